@@ -1,0 +1,181 @@
+"""Closed-form kinematics of CaHyMan (no Pinocchio), vectorised over poses.
+
+Conventions (world frame at the centre of the fixed plate, z up, x towards leg 1):
+leg k has delta_k = 0, 120, 240 deg, radial unit u_k, tangential t_k = z x u_k. The
+point H_k (ball-joint centre of leg k) has in-plane coordinates y_k = t_k . (H_k - O_k)
+= b cos(alpha_k) and z_k = b sin(alpha_k) + h. The plate orientation is
+R = Rz(theta) Ry(pi/2 - phi) Rz(psi) (the paper's eq. 6); its origin H is the centroid of
+the ball centres, which sit at p_k = r_p u_k in the plate frame.
+
+Every function accepts arrays with a leading batch shape ``(...)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from closedloop.exceptions import AssemblyError, InvalidInputError
+
+from .params import CaHyManParams
+
+#: Leg angles delta_k [rad].
+DELTA = np.deg2rad([0.0, 120.0, 240.0])
+#: (3, 3) radial unit vectors u_k, one per row, world axes.
+U = np.stack([np.cos(DELTA), np.sin(DELTA), np.zeros(3)], axis=1)
+#: (3, 3) tangential unit vectors t_k = z x u_k, one per row, world axes.
+T = np.stack([-np.sin(DELTA), np.cos(DELTA), np.zeros(3)], axis=1)
+EZ = np.array([0.0, 0.0, 1.0])
+_SQ3 = np.sqrt(3.0)
+
+
+def rot_z(angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation about z by ``angle`` [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    o, i = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, o], -1), np.stack([s, c, o], -1), np.stack([o, o, i], -1)], -2)
+
+
+def rot_y(angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation about y by ``angle`` [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    o, i = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, o, s], -1), np.stack([o, i, o], -1), np.stack([-s, o, c], -1)], -2)
+
+
+def plate_rotation(phi, theta, psi) -> np.ndarray:
+    """(..., 3, 3) plate rotation R = Rz(theta) Ry(pi/2 - phi) Rz(psi) (paper eq. 6)."""
+    phi, theta, psi = np.broadcast_arrays(*(np.asarray(x, float) for x in (phi, theta, psi)))
+    return rot_z(theta) @ rot_y(np.pi / 2 - phi) @ rot_z(psi)
+
+
+@dataclass(frozen=True)
+class PlatePose:
+    """Pose of the mobile plate for a batch of leg inputs.
+
+    Attributes:
+        H: (..., 3) plate centre [m], world frame.
+        R: (..., 3, 3) plate orientation, world from plate.
+        phi, theta, psi: (...) the paper's angles [rad] (see module docstring).
+        s: (..., 3) strokes s_k of the prismatic joints SJ [m].
+    """
+
+    H: np.ndarray
+    R: np.ndarray
+    phi: np.ndarray
+    theta: np.ndarray
+    psi: np.ndarray
+    s: np.ndarray
+
+
+def leg_plane_coordinates(alpha: np.ndarray, p: CaHyManParams) -> tuple[np.ndarray, np.ndarray]:
+    """In-plane coordinates (y_k, z_k) [m] of the ball centres H_k for inputs alpha (..., 3) [rad]."""
+    alpha = np.asarray(alpha, float)
+    return p.b * np.cos(alpha), p.b * np.sin(alpha) + p.h
+
+
+def _check_alpha(alpha: np.ndarray) -> np.ndarray:
+    alpha = np.asarray(alpha, float)
+    if alpha.shape[-1:] != (3,):
+        raise InvalidInputError(f"alpha must have shape (..., 3), got {alpha.shape}")
+    if not np.all(np.isfinite(alpha)):
+        raise InvalidInputError(f"alpha must be finite, got {alpha}")
+    return alpha
+
+
+def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
+    """Closed-form direct kinematics of CaPaMan: leg inputs -> plate pose.
+
+    Args:
+        alpha: (..., 3) crank angles alpha_1..3 [rad].
+        p: parameters.
+
+    Raises:
+        AssemblyError: the legs cannot carry the plate (cos phi > 1 or |sin(theta+psi)| > 1).
+    """
+    alpha = _check_alpha(alpha)
+    y, z = leg_plane_coordinates(alpha, p)
+    y1, y2, y3 = np.moveaxis(y, -1, 0)
+    z1, z2, z3 = np.moveaxis(z, -1, 0)
+    cphi = np.sqrt((2 * z1 - z2 - z3) ** 2 + 3 * (z2 - z3) ** 2) / (3 * p.r_p)
+    bad = cphi > 1.0
+    if np.any(bad):
+        raise AssemblyError(
+            f"plate cannot be assembled at alpha={np.rad2deg(alpha[bad]).tolist()} deg: "
+            "height differences between legs exceed the plate radius",
+            float(np.max(cphi - 1.0) * 3 * p.r_p),
+        )
+    phi = np.arccos(cphi)
+    sphi = np.sin(phi)
+    psi = np.arctan2(_SQ3 * (z2 - z3), -(2 * z1 - z2 - z3))
+    s_tp = (y1 + y2 + y3) / (1.5 * p.r_p * (1.0 + sphi))
+    bad = np.abs(s_tp) > 1.0
+    if np.any(bad):
+        raise AssemblyError(
+            f"plate cannot be assembled at alpha={np.rad2deg(alpha[bad]).tolist()} deg: "
+            "in-plane leg offsets exceed the plate radius",
+            float(np.max(np.abs(s_tp) - 1.0) * 1.5 * p.r_p),
+        )
+    theta = np.arcsin(s_tp) - psi
+    x_H = (y3 - y2) / _SQ3 - 0.5 * p.r_p * (1.0 - sphi) * np.cos(psi - theta)
+    y_H = y1 - p.r_p * (np.sin(psi) * np.cos(theta) + sphi * np.cos(psi) * np.sin(theta))
+    z_H = (z1 + z2 + z3) / 3.0
+    H = np.stack([x_H, y_H, z_H], axis=-1)
+    R = plate_rotation(phi, theta, psi)
+    H_k = H[..., None, :] + np.einsum("...ij,kj->...ki", R, p.r_p * U)
+    s = np.einsum("...ki,ki->...k", H_k, U) - p.r_e
+    return PlatePose(H=H, R=R, phi=phi, theta=theta, psi=psi, s=s)
+
+
+def ball_centres(pose: PlatePose, p: CaHyManParams) -> np.ndarray:
+    """(..., 3, 3) ball-joint centres H_k [m], world frame, one leg per row."""
+    return pose.H[..., None, :] + np.einsum("...ij,kj->...ki", pose.R, p.r_p * U)
+
+
+def inverse_legs(z_H, phi, psi, p: CaHyManParams) -> np.ndarray:
+    """Closed-form inverse kinematics of CaPaMan: plate height and tilt -> alpha (..., 3).
+
+    Args:
+        z_H: (...) plate-centre height [m].
+        phi: (...) elevation of the plate normal [rad] (pi/2: plate parallel to FP).
+        psi: (...) azimuth of the tilt [rad].
+        p: parameters.
+
+    Returns:
+        (..., 3) crank angles in [-pi/2, pi/2] [rad] (the branch the paper uses).
+
+    Raises:
+        AssemblyError: a crank would have to reach beyond its length b.
+    """
+    z_H, phi, psi = np.broadcast_arrays(*(np.asarray(x, float) for x in (z_H, phi, psi)))
+    rc = p.r_p * np.cos(phi)
+    z1 = z_H - rc * np.cos(psi)
+    z2 = z_H + 0.5 * rc * np.cos(psi) + 0.5 * _SQ3 * rc * np.sin(psi)
+    z3 = z_H + 0.5 * rc * np.cos(psi) - 0.5 * _SQ3 * rc * np.sin(psi)
+    sa = (np.stack([z1, z2, z3], axis=-1) - p.h) / p.b
+    if np.any(np.abs(sa) > 1.0):
+        raise AssemblyError(
+            f"pose z_H={z_H.tolist()} m, phi={np.rad2deg(phi).tolist()} deg, "
+            f"psi={np.rad2deg(psi).tolist()} deg is out of reach of the cranks",
+            float(np.max(np.abs(sa) - 1.0) * p.b),
+        )
+    return np.arcsin(sa)
+
+
+def arm_direction(R: np.ndarray, alpha4) -> np.ndarray:
+    """(..., 3) unit arm direction w = cos(alpha_4) x_p + sin(alpha_4) z_p, world axes."""
+    alpha4 = np.asarray(alpha4, float)
+    return np.cos(alpha4)[..., None] * R[..., :, 0] + np.sin(alpha4)[..., None] * R[..., :, 2]
+
+
+def arm_rotation(R: np.ndarray, alpha4) -> np.ndarray:
+    """(..., 3, 3) orientation of the arm link carrying M: R Ry(-alpha_4) (x axis along w)."""
+    return R @ rot_y(-np.asarray(alpha4, float))
+
+
+def extremity(pose: PlatePose, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, np.ndarray]:
+    """Points Q and M [m], world frame: Q = H + HQ z_p, M = Q + (L + s_4) w."""
+    Q = pose.H + p.HQ * pose.R[..., :, 2]
+    M = Q + (p.L + np.asarray(s4, float))[..., None] * arm_direction(pose.R, alpha4)
+    return Q, M

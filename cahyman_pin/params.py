@@ -1,0 +1,122 @@
+"""CaHyMan parameters: every dimension, spring and mass of the reference model.
+
+The defaults are those of the project's reference reading of the mechanism (the paper
+gives the springs, not the dimensions). All values are SI: metres, radians, newtons,
+N/m for axial springs, N m/rad for torsional springs, kilograms.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from closedloop.exceptions import InvalidInputError
+
+#: K_s as printed in the paper [N/m]. It gives 1.4 m of deflection per newton.
+K_S_PRINTED = 0.697
+#: K_s assumed by the reference model [N/m] (the printed value times 1e6).
+K_S_ASSUMED = 0.697e6
+
+_KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
+
+_LENGTHS = ("a", "b", "h", "r_e", "r_p", "HQ", "L")
+_SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
+_MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
+
+
+@dataclass(frozen=True)
+class CaHyManParams:
+    """Dimensions [m], springs [N/m or N m/rad] and masses [kg] of CaHyMan.
+
+    Attributes:
+        a: frame link and coupler length a_k = c_k of each parallelogram [m].
+        b: crank length b_k = d_k [m].
+        h: connecting-bar length h_k [m].
+        r_e: radius of the leg bases on the fixed plate [m].
+        r_p: radius of the ball joints on the mobile plate [m].
+        HQ: offset of the arm's revolute joint Q from H along the plate normal [m].
+        L: arm length from Q to M at s_4 = 0 [m].
+        K_T: torsional stiffness of each leg motor at alpha_k [N m/rad].
+        K_b: axial stiffness of each input crank b_k [N/m].
+        K_d: axial stiffness of each follower crank d_k [N/m].
+        K_T4: torsional stiffness of the arm motor at alpha_4 [N m/rad].
+        K_s: axial stiffness of the linear motor and link MM2 (joint s_4) [N/m].
+        K_4: axial stiffness of link QM2, in series with K_s [N/m].
+        m_HQ, m_QM, m_MM2, m_M4, m_M5: masses named by the paper [kg] (0: no gravity).
+        gravity: gravitational acceleration [m/s^2], acting along -z.
+        s4_max: stroke of the linear motor, s_4 in [0, s4_max] [m].
+    """
+
+    a: float = 0.200
+    b: float = 0.080
+    h: float = 0.050
+    r_e: float = 0.100
+    r_p: float = 0.100
+    HQ: float = 0.050
+    L: float = 0.150
+    K_T: float = 4.672e3
+    K_b: float = 2.625e6
+    K_d: float = 2.625e6
+    K_T4: float = 0.876e3
+    K_s: float = K_S_ASSUMED
+    K_4: float = 2.625e6
+    m_HQ: float = 0.0
+    m_QM: float = 0.0
+    m_MM2: float = 0.0
+    m_M4: float = 0.0
+    m_M5: float = 0.0
+    gravity: float = 9.81
+    s4_max: float = 0.050
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InvalidInputError(
+                    f"CaHyMan parameter {f.name}={value!r} must be a real number"
+                )
+            if not math.isfinite(value):
+                raise InvalidInputError(
+                    f"CaHyMan parameter {f.name}={value!r} must be finite"
+                )
+        for name in (*_LENGTHS, *_SPRINGS, "s4_max"):
+            if getattr(self, name) <= 0.0:
+                raise InvalidInputError(
+                    f"CaHyMan parameter {name}={getattr(self, name)!r} must be > 0"
+                )
+        for name in (*_MASSES, "gravity"):
+            if getattr(self, name) < 0.0:
+                raise InvalidInputError(
+                    f"CaHyMan parameter {name}={getattr(self, name)!r} must be >= 0"
+                )
+
+    def replace(self, **changes: float) -> CaHyManParams:
+        """Copy with some fields changed (validated); unknown names raise."""
+        unknown = sorted(set(changes) - set(self.field_names()))
+        if unknown:
+            raise InvalidInputError(
+                f"unknown CaHyMan parameter(s) {unknown}; expected some of {self.field_names()}"
+            )
+        return dataclasses.replace(self, **changes)
+
+    def with_ks(self, preset: str) -> CaHyManParams:
+        """Copy with K_s set by name: ``"assumed"`` (0.697e6 N/m) or ``"printed"`` (0.697 N/m)."""
+        if preset not in _KS_PRESETS:
+            raise InvalidInputError(
+                f"unknown K_s preset {preset!r}; expected one of {sorted(_KS_PRESETS)}"
+            )
+        return self.replace(K_s=_KS_PRESETS[preset])
+
+    @property
+    def total_arm_mass(self) -> float:
+        """Sum of the five masses carried by the plate [kg]."""
+        return sum(getattr(self, n) for n in _MASSES)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of every parameter, in declaration order."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+
+DEFAULT_PARAMS = CaHyManParams()

@@ -1,0 +1,67 @@
+"""Exceptions raised by :mod:`closedloop`.
+
+Every message names the offending value and what was expected, so that a command-line
+front end can print it on one line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class ClosedLoopError(Exception):
+    """Base class of every error raised by :mod:`closedloop`."""
+
+
+def _choices(names: Iterable[str], limit: int = 12) -> str:
+    names = list(names)
+    shown = ", ".join(repr(n) for n in names[:limit])
+    return shown + (f", ... ({len(names)} in all)" if len(names) > limit else "")
+
+
+class NameNotFoundError(ClosedLoopError, KeyError):
+    """A joint or frame name that the model does not have."""
+
+    def __init__(self, kind: str, name: str, valid: Iterable[str]):
+        self.kind, self.name = kind, name
+        super().__init__(f"unknown {kind} {name!r}; expected one of: {_choices(valid)}")
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return self.args[0]
+
+
+class InvalidInputError(ClosedLoopError, ValueError):
+    """A numerical input with the wrong shape, sign or value (NaN, negative stiffness...)."""
+
+
+class ModelFileError(ClosedLoopError, ValueError):
+    """A robot or closure file that is missing or cannot be parsed."""
+
+
+class AssemblyError(ClosedLoopError):
+    """The loop closures cannot be satisfied for the given inputs (unreachable pose)."""
+
+    def __init__(self, message: str, residual: float):
+        self.residual = residual
+        super().__init__(f"{message} (closure residual reached: {residual:.3e})")
+
+
+class MechanismError(ClosedLoopError):
+    """The structure still moves without any restoring spring: no static equilibrium."""
+
+
+class RigidDirectionsError(ClosedLoopError):
+    """The compliance is rank deficient: the stiffness matrix does not exist.
+
+    Attributes:
+        directions: (6, r) array, orthonormal basis of the rigid directions (twist
+            coordinates ordered dx, dy, dz, rx, ry, rz, same frame as the compliance).
+    """
+
+    def __init__(self, message: str, directions):
+        self.directions = directions
+        super().__init__(message)
+
+
+class SingularConfigurationError(ClosedLoopError):
+    """A configuration at which the requested map is singular."""
