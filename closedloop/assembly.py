@@ -1,0 +1,104 @@
+"""Assembly: solve the passive coordinates so that every loop closure holds."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import AssemblyError, InvalidInputError
+from .kinematics import closure_jacobian, closure_residual
+from .model import ClosedLoopModel
+
+#: Default closure tolerance [m for points; m and rad for welds], infinity norm.
+ASSEMBLY_TOL = 1e-12
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """An assembled configuration.
+
+    Attributes:
+        q: (nq,) configuration (read-only) satisfying every closure.
+        residual: infinity norm of the closure residual [m, rad].
+        iterations: Gauss-Newton iterations used.
+    """
+
+    q: np.ndarray
+    residual: float
+    iterations: int
+
+
+def free_coordinates(clm: ClosedLoopModel) -> np.ndarray:
+    """Tangent indices solved by assembly: the passive ones (zero stiffness)."""
+    return np.flatnonzero(clm.stiffness == 0.0)
+
+
+def assemble(
+    clm: ClosedLoopModel,
+    actuated: np.ndarray | None = None,
+    q0: np.ndarray | None = None,
+    *,
+    tol: float = ASSEMBLY_TOL,
+    max_iter: int = 50,
+) -> Assembly:
+    """Close every loop by moving the passive coordinates only.
+
+    Actuated coordinates are set to ``actuated``; spring and locked coordinates keep the
+    values they have in ``q0`` (their rest values). The passive coordinates are found by
+    Gauss-Newton on the stacked closure residual, each step a minimum-norm least-squares
+    solve through the SVD (rank revealing: redundant closure rows are harmless), with
+    backtracking when a step does not reduce the residual.
+
+    Args:
+        clm: the model.
+        actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
+            ``clm.actuated``; ``None`` keeps those of ``q0``.
+        q0: (nq,) start configuration, which picks the assembly branch (default: neutral).
+        tol: closure tolerance (infinity norm) [m, rad].
+        max_iter: iteration limit.
+
+    Raises:
+        AssemblyError: the closures cannot be satisfied from this start (unreachable
+            input); the message gives the residual reached.
+    """
+    model = clm.model
+    q = clm.check_configuration(pin.neutral(model) if q0 is None else q0)
+    if actuated is not None:
+        actuated = np.asarray(actuated, dtype=float).reshape(-1)
+        if actuated.shape != (len(clm.actuated),):
+            raise InvalidInputError(
+                f"{actuated.size} actuated values given; expected {len(clm.actuated)} "
+                f"for joints {list(clm.actuated)}"
+            )
+        if not np.all(np.isfinite(actuated)):
+            raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
+        q[clm.actuated_q_indices] = actuated
+    free = free_coordinates(clm)
+    r = closure_residual(clm, q)
+    err = float(np.max(np.abs(r), initial=0.0))
+    it = 0
+    while err > tol and it < max_iter:
+        it += 1
+        J = closure_jacobian(clm, q, update=False)[:, free]
+        step = np.zeros(model.nv)
+        step[free] = -np.linalg.lstsq(J, r, rcond=1e-12)[0]
+        for _ in range(30):
+            q_try = pin.integrate(model, q, step)
+            r_try = closure_residual(clm, q_try)
+            err_try = float(np.max(np.abs(r_try)))
+            if np.linalg.norm(r_try) < np.linalg.norm(r) or err_try <= tol:
+                break
+            step *= 0.5
+        else:
+            break
+        q, r, err = q_try, r_try, err_try
+    if not err <= tol:
+        raise AssemblyError(
+            f"cannot close the loops of {clm.name!r} with actuated "
+            f"{dict(zip(clm.actuated, q[clm.actuated_q_indices].tolist(), strict=True))}",
+            err,
+        )
+    q.flags.writeable = False
+    return Assembly(q=q, residual=err, iterations=it)

@@ -1,0 +1,135 @@
+"""Constrained kinematics: closure residuals and Jacobians, null spaces, closed-loop Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import InvalidInputError, SingularConfigurationError
+from .model import ClosedLoopModel
+
+#: Relative singular-value threshold below which a direction counts as rank deficient.
+RANK_RTOL = 1e-9
+
+REFERENCE_FRAMES = {"world": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL}
+
+
+def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
+    """Forward kinematics, joint Jacobians and frame placements at q (nq,)."""
+    pin.computeJointJacobians(clm.model, clm.data, q)
+    pin.updateFramePlacements(clm.model, clm.data)
+
+
+def closure_residual(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
+    """Stacked closure residuals (m,) at q [m for points, log6 (m, rad) for welds]."""
+    if update:
+        update_kinematics(clm, q)
+    out = [np.zeros(0)]
+    for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
+        c.constraint.calc(clm.model, clm.data, cd)
+        out.append(np.array(cd.constraint_position_error))
+    return np.concatenate(out)
+
+
+def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
+    """(m, nv) Jacobian of :func:`closure_residual` with respect to the tangent of q.
+
+    For a weld the anchor Jacobian maps velocities to the relative twist; it is composed
+    with the Jacobian of log6 so that the result is the derivative of the residual also
+    away from closure (where the two coincide).
+    """
+    if update:
+        update_kinematics(clm, q)
+    rows = [np.zeros((0, clm.model.nv))]
+    for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
+        c.constraint.calc(clm.model, clm.data, cd)
+        J = np.array(c.constraint.jacobian(clm.model, clm.data, cd))
+        if c.kind == "6d":
+            J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
+        rows.append(J)
+    return np.vstack(rows)
+
+
+def frame_jacobian(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, axes: str = "world", *, update: bool = True
+) -> np.ndarray:
+    """(6, nv) Jacobian of frame ``frame``: twist (v [m/s], w [rad/s]) at the frame origin.
+
+    Args:
+        axes: ``"world"`` (world-aligned axes) or ``"local"`` (the frame's own axes).
+    """
+    if axes not in REFERENCE_FRAMES:
+        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    fid = clm.frame_id(frame)
+    if update:
+        update_kinematics(clm, q)
+    return pin.getFrameJacobian(clm.model, clm.data, fid, REFERENCE_FRAMES[axes])
+
+
+def nullspace(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray, int]:
+    """Orthonormal null-space basis of A (m, n) by SVD, and the rank of A.
+
+    Returns:
+        N: (n, n - rank) with A N ~ 0 and N^T N = I.
+        rank: number of singular values above ``rtol`` times the largest.
+    """
+    n = A.shape[1]
+    if A.shape[0] == 0:
+        return np.eye(n), 0
+    _, s, Vt = np.linalg.svd(A, full_matrices=True)
+    rank = int(np.sum(s > rtol * s[0])) if s.size and s[0] > 0.0 else 0
+    return Vt[rank:].T.copy(), rank
+
+
+def rigid_rows(clm: ClosedLoopModel) -> np.ndarray:
+    """(n_locked, nv) selection rows of the locked coordinates (stiffness = inf)."""
+    idx = np.flatnonzero(np.isinf(clm.stiffness))
+    E = np.zeros((idx.size, clm.model.nv))
+    E[np.arange(idx.size), idx] = 1.0
+    return E
+
+
+def admissible_motions(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True):
+    """Basis N (nv, d) of the tangent motions that keep every closure and locked joint.
+
+    Returns:
+        N: (nv, d) orthonormal basis, closure Jacobian and locked rows times N ~ 0.
+        rank: rank of the stacked closure + locked rows (redundant rows removed).
+    """
+    A = np.vstack([closure_jacobian(clm, q, update=update), rigid_rows(clm)])
+    return nullspace(A)
+
+
+def closed_loop_jacobian(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, inputs: np.ndarray, axes: str = "world"
+) -> np.ndarray:
+    """(6, n_in) Jacobian of frame ``frame`` with respect to the coordinates ``inputs``.
+
+    The other coordinates follow: the passive ones (stiffness 0) as the closures require,
+    every other one held still. Rows: twist (v [m/s], w [rad/s]) at the frame origin, in
+    ``axes``; columns: the tangent coordinates ``inputs`` (indices into v).
+
+    Raises:
+        SingularConfigurationError: the inputs do not determine the passive coordinates
+            (the passive joints alone form a mobility) or violate the closures.
+    """
+    update_kinematics(clm, q)
+    Jc = closure_jacobian(clm, q, update=False)
+    Jf = frame_jacobian(clm, q, frame, axes, update=False)
+    inputs = np.asarray(inputs, dtype=int)
+    passive = np.flatnonzero(clm.stiffness == 0.0)
+    passive = np.setdiff1d(passive, inputs)
+    Jp, Ja = Jc[:, passive], Jc[:, inputs]
+    Np, _ = nullspace(Jp)
+    if Np.shape[1]:
+        raise SingularConfigurationError(
+            f"the passive joints form a {Np.shape[1]}-dof mobility at this configuration: "
+            "the inputs do not determine the configuration"
+        )
+    X, *_ = np.linalg.lstsq(Jp, -Ja, rcond=None)
+    gap = np.linalg.norm(Jp @ X + Ja) / max(1.0, np.linalg.norm(Ja))
+    if gap > 1e-8:
+        raise SingularConfigurationError(
+            f"the inputs cannot move while the closures hold (relative gap {gap:.2e})"
+        )
+    return Jf[:, inputs] + Jf[:, passive] @ X
