@@ -162,24 +162,8 @@ def compliance(
     J = frame_jacobian(clm, q, frame, axes, update=False)
     point = clm.data.oMf[clm.frame_id(frame)].translation
     residual = closure_residual(clm, q, update=False)
-    N, _ = admissible_motions(clm, q, update=False)
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-    Kr = (N.T * k) @ N
-    lam, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
-    soft = lam <= RANK_RTOL * max(lam[-1] if lam.size else 0.0, 0.0)
-    if lam.size == 0 or lam[-1] <= 0.0:
-        soft[:] = True
+    N, Vs, ls, n_internal = spring_subspace(clm, q, J, frame)
     JN = J @ N
-    Z = V[:, soft]
-    moves = np.linalg.norm(JN @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN), 1e-300)
-    if np.any(moves):
-        dq = N @ Z[:, moves]
-        raise MechanismError(
-            f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} motion(s) "
-            f"with no restoring spring move it, driven mostly by {_main_joints(clm, dq)}; "
-            "add springs or lock joints"
-        )
-    Vs, ls = V[:, ~soft], lam[~soft]
     B = JN @ (Vs / np.sqrt(ls))  # C = B B^T
     NV = N @ (Vs / ls)
     G = NV @ (JN @ Vs).T
@@ -196,9 +180,61 @@ def compliance(
         rigid_directions=_readonly(U[:, rank:]),
         closure_residual=float(np.max(np.abs(residual), initial=0.0)),
         mobility=N.shape[1],
-        internal_mobilities=int(soft.sum()),
+        internal_mobilities=n_internal,
         G=_readonly(G),
     )
+
+
+def spring_subspace(
+    clm: ClosedLoopModel, q: np.ndarray, J: np.ndarray, frame: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Admissible motions and the eigen-decomposition of their spring stiffness K_r.
+
+    Expects the kinematics of q to be up to date (:func:`update_kinematics`).
+
+    Args:
+        clm: model with closures and springs.
+        q: (nq,) configuration.
+        J: (6, nv) Jacobian of the loaded frame (any reference axes).
+        frame: name of the loaded frame (for messages).
+
+    Returns:
+        N: (nv, d) orthonormal basis of the admissible motions (closures and locks kept).
+        V: (d, s) orthonormal eigenvectors of K_r = N^T K_q N with a restoring spring.
+        lam: (s,) their eigenvalues (> 0) [N m/rad, N/m, mixed per the joint units].
+        n_internal: number of spring-free motions that do not move the frame (left out).
+
+    Raises:
+        MechanismError: a spring-free motion moves the frame (no static equilibrium).
+    """
+    N, _ = admissible_motions(clm, q, update=False)
+    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+    # Spring-free motions are found kinematically (no spring coordinate moves: null space
+    # of the spring rows of N), not by a threshold on the eigenvalues of K_r, which would
+    # drop a spring more than 1/RANK_RTOL times softer than the stiffest one.
+    W, Z = _split_by_rank(N[k > 0.0], N.shape[1])
+    Kr = W.T @ ((N.T * k) @ N) @ W
+    lam, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
+    V = W @ V
+    JN = J @ N
+    moves = np.linalg.norm(JN @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN), 1e-300)
+    if np.any(moves):
+        dq = N @ Z[:, moves]
+        raise MechanismError(
+            f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} motion(s) "
+            f"with no restoring spring move it, driven mostly by {_main_joints(clm, dq)}; "
+            "add springs or lock joints"
+        )
+    return N, V, lam, Z.shape[1]
+
+
+def _split_by_rank(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal bases (n, r) of the row space and (n, n - r) of the null space of A."""
+    if A.shape[0] == 0 or n == 0:
+        return np.zeros((n, 0)), np.eye(n)
+    _, s, Vt = np.linalg.svd(A, full_matrices=True)
+    rank = int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0.0 else 0
+    return Vt[:rank].T, Vt[rank:].T
 
 
 def _main_joints(clm: ClosedLoopModel, dq: np.ndarray) -> str:

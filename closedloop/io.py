@@ -1,4 +1,4 @@
-"""Loading models: URDF + closure file, MJCF with equality constraints, example robots.
+"""Loading models: URDF + closure file, MJCF with equality constraints, serial robots.
 
 Closure file (YAML), after the "Extended URDF" convention, extended with springs::
 
@@ -7,32 +7,70 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
+
+A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
+number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
+
+Sources of actuated joints and springs, later ones overriding earlier ones:
+
+* URDF with a closure file: the file (no ``name_mot``: nothing actuated).
+* URDF without closure file (serial robot): the 1-dof joints of the main chain, from
+  the root to the first joint with several child joints, are actuated; the 1-dof joints
+  beyond that branching (the Panda's fingers) are locked, so that a gripper neither adds
+  inputs nor takes a joint spring. A tree that branches at its root needs a closure file.
+* MJCF: every ``<actuator>`` child with a ``joint`` attribute makes that joint actuated;
+  a joint ``stiffness`` attribute > 0 (``<default>`` classes resolved) is a spring.
+  Pinocchio's model does not keep either, so they are read from the XML here. A side
+  file in the closure-file format with only ``name_mot``/``springs``/``locked`` overrides
+  them (``name_mot`` replaces the actuator list; springs are merged; locked added).
+* Keyword ``springs``: merged over all of the above.
+* Keyword ``joint_stiffness``: given to every actuated joint that has no spring yet.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
+import math
+import os
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pinocchio as pin
 import yaml
 
-from .exceptions import ModelFileError
-from .model import ClosedLoopModel, closure_between_frames
+from .exceptions import InvalidInputError, ModelFileError
+from .model import ClosedLoopModel, Closure, closure_between_frames
+
+#: Model-file suffixes and their format.
+MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
+CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked")
+SIDE_FILE_KEYS = ("name_mot", "springs", "locked")
+#: MJCF equality constraints that Pinocchio turns into anchor constraints.
+MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
+
+Stiffness = float | list[float]
 
 
 @dataclass(frozen=True)
 class ClosureSpec:
-    """Contents of a closure file (see the module docstring)."""
+    """Contents of a closure file (see the module docstring).
+
+    ``actuated`` is ``None`` when the file has no ``name_mot`` key.
+    """
 
     pairs: tuple[tuple[str, str], ...] = ()
     types: tuple[str, ...] = ()
-    actuated: tuple[str, ...] = ()
-    springs: dict = field(default_factory=dict)
+    actuated: tuple[str, ...] | None = None
+    springs: dict[str, Stiffness] = field(default_factory=dict)
     locked: tuple[str, ...] = ()
 
 
+# ---------------------------------------------------------------------------- YAML files
 def _existing(path: str | Path, what: str) -> Path:
     path = Path(path)
     if not path.is_file():
@@ -40,100 +78,371 @@ def _existing(path: str | Path, what: str) -> Path:
     return path
 
 
-def read_closure_file(path: str | Path) -> ClosureSpec:
-    """Parse and validate a closure file; raises :class:`ModelFileError` naming the fault."""
-    path = _existing(path, "closure file")
+def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
+    path = _existing(path, what)
     try:
         doc = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e}") from None
     except yaml.YAMLError as e:
-        raise ModelFileError(f"closure file {str(path)!r} is not valid YAML: {e}") from None
+        msg = " ".join(str(e).split())
+        raise ModelFileError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
     if not isinstance(doc, dict):
-        raise ModelFileError(f"closure file {str(path)!r}: expected a mapping at top level")
-    unknown = set(doc) - {"closed_loop", "type", "name_mot", "springs", "locked"}
+        raise ModelFileError(
+            f"{what} {str(path)!r}: expected a mapping at top level, got {type(doc).__name__}"
+        )
+    return path, doc
+
+
+def _number(value, where: str, name: str) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ModelFileError(
+            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number"
+        )
+    if math.isnan(value) or value < 0:
+        raise ModelFileError(
+            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
+            "(0 = passive, .inf = locked)"
+        )
+    return float(value)
+
+
+def _check_springs(springs, where: str) -> dict[str, Stiffness]:
+    """Validated joint -> stiffness mapping (a number or a list of numbers per joint)."""
+    if not isinstance(springs, dict) or not all(isinstance(k, str) for k in springs):
+        raise ModelFileError(f"{where}: springs must be a mapping joint name -> stiffness")
+    out: dict[str, Stiffness] = {}
+    for name, value in springs.items():
+        if isinstance(value, list) and value:
+            out[name] = [_number(v, where, name) for v in value]
+        else:
+            out[name] = _number(value, where, name)
+    return out
+
+
+def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
+    if key not in doc:
+        return None
+    names = doc[key] if doc[key] is not None else []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ModelFileError(f"{where}: {key} must be a list of joint names, got {names!r}")
+    return tuple(names)
+
+
+def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> ClosureSpec:
+    """Parse and validate a closure file.
+
+    Args:
+        path: YAML file (see the module docstring).
+        keys: keys allowed at top level (:data:`SIDE_FILE_KEYS` for an MJCF side file).
+
+    Raises:
+        ModelFileError: missing or unreadable file, invalid YAML, unknown key, malformed
+            value; the message names the file and the fault.
+    """
+    path, doc = _read_yaml_mapping(path, "closure file")
+    where = f"closure file {str(path)!r}"
+    unknown = set(doc) - set(keys)
     if unknown:
         raise ModelFileError(
-            f"closure file {str(path)!r}: unknown key(s) {sorted(unknown)}; expected "
-            "closed_loop, type, name_mot, springs, locked"
+            f"{where}: unknown key(s) {sorted(map(str, unknown))}; expected {', '.join(keys)}"
         )
     pairs = doc.get("closed_loop") or []
     types = doc.get("type") or []
     if not isinstance(pairs, list) or any(
-        not isinstance(p, list | tuple) or len(p) != 2 or not all(isinstance(n, str) for n in p)
+        not isinstance(p, list) or len(p) != 2 or not all(isinstance(n, str) for n in p)
         for p in pairs
     ):
         raise ModelFileError(
-            f"closure file {str(path)!r}: closed_loop must be a list of [frameA, frameB] "
-            f"name pairs, got {pairs!r}"
+            f"{where}: closed_loop must be a list of [frameA, frameB] name pairs, got {pairs!r}"
         )
     if not isinstance(types, list) or len(types) != len(pairs):
         raise ModelFileError(
-            f"closure file {str(path)!r}: type must list one of '3d'/'6d' per closed_loop "
-            f"pair ({len(pairs)}), got {types!r}"
+            f"{where}: type must list one of '3d'/'6d' per closed_loop pair "
+            f"({len(pairs)}), got {types!r}"
         )
     bad = [t for t in types if t not in ("3d", "6d")]
     if bad:
-        raise ModelFileError(f"closure file {str(path)!r}: type {bad[0]!r}; expected '3d' or '6d'")
-    springs = doc.get("springs") or {}
-    if not isinstance(springs, dict):
-        raise ModelFileError(
-            f"closure file {str(path)!r}: springs must be a mapping joint -> value"
-        )
-    names = doc.get("name_mot") or []
-    locked = doc.get("locked") or []
-    for key, val in (("name_mot", names), ("locked", locked)):
-        if not isinstance(val, list) or not all(isinstance(n, str) for n in val):
-            raise ModelFileError(f"closure file {str(path)!r}: {key} must be a list of joint names")
+        raise ModelFileError(f"{where}: type {bad[0]!r}; expected '3d' or '6d'")
     return ClosureSpec(
-        tuple(tuple(p) for p in pairs), tuple(types), tuple(names), dict(springs), tuple(locked)
+        pairs=tuple((a, b) for a, b in pairs),
+        types=tuple(types),
+        actuated=_name_list(doc, "name_mot", where),
+        springs=_check_springs(doc.get("springs") or {}, where),
+        locked=_name_list(doc, "locked", where) or (),
     )
 
 
-def load_urdf(
-    urdf: str | Path,
-    closures: str | Path | None = None,
-    *,
-    springs: dict | None = None,
-    actuated: tuple[str, ...] | None = None,
-) -> ClosedLoopModel:
-    """Load a URDF tree and (optionally) its closure file.
+def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
+    """Joint -> stiffness mapping [N m/rad or N/m] from a YAML file ``{joint: value}``.
 
-    Args:
-        urdf: path of the URDF file.
-        closures: path of the closure file; ``None`` for a serial robot.
-        springs: joint -> stiffness, overriding the closure file's entries.
-        actuated: actuated joints, overriding ``name_mot`` (default for a serial robot
-            without closure file: every 1-dof joint).
+    Raises:
+        ModelFileError: missing file, invalid YAML, a value that is not a number >= 0.
     """
-    urdf = _existing(urdf, "robot file")
-    try:
-        model = pin.buildModelFromUrdf(str(urdf))
-        visual = pin.buildGeomFromUrdf(
-            model,
-            str(urdf),
-            pin.GeometryType.VISUAL,
-            package_dirs=[
-                str(urdf.parent),
-                str(urdf.parent.parent),
-                str(urdf.parent.parent.parent),
-            ],
+    path, doc = _read_yaml_mapping(path, "springs file")
+    return _check_springs(doc, f"springs file {str(path)!r}")
+
+
+# ------------------------------------------------------------------------ model files
+def _parse(build: Callable, path: Path, what: str):
+    """Run a Pinocchio parser; a failure becomes a one-line :class:`ModelFileError`.
+
+    What the parser's native code writes on file descriptor 2 (urdfdom's "Error:" lines)
+    is captured: folded into the message on failure, passed on to ``sys.stderr`` otherwise.
+    """
+    sys.stderr.flush()
+    saved, failure = os.dup(2), None
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            result = build()
+        except (RuntimeError, ValueError) as e:
+            failure = e
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        tmp.seek(0)
+        native = tmp.read().decode(errors="replace")
+    if failure is None:
+        sys.stderr.write(native)
+        return result
+    details = [ln.strip() for ln in native.splitlines() if ln.strip().startswith("Error:")]
+    detail = "; ".join(ln.removeprefix("Error:").strip() for ln in details[-2:])
+    msg = " ".join(f"{failure} {detail}".split())
+    raise ModelFileError(f"{what} {str(path)!r} cannot be parsed: {msg}")
+
+
+def _geometry(wanted: bool, build: Callable, path: Path) -> pin.GeometryModel | None:
+    return _parse(build, path, "geometry of robot file") if wanted else None
+
+
+def _package_dirs(path: Path) -> list[str]:
+    # ``package://pkg/...`` resolves against any folder that holds ``pkg``: try every
+    # ancestor of the file (example-robot-data uses package://example-robot-data/robots/...).
+    return [str(p) for p in path.resolve().parents]
+
+
+def _serial_defaults(model: pin.Model, path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(actuated, locked) joints of a robot file without closures (module docstring)."""
+    chain, j = [], 0
+    while len(model.children[j]) == 1:
+        j = model.children[j][0]
+        chain.append(j)
+    if model.njoints > 1 and not chain:
+        raise ModelFileError(
+            f"robot file {str(path)!r} branches at its root: give a closure file that lists "
+            "the actuated joints (name_mot)"
         )
-    except (RuntimeError, ValueError) as e:
-        raise ModelFileError(f"robot file {str(urdf)!r} cannot be parsed: {e}") from None
-    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
+    one_dof = [k for k in range(1, model.njoints) if model.joints[k].nq == model.joints[k].nv == 1]
+    actuated = tuple(model.names[k] for k in one_dof if k in chain)
+    locked = tuple(model.names[k] for k in one_dof if k not in chain)
+    return actuated, locked
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """What a robot file gives before the keyword overrides of :func:`load_model`."""
+
+    model: pin.Model
+    loops: list[Closure]
+    actuated: tuple[str, ...]
+    springs: dict[str, Stiffness]
+    locked: tuple[str, ...]
+    visual: pin.GeometryModel | None
+    undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
+
+
+def _read_urdf(path: Path, closures: str | Path | None, geometry: bool) -> _Tree:
+    model = _parse(lambda: pin.buildModelFromUrdf(str(path)), path, "robot file")
+    visual = _geometry(
+        geometry,
+        lambda: pin.buildGeomFromUrdf(
+            model, str(path), pin.GeometryType.VISUAL, package_dirs=_package_dirs(path)
+        ),
+        path,
+    )
+    if closures is None:
+        actuated, locked = _serial_defaults(model, path)
+        return _Tree(model, [], actuated, {}, locked, visual)
+    spec = read_closure_file(closures)
     loops = [
         closure_between_frames(model, a, b, t)
         for (a, b), t in zip(spec.pairs, spec.types, strict=True)
     ]
-    if actuated is None:
-        actuated = (
-            spec.actuated
-            if closures is not None
-            else tuple(model.names[j] for j in range(1, model.njoints) if model.joints[j].nq == 1)
-        )
-    all_springs = {**spec.springs, **(springs or {})}
-    return ClosedLoopModel(
-        model, loops, actuated, all_springs, spec.locked, visual_model=visual, name=model.name
+    return _Tree(model, loops, spec.actuated or (), spec.springs, spec.locked, visual)
+
+
+def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+    model, points, welds = _parse(
+        lambda: pin.buildModelAndConstraintsFromMJCF(str(path)), path, "robot file"
     )
+    actuated, springs, names, undriven = _mjcf_xml(path)
+    spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
+    constraints = [*points, *welds]
+    if len(names) != len(constraints):
+        names = [f"closure{i}" for i in range(len(constraints))]
+    visual = _geometry(
+        geometry, lambda: pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL), path
+    )
+    return _Tree(
+        model,
+        [Closure(c, n) for c, n in zip(constraints, names, strict=True)],
+        actuated if spec.actuated is None else spec.actuated,
+        {**springs, **spec.springs},
+        spec.locked,
+        visual,
+        tuple(undriven) if spec.actuated is None else (),
+    )
+
+
+def _mjcf_xml(path: Path) -> tuple[tuple[str, ...], dict[str, float], list[str], list[str]]:
+    """(actuated joints, springs, closure names, actuators driving no joint) from the XML.
+
+    Raises:
+        ModelFileError: ``<include>``, several root bodies (Pinocchio would keep only the
+            first), an equality other than connect/weld, a stiffness that is not >= 0.
+    """
+    where = f"robot file {str(path)!r}"
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as e:
+        raise ModelFileError(f"{where} is not valid XML: {e}") from None
+    if root.find(".//include") is not None:
+        raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
+    roots = root.findall("worldbody/body")
+    if len(roots) > 1:
+        raise ModelFileError(
+            f"{where}: {len(roots)} root bodies under <worldbody>; Pinocchio keeps only the "
+            "first: wrap every ground branch in one body"
+        )
+    equalities = [e for eq in root.findall("equality") for e in eq]
+    other = sorted({e.tag for e in equalities} - set(MJCF_EQUALITIES))
+    if other:
+        raise ModelFileError(f"{where}: equality <{other[0]}> is not supported (connect, weld)")
+    names = []
+    for tag in MJCF_EQUALITIES:  # Pinocchio returns the connects, then the welds
+        same = [e for e in equalities if e.tag == tag]
+        names += [e.get("name") or f"{tag}{i}" for i, e in enumerate(same)]
+    stiffness = {n: _number(v, where, n) for n, v in _mjcf_joint_attribute(root, "stiffness")}
+    actuators = [a for act in root.findall("actuator") for a in act]
+    return (
+        tuple(a.get("joint") for a in actuators if a.get("joint")),
+        {n: k for n, k in stiffness.items() if k > 0},
+        names,
+        [a.get("name") or a.tag for a in actuators if not a.get("joint")],
+    )
+
+
+def _mjcf_joint_attribute(root: ET.Element, attribute: str) -> list[tuple[str, str]]:
+    """(joint name, value of ``attribute``), ``<default>`` classes and childclass resolved."""
+    defaults: dict[str, dict[str, str]] = {}
+
+    def visit_default(elem: ET.Element, inherited: dict[str, str]) -> None:
+        joint = elem.find("joint")
+        defaults[elem.get("class", "main")] = attrs = {
+            **inherited,
+            **(joint.attrib if joint is not None else {}),
+        }
+        for child in elem.findall("default"):
+            visit_default(child, attrs)
+
+    def visit_body(elem: ET.Element, cls: str) -> None:
+        cls = elem.get("childclass", cls)
+        for joint in elem.findall("joint"):
+            attrs = {**defaults.get(joint.get("class", cls), {}), **joint.attrib}
+            if "name" in attrs and attribute in attrs:
+                values.append((attrs["name"], attrs[attribute]))
+        for body in elem.findall("body"):
+            visit_body(body, cls)
+
+    values: list[tuple[str, str]] = []
+    for d in root.findall("default"):
+        visit_default(d, {})
+    for world in root.findall("worldbody"):
+        visit_body(world, "main")
+    return values
+
+
+def load_model(
+    path: str | Path,
+    closures: str | Path | None = None,
+    *,
+    springs: Mapping[str, Stiffness] | None = None,
+    joint_stiffness: float | None = None,
+    actuated: Sequence[str] | None = None,
+    geometry: bool = True,
+    file_format: str | None = None,
+) -> ClosedLoopModel:
+    """Load a URDF (``.urdf``) or MJCF (``.xml``, ``.mjcf``) model.
+
+    An MJCF model's loops are its ``<equality><connect|weld>`` constraints. Pinocchio
+    computes the ``<connect>`` anchor on the second body at ``qpos0``, so the file's
+    reference pose must be assembled; :func:`reference_configuration` returns it.
+
+    Args:
+        path: robot file.
+        closures: closure file (URDF; ``None`` for a serial robot) or side file (MJCF,
+            only ``name_mot``, ``springs``, ``locked``).
+        springs: joint -> stiffness [N m/rad or N/m], merged over the files' springs.
+        joint_stiffness: stiffness [N m/rad or N/m] of every actuated joint that has no
+            spring otherwise.
+        actuated: actuated joints, replacing those of the files or the serial default.
+        geometry: also load the visual geometry (meshes must be found).
+        file_format: ``"urdf"`` or ``"mjcf"``; default: from the file suffix.
+
+    Raises:
+        ModelFileError: missing or unparsable robot or closure file, unknown format; the
+            message names the file and the fault.
+        NameNotFoundError: a frame or joint name that the model does not have.
+        InvalidInputError: a negative or NaN stiffness given as keyword.
+    """
+    kind = file_format or MODEL_SUFFIXES.get(Path(path).suffix.lower())
+    if kind not in ("urdf", "mjcf"):
+        raise ModelFileError(
+            f"robot file {str(path)!r}: unknown format {kind or Path(path).suffix!r}; expected "
+            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf' or 'mjcf'"
+        )
+    path = _existing(path, "robot file")
+    tree = (_read_urdf if kind == "urdf" else _read_mjcf)(path, closures, geometry)
+    if actuated is None and tree.undriven:
+        raise ModelFileError(
+            f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
+            "directly; list the actuated joints (name_mot in a side file, or actuated=)"
+        )
+    actuated = tree.actuated if actuated is None else tuple(actuated)
+    springs = {**tree.springs, **(springs or {})}
+    if joint_stiffness is not None:
+        try:
+            k = float(joint_stiffness)
+        except (TypeError, ValueError):
+            k = math.nan
+        if math.isnan(k) or k < 0:
+            raise InvalidInputError(
+                f"joint stiffness {joint_stiffness!r}; expected a number >= 0 "
+                "[N m/rad or N/m] (0 = passive, inf = locked)"
+            )
+        for name in actuated:
+            springs.setdefault(name, k)
+    return ClosedLoopModel(
+        tree.model, tree.loops, actuated, springs, tree.locked, visual_model=tree.visual
+    )
+
+
+def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:
+    """:func:`load_model` for a URDF file, whatever its suffix (same keyword options)."""
+    return load_model(urdf, closures, file_format="urdf", **options)
+
+
+def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
+    """(nq,) start configuration: the MJCF ``qpos0`` if the model has one, else neutral."""
+    refs = clm.model.referenceConfigurations
+    q = refs["qpos0"] if "qpos0" in refs else pin.neutral(clm.model)
+    return np.array(q, dtype=float)
 
 
 def robot_data_dir() -> Path:

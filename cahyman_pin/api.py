@@ -1,0 +1,275 @@
+"""One-call stiffness queries of CaHyMan at an arbitrary pose (SI in, SI out).
+
+Example::
+
+    from cahyman_pin.api import stiffness
+    r = stiffness([1.0, 1.1, 1.2], 0.5, 0.02)   # alpha [rad], alpha_4 [rad], s_4 [m]
+    r.K, r.C, r.det_K                            # at M, world axes
+    r.deflection([1, 1, 1, 0, 0, 0]).M           # twist of M under 1 N along x, y, z
+
+Matrices are 6x6 at the reference point M (the arm extremity), in world axes, ordered
+(dx, dy, dz, rx, ry, rz) for twists and (fx, fy, fz, nx, ny, nz) for wrenches; a rotation
+is the small rotation vector of the arm link that carries M.
+
+Backends compute the matrices. ``"generic"`` is the Pinocchio model of
+:mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`. Another backend is
+a function ``f(params, alpha, alpha4, s4) -> BackendResult`` registered with one line,
+``register_backend("name", f)``, in a module ``cahyman_pin/backend_<name>.py``: that module
+is imported the first time ``backend="name"`` is asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from closedloop.compliance import TWIST_LABELS, UNITS, compliance
+from closedloop.exceptions import InvalidInputError
+from closedloop.indices import StiffnessIndices
+from closedloop.kinematics import frame_jacobian
+
+from .model import CaHyManPose, cahyman_model, check_inputs
+from .params import DEFAULT_PARAMS, CaHyManParams
+from .urdf_builder import FRAME_H, FRAME_M
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class BackendResult:
+    """What a backend returns.
+
+    Attributes:
+        C: (6, 6) compliance at M, world axes [SI] (see the module docstring).
+        pose: plate and arm pose.
+        C_platform: (6, 6) twist of the plate at H (world axes) per wrench at M, or None
+            when the backend does not provide it.
+        details: backend-specific extras (e.g. the configuration q).
+    """
+
+    C: np.ndarray
+    pose: CaHyManPose
+    C_platform: np.ndarray | None = None
+    details: dict = field(default_factory=dict)
+
+
+Backend = Callable[[CaHyManParams, np.ndarray, float, float], BackendResult]
+_BACKENDS: dict[str, Backend] = {}
+
+
+def register_backend(name: str, func: Backend) -> Backend:
+    """Make ``func`` available as ``backend=name`` (returns ``func``)."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise InvalidInputError(f"backend name {name!r} must be an identifier")
+    _BACKENDS[name] = func
+    return func
+
+
+def backend_names() -> tuple[str, ...]:
+    """Registered backends and the ``cahyman_pin.backend_<name>`` modules, sorted."""
+    package = importlib.import_module(__package__)
+    found = {
+        m.name.removeprefix("backend_")
+        for m in pkgutil.iter_modules(package.__path__)
+        if m.name.startswith("backend_")
+    }
+    return tuple(sorted(found | set(_BACKENDS)))
+
+
+def get_backend(name: str) -> Backend:
+    """The backend function called ``name``, importing its module on first use.
+
+    Raises:
+        InvalidInputError: unknown name (the message lists the choices).
+    """
+    if name not in _BACKENDS and name in backend_names():
+        importlib.import_module(f"{__package__}.backend_{name}")
+        if name not in _BACKENDS:
+            raise InvalidInputError(
+                f"module {__package__}.backend_{name} does not register a backend; it needs "
+                f"register_backend({name!r}, function)"
+            )
+    if name not in _BACKENDS:
+        raise InvalidInputError(
+            f"unknown backend {name!r}; expected one of {list(backend_names())}"
+        )
+    return _BACKENDS[name]
+
+
+def generic_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
+    """Pinocchio model + closedloop compliance (the reference backend).
+
+    ``details`` holds ``q`` (nq,), the assembled configuration, and ``compliance``, the
+    :class:`closedloop.compliance.ComplianceResult` at M.
+    """
+    model = cahyman_model(params)
+    q = model.assemble(alpha, alpha4, s4)
+    result = compliance(model.clm, q, FRAME_M, "world")
+    J_H = frame_jacobian(model.clm, q, FRAME_H, "world")
+    return BackendResult(
+        C=result.C,
+        pose=model.pose(q),
+        C_platform=_readonly(J_H @ result.G),
+        details={"q": q, "compliance": result},
+    )
+
+
+register_backend("generic", generic_backend)
+
+
+@dataclass(frozen=True)
+class Deflection:
+    """Small displacement under a wrench at M (arrays read-only, world axes, SI).
+
+    Attributes:
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]) applied at M.
+        M: (6,) twist of M: (dx, dy, dz [m], rx, ry, rz [rad]), rotation of the arm link.
+        H: (6,) twist of the plate at H, or None if the backend does not give it.
+    """
+
+    wrench: np.ndarray
+    M: np.ndarray
+    H: np.ndarray | None
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (SI)."""
+        return {
+            "wrench": self.wrench.tolist(),
+            "M": self.M.tolist(),
+            "H": None if self.H is None else self.H.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class CaHyManStiffness:
+    """Stiffness of CaHyMan at one pose (arrays read-only).
+
+    Attributes:
+        alpha: (3,) crank angles alpha_1..3 [rad].
+        alpha4: arm angle [rad].
+        s4: telescope stroke [m].
+        params: parameters used.
+        backend: name of the backend.
+        C: (6, 6) compliance at M, world axes [m/N, m/(N m) = rad/N, rad/(N m)].
+        C_platform: (6, 6) twist of the plate at H per wrench at M, or None.
+        pose: plate and arm pose.
+        indices: :class:`closedloop.indices.StiffnessIndices` of C.
+        details: backend extras (generic: ``q``, ``compliance``).
+    """
+
+    alpha: np.ndarray
+    alpha4: float
+    s4: float
+    params: CaHyManParams
+    backend: str
+    C: np.ndarray
+    C_platform: np.ndarray | None
+    pose: CaHyManPose
+    indices: StiffnessIndices
+    details: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(6, 6) stiffness C^-1 at M, world axes [N/m, N/rad, N m/m, N m/rad].
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+        """
+        return self.indices.K
+
+    @property
+    def det_K(self) -> float:
+        """det K [N^6/rad^3] (the paper's performance index)."""
+        return self.indices.determinant
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """(6,) eigenvalues of K in SI (mixed units), ascending."""
+        return self.indices.eigenvalues
+
+    @property
+    def condition_number(self) -> float:
+        """Condition number of K in SI (depends on the length unit and the point)."""
+        return self.indices.condition_number
+
+    def deflection(self, wrench) -> Deflection:
+        """Twists of M and of the plate under ``wrench`` (6,) at M [N, N m], world axes."""
+        w = np.asarray(wrench, dtype=float).reshape(-1)
+        if w.shape != (6,) or not np.all(np.isfinite(w)):
+            raise InvalidInputError(
+                f"wrench must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"
+            )
+        H = None if self.C_platform is None else _readonly(self.C_platform @ w)
+        return Deflection(wrench=_readonly(w), M=_readonly(self.C @ w), H=H)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (SI): K, C, det_K, eigenvalues, platform, inputs, units."""
+        full = self.indices.is_full_rank
+        return {
+            "K": self.K.tolist() if full else None,
+            "C": self.C.tolist(),
+            "det_K": self.det_K if full else None,
+            "eigenvalues_K": self.eigenvalues.tolist() if full else None,
+            "condition_number_K": self.condition_number if full else None,
+            "rank": self.indices.rank,
+            "reference_point": "M",
+            "M_m": self.pose.M.tolist(),
+            "axes": "world",
+            "order": list(TWIST_LABELS),
+            "platform": self.pose.to_dict(),
+            "inputs": {
+                "alpha_rad": self.alpha.tolist(),
+                "alpha4_rad": self.alpha4,
+                "s4_m": self.s4,
+                "K_s_N_per_m": self.params.K_s,
+            },
+            "backend": self.backend,
+            "units": {**UNITS, "det_K": "N^6/rad^3"},
+        }
+
+
+def stiffness(
+    alpha,
+    alpha4: float,
+    s4: float,
+    *,
+    params: CaHyManParams = DEFAULT_PARAMS,
+    backend: str = "generic",
+) -> CaHyManStiffness:
+    """Stiffness and compliance of CaHyMan at M for the given inputs.
+
+    Args:
+        alpha: (3,) crank angles alpha_1..3 [rad].
+        alpha4: arm angle [rad] (from x_p towards z_p).
+        s4: telescope stroke [m], in [0, params.s4_max].
+        params: parameters (e.g. ``DEFAULT_PARAMS.with_ks("printed")``).
+        backend: name of the backend (see :func:`backend_names`).
+
+    Raises:
+        InvalidInputError: bad input or unknown backend.
+        AssemblyError: unreachable pose.
+    """
+    if not isinstance(params, CaHyManParams):
+        raise InvalidInputError(f"params must be a CaHyManParams, got {type(params).__name__}")
+    alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, params)
+    result = get_backend(backend)(params, alpha, alpha4, s4)
+    return CaHyManStiffness(
+        alpha=_readonly(alpha),
+        alpha4=alpha4,
+        s4=s4,
+        params=params,
+        backend=backend,
+        C=_readonly(result.C),
+        C_platform=None if result.C_platform is None else _readonly(result.C_platform),
+        pose=result.pose,
+        indices=StiffnessIndices.from_compliance(result.C),
+        details=result.details,
+    )

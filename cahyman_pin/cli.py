@@ -1,0 +1,244 @@
+"""Command line ``cahyman``: stiffness and deflection of CaHyMan at a pose.
+
+Inputs are in the paper's units (degrees, millimetres); outputs are SI (JSON with
+``--json``) with the paper's units beside them in the readable print. Examples::
+
+    cahyman stiffness --alpha 45 60 75 --alpha4 45 --s4 0 --json
+    cahyman deflect --force 1 1 1 --torque 0 0 0
+
+Subcommands: every module named in :data:`SUBCOMMAND_MODULES` provides
+``add_parser(subparsers)``, which adds its parser and sets ``func`` (``args -> int``) as
+its default; :func:`add_pose_arguments` and :func:`stiffness_from_args` are shared.
+Bad input prints one line ``cahyman: error: ...`` on stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from closedloop.exceptions import ClosedLoopError
+
+from .api import CaHyManStiffness, stiffness
+from .params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED
+
+PROG = "cahyman"
+#: Modules adding further subcommands (each defines ``add_parser(subparsers)``).
+SUBCOMMAND_MODULES: tuple[str, ...] = ()
+#: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
+DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
+KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
+
+
+class UsageError(Exception):
+    """A command-line error (bad option or value)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, no usage block
+        raise UsageError(message)
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite real number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --alpha, --alpha4, --s4 (paper units), --ks, --backend, --json."""
+    d = DEFAULT_POSE
+    parser.add_argument(
+        "--alpha",
+        nargs=3,
+        type=finite_float,
+        default=list(d["alpha"]),
+        metavar=("A1", "A2", "A3"),
+        help="crank angles alpha_1..3 [deg] (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--alpha4",
+        type=finite_float,
+        default=d["alpha4"],
+        metavar="A4",
+        help="arm angle alpha_4 [deg] (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--s4",
+        type=finite_float,
+        default=d["s4"],
+        metavar="S4",
+        help="telescope stroke s_4 [mm] (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--ks",
+        choices=sorted(KS_PRESETS),
+        default="assumed",
+        help="K_s preset: assumed 0.697e6 N/m or printed 0.697 N/m",
+    )
+    parser.add_argument("--backend", default="generic", help="stiffness backend")
+    parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
+
+
+def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
+    """Stiffness at the pose given by :func:`add_pose_arguments`' options (converted to SI)."""
+    return stiffness(
+        np.deg2rad(args.alpha),
+        math.radians(args.alpha4),
+        args.s4 / 1000.0,
+        params=DEFAULT_PARAMS.with_ks(args.ks),
+        backend=args.backend,
+    )
+
+
+def inputs_echo(args: argparse.Namespace) -> dict:
+    """The pose options as given (paper units) and in SI."""
+    return {
+        "alpha_deg": list(args.alpha),
+        "alpha4_deg": args.alpha4,
+        "s4_mm": args.s4,
+        "alpha_rad": np.deg2rad(args.alpha).tolist(),
+        "alpha4_rad": math.radians(args.alpha4),
+        "s4_m": args.s4 / 1000.0,
+        "ks": args.ks,
+        "K_s_N_per_m": KS_PRESETS[args.ks],
+        "backend": args.backend,
+    }
+
+
+def _matrix(name: str, A: np.ndarray, unit: str) -> str:
+    rows = "\n".join("  " + " ".join(f"{x: .6e}" for x in row) for row in A)
+    return f"{name} [{unit}] (order dx dy dz rx ry rz; at M, world axes):\n{rows}"
+
+
+def _vec(v, scale: float = 1.0, fmt: str = "{: .6g}") -> str:
+    return "(" + ", ".join(fmt.format(x * scale) for x in v) + ")"
+
+
+def _pose_lines(r: CaHyManStiffness) -> list[str]:
+    p = r.pose
+    return [
+        f"platform H = {_vec(p.H, 1e3)} mm; phi, theta, psi = "
+        f"{_vec([p.phi, p.theta, p.psi], 180 / math.pi)} deg",
+        f"extremity M = {_vec(p.M, 1e3)} mm",
+    ]
+
+
+# ------------------------------------------------------------------ stiffness
+def _run_stiffness(args: argparse.Namespace) -> int:
+    r = stiffness_from_args(args)
+    out = r.to_dict()
+    out["inputs"] = inputs_echo(args)
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"CaHyMan at alpha = {args.alpha} deg, alpha4 = {args.alpha4} deg, "
+          f"s4 = {args.s4} mm (K_s {args.ks}, backend {args.backend})")  # fmt: skip
+    print("\n".join(_pose_lines(r)))
+    if r.indices.is_full_rank:
+        print(_matrix("K", r.K, "N/m, N/rad, N m/m, N m/rad"))
+        print(f"det K = {r.det_K:.6e} N^6/rad^3")
+        print(f"eigenvalues of K [SI] = {_vec(r.eigenvalues)}")
+        print(f"condition number of K [SI] = {r.condition_number:.6g}")
+    else:
+        print(f"K does not exist: compliance rank {r.indices.rank} < 6")
+    print(_matrix("C", r.C, "m/N, m/(N m), rad/N, rad/(N m)"))
+    return 0
+
+
+def _add_stiffness(subparsers) -> None:
+    p = subparsers.add_parser("stiffness", help="6x6 stiffness and compliance at M",
+                              description="Stiffness K and compliance C at M (SI).")  # fmt: skip
+    add_pose_arguments(p)
+    p.set_defaults(func=_run_stiffness)
+
+
+# ------------------------------------------------------------------ deflect
+def _twist_dict(t: np.ndarray) -> dict:
+    return {
+        "displacement_m": t[:3].tolist(),
+        "displacement_mm": (t[:3] * 1e3).tolist(),
+        "rotation_rad": t[3:].tolist(),
+        "rotation_deg": np.rad2deg(t[3:]).tolist(),
+    }
+
+
+def _run_deflect(args: argparse.Namespace) -> int:
+    r = stiffness_from_args(args)
+    d = r.deflection(np.r_[args.force, args.torque])
+    out = {
+        "wrench": {"force_N": list(args.force), "torque_N_m": list(args.torque)},
+        "M": _twist_dict(d.M),
+        "platform": None if d.H is None else _twist_dict(d.H),
+        "pose": r.pose.to_dict(),
+        "inputs": inputs_echo(args),
+        "units": "SI, with _mm and _deg copies; twists at M (arm link) and at H (plate), "
+        "world axes; rotations are small rotation vectors",
+    }
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"force {args.force} N, torque {args.torque} N m at M")
+    print("\n".join(_pose_lines(r)))
+    rows = [("M (arm extremity)", d.M)] + ([] if d.H is None else [("H (platform)", d.H)])
+    for name, t in rows:
+        print(f"{name}: displacement {_vec(t[:3], 1e3)} mm = {_vec(t[:3])} m")
+        print(f"{' ' * len(name)}  rotation {_vec(t[3:], 180 / math.pi)} deg = {_vec(t[3:])} rad")
+    return 0
+
+
+def _add_deflect(subparsers) -> None:
+    p = subparsers.add_parser("deflect", help="deflection of M and of the platform under a load",
+                              description="Small deflection under a wrench at M.")  # fmt: skip
+    add_pose_arguments(p)
+    p.add_argument(
+        "--force",
+        nargs=3,
+        type=finite_float,
+        default=[0.0, 0.0, 0.0],
+        metavar=("FX", "FY", "FZ"),
+        help="force at M [N], world axes",
+    )
+    p.add_argument("--torque", nargs=3, type=finite_float, default=[0.0, 0.0, 0.0],
+                   metavar=("NX", "NY", "NZ"), help="torque [N m], world axes")  # fmt: skip
+    p.set_defaults(func=_run_deflect)
+
+
+# ------------------------------------------------------------------ entry point
+def build_parser() -> argparse.ArgumentParser:
+    """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`."""
+    parser = _Parser(prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator).")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_stiffness(subparsers)
+    _add_deflect(subparsers)
+    for name in SUBCOMMAND_MODULES:
+        importlib.import_module(name).add_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (2 on bad input)."""
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.func(args) or 0)
+    except (UsageError, ClosedLoopError) as e:
+        message = " ".join(str(e).split())
+        print(f"{PROG}: error: {message}", file=sys.stderr)
+        return 2
+    except SystemExit as e:  # --help
+        return e.code if isinstance(e.code, int) else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

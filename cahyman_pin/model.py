@@ -1,0 +1,298 @@
+"""CaHyMan as a :class:`closedloop.model.ClosedLoopModel`: build, assemble, read the pose.
+
+The model is built in memory from :mod:`cahyman_pin.urdf_builder` (URDF text parsed by
+Pinocchio, closures and springs from the same builder), so a parameter sweep rebuilds it
+without files. :func:`cahyman_model` caches one model per parameter set.
+
+Inputs are alpha = (alpha_1, alpha_2, alpha_3) [rad] (leg cranks), alpha_4 [rad] (arm
+elevation from x_p towards z_p) and s_4 [m] (telescope stroke, in [0, params.s4_max]).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.assembly import assemble as assemble_loops
+from closedloop.exceptions import InvalidInputError
+from closedloop.kinematics import closure_residual, update_kinematics
+from closedloop.model import ClosedLoopModel, closure_between_frames
+
+from . import geometry
+from .params import DEFAULT_PARAMS, CaHyManParams
+from .urdf_builder import (
+    FRAME_H,
+    FRAME_M,
+    LEGS,
+    PLATE_JOINT,
+    VIRTUAL_JOINTS,
+    build_urdf,
+    closure_spec,
+)
+
+#: Below this value of cos(phi) the plate normal is vertical and only theta + psi is
+#: defined: :func:`paper_angles` then reports psi = 0 and theta = the yaw.
+SINGULAR_COS_PHI = 1e-12
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class CaHyManPose:
+    """Pose of the mobile plate and of the arm (arrays read-only, world frame, SI).
+
+    Attributes:
+        H: (3,) plate centre [m].
+        R: (3, 3) plate orientation, world from plate (columns x_p, y_p, z_p).
+        phi, theta, psi: the paper's angles [rad], R = Rz(theta) Ry(pi/2 - phi) Rz(psi);
+            at phi = pi/2 (cos phi < ``SINGULAR_COS_PHI``) psi = 0 and theta is the yaw.
+        s: (3,) strokes s_1..3 of the leg sliders [m].
+        H_k: (3, 3) ball-joint centres, one leg per row [m].
+        Q: (3,) arm pivot Q = H + HQ z_p [m].
+        M: (3,) arm extremity M [m].
+        R_M: (3, 3) orientation of the link carrying M (x axis along the arm direction w).
+    """
+
+    H: np.ndarray
+    R: np.ndarray
+    phi: float
+    theta: float
+    psi: float
+    s: np.ndarray
+    H_k: np.ndarray
+    Q: np.ndarray
+    M: np.ndarray
+    R_M: np.ndarray
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (metres, radians)."""
+        return {
+            "H_m": self.H.tolist(),
+            "R": self.R.tolist(),
+            "phi_rad": self.phi,
+            "theta_rad": self.theta,
+            "psi_rad": self.psi,
+            "s_m": self.s.tolist(),
+            "M_m": self.M.tolist(),
+        }
+
+
+def paper_angles(R: np.ndarray) -> tuple[float, float, float]:
+    """(phi, theta, psi) [rad] of a plate rotation R (3, 3) = Rz(theta) Ry(pi/2 - phi) Rz(psi).
+
+    phi in [-pi/2, pi/2] (elevation of the plate normal), theta and psi in (-pi, pi].
+    """
+    cos_phi = float(np.hypot(R[0, 2], R[1, 2]))
+    phi = float(np.arctan2(R[2, 2], cos_phi))
+    if cos_phi < SINGULAR_COS_PHI:
+        return phi, float(np.arctan2(R[1, 0], R[0, 0])), 0.0
+    return phi, float(np.arctan2(R[1, 2], R[0, 2])), float(np.arctan2(R[2, 1], -R[2, 0]))
+
+
+def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float, float]:
+    """Validated (alpha (3,) [rad], alpha_4 [rad], s_4 [m]); raises InvalidInputError."""
+    alpha = np.array(alpha, dtype=float).reshape(-1)
+    if alpha.shape != (3,) or not np.all(np.isfinite(alpha)):
+        raise InvalidInputError(f"alpha must be 3 finite angles [rad], got {alpha.tolist()}")
+    alpha4, s4 = np.asarray(alpha4, dtype=float), np.asarray(s4, dtype=float)
+    if alpha4.size != 1 or not np.isfinite(alpha4):
+        raise InvalidInputError(f"alpha_4 must be one finite angle [rad], got {alpha4.tolist()}")
+    if s4.size != 1 or not np.isfinite(s4) or not 0.0 <= float(s4) <= p.s4_max:
+        raise InvalidInputError(
+            f"s_4 = {s4.tolist()} m is outside the stroke [0, {p.s4_max}] m "
+            "(params.s4_max sets the stroke)"
+        )
+    return alpha, float(alpha4), float(s4)
+
+
+def closed_form_pose(alpha, alpha4, s4, p: CaHyManParams = DEFAULT_PARAMS) -> CaHyManPose:
+    """Pose from the closed-form geometry of :mod:`cahyman_pin.geometry` (no Pinocchio).
+
+    Args:
+        alpha: (3,) crank angles [rad]; alpha4: arm angle [rad]; s4: stroke [m].
+
+    Raises:
+        AssemblyError: the legs cannot carry the plate.
+    """
+    alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, p)
+    pose = geometry.plate_pose(alpha, p)
+    Q, M = geometry.extremity(pose, alpha4, s4, p)
+    phi, theta, psi = paper_angles(pose.R)
+    return CaHyManPose(
+        H=_readonly(pose.H),
+        R=_readonly(pose.R),
+        phi=phi,
+        theta=theta,
+        psi=psi,
+        s=_readonly(pose.s),
+        H_k=_readonly(geometry.ball_centres(pose, p)),
+        Q=_readonly(Q),
+        M=_readonly(M),
+        R_M=_readonly(geometry.arm_rotation(pose.R, alpha4)),
+    )
+
+
+def build_closed_loop_model(p: CaHyManParams = DEFAULT_PARAMS) -> ClosedLoopModel:
+    """ClosedLoopModel of CaHyMan for parameters ``p``, built in memory (no files)."""
+    urdf = build_urdf(p)
+    model = pin.buildModelFromXML(urdf)
+    visual = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.VISUAL)
+    spec = closure_spec(p)
+    closures = [
+        closure_between_frames(model, a, b, kind)
+        for (a, b), kind in zip(spec.pairs, spec.types, strict=True)
+    ]
+    return ClosedLoopModel(
+        model, closures, spec.actuated, spec.springs, spec.locked, visual_model=visual,
+        name="cahyman",
+    )  # fmt: skip
+
+
+class CaHyManModel:
+    """CaHyMan with Pinocchio: assembly, pose and inverse kinematics of the parallel base.
+
+    Args:
+        params: dimensions and springs (SI).
+
+    Attributes:
+        params: the parameters.
+        clm: the :class:`ClosedLoopModel` (tree, 6 point closures, 5 actuated joints,
+            12 springs).
+    """
+
+    def __init__(self, params: CaHyManParams = DEFAULT_PARAMS):
+        if not isinstance(params, CaHyManParams):
+            raise InvalidInputError(f"params must be a CaHyManParams, got {type(params).__name__}")
+        self.params = params
+        self.clm = build_closed_loop_model(params)
+        self._q_index = {
+            self.clm.model.names[j]: self.clm.model.joints[j].idx_q
+            for j in range(1, self.clm.model.njoints)
+        }
+
+    def __repr__(self) -> str:
+        return f"CaHyManModel({self.clm!r})"
+
+    # --------------------------------------------------------------- configurations
+    def initial_guess(self, alpha, alpha4, s4) -> np.ndarray:
+        """(nq,) configuration from the closed-form geometry (undeformed springs).
+
+        Raises:
+            AssemblyError: the legs cannot carry the plate.
+        """
+        alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
+        pose = geometry.plate_pose(alpha, self.params)
+        q = pin.neutral(self.clm.model)
+        ix = self._q_index
+        for k, a, s in zip(LEGS, alpha, pose.s, strict=True):
+            q[ix[f"alpha_{k}"]], q[ix[f"c_{k}"]], q[ix[f"d_{k}"]] = a, -a, a
+            q[ix[f"s_{k}"]] = s
+        i = ix[PLATE_JOINT]
+        q[i : i + 3] = pose.H
+        q[i + 3 : i + 7] = pin.Quaternion(pose.R).coeffs()
+        q[ix["alpha_4"]], q[ix["s_4"]] = alpha4, s4
+        return q
+
+    def assemble(self, alpha, alpha4, s4, *, q0=None, full_output: bool = False):
+        """Assembled configuration for the inputs, springs at rest.
+
+        Args:
+            alpha: (3,) crank angles alpha_1..3 [rad].
+            alpha4: arm angle [rad].
+            s4: telescope stroke [m].
+            q0: (nq,) warm start (e.g. a neighbouring pose); default: the closed-form
+                guess, which picks the branch of the closed-form geometry.
+            full_output: return the :class:`closedloop.assembly.Assembly` (q, residual,
+                iterations) instead of q.
+
+        Returns:
+            (nq,) read-only configuration q, or the Assembly.
+
+        Raises:
+            AssemblyError: unreachable inputs (message gives the residual reached).
+            InvalidInputError: non-finite input, wrong count, s_4 outside its stroke.
+        """
+        alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
+        if q0 is None:
+            q0 = self.initial_guess(alpha, alpha4, s4)
+        else:
+            q0 = self.clm.check_configuration(q0)
+            for name in VIRTUAL_JOINTS:  # virtual springs back to rest
+                q0[self._q_index[name]] = 0.0
+        actuated = np.concatenate([alpha, [alpha4, s4]])
+        result = assemble_loops(self.clm, actuated, q0)
+        return result if full_output else result.q
+
+    def residual(self, q) -> float:
+        """Infinity norm of the closure residual at q (nq,) [m]."""
+        return float(np.max(np.abs(closure_residual(self.clm, self.clm.check_configuration(q)))))
+
+    # ------------------------------------------------------------------------ pose
+    def placement(self, q, frame: str) -> pin.SE3:
+        """World placement of frame ``frame`` at q (nq,)."""
+        update_kinematics(self.clm, self.clm.check_configuration(q))
+        return self.clm.data.oMf[self.clm.frame_id(frame)].copy()
+
+    def pose(self, q) -> CaHyManPose:
+        """Plate and arm pose read from the assembled configuration q (nq,)."""
+        q = self.clm.check_configuration(q)
+        update_kinematics(self.clm, q)
+        oMf, fid = self.clm.data.oMf, self.clm.frame_id
+        plate, arm = oMf[fid(FRAME_H)], oMf[fid(FRAME_M)]
+        phi, theta, psi = paper_angles(plate.rotation)
+        return CaHyManPose(
+            H=_readonly(plate.translation),
+            R=_readonly(plate.rotation),
+            phi=phi,
+            theta=theta,
+            psi=psi,
+            s=_readonly([q[self._q_index[f"s_{k}"]] for k in LEGS]),
+            H_k=_readonly([oMf[fid(f"H_{k}")].translation for k in LEGS]),
+            Q=_readonly(oMf[fid("Q")].translation),
+            M=_readonly(arm.translation),
+            R_M=_readonly(arm.rotation),
+        )
+
+    def inverse(self, z_H: float, phi: float, psi: float) -> np.ndarray:
+        """Leg inputs for a plate height and tilt (closed form, the paper's branch).
+
+        Args:
+            z_H: plate-centre height [m]; phi: elevation of the plate normal [rad]
+                (pi/2 = level); psi: azimuth of the tilt [rad].
+
+        Returns:
+            (3,) crank angles alpha_1..3 [rad] in [-pi/2, pi/2].
+
+        Raises:
+            AssemblyError: a crank would have to reach beyond its length.
+        """
+        values = np.array([z_H, phi, psi], dtype=float)
+        if values.shape != (3,) or not np.all(np.isfinite(values)):
+            raise InvalidInputError(f"z_H, phi, psi must be finite numbers, got {values.tolist()}")
+        alpha = geometry.inverse_legs(*values, self.params)
+        return _readonly(alpha)
+
+
+@functools.lru_cache(maxsize=32)
+def cahyman_model(params: CaHyManParams = DEFAULT_PARAMS) -> CaHyManModel:
+    """Cached :class:`CaHyManModel` for ``params`` (building a model costs milliseconds)."""
+    return CaHyManModel(params)
+
+
+__all__ = [
+    "SINGULAR_COS_PHI",
+    "CaHyManModel",
+    "CaHyManPose",
+    "build_closed_loop_model",
+    "cahyman_model",
+    "check_inputs",
+    "closed_form_pose",
+    "paper_angles",
+]

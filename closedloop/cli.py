@@ -1,0 +1,194 @@
+"""Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
+
+Exit codes:
+
+* ``0`` - the stiffness K exists; K and C printed.
+* ``1`` - the analysis succeeded but C is rank deficient: the frame is rigid along some
+  directions, K does not exist. C and the rigid directions are printed (JSON: ``"K": null``).
+  This is an answer, not an error, hence not 2; it differs from 0 so that scripts notice.
+* ``2`` - usage or input error (missing file, unknown frame or joint, malformed closure
+  file, wrong number of values, NaN, negative stiffness, loops that cannot be closed,
+  a mechanism without equilibrium): one line ``closedloop: error: <message>`` on stderr.
+  A command-line syntax error is reported by argparse (usage line, then the error).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from .assembly import assemble
+from .compliance import TWIST_LABELS, UNITS, ComplianceResult, compliance, describe_directions
+from .exceptions import ClosedLoopError, InvalidInputError
+from .io import load_model, read_springs_file, reference_configuration
+from .kinematics import closure_residual
+from .model import ClosedLoopModel
+
+PROG = "closedloop"
+EXIT_OK, EXIT_RIGID, EXIT_ERROR = 0, 1, 2
+#: Largest closure residual accepted for a configuration given with --q [m, rad]: values
+#: typed with 7 significant digits close a loop of metre size to about 1e-7.
+Q_CLOSURE_TOL = 1e-6
+WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
+
+EPILOG = """\
+Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
+gives the actuated joints' values and the loops are closed by moving the passive joints
+(start: MJCF qpos0, else the neutral configuration). Without either: that start, assembled.
+A --q of a model with loops must close them to 1e-6 (m, rad).
+
+Springs: --joint-stiffness K gives stiffness K [N m/rad or N/m] to every actuated joint
+that has no spring in the closure file; --springs FILE is a YAML mapping joint -> stiffness
+merged over the closure file's springs (.inf locks a joint). Actuated joints without a
+spring are rigid. A URDF without closure file is a serial robot: the joints of its main
+chain are actuated, joints beyond a branching (gripper fingers) are locked.
+
+Output: C is the twist (dx dy dz [m], rx ry rz [rad]) per wrench (fx fy fz [N], nx ny nz
+[N m]) at the frame origin, in world-aligned axes (--axes world) or the frame's own axes
+(--axes local); K = C^-1.
+
+Exit status: 0 K exists; 1 C is rank deficient (the rigid directions are named, K does
+not exist, JSON "K": null); 2 error (one line on stderr).
+
+Example:
+  closedloop stiffness ur5_robot.urdf --frame tool0 --q 0 -1.0 1.5 -0.5 1.2 0.3 \\
+      --joint-stiffness 1e4
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser of the ``closedloop`` command."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="Stiffness and compliance of robots with closed loops."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p = sub.add_parser(
+        "stiffness",
+        help="Cartesian stiffness K and compliance C of a frame",
+        description="Cartesian stiffness K and compliance C of a frame (SI units).",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="robot file: .urdf, or .xml/.mjcf (MJCF)")
+    p.add_argument(
+        "--closures",
+        metavar="FILE",
+        help="closure file (URDF) or side file with name_mot/springs/locked (MJCF)",
+    )
+    p.add_argument("--frame", required=True, metavar="NAME", help="loaded frame")
+    config = p.add_mutually_exclusive_group()
+    config.add_argument(
+        "--q", nargs="+", type=float, metavar="Q", help="full configuration (nq values)"
+    )
+    config.add_argument(
+        "--actuated", nargs="+", type=float, metavar="A", help="actuated joint values"
+    )
+    springs = p.add_mutually_exclusive_group()
+    springs.add_argument(
+        "--joint-stiffness",
+        type=float,
+        metavar="VALUE",
+        help="stiffness of every actuated joint without spring [N m/rad or N/m]",
+    )
+    springs.add_argument("--springs", metavar="FILE", help="YAML mapping joint -> stiffness")
+    p.add_argument("--axes", choices=("world", "local"), default="world", help="axes of K and C")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    return parser
+
+
+def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> np.ndarray:
+    """(nq,) configuration for the analysis from ``--q`` or ``--actuated`` values.
+
+    Raises:
+        InvalidInputError: wrong count, non-finite values, or a ``q`` that violates the
+            closures by more than :data:`Q_CLOSURE_TOL`.
+        AssemblyError: the loops cannot be closed for these actuated values.
+    """
+    if q is None:
+        return assemble(clm, actuated, reference_configuration(clm)).q
+    q = clm.check_configuration(q)
+    gap = float(np.max(np.abs(closure_residual(clm, q)), initial=0.0))
+    if gap > Q_CLOSURE_TOL:
+        raise InvalidInputError(
+            f"--q violates the loop closures by {gap:.3e} (> {Q_CLOSURE_TOL:g} m or rad); "
+            "give --actuated values to assemble the loops"
+        )
+    return q
+
+
+def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
+    head = " " * 4 + "".join(f"{c:>13}" for c in cols)
+    body = [
+        f"  {r:<2}" + "".join(f"{v:13.5e}" for v in row) for r, row in zip(rows, M, strict=True)
+    ]
+    return "\n".join([head, *body])
+
+
+def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
+    """Readable report of a compliance result: configuration, C, then K or rigid directions."""
+    axes = "world-aligned axes" if res.axes == "world" else f"axes of frame {res.frame!r}"
+    lines = [
+        f"model {clm.name!r}, frame {res.frame!r}",
+        f"q = {np.array2string(res.q, precision=6, separator=', ')} [rad, m]",
+        f"reference point (frame origin, world) = "
+        f"{np.array2string(res.point, precision=6, separator=', ')} m; {axes}",
+        f"closure residual {res.closure_residual:.1e} [m, rad]; rank of C {res.rank}/6",
+        "",
+        f"compliance C: twist per wrench [{UNITS['C']}]",
+        _matrix(res.C, TWIST_LABELS, WRENCH_LABELS),
+        "",
+    ]
+    if res.is_full_rank:
+        lines += [f"stiffness K = C^-1: wrench per twist [{UNITS['K']}]"]
+        lines += [_matrix(res.K, WRENCH_LABELS, TWIST_LABELS)]
+    else:
+        lines += [
+            f"rigid directions (no wrench produces these twists): "
+            f"{describe_directions(res.rigid_directions)}",
+            f"stiffness K: does not exist (C has rank {res.rank} < 6: the stiffness is "
+            "infinite along the rigid directions)",
+        ]
+    return "\n".join(lines)
+
+
+def stiffness(args: argparse.Namespace) -> int:
+    """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
+    springs = read_springs_file(args.springs) if args.springs else None
+    clm = load_model(
+        args.model,
+        args.closures,
+        springs=springs,
+        joint_stiffness=args.joint_stiffness,
+        geometry=False,
+    )
+    clm.frame_id(args.frame)  # unknown frame: fail before any assembly
+    q = configuration(clm, args.q, args.actuated)
+    res = compliance(clm, q, args.frame, args.axes)
+    if args.json:
+        doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
+        print(json.dumps(doc, allow_nan=False))
+    else:
+        print(format_report(clm, res))
+    return EXIT_OK if res.is_full_rank else EXIT_RIGID
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``closedloop`` command; returns the exit code (see module doc)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2), already printed
+        return e.code if isinstance(e.code, int) else EXIT_ERROR
+    try:
+        return stiffness(args)
+    except ClosedLoopError as e:
+        print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,439 @@
+"""Stiffness indices of a 6x6 Cartesian stiffness K or compliance C.
+
+Conventions (those of :mod:`closedloop.compliance`): SI units; twists ordered
+(dx, dy, dz [m], rx, ry, rz [rad]) and wrenches (fx, fy, fz [N], nx, ny, nz [N m]), both
+at one reference point and in one set of axes; ``w = K x`` and ``x = C w`` (x: twist).
+Subscripts ``t`` and ``r`` name the translational and rotational 3x3 blocks.
+
+Units matter for some indices and not for others:
+
+* ``determinant`` (det K, [N^6/rad^3]) and the eigenscrews (eigenvalue [N/rad], pitch
+  [m/rad], axis line) do not depend on the length unit, the reference point or the axes.
+* ``eigenvalues`` and ``condition_number`` of the SI matrix mix N/m with N m/rad: they
+  change with the length unit (m vs mm) and with the reference point, and only compare
+  matrices given in the same units at the same point. With a characteristic length L the
+  twist (d, L r) and the wrench (f, n / L) share units, ``K_h = T^-1 K T^-1`` with
+  ``T = diag(1, 1, 1, L, L, L)`` is uniform in N/m, and its eigenvalues and condition
+  number (``homogenised_*``) read as "stiffnesses of points at distance L" (L: e.g. the
+  tool size or the workspace radius; the number still depends on L and on the point).
+
+Translational and rotational parts (Schur complements). "Free": no load on the other
+part, which moves as it likes; "blocked": the other part is held still.
+
+* ``translational_stiffness`` (rotations free) ``K_tt - K_tr K_rr^-1 K_rt = C_tt^-1``
+  [N/m], exists when C_tt is invertible; ``translational_stiffness_blocked`` (rotations
+  blocked) ``K_tt = (C_tt - C_tr C_rr^-1 C_rt)^-1``, needs K.
+* ``rotational_stiffness`` (translations free) ``K_rr - K_rt K_tt^-1 K_tr = C_rr^-1``
+  [N m/rad], exists when C_rr is invertible and does not depend on the reference point;
+  ``rotational_stiffness_blocked`` (translations blocked) ``K_rr``, needs K.
+* ``min/max_translational_stiffness``: extreme eigenvalues of the "free" translational
+  stiffness and their unit directions (axes of C); the minimum exists whenever C_tt is
+  nonzero. Likewise for rotations.
+
+Eigenscrews (Lipkin and Patterson's decomposition of K): with the reciprocal product
+matrix ``Delta = [[0, I], [I, 0]]`` (``x^T Delta w`` is the work of wrench w on twist x),
+the symmetric-definite pencil ``K x = lambda Delta x`` has six real eigenpairs. The twist
+x and the wrench ``K x = lambda Delta x`` then lie on the same screw: a rotation about the
+screw axis with pitch h meets a force along the same axis with the same pitch. Every x has
+a rotation part (``x^T K x = 2 lambda w.v > 0``), so each eigenscrew has a finite nonzero
+pitch h (same sign as lambda) and an axis; ``K = sum_i k_i W_i W_i^T`` with ``W_i`` the
+unit wrench on screw i and ``k_i = lambda_i / (2 h_i) > 0`` [N/m].
+
+A rank-deficient C (rigid directions) has no K; indices that need K raise
+:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import scipy.linalg
+
+from .compliance import TWIST_LABELS, UNITS, describe_directions
+from .exceptions import InvalidInputError, RigidDirectionsError
+from .kinematics import RANK_RTOL
+
+T, R = slice(0, 3), slice(3, 6)
+#: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
+DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+#: Tolerance on the Jacobi-scaled (dimensionless) matrix for symmetry and semi-definiteness.
+SCALED_TOL = 1e-8
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """v normalised, sign fixed so that its largest-magnitude component is positive."""
+    v = v / np.linalg.norm(v)
+    return _readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
+
+
+def _embed(V: np.ndarray, block: slice) -> np.ndarray:
+    """(6, r) twist directions from (3, r) directions of one block."""
+    out = np.zeros((6, V.shape[1]))
+    out[block] = V
+    return out
+
+
+class PrincipalStiffness(NamedTuple):
+    """A principal stiffness of a 3x3 block and its direction.
+
+    Attributes:
+        value: stiffness [N/m (translation) or N m/rad (rotation)].
+        direction: (3,) unit vector (translation direction or rotation axis), in the axes
+            of C; sign fixed so that its largest component is positive.
+    """
+
+    value: float
+    direction: np.ndarray
+
+
+@dataclass(frozen=True)
+class Eigenscrew:
+    """One eigenscrew of K (see the module docstring).
+
+    Attributes:
+        eigenvalue: lambda [N/rad], ``K twist = lambda Delta twist``; sign of the pitch.
+        pitch: h [m/rad], nonzero.
+        direction: (3,) unit axis direction, in the axes of C.
+        point: (3,) [m] point of the axis nearest to the reference point, relative to it.
+        spring: k = lambda / (2 h) [N/m] > 0, weight of the screw in ``K = sum k W W^T``.
+    """
+
+    eigenvalue: float
+    pitch: float
+    direction: np.ndarray
+    point: np.ndarray
+    spring: float
+
+    @property
+    def twist(self) -> np.ndarray:
+        """(6,) unit rotation about the screw: (h u + p x u [m], u [rad]) at the point."""
+        u, p = self.direction, self.point
+        return np.concatenate([self.pitch * u + np.cross(p, u), u])
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """(6,) unit force on the screw: (u [N], h u + p x u [N m]); ``K twist = lambda wrench``."""
+        return DELTA @ self.twist
+
+
+def _check_matrix(M, what: str) -> np.ndarray:
+    M = np.array(M, dtype=float)
+    if M.shape != (6, 6):
+        raise InvalidInputError(f"{what} must be a (6, 6) matrix, got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise InvalidInputError(f"{what} contains non-finite values")
+    return M
+
+
+def _check_length(length) -> float | None:
+    if length is None:
+        return None
+    if not (np.isfinite(length) and length > 0):
+        raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
+    return float(length)
+
+
+def _rank_of_compliance(C: np.ndarray, rtol: float, length: float) -> tuple[int, np.ndarray]:
+    """Rank of a symmetric PSD compliance and an orthonormal basis (6, 6 - rank) of its null space.
+
+    Coordinates whose diagonal entry (homogenised with ``length``) is below ``rtol`` times
+    the largest are rigid; the others are Jacobi-scaled to a dimensionless matrix with unit
+    diagonal, whose rank (relative threshold ``rtol``) does not depend on the units.
+    """
+    d = np.diag(C) * np.r_[np.ones(3), np.full(3, length**2)]
+    if np.any(d < 0.0):
+        raise InvalidInputError(f"compliance has negative diagonal entries: {np.diag(C)}")
+    if d.max() <= 0.0:
+        return 0, np.eye(6)
+    keep = np.flatnonzero(d > rtol * d.max())
+    s = 1.0 / np.sqrt(np.diag(C)[keep])
+    S = C[np.ix_(keep, keep)] * np.outer(s, s)
+    if np.max(np.abs(S - S.T)) > SCALED_TOL:
+        raise InvalidInputError("compliance is not symmetric")
+    mu, Z = np.linalg.eigh(0.5 * (S + S.T))
+    if mu[0] < -SCALED_TOL * mu[-1]:
+        raise InvalidInputError(
+            f"compliance is not positive semi-definite (scaled eigenvalue {mu[0]:.2e})"
+        )
+    soft = mu > rtol * mu[-1]
+    null = np.zeros((6, 6 - keep.size + int((~soft).sum())))
+    rigid = np.setdiff1d(np.arange(6), keep)
+    null[rigid, np.arange(rigid.size)] = 1.0
+    null[keep, rigid.size :] = Z[:, ~soft] * s[:, None]
+    basis = np.linalg.qr(null)[0] if null.shape[1] else null
+    signs = np.sign(basis[np.argmax(np.abs(basis), axis=0), np.arange(basis.shape[1])])
+    return int(soft.sum()), basis * signs + 0.0
+
+
+@dataclass(frozen=True)
+class StiffnessIndices:
+    """Stiffness indices of one Cartesian compliance (see the module docstring).
+
+    Build with :meth:`from_compliance`, :meth:`from_stiffness` or :meth:`from_result`.
+
+    Attributes:
+        C: (6, 6) compliance [m/N, rad/N, m/(N m), rad/(N m)], symmetric PSD, read-only.
+        rank: rank of C.
+        rigid_directions: (6, 6 - rank) orthonormal basis of the twists no wrench produces.
+        length: characteristic length [m] of the ``homogenised_*`` indices, or None.
+    """
+
+    C: np.ndarray
+    rank: int
+    rigid_directions: np.ndarray
+    length: float | None = None
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_compliance(
+        cls, C, *, length: float | None = None, rtol: float = RANK_RTOL
+    ) -> StiffnessIndices:
+        """Indices of compliance C (6, 6) [SI]; it may be rank deficient.
+
+        Args:
+            C: symmetric positive semi-definite compliance.
+            length: characteristic length [m] for the homogenised indices (optional); it
+                also weighs rotations against translations when spotting rigid coordinates
+                (1 m when None).
+            rtol: relative threshold of the rank decision.
+
+        Raises:
+            InvalidInputError: C is not a finite symmetric PSD (6, 6) matrix.
+        """
+        C = _check_matrix(C, "compliance")
+        length = _check_length(length)
+        rank, rigid = _rank_of_compliance(C, rtol, 1.0 if length is None else length)
+        return cls(_readonly(0.5 * (C + C.T)), rank, _readonly(rigid), length)
+
+    @classmethod
+    def from_stiffness(cls, K, *, length: float | None = None) -> StiffnessIndices:
+        """Indices of stiffness K (6, 6) [SI], symmetric positive definite.
+
+        Raises:
+            InvalidInputError: K is not a finite symmetric positive definite (6, 6) matrix.
+        """
+        K = _check_matrix(K, "stiffness")
+        if not np.allclose(K, K.T, rtol=SCALED_TOL, atol=0.0):
+            raise InvalidInputError("stiffness is not symmetric")
+        try:
+            L = np.linalg.cholesky(0.5 * (K + K.T))
+        except np.linalg.LinAlgError:
+            raise InvalidInputError("stiffness is not positive definite") from None
+        Linv = scipy.linalg.solve_triangular(L, np.eye(6), lower=True)
+        return cls(_readonly(Linv.T @ Linv), 6, _readonly(np.zeros((6, 0))), _check_length(length))
+
+    @classmethod
+    def from_result(cls, result, *, length: float | None = None) -> StiffnessIndices:
+        """Indices of a :class:`closedloop.compliance.ComplianceResult`, same point and axes.
+
+        Its rank and rigid directions are kept: they come from a square-root factor of C,
+        which resolves near-singular poses better than C itself, and so ``K`` exists here
+        exactly when ``result.K`` does.
+        """
+        rigid = _readonly(result.rigid_directions)
+        return cls(_readonly(result.C), int(result.rank), rigid, _check_length(length))
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def is_full_rank(self) -> bool:
+        """True when the stiffness K exists."""
+        return self.rank == 6
+
+    def _require_full_rank(self, what: str) -> None:
+        if not self.is_full_rank:
+            raise RigidDirectionsError(
+                f"{what}: the compliance has rank {self.rank} < 6, the stiffness does not "
+                f"exist (infinitely stiff along {describe_directions(self.rigid_directions)})",
+                self.rigid_directions,
+            )
+
+    def _length(self, length: float | None) -> float:
+        length = _check_length(self.length if length is None else length)
+        if length is None:
+            raise InvalidInputError("a characteristic length [m] is needed: pass length=...")
+        return length
+
+    def _block_eig(self, block: slice, what: str, need_full: bool):
+        """Eigen-decomposition (c ascending, V) of the 3x3 compliance block."""
+        c, V = np.linalg.eigh(self.C[block, block])
+        if c[-1] <= 0.0:
+            raise RigidDirectionsError(
+                f"{what}: the block is zero, infinitely stiff along every direction",
+                _embed(np.eye(3), block),
+            )
+        if need_full and c[0] <= RANK_RTOL * c[-1]:
+            rigid = _embed(V[:, c <= RANK_RTOL * c[-1]], block)
+            raise RigidDirectionsError(
+                f"{what}: the compliance block is singular, infinitely stiff along "
+                f"{describe_directions(rigid)}",
+                rigid,
+            )
+        return c, V
+
+    # ------------------------------------------------------------------ whole matrix
+    @property
+    def K(self) -> np.ndarray:
+        """(6, 6) stiffness C^-1 [N/m, N/rad, N m/m, N m/rad]."""
+        self._require_full_rank("K")
+        K = np.linalg.inv(self.C)
+        return _readonly(0.5 * (K + K.T))
+
+    @property
+    def determinant(self) -> float:
+        """det K [N^6/rad^3], invariant under length unit, reference point and axes."""
+        self._require_full_rank("det K")
+        return float(1.0 / np.linalg.det(self.C))
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring)."""
+        self._require_full_rank("the eigenvalues of K")
+        return _readonly(np.linalg.eigvalsh(self.K))
+
+    @property
+    def compliance_eigenvalues(self) -> np.ndarray:
+        """(6,) eigenvalues of the SI matrix C, ascending (mixed units); exist at any rank."""
+        return _readonly(np.linalg.eigvalsh(self.C))
+
+    @property
+    def condition_number(self) -> float:
+        """cond(K) = cond(C) of the SI matrix: depends on the length unit and the point."""
+        lam = self.eigenvalues
+        return float(lam[-1] / lam[0])
+
+    def homogenised_stiffness(self, length: float | None = None) -> np.ndarray:
+        """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]."""
+        L = self._length(length)
+        t = np.r_[np.ones(3), np.full(3, 1.0 / L)]
+        return _readonly(self.K * np.outer(t, t))
+
+    def homogenised_eigenvalues(self, length: float | None = None) -> np.ndarray:
+        """(6,) eigenvalues of K_h [N/m], ascending."""
+        return _readonly(np.linalg.eigvalsh(self.homogenised_stiffness(length)))
+
+    def homogenised_condition_number(self, length: float | None = None) -> float:
+        """cond(K_h), dimensionless; depends on L and on the reference point."""
+        lam = self.homogenised_eigenvalues(length)
+        return float(lam[-1] / lam[0])
+
+    # ------------------------------------------------------------------ blocks
+    @property
+    def translational_stiffness(self) -> np.ndarray:
+        """(3, 3) [N/m], rotations free: K_tt - K_tr K_rr^-1 K_rt = C_tt^-1."""
+        self._block_eig(T, "translational stiffness (rotations free)", True)
+        return _readonly(np.linalg.inv(self.C[T, T]))
+
+    @property
+    def translational_stiffness_blocked(self) -> np.ndarray:
+        """(3, 3) [N/m], rotations blocked: K_tt."""
+        return _readonly(self.K[T, T])
+
+    @property
+    def rotational_stiffness(self) -> np.ndarray:
+        """(3, 3) [N m/rad], translations free: K_rr - K_rt K_tt^-1 K_tr = C_rr^-1."""
+        self._block_eig(R, "rotational stiffness (translations free)", True)
+        return _readonly(np.linalg.inv(self.C[R, R]))
+
+    @property
+    def rotational_stiffness_blocked(self) -> np.ndarray:
+        """(3, 3) [N m/rad], translations blocked: K_rr."""
+        return _readonly(self.K[R, R])
+
+    def _principal(self, block: slice, which: str) -> PrincipalStiffness:
+        kind = "translational" if block == T else "rotational"
+        c, V = self._block_eig(block, f"{which} {kind} stiffness", which == "max")
+        i = -1 if which == "min" else 0
+        return PrincipalStiffness(float(1.0 / c[i]), _unit(V[:, i]))
+
+    @property
+    def min_translational_stiffness(self) -> PrincipalStiffness:
+        """Smallest eigenvalue of the translational stiffness (rotations free) [N/m]."""
+        return self._principal(T, "min")
+
+    @property
+    def max_translational_stiffness(self) -> PrincipalStiffness:
+        """Largest eigenvalue of the translational stiffness (rotations free) [N/m]."""
+        return self._principal(T, "max")
+
+    @property
+    def min_rotational_stiffness(self) -> PrincipalStiffness:
+        """Smallest eigenvalue of the rotational stiffness (translations free) [N m/rad]."""
+        return self._principal(R, "min")
+
+    @property
+    def max_rotational_stiffness(self) -> PrincipalStiffness:
+        """Largest eigenvalue of the rotational stiffness (translations free) [N m/rad]."""
+        return self._principal(R, "max")
+
+    # ------------------------------------------------------------------ eigenscrews
+    @property
+    def eigenscrews(self) -> tuple[Eigenscrew, ...]:
+        """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first)."""
+        K = self.K
+        mu, X = scipy.linalg.eigh(DELTA, K)  # Delta x = mu K x, X^T K X = I; lambda = 1/mu
+        lam = 1.0 / mu
+        screws = []
+        for i in np.argsort(lam):
+            v, w = X[:3, i], X[3:, i]
+            n2 = float(w @ w)
+            pitch, point = float(w @ v / n2), _readonly(np.cross(w, v) / n2)
+            screws.append(Eigenscrew(lam[i], pitch, _unit(w), point, lam[i] ** 2 * n2))
+        return tuple(screws)
+
+    # ------------------------------------------------------------------ export
+    def to_dict(self) -> dict:
+        """JSON-ready summary; an index that does not exist is None, its reason in ``missing``."""
+        out: dict = {"rank": self.rank, "rigid_directions": self.rigid_directions.T}
+        missing: dict = {}
+        names = list(_EXPORTED) + (
+            ["homogenised_eigenvalues", "homogenised_condition_number"]
+            if self.length is not None
+            else []
+        )
+        for name in names:
+            try:
+                value = getattr(self, name)
+                out[name] = _jsonable(value() if callable(value) else value)
+            except RigidDirectionsError as e:
+                out[name], missing[name] = None, str(e)
+        out["rigid_directions"] = _jsonable(out["rigid_directions"])
+        out.update(missing=missing, order=list(TWIST_LABELS), units=INDEX_UNITS)
+        return out
+
+
+#: Indices exported by :meth:`StiffnessIndices.to_dict` (besides rank and rigid directions).
+_EXPORTED = (
+    "length", "C", "compliance_eigenvalues", "K", "determinant", "eigenvalues",
+    "condition_number", "translational_stiffness", "translational_stiffness_blocked",
+    "rotational_stiffness", "rotational_stiffness_blocked", "min_translational_stiffness",
+    "max_translational_stiffness", "min_rotational_stiffness", "max_rotational_stiffness",
+    "eigenscrews",
+)  # fmt: skip
+
+#: Units of the exported indices.
+INDEX_UNITS = {
+    **UNITS,
+    "determinant": "N^6/rad^3",
+    "translational": "N/m",
+    "rotational": "N m/rad",
+    "eigenscrews": "eigenvalue N/rad, pitch m/rad, point m, spring N/m",
+    "homogenised": "N/m",
+}
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, PrincipalStiffness):
+        return {"value": value.value, "direction": value.direction.tolist()}
+    if isinstance(value, tuple):
+        return [{k: _jsonable(v) for k, v in vars(screw).items()} for screw in value]
+    return float(value) if isinstance(value, np.floating) else value

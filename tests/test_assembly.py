@@ -1,0 +1,97 @@
+"""Assembly of the four-bar: closure reached, unreachable inputs, invalid inputs."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from closedloop.assembly import ASSEMBLY_TOL, assemble
+from closedloop.exceptions import AssemblyError, InvalidInputError
+from closedloop.io import load_urdf
+
+# Link lengths of urdf/fourbar.urdf [m]: crank AB, coupler BC, rocker DC, ground AD.
+L_CRANK, L_COUPLER, L_ROCKER, GROUND = 0.1, 0.3, 0.15, 0.3
+CRANK_AXIAL = 1  # index of crank_axial in q
+
+
+@functools.cache
+def fourbar(closures="urdf/fourbar.yaml"):
+    return load_urdf("urdf/fourbar.urdf", closures)
+
+
+def world_gap(clm, q):
+    """Distance [m] between the two closure frames, from Pinocchio's forward kinematics."""
+    data = clm.model.createData()
+    pin.framesForwardKinematics(clm.model, data, q)
+    a, b = (
+        data.oMf[clm.model.getFrameId(f)].translation for f in ("closedloop1_A", "closedloop1_B")
+    )
+    return np.linalg.norm(a - b)
+
+
+def test_residual_after_assembly_at_random_crank_angles():
+    # Grashof: crank + coupler = 0.4 <= ground + rocker = 0.45 and the crank is the shortest
+    # link, so the crank turns fully and every crank angle assembles.
+    clm = fourbar()
+    rng = np.random.default_rng(11)
+    for theta in rng.uniform(-np.pi, np.pi, 12):
+        asm = assemble(clm, [theta])
+        assert asm.residual <= ASSEMBLY_TOL
+        # the point residual is a 3-vector: its 2-norm is at most sqrt(3) times the max norm
+        assert world_gap(clm, asm.q) <= np.sqrt(3) * ASSEMBLY_TOL
+        assert asm.q[0] == theta
+        np.testing.assert_array_equal(asm.q[[1, 4]], 0.0)  # springs keep their rest values
+        assert not asm.q.flags.writeable
+
+
+def test_start_configuration_keeps_its_branch():
+    clm = fourbar()
+    first = assemble(clm, [0.4])
+    again = assemble(clm, [0.45], q0=first.q)  # small input step from an assembled pose
+    # continuity: the passive angles move by a small amount, not to the other branch
+    assert np.max(np.abs(again.q - first.q)) < 0.2
+
+
+def test_unreachable_crank_angle():
+    # With crank_axial = 0.1 m at rest the crank is 0.2 m long. At theta = -pi/2 it points
+    # along -x, B = (-0.2, 0): |BD| = 0.5 m > BC + DC = 0.45 m, so C cannot exist and no
+    # configuration comes closer than 0.05 m; the residual is that gap in the coupler
+    # frame, in the x-z plane, so its max norm is at least 0.05 / sqrt(2).
+    q0 = np.zeros(5)
+    q0[CRANK_AXIAL] = 0.1
+    with pytest.raises(
+        AssemblyError, match=r"'crank': -1\.57.*closure residual reached: \d\.\d{3}e-0\d"
+    ) as err:
+        assemble(fourbar(), [-np.pi / 2], q0=q0)
+    assert err.value.residual >= 0.05 / np.sqrt(2)
+
+
+def test_unreachable_weld():
+    # Welding the coupler frame to the rocker frame at C asks phi (coupler) = psi (rocker).
+    # At theta = 0, B = (0, 0.1): B + 0.3 (cos phi, -sin phi) = D + 0.15 (sin phi, cos phi)
+    # is linear in (c, s) = (cos phi, sin phi): 0.3 c - 0.15 s = 0.3, 0.15 c + 0.3 s = 0.1,
+    # so c = 0.105 / 0.1125, s = -0.015 / 0.1125 and c^2 + s^2 = 0.889 != 1: no solution.
+    c, s = np.linalg.solve([[0.3, -0.15], [0.15, 0.3]], [0.3, 0.1])
+    assert abs(c**2 + s**2 - 1) > 0.1
+    with pytest.raises(AssemblyError, match=r"closure residual reached") as err:
+        assemble(fourbar("tests/data/fourbar_weld.yaml"), [0.0])
+    assert err.value.residual > 1e3 * ASSEMBLY_TOL
+
+
+@pytest.mark.parametrize(
+    ("actuated", "q0", "match"),
+    [
+        ([0.1, 0.2], None, r"2 actuated values given; expected 1 for joints \['crank'\]"),
+        ([], None, r"0 actuated values given; expected 1"),
+        ([np.nan], None, r"actuated values must be finite, got \[nan\]"),
+        ([np.inf], None, r"actuated values must be finite, got \[inf\]"),
+        ([0.1], np.zeros(4), r"q has 4 values; expected nq=5"),
+        ([0.1], [0, np.nan, 0, 0, 0], r"q contains non-finite values"),
+    ],
+)
+def test_invalid_inputs(actuated, q0, match):
+    with pytest.raises(InvalidInputError, match=match):
+        assemble(fourbar(), actuated, q0=q0)

@@ -1,0 +1,183 @@
+"""CaHyMan Pinocchio model against the closed-form geometry: assembly, pose, inverse."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cahyman_pin import geometry
+from cahyman_pin.model import CaHyManModel, cahyman_model, closed_form_pose
+from cahyman_pin.params import DEFAULT_PARAMS
+from closedloop.exceptions import AssemblyError, InvalidInputError
+
+#: Positions [m]: the closed form and the tree both evaluate ~10 products of O(0.1 m)
+#: terms, so they agree to a few 1e-16 m; 1e-12 m leaves room for the Newton tolerance.
+POSITION_TOL = 1e-12
+#: Rotation-matrix entries (dimensionless), same reasoning.
+ROTATION_TOL = 1e-12
+#: Closure residual after assembly [m]: the assembly tolerance.
+RESIDUAL_TOL = 1e-12
+#: Paper angles [rad] away from the phi = 90 deg singularity (cos phi > COS_PHI_MIN):
+#: the extraction amplifies 1e-16 errors by 1/cos(phi) <= 1e3.
+ANGLE_TOL = 1e-9
+COS_PHI_MIN = 1e-3
+#: Newton iterations from the closed-form guess (it is exact up to rounding).
+MAX_COLD_ITERATIONS = 3
+#: Newton iterations from a neighbouring pose (a few degrees away).
+MAX_WARM_ITERATIONS = 6
+
+N_POSES = 200
+
+
+def random_inputs(rng: np.random.Generator, n: int):
+    """n random (alpha (3,) [rad], alpha_4 [rad], s_4 [m]) in the issue's ranges."""
+    alpha = np.deg2rad(rng.uniform(30.0, 90.0, size=(n, 3)))
+    alpha4 = np.deg2rad(rng.uniform(0.0, 90.0, size=n))
+    s4 = rng.uniform(0.0, 0.05, size=n)
+    return alpha, alpha4, s4
+
+
+def wrap(angle):
+    """Angle difference wrapped to (-pi, pi]."""
+    return np.angle(np.exp(1j * np.asarray(angle)))
+
+
+@pytest.fixture(scope="module")
+def model() -> CaHyManModel:
+    return cahyman_model(DEFAULT_PARAMS)
+
+
+def _compare_with_closed_form(m: CaHyManModel, alpha, alpha4, s4):
+    """Assemble with Pinocchio and compare every point and rotation with geometry.py."""
+    asm = m.assemble(alpha, alpha4, s4, full_output=True)
+    got = m.pose(asm.q)
+    plate = geometry.plate_pose(alpha, m.params)
+    Q, M = geometry.extremity(plate, alpha4, s4, m.params)
+    np.testing.assert_allclose(got.H, plate.H, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(
+        got.H_k, geometry.ball_centres(plate, m.params), rtol=0, atol=POSITION_TOL
+    )
+    np.testing.assert_allclose(got.Q, Q, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.M, M, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.s, plate.s, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.R, plate.R, rtol=0, atol=ROTATION_TOL)
+    R_M = geometry.arm_rotation(plate.R, alpha4)
+    np.testing.assert_allclose(got.R_M, R_M, rtol=0, atol=ROTATION_TOL)
+    assert asm.residual <= RESIDUAL_TOL
+    assert m.residual(asm.q) <= RESIDUAL_TOL
+    assert asm.iterations <= MAX_COLD_ITERATIONS
+    if np.cos(plate.phi) > COS_PHI_MIN:
+        np.testing.assert_allclose(got.phi, plate.phi, rtol=0, atol=ANGLE_TOL)
+        np.testing.assert_allclose(wrap(got.theta - plate.theta), 0.0, atol=ANGLE_TOL)
+        np.testing.assert_allclose(wrap(got.psi - plate.psi), 0.0, atol=ANGLE_TOL)
+
+
+def test_assembly_matches_closed_form_at_random_poses(model):
+    alpha, alpha4, s4 = random_inputs(np.random.default_rng(20240611), N_POSES)
+    for i in range(N_POSES):
+        _compare_with_closed_form(model, alpha[i], alpha4[i], s4[i])
+
+
+def test_other_dimensions_rebuild_the_model():
+    # a parameter sweep rebuilds the tree: longer cranks, smaller plate, longer arm
+    params = DEFAULT_PARAMS.replace(b=0.11, h=0.07, r_p=0.08, HQ=0.03, L=0.2, a=0.25)
+    m = CaHyManModel(params)
+    alpha, alpha4, s4 = random_inputs(np.random.default_rng(7), 10)
+    for i in range(10):
+        _compare_with_closed_form(m, alpha[i], alpha4[i], s4[i])
+
+
+@pytest.mark.parametrize(
+    ("alpha4_deg", "w_plate"),
+    [(0.0, (1.0, 0.0, 0.0)), (90.0, (0.0, 0.0, 1.0)), (45.0, (0.5**0.5, 0.0, 0.5**0.5))],
+)
+def test_arm_direction_convention(model, alpha4_deg, w_plate):
+    # alpha_4 is measured from x_p towards z_p; M's x axis is the arm direction w
+    q = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(alpha4_deg), 0.02)
+    pose = model.pose(q)
+    w = pose.R @ np.array(w_plate)
+    np.testing.assert_allclose(pose.R_M[:, 0], w, atol=ROTATION_TOL)
+    np.testing.assert_allclose(pose.M - pose.Q, (DEFAULT_PARAMS.L + 0.02) * w, atol=POSITION_TOL)
+    np.testing.assert_allclose(pose.Q - pose.H, DEFAULT_PARAMS.HQ * pose.R[:, 2], atol=POSITION_TOL)
+
+
+def test_home_pose_is_level_at_height_b_plus_h(model):
+    # doc: alpha_k = 90 deg gives a level plate at height b + h, strokes r_p - r_e
+    p = DEFAULT_PARAMS
+    pose = model.pose(model.assemble(np.deg2rad([90.0, 90.0, 90.0]), 0.0, 0.0))
+    np.testing.assert_allclose(pose.H, [0.0, 0.0, p.b + p.h], atol=POSITION_TOL)
+    np.testing.assert_allclose(pose.R, np.eye(3), atol=ROTATION_TOL)
+    np.testing.assert_allclose(pose.s, np.full(3, p.r_p - p.r_e), atol=POSITION_TOL)
+    np.testing.assert_allclose(pose.phi, np.pi / 2, atol=ANGLE_TOL)
+
+
+def test_closed_form_pose_helper_agrees_with_model(model):
+    alpha, alpha4, s4 = np.deg2rad([40.0, 55.0, 80.0]), np.deg2rad(30.0), 0.01
+    a, b = closed_form_pose(alpha, alpha4, s4), model.pose(model.assemble(alpha, alpha4, s4))
+    np.testing.assert_allclose(a.M, b.M, atol=POSITION_TOL)
+    np.testing.assert_allclose(a.R_M, b.R_M, atol=ROTATION_TOL)
+
+
+def test_warm_start_reaches_the_same_configuration(model):
+    rng = np.random.default_rng(11)
+    alpha, alpha4, s4 = random_inputs(rng, 1)
+    q_prev = model.assemble(alpha[0], alpha4[0], s4[0])
+    step = np.deg2rad(rng.uniform(-3.0, 3.0, size=3))
+    target = np.clip(alpha[0] + step, np.deg2rad(30.0), np.deg2rad(90.0))
+    warm = model.assemble(target, alpha4[0] + 0.05, s4[0], q0=q_prev, full_output=True)
+    cold = model.assemble(target, alpha4[0] + 0.05, s4[0])
+    assert warm.iterations <= MAX_WARM_ITERATIONS
+    np.testing.assert_allclose(model.pose(warm.q).M, model.pose(cold).M, atol=POSITION_TOL)
+    np.testing.assert_allclose(model.pose(warm.q).R, model.pose(cold).R, atol=ROTATION_TOL)
+
+
+def test_inverse_kinematics_recovers_the_inputs(model):
+    # compare b sin(alpha) (the crank heights): arcsin is ill-conditioned near 90 deg
+    alpha, alpha4, s4 = random_inputs(np.random.default_rng(3), 30)
+    for i in range(30):
+        pose = model.pose(model.assemble(alpha[i], alpha4[i], s4[i]))
+        back = model.inverse(pose.H[2], pose.phi, pose.psi)
+        np.testing.assert_allclose(
+            DEFAULT_PARAMS.b * np.sin(back),
+            DEFAULT_PARAMS.b * np.sin(alpha[i]),
+            rtol=0,
+            atol=POSITION_TOL,
+        )
+
+
+def test_inverse_out_of_reach_raises(model):
+    # the plate centre cannot rise above b + h + r_p cos(phi)
+    with pytest.raises(AssemblyError, match="out of reach"):
+        model.inverse(0.5, np.pi / 2, 0.0)
+
+
+@pytest.mark.parametrize(
+    "alpha_deg",
+    [(90.0, -90.0, 90.0), (90.0, 90.0, -90.0), (-90.0, 90.0, 90.0)],
+)
+def test_unreachable_inputs_raise_assembly_error(model, alpha_deg):
+    with pytest.raises(AssemblyError, match="residual"):
+        model.assemble(np.deg2rad(alpha_deg), 0.0, 0.0)
+
+
+def test_unreachable_inputs_from_warm_start_raise_assembly_error(model):
+    # Newton itself (no closed-form pre-check) must give up with a typed error
+    q0 = model.assemble(np.deg2rad([60.0, 60.0, 60.0]), 0.0, 0.0)
+    with pytest.raises(AssemblyError, match="residual") as info:
+        model.assemble(np.deg2rad([90.0, -90.0, 90.0]), 0.0, 0.0, q0=q0)
+    assert info.value.residual > RESIDUAL_TOL
+
+
+@pytest.mark.parametrize(
+    ("alpha", "alpha4", "s4"),
+    [
+        ([np.nan, 1.0, 1.0], 0.0, 0.0),
+        ([1.0, 1.0], 0.0, 0.0),
+        ([1.0, 1.0, 1.0], np.inf, 0.0),
+        ([1.0, 1.0, 1.0], 0.0, -0.001),
+        ([1.0, 1.0, 1.0], 0.0, 0.051),
+    ],
+)
+def test_invalid_inputs_raise(model, alpha, alpha4, s4):
+    with pytest.raises(InvalidInputError):
+        model.assemble(alpha, alpha4, s4)

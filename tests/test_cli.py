@@ -1,0 +1,242 @@
+"""The ``closedloop`` command, in-process through ``main`` and as a real subprocess."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from closedloop.cli import main
+
+REPO = Path(__file__).resolve().parent.parent
+UR5_Q = [0.0, -1.0, 1.5, -0.5, 1.2, 0.3]  # the documented example [rad]
+UR5_K = 1e4  # joint stiffness of the example [N m/rad]
+# C = J K^-1 J^T is a product of O(1) numbers computed along two routes (compliance via
+# a null-space basis, reference via the plain Jacobian): agreement to a few ulps, scaled
+# by the largest entry since exact zeros are ~1e-17 noise in one route.
+RTOL_EXACT = 1e-10
+# The text report prints 6 significant digits (format .5e).
+RTOL_PRINTED = 1e-5
+JSON_KEYS = {"K", "C", "frame", "axes", "point", "units", "rank", "rigid_directions"}
+
+
+def run(capsys, *args: str) -> tuple[int, str, str]:
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def ur5_reference(ur5_urdf: Path, q, frame: str = "tool0", rf=pin.LOCAL_WORLD_ALIGNED):
+    """(C, J, point) of the UR5 with equal joint springs, straight from Pinocchio."""
+    model = pin.buildModelFromUrdf(str(ur5_urdf))
+    data = model.createData()
+    fid = model.getFrameId(frame)
+    J = pin.computeFrameJacobian(model, data, np.array(q), fid, rf)
+    pin.framesForwardKinematics(model, data, np.array(q))
+    return J @ J.T / UR5_K, J, data.oMf[fid].translation
+
+
+def assert_close_scaled(actual, desired, rtol):
+    desired = np.asarray(desired)
+    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.max(np.abs(desired)))
+
+
+def stiffness_args(ur5_urdf: Path, q=UR5_Q, *extra) -> list:
+    return [
+        "stiffness",
+        ur5_urdf,
+        "--frame",
+        "tool0",
+        "--q",
+        *q,
+        "--joint-stiffness",
+        UR5_K,
+        *extra,
+    ]
+
+
+# ------------------------------------------------------------------------ UR5 example
+def test_ur5_example_json_matches_J_Kinv_JT(ur5_urdf, capsys):
+    code, out, err = run(capsys, *stiffness_args(ur5_urdf, UR5_Q, "--json"))
+    assert (code, err) == (0, "")
+    doc = json.loads(out)
+    assert JSON_KEYS <= set(doc)
+    C_ref, _, point = ur5_reference(ur5_urdf, UR5_Q)
+    assert_close_scaled(doc["C"], C_ref, RTOL_EXACT)
+    # K = C^-1: C is well conditioned here (cond ~ 80), so the inverse keeps ~1e-14.
+    assert_close_scaled(doc["K"], np.linalg.inv(C_ref), RTOL_EXACT)
+    assert_close_scaled(doc["point"], point, RTOL_EXACT)
+    assert (doc["frame"], doc["axes"], doc["rank"], doc["rigid_directions"]) == (
+        "tool0",
+        "world",
+        6,
+        [],
+    )
+    assert "m/N" in doc["units"]["C"]
+
+
+def test_ur5_example_local_axes(ur5_urdf, capsys):
+    code, out, _ = run(capsys, *stiffness_args(ur5_urdf, UR5_Q, "--json", "--axes", "local"))
+    assert code == 0
+    C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q, rf=pin.LOCAL)
+    assert_close_scaled(json.loads(out)["C"], C_ref, RTOL_EXACT)
+
+
+def parse_matrix(text: str, title: str) -> np.ndarray:
+    """The 6x6 matrix printed under the line starting with ``title`` (after its header)."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(title)) + 2
+    return np.array([[float(v) for v in ln.split()[1:]] for ln in lines[start : start + 6]])
+
+
+def test_ur5_example_text_report(ur5_urdf, capsys):
+    code, out, err = run(capsys, *stiffness_args(ur5_urdf))
+    assert (code, err) == (0, "")
+    C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q)
+    assert_close_scaled(parse_matrix(out, "compliance C"), C_ref, RTOL_PRINTED)
+    assert_close_scaled(parse_matrix(out, "stiffness K"), np.linalg.inv(C_ref), RTOL_PRINTED)
+    assert "[m/N" in out and "[N/m" in out and "world-aligned" in out
+
+
+def test_ur5_springs_file(ur5_urdf, tmp_path, capsys):
+    k = np.array([1e4, 2e4, 3e4, 4e3, 5e3, 6e3])
+    names = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
+    springs = tmp_path / "k.yaml"
+    springs.write_text("".join(f"{n}_joint: {float(v)!r}\n" for n, v in zip(names, k, strict=True)))
+    code, out, _ = run(
+        capsys,
+        "stiffness",
+        ur5_urdf,
+        "--frame",
+        "tool0",
+        "--q",
+        *UR5_Q,
+        "--springs",
+        springs,
+        "--json",
+    )
+    assert code == 0
+    _, J, _ = ur5_reference(ur5_urdf, UR5_Q)
+    assert_close_scaled(json.loads(out)["C"], (J / k) @ J.T, RTOL_EXACT)
+
+
+# -------------------------------------------------------------- rigid directions: exit 1
+def test_ur5_neutral_names_rigid_direction_and_refuses_K(ur5_urdf, capsys):
+    zeros = [0.0] * 6
+    code, out, err = run(capsys, *stiffness_args(ur5_urdf, zeros))
+    assert (code, err) == (1, "")
+    assert "rank of C 5/6" in out
+    assert "rigid directions" in out and "[+1.00 rx]" in out
+    assert "K: does not exist" in out
+    assert re.search(r"\b(nan|inf)\b", out, re.IGNORECASE) is None  # no NaN/inf matrix
+    assert "stiffness K = C^-1" not in out  # no matrix for K
+
+    code, out, _ = run(capsys, *stiffness_args(ur5_urdf, zeros, "--json"))
+    doc = json.loads(out)
+    assert (code, doc["K"], doc["rank"]) == (1, None, 5)
+    # Independent: the rigid direction is the left null vector of J (J^T u = 0).
+    _, J, _ = ur5_reference(ur5_urdf, zeros)
+    u = np.linalg.svd(J)[0][:, -1]
+    (rigid,) = doc["rigid_directions"]
+    np.testing.assert_allclose(abs(np.dot(u, rigid)), 1.0, rtol=RTOL_EXACT)
+
+
+# ------------------------------------------------------------------- closed loops
+FOURBAR = {
+    "urdf": [REPO / "urdf" / "fourbar.urdf", "--closures", REPO / "urdf" / "fourbar.yaml"],
+    "mjcf": [REPO / "urdf" / "fourbar.xml"],
+}
+
+
+@pytest.mark.parametrize("kind", ["urdf", "mjcf"])
+def test_fourbar_actuated_is_assembled(kind, capsys):
+    code, out, err = run(
+        capsys, "stiffness", *FOURBAR[kind], "--frame", "P", "--actuated", 0.8, "--json"
+    )
+    doc = json.loads(out)
+    # Planar: only dx, dz, ry are compliant; exit 1 because K does not exist in 6D.
+    assert (code, err, doc["rank"], doc["K"]) == (1, "", 3, None)
+    assert doc["q"][0] == 0.8 and doc["closure_residual"] < 1e-12
+
+
+def test_fourbar_urdf_and_mjcf_agree_through_the_cli(capsys):
+    common = ["--frame", "P", "--actuated", 0.8, "--json"]
+    C_urdf = json.loads(run(capsys, "stiffness", *FOURBAR["urdf"], *common)[1])["C"]
+    C_mjcf = json.loads(run(capsys, "stiffness", *FOURBAR["mjcf"], *common)[1])["C"]
+    assert_close_scaled(C_mjcf, C_urdf, 1e-9)  # same tolerance as RTOL_TWIN in test_io.py
+
+
+# ---------------------------------------------------------------------- errors: exit 2
+# Command lines ({ur5}, {fourbar}, {tmp} substituted) and a part of the expected message.
+ERRORS = {
+    "missing-file": ("{tmp}/none.urdf --frame P", "robot file '{tmp}/none.urdf' does not exist"),
+    "unknown-frame": ("{ur5} --frame tool9", "unknown frame 'tool9'; expected one of:"),
+    "malformed-closures": ("{fourbar} --closures {tmp}/bad.yaml --frame P", "bad.yaml': type '4d'"),
+    "unknown-joint": ("{ur5} --frame tool0 --springs {tmp}/k.yaml", "unknown joint 'elbow'"),
+    "q-count": ("{ur5} --frame tool0 --q 0 0 0 0 0", "q has 5 values; expected nq=6"),
+    "q-nan": ("{ur5} --frame tool0 --q 0 0 nan 0 0 0", "non-finite"),
+    "negative-stiffness": ("{ur5} --frame tool0 --joint-stiffness -1", "expected a number >= 0"),
+    "nan-stiffness": ("{ur5} --frame tool0 --joint-stiffness nan", "expected a number >= 0"),
+    "q-not-assembled": ("{fourbar} --closures {yaml} --frame P --q 0 0 0 0 0", "violates the loop"),
+}
+
+
+@pytest.mark.parametrize(("line", "match"), ERRORS.values(), ids=ERRORS.keys())
+def test_errors_one_line_exit_2(ur5_urdf, tmp_path, capsys, line, match):
+    (tmp_path / "bad.yaml").write_text(
+        "closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: ['4d']\n"
+    )
+    (tmp_path / "k.yaml").write_text("elbow: 1.0\n")
+    names = {
+        "ur5": ur5_urdf,
+        "tmp": tmp_path,
+        "fourbar": FOURBAR["urdf"][0],
+        "yaml": FOURBAR["urdf"][2],
+    }
+    code, out, err = run(capsys, "stiffness", *line.format(**names).split())
+    assert code == 2 and out == ""
+    assert err.startswith("closedloop: error: ") and err.count("\n") == 1
+    assert match.format(**names) in err and "Traceback" not in err
+
+
+def test_help_documents_exit_codes(capsys):
+    code, out, _ = run(capsys, "stiffness", "--help")
+    assert code == 0 and "Exit status" in out and "--joint-stiffness" in out
+
+
+def test_q_and_actuated_are_exclusive(ur5_urdf, capsys):
+    code, _, err = run(capsys, "stiffness", ur5_urdf, "--frame", "tool0", "--q", 0, "--actuated", 0)
+    assert code == 2 and "not allowed with" in err
+
+
+# ------------------------------------------------------------------------- subprocess
+def python_m(*args) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.run(
+        [sys.executable, "-m", "closedloop", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=REPO,
+        timeout=120,
+        check=False,
+    )
+
+
+def test_subprocess_example_and_error(ur5_urdf, tmp_path):
+    done = python_m(*stiffness_args(ur5_urdf, UR5_Q, "--json"))
+    assert (done.returncode, done.stderr) == (0, "")
+    C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q)
+    assert_close_scaled(json.loads(done.stdout)["C"], C_ref, RTOL_EXACT)
+
+    done = python_m("stiffness", tmp_path / "missing.urdf", "--frame", "tool0")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.startswith("closedloop: error: robot file") and done.stderr.count("\n") == 1
+    assert "Traceback" not in done.stderr

@@ -1,0 +1,270 @@
+"""Stiffness indices against closed forms, definitions and invariances."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.spatial.transform import Rotation
+
+from closedloop.exceptions import InvalidInputError, RigidDirectionsError
+from closedloop.indices import StiffnessIndices
+
+# Closed forms and definitions evaluated on matrices of condition ~1e5 (mixed units):
+# inverting them costs ~cond * eps ~ 1e-11 relative; 1e-9 leaves a margin.
+INDEX_RTOL = 1e-9
+# Eigenvectors of a well separated spectrum (gaps > 10 % here): error ~ eps * cond / gap.
+DIRECTION_ATOL = 1e-9
+# Unit vectors or lines that coincide, distance [m] or angle [rad]: roundoff only.
+GEOMETRY_ATOL = 1e-9
+
+K_T, K_R = np.array([1e5, 2e5, 5e5]), np.array([50.0, 80.0, 300.0])  # [N/m], [N m/rad]
+T, R = slice(0, 3), slice(3, 6)
+
+
+def close(actual, desired, rtol=INDEX_RTOL):
+    """Entries agree to rtol, near-zero ones to rtol times the largest entry."""
+    desired = np.asarray(desired, dtype=float)
+    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.abs(desired).max())
+
+
+def same_axis(u, v):
+    """Unit vectors equal up to sign."""
+    np.testing.assert_allclose(np.outer(u, u), np.outer(v, v), atol=DIRECTION_ATOL)
+
+
+def decoupled(rng):
+    """Stiffness at the origin: principal springs K_T along, K_R about, the columns of Q."""
+    Q = Rotation.random(random_state=rng).as_matrix()
+    K = np.zeros((6, 6))
+    K[T, T], K[R, R] = Q @ np.diag(K_T) @ Q.T, Q @ np.diag(K_R) @ Q.T
+    return K, Q
+
+
+def random_stiffness(rng):
+    """Coupled SPD stiffness with realistic magnitudes (1e5 N/m, 1e2 N m/rad)."""
+    A = rng.normal(size=(6, 6))
+    D = np.sqrt(np.r_[np.full(3, 1e5), np.full(3, 1e2)])
+    return D[:, None] * (A @ A.T + 0.5 * np.eye(6)) * D
+
+
+def changed(K, M):
+    """K expressed at another point and in other axes: M = placement of the new frame."""
+    X = M.inverse().toActionMatrix()  # twist_new = X twist_old (Pinocchio: linear first)
+    return np.linalg.inv(X @ np.linalg.inv(K) @ X.T)
+
+
+# ---------------------------------------------------------------- closed forms
+def test_decoupled_stiffness_closed_forms():
+    K, Q = decoupled(np.random.default_rng(0))
+    s = StiffnessIndices.from_stiffness(K)
+    assert s.rank == 6
+    close(s.eigenvalues, np.sort(np.r_[K_T, K_R]))
+    close(s.determinant, np.prod(K_T) * np.prod(K_R))
+    close(s.condition_number, K_T.max() / K_R.min())
+    for free, blocked, expected in (
+        (s.translational_stiffness, s.translational_stiffness_blocked, K[T, T]),
+        (s.rotational_stiffness, s.rotational_stiffness_blocked, K[R, R]),
+    ):
+        close(free, expected)  # decoupled: free and blocked coincide
+        close(blocked, expected)
+    for got, value, axis in (
+        (s.min_translational_stiffness, K_T[0], Q[:, 0]),
+        (s.max_translational_stiffness, K_T[2], Q[:, 2]),
+        (s.min_rotational_stiffness, K_R[0], Q[:, 0]),
+        (s.max_rotational_stiffness, K_R[2], Q[:, 2]),
+    ):
+        close(got.value, value)
+        same_axis(got.direction, axis)
+
+
+def test_homogenised_indices_with_characteristic_length():
+    K = np.diag([4e5, 4e5, 4e5, 100.0, 100.0, 100.0])
+    length = np.sqrt(100.0 / 4e5)  # rotation stiffness / length^2 = translation stiffness
+    s = StiffnessIndices.from_stiffness(K, length=length)
+    close(s.homogenised_eigenvalues(), np.full(6, 4e5))
+    close(s.homogenised_condition_number(), 1.0)
+    close(s.homogenised_eigenvalues(2 * length), np.r_[np.full(3, 1e5), np.full(3, 4e5)])
+    close(s.condition_number, 4e3)
+
+
+def test_decoupled_eigenscrews_closed_form():
+    # K x = lambda Delta x with x = (v q, w q): k v = lambda w, a w = lambda v, so
+    # lambda = +-sqrt(k a), pitch v / w = lambda / k = +-sqrt(a / k), axis q through 0.
+    K, Q = decoupled(np.random.default_rng(1))
+    screws = StiffnessIndices.from_stiffness(K).eigenscrews
+    expected = sorted(
+        (sign * np.sqrt(k * a), sign * np.sqrt(a / k), i)
+        for sign in (1, -1)
+        for i, (k, a) in enumerate(zip(K_T, K_R, strict=True))
+    )
+    for screw, (lam, pitch, i) in zip(screws, expected, strict=True):
+        close(screw.eigenvalue, lam)
+        close(screw.pitch, pitch)
+        same_axis(screw.direction, Q[:, i])
+        np.testing.assert_allclose(screw.point, 0.0, atol=GEOMETRY_ATOL)
+
+
+# ---------------------------------------------------------------- definitions
+def test_schur_complements_match_their_definitions():
+    K = random_stiffness(np.random.default_rng(2))
+    C = np.linalg.inv(K)
+    s = StiffnessIndices.from_compliance(C)
+
+    def schur(M, a, b):
+        return M[a, a] - M[a, b] @ np.linalg.solve(M[b, b], M[b, a])
+
+    close(s.translational_stiffness, schur(K, T, R))
+    close(s.rotational_stiffness, schur(K, R, T))
+    close(s.translational_stiffness_blocked, np.linalg.inv(schur(C, T, R)))
+    close(s.rotational_stiffness_blocked, np.linalg.inv(schur(C, R, T)))
+    # "rotations free": a pure force f gives a translation d with f = K_t d
+    f = np.array([3.0, -1.0, 2.0])
+    d = (C @ np.r_[f, 0, 0, 0])[T]
+    close(s.translational_stiffness @ d, f)
+
+
+def test_principal_translational_stiffness_bounds_every_direction():
+    rng = np.random.default_rng(3)
+    s = StiffnessIndices.from_stiffness(random_stiffness(rng))
+    Kt = s.translational_stiffness
+    lo, hi = s.min_translational_stiffness, s.max_translational_stiffness
+    for p in (lo, hi):
+        close(np.linalg.norm(p.direction), 1.0)
+        close(Kt @ p.direction, p.value * p.direction)
+    u = rng.normal(size=(3, 2000))
+    u /= np.linalg.norm(u, axis=0)
+    rayleigh = np.einsum("in,ij,jn->n", u, Kt, u)
+    assert lo.value * (1 - INDEX_RTOL) <= rayleigh.min()
+    assert rayleigh.max() <= hi.value * (1 + INDEX_RTOL)
+
+
+def test_eigenscrews_of_a_coupled_stiffness():
+    K = random_stiffness(np.random.default_rng(4))
+    s = StiffnessIndices.from_stiffness(K)
+    total = np.zeros((6, 6))
+    for screw in s.eigenscrews:
+        u, p, h = screw.direction, screw.point, screw.pitch
+        twist = np.r_[h * u + np.cross(p, u), u]  # unit rotation about the axis, at 0
+        wrench = np.r_[u, h * u + np.cross(p, u)]  # unit force on the same axis, at 0
+        close(K @ twist, screw.eigenvalue * wrench)
+        np.testing.assert_allclose(p @ u, 0.0, atol=GEOMETRY_ATOL)  # nearest point
+        assert np.sign(screw.eigenvalue) == np.sign(h)
+        close(screw.spring, screw.eigenvalue / (2 * h))
+        total += screw.spring * np.outer(wrench, wrench)
+    close(total, K)
+    assert sorted(np.sign([x.eigenvalue for x in s.eigenscrews])) == [-1] * 3 + [1] * 3
+    close(s.determinant, -np.prod([x.eigenvalue for x in s.eigenscrews]))
+
+
+# ---------------------------------------------------------------- invariances
+def test_point_and_axes_invariants():
+    rng = np.random.default_rng(5)
+    K = random_stiffness(rng)
+    M = pin.SE3(Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3) * 0.2)
+    a, b = StiffnessIndices.from_stiffness(K), StiffnessIndices.from_stiffness(changed(K, M))
+    close(b.determinant, a.determinant)
+    Rt = M.rotation.T
+    close(b.rotational_stiffness, Rt @ a.rotational_stiffness @ M.rotation)
+    for sa, sb in zip(a.eigenscrews, b.eigenscrews, strict=True):
+        close(sb.eigenvalue, sa.eigenvalue)
+        close(sb.pitch, sa.pitch)
+        same_axis(sb.direction, Rt @ sa.direction)
+        on_axis = Rt @ (sa.point - M.translation)  # a point of the same line, new frame
+        np.testing.assert_allclose(
+            np.cross(on_axis - sb.point, sb.direction), 0.0, atol=GEOMETRY_ATOL
+        )
+
+
+def in_mm(C):
+    """The same compliance in mm: twist_mm = S t, wrench_mm = W w, C_mm = S C W^-1."""
+    S, W = np.diag([1e3] * 3 + [1.0] * 3), np.diag([1.0] * 3 + [1e3] * 3)
+    return S @ C @ np.linalg.inv(W)
+
+
+def test_length_unit_invariants():
+    rng = np.random.default_rng(6)
+    C = np.linalg.inv(random_stiffness(rng))
+    screw = np.r_[0.3, -0.2, 0.1, 0.5, 0.4, -0.7]  # a rigid direction mixing d and r
+    P = np.eye(6) - np.outer(screw, screw) / (screw @ screw)
+    m, mm = (StiffnessIndices.from_compliance(c) for c in (P @ C @ P, in_mm(P @ C @ P)))
+    assert m.rank == mm.rank == 5
+    same_axis(m.rigid_directions[:, 0], screw / np.linalg.norm(screw))
+    m = StiffnessIndices.from_compliance(C, length=0.1)
+    mm = StiffnessIndices.from_compliance(in_mm(C), length=100.0)
+    close(mm.determinant, m.determinant)
+    close(mm.homogenised_condition_number(), m.homogenised_condition_number())
+    close([x.pitch for x in mm.eigenscrews], [1e3 * x.pitch for x in m.eigenscrews])
+
+
+# ---------------------------------------------------------------- rank deficiency
+def test_rank_deficient_compliance_returns_what_exists():
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(3, 3)) * [[1e-2], [1e-2], [1e-1]]
+    plane = [0, 2, 4]  # dx, dz, ry: a planar mechanism
+    C = np.zeros((6, 6))
+    C[np.ix_(plane, plane)] = A @ A.T * 1e-3
+    s = StiffnessIndices.from_compliance(C)
+    assert s.rank == 3
+    expected = np.zeros((6, 6))
+    expected[[1, 3, 5], [1, 3, 5]] = 1.0
+    close(s.rigid_directions @ s.rigid_directions.T, expected)
+    for name in ("K", "determinant", "eigenvalues", "condition_number", "eigenscrews"):
+        with pytest.raises(RigidDirectionsError, match=r"rank 3 < 6.*dy.*rx.*rz"):
+            getattr(s, name)
+    with pytest.raises(RigidDirectionsError, match=r"translational.*singular.*\+1\.00 dy\]$"):
+        _ = s.max_translational_stiffness
+    c, V = np.linalg.eigh(C[np.ix_([0, 2], [0, 2])])  # the in-plane translations alone
+    close(s.min_translational_stiffness.value, 1 / c[-1])
+    same_axis(s.min_translational_stiffness.direction, [V[0, -1], 0.0, V[1, -1]])
+    close(s.min_rotational_stiffness.value, 1 / C[4, 4])
+    out = json.loads(json.dumps(s.to_dict()))
+    assert out["K"] is None and "rank 3 < 6" in out["missing"]["K"]
+    assert out["min_translational_stiffness"]["value"] == s.min_translational_stiffness.value
+    assert set(out["missing"]) == {
+        "K", "determinant", "eigenvalues", "condition_number", "eigenscrews",
+        "translational_stiffness", "translational_stiffness_blocked", "rotational_stiffness",
+        "rotational_stiffness_blocked", "max_translational_stiffness", "max_rotational_stiffness",
+    }  # fmt: skip
+
+
+def test_full_rank_dict_and_constructors_agree():
+    K = random_stiffness(np.random.default_rng(8))
+    a = StiffnessIndices.from_stiffness(K, length=0.2)
+    b = StiffnessIndices.from_compliance(np.linalg.inv(K), length=0.2)
+    out = json.loads(json.dumps(a.to_dict()))
+    assert out["missing"] == {} and out["rank"] == 6 and len(out["eigenscrews"]) == 6
+    close(out["K"], K)
+    close(b.K, K)
+    close(out["homogenised_condition_number"], b.homogenised_condition_number())
+
+
+# ---------------------------------------------------------------- input errors
+@pytest.mark.parametrize(
+    ("matrix", "constructor", "match"),
+    [
+        (np.eye(5), "from_compliance", r"must be a \(6, 6\) matrix, got shape \(5, 5\)"),
+        (np.diag([1.0, np.nan, 1, 1, 1, 1]), "from_stiffness", r"stiffness contains non-finite"),
+        (np.eye(6) + np.triu(np.ones((6, 6)), 1), "from_compliance", r"not symmetric"),
+        (np.eye(6) + np.triu(np.ones((6, 6)), 1), "from_stiffness", r"not symmetric"),
+        (np.diag([1.0, -1, 1, 1, 1, 1]), "from_compliance", r"negative diagonal entries"),
+        (np.ones((6, 6)) - 0.5 * np.eye(6), "from_compliance", r"not positive semi-definite"),
+        (np.diag([1.0, 0, 1, 1, 1, 1]), "from_stiffness", r"not positive definite"),
+    ],
+)
+def test_invalid_matrices(matrix, constructor, match):
+    with pytest.raises(InvalidInputError, match=match):
+        getattr(StiffnessIndices, constructor)(matrix)
+
+
+@pytest.mark.parametrize("length", [0.0, -1.0, np.nan, np.inf])
+def test_invalid_length(length):
+    with pytest.raises(InvalidInputError, match=r"characteristic length must be finite and > 0"):
+        StiffnessIndices.from_stiffness(np.eye(6), length=length)
+
+
+def test_homogenised_index_needs_a_length():
+    with pytest.raises(InvalidInputError, match=r"characteristic length \[m\] is needed"):
+        StiffnessIndices.from_stiffness(np.eye(6)).homogenised_condition_number()
