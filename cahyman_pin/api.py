@@ -11,17 +11,16 @@ Matrices are 6x6 at the reference point M (the arm extremity), in world axes, or
 (dx, dy, dz, rx, ry, rz) for twists and (fx, fy, fz, nx, ny, nz) for wrenches; a rotation
 is the small rotation vector of the arm link that carries M.
 
-Backends compute the matrices. ``"generic"`` is the Pinocchio model of
-:mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`. Another backend is
-a function ``f(params, alpha, alpha4, s4) -> BackendResult`` registered with one line,
-``register_backend("name", f)``, in a module ``cahyman_pin/backend_<name>.py``: that module
-is imported the first time ``backend="name"`` is asked for.
+Backends compute the matrices: ``"generic"`` (default) is the Pinocchio model of
+:mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`; ``"consistent"`` is
+the closed form of :mod:`cahyman_pin.backend_consistent`; ``"published"`` the paper's
+matrices as printed (:mod:`cahyman_pin.backend_published`, its own coordinates, not
+symmetric). Another backend is a function ``f(params, alpha, alpha4, s4) ->
+BackendResult`` registered with ``register_backend("name", f)``.
 """
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -32,7 +31,9 @@ from closedloop.exceptions import InvalidInputError
 from closedloop.indices import StiffnessIndices
 from closedloop.kinematics import frame_jacobian
 
-from .model import CaHyManPose, cahyman_model, check_inputs
+from .backend_consistent import consistent_breakdown
+from .backend_published import published_stiffness
+from .model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from .params import DEFAULT_PARAMS, CaHyManParams
 from .urdf_builder import FRAME_H, FRAME_M
 
@@ -74,29 +75,16 @@ def register_backend(name: str, func: Backend) -> Backend:
 
 
 def backend_names() -> tuple[str, ...]:
-    """Registered backends and the ``cahyman_pin.backend_<name>`` modules, sorted."""
-    package = importlib.import_module(__package__)
-    found = {
-        m.name.removeprefix("backend_")
-        for m in pkgutil.iter_modules(package.__path__)
-        if m.name.startswith("backend_")
-    }
-    return tuple(sorted(found | set(_BACKENDS)))
+    """Names of the registered backends, sorted."""
+    return tuple(sorted(_BACKENDS))
 
 
 def get_backend(name: str) -> Backend:
-    """The backend function called ``name``, importing its module on first use.
+    """The backend function called ``name``.
 
     Raises:
         InvalidInputError: unknown name (the message lists the choices).
     """
-    if name not in _BACKENDS and name in backend_names():
-        importlib.import_module(f"{__package__}.backend_{name}")
-        if name not in _BACKENDS:
-            raise InvalidInputError(
-                f"module {__package__}.backend_{name} does not register a backend; it needs "
-                f"register_backend({name!r}, function)"
-            )
     if name not in _BACKENDS:
         raise InvalidInputError(
             f"unknown backend {name!r}; expected one of {list(backend_names())}"
@@ -122,7 +110,39 @@ def generic_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> B
     )
 
 
+def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
+    """The consistent closed form (pure numpy); ``details["breakdown"]`` has its parts.
+
+    The plate twist at H per wrench at M is C_H T^T (T^T carries the wrench from M to H).
+    """
+    parts = consistent_breakdown(alpha, alpha4, s4, params)
+    return BackendResult(
+        C=parts.C,
+        pose=closed_form_pose(alpha, alpha4, s4, params),
+        C_platform=_readonly(parts.C_H @ parts.T.T),
+        details={"breakdown": parts},
+    )
+
+
+def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
+    """The paper's matrices as printed (see :mod:`cahyman_pin.backend_published`).
+
+    Its C is in the paper's own mixed coordinates and is not symmetric; C_platform is the
+    plate term K_PAR^-1 of eq. (3) (displacement of H). No load is given, so the weight
+    terms of eq. (11) are zero. ``details["result"]`` holds every matrix.
+    """
+    r = published_stiffness(alpha, alpha4, s4, params)
+    return BackendResult(
+        C=r.C,
+        pose=closed_form_pose(alpha, alpha4, s4, params),
+        C_platform=r.C_PAR,
+        details={"result": r},
+    )
+
+
 register_backend("generic", generic_backend)
+register_backend("consistent", consistent_backend)
+register_backend("published", published_backend)
 
 
 @dataclass(frozen=True)
@@ -161,7 +181,9 @@ class CaHyManStiffness:
         C: (6, 6) compliance at M, world axes [m/N, m/(N m) = rad/N, rad/(N m)].
         C_platform: (6, 6) twist of the plate at H per wrench at M, or None.
         pose: plate and arm pose.
-        indices: :class:`closedloop.indices.StiffnessIndices` of C.
+        indices: :class:`closedloop.indices.StiffnessIndices` of C, or None when C is not
+            symmetric (the as-published backend): K, det_K, eigenvalues and condition
+            number are then those of the plain inverse of C.
         details: backend extras (generic: ``q``, ``compliance``).
     """
 
@@ -173,7 +195,7 @@ class CaHyManStiffness:
     C: np.ndarray
     C_platform: np.ndarray | None
     pose: CaHyManPose
-    indices: StiffnessIndices
+    indices: StiffnessIndices | None
     details: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -183,22 +205,32 @@ class CaHyManStiffness:
         Raises:
             RigidDirectionsError: C is rank deficient.
         """
-        return self.indices.K
+        return _readonly(np.linalg.inv(self.C)) if self.indices is None else self.indices.K
 
     @property
     def det_K(self) -> float:
         """det K [N^6/rad^3] (the paper's performance index)."""
-        return self.indices.determinant
+        return float(np.linalg.det(self.K)) if self.indices is None else self.indices.determinant
 
     @property
     def eigenvalues(self) -> np.ndarray:
-        """(6,) eigenvalues of K in SI (mixed units), ascending."""
+        """(6,) eigenvalues of K in SI (mixed units), ascending (real part first)."""
+        if self.indices is None:
+            ev = np.linalg.eigvals(self.K)
+            return ev[np.lexsort((ev.imag, ev.real))]
         return self.indices.eigenvalues
 
     @property
     def condition_number(self) -> float:
         """Condition number of K in SI (depends on the length unit and the point)."""
-        return self.indices.condition_number
+        return (
+            float(np.linalg.cond(self.K)) if self.indices is None else self.indices.condition_number
+        )
+
+    @property
+    def is_full_rank(self) -> bool:
+        """True when K exists."""
+        return True if self.indices is None else self.indices.is_full_rank
 
     def deflection(self, wrench) -> Deflection:
         """Twists of M and of the plate under ``wrench`` (6,) at M [N, N m], world axes."""
@@ -212,14 +244,15 @@ class CaHyManStiffness:
 
     def to_dict(self) -> dict:
         """JSON-ready summary (SI): K, C, det_K, eigenvalues, platform, inputs, units."""
-        full = self.indices.is_full_rank
+        full = self.is_full_rank
+        ev = self.eigenvalues if full else None
         return {
             "K": self.K.tolist() if full else None,
             "C": self.C.tolist(),
             "det_K": self.det_K if full else None,
-            "eigenvalues_K": self.eigenvalues.tolist() if full else None,
+            "eigenvalues_K": None if ev is None else np.real_if_close(ev).tolist(),
             "condition_number_K": self.condition_number if full else None,
-            "rank": self.indices.rank,
+            "rank": 6 if self.indices is None else self.indices.rank,
             "reference_point": "M",
             "M_m": self.pose.M.tolist(),
             "axes": "world",
@@ -234,6 +267,14 @@ class CaHyManStiffness:
             "backend": self.backend,
             "units": {**UNITS, "det_K": "N^6/rad^3"},
         }
+
+
+def _indices(result: BackendResult) -> StiffnessIndices | None:
+    if "compliance" in result.details:  # keep the rank decision of the generic solver
+        return StiffnessIndices.from_result(result.details["compliance"])
+    if not np.allclose(result.C, result.C.T, rtol=1e-9, atol=0.0):
+        return None
+    return StiffnessIndices.from_compliance(result.C)
 
 
 def stiffness(
@@ -270,6 +311,6 @@ def stiffness(
         C=_readonly(result.C),
         C_platform=None if result.C_platform is None else _readonly(result.C_platform),
         pose=result.pose,
-        indices=StiffnessIndices.from_compliance(result.C),
+        indices=_indices(result),
         details=result.details,
     )

@@ -235,11 +235,6 @@ class CaHyManModel:
         return float(np.max(np.abs(closure_residual(self.clm, self.clm.check_configuration(q)))))
 
     # ------------------------------------------------------------------------ pose
-    def placement(self, q, frame: str) -> pin.SE3:
-        """World placement of frame ``frame`` at q (nq,)."""
-        update_kinematics(self.clm, self.clm.check_configuration(q))
-        return self.clm.data.oMf[self.clm.frame_id(frame)].copy()
-
     def pose(self, q) -> CaHyManPose:
         """Plate and arm pose read from the assembled configuration q (nq,)."""
         q = self.clm.check_configuration(q)

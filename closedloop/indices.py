@@ -74,13 +74,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return _readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
 
 
-def _embed(V: np.ndarray, block: slice) -> np.ndarray:
-    """(6, r) twist directions from (3, r) directions of one block."""
-    out = np.zeros((6, V.shape[1]))
-    out[block] = V
-    return out
-
-
 class PrincipalStiffness(NamedTuple):
     """A principal stiffness of a 3x3 block and its direction.
 
@@ -262,19 +255,16 @@ class StiffnessIndices:
         return length
 
     def _block_eig(self, block: slice, what: str, need_full: bool):
-        """Eigen-decomposition (c ascending, V) of the 3x3 compliance block."""
+        """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked."""
         c, V = np.linalg.eigh(self.C[block, block])
-        if c[-1] <= 0.0:
+        rigid = c <= RANK_RTOL * max(c[-1], 0.0)
+        if rigid.all() or (need_full and rigid.any()):
+            directions = np.zeros((6, int(rigid.sum())))
+            directions[block] = V[:, rigid]
             raise RigidDirectionsError(
-                f"{what}: the block is zero, infinitely stiff along every direction",
-                _embed(np.eye(3), block),
-            )
-        if need_full and c[0] <= RANK_RTOL * c[-1]:
-            rigid = _embed(V[:, c <= RANK_RTOL * c[-1]], block)
-            raise RigidDirectionsError(
-                f"{what}: the compliance block is singular, infinitely stiff along "
-                f"{describe_directions(rigid)}",
-                rigid,
+                f"{what} does not exist: the compliance block has rank {3 - rigid.sum()} < 3, "
+                f"infinitely stiff along {describe_directions(directions)}",
+                directions,
             )
         return c, V
 

@@ -34,7 +34,6 @@ import math
 import os
 import sys
 import tempfile
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +43,7 @@ import pinocchio as pin
 import yaml
 
 from .exceptions import InvalidInputError, ModelFileError
+from .mjcf import read_mjcf_extras
 from .model import ClosedLoopModel, Closure, closure_between_frames
 
 #: Model-file suffixes and their format.
@@ -51,7 +51,6 @@ MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
 CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked")
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked")
 #: MJCF equality constraints that Pinocchio turns into anchor constraints.
-MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
 
 Stiffness = float | list[float]
 
@@ -281,7 +280,9 @@ def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tre
     model, points, welds = _parse(
         lambda: pin.buildModelAndConstraintsFromMJCF(str(path)), path, "robot file"
     )
-    actuated, springs, names, undriven = _mjcf_xml(path)
+    actuated, stiffness, names, undriven = read_mjcf_extras(path)
+    where = f"robot file {str(path)!r}"
+    springs = {n: k for n, v in stiffness.items() if (k := _number(v, where, n)) > 0}
     spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
     constraints = [*points, *welds]
     if len(names) != len(constraints):
@@ -298,74 +299,6 @@ def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tre
         visual,
         tuple(undriven) if spec.actuated is None else (),
     )
-
-
-def _mjcf_xml(path: Path) -> tuple[tuple[str, ...], dict[str, float], list[str], list[str]]:
-    """(actuated joints, springs, closure names, actuators driving no joint) from the XML.
-
-    Raises:
-        ModelFileError: ``<include>``, several root bodies (Pinocchio would keep only the
-            first), an equality other than connect/weld, a stiffness that is not >= 0.
-    """
-    where = f"robot file {str(path)!r}"
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ModelFileError(f"{where} is not valid XML: {e}") from None
-    if root.find(".//include") is not None:
-        raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
-    roots = root.findall("worldbody/body")
-    if len(roots) > 1:
-        raise ModelFileError(
-            f"{where}: {len(roots)} root bodies under <worldbody>; Pinocchio keeps only the "
-            "first: wrap every ground branch in one body"
-        )
-    equalities = [e for eq in root.findall("equality") for e in eq]
-    other = sorted({e.tag for e in equalities} - set(MJCF_EQUALITIES))
-    if other:
-        raise ModelFileError(f"{where}: equality <{other[0]}> is not supported (connect, weld)")
-    names = []
-    for tag in MJCF_EQUALITIES:  # Pinocchio returns the connects, then the welds
-        same = [e for e in equalities if e.tag == tag]
-        names += [e.get("name") or f"{tag}{i}" for i, e in enumerate(same)]
-    stiffness = {n: _number(v, where, n) for n, v in _mjcf_joint_attribute(root, "stiffness")}
-    actuators = [a for act in root.findall("actuator") for a in act]
-    return (
-        tuple(a.get("joint") for a in actuators if a.get("joint")),
-        {n: k for n, k in stiffness.items() if k > 0},
-        names,
-        [a.get("name") or a.tag for a in actuators if not a.get("joint")],
-    )
-
-
-def _mjcf_joint_attribute(root: ET.Element, attribute: str) -> list[tuple[str, str]]:
-    """(joint name, value of ``attribute``), ``<default>`` classes and childclass resolved."""
-    defaults: dict[str, dict[str, str]] = {}
-
-    def visit_default(elem: ET.Element, inherited: dict[str, str]) -> None:
-        joint = elem.find("joint")
-        defaults[elem.get("class", "main")] = attrs = {
-            **inherited,
-            **(joint.attrib if joint is not None else {}),
-        }
-        for child in elem.findall("default"):
-            visit_default(child, attrs)
-
-    def visit_body(elem: ET.Element, cls: str) -> None:
-        cls = elem.get("childclass", cls)
-        for joint in elem.findall("joint"):
-            attrs = {**defaults.get(joint.get("class", cls), {}), **joint.attrib}
-            if "name" in attrs and attribute in attrs:
-                values.append((attrs["name"], attrs[attribute]))
-        for body in elem.findall("body"):
-            visit_body(body, cls)
-
-    values: list[tuple[str, str]] = []
-    for d in root.findall("default"):
-        visit_default(d, {})
-    for world in root.findall("worldbody"):
-        visit_body(world, "main")
-    return values
 
 
 def load_model(

@@ -59,8 +59,9 @@ if TYPE_CHECKING:
 #: its relative error in K_t stays ~1e-10.
 WELD_CURVATURE_STEP = 1e-5
 
-#: Conditioning limit of the scaled tangent stiffness beyond which it counts as singular.
-CRITICAL_COND = 1e12
+#: Smallest singular value of the scaled tangent stiffness (1 without preload), relative
+#: to max(1, its largest), below which it counts as singular (critical preload).
+CRITICAL_RTOL = 1e-12
 
 
 def _hessian(raw: np.ndarray, nv: int) -> np.ndarray:
@@ -313,7 +314,8 @@ def preloaded_compliance(
         return PreloadedCompliance(**base.__dict__, preload=_readonly(w0), stability_margin=1.0)
     T = Vs / np.sqrt(ls)  # T^T K_r T = I on the sprung motions
     M = np.eye(T.shape[1]) + T.T @ P @ T
-    if M.size and np.linalg.cond(M) > CRITICAL_COND:
+    s_M = np.linalg.svd(M, compute_uv=False)
+    if s_M.size and s_M[-1] <= CRITICAL_RTOL * max(1.0, s_M[0]):
         raise SingularConfigurationError(
             f"the tangent stiffness at frame {frame!r} is singular under preload "
             f"{w0.tolist()} (critical load: buckling or limit point)"

@@ -33,7 +33,8 @@ def progress(
     def draw(end: str) -> None:
         width = 30
         frac = i / total if total else 1.0
-        bar = "#" * int(round(width * frac)) + "." * (width - int(round(width * frac)))
+        filled = round(width * frac)
+        bar = "#" * filled + "." * (width - filled)
         count = f"{i}/{total}" if total else f"{i}"
         stream.write(f"\r{label} [{bar}] {count} {time.perf_counter() - start:6.1f} s{end}")
         stream.flush()

@@ -21,7 +21,10 @@ space N (a Newton step on N^T F with the tangent stiffness of
 :func:`closedloop.preload.tangent_stiffness`). The multipliers are the least-squares
 ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the part of the closure forces that
 redundant rows leave statically indeterminate is set to zero (minimum norm). The load is
-applied at once and, when Newton fails, in smaller increments (continuation).
+followed from zero (continuation): each increment starts from the tangent prediction
+dq = N K_t^-1 N^T J^T dw, is sized so that this prediction stays small, and is halved
+when Newton fails, so that the solution stays on the branch that starts at q_rest
+(past a limit load, where K_t turns singular, no equilibrium is found on it).
 
 For a pure force the equilibrium is a stationary point of :func:`potential_energy` on the
 closure manifold, an independent check.
@@ -198,30 +201,43 @@ class _Statics:
             "N": N,
         }
 
+    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> np.ndarray:
+        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w).
+
+        Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
+        closures plus the Newton step of N^T F on the admissible motions. With ``load``
+        (6,): the rate dq/ds of the equilibrium when the wrench grows by s ``load``.
+        """
+        free = self.free
+        H = tangent_stiffness(self.clm, q, self.q_rest, self.frame, w, st["lam"], update=False)
+        H = H[np.ix_(free, free)]
+        R, N = st["R"], st["N"]
+        if load is None:
+            dx = -R @ ((st["Ur"].T @ st["c"]) / st["sr"])  # restores the closures
+            rhs = -N.T @ (st["F"] + H @ dx)
+        else:
+            J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
+            dx, rhs = np.zeros(free.size), N.T @ (J.T @ load)[free]
+        dx += N @ np.linalg.lstsq(N.T @ H @ N, rhs, rcond=1e-12)[0]
+        v = np.zeros(self.clm.model.nv)
+        v[free] = dx
+        return v
+
     def newton(self, q, w, *, tol: float, max_iter: int, max_step: float):
         """Newton iterations at a fixed wrench; returns (q or None, state, iterations)."""
-        clm, free = self.clm, self.free
         st = self.evaluate(q, w)
         for it in range(max_iter + 1):
             if st["closure"] <= tol and st["force"] <= st["force_tol"]:
                 return q, st, it
             if it == max_iter:
                 break
-            H = tangent_stiffness(clm, q, self.q_rest, self.frame, w, st["lam"], update=False)
-            H = H[np.ix_(free, free)]
-            R, N = st["R"], st["N"]
-            step = -R @ ((st["Ur"].T @ st["c"]) / st["sr"])  # restores the closures
-            Hn = N.T @ H @ N
-            rhs = -N.T @ (st["F"] + H @ step)
-            step += N @ np.linalg.lstsq(Hn, rhs, rcond=1e-12)[0]
-            size = np.max(np.abs(step), initial=0.0)
+            v = self.step(q, w, st)
+            size = np.max(np.abs(v), initial=0.0)
             if not np.isfinite(size):
                 break
             if size > max_step:
-                step *= max_step / size
-            v = np.zeros(clm.model.nv)
-            v[free] = step
-            q = pin.integrate(clm.model, q, v)
+                v *= max_step / size
+            q = pin.integrate(self.clm.model, q, v)
             st = self.evaluate(q, w)
             if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
                 break
@@ -240,6 +256,7 @@ def solve_equilibrium(
     max_iter: int = 30,
     max_halvings: int = 12,
     max_step: float = 0.5,
+    max_increment: float = 0.1,
 ) -> Equilibrium:
     """Static equilibrium of the mechanism under a dead-load wrench at ``frame``.
 
@@ -259,6 +276,8 @@ def solve_equilibrium(
         max_iter: Newton iterations per load increment.
         max_halvings: how many times a failed load increment may be halved.
         max_step: largest Newton step (infinity norm) [rad or m].
+        max_increment: largest predicted joint motion per load increment (infinity
+            norm) [rad or m]; larger deflections are followed in several increments.
 
     Raises:
         InvalidInputError: a wrench that is not 6 finite values, a bad q_rest, or a q_rest
@@ -280,10 +299,17 @@ def solve_equilibrium(
     spring_subspace(clm, q_rest, frame_jacobian(clm, q_rest, frame, update=False), frame)
     statics = _Statics(clm, q_rest, frame)
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
+    st = statics.evaluate(q, 0.0 * w)
     while t < 1.0:
-        t_try = min(1.0, t + dt)
+        rate = statics.step(q, t * w, st, load=w) if np.any(w) else np.zeros(clm.model.nv)
+        ds = min(dt, 1.0 - t)
+        speed = float(np.max(np.abs(rate), initial=0.0))
+        if speed * ds > max_increment:
+            ds = max_increment / speed
+        s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
+        guess = pin.integrate(clm.model, q, (s_try - t) * rate)
         q_new, st_try, it = statics.newton(
-            q, t_try * w, tol=tol, max_iter=max_iter, max_step=max_step
+            guess, s_try * w, tol=tol, max_iter=max_iter, max_step=max_step
         )
         iterations += it
         if q_new is None:
@@ -296,10 +322,9 @@ def solve_equilibrium(
                     st_try["force"],
                     t,
                 )
-            dt *= 0.5
+            dt = 0.5 * ds
             continue
-        q, st, t, steps = q_new, st_try, t_try, steps + 1
-        dt = min(1.0, 2.0 * dt)
+        q, st, t, steps, dt = q_new, st_try, s_try, steps + 1, 2.0 * ds
     disp = frame_displacement(clm, q, q_rest, frame)  # leaves the kinematics of q in clm.data
     return Equilibrium(
         q=_readonly(q),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -12,6 +13,8 @@ from closedloop.assembly import ASSEMBLY_TOL, assemble
 from closedloop.exceptions import AssemblyError, InvalidInputError
 from closedloop.io import load_urdf
 
+REPO = Path(__file__).resolve().parent.parent
+
 # Link lengths of urdf/fourbar.urdf [m]: crank AB, coupler BC, rocker DC, ground AD.
 L_CRANK, L_COUPLER, L_ROCKER, GROUND = 0.1, 0.3, 0.15, 0.3
 CRANK_AXIAL = 1  # index of crank_axial in q
@@ -19,7 +22,8 @@ CRANK_AXIAL = 1  # index of crank_axial in q
 
 @functools.cache
 def fourbar(closures="urdf/fourbar.yaml"):
-    return load_urdf("urdf/fourbar.urdf", closures)
+    """The four-bar with a closure file given relative to the repository."""
+    return load_urdf(REPO / "urdf/fourbar.urdf", REPO / closures)
 
 
 def world_gap(clm, q):

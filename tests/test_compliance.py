@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -20,6 +21,8 @@ from closedloop.exceptions import (
 )
 from closedloop.io import load_urdf, robot_data_dir
 from closedloop.model import ClosedLoopModel
+
+REPO = Path(__file__).resolve().parent.parent
 
 # Serial C = J K^-1 J^T: both sides are a few 6x6 products of the same Jacobian entries,
 # so they agree to a few ulps of the largest entry; 1e-10 leaves a wide margin.
@@ -88,14 +91,12 @@ def fourbar_by_hand(theta, branch=1, e1=0.0, e3=0.0):
 
 @functools.cache
 def fourbar():
-    return load_urdf("urdf/fourbar.urdf", "urdf/fourbar.yaml")
+    return load_urdf(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
 
 
 @functools.cache
 def ur5():
-    path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
-    model = pin.buildModelFromUrdf(str(path))
-    return load_urdf(path, springs={name: 1e4 for name in list(model.names)[1:]})
+    return load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=1e4)
 
 
 @functools.cache
@@ -315,7 +316,12 @@ def test_fourbar_without_springs_is_a_mechanism():
 
 
 def sleeve_variant(clm):
-    """A sleeve on the coupler, free to spin about the coupler line BC, carries C."""
+    """A sleeve on the coupler, free to spin about the coupler line BC, carries C.
+
+    Its spin keeps C (on the spin axis) and does not move the coupler, hence P: an
+    internal mobility. A passive joint between the ground and P would rotate P even with
+    its axis through P, which makes a mechanism, not an internal mobility.
+    """
     model = pin.Model(clm.model)
     sleeve = model.addJoint(
         model.getJointId("coupler"), pin.JointModelRX(), pin.SE3.Identity(), "sleeve"
@@ -377,7 +383,7 @@ def test_unknown_frame():
 )
 def test_bad_springs(springs, error, match):
     with pytest.raises(error, match=match):
-        load_urdf("urdf/fourbar.urdf", "urdf/fourbar.yaml", springs=springs)
+        load_urdf(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml", springs=springs)
 
 
 @pytest.mark.parametrize(

@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
+from closedloop.assembly import assemble
+from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError, RigidDirectionsError
 from closedloop.indices import StiffnessIndices
+from closedloop.io import load_urdf, robot_data_dir
+
+REPO = Path(__file__).resolve().parent.parent
 
 # Closed forms and definitions evaluated on matrices of condition ~1e5 (mixed units):
 # inverting them costs ~cond * eps ~ 1e-11 relative; 1e-9 leaves a margin.
@@ -214,7 +220,10 @@ def test_rank_deficient_compliance_returns_what_exists():
     for name in ("K", "determinant", "eigenvalues", "condition_number", "eigenscrews"):
         with pytest.raises(RigidDirectionsError, match=r"rank 3 < 6.*dy.*rx.*rz"):
             getattr(s, name)
-    with pytest.raises(RigidDirectionsError, match=r"translational.*singular.*\+1\.00 dy\]$"):
+    with pytest.raises(
+        RigidDirectionsError,
+        match=r"max translational stiffness does not exist.*rank 2 < 3.*\+1\.00 dy\]$",
+    ):
         _ = s.max_translational_stiffness
     c, V = np.linalg.eigh(C[np.ix_([0, 2], [0, 2])])  # the in-plane translations alone
     close(s.min_translational_stiffness.value, 1 / c[-1])
@@ -230,6 +239,18 @@ def test_rank_deficient_compliance_returns_what_exists():
     }  # fmt: skip
 
 
+def test_rotations_rigid():
+    # a translational platform (rotations locked): C_rr = 0 exactly
+    s = StiffnessIndices.from_compliance(np.diag([1e-5, 2e-5, 3e-5, 0.0, 0.0, 0.0]))
+    assert s.rank == 3
+    close(s.rigid_directions @ s.rigid_directions.T, np.diag([0.0, 0, 0, 1, 1, 1]))
+    close(s.translational_stiffness, np.diag([1e5, 5e4, 1e5 / 3]))
+    close(s.min_translational_stiffness.value, 1e5 / 3)
+    same_axis(s.min_translational_stiffness.direction, [0.0, 0.0, 1.0])
+    with pytest.raises(RigidDirectionsError, match=r"min rotational stiffness .* rank 0 < 3"):
+        _ = s.min_rotational_stiffness
+
+
 def test_full_rank_dict_and_constructors_agree():
     K = random_stiffness(np.random.default_rng(8))
     a = StiffnessIndices.from_stiffness(K, length=0.2)
@@ -239,6 +260,37 @@ def test_full_rank_dict_and_constructors_agree():
     close(out["K"], K)
     close(b.K, K)
     close(out["homogenised_condition_number"], b.homogenised_condition_number())
+
+
+# ---------------------------------------------------------------- from a mechanism
+def test_ur5_determinant_from_joint_stiffness_and_jacobian():
+    # 6-dof serial robot: C = J K_q^-1 J^T, so det K = prod(k) / det(J)^2; det J does not
+    # depend on the reference point or axes (the change matrices have determinant 1).
+    clm = load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=1e4)
+    q = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])
+    s = StiffnessIndices.from_result(compliance(clm, q, "tool0", axes="local"))
+    J = pin.computeJointJacobian(clm.model, clm.model.createData(), q, 6)  # joint 6 frame
+    close(s.determinant, 1e4**6 / np.linalg.det(J) ** 2)
+    for elbow, rank in ((1e-7, 6), (0.0, 5)):  # near the stretched-arm singularity, and at it
+        result = compliance(clm, np.r_[q[:2], elbow, q[3:]], "tool0")
+        s = StiffnessIndices.from_result(result)
+        assert s.rank == result.rank == rank
+        assert s.is_full_rank == result.is_full_rank
+
+
+def test_fourbar_indices_from_result():
+    clm = load_urdf(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    result = compliance(clm, assemble(clm, [0.4]).q, "P")
+    s = StiffnessIndices.from_result(result)
+    assert s.rank == 3
+    close(
+        s.rigid_directions @ s.rigid_directions.T,
+        result.rigid_directions @ result.rigid_directions.T,
+    )
+    c = np.linalg.eigvalsh(result.C[np.ix_([0, 2], [0, 2])])  # in-plane translations
+    close(s.min_translational_stiffness.value, 1 / c[-1])
+    with pytest.raises(RigidDirectionsError, match=r"dy"):
+        _ = s.translational_stiffness
 
 
 # ---------------------------------------------------------------- input errors

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +22,8 @@ from closedloop.kinematics import (
 )
 from closedloop.model import ClosedLoopModel
 
+REPO = Path(__file__).resolve().parent.parent
+
 # Central differences with step FD_STEP: truncation ~ FD_STEP^2 * |third derivative|
 # (~1e-12 here, lengths ~0.1-1 m) plus roundoff ~ eps / FD_STEP ~ 1e-10.
 FD_STEP = 1e-6
@@ -34,7 +37,8 @@ NULL_ATOL = 1e-12
 
 @functools.cache
 def fourbar(closures="urdf/fourbar.yaml"):
-    return load_urdf("urdf/fourbar.urdf", closures)
+    """The four-bar with a closure file given relative to the repository."""
+    return load_urdf(REPO / "urdf/fourbar.urdf", REPO / closures)
 
 
 @functools.cache
