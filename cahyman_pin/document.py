@@ -13,6 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
+def _md_row(cells) -> str:
+    return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+
 @dataclass(frozen=True)
 class Heading:
     text: str
@@ -67,9 +71,9 @@ class Document:
             elif isinstance(b, Table):
                 if b.caption:
                     out += [f"*{b.caption}*", ""]
-                out.append("| " + " | ".join(b.header) + " |")
+                out.append(_md_row(b.header))
                 out.append("|" + "|".join("---" for _ in b.header) + "|")
-                out += ["| " + " | ".join(r) + " |" for r in b.rows]
+                out += [_md_row(r) for r in b.rows]
                 out.append("")
             elif isinstance(b, Figure):
                 rel = Path(b.path).resolve().relative_to(Path(relative_to).resolve())

@@ -11,15 +11,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from closedloop.exceptions import ClosedLoopError  # noqa: E402
-from closedloop.progress import progress  # noqa: E402
+from closedloop.exceptions import ClosedLoopError
+from closedloop.progress import progress
 
-from .paper_compare import BACKENDS, backend_compliance  # noqa: E402
-from .paper_data import FIG5A, FIG5BCD, FIG67, PaperPose  # noqa: E402
-from .params import CaHyManParams  # noqa: E402
+from .paper_compare import BACKENDS, backend_compliance
+from .paper_data import FIG5A, FIG5BCD, FIG67, PaperPose
+from .params import CaHyManParams
 
 STYLES = {"published": ("tab:red", "--"), "consistent": ("tab:blue", "-"),
           "generic": ("k", ":")}  # fmt: skip

@@ -34,14 +34,18 @@ def rot_z(angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation about z by ``angle`` [rad]."""
     c, s = np.cos(angle), np.sin(angle)
     o, i = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, -s, o], -1), np.stack([s, c, o], -1), np.stack([o, o, i], -1)], -2)
+    return np.stack(
+        [np.stack([c, -s, o], -1), np.stack([s, c, o], -1), np.stack([o, o, i], -1)], -2
+    )
 
 
 def rot_y(angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation about y by ``angle`` [rad]."""
     c, s = np.cos(angle), np.sin(angle)
     o, i = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, o, s], -1), np.stack([o, i, o], -1), np.stack([-s, o, c], -1)], -2)
+    return np.stack(
+        [np.stack([c, o, s], -1), np.stack([o, i, o], -1), np.stack([-s, o, c], -1)], -2
+    )
 
 
 def plate_rotation(phi, theta, psi) -> np.ndarray:
@@ -70,7 +74,7 @@ class PlatePose:
 
 
 def leg_plane_coordinates(alpha: np.ndarray, p: CaHyManParams) -> tuple[np.ndarray, np.ndarray]:
-    """In-plane coordinates (y_k, z_k) [m] of the ball centres H_k for inputs alpha (..., 3) [rad]."""
+    """In-plane coordinates (y_k, z_k) [m] of the ball centres H_k; alpha (..., 3) [rad]."""
     alpha = np.asarray(alpha, float)
     return p.b * np.cos(alpha), p.b * np.sin(alpha) + p.h
 

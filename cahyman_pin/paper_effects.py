@@ -28,7 +28,11 @@ class Effect:
     name: str
     change: dict
     note: str
+    params_change: dict = dataclasses.field(default_factory=dict)
 
+
+#: Mass [kg] given to each of the five named parts to show the weight terms of eq. (11).
+ILLUSTRATIVE_MASS = 0.5
 
 EFFECTS = (
     Effect("lever arm of eq. (3)", {"lever_arm": True},
@@ -36,7 +40,10 @@ EFFECTS = (
     Effect("K_s value", {"ks": "params"},
            "0.697 N/m as printed -> the assumed 0.697e6 N/m"),
     Effect("weights of eq. (11)", {"weights": False},
-           "weight terms dropped (gravity belongs to a separate preload)"),
+           "weight terms dropped (gravity belongs to a separate preload); the paper gives no "
+           "masses and the model has none, so the terms are shown here with an illustrative "
+           f"{ILLUSTRATIVE_MASS} kg for each of the five masses",
+           {m: ILLUSTRATIVE_MASS for m in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")}),
     Effect("A_d damage, eqs. (18)-(19)", {"a_d": "printed"},
            "A_d as printed (secant form, singular where y_1 = 0 or C_psi = 0) instead of "
            "the Jacobian of the closed-form kinematics"),
@@ -70,14 +77,13 @@ def effect_changes(params: CaHyManParams) -> dict[str, dict[str, np.ndarray | No
     Returns:
         ``{effect name: {table label: (n_rows, 3) change [mm, deg] or None (singular)}}``.
     """
-    base = {p.label: cell_values(p, params, PublishedOptions()) for p in TABLE_POSES}
     out: dict[str, dict[str, np.ndarray | None]] = {}
     for effect in EFFECTS:
+        prm = params.replace(**effect.params_change)
         options = dataclasses.replace(PublishedOptions(), **effect.change)
         out[effect.name] = {}
         for p in TABLE_POSES:
-            v = cell_values(p, params, options)
-            out[effect.name][p.label] = None if v is None or base[p.label] is None else (
-                v - base[p.label]
-            )
+            base = cell_values(p, prm, PublishedOptions())
+            v = cell_values(p, prm, options)
+            out[effect.name][p.label] = None if v is None or base is None else v - base
     return out

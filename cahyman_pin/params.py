@@ -77,9 +77,7 @@ class CaHyManParams:
                     f"CaHyMan parameter {f.name}={value!r} must be a real number"
                 )
             if not math.isfinite(value):
-                raise InvalidInputError(
-                    f"CaHyMan parameter {f.name}={value!r} must be finite"
-                )
+                raise InvalidInputError(f"CaHyMan parameter {f.name}={value!r} must be finite")
         for name in (*_LENGTHS, *_SPRINGS, "s4_max"):
             if getattr(self, name) <= 0.0:
                 raise InvalidInputError(

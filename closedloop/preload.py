@@ -17,7 +17,10 @@ along the admissible motions N (nv, d) (closures and locked joints kept), with
   stiffness of the preload, J the (6, nv) frame Jacobian with world-aligned axes at the
   frame origin (Pinocchio LOCAL_WORLD_ALIGNED); it enters with a minus sign;
 * ``Hess c_j`` is the second derivative of closure row j: the loop curvature, weighted by
-  the internal force lambda_j that the preload creates in the loop.
+  the internal force lambda_j that the preload creates in the loop. With redundant
+  closure rows, lambda is known only up to a self-stress mu (J_c^T mu = 0), which the
+  solver sets to zero; it does not matter here, because differentiating c = 0 twice
+  along the closure manifold gives mu^T Hess c [v, v] = 0 for every admissible v.
 
 Derivatives with respect to q are taken along ``pin.integrate(model, q, v)``. The
 preloaded compliance at the frame is ``C = (J N) K_t^-1 (J N)^T``. A world-fixed moment is
@@ -293,8 +296,10 @@ def preloaded_compliance(
             the preloaded pose) for the increments dw and the twist.
 
     Returns:
-        The compliance; without preload (zero wrench) exactly
-        :func:`closedloop.compliance.compliance` at q.
+        The compliance; when the preload terms vanish (zero wrench) it is exactly
+        :func:`closedloop.compliance.compliance` at q. As there, spring-free motions that
+        do not move the frame (internal mobilities) are left out; any coupling of the
+        preload into them is neglected.
 
     Raises:
         MechanismError: a spring-free motion moves the frame.
@@ -328,8 +333,7 @@ def preloaded_compliance(
         C = 0.5 * (C + C.T)
     U, s, _ = np.linalg.svd(B, full_matrices=True)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
-    residual = closure_residual(clm, q)
-    update_kinematics(clm, q)
+    residual = closure_residual(clm, q)  # also restores the kinematics of q
     return PreloadedCompliance(
         C=_readonly(C),
         frame=frame,

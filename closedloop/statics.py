@@ -94,7 +94,8 @@ class Equilibrium:
         joint_deflection: (nv,) difference(q_rest, q) [rad or m].
         multipliers: (m,) closure multipliers lambda, one per closure row; for a point
             closure, the force [N] that side 2 exerts on side 1 at the anchor, in the axes
-            of the side-1 anchor frame (minimum-norm when closure rows are redundant).
+            of the side-1 anchor frame; for a weld, the wrench [N, N m] conjugate to its
+            log6 residual rows. Minimum-norm when closure rows are redundant (no self-stress).
         closure_residual: infinity norm of the closure residual at q [m, rad].
         force_residual: infinity norm of the unbalanced generalised force
             (g - J^T w + J_c^T lambda on the free coordinates) [N m, N].
@@ -299,15 +300,15 @@ def solve_equilibrium(
     spring_subspace(clm, q_rest, frame_jacobian(clm, q_rest, frame, update=False), frame)
     statics = _Statics(clm, q_rest, frame)
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
-    st = statics.evaluate(q, 0.0 * w)
     while t < 1.0:
+        st = statics.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
         rate = statics.step(q, t * w, st, load=w) if np.any(w) else np.zeros(clm.model.nv)
         ds = min(dt, 1.0 - t)
         speed = float(np.max(np.abs(rate), initial=0.0))
         if speed * ds > max_increment:
             ds = max_increment / speed
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
-        guess = pin.integrate(clm.model, q, (s_try - t) * rate)
+        guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
         q_new, st_try, it = statics.newton(
             guess, s_try * w, tol=tol, max_iter=max_iter, max_step=max_step
         )
@@ -317,7 +318,8 @@ def solve_equilibrium(
             if halvings > max_halvings:
                 raise EquilibriumError(
                     f"no static equilibrium found for wrench {w.tolist()} at frame {frame!r} "
-                    f"of {clm.name!r}",
+                    f"of {clm.name!r} (a limit load, where the tangent stiffness turns "
+                    "singular, ends the branch that starts at q_rest)",
                     st_try["closure"],
                     st_try["force"],
                     t,

@@ -167,6 +167,17 @@ def test_closure_curvature_matches_differences_of_closure_jacobian(fourbar, case
     assert_close_in_norm(H, H_fd, RTOL_HESSIAN_FD)
 
 
+def test_self_stress_does_not_enter_the_restricted_curvature():
+    """mu in the left null space of J_c (redundant rows): N^T Hess(mu . c) N = 0."""
+    clm, q0 = spherical_fourbar()
+    U, s, Vt = np.linalg.svd(closure_jacobian(clm, q0))
+    assert s[2] < 1e-12 * s[0]  # the radial row is redundant
+    H = closure_curvature(clm, q0, 100.0 * U[:, 2])
+    N = Vt[2:].T
+    assert np.abs(H).max() > 1.0  # the full Hessian is not zero...
+    np.testing.assert_allclose(N.T @ H @ N, 0.0, atol=RTOL_ROUNDING * np.abs(H).max())
+
+
 # ---------------------------------------------------------------------------- preloads
 @pytest.mark.parametrize("mechanism", ["fourbar", "ur5", "spherical", "welded"])
 def test_preloaded_compliance_matches_differences_of_solver(fourbar, ur5, mechanism):
