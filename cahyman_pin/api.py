@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from closedloop.arrays import check_wrench, readonly
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance
 from closedloop.exceptions import InvalidInputError
 from closedloop.indices import StiffnessIndices
@@ -36,12 +37,6 @@ from .backend_published import published_stiffness
 from .model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from .params import DEFAULT_PARAMS, CaHyManParams
 from .urdf_builder import FRAME_H, FRAME_M
-
-
-def _readonly(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)
@@ -105,7 +100,7 @@ def generic_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> B
     return BackendResult(
         C=result.C,
         pose=model.pose(q),
-        C_platform=_readonly(J_H @ result.G),
+        C_platform=readonly(J_H @ result.G),
         details={"q": q, "compliance": result},
     )
 
@@ -119,7 +114,7 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
     return BackendResult(
         C=parts.C,
         pose=closed_form_pose(alpha, alpha4, s4, params),
-        C_platform=_readonly(parts.C_H @ parts.T.T),
+        C_platform=readonly(parts.C_H @ parts.T.T),
         details={"breakdown": parts},
     )
 
@@ -205,7 +200,7 @@ class CaHyManStiffness:
         Raises:
             RigidDirectionsError: C is rank deficient.
         """
-        return _readonly(np.linalg.inv(self.C)) if self.indices is None else self.indices.K
+        return readonly(np.linalg.inv(self.C)) if self.indices is None else self.indices.K
 
     @property
     def det_K(self) -> float:
@@ -234,13 +229,9 @@ class CaHyManStiffness:
 
     def deflection(self, wrench) -> Deflection:
         """Twists of M and of the plate under ``wrench`` (6,) at M [N, N m], world axes."""
-        w = np.asarray(wrench, dtype=float).reshape(-1)
-        if w.shape != (6,) or not np.all(np.isfinite(w)):
-            raise InvalidInputError(
-                f"wrench must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"
-            )
-        H = None if self.C_platform is None else _readonly(self.C_platform @ w)
-        return Deflection(wrench=_readonly(w), M=_readonly(self.C @ w), H=H)
+        w = check_wrench(wrench)
+        H = None if self.C_platform is None else readonly(self.C_platform @ w)
+        return Deflection(wrench=readonly(w), M=readonly(self.C @ w), H=H)
 
     def to_dict(self) -> dict:
         """JSON-ready summary (SI): K, C, det_K, eigenvalues, platform, inputs, units."""
@@ -303,13 +294,13 @@ def stiffness(
     alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, params)
     result = get_backend(backend)(params, alpha, alpha4, s4)
     return CaHyManStiffness(
-        alpha=_readonly(alpha),
+        alpha=readonly(alpha),
         alpha4=alpha4,
         s4=s4,
         params=params,
         backend=backend,
-        C=_readonly(result.C),
-        C_platform=None if result.C_platform is None else _readonly(result.C_platform),
+        C=readonly(result.C),
+        C_platform=None if result.C_platform is None else readonly(result.C_platform),
         pose=result.pose,
         indices=_indices(result),
         details=result.details,

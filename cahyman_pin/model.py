@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from closedloop.arrays import readonly
 from closedloop.assembly import assemble as assemble_loops
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics import closure_residual, update_kinematics
@@ -36,12 +37,6 @@ from .urdf_builder import (
 #: Below this value of cos(phi) the plate normal is vertical and only theta + psi is
 #: defined: :func:`paper_angles` then reports psi = 0 and theta = the yaw.
 SINGULAR_COS_PHI = 1e-12
-
-
-def _readonly(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)
@@ -126,16 +121,16 @@ def closed_form_pose(alpha, alpha4, s4, p: CaHyManParams = DEFAULT_PARAMS) -> Ca
     Q, M = geometry.extremity(pose, alpha4, s4, p)
     phi, theta, psi = paper_angles(pose.R)
     return CaHyManPose(
-        H=_readonly(pose.H),
-        R=_readonly(pose.R),
+        H=readonly(pose.H),
+        R=readonly(pose.R),
         phi=phi,
         theta=theta,
         psi=psi,
-        s=_readonly(pose.s),
-        H_k=_readonly(geometry.ball_centres(pose, p)),
-        Q=_readonly(Q),
-        M=_readonly(M),
-        R_M=_readonly(geometry.arm_rotation(pose.R, alpha4)),
+        s=readonly(pose.s),
+        H_k=readonly(geometry.ball_centres(pose, p)),
+        Q=readonly(Q),
+        M=readonly(M),
+        R_M=readonly(geometry.arm_rotation(pose.R, alpha4)),
     )
 
 
@@ -243,16 +238,16 @@ class CaHyManModel:
         plate, arm = oMf[fid(FRAME_H)], oMf[fid(FRAME_M)]
         phi, theta, psi = paper_angles(plate.rotation)
         return CaHyManPose(
-            H=_readonly(plate.translation),
-            R=_readonly(plate.rotation),
+            H=readonly(plate.translation),
+            R=readonly(plate.rotation),
             phi=phi,
             theta=theta,
             psi=psi,
-            s=_readonly([q[self._q_index[f"s_{k}"]] for k in LEGS]),
-            H_k=_readonly([oMf[fid(f"H_{k}")].translation for k in LEGS]),
-            Q=_readonly(oMf[fid("Q")].translation),
-            M=_readonly(arm.translation),
-            R_M=_readonly(arm.rotation),
+            s=readonly([q[self._q_index[f"s_{k}"]] for k in LEGS]),
+            H_k=readonly([oMf[fid(f"H_{k}")].translation for k in LEGS]),
+            Q=readonly(oMf[fid("Q")].translation),
+            M=readonly(arm.translation),
+            R_M=readonly(arm.rotation),
         )
 
     def inverse(self, z_H: float, phi: float, psi: float) -> np.ndarray:
@@ -272,7 +267,7 @@ class CaHyManModel:
         if values.shape != (3,) or not np.all(np.isfinite(values)):
             raise InvalidInputError(f"z_H, phi, psi must be finite numbers, got {values.tolist()}")
         alpha = geometry.inverse_legs(*values, self.params)
-        return _readonly(alpha)
+        return readonly(alpha)
 
 
 @functools.lru_cache(maxsize=32)

@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .exceptions import InvalidInputError, MechanismError, RigidDirectionsError
+from .arrays import check_wrench, readonly
+from .exceptions import MechanismError, RigidDirectionsError
 from .kinematics import (
     RANK_RTOL,
     admissible_motions,
@@ -40,12 +41,6 @@ UNITS = {
     "C": "m/N, m/(N m) = rad/N, rad/(N m)",
     "K": "N/m, N/rad, N m/m, N m/rad",
 }
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)
@@ -99,15 +94,15 @@ class ComplianceResult:
                 self.rigid_directions,
             )
         K = np.linalg.inv(self.C)
-        return _readonly(0.5 * (K + K.T))
+        return readonly(0.5 * (K + K.T))
 
     def deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(6,) twist (dx, dy, dz [m], rx, ry, rz [rad]) of the frame under ``wrench`` (6,)."""
-        return self.C @ _wrench(wrench)
+        return self.C @ check_wrench(wrench)
 
     def joint_deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(nv,) joint deflection dq (tangent of q) [rad or m] under ``wrench`` (6,)."""
-        return self.G @ _wrench(wrench)
+        return self.G @ check_wrench(wrench)
 
     def to_dict(self) -> dict:
         """JSON-ready summary: K (or None), C, frame, axes, point, rank, units."""
@@ -123,13 +118,6 @@ class ComplianceResult:
             "closure_residual": self.closure_residual,
             "units": UNITS,
         }
-
-
-def _wrench(w) -> np.ndarray:
-    w = np.asarray(w, dtype=float).reshape(-1)
-    if w.shape != (6,) or not np.all(np.isfinite(w)):
-        raise InvalidInputError(f"wrench must be 6 finite values (fx fy fz nx ny nz), got {w}")
-    return w
 
 
 def describe_directions(V: np.ndarray) -> str:
@@ -171,17 +159,17 @@ def compliance(
     U, s, _ = np.linalg.svd(B, full_matrices=True)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
     return ComplianceResult(
-        C=_readonly(0.5 * (C + C.T)),
+        C=readonly(0.5 * (C + C.T)),
         frame=frame,
         axes=axes,
-        point=_readonly(point),
-        q=_readonly(q),
+        point=readonly(point),
+        q=readonly(q),
         rank=rank,
-        rigid_directions=_readonly(U[:, rank:]),
+        rigid_directions=readonly(U[:, rank:]),
         closure_residual=float(np.max(np.abs(residual), initial=0.0)),
         mobility=N.shape[1],
         internal_mobilities=n_internal,
-        G=_readonly(G),
+        G=readonly(G),
     )
 
 

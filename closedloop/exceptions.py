@@ -65,3 +65,21 @@ class RigidDirectionsError(ClosedLoopError):
 
 class SingularConfigurationError(ClosedLoopError):
     """A configuration at which the requested map is singular."""
+
+
+class EquilibriumError(ClosedLoopError):
+    """The static equilibrium could not be found (Newton with load continuation failed).
+
+    Attributes:
+        residual: infinity norm of the closure residual reached [m, rad].
+        force_residual: infinity norm of the unbalanced generalised force [N m, N].
+        load_fraction: fraction of the wrench at which equilibrium was last found.
+    """
+
+    def __init__(self, message: str, residual: float, force_residual: float, load_fraction):
+        self.residual, self.force_residual = residual, force_residual
+        self.load_fraction = load_fraction
+        super().__init__(
+            f"{message} (closure residual reached: {residual:.3e}, unbalanced force: "
+            f"{force_residual:.3e}, equilibrium found up to {load_fraction:.3g} of the load)"
+        )

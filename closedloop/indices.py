@@ -51,6 +51,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 
+from .arrays import readonly
 from .compliance import TWIST_LABELS, UNITS, describe_directions
 from .exceptions import InvalidInputError, RigidDirectionsError
 from .kinematics import RANK_RTOL
@@ -62,16 +63,10 @@ DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
 SCALED_TOL = 1e-8
 
 
-def _readonly(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.flags.writeable = False
-    return a
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     """v normalised, sign fixed so that its largest-magnitude component is positive."""
     v = v / np.linalg.norm(v)
-    return _readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
+    return readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
 
 
 class PrincipalStiffness(NamedTuple):
@@ -204,7 +199,7 @@ class StiffnessIndices:
         C = _check_matrix(C, "compliance")
         length = _check_length(length)
         rank, rigid = _rank_of_compliance(C, rtol, 1.0 if length is None else length)
-        return cls(_readonly(0.5 * (C + C.T)), rank, _readonly(rigid), length)
+        return cls(readonly(0.5 * (C + C.T)), rank, readonly(rigid), length)
 
     @classmethod
     def from_stiffness(cls, K, *, length: float | None = None) -> StiffnessIndices:
@@ -221,7 +216,7 @@ class StiffnessIndices:
         except np.linalg.LinAlgError:
             raise InvalidInputError("stiffness is not positive definite") from None
         Linv = scipy.linalg.solve_triangular(L, np.eye(6), lower=True)
-        return cls(_readonly(Linv.T @ Linv), 6, _readonly(np.zeros((6, 0))), _check_length(length))
+        return cls(readonly(Linv.T @ Linv), 6, readonly(np.zeros((6, 0))), _check_length(length))
 
     @classmethod
     def from_result(cls, result, *, length: float | None = None) -> StiffnessIndices:
@@ -231,8 +226,8 @@ class StiffnessIndices:
         which resolves near-singular poses better than C itself, and so ``K`` exists here
         exactly when ``result.K`` does.
         """
-        rigid = _readonly(result.rigid_directions)
-        return cls(_readonly(result.C), int(result.rank), rigid, _check_length(length))
+        rigid = readonly(result.rigid_directions)
+        return cls(readonly(result.C), int(result.rank), rigid, _check_length(length))
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -274,7 +269,7 @@ class StiffnessIndices:
         """(6, 6) stiffness C^-1 [N/m, N/rad, N m/m, N m/rad]."""
         self._require_full_rank("K")
         K = np.linalg.inv(self.C)
-        return _readonly(0.5 * (K + K.T))
+        return readonly(0.5 * (K + K.T))
 
     @property
     def determinant(self) -> float:
@@ -286,12 +281,12 @@ class StiffnessIndices:
     def eigenvalues(self) -> np.ndarray:
         """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring)."""
         self._require_full_rank("the eigenvalues of K")
-        return _readonly(np.linalg.eigvalsh(self.K))
+        return readonly(np.linalg.eigvalsh(self.K))
 
     @property
     def compliance_eigenvalues(self) -> np.ndarray:
         """(6,) eigenvalues of the SI matrix C, ascending (mixed units); exist at any rank."""
-        return _readonly(np.linalg.eigvalsh(self.C))
+        return readonly(np.linalg.eigvalsh(self.C))
 
     @property
     def condition_number(self) -> float:
@@ -303,11 +298,11 @@ class StiffnessIndices:
         """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]."""
         L = self._length(length)
         t = np.r_[np.ones(3), np.full(3, 1.0 / L)]
-        return _readonly(self.K * np.outer(t, t))
+        return readonly(self.K * np.outer(t, t))
 
     def homogenised_eigenvalues(self, length: float | None = None) -> np.ndarray:
         """(6,) eigenvalues of K_h [N/m], ascending."""
-        return _readonly(np.linalg.eigvalsh(self.homogenised_stiffness(length)))
+        return readonly(np.linalg.eigvalsh(self.homogenised_stiffness(length)))
 
     def homogenised_condition_number(self, length: float | None = None) -> float:
         """cond(K_h), dimensionless; depends on L and on the reference point."""
@@ -319,23 +314,23 @@ class StiffnessIndices:
     def translational_stiffness(self) -> np.ndarray:
         """(3, 3) [N/m], rotations free: K_tt - K_tr K_rr^-1 K_rt = C_tt^-1."""
         self._block_eig(T, "translational stiffness (rotations free)", True)
-        return _readonly(np.linalg.inv(self.C[T, T]))
+        return readonly(np.linalg.inv(self.C[T, T]))
 
     @property
     def translational_stiffness_blocked(self) -> np.ndarray:
         """(3, 3) [N/m], rotations blocked: K_tt."""
-        return _readonly(self.K[T, T])
+        return readonly(self.K[T, T])
 
     @property
     def rotational_stiffness(self) -> np.ndarray:
         """(3, 3) [N m/rad], translations free: K_rr - K_rt K_tt^-1 K_tr = C_rr^-1."""
         self._block_eig(R, "rotational stiffness (translations free)", True)
-        return _readonly(np.linalg.inv(self.C[R, R]))
+        return readonly(np.linalg.inv(self.C[R, R]))
 
     @property
     def rotational_stiffness_blocked(self) -> np.ndarray:
         """(3, 3) [N m/rad], translations blocked: K_rr."""
-        return _readonly(self.K[R, R])
+        return readonly(self.K[R, R])
 
     def _principal(self, block: slice, which: str) -> PrincipalStiffness:
         kind = "translational" if block == T else "rotational"
@@ -374,7 +369,7 @@ class StiffnessIndices:
         for i in np.argsort(lam):
             v, w = X[:3, i], X[3:, i]
             n2 = float(w @ w)
-            pitch, point = float(w @ v / n2), _readonly(np.cross(w, v) / n2)
+            pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
             screws.append(Eigenscrew(lam[i], pitch, _unit(w), point, lam[i] ** 2 * n2))
         return tuple(screws)
 

@@ -43,7 +43,7 @@ def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
     rows = [np.zeros((0, clm.model.nv))]
     for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
         c.constraint.calc(clm.model, clm.data, cd)
-        J = np.array(c.constraint.jacobian(clm.model, clm.data, cd))
+        J = np.array(c.constraint.jacobian(clm.model, clm.data, cd)).reshape(c.size, -1)
         if c.kind == "6d":
             J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
         rows.append(J)
@@ -63,7 +63,8 @@ def frame_jacobian(
     fid = clm.frame_id(frame)
     if update:
         update_kinematics(clm, q)
-    return pin.getFrameJacobian(clm.model, clm.data, fid, REFERENCE_FRAMES[axes])
+    J = pin.getFrameJacobian(clm.model, clm.data, fid, REFERENCE_FRAMES[axes])
+    return np.asarray(J).reshape(6, clm.model.nv)  # a one-dof model gives a (6,) vector
 
 
 def nullspace(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray, int]:

@@ -35,13 +35,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from .compliance import (
-    ComplianceResult,
-    _readonly,
-    _wrench,
-    compliance,
-    spring_subspace,
-)
+from .arrays import check_wrench, readonly
+from .compliance import ComplianceResult, compliance, spring_subspace
 from .exceptions import InvalidInputError, SingularConfigurationError
 from .kinematics import (
     RANK_RTOL,
@@ -97,7 +92,7 @@ def geometric_stiffness(
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
         update: recompute the kinematics of q first (else they must be current).
     """
-    w = _wrench(wrench)
+    w = check_wrench(wrench)
     fid = clm.frame_id(frame)
     if update:
         update_kinematics(clm, q)
@@ -273,7 +268,7 @@ class PreloadedCompliance(ComplianceResult):
         """(6, 6) stiffness C^-1 [SI]; symmetrised only when C is symmetric."""
         if not self.is_full_rank or np.array_equal(self.C, self.C.T):
             return super().K  # symmetric, or raises RigidDirectionsError
-        return _readonly(np.linalg.inv(self.C))
+        return readonly(np.linalg.inv(self.C))
 
     def to_dict(self) -> dict:
         """JSON-ready summary: that of :class:`ComplianceResult` plus the preload."""
@@ -307,7 +302,7 @@ def preloaded_compliance(
             point).
     """
     eq = equilibrium
-    q, frame, w0 = eq.q, eq.frame, _wrench(eq.wrench)
+    q, frame, w0 = eq.q, eq.frame, check_wrench(eq.wrench)
     update_kinematics(clm, q)
     J = frame_jacobian(clm, q, frame, axes, update=False)
     N, Vs, ls, n_internal = spring_subspace(clm, q, J, frame)
@@ -316,7 +311,7 @@ def preloaded_compliance(
     P = N.T @ (Kt - np.diag(k)) @ N  # preload part of K_t (d, d)
     if not np.any(P):
         base = compliance(clm, q, frame, axes)
-        return PreloadedCompliance(**base.__dict__, preload=_readonly(w0), stability_margin=1.0)
+        return PreloadedCompliance(**base.__dict__, preload=readonly(w0), stability_margin=1.0)
     T = Vs / np.sqrt(ls)  # T^T K_r T = I on the sprung motions
     M = np.eye(T.shape[1]) + T.T @ P @ T
     s_M = np.linalg.svd(M, compute_uv=False)
@@ -335,17 +330,17 @@ def preloaded_compliance(
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
     residual = closure_residual(clm, q)  # also restores the kinematics of q
     return PreloadedCompliance(
-        C=_readonly(C),
+        C=readonly(C),
         frame=frame,
         axes=axes,
-        point=_readonly(clm.data.oMf[clm.frame_id(frame)].translation),
-        q=_readonly(q),
+        point=readonly(clm.data.oMf[clm.frame_id(frame)].translation),
+        q=readonly(q),
         rank=rank,
-        rigid_directions=_readonly(U[:, rank:]),
+        rigid_directions=readonly(U[:, rank:]),
         closure_residual=float(np.max(np.abs(residual), initial=0.0)),
         mobility=N.shape[1],
         internal_mobilities=n_internal,
-        G=_readonly(N @ T @ X),
-        preload=_readonly(w0),
+        G=readonly(N @ T @ X),
+        preload=readonly(w0),
         stability_margin=margin,
     )

@@ -37,8 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .compliance import _readonly, _wrench, spring_subspace
-from .exceptions import ClosedLoopError, InvalidInputError
+from .arrays import check_wrench, readonly
+from .compliance import spring_subspace
+from .exceptions import EquilibriumError, InvalidInputError
 from .kinematics import (
     RANK_RTOL,
     closure_jacobian,
@@ -57,24 +58,6 @@ FORCE_RTOL = 1e-11
 STEP_TOL = 1e-12
 #: Largest closure residual accepted in the rest configuration [m, rad].
 REST_TOL = 1e-8
-
-
-class EquilibriumError(ClosedLoopError):
-    """The static equilibrium could not be found (Newton with load continuation failed).
-
-    Attributes:
-        residual: infinity norm of the closure residual reached [m, rad].
-        force_residual: infinity norm of the unbalanced generalised force [N m, N].
-        load_fraction: fraction of the wrench at which equilibrium was last found.
-    """
-
-    def __init__(self, message: str, residual: float, force_residual: float, load_fraction):
-        self.residual, self.force_residual = residual, force_residual
-        self.load_fraction = load_fraction
-        super().__init__(
-            f"{message} (closure residual reached: {residual:.3e}, unbalanced force: "
-            f"{force_residual:.3e}, equilibrium found up to {load_fraction:.3g} of the load)"
-        )
 
 
 @dataclass(frozen=True)
@@ -288,7 +271,7 @@ def solve_equilibrium(
         EquilibriumError: Newton failed even with the smallest load increment; the error
             carries the residuals reached.
     """
-    w = _wrench(wrench)
+    w = check_wrench(wrench)
     q_rest = clm.check_configuration(q_rest)
     clm.frame_id(frame)  # unknown frame: NameNotFoundError before any work
     r0 = float(np.max(np.abs(closure_residual(clm, q_rest)), initial=0.0))
@@ -329,14 +312,14 @@ def solve_equilibrium(
         q, st, t, steps, dt = q_new, st_try, s_try, steps + 1, 2.0 * ds
     disp = frame_displacement(clm, q, q_rest, frame)  # leaves the kinematics of q in clm.data
     return Equilibrium(
-        q=_readonly(q),
-        q_rest=_readonly(q_rest),
+        q=readonly(q),
+        q_rest=readonly(q_rest),
         frame=frame,
-        wrench=_readonly(w),
-        translation=_readonly(disp[:3]),
-        rotation=_readonly(disp[3:]),
-        joint_deflection=_readonly(pin.difference(clm.model, q_rest, q)),
-        multipliers=_readonly(st["lam"]),
+        wrench=readonly(w),
+        translation=readonly(disp[:3]),
+        rotation=readonly(disp[3:]),
+        joint_deflection=readonly(pin.difference(clm.model, q_rest, q)),
+        multipliers=readonly(st["lam"]),
         closure_residual=st["closure"],
         force_residual=st["force"],
         iterations=iterations,
