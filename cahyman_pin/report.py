@@ -270,6 +270,16 @@ def build_report(out: Path = DEFAULT_OUT, params: CaHyManParams = DEFAULT_PARAMS
     _matrices(doc, params)
     doc.add(
         Heading("Figures"),
+        Paragraph(
+            "det K is in SI (N^6/rad^3) and does not depend on the reference point: moving "
+            "the point along the arm (Fig. 5d, s_4) only transports the same compliance, so "
+            "det K of the consistent and generic models is constant there, whereas the "
+            "as-published K, in its own mixed coordinates, is not (crosses mark a negative "
+            "determinant, which a symmetric positive definite K cannot have). Figs. 6 and 7 "
+            "are linear in the load for every backend; the rotations are shown as the small "
+            "rotation vector of the arm in world axes because the plate is level at this "
+            "pose (phi = 90 deg)."
+        ),
         Figure(figure5(out, params), "Fig. 5: det K versus alpha_k, b_k = d_k, alpha_4, L + s_4"),
         Figure(figure_load(out, params, torque=False), "Fig. 6: displacements versus force"),
         Figure(figure_load(out, params, torque=True), "Fig. 7: displacements versus moment"),

@@ -29,6 +29,7 @@ from .kinematics import (
     admissible_motions,
     closure_residual,
     frame_jacobian,
+    nullspace,
     update_kinematics,
 )
 from .model import ClosedLoopModel
@@ -156,8 +157,7 @@ def compliance(
     NV = N @ (Vs / ls)
     G = NV @ (JN @ Vs).T
     C = B @ B.T
-    U, s, _ = np.linalg.svd(B, full_matrices=True)
-    rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
+    rigid, rank = nullspace(B.T)  # twists outside the range of C = B B^T
     return ComplianceResult(
         C=readonly(0.5 * (C + C.T)),
         frame=frame,
@@ -165,7 +165,7 @@ def compliance(
         point=readonly(point),
         q=readonly(q),
         rank=rank,
-        rigid_directions=readonly(U[:, rank:]),
+        rigid_directions=readonly(rigid),
         closure_residual=float(np.max(np.abs(residual), initial=0.0)),
         mobility=N.shape[1],
         internal_mobilities=n_internal,

@@ -39,10 +39,10 @@ from .arrays import check_wrench, readonly
 from .compliance import ComplianceResult, compliance, spring_subspace
 from .exceptions import InvalidInputError, SingularConfigurationError
 from .kinematics import (
-    RANK_RTOL,
     closure_jacobian,
     closure_residual,
     frame_jacobian,
+    nullspace,
     update_kinematics,
 )
 from .model import ClosedLoopModel
@@ -326,8 +326,7 @@ def preloaded_compliance(
     C = B @ X
     if not np.any(w0[3:]):  # conservative preload: K_t and C symmetric up to rounding
         C = 0.5 * (C + C.T)
-    U, s, _ = np.linalg.svd(B, full_matrices=True)
-    rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
+    rigid, rank = nullspace(B.T)  # twists outside the range of C
     residual = closure_residual(clm, q)  # also restores the kinematics of q
     return PreloadedCompliance(
         C=readonly(C),
@@ -336,7 +335,7 @@ def preloaded_compliance(
         point=readonly(clm.data.oMf[clm.frame_id(frame)].translation),
         q=readonly(q),
         rank=rank,
-        rigid_directions=readonly(U[:, rank:]),
+        rigid_directions=readonly(rigid),
         closure_residual=float(np.max(np.abs(residual), initial=0.0)),
         mobility=N.shape[1],
         internal_mobilities=n_internal,
