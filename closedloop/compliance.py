@@ -30,6 +30,7 @@ from .kinematics import (
     closure_residual,
     frame_jacobian,
     nullspace,
+    orthogonal_split,
     update_kinematics,
 )
 from .model import ClosedLoopModel
@@ -200,7 +201,7 @@ def spring_subspace(
     # Spring-free motions are found kinematically (no spring coordinate moves: null space
     # of the spring rows of N), not by a threshold on the eigenvalues of K_r, which would
     # drop a spring more than 1/RANK_RTOL times softer than the stiffest one.
-    W, Z = _split_by_rank(N[k > 0.0], N.shape[1])
+    W, Z, _ = orthogonal_split(N[k > 0.0])
     Kr = W.T @ ((N.T * k) @ N) @ W
     lam, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
     V = W @ V
@@ -214,15 +215,6 @@ def spring_subspace(
             "add springs or lock joints"
         )
     return N, V, lam, Z.shape[1]
-
-
-def _split_by_rank(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal bases (n, r) of the row space and (n, n - r) of the null space of A."""
-    if A.shape[0] == 0 or n == 0:
-        return np.zeros((n, 0)), np.eye(n)
-    _, s, Vt = np.linalg.svd(A, full_matrices=True)
-    rank = int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0.0 else 0
-    return Vt[:rank].T, Vt[rank:].T
 
 
 def _main_joints(clm: ClosedLoopModel, dq: np.ndarray) -> str:

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from .exceptions import InvalidInputError, SingularConfigurationError
 from .model import ClosedLoopModel
 
-#: Relative singular-value threshold below which a direction counts as rank deficient.
+#: Relative threshold (singular values, or pivots of a rank-revealing QR) below which a
+#: direction counts as rank deficient.
 RANK_RTOL = 1e-9
 
 REFERENCE_FRAMES = {"world": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL}
@@ -67,19 +69,42 @@ def frame_jacobian(
     return np.asarray(J).reshape(6, clm.model.nv)  # a one-dof model gives a (6,) vector
 
 
+def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray, np.ndarray, int]:
+    """Orthonormal bases of the row space and of the null space of A (m, n), and its rank.
+
+    Rank-revealing QR of A^T with column pivoting (LAPACK ``dgeqp3``): A^T P = Q R with
+    |R_ii| non-increasing; the rank counts the |R_ii| above ``rtol`` times the largest.
+    On matrices this small it is several times faster than an SVD, and the rank decision
+    agrees with the singular values except within a small factor of the threshold.
+
+    Returns:
+        W: (n, rank) row-space basis; Z: (n, n - rank) null-space basis, A Z ~ 0; together
+        they form an orthogonal matrix.
+        rank: rank of A.
+    """
+    m, n = A.shape
+    if m == 0 or n == 0:
+        return np.zeros((n, 0)), np.eye(n), 0
+    qr, _, tau, _, info = scipy.linalg.lapack.dgeqp3(np.array(A.T, dtype=float, order="F"))
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeqp3 failed (info={info})")
+    d = np.abs(np.diagonal(qr))
+    rank = int(np.count_nonzero(d > rtol * d[0])) if d[0] > 0.0 else 0
+    Q = np.zeros((n, n), order="F")
+    Q[:, : tau.size] = qr[:, : tau.size]
+    Q = scipy.linalg.lapack.dorgqr(Q, np.r_[tau, np.zeros(n - tau.size)])[0]
+    return Q[:, :rank], Q[:, rank:], rank
+
+
 def nullspace(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray, int]:
-    """Orthonormal null-space basis of A (m, n) by SVD, and the rank of A.
+    """Orthonormal null-space basis of A (m, n), and the rank of A (:func:`orthogonal_split`).
 
     Returns:
         N: (n, n - rank) with A N ~ 0 and N^T N = I.
-        rank: number of singular values above ``rtol`` times the largest.
+        rank: number of pivots of the rank-revealing QR above ``rtol`` times the largest.
     """
-    n = A.shape[1]
-    if A.shape[0] == 0:
-        return np.eye(n), 0
-    _, s, Vt = np.linalg.svd(A, full_matrices=True)
-    rank = int(np.sum(s > rtol * s[0])) if s.size and s[0] > 0.0 else 0
-    return Vt[rank:].T.copy(), rank
+    _, N, rank = orthogonal_split(A, rtol)
+    return N, rank
 
 
 def rigid_rows(clm: ClosedLoopModel) -> np.ndarray:
