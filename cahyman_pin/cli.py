@@ -30,7 +30,11 @@ from .params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED
 
 PROG = "cahyman"
 #: Modules adding further subcommands (each defines ``add_parser(subparsers)``).
-SUBCOMMAND_MODULES: tuple[str, ...] = ("cahyman_pin.report",)
+SUBCOMMAND_MODULES: tuple[str, ...] = (
+    "cahyman_pin.report",
+    "cahyman_pin.map_cli",
+    "cahyman_pin.view",
+)
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
 KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}

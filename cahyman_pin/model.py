@@ -183,16 +183,30 @@ class CaHyManModel:
             AssemblyError: the legs cannot carry the plate.
         """
         alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
+        return self.initial_guesses(alpha[None], np.array([alpha4]), np.array([s4]))[0]
+
+    def initial_guesses(self, alpha, alpha4, s4) -> np.ndarray:
+        """(n, nq) configurations from the closed-form geometry for n poses at once.
+
+        Args:
+            alpha: (n, 3) crank angles [rad]; alpha4: (n,) arm angles [rad]; s4: (n,)
+                strokes [m]; checked by the caller (see :func:`check_inputs`).
+
+        Raises:
+            AssemblyError: the legs cannot carry the plate at some pose.
+        """
+        alpha = np.asarray(alpha, dtype=float)
         pose = geometry.plate_pose(alpha, self.params)
-        q = pin.neutral(self.clm.model)
+        q = np.tile(pin.neutral(self.clm.model), (len(alpha), 1))
         ix = self._q_index
-        for k, a, s in zip(LEGS, alpha, pose.s, strict=True):
-            q[ix[f"alpha_{k}"]], q[ix[f"c_{k}"]], q[ix[f"d_{k}"]] = a, -a, a
-            q[ix[f"s_{k}"]] = s
+        for k, leg in enumerate(LEGS):
+            a = alpha[:, k]
+            q[:, ix[f"alpha_{leg}"]], q[:, ix[f"c_{leg}"]], q[:, ix[f"d_{leg}"]] = a, -a, a
+            q[:, ix[f"s_{leg}"]] = pose.s[:, k]
         i = ix[PLATE_JOINT]
-        q[i : i + 3] = pose.H
-        q[i + 3 : i + 7] = pin.Quaternion(pose.R).coeffs()
-        q[ix["alpha_4"]], q[ix["s_4"]] = alpha4, s4
+        q[:, i : i + 3] = pose.H
+        q[:, i + 3 : i + 7] = [pin.Quaternion(R).coeffs() for R in pose.R]
+        q[:, ix["alpha_4"]], q[:, ix["s_4"]] = alpha4, s4
         return q
 
     def assemble(self, alpha, alpha4, s4, *, q0=None, full_output: bool = False):

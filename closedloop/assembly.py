@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import closure_jacobian, closure_residual
@@ -35,6 +36,26 @@ def free_coordinates(clm: ClosedLoopModel) -> np.ndarray:
     return np.flatnonzero(clm.stiffness == 0.0)
 
 
+def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """Minimum-norm least-squares solution x (n,) of A x = b, A (m, n), b (m,).
+
+    LAPACK ``dgelsy``: QR with column pivoting, the effective rank being the largest
+    leading block of R whose estimated condition number stays below 1 / ``rcond``, then a
+    complete orthogonal decomposition. Same answer as ``numpy.linalg.lstsq`` (an SVD) up
+    to rounding when the rank decision agrees, and several times faster on small matrices.
+    """
+    m, n = A.shape
+    rhs = np.zeros(max(m, n))
+    rhs[:m] = b
+    lwork = max(min(m, n) + 3 * n + 1, 2 * min(m, n) + 1)
+    _, x, _, _, info = scipy.linalg.lapack.dgelsy(
+        np.array(A, dtype=float, order="F"), rhs, np.zeros(n, dtype=np.int32), rcond, lwork=lwork
+    )
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgelsy failed (info={info})")
+    return x[:n]
+
+
 def assemble(
     clm: ClosedLoopModel,
     actuated: np.ndarray | None = None,
@@ -48,8 +69,8 @@ def assemble(
     Actuated coordinates are set to ``actuated``; spring and locked coordinates keep the
     values they have in ``q0`` (their rest values). The passive coordinates are found by
     Gauss-Newton on the stacked closure residual, each step a minimum-norm least-squares
-    solve through the SVD (rank revealing: redundant closure rows are harmless), with
-    backtracking when a step does not reduce the residual.
+    solve (:func:`min_norm_solve`, rank revealing: redundant closure rows are harmless),
+    with backtracking when a step does not reduce the residual.
 
     Args:
         clm: the model.
@@ -83,7 +104,7 @@ def assemble(
         it += 1
         J = closure_jacobian(clm, q, update=False)[:, free]
         step = np.zeros(model.nv)
-        step[free] = -np.linalg.lstsq(J, r, rcond=1e-12)[0]
+        step[free] = -min_norm_solve(J, r)
         for _ in range(30):
             q_try = pin.integrate(model, q, step)
             r_try = closure_residual(clm, q_try)

@@ -1,5 +1,8 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
+``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); its exit code is 0 or 2.
+
 Exit codes:
 
 * ``0`` - the stiffness K exists; K and C printed.
@@ -73,6 +76,27 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    add_model_arguments(p)
+    p.add_argument("--axes", choices=("world", "local"), default="world", help="axes of K and C")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=stiffness)
+    v = sub.add_parser(
+        "view",
+        help="meshcat view of the deflection under a wrench",
+        description="Nominal pose (ghost), amplified deflected pose, wrench arrows and\n"
+        "compliance ellipsoid in a meshcat viewer. --html writes a self-contained page;\n"
+        "without it the viewer is served on 127.0.0.1 until Ctrl-C.",
+        epilog=EPILOG.split("\n\nOutput:")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_model_arguments(v)
+    add_view_arguments(v)
+    v.set_defaults(func=view)
+    return parser
+
+
+def add_model_arguments(p: argparse.ArgumentParser) -> None:
+    """MODEL, --closures, --frame, --q | --actuated, --joint-stiffness | --springs."""
     p.add_argument("model", metavar="MODEL", help="robot file: .urdf, or .xml/.mjcf (MJCF)")
     p.add_argument(
         "--closures",
@@ -95,9 +119,68 @@ def build_parser() -> argparse.ArgumentParser:
         help="stiffness of every actuated joint without spring [N m/rad or N/m]",
     )
     springs.add_argument("--springs", metavar="FILE", help="YAML mapping joint -> stiffness")
-    p.add_argument("--axes", choices=("world", "local"), default="world", help="axes of K and C")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    return parser
+
+
+def add_view_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of a deflection view: wrench, amplification, output (SI)."""
+    for name, labels, unit in (
+        ("--force", ("FX", "FY", "FZ"), "N"),
+        ("--torque", ("NX", "NY", "NZ"), "N m"),
+    ):
+        p.add_argument(
+            name,
+            nargs=3,
+            type=float,
+            default=[0.0] * 3,
+            metavar=labels,
+            help=f"{name[2:]} at the frame origin, world axes [{unit}]",
+        )
+    p.add_argument(
+        "--scale",
+        type=float,
+        metavar="S",
+        help="amplification of the deflection (default: automatic, the largest "
+        "point displacement shown as 10%% of the model size)",
+    )
+    p.add_argument(
+        "--nonlinear", action="store_true", help="nonlinear static equilibrium along the load ramp"
+    )
+    p.add_argument(
+        "--close-loops",
+        action="store_true",
+        help="re-close the loops of the amplified pose with the passive joints",
+    )
+    p.add_argument(
+        "--rotational", action="store_true", help="also the rotational compliance ellipsoid"
+    )
+    p.add_argument("--html", metavar="FILE", help="write a self-contained HTML page")
+    p.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="without --html: serve for this long (default: until Ctrl-C)",
+    )
+    p.add_argument("--autoplay", action="store_true", help="play the load ramp on opening")
+
+
+def view_from_args(clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=print):
+    """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options."""
+    from .viewer import run_view  # meshcat is imported only for a view
+
+    return run_view(
+        clm,
+        q,
+        frame,
+        np.r_[args.force, args.torque],
+        scale=args.scale,
+        nonlinear=args.nonlinear,
+        close_loops=args.close_loops,
+        rotational=args.rotational,
+        html=args.html,
+        duration=args.duration,
+        autoplay=args.autoplay,
+        out=out,
+    )
 
 
 def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> np.ndarray:
@@ -155,18 +238,23 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
     return "\n".join(lines)
 
 
-def stiffness(args: argparse.Namespace) -> int:
-    """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
+def model_from_args(args: argparse.Namespace, geometry: bool = False):
+    """(model, configuration) from :func:`add_model_arguments`' options."""
     springs = read_springs_file(args.springs) if args.springs else None
     clm = load_model(
         args.model,
         args.closures,
         springs=springs,
         joint_stiffness=args.joint_stiffness,
-        geometry=False,
+        geometry=geometry,
     )
     clm.frame_id(args.frame)  # unknown frame: fail before any assembly
-    q = configuration(clm, args.q, args.actuated)
+    return clm, configuration(clm, args.q, args.actuated)
+
+
+def stiffness(args: argparse.Namespace) -> int:
+    """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
+    clm, q = model_from_args(args)
     res = compliance(clm, q, args.frame, args.axes)
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
@@ -174,6 +262,13 @@ def stiffness(args: argparse.Namespace) -> int:
     else:
         print(format_report(clm, res))
     return EXIT_OK if res.is_full_rank else EXIT_RIGID
+
+
+def view(args: argparse.Namespace) -> int:
+    """Run ``closedloop view``; returns the exit code (0)."""
+    clm, q = model_from_args(args, geometry=True)
+    view_from_args(clm, q, args.frame, args)
+    return EXIT_OK
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -184,7 +279,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as e:  # --help (0) or a usage error (2), already printed
         return e.code if isinstance(e.code, int) else EXIT_ERROR
     try:
-        return stiffness(args)
+        return args.func(args)
     except ClosedLoopError as e:
         print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
         return EXIT_ERROR

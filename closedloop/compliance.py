@@ -206,7 +206,9 @@ def spring_subspace(
     lam, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
     V = W @ V
     JN = J @ N
-    moves = np.linalg.norm(JN @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN), 1e-300)
+    moves = np.zeros(Z.shape[1], dtype=bool)
+    if Z.shape[1]:  # spring-free motions must not move the frame
+        moves = np.linalg.norm(JN @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN), 1e-300)
     if np.any(moves):
         dq = N @ Z[:, moves]
         raise MechanismError(

@@ -42,10 +42,11 @@ def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
     """
     if update:
         update_kinematics(clm, q)
-    rows = [np.zeros((0, clm.model.nv))]
+    nv = clm.model.nv
+    rows = [np.zeros((0, nv))]
     for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
         c.constraint.calc(clm.model, clm.data, cd)
-        J = np.array(c.constraint.jacobian(clm.model, clm.data, cd)).reshape(c.size, -1)
+        J = np.asarray(c.constraint.jacobian(clm.model, clm.data, cd)).reshape(-1, nv)
         if c.kind == "6d":
             J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
         rows.append(J)
@@ -85,14 +86,15 @@ def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray
     m, n = A.shape
     if m == 0 or n == 0:
         return np.zeros((n, 0)), np.eye(n), 0
-    qr, _, tau, _, info = scipy.linalg.lapack.dgeqp3(np.array(A.T, dtype=float, order="F"))
+    qr, _, tau, _, info = scipy.linalg.lapack.dgeqp3(np.asarray(A, dtype=float).T)
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqp3 failed (info={info})")
-    d = np.abs(np.diagonal(qr))
+    d = np.abs(qr.diagonal())
     rank = int(np.count_nonzero(d > rtol * d[0])) if d[0] > 0.0 else 0
-    Q = np.zeros((n, n), order="F")
-    Q[:, : tau.size] = qr[:, : tau.size]
-    Q = scipy.linalg.lapack.dorgqr(Q, np.r_[tau, np.zeros(n - tau.size)])[0]
+    if tau.size < n:  # fewer reflectors than columns: pad to build the square Q
+        qr = np.hstack([qr[:, : tau.size], np.zeros((n, n - tau.size))])
+        tau = np.hstack([tau, np.zeros(n - tau.size)])
+    Q = scipy.linalg.lapack.dorgqr(qr[:, :n], tau, overwrite_a=1)[0]
     return Q[:, :rank], Q[:, rank:], rank
 
 
@@ -122,8 +124,8 @@ def admissible_motions(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = Tr
         N: (nv, d) orthonormal basis, closure Jacobian and locked rows times N ~ 0.
         rank: rank of the stacked closure + locked rows (redundant rows removed).
     """
-    A = np.vstack([closure_jacobian(clm, q, update=update), rigid_rows(clm)])
-    return nullspace(A)
+    A, locked = closure_jacobian(clm, q, update=update), rigid_rows(clm)
+    return nullspace(np.vstack([A, locked]) if len(locked) else A)
 
 
 def closed_loop_jacobian(

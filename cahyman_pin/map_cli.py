@@ -1,0 +1,294 @@
+"""``cahyman map``: a stiffness index over one or two swept inputs, as data and a figure.
+
+Pose inputs are in the paper's units (deg, mm), like the other ``cahyman`` subcommands;
+design parameters (``--param``) are CaHyManParams fields in their SI units (m, N/m,
+N m/rad, kg). A value is one of
+
+* ``V``: a single value (fixed);
+* ``START:STOP:NUM``: NUM evenly spaced values, both ends included (swept);
+* ``V1,V2,...``: a list of values (swept).
+
+Examples::
+
+    cahyman map --alpha 30:90:61 --alpha4 60 --s4 25                    # Fig. 5a, a curve
+    cahyman map --alpha1 30:90:25 --alpha2 30:90:25 --alpha3 60 --index min_translational
+    cahyman map --alpha 60 --alpha4 60 --s4 50 --param b=0.04:0.12:9      # design sweep
+    cahyman map --alpha 30:90:31 --param b=0.04:0.12:9 --backend consistent --out fig5b
+    cahyman map --s4 0:50:21 --alpha4 0:90:19 --force 1 1 1 --index deflection_translation
+
+``--alpha`` takes one value (alpha_1 = alpha_2 = alpha_3, swept together when a range) or
+three (alpha_1, alpha_2, alpha_3). A value starting with a minus sign needs ``=``:
+``--alpha4=-30:30:13``. One swept input gives a curve, two a heat map. The folder ``--out``
+receives ``map.npz`` (everything, SI), ``map.csv`` when the map is small and
+``map_<index>.png``. ``--start closed_form`` starts every generic assembly from CaHyMan's
+closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .cli import DEFAULT_POSE, KS_PRESETS, UsageError, finite_float
+from .model import check_inputs
+from .params import DEFAULT_PARAMS, CaHyManParams
+from .sweep import INDEX_UNITS, SweepResult, grid, sweep
+from .sweep_exec import STARTS
+from .sweep_points import param_unit
+
+DEFAULT_OUT = Path("cahyman-map")
+#: Most points a map may have (a guard against typing one zero too many).
+MAX_POINTS = 2_000_000
+#: Pose inputs: grid axis -> (option, unit shown, factor from the shown unit to SI).
+POSE_OPTIONS = {
+    "alpha": ("alpha", "deg", math.pi / 180.0),
+    "alpha1": ("alpha1", "deg", math.pi / 180.0),
+    "alpha2": ("alpha2", "deg", math.pi / 180.0),
+    "alpha3": ("alpha3", "deg", math.pi / 180.0),
+    "alpha4": ("alpha4", "deg", math.pi / 180.0),
+    "s4": ("s4", "mm", 1e-3),
+}
+#: Indices plotted on a log scale (they span decades), and display scales of the others.
+LOG_INDICES = ("det_K", "condition_number")
+DISPLAY = {"deflection_translation": ("mm", 1e3), "deflection_rotation": ("deg", 180 / math.pi)}
+
+
+#: Axis titles of the pose inputs.
+TITLES = {"alpha": "alpha_1 = alpha_2 = alpha_3", "alpha1": "alpha_1", "alpha2": "alpha_2",
+          "alpha3": "alpha_3", "alpha4": "alpha_4", "s4": "s_4"}  # fmt: skip
+
+
+class SpecError(argparse.ArgumentTypeError):
+    """A value specification that cannot be read."""
+
+
+def parse_values(text: str) -> np.ndarray:
+    """Values of a specification ``V``, ``START:STOP:NUM`` or ``V1,V2,...`` (no unit change).
+
+    Raises:
+        SpecError: the text does not follow one of the three forms.
+    """
+    try:
+        if ":" in text:
+            start, stop, num = text.split(":")
+            count = int(num)
+            if count < 1:
+                raise SpecError(f"{text!r}: NUM must be >= 1")
+            values = np.linspace(float(start), float(stop), count)
+        else:
+            values = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise SpecError(f"{text!r} is not a value, START:STOP:NUM or V1,V2,... (numbers)") from None
+    if not np.all(np.isfinite(values)):
+        raise SpecError(f"{text!r} has non-finite values")
+    return values
+
+
+def parse_param(text: str) -> tuple[str, np.ndarray]:
+    """``NAME=SPEC`` with NAME a CaHyManParams field (values in SI)."""
+    name, sep, spec = text.partition("=")
+    fields = CaHyManParams.field_names()
+    if not sep or name not in fields:
+        raise SpecError(f"{text!r}: expected NAME=VALUES with NAME one of {', '.join(fields)}")
+    return name, parse_values(spec)
+
+
+def add_parser(subparsers) -> None:
+    """The ``map`` subcommand."""
+    p = subparsers.add_parser(
+        "map",
+        help="a stiffness index over swept inputs (NPZ, CSV, PNG)",
+        description="A stiffness index over one or two swept inputs: V, START:STOP:NUM or "
+        "V1,V2,... (pose in deg and mm; --param in SI).",
+    )
+    d = DEFAULT_POSE
+    p.add_argument("--alpha", nargs="+", type=parse_values, metavar="SPEC",
+                   help="alpha_1 = alpha_2 = alpha_3 (one SPEC) or alpha_1..3 (three) [deg] "
+                   f"(default {' '.join(f'{a:g}' for a in d['alpha'])})")  # fmt: skip
+    for k in (1, 2, 3):
+        p.add_argument(f"--alpha{k}", type=parse_values, metavar="SPEC",
+                       help=f"alpha_{k} [deg], overrides --alpha")  # fmt: skip
+    p.add_argument(
+        "--alpha4",
+        type=parse_values,
+        default=np.array([d["alpha4"]]),
+        metavar="SPEC",
+        help=f"arm angle alpha_4 [deg] (default {d['alpha4']:g})",
+    )
+    p.add_argument("--s4", type=parse_values, default=np.array([d["s4"]]), metavar="SPEC",
+                   help=f"telescope stroke s_4 [mm] (default {d['s4']:g})")  # fmt: skip
+    p.add_argument("--param", type=parse_param, action="append", default=[],
+                   metavar="NAME=SPEC", help="design parameter in SI, e.g. b=0.04:0.12:9 "
+                   "(repeatable)")  # fmt: skip
+    p.add_argument("--ks", choices=sorted(KS_PRESETS), default="assumed",
+                   help="K_s preset: assumed 0.697e6 N/m or printed 0.697 N/m")  # fmt: skip
+    p.add_argument("--backend", default="generic", help="stiffness backend (default generic)")
+    p.add_argument("--start", choices=STARTS, default="neighbour",
+                   help="generic backend: assembly from the previous point (neighbour, "
+                   "default) or from the closed-form geometry (closed_form, faster)")  # fmt: skip
+    p.add_argument("--index", choices=sorted(INDEX_UNITS), default="det_K",
+                   help="index to plot (default det_K); all are saved")  # fmt: skip
+    p.add_argument("--force", nargs=3, type=finite_float, metavar=("FX", "FY", "FZ"),
+                   help="force at M [N], world axes, for the deflection indices")  # fmt: skip
+    p.add_argument("--torque", nargs=3, type=finite_float, metavar=("NX", "NY", "NZ"),
+                   help="torque at M [N m], world axes, for the deflection indices")  # fmt: skip
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: all cores; 1: no pool)")  # fmt: skip
+    p.add_argument("--chunk-size", type=int, default=None, help="points per task")
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                   help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
+    p.set_defaults(func=_run)
+
+
+def _inputs(args: argparse.Namespace) -> dict[str, tuple[np.ndarray, str, float]]:
+    """Axis name -> (values in the shown unit, unit, factor to SI), pose and design."""
+    alpha = args.alpha or [np.array([a]) for a in DEFAULT_POSE["alpha"]]
+    if len(alpha) not in (1, 3):
+        raise UsageError(f"--alpha takes 1 or 3 values, got {len(alpha)}")
+    given = {"alpha4": args.alpha4, "s4": args.s4}
+    if len(alpha) == 1 and alpha[0].size > 1:
+        given["alpha"] = alpha[0]  # alpha_1 = alpha_2 = alpha_3, swept together
+    else:
+        given.update({f"alpha{k + 1}": alpha[k % len(alpha)] for k in range(3)})
+    for k in (1, 2, 3):
+        value = getattr(args, f"alpha{k}")
+        if value is not None:
+            if "alpha" in given:
+                raise UsageError(
+                    f"--alpha{k} cannot be combined with a range in --alpha (which sweeps "
+                    "alpha_1 = alpha_2 = alpha_3)"
+                )
+            given[f"alpha{k}"] = value
+    out = {k: (v, *POSE_OPTIONS[k][1:]) for k, v in given.items()}
+    for name, values in args.param:
+        if name in out:
+            raise UsageError(f"--param {name} given twice")
+        out[name] = (values, param_unit(name), 1.0)
+    return out
+
+
+def _wrench(args: argparse.Namespace) -> np.ndarray | None:
+    if args.force is None and args.torque is None:
+        if args.index.startswith("deflection"):
+            raise UsageError(f"--index {args.index} needs --force and/or --torque")
+        return None
+    return np.r_[args.force or [0.0, 0.0, 0.0], args.torque or [0.0, 0.0, 0.0]]
+
+
+def _label(name: str, unit: str) -> str:
+    return f"{name} [{unit}]"
+
+
+def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
+    """Curve (one swept axis) or heat map (two) of ``index``; failed points left blank.
+
+    Args:
+        result: the sweep (a grid).
+        index: name of the index to show.
+        shown: axis name -> (unit shown, factor from the shown unit to SI).
+        path: PNG file to write.
+    """
+    v = result.grid_values(index)
+    unit, scale = DISPLAY.get(index, (INDEX_UNITS[index], 1.0))
+    v = v * scale
+    label = _label(index, unit)
+    if index in LOG_INDICES:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = np.log10(np.abs(v))
+        label = f"log10 |{index}| [{unit}]"
+    axes = [
+        (a, values / shown[a][1], _label(TITLES.get(a, a), shown[a][0]))
+        for a, values in result.points.axes
+    ]
+    fig, ax = plt.subplots(figsize=(7, 5))
+    if len(axes) == 1:
+        (_, x, xlabel), y = axes[0], v.reshape(-1)
+        ax.plot(x, y, "k.-", ms=3)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    else:
+        (_, x, xlabel), (_, y, ylabel) = axes
+        mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(v).T, shading="nearest", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label=label)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+    failed = int(np.count_nonzero(~np.isfinite(v)))
+    note = f" ({failed} points without a value)" if failed else ""
+    ax.set_title(f"{index} at M, backend {result.backend}{note}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _check_values(inputs: dict, params: CaHyManParams) -> None:
+    """Refuse values that no point could use (raises InvalidInputError).
+
+    Each design value must make valid parameters, and each stroke must lie in
+    [0, s4_max]: a range that leaves them is a typing error, not a map with holes.
+    """
+    for name, (values, _, factor) in inputs.items():
+        for v in values * factor:
+            if name == "s4":
+                check_inputs(np.zeros(3), 0.0, v, params)
+            elif name in CaHyManParams.field_names():
+                params.replace(**{name: float(v)})
+
+
+def _run(args: argparse.Namespace) -> int:
+    inputs = _inputs(args)
+    swept = {k: v for k, v in inputs.items() if v[0].size > 1}
+    if not swept:
+        raise UsageError("nothing to sweep: give START:STOP:NUM or V1,V2,... to one or two inputs")
+    if len(swept) > 2:
+        raise UsageError(
+            f"a map sweeps one or two inputs, got {len(swept)} ({', '.join(swept)}); "
+            "use cahyman_pin.sweep from Python for more"
+        )
+    n = math.prod(v[0].size for v in swept.values())
+    if n > MAX_POINTS:
+        raise UsageError(f"{n} points is more than the {MAX_POINTS} a map may have")
+    params = DEFAULT_PARAMS.with_ks(args.ks)
+    fixed = {k: float(v[0][0] * v[2]) for k, v in inputs.items() if k not in swept}
+    design = {k: fixed.pop(k) for k in list(fixed) if k in CaHyManParams.field_names()}
+    params = params.replace(**design) if design else params
+    alpha = [fixed.pop(f"alpha{k}", 0.0) for k in (1, 2, 3)]
+    _check_values(inputs, params)
+    points = grid(
+        {k: v[0] * v[2] for k, v in swept.items()},
+        alpha=alpha,
+        alpha4=fixed.get("alpha4"),
+        s4=fixed.get("s4"),
+        params=params,
+    )
+    executor = "serial" if args.workers == 1 else "processes"
+    result = sweep(
+        points,
+        backend=args.backend,
+        wrench=_wrench(args),
+        start=args.start,
+        executor=executor,
+        workers=args.workers,
+        chunk_size=args.chunk_size,
+        show_progress=True,
+    )
+    paths = result.save(args.out, "map")
+    shown = {k: (v[1], v[2]) for k, v in swept.items()}
+    paths.append(plot_map(result, args.index, shown, args.out / f"map_{args.index}.png"))
+    print(result.summary())
+    values = result.indices[args.index]
+    if np.any(np.isfinite(values)):
+        unit = INDEX_UNITS[args.index]
+        print(f"{args.index}: min {np.nanmin(values):.6g}, max {np.nanmax(values):.6g} [{unit}]")
+    for i, status, reason in result.failures()[:3]:
+        print(f"point {i} {status}: {reason}")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0

@@ -1,0 +1,63 @@
+"""``cahyman view``: the deflection of CaHyMan under a wrench at M, in a meshcat viewer.
+
+Pose options as for the other subcommands (deg, mm); the wrench is SI, world axes, at M.
+With ``--html FILE`` a self-contained page is written (it opens offline); without it the
+viewer is served on 127.0.0.1, its URL printed, until Ctrl-C (or ``--duration`` seconds).
+Examples::
+
+    cahyman view --alpha 45 60 75 --alpha4 45 --s4 0 --force 10 0 -20 --html cahyman.html
+    cahyman view --force 0 0 -50 --scale 200          # live, amplification 200
+
+The drawing (ghost of the nominal pose, amplified deflected pose, arrows, compliance
+ellipsoid, load-ramp animation) is :mod:`closedloop.viewer`'s; the model is the Pinocchio
+model of :mod:`cahyman_pin.model`, hence ``--backend`` must stay ``generic``. With
+``--json`` the summary is printed as one JSON object and the other lines go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+import numpy as np
+
+from closedloop.cli import add_view_arguments, view_from_args
+
+from .cli import UsageError, add_pose_arguments
+from .model import cahyman_model
+from .params import DEFAULT_PARAMS
+from .urdf_builder import FRAME_M
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``cahyman view``; returns the exit status (0)."""
+    if args.backend != "generic":
+        raise UsageError(
+            f"view draws the Pinocchio model: --backend must be 'generic', got {args.backend!r}"
+        )
+    model = cahyman_model(DEFAULT_PARAMS.with_ks(args.ks))
+    q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    scene = view_from_args(model.clm, q, FRAME_M, args, out=_stderr if args.json else print)
+    if args.json:
+        print(json.dumps({**scene.to_dict(), "html": args.html}))
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    """Add the ``view`` subcommand."""
+    p = subparsers.add_parser(
+        "view",
+        help="meshcat view of the deflection under a wrench at M",
+        description="Deflection of CaHyMan under a wrench at M (SI, world axes) in a meshcat "
+        "viewer: --html writes a self-contained page, else the viewer is served on "
+        "127.0.0.1 until Ctrl-C.",
+    )
+    add_pose_arguments(p)
+    add_view_arguments(p)
+    p.set_defaults(func=run)

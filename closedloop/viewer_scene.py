@@ -1,0 +1,326 @@
+"""What the deflection viewer draws, computed without any viewer: poses, scale, ellipsoids.
+
+A wrench w = (f [N], n [N m]) acts at the origin of a frame, world axes. The joint
+deflection dq (nv,) (tangent of q) is the linear one, ``G w`` of
+:func:`closedloop.compliance.compliance`, or, with ``nonlinear=True``, the finite one
+``difference(q, q_eq)`` of the static equilibrium q_eq of
+:func:`closedloop.statics.solve_equilibrium` (a dead load followed from zero). The
+deflected pose is drawn amplified:
+
+    q_s = integrate(q, s dq)
+
+A loop closure holds q_s only to first order in s dq: a large s visibly opens the loops.
+With ``close_loops=True`` each amplified pose is re-assembled instead
+(:func:`closedloop.assembly.assemble` from q_s): the spring and locked coordinates keep their
+amplified values and the passive joints close the loops.
+
+Amplification (``scale=None``): the first-order displacement of a point p under dq is
+``J_p dq`` (J_p the translational rows of its Jacobian, world axes); over the origins of all
+joints (the link frames) and of the loaded frame, the largest one, d_max [m], is made
+``AUTO_FRACTION`` of the model size L [m], the diagonal of the bounding box of the origins
+of all joints and frames at q:
+
+    s = AUTO_FRACTION * L / d_max     (s = 1 when d_max = 0: nothing deflects)
+
+Compliance ellipsoids, centred at the loaded frame origin at q, world axes. With C_tt,
+C_rr the (3, 3) translational and rotational diagonal blocks of the compliance C (world
+axes, at the frame origin), eigenvalues lambda_i and unit eigenvectors v_i:
+
+* translation: semi-axes ``s F lambda_i`` [m] along v_i, F = |f| [N] (|n| / L when f = 0):
+  the set {s C_tt u : |u| = F}, the amplified displacements of the frame origin under all
+  forces of the applied magnitude. Under a pure force the amplified first-order
+  displacement ``s C_tt f`` of the frame origin lies on its surface.
+* rotation (on request): semi-axes ``rho s N mu_i`` [m] along v_i, N = |n| [N m]
+  (|f| rho when n = 0), mu_i the eigenvalues of C_rr [rad/(N m)], rho = ``LEVER_FRACTION``
+  L (the length of the drawn arrows): the amplified rotations under all moments of the
+  applied magnitude, drawn as the arc length [m] they give at radius rho.
+
+No ellipsoid is drawn for a zero wrench.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .arrays import check_wrench, readonly
+from .assembly import assemble
+from .compliance import ComplianceResult, compliance
+from .exceptions import InvalidInputError
+from .kinematics import frame_jacobian, update_kinematics
+from .model import ClosedLoopModel
+from .statics import Equilibrium, solve_equilibrium
+
+#: Largest amplified first-order point displacement, as a fraction of the model size.
+AUTO_FRACTION = 0.1
+#: Lever arm rho of the rotational ellipsoid (and arrow length), per model size L.
+LEVER_FRACTION = 0.25
+#: Number of poses of the load-ramp animation (load fractions 0 .. 1, evenly spaced).
+ANIMATION_FRAMES = 25
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """An ellipsoid to draw (arrays read-only).
+
+    Attributes:
+        kind: ``"translation"`` or ``"rotation"``.
+        centre: (3,) centre [m], world frame.
+        radii: (3,) semi-axes [m] (see the module docstring), ascending.
+        axes: (3, 3) unit directions of the semi-axes (columns), world axes.
+    """
+
+    kind: str
+    centre: np.ndarray
+    radii: np.ndarray
+    axes: np.ndarray
+
+
+@dataclass(frozen=True)
+class DeflectionScene:
+    """The nominal and the amplified deflected pose under a wrench (arrays read-only).
+
+    Attributes:
+        frame: name of the loaded frame.
+        q: (nq,) nominal (unloaded, assembled) configuration.
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
+        dq: (nv,) joint deflection (tangent of q) [rad or m], not amplified.
+        scale: amplification s (dimensionless).
+        auto_scaled: True when s was chosen by :func:`auto_scale`.
+        size: model size L [m] (:func:`model_size`).
+        max_displacement: d_max [m], largest first-order point displacement under dq
+            (origins of the joints and of the loaded frame), not amplified.
+        q_deflected: (nq,) integrate(q, s dq).
+        point: (3,) loaded frame origin at q [m], world frame.
+        point_deflected: (3,) loaded frame origin at q_deflected [m], world frame.
+        compliance: compliance at the loaded frame, world axes, at q.
+        ellipsoids: translational (and, on request, rotational) compliance ellipsoids.
+        ramp: (n,) load fractions of the animation, 0 .. 1.
+        ramp_q: (n, nq) amplified configurations integrate(q, s dq(t)) for each fraction t.
+        equilibrium: the nonlinear equilibrium under the full wrench, or None (linear).
+    """
+
+    frame: str
+    q: np.ndarray
+    wrench: np.ndarray
+    dq: np.ndarray
+    scale: float
+    auto_scaled: bool
+    size: float
+    max_displacement: float
+    q_deflected: np.ndarray
+    point: np.ndarray
+    point_deflected: np.ndarray
+    compliance: ComplianceResult
+    ellipsoids: tuple[Ellipsoid, ...]
+    ramp: np.ndarray
+    ramp_q: np.ndarray
+    equilibrium: Equilibrium | None
+
+    @property
+    def nonlinear(self) -> bool:
+        """True when dq is the finite deflection of the nonlinear equilibrium."""
+        return self.equilibrium is not None
+
+    def summary(self) -> str:
+        """One line: amplification, largest displacement and model size."""
+        how = "automatic" if self.auto_scaled else "given"
+        kind = "nonlinear" if self.nonlinear else "linear"
+        return (
+            f"deflection amplified x{self.scale:.4g} ({how}; {kind} deflection): largest "
+            f"point displacement {self.max_displacement:.3e} m, shown as "
+            f"{self.scale * self.max_displacement:.3e} m; model size {self.size:.3g} m"
+        )
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (SI)."""
+        return {
+            "frame": self.frame,
+            "scale": self.scale,
+            "auto_scaled": self.auto_scaled,
+            "nonlinear": self.nonlinear,
+            "model_size_m": self.size,
+            "max_displacement_m": self.max_displacement,
+            "wrench": self.wrench.tolist(),
+            "point_m": self.point.tolist(),
+            "point_deflected_m": self.point_deflected.tolist(),
+            "ellipsoids": [
+                {"kind": e.kind, "radii_m": e.radii.tolist(), "axes": e.axes.T.tolist()}
+                for e in self.ellipsoids
+            ],
+        }
+
+
+def _origins(clm: ClosedLoopModel) -> np.ndarray:
+    """(njoints - 1 + nframes, 3) origins of joints and frames from the current kinematics."""
+    joints = [clm.data.oMi[j].translation for j in range(1, clm.model.njoints)]
+    frames = [f.translation for f in clm.data.oMf]
+    return np.array(joints + frames).reshape(-1, 3)
+
+
+def bounding_box(clm: ClosedLoopModel, q: np.ndarray) -> np.ndarray:
+    """(2, 3) lowest and highest corner [m], world frame, of all joint and frame origins at q."""
+    update_kinematics(clm, clm.check_configuration(q))
+    p = _origins(clm)
+    return np.array([p.min(axis=0), p.max(axis=0)])
+
+
+def model_size(clm: ClosedLoopModel, q: np.ndarray) -> float:
+    """Model size L [m]: diagonal of :func:`bounding_box` at q (1 m if it is a point)."""
+    lo, hi = bounding_box(clm, q)
+    size = float(np.linalg.norm(hi - lo))
+    return size if size > 0.0 else 1.0
+
+
+def point_displacements(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray
+) -> np.ndarray:
+    """First-order displacements J_p dq [m] of the origins of the joints and of ``frame``.
+
+    Args:
+        q: (nq,) configuration.
+        frame: name of the loaded frame.
+        dq: (nv,) joint deflection (tangent of q) [rad or m].
+
+    Returns:
+        (njoints - 1 + 1, 3) displacements, world axes: joints 1..njoints-1, then the frame.
+    """
+    q = clm.check_configuration(q)
+    dq = np.asarray(dq, dtype=float).reshape(-1)
+    if dq.shape != (clm.model.nv,) or not np.all(np.isfinite(dq)):
+        raise InvalidInputError(f"dq must be {clm.model.nv} finite values, got {dq.size}")
+    J_f = frame_jacobian(clm, q, frame, "world")  # also the joint Jacobians of q
+    rows = [
+        pin.getJointJacobian(clm.model, clm.data, j, pin.LOCAL_WORLD_ALIGNED)[:3] @ dq
+        for j in range(1, clm.model.njoints)
+    ]
+    return np.array([*rows, J_f[:3] @ dq]).reshape(-1, 3)
+
+
+def largest_displacement(clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray) -> float:
+    """d_max [m]: largest norm of :func:`point_displacements`."""
+    return float(np.max(np.linalg.norm(point_displacements(clm, q, frame, dq), axis=1)))
+
+
+def auto_scale(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    frame: str,
+    dq: np.ndarray,
+    fraction: float = AUTO_FRACTION,
+) -> float:
+    """Amplification s = fraction L / d_max (module docstring); 1 when nothing deflects."""
+    d_max = largest_displacement(clm, q, frame, dq)
+    return fraction * model_size(clm, q) / d_max if d_max > 0.0 else 1.0
+
+
+def compliance_ellipsoid(
+    block: np.ndarray, magnitude: float, length: float, centre: np.ndarray, kind: str
+) -> Ellipsoid:
+    """Ellipsoid {length * magnitude * block u : |u| = 1} of a symmetric (3, 3) block.
+
+    Args:
+        block: (3, 3) symmetric positive semi-definite compliance block [SI].
+        magnitude: load magnitude [N or N m].
+        length: factor turning the block's output into metres (s, or s L for rotations).
+        centre: (3,) centre [m], world frame.
+        kind: ``"translation"`` or ``"rotation"``.
+    """
+    lam, V = np.linalg.eigh(0.5 * (block + block.T))
+    radii = length * magnitude * np.clip(lam, 0.0, None)  # rounding may leave -1e-20
+    return Ellipsoid(kind, readonly(centre), readonly(radii), readonly(V))
+
+
+def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rotational: bool):
+    f, n = np.linalg.norm(w[:3]), np.linalg.norm(w[3:])
+    if f == 0.0 and n == 0.0:
+        return ()
+    force = f if f > 0.0 else n / size
+    out = [compliance_ellipsoid(res.C[:3, :3], force, s, res.point, "translation")]
+    if rotational:
+        rho = LEVER_FRACTION * size
+        moment = n if n > 0.0 else f * rho
+        out.append(compliance_ellipsoid(res.C[3:, 3:], moment, s * rho, res.point, "rotation"))
+    return tuple(out)
+
+
+def deflection_scene(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    frame: str,
+    wrench: np.ndarray,
+    *,
+    scale: float | None = None,
+    nonlinear: bool = False,
+    close_loops: bool = False,
+    rotational: bool = False,
+    frames: int = ANIMATION_FRAMES,
+) -> DeflectionScene:
+    """Poses, amplification, ellipsoids and load ramp for a wrench at ``frame``.
+
+    Args:
+        clm: model with closures and springs.
+        q: (nq,) assembled configuration (the unloaded pose, rest of the springs).
+        frame: name of the loaded frame.
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
+        scale: amplification s >= 0; None chooses it (:func:`auto_scale`).
+        nonlinear: solve the static equilibrium at each load fraction
+            (:func:`closedloop.statics.solve_equilibrium`) instead of the linear map.
+        close_loops: re-assemble each amplified pose (module docstring).
+        rotational: also the rotational compliance ellipsoid.
+        frames: number of poses of the load ramp (>= 2).
+
+    Raises:
+        InvalidInputError: bad wrench, scale or frame count.
+        NameNotFoundError: unknown frame.
+        MechanismError: a spring-free motion moves the frame.
+        EquilibriumError: (nonlinear) no equilibrium on the branch of q.
+        AssemblyError: (close_loops) the amplified spring deflections cannot be closed
+            (a smaller scale can).
+    """
+    w = check_wrench(wrench)
+    if scale is not None and not (np.isfinite(scale) and scale >= 0.0):
+        raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
+    if int(frames) != frames or frames < 2:
+        raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
+    res = compliance(clm, q, frame, "world")
+    q = res.q
+    ramp = np.linspace(0.0, 1.0, int(frames))
+    if nonlinear:
+        equilibria = [solve_equilibrium(clm, q, frame, t * w) for t in ramp[1:]]
+        steps = [np.zeros(clm.model.nv), *(e.joint_deflection for e in equilibria)]
+        equilibrium = equilibria[-1]
+    else:
+        dq_lin = res.joint_deflection(w)
+        steps, equilibrium = [t * dq_lin for t in ramp], None
+    dq = steps[-1]
+    size = model_size(clm, q)
+    d_max = largest_displacement(clm, q, frame, dq)
+    s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
+    ramp_q = [pin.integrate(clm.model, q, s * v) for v in steps]
+    if close_loops and clm.closures:
+        ramp_q = [assemble(clm, None, q_s).q for q_s in ramp_q]
+    ramp_q = np.array(ramp_q)
+    update_kinematics(clm, ramp_q[-1])
+    point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
+    update_kinematics(clm, q)
+    return DeflectionScene(
+        frame=frame,
+        q=q,
+        wrench=readonly(w),
+        dq=readonly(dq),
+        scale=s,
+        auto_scaled=scale is None,
+        size=size,
+        max_displacement=d_max,
+        q_deflected=readonly(ramp_q[-1]),
+        point=res.point,
+        point_deflected=readonly(point_deflected),
+        compliance=res,
+        ellipsoids=_ellipsoids(res, w, s, size, rotational),
+        ramp=readonly(ramp),
+        ramp_q=readonly(ramp_q),
+        equilibrium=equilibrium,
+    )

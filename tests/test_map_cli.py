@@ -1,0 +1,103 @@
+"""``cahyman map``: files written, paper units converted, bad input refused on one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cahyman_pin.cli import main
+from cahyman_pin.map_cli import parse_values
+from cahyman_pin.params import DEFAULT_PARAMS
+from cahyman_pin.sweep import SweepResult, grid, sweep
+
+#: The CLI and the API run the same sweep; only the deg -> rad conversion may round
+#: differently (one ulp of the inputs).
+SAME_RTOL = 1e-9
+
+
+def run(capsys, tmp_path, *argv: str) -> tuple[int, str, str]:
+    """``cahyman map ARGV --out TMP`` (no process pool unless --workers is given)."""
+    workers = [] if "--workers" in argv else ["--workers", "1"]
+    status = main(["map", *argv, *workers, "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_value_specifications():
+    np.testing.assert_allclose(parse_values("30:90:4"), [30.0, 50.0, 70.0, 90.0])
+    np.testing.assert_allclose(parse_values("1,2.5,-3"), [1.0, 2.5, -3.0])
+    np.testing.assert_allclose(parse_values("7"), [7.0])
+
+
+def test_curve_writes_data_and_figure(capsys, tmp_path):
+    status, out, err = run(capsys, tmp_path, "--alpha", "40:80:5", "--alpha4", "60", "--s4", "25")
+    assert status == 0, err
+    assert "5 points (5 ok)" in out
+    for name in ("map.npz", "map.csv", "map_det_K.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    res = SweepResult.load_npz(tmp_path / "map.npz")
+    alpha = np.deg2rad([40.0, 50.0, 60.0, 70.0, 80.0])
+    np.testing.assert_allclose(res.points.alpha, np.repeat(alpha[:, None], 3, axis=1))
+    np.testing.assert_allclose(res.points.s4, 0.025)
+    ref = sweep(grid({"alpha": alpha}, alpha4=np.deg2rad(60.0), s4=0.025), executor="serial")
+    np.testing.assert_allclose(res.indices["det_K"], ref.indices["det_K"], rtol=SAME_RTOL)
+
+
+def test_heat_map_of_a_design_sweep(capsys, tmp_path):
+    status, _, err = run(capsys, tmp_path, "--alpha", "45", "60", "75", "--alpha4", "0:90:4",
+                           "--param", "b=0.06:0.10:3", "--backend", "consistent",
+                           "--index", "min_translational", "--ks", "printed")  # fmt: skip
+    assert status == 0, err
+    assert (tmp_path / "map_min_translational.png").exists()
+    res = SweepResult.load_npz(tmp_path / "map.npz")
+    assert res.points.shape == (4, 3) and res.backend == "consistent"
+    assert res.points.params == DEFAULT_PARAMS.with_ks("printed")
+    np.testing.assert_allclose(res.points.design["b"].reshape(4, 3)[0], [0.06, 0.08, 0.10])
+    np.testing.assert_allclose(res.points.alpha[0], np.deg2rad([45.0, 60.0, 75.0]))
+
+
+def test_deflection_map_with_a_load_and_the_process_pool(capsys, tmp_path):
+    status, _, err = run(capsys, tmp_path, "--s4", "0:50:3", "--alpha1", "50,70",
+                           "--force", "1", "1", "1", "--index", "deflection_translation",
+                           "--workers", "2", "--start", "closed_form")  # fmt: skip
+    assert status == 0, err
+    res = SweepResult.load_npz(tmp_path / "map.npz")
+    np.testing.assert_array_equal(res.wrench, [1, 1, 1, 0, 0, 0])
+    assert res.points.shape == (3, 2) and np.all(res.indices["deflection_translation"] > 0)
+    assert (tmp_path / "map_deflection_translation.png").exists()
+
+
+def test_failed_points_are_reported_not_fatal(capsys, tmp_path):
+    status, out, err = run(
+        capsys, tmp_path, "--alpha1", "90,-80", "--alpha", "90", "--workers", "1"
+    )
+    assert status == 0, err
+    assert "1 unreachable" in out and "cannot be assembled" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--alpha", "30:x:3"], "START:STOP:NUM"),
+        (["--alpha", "30"], "nothing to sweep"),
+        (["--alpha", "1", "2"], "1 or 3 values"),
+        (["--alpha", "30:90:3", "--alpha1", "40"], "cannot be combined"),
+        (["--alpha", "30:90:3", "--param", "zz=1"], "NAME one of"),
+        (["--alpha", "30:90:3", "--index", "deflection_rotation"], "--force"),
+        (["--alpha", "30:90:3", "--alpha4", "0,1", "--s4", "0,1"], "one or two inputs"),
+        (["--alpha", "30:90:3", "--backend", "nope"], "unknown backend"),
+        (["--alpha", "30:90:3", "--s4", "80"], "outside the stroke"),
+        (["--alpha", "30:90:3", "--param", "b=-1"], "must be > 0"),
+        (["--alpha", "30:90:3", "--s4", "0:60:4"], "outside the stroke"),
+        (["--alpha", "60", "--param", "b=-0.1:0.1:3"], "must be > 0"),
+        (["--alpha", "30:90:3", "--workers", "0"], "workers"),
+        (["--alpha", "30:90:3", "--index", "stiffness"], "invalid choice"),
+        (["--alpha", "30:90:3", "--start", "cold"], "invalid choice"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
+    status, _, err = run(capsys, tmp_path, *argv)
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cahyman: error:"), err
+    assert message in lines[0]
