@@ -28,9 +28,9 @@ import numpy as np
 
 from closedloop.arrays import check_wrench, readonly
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance
-from closedloop.exceptions import InvalidInputError
+from closedloop.configuration import Configuration
+from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices
-from closedloop.kinematics import frame_jacobian
 
 from .backend_consistent import consistent_breakdown
 from .backend_published import published_stiffness
@@ -95,8 +95,9 @@ def generic_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> B
     """
     model = cahyman_model(params)
     q = model.assemble(alpha, alpha4, s4)
-    result = compliance(model.clm, q, FRAME_M, "world")
-    J_H = frame_jacobian(model.clm, q, FRAME_H, "world")
+    state = Configuration(model.clm, q, length=params.length)
+    result = compliance(state, FRAME_M)
+    J_H = state.frame_jacobian(FRAME_H)
     return BackendResult(
         C=result.C,
         pose=model.pose(q),
@@ -241,8 +242,12 @@ class CaHyManStiffness:
             "K": self.K.tolist() if full else None,
             "C": self.C.tolist(),
             "det_K": self.det_K if full else None,
-            "eigenvalues_K": None if ev is None else np.real_if_close(ev).tolist(),
+            "eigenvalues_K": None if ev is None else _real_or_pairs(ev),
             "condition_number_K": self.condition_number if full else None,
+            "condition_number_scaled": (
+                None if self.indices is None else self.indices.scaled_condition_number
+            ),
+            "ill_conditioned": None if self.indices is None else self.indices.ill_conditioned,
             "rank": 6 if self.indices is None else self.indices.rank,
             "reference_point": "M",
             "M_m": self.pose.M.tolist(),
@@ -260,12 +265,35 @@ class CaHyManStiffness:
         }
 
 
-def _indices(result: BackendResult) -> StiffnessIndices | None:
-    if "compliance" in result.details:  # keep the rank decision of the generic solver
-        return StiffnessIndices.from_result(result.details["compliance"])
+def _real_or_pairs(ev: np.ndarray) -> list:
+    """Eigenvalues as JSON: reals, or [real, imaginary] pairs when some are complex."""
+    ev = np.real_if_close(ev)
+    return ev.tolist() if np.isrealobj(ev) else [[float(e.real), float(e.imag)] for e in ev]
+
+
+def _indices(result: BackendResult, params: CaHyManParams, backend: str):
+    """Indices by the one rank rule at the machine's length (the generic solver's own
+    decision, taken on its square-root factor, is kept).
+
+    Raises:
+        SingularConfigurationError: a closed-form C of numerical rank < 6. CaHyMan's
+            springs reach all six directions of M at every regular pose, so that rank
+            deficiency is not rigidity but one compliance 1e14 times larger than the others
+            (a crank near its coupler); the generic backend refuses the same poses as a
+            mechanism (its spring-free rule works on the stiffness side).
+    """
+    if "compliance" in result.details:
+        return StiffnessIndices.from_result(result.details["compliance"], length=params.length)
     if not np.allclose(result.C, result.C.T, rtol=1e-9, atol=0.0):
         return None
-    return StiffnessIndices.from_compliance(result.C)
+    indices = StiffnessIndices.from_compliance(result.C, length=params.length)
+    if not indices.is_full_rank:
+        raise SingularConfigurationError(
+            f"the {backend} compliance at M has numerical rank {indices.rank} < 6 (scaled "
+            "eigenvalue ratio below 1e-14): a singular pose, where one direction is almost "
+            "free; move the inputs away from it"
+        )
+    return indices
 
 
 def stiffness(
@@ -302,6 +330,6 @@ def stiffness(
         C=readonly(result.C),
         C_platform=None if result.C_platform is None else readonly(result.C_platform),
         pose=result.pose,
-        indices=_indices(result),
+        indices=_indices(result, params, backend),
         details=result.details,
     )

@@ -145,18 +145,22 @@ def _run_stiffness(args: argparse.Namespace) -> int:
     out = r.to_dict()
     out["inputs"] = inputs_echo(args)
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"CaHyMan at alpha = {args.alpha} deg, alpha4 = {args.alpha4} deg, "
           f"s4 = {args.s4} mm (K_s {args.ks}, backend {args.backend})")  # fmt: skip
     print("\n".join(_pose_lines(r)))
-    if r.indices.is_full_rank:
+    if r.is_full_rank:
         print(_matrix("K", r.K, "N/m, N/rad, N m/m, N m/rad"))
         print(f"det K = {r.det_K:.6e} N^6/rad^3")
-        print(f"eigenvalues of K [SI] = {_vec(r.eigenvalues)}")
+        print(f"eigenvalues of K [SI] = {_vec(np.real_if_close(r.eigenvalues))}")
         print(f"condition number of K [SI] = {r.condition_number:.6g}")
     else:
-        print(f"K does not exist: compliance rank {r.indices.rank} < 6")
+        print(f"K does not exist: compliance rank {out['rank']} < 6")
+    if r.indices is not None:
+        flag = "; ILL-CONDITIONED: near a singular pose" if r.indices.ill_conditioned else ""
+        print(f"condition number of the scaled K = {r.indices.scaled_condition_number:.3e} "
+              f"(lengths per L = {r.params.length:.4g} m){flag}")  # fmt: skip
     print(_matrix("C", r.C, "m/N, m/(N m), rad/N, rad/(N m)"))
     return 0
 
@@ -191,7 +195,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
         "world axes; rotations are small rotation vectors",
     }
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"force {args.force} N, torque {args.torque} N m at M")
     print("\n".join(_pose_lines(r)))

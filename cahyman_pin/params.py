@@ -89,6 +89,13 @@ class CaHyManParams:
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be >= 0"
                 )
 
+    @property
+    def length(self) -> float:
+        """Characteristic length of the machine [m], the scale of the unit-free rank rule
+        (:mod:`closedloop.conditioning`) for every backend: base diameter plus the heights
+        of a leg and of the arm, 2 r_e + a + b + h + HQ + L + s4_max."""
+        return 2 * self.r_e + self.a + self.b + self.h + self.HQ + self.L + self.s4_max
+
     def replace(self, **changes: float) -> CaHyManParams:
         """Copy with some fields changed (validated); unknown names raise."""
         unknown = sorted(set(changes) - set(self.field_names()))

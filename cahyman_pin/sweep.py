@@ -240,6 +240,27 @@ def default_chunk_size(n: int, backend: str, workers: int) -> int:
     return int(min(max(-(-n // (4 * max(workers, 1))), 1), limit))
 
 
+def _lengths(points: SweepPoints) -> np.ndarray:
+    """(n,) characteristic length [m] of the machine at each point (``params.length``),
+    computed once per distinct design; invalid designs (failed points) get the base one."""
+    n, base = len(points), points.params.length
+    if not points.design:
+        return np.full(n, base)
+    names = list(points.design)
+    rows, inverse = np.unique(
+        np.column_stack([points.design[k] for k in names]), axis=0, return_inverse=True
+    )
+    values = []
+    for row in rows:
+        try:
+            values.append(
+                points.params.replace(**dict(zip(names, row.tolist(), strict=True))).length
+            )
+        except InvalidInputError:
+            values.append(base)
+    return np.asarray(values)[inverse.reshape(-1)]
+
+
 def sweep(
     points: SweepPoints,
     *,
@@ -302,7 +323,7 @@ def sweep(
         for i, text in r.reasons.items():
             reasons[idx[i]] = text
         offset += len(r.rank)
-    symmetric = classify(C, rank, codes, reasons)
+    symmetric = classify(C, rank, codes, reasons, _lengths(points))
     indices = stiffness_indices(C, codes == STATUS.index("ok"), symmetric, w)
     return SweepResult(
         points=points,

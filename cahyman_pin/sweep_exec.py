@@ -273,7 +273,7 @@ def _generic(chunk: Chunk, out: ChunkResult) -> None:
         try:
             q0 = _warm_start(model, history, x_all[i]) if starts is None else starts[i]
             result = _assemble(model, chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], q0)
-            c = compliance(model.clm, result.q, FRAME_M, "world")
+            c = compliance(model.clm, result.q, FRAME_M, "world", length=params.length)
         except POINT_ERRORS as e:
             out.fail(i, e)
             history = []

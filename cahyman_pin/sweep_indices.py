@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from closedloop.indices import SCALED_TOL
-from closedloop.kinematics import RANK_RTOL
+from closedloop.conditioning import RANK_RTOL, batch_rank
 
 #: Status of a point, by code (index in this tuple).
 STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
@@ -35,26 +34,17 @@ INDEX_UNITS = {
 }
 
 
-def compliance_rank(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rank of symmetric compliances, decided as :meth:`StiffnessIndices.from_compliance`.
-
-    Coordinates with a diagonal entry below ``RANK_RTOL`` times the largest are rigid; the
-    others are Jacobi-scaled to a unit diagonal and their eigenvalues counted above
-    ``RANK_RTOL`` times the largest.
+def compliance_rank(C: np.ndarray, length) -> tuple[np.ndarray, np.ndarray]:
+    """Rank of symmetric compliances by the one rule of :mod:`closedloop.conditioning`.
 
     Args:
         C: (n, 6, 6) symmetric compliances [SI].
+        length: (n,) characteristic lengths of the machines [m] (``params.length``).
 
     Returns:
         rank: (n,) int; psd: (n,) bool, False where C is not positive semi-definite.
     """
-    d = np.diagonal(C, axis1=1, axis2=2)
-    keep = d > RANK_RTOL * np.max(d, axis=1, keepdims=True)
-    s = np.where(keep, 1.0 / np.sqrt(np.where(keep, d, 1.0)), 0.0)
-    mu = np.linalg.eigvalsh(C * s[:, :, None] * s[:, None, :])
-    top = np.maximum(mu[:, -1:], 0.0)
-    rank = np.count_nonzero(mu > RANK_RTOL * top, axis=1)
-    psd = np.all(d >= 0.0, axis=1) & (mu[:, 0] >= -SCALED_TOL * top[:, 0])
+    rank, _, psd = batch_rank(C, length)
     return rank, psd
 
 
@@ -65,7 +55,7 @@ def _block_extremes(C: np.ndarray, block: slice) -> tuple[np.ndarray, np.ndarray
     zero, the maximum only when no direction of the block is rigid.
     """
     c = np.linalg.eigvalsh(C[:, block, block])
-    rigid = c <= RANK_RTOL * np.maximum(c[:, -1:], 0.0)
+    rigid = c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0)  # the rule, on eigenvalues
     with np.errstate(divide="ignore"):
         low = np.where(rigid.all(axis=1), np.nan, 1.0 / c[:, -1])
         high = np.where(rigid.any(axis=1), np.nan, 1.0 / c[:, 0])
@@ -122,7 +112,9 @@ def stiffness_indices(
     return out
 
 
-def classify(C: np.ndarray, rank: np.ndarray, status: np.ndarray, reasons: list) -> np.ndarray:
+def classify(
+    C: np.ndarray, rank: np.ndarray, status: np.ndarray, reasons: list, length: np.ndarray
+) -> np.ndarray:
     """Complete rank and status of computed points from their compliance (in place).
 
     Symmetric C without a rank (not from the generic solver) gets the rank of
@@ -135,6 +127,7 @@ def classify(C: np.ndarray, rank: np.ndarray, status: np.ndarray, reasons: list)
         rank: (n,) ranks, -1 where unknown; modified.
         status: (n,) status codes, OK where computed; modified.
         reasons: n messages; modified.
+        length: (n,) characteristic length of the machine at each point [m].
 
     Returns:
         (n,) bool: C is symmetric (and computed).
@@ -145,7 +138,7 @@ def classify(C: np.ndarray, rank: np.ndarray, status: np.ndarray, reasons: list)
     )
     unknown = symmetric & (rank < 0)
     if np.any(unknown):
-        rank[unknown], psd = compliance_rank(C[unknown])
+        rank[unknown], psd = compliance_rank(C[unknown], length[unknown])
         for i in np.flatnonzero(unknown)[~psd]:
             status[i], C[i], symmetric[i] = FAILED, np.nan, False
             reasons[i] = "compliance is not positive semi-definite"

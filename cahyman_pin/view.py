@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
     scene = view_from_args(model.clm, q, FRAME_M, args, out=_stderr if args.json else print)
     if args.json:
-        print(json.dumps({**scene.to_dict(), "html": args.html}))
+        print(json.dumps({**scene.to_dict(), "html": args.html}, allow_nan=False))
     return 0
 
 

@@ -26,23 +26,21 @@ import numpy as np
 
 from .assembly import assemble
 from .compliance import TWIST_LABELS, UNITS, ComplianceResult, compliance, describe_directions
-from .exceptions import ClosedLoopError, InvalidInputError
+from .conditioning import ILL_CONDITIONED
+from .configuration import Configuration
+from .exceptions import ClosedLoopError, OpenLoopError
 from .io import load_model, read_springs_file, reference_configuration
-from .kinematics import closure_residual
 from .model import ClosedLoopModel
 
 PROG = "closedloop"
 EXIT_OK, EXIT_RIGID, EXIT_ERROR = 0, 1, 2
-#: Largest closure residual accepted for a configuration given with --q [m, rad]: values
-#: typed with 7 significant digits close a loop of metre size to about 1e-7.
-Q_CLOSURE_TOL = 1e-6
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
 
 EPILOG = """\
 Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
 gives the actuated joints' values and the loops are closed by moving the passive joints
 (start: MJCF qpos0, else the neutral configuration). Without either: that start, assembled.
-A --q of a model with loops must close them to 1e-6 (m, rad).
+A --q of a model with loops must close them to 1e-6 (metres per size of the mechanism, rad).
 
 Springs: --joint-stiffness K gives stiffness K [N m/rad or N/m] to every actuated joint
 that has no spring in the closure file; --springs FILE is a YAML mapping joint -> stiffness
@@ -52,7 +50,10 @@ chain are actuated, joints beyond a branching (gripper fingers) are locked.
 
 Output: C is the twist (dx dy dz [m], rx ry rz [rad]) per wrench (fx fy fz [N], nx ny nz
 [N m]) at the frame origin, in world-aligned axes (--axes world) or the frame's own axes
-(--axes local); K = C^-1.
+(--axes local); K = C^-1, from a square-root factor of C. The rank and the condition
+number are unit-free: lengths are divided by the size L of the mechanism. Above a scaled
+condition number of 1e8 the result is flagged ill-conditioned (near a singular pose); below
+an eigenvalue ratio of 1e-14 C is rank deficient.
 
 Exit status: 0 K exists; 1 C is rank deficient (the rigid directions are named, K does
 not exist, JSON "K": null); 2 error (one line on stderr).
@@ -183,24 +184,24 @@ def view_from_args(clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=pr
     )
 
 
-def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> np.ndarray:
-    """(nq,) configuration for the analysis from ``--q`` or ``--actuated`` values.
+def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
+    """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
     Raises:
-        InvalidInputError: wrong count, non-finite values, or a ``q`` that violates the
-            closures by more than :data:`Q_CLOSURE_TOL`.
+        InvalidInputError: wrong count, non-finite values.
+        OpenLoopError: a ``--q`` that does not close the loops (the one closure tolerance,
+            :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
     if q is None:
-        return assemble(clm, actuated, reference_configuration(clm)).q
-    q = clm.check_configuration(q)
-    gap = float(np.max(np.abs(closure_residual(clm, q)), initial=0.0))
-    if gap > Q_CLOSURE_TOL:
-        raise InvalidInputError(
-            f"--q violates the loop closures by {gap:.3e} (> {Q_CLOSURE_TOL:g} m or rad); "
-            "give --actuated values to assemble the loops"
-        )
-    return q
+        q = assemble(clm, actuated, reference_configuration(clm)).q
+    state = Configuration(clm, q)
+    try:
+        return state.require_closed()
+    except OpenLoopError as e:
+        raise OpenLoopError(
+            f"--q: {e}; or give --actuated values", e.residual, e.tolerance
+        ) from None
 
 
 def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
@@ -220,6 +221,13 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
         f"reference point (frame origin, world) = "
         f"{np.array2string(res.point, precision=6, separator=', ')} m; {axes}",
         f"closure residual {res.closure_residual:.1e} [m, rad]; rank of C {res.rank}/6",
+        f"condition number of the scaled K {res.condition_number:.3e} (lengths per "
+        f"L = {res.length:.4g} m)"
+        + (
+            f"; ILL-CONDITIONED (> {ILL_CONDITIONED:.0e}): near a singular configuration"
+            if res.ill_conditioned
+            else ""
+        ),
         "",
         f"compliance C: twist per wrench [{UNITS['C']}]",
         _matrix(res.C, TWIST_LABELS, WRENCH_LABELS),
@@ -239,7 +247,7 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
 
 
 def model_from_args(args: argparse.Namespace, geometry: bool = False):
-    """(model, configuration) from :func:`add_model_arguments`' options."""
+    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options."""
     springs = read_springs_file(args.springs) if args.springs else None
     clm = load_model(
         args.model,
@@ -254,8 +262,8 @@ def model_from_args(args: argparse.Namespace, geometry: bool = False):
 
 def stiffness(args: argparse.Namespace) -> int:
     """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
-    clm, q = model_from_args(args)
-    res = compliance(clm, q, args.frame, args.axes)
+    clm, state = model_from_args(args)
+    res = compliance(state, args.frame, axes=args.axes)
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
         print(json.dumps(doc, allow_nan=False))
@@ -266,8 +274,8 @@ def stiffness(args: argparse.Namespace) -> int:
 
 def view(args: argparse.Namespace) -> int:
     """Run ``closedloop view``; returns the exit code (0)."""
-    clm, q = model_from_args(args, geometry=True)
-    view_from_args(clm, q, args.frame, args)
+    clm, state = model_from_args(args, geometry=True)
+    view_from_args(clm, state.q, args.frame, args)
     return EXIT_OK
 
 

@@ -14,25 +14,41 @@ Passive joints and redundant closure rows need no special case: they only shape 
 A null direction z of K_r is a motion without any restoring spring. If it moves the
 frame (J N z != 0) there is no equilibrium (:class:`MechanismError`); if not, it is an
 internal mobility (e.g. a link spinning about its own axis) and is left out.
+
+Numerics (:mod:`closedloop.conditioning`). Everything is computed in unit-free
+coordinates: lengths divided by the characteristic length L of the configuration, in
+joint space (prismatic coordinates dq / L, their springs k L^2 [N m]) as in Cartesian
+space. K_r is never formed: the SVD of its square-root factor S = sqrt(K_q) N gives
+K_r = V diag(sigma^2) V^T to the precision of S, and a motion is spring-free when its
+sigma is below ``RANK_RTOL`` times the largest (the same rule as the rank of C, on the
+same square-root scale). C = B B^T with B = J N V diag(1/sigma), and K comes from the SVD
+of B, never from inv(C), which would lose cond(C) = cond(J)^2 digits.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from .arrays import check_wrench, readonly
-from .exceptions import MechanismError, RigidDirectionsError
-from .kinematics import (
+from .conditioning import (
+    ILL_CONDITIONED,
     RANK_RTOL,
-    admissible_motions,
-    closure_residual,
-    frame_jacobian,
-    nullspace,
-    orthogonal_split,
-    update_kinematics,
+    Spectrum,
+    spectrum_from_factor,
+    split_factor,
+    twist_scaling,
 )
+from .configuration import Configuration, as_configuration
+from .exceptions import (
+    InvalidInputError,
+    MechanismError,
+    RigidDirectionsError,
+    SingularConfigurationError,
+)
+from .kinematics import nullspace, rigid_rows
 from .model import ClosedLoopModel
 
 #: Labels of the twist / wrench coordinates, in order.
@@ -42,6 +58,8 @@ UNITS = {
     "wrench": "fx, fy, fz [N]; nx, ny, nz [N m]",
     "C": "m/N, m/(N m) = rad/N, rad/(N m)",
     "K": "N/m, N/rad, N m/m, N m/rad",
+    "length": "m",
+    "condition_number": "1 (scaled stiffness K_s, twists (d/L, r), wrenches (f L, n))",
 }
 
 
@@ -56,13 +74,18 @@ class ComplianceResult:
         axes: ``"world"`` (world-aligned) or ``"local"`` (the frame's own axes).
         point: (3,) reference point [m], world frame: the frame origin.
         q: (nq,) configuration.
-        rank: rank of C.
+        rank: rank of C (unit-free rule of :mod:`closedloop.conditioning`).
         rigid_directions: (6, 6 - rank) orthonormal basis of the twists that no wrench
             produces (empty when C is full rank).
         closure_residual: infinity norm of the loop-closure residual at q [m, rad].
         mobility: dimension d of the admissible motions (closures and locks kept).
         internal_mobilities: spring-free motions that do not move the frame.
         G: (nv, 6) map from wrench to joint deflection dq (tangent of q) [rad or m per N, N m].
+        length: characteristic length L [m] of the unit-free scaling.
+        condition_number: cond(K_s) of the scaled stiffness over the rank of C,
+            dimensionless; above ``ILL_CONDITIONED`` (1e8) the result is ill-conditioned.
+        stiffness_matrix: (6, 6) K [SI] from the square-root factor when rank is 6, else
+            None; read it as :attr:`K`, which explains a missing K.
     """
 
     C: np.ndarray
@@ -76,11 +99,20 @@ class ComplianceResult:
     mobility: int
     internal_mobilities: int
     G: np.ndarray = field(repr=False)
+    length: float = field(kw_only=True)
+    condition_number: float = field(kw_only=True)
+    stiffness_matrix: np.ndarray | None = field(kw_only=True, repr=False)
 
     @property
     def is_full_rank(self) -> bool:
         """True when C is invertible (the stiffness exists)."""
         return self.rank == 6
+
+    @property
+    def ill_conditioned(self) -> bool:
+        """True when cond(K_s) exceeds ``ILL_CONDITIONED``: near a singular configuration,
+        the stiffest direction of K is known to about 1e-16 sqrt(cond) relative."""
+        return self.condition_number > ILL_CONDITIONED
 
     @property
     def K(self) -> np.ndarray:
@@ -89,25 +121,24 @@ class ComplianceResult:
         Raises:
             RigidDirectionsError: C is rank deficient; the error lists the rigid directions.
         """
-        if not self.is_full_rank:
+        if not self.is_full_rank or self.stiffness_matrix is None:
             raise RigidDirectionsError(
                 f"compliance at frame {self.frame!r} has rank {self.rank} < 6: the stiffness "
                 f"is infinite along {describe_directions(self.rigid_directions)}",
                 self.rigid_directions,
             )
-        K = np.linalg.inv(self.C)
-        return readonly(0.5 * (K + K.T))
+        return self.stiffness_matrix
 
     def deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(6,) twist (dx, dy, dz [m], rx, ry, rz [rad]) of the frame under ``wrench`` (6,)."""
-        return self.C @ check_wrench(wrench)
+        return _finite(self.C @ check_wrench(wrench), "deflection", wrench)
 
     def joint_deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(nv,) joint deflection dq (tangent of q) [rad or m] under ``wrench`` (6,)."""
-        return self.G @ check_wrench(wrench)
+        return _finite(self.G @ check_wrench(wrench), "joint deflection", wrench)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary: K (or None), C, frame, axes, point, rank, units."""
+        """JSON-ready summary: K (or None), C, frame, axes, point, rank, conditioning, units."""
         return {
             "K": self.K.tolist() if self.is_full_rank else None,
             "C": self.C.tolist(),
@@ -117,9 +148,23 @@ class ComplianceResult:
             "order": list(TWIST_LABELS),
             "rank": self.rank,
             "rigid_directions": self.rigid_directions.T.tolist(),
+            "condition_number": self.condition_number,
+            "ill_conditioned": self.ill_conditioned,
+            "length": self.length,
             "closure_residual": self.closure_residual,
+            "mobility": self.mobility,
+            "internal_mobilities": self.internal_mobilities,
             "units": UNITS,
         }
+
+
+def _finite(x: np.ndarray, what: str, wrench) -> np.ndarray:
+    if not np.all(np.isfinite(x)):
+        raise InvalidInputError(
+            f"the {what} under wrench {np.asarray(wrench).tolist()} overflows the floating "
+            "point range; give a smaller load"
+        )
+    return readonly(x)
 
 
 def describe_directions(V: np.ndarray) -> str:
@@ -132,45 +177,149 @@ def describe_directions(V: np.ndarray) -> str:
     return ", ".join(parts)
 
 
-def compliance(
-    clm: ClosedLoopModel, q: np.ndarray, frame: str, axes: str = "world"
-) -> ComplianceResult:
-    """Cartesian compliance of ``frame`` at configuration q (see the module docstring).
+class SpringFactor(NamedTuple):
+    """Admissible motions and the square-root factor of their spring stiffness.
+
+    Attributes:
+        N: (nv, d) basis of the admissible motions dq = N y (closures and locks kept),
+            orthonormal in the scaled joint coordinates (prismatic ones divided by L).
+        V: (d, s) orthonormal directions of y with a restoring spring.
+        sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
+            [sqrt(N m)].
+        n_internal: number of spring-free motions that do not move the frame (left out).
+    """
+
+    N: np.ndarray
+    V: np.ndarray
+    sigma: np.ndarray
+    n_internal: int
+
+    @property
+    def P(self) -> np.ndarray:
+        """(nv, s) N V diag(1/sigma): dq = P P^T J^T w, C = (J P) (J P)^T."""
+        return self.N @ (self.V / self.sigma)
+
+
+def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:
+    """Admissible motions and spring factor at a configuration (module docstring).
 
     Args:
-        clm: model with closures and springs.
-        q: (nq,) assembled configuration (see :func:`closedloop.assembly.assemble`).
+        state: the configuration.
+        J: (6, nv) Jacobian of the loaded frame (any reference axes) [m/rad, 1].
+        frame: name of the loaded frame (for messages).
+
+    Raises:
+        MechanismError: a spring-free motion moves the frame (no static equilibrium):
+            a joint without spring, or a singular configuration where the springs resist
+            a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
+    """
+    clm, L = state.model, state.length
+    s_q = np.where(clm.linear_coordinates, L, 1.0)  # dq = s_q * (scaled dq)
+    Jc = state.closure_jacobian() * np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None]
+    locked = rigid_rows(clm)
+    A = np.vstack([Jc, locked]) if len(locked) else Jc
+    N_s, _ = nullspace(A * s_q)
+    k = clm.stiffness
+    sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
+    S = np.sqrt(k[sprung] * s_q[sprung] ** 2)[:, None] * N_s[sprung]
+    sigma, V, Z, _ = split_factor(S)
+    N = N_s * s_q[:, None]
+    if Z.shape[1]:  # spring-free motions must not move the frame
+        JN_s = (J * twist_scaling(L)[:, None]) @ N
+        moves = np.linalg.norm(JN_s @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN_s), 1e-300)
+        if np.any(moves):
+            raise MechanismError(
+                f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} "
+                "motion(s) with no restoring spring (or one below 1e-14 of the stiffest, a "
+                f"singular configuration) move it, driven mostly by "
+                f"{_main_joints(clm, N @ Z[:, moves])}; add springs, lock joints or move away "
+                "from the singularity"
+            )
+    return SpringFactor(N, V, sigma, Z.shape[1])
+
+
+def compliance(
+    model: ClosedLoopModel | Configuration,
+    q: np.ndarray | str | None = None,
+    frame: str | None = None,
+    axes: str = "world",
+    *,
+    length: float | None = None,
+) -> ComplianceResult:
+    """Cartesian compliance of ``frame`` at a configuration (see the module docstring).
+
+    Call as ``compliance(state, frame)`` with a :class:`Configuration`, or as
+    ``compliance(model, q, frame)``.
+
+    Args:
+        model: a configuration, or a model with closures and springs.
+        q: (nq,) assembled configuration with a model (:func:`closedloop.assemble`); with a
+            configuration, the frame may be given here.
         frame: name of the loaded frame; the reference point is its origin.
         axes: ``"world"`` (world-aligned axes, default) or ``"local"``.
+        length: characteristic length [m] of the unit-free rules, with a model (default:
+            that of the configuration, the size of its joint origins).
 
     Raises:
         NameNotFoundError: unknown frame.
+        OpenLoopError: q does not close the loops (tolerance ``CLOSURE_TOL``).
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
+        SingularConfigurationError: the compliance overflows (springs near 1e-308).
     """
-    q = clm.check_configuration(q)
-    update_kinematics(clm, q)
-    J = frame_jacobian(clm, q, frame, axes, update=False)
-    point = clm.data.oMf[clm.frame_id(frame)].translation
-    residual = closure_residual(clm, q, update=False)
-    N, Vs, ls, n_internal = spring_subspace(clm, q, J, frame)
-    JN = J @ N
-    B = JN @ (Vs / np.sqrt(ls))  # C = B B^T
-    NV = N @ (Vs / ls)
-    G = NV @ (JN @ Vs).T
+    if isinstance(model, Configuration) and isinstance(q, str) and frame is None:
+        q, frame = None, q
+    if frame is None:
+        raise TypeError("compliance() needs the name of the loaded frame")
+    state = as_configuration(model, q, length=length)
+    state.require_closed()
+    J = state.frame_jacobian(frame, axes)
+    f = spring_factor(state, J, frame)
+    P = f.P
+    B = J @ P  # C = B B^T
+    d = twist_scaling(state.length)[:, None]
+    spectrum = spectrum_from_factor(d * B, state.length, range_factor=d * (J @ f.N @ f.V))
     C = B @ B.T
-    rigid, rank = nullspace(B.T)  # twists outside the range of C = B B^T
-    return ComplianceResult(
-        C=readonly(0.5 * (C + C.T)),
+    return compliance_result(state, frame, axes, 0.5 * (C + C.T), P @ B.T, f, spectrum)
+
+
+def compliance_result(
+    state: Configuration,
+    frame: str,
+    axes: str,
+    C: np.ndarray,
+    G: np.ndarray,
+    f: SpringFactor,
+    spectrum: Spectrum,
+    cls: type[ComplianceResult] | None = None,
+    **extra,
+) -> ComplianceResult:
+    """A checked :class:`ComplianceResult` (or subclass, with ``extra`` fields).
+
+    Raises:
+        SingularConfigurationError: C, G or K are not finite (overflow).
+    """
+    arrays = [C, G] + ([] if spectrum.K is None else [spectrum.K])
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise SingularConfigurationError(
+            f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "
+            "floating point range (springs near 1e-308, or a singular configuration)"
+        )
+    return (cls or ComplianceResult)(
+        C=readonly(C),
         frame=frame,
         axes=axes,
-        point=readonly(point),
-        q=readonly(q),
-        rank=rank,
-        rigid_directions=readonly(rigid),
-        closure_residual=float(np.max(np.abs(residual), initial=0.0)),
-        mobility=N.shape[1],
-        internal_mobilities=n_internal,
+        point=readonly(state.data.oMf[state.model.frame_id(frame)].translation),
+        q=state.q,
+        rank=spectrum.rank,
+        rigid_directions=spectrum.rigid_directions,
+        closure_residual=float(np.max(np.abs(state.residual), initial=0.0)),
+        mobility=f.N.shape[1],
+        internal_mobilities=f.n_internal,
         G=readonly(G),
+        length=spectrum.length,
+        condition_number=spectrum.condition_number,
+        stiffness_matrix=spectrum.K,
+        **extra,
     )
 
 
@@ -179,44 +328,19 @@ def spring_subspace(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Admissible motions and the eigen-decomposition of their spring stiffness K_r.
 
-    Expects the kinematics of q to be up to date (:func:`update_kinematics`).
-
-    Args:
-        clm: model with closures and springs.
-        q: (nq,) configuration.
-        J: (6, nv) Jacobian of the loaded frame (any reference axes).
-        frame: name of the loaded frame (for messages).
+    The form of :func:`spring_factor` for a model and q (first release).
 
     Returns:
-        N: (nv, d) orthonormal basis of the admissible motions (closures and locks kept).
+        N: (nv, d) basis of the admissible motions (closures and locks kept).
         V: (d, s) orthonormal eigenvectors of K_r = N^T K_q N with a restoring spring.
-        lam: (s,) their eigenvalues (> 0) [N m/rad, N/m, mixed per the joint units].
+        lam: (s,) their eigenvalues sigma^2 (> 0).
         n_internal: number of spring-free motions that do not move the frame (left out).
 
     Raises:
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
     """
-    N, _ = admissible_motions(clm, q, update=False)
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-    # Spring-free motions are found kinematically (no spring coordinate moves: null space
-    # of the spring rows of N), not by a threshold on the eigenvalues of K_r, which would
-    # drop a spring more than 1/RANK_RTOL times softer than the stiffest one.
-    W, Z, _ = orthogonal_split(N[k > 0.0])
-    Kr = W.T @ ((N.T * k) @ N) @ W
-    lam, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
-    V = W @ V
-    JN = J @ N
-    moves = np.zeros(Z.shape[1], dtype=bool)
-    if Z.shape[1]:  # spring-free motions must not move the frame
-        moves = np.linalg.norm(JN @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN), 1e-300)
-    if np.any(moves):
-        dq = N @ Z[:, moves]
-        raise MechanismError(
-            f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} motion(s) "
-            f"with no restoring spring move it, driven mostly by {_main_joints(clm, dq)}; "
-            "add springs or lock joints"
-        )
-    return N, V, lam, Z.shape[1]
+    f = spring_factor(Configuration(clm, q), J, frame)
+    return f.N, f.V, f.sigma**2, f.n_internal
 
 
 def _main_joints(clm: ClosedLoopModel, dq: np.ndarray) -> str:

@@ -46,6 +46,20 @@ class AssemblyError(ClosedLoopError):
         super().__init__(f"{message} (closure residual reached: {residual:.3e})")
 
 
+class OpenLoopError(InvalidInputError):
+    """A configuration that does not close the loops (assemble it first).
+
+    Attributes:
+        residual: scaled closure residual (infinity norm; metres divided by the
+            characteristic length, radians as they are).
+        tolerance: the tolerance it exceeds (:data:`closedloop.configuration.CLOSURE_TOL`).
+    """
+
+    def __init__(self, message: str, residual: float, tolerance: float):
+        self.residual, self.tolerance = residual, tolerance
+        super().__init__(message)
+
+
 class MechanismError(ClosedLoopError):
     """The structure still moves without any restoring spring: no static equilibrium."""
 

@@ -45,7 +45,7 @@ A rank-deficient C (rigid directions) has no K; indices that need K raise
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -53,14 +53,20 @@ import scipy.linalg
 
 from .arrays import readonly
 from .compliance import TWIST_LABELS, UNITS, describe_directions
+from .conditioning import (
+    RANK_RTOL,
+    SCALED_TOL,
+    Spectrum,
+    check_length,
+    spectrum_from_compliance,
+    spectrum_from_factor,
+    twist_scaling,
+)
 from .exceptions import InvalidInputError, RigidDirectionsError
-from .kinematics import RANK_RTOL
 
 T, R = slice(0, 3), slice(3, 6)
 #: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
 DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
-#: Tolerance on the Jacobi-scaled (dimensionless) matrix for symmetry and semi-definiteness.
-SCALED_TOL = 1e-8
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -122,43 +128,7 @@ def _check_matrix(M, what: str) -> np.ndarray:
 
 
 def _check_length(length) -> float | None:
-    if length is None:
-        return None
-    if not (np.isfinite(length) and length > 0):
-        raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
-    return float(length)
-
-
-def _rank_of_compliance(C: np.ndarray, rtol: float, length: float) -> tuple[int, np.ndarray]:
-    """Rank of a symmetric PSD compliance and an orthonormal basis (6, 6 - rank) of its null space.
-
-    Coordinates whose diagonal entry (homogenised with ``length``) is below ``rtol`` times
-    the largest are rigid; the others are Jacobi-scaled to a dimensionless matrix with unit
-    diagonal, whose rank (relative threshold ``rtol``) does not depend on the units.
-    """
-    d = np.diag(C) * np.r_[np.ones(3), np.full(3, length**2)]
-    if np.any(d < 0.0):
-        raise InvalidInputError(f"compliance has negative diagonal entries: {np.diag(C)}")
-    if d.max() <= 0.0:
-        return 0, np.eye(6)
-    keep = np.flatnonzero(d > rtol * d.max())
-    s = 1.0 / np.sqrt(np.diag(C)[keep])
-    S = C[np.ix_(keep, keep)] * np.outer(s, s)
-    if np.max(np.abs(S - S.T)) > SCALED_TOL:
-        raise InvalidInputError("compliance is not symmetric")
-    mu, Z = np.linalg.eigh(0.5 * (S + S.T))
-    if mu[0] < -SCALED_TOL * mu[-1]:
-        raise InvalidInputError(
-            f"compliance is not positive semi-definite (scaled eigenvalue {mu[0]:.2e})"
-        )
-    soft = mu > rtol * mu[-1]
-    null = np.zeros((6, 6 - keep.size + int((~soft).sum())))
-    rigid = np.setdiff1d(np.arange(6), keep)
-    null[rigid, np.arange(rigid.size)] = 1.0
-    null[keep, rigid.size :] = Z[:, ~soft] * s[:, None]
-    basis = np.linalg.qr(null)[0] if null.shape[1] else null
-    signs = np.sign(basis[np.argmax(np.abs(basis), axis=0), np.arange(basis.shape[1])])
-    return int(soft.sum()), basis * signs + 0.0
+    return None if length is None else check_length(length)
 
 
 @dataclass(frozen=True)
@@ -166,40 +136,46 @@ class StiffnessIndices:
     """Stiffness indices of one Cartesian compliance (see the module docstring).
 
     Build with :meth:`from_compliance`, :meth:`from_stiffness` or :meth:`from_result`.
+    The rank, the rigid directions, K and the scaled condition number follow the one rule
+    of :mod:`closedloop.conditioning`.
 
     Attributes:
         C: (6, 6) compliance [m/N, rad/N, m/(N m), rad/(N m)], symmetric PSD, read-only.
         rank: rank of C.
         rigid_directions: (6, 6 - rank) orthonormal basis of the twists no wrench produces.
         length: characteristic length [m] of the ``homogenised_*`` indices, or None.
+        spectrum: the rank decision, scaled condition number and K (with the length of
+            the scaling: ``length``, or 1 m when None).
     """
 
     C: np.ndarray
     rank: int
     rigid_directions: np.ndarray
     length: float | None = None
+    spectrum: Spectrum | None = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_compliance(
-        cls, C, *, length: float | None = None, rtol: float = RANK_RTOL
-    ) -> StiffnessIndices:
+    def _of(cls, C, spectrum: Spectrum, length: float | None) -> StiffnessIndices:
+        return cls(readonly(C), spectrum.rank, spectrum.rigid_directions, length, spectrum)
+
+    @classmethod
+    def from_compliance(cls, C, *, length: float | None = None) -> StiffnessIndices:
         """Indices of compliance C (6, 6) [SI]; it may be rank deficient.
 
         Args:
             C: symmetric positive semi-definite compliance.
-            length: characteristic length [m] for the homogenised indices (optional); it
-                also weighs rotations against translations when spotting rigid coordinates
-                (1 m when None).
-            rtol: relative threshold of the rank decision.
+            length: characteristic length [m] of the mechanism: the scaling of the rank
+                rule and the length of the homogenised indices (optional; the rank rule
+                then uses 1 m, and depends on the length unit).
 
         Raises:
             InvalidInputError: C is not a finite symmetric PSD (6, 6) matrix.
         """
         C = _check_matrix(C, "compliance")
         length = _check_length(length)
-        rank, rigid = _rank_of_compliance(C, rtol, 1.0 if length is None else length)
-        return cls(readonly(0.5 * (C + C.T)), rank, readonly(rigid), length)
+        spectrum = spectrum_from_compliance(C, 1.0 if length is None else length)
+        return cls._of(0.5 * (C + C.T), spectrum, length)
 
     @classmethod
     def from_stiffness(cls, K, *, length: float | None = None) -> StiffnessIndices:
@@ -215,19 +191,28 @@ class StiffnessIndices:
             L = np.linalg.cholesky(0.5 * (K + K.T))
         except np.linalg.LinAlgError:
             raise InvalidInputError("stiffness is not positive definite") from None
-        Linv = scipy.linalg.solve_triangular(L, np.eye(6), lower=True)
-        return cls(readonly(Linv.T @ Linv), 6, readonly(np.zeros((6, 0))), _check_length(length))
+        B = scipy.linalg.solve_triangular(L, np.eye(6), lower=True).T  # C = B B^T
+        length = _check_length(length)
+        scale = 1.0 if length is None else length
+        spectrum = spectrum_from_factor(B * twist_scaling(scale)[:, None], scale)
+        return cls._of(B @ B.T, spectrum, length)
 
     @classmethod
     def from_result(cls, result, *, length: float | None = None) -> StiffnessIndices:
         """Indices of a :class:`closedloop.compliance.ComplianceResult`, same point and axes.
 
-        Its rank and rigid directions are kept: they come from a square-root factor of C,
-        which resolves near-singular poses better than C itself, and so ``K`` exists here
-        exactly when ``result.K`` does.
+        Its rank, rigid directions, K and scaled condition number are kept: they come
+        from a square-root factor of C, which resolves near-singular poses better than C
+        itself, and so ``K`` exists here exactly when ``result.K`` does.
         """
-        rigid = readonly(result.rigid_directions)
-        return cls(readonly(result.C), int(result.rank), rigid, _check_length(length))
+        spectrum = Spectrum(
+            int(result.rank),
+            readonly(result.rigid_directions),
+            float(result.condition_number),
+            float(result.length),
+            result.stiffness_matrix if result.is_full_rank else None,
+        )
+        return cls._of(result.C, spectrum, _check_length(length))
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -252,7 +237,7 @@ class StiffnessIndices:
     def _block_eig(self, block: slice, what: str, need_full: bool):
         """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked."""
         c, V = np.linalg.eigh(self.C[block, block])
-        rigid = c <= RANK_RTOL * max(c[-1], 0.0)
+        rigid = c <= RANK_RTOL**2 * max(c[-1], 0.0)  # the rule, on eigenvalues
         if rigid.all() or (need_full and rigid.any()):
             directions = np.zeros((6, int(rigid.sum())))
             directions[block] = V[:, rigid]
@@ -266,16 +251,31 @@ class StiffnessIndices:
     # ------------------------------------------------------------------ whole matrix
     @property
     def K(self) -> np.ndarray:
-        """(6, 6) stiffness C^-1 [N/m, N/rad, N m/m, N m/rad]."""
+        """(6, 6) stiffness C^-1 [N/m, N/rad, N m/m, N m/rad], from a square-root factor."""
         self._require_full_rank("K")
-        K = np.linalg.inv(self.C)
-        return readonly(0.5 * (K + K.T))
+        return self._spectrum.K
+
+    @property
+    def _spectrum(self) -> Spectrum:
+        if self.spectrum is None:  # built field by field: the rule on C itself
+            return spectrum_from_compliance(self.C, 1.0 if self.length is None else self.length)
+        return self.spectrum
+
+    @property
+    def scaled_condition_number(self) -> float:
+        """cond(K_s) of the scaled stiffness over the rank (:mod:`closedloop.conditioning`)."""
+        return self._spectrum.condition_number
+
+    @property
+    def ill_conditioned(self) -> bool:
+        """True when :attr:`scaled_condition_number` exceeds ``ILL_CONDITIONED``."""
+        return self._spectrum.ill_conditioned
 
     @property
     def determinant(self) -> float:
         """det K [N^6/rad^3], invariant under length unit, reference point and axes."""
         self._require_full_rank("det K")
-        return float(1.0 / np.linalg.det(self.C))
+        return float(np.linalg.det(self.K))
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -397,7 +397,8 @@ class StiffnessIndices:
 #: Indices exported by :meth:`StiffnessIndices.to_dict` (besides rank and rigid directions).
 _EXPORTED = (
     "length", "C", "compliance_eigenvalues", "K", "determinant", "eigenvalues",
-    "condition_number", "translational_stiffness", "translational_stiffness_blocked",
+    "condition_number", "scaled_condition_number", "ill_conditioned", "translational_stiffness",
+    "translational_stiffness_blocked",
     "rotational_stiffness", "rotational_stiffness_blocked", "min_translational_stiffness",
     "max_translational_stiffness", "min_rotational_stiffness", "max_rotational_stiffness",
     "eigenscrews",

@@ -6,31 +6,81 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from .conditioning import RANK_RTOL as _RANK_RTOL
 from .exceptions import InvalidInputError, SingularConfigurationError
 from .model import ClosedLoopModel
 
 #: Relative threshold (singular values, or pivots of a rank-revealing QR) below which a
-#: direction counts as rank deficient.
-RANK_RTOL = 1e-9
+#: direction counts as rank deficient: the project's one rule (:mod:`.conditioning`).
+RANK_RTOL = _RANK_RTOL
 
 REFERENCE_FRAMES = {"world": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL}
 
 
 def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
-    """Forward kinematics, joint Jacobians and frame placements at q (nq,)."""
+    """Forward kinematics, joint Jacobians and frame placements at q (nq,), in ``clm.data``.
+
+    ``clm.data`` is this thread's workspace of the model; a
+    :class:`closedloop.configuration.Configuration` has a Data of its own instead.
+    """
     pin.computeJointJacobians(clm.model, clm.data, q)
     pin.updateFramePlacements(clm.model, clm.data)
+
+
+def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
+    """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
+    out = [np.zeros(0)]
+    for c, cd in zip(clm.closures, constraint_datas, strict=True):
+        c.constraint.calc(clm.model, data, cd)
+        out.append(np.array(cd.constraint_position_error))
+    return np.concatenate(out)
+
+
+def jacobian_rows(
+    clm: ClosedLoopModel, data: pin.Data, constraint_datas, *, calc: bool = True
+) -> np.ndarray:
+    """(m, nv) Jacobian of :func:`residual_rows` from current kinematics in ``data``.
+
+    Args:
+        calc: evaluate the constraints first (False when :func:`residual_rows` has just
+            done it with the same datas).
+    """
+    nv = clm.model.nv
+    rows = [np.zeros((0, nv))]
+    for c, cd in zip(clm.closures, constraint_datas, strict=True):
+        if calc:
+            c.constraint.calc(clm.model, data, cd)
+        J = np.asarray(c.constraint.jacobian(clm.model, data, cd)).reshape(-1, nv)
+        if c.kind == "6d":
+            J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
+        rows.append(J)
+    return np.vstack(rows)
+
+
+def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: str) -> np.ndarray:
+    """(6, nv) Jacobian of ``frame`` from current joint Jacobians in ``data``.
+
+    Raises:
+        InvalidInputError: unknown ``axes``, or a model without any moving joint (nv = 0).
+        NameNotFoundError: unknown frame.
+    """
+    if axes not in REFERENCE_FRAMES:
+        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    fid = clm.frame_id(frame)
+    if clm.model.nv == 0:  # pin.getFrameJacobian crashes the interpreter on nv = 0
+        raise InvalidInputError(
+            f"model {clm.name!r} has no moving joint (nv = 0): frame {frame!r} cannot move, "
+            "there is no compliance to compute; give the model joints (or springs)"
+        )
+    J = pin.getFrameJacobian(clm.model, data, fid, REFERENCE_FRAMES[axes])
+    return np.asarray(J).reshape(6, clm.model.nv)  # a one-dof model gives a (6,) vector
 
 
 def closure_residual(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
     """Stacked closure residuals (m,) at q [m for points, log6 (m, rad) for welds]."""
     if update:
         update_kinematics(clm, q)
-    out = [np.zeros(0)]
-    for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
-        c.constraint.calc(clm.model, clm.data, cd)
-        out.append(np.array(cd.constraint_position_error))
-    return np.concatenate(out)
+    return residual_rows(clm, clm.data, clm.constraint_datas)
 
 
 def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
@@ -42,15 +92,7 @@ def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
     """
     if update:
         update_kinematics(clm, q)
-    nv = clm.model.nv
-    rows = [np.zeros((0, nv))]
-    for c, cd in zip(clm.closures, clm.constraint_datas, strict=True):
-        c.constraint.calc(clm.model, clm.data, cd)
-        J = np.asarray(c.constraint.jacobian(clm.model, clm.data, cd)).reshape(-1, nv)
-        if c.kind == "6d":
-            J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
-        rows.append(J)
-    return np.vstack(rows)
+    return jacobian_rows(clm, clm.data, clm.constraint_datas)
 
 
 def frame_jacobian(
@@ -61,13 +103,9 @@ def frame_jacobian(
     Args:
         axes: ``"world"`` (world-aligned axes) or ``"local"`` (the frame's own axes).
     """
-    if axes not in REFERENCE_FRAMES:
-        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
-    fid = clm.frame_id(frame)
     if update:
         update_kinematics(clm, q)
-    J = pin.getFrameJacobian(clm.model, clm.data, fid, REFERENCE_FRAMES[axes])
-    return np.asarray(J).reshape(6, clm.model.nv)  # a one-dof model gives a (6,) vector
+    return frame_jacobian_rows(clm, clm.data, frame, axes)
 
 
 def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray, np.ndarray, int]:

@@ -16,6 +16,7 @@ without a spring is a rigid actuator (locked).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -80,6 +81,26 @@ def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: s
     return Closure(constraint, f"{frame_a}<->{frame_b}")
 
 
+def _linear_coordinates(model: pin.Model) -> np.ndarray:
+    """(nv,) read-only mask of the translational velocity coordinates (prismatic, the
+    linear part of a free flyer...), read off the joint motion subspaces: a coordinate is
+    linear when it moves its joint without rotating it."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    mask = np.zeros(model.nv, dtype=bool)
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.nv:
+            S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
+            mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
+    return _frozen(mask)
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
 class ClosedLoopModel:
     """Kinematic tree + loop closures + actuated joints + per-coordinate stiffness.
 
@@ -95,6 +116,10 @@ class ClosedLoopModel:
 
     Attributes:
         stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf).
+        linear_coordinates: (nv,) read-only bool, True for translational coordinates [m]
+            (prismatic, linear part of a free flyer), False for rotations [rad].
+        linear_rows: (m,) read-only bool, True for the closure rows in metres (point
+            closures, translation of welds), False for the rotation rows of welds [rad].
     """
 
     def __init__(
@@ -109,12 +134,11 @@ class ClosedLoopModel:
         name: str = "",
     ):
         self.model = model
-        self.data = model.createData()
+        self._local = threading.local()
         self.closures = tuple(
             c if isinstance(c, Closure) else Closure(c, f"closure{i}")
             for i, c in enumerate(closures)
         )
-        self.constraint_datas = [c.constraint.createData() for c in self.closures]
         self.visual_model = visual_model
         self.collision_model = collision_model
         self.name = name or model.name
@@ -127,6 +151,29 @@ class ClosedLoopModel:
                     f"it has nq={model.joints[j].nq}, nv={model.joints[j].nv}"
                 )
         self.stiffness = self._stiffness_vector(springs or {}, locked)
+        self.linear_coordinates = _linear_coordinates(model)
+        rows = [i < 3 for c in self.closures for i in range(c.size)]
+        self.linear_rows = _frozen(np.array(rows, dtype=bool))
+
+    # ------------------------------------------------------------------ workspaces
+    @property
+    def data(self) -> pin.Data:
+        """This thread's Pinocchio Data of the model (one per thread, never shared).
+
+        Functions that take ``(model, q)`` compute their kinematics here; a
+        :class:`closedloop.configuration.Configuration` owns a Data of its own.
+        """
+        local = self._local
+        if not hasattr(local, "data"):
+            local.data = self.model.createData()
+            local.constraint_datas = [c.constraint.createData() for c in self.closures]
+        return local.data
+
+    @property
+    def constraint_datas(self) -> list:
+        """This thread's constraint datas of the closures (see :attr:`data`)."""
+        self.data  # noqa: B018  (creates this thread's workspace)
+        return self._local.constraint_datas
 
     def _stiffness_vector(self, springs, locked) -> np.ndarray:
         k = np.zeros(self.model.nv)

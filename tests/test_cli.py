@@ -184,7 +184,10 @@ ERRORS = {
     "q-nan": ("{ur5} --frame tool0 --q 0 0 nan 0 0 0", "non-finite"),
     "negative-stiffness": ("{ur5} --frame tool0 --joint-stiffness -1", "expected a number >= 0"),
     "nan-stiffness": ("{ur5} --frame tool0 --joint-stiffness nan", "expected a number >= 0"),
-    "q-not-assembled": ("{fourbar} --closures {yaml} --frame P --q 0 0 0 0 0", "violates the loop"),
+    "q-not-assembled": (
+        "{fourbar} --closures {yaml} --frame P --q 0 0 0 0 0",
+        "--q: configuration does not close the loops of 'fourbar'",
+    ),
 }
 
 

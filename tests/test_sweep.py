@@ -22,6 +22,10 @@ SAME_PATH_RTOL = 1e-10
 #: With the closed-form start the sweep assembles from the very configuration that
 #: api.stiffness uses: only batched vs single linear algebra differs (rounding).
 CLOSED_FORM_START_RTOL = 1e-13
+#: The indices that need K: the API takes K from the square-root factor of the generic
+#: solver, the batched sweep from inv(C); the two differ by about eps cond(C_SI), cond(C_SI)
+#: ~ 4e3 here, i.e. 1e-12.
+K_PATH_RTOL = 1e-11
 WRENCH = np.array([1.0, -2.0, 0.5, 0.3, 0.0, -0.2])
 SCALAR_INDICES = (
     "det_K",
@@ -50,6 +54,8 @@ def pointwise(points, backend: str, i: int) -> api.CaHyManStiffness:
 
 
 def assert_matches_pointwise(result: SweepResult, rtol: float) -> None:
+    """C, deflection and block indices within ``rtol``; det K and cond K within
+    max(rtol, K_PATH_RTOL)."""
     pts = result.points
     for i in np.flatnonzero(result.ok):
         ref = pointwise(pts, result.backend, i)
@@ -65,7 +71,8 @@ def assert_matches_pointwise(result: SweepResult, rtol: float) -> None:
                 max_rotational=ref.indices.max_rotational_stiffness.value,
             )
         for name, value in expected.items():
-            np.testing.assert_allclose(got[name], value, rtol=rtol, err_msg=f"{name} at {i}")
+            tol = max(rtol, K_PATH_RTOL) if name in ("det_K", "condition_number") else rtol
+            np.testing.assert_allclose(got[name], value, rtol=tol, err_msg=f"{name} at {i}")
         twist = ref.deflection(WRENCH).M
         np.testing.assert_allclose(
             result.indices["deflection"][i], twist, rtol=rtol, atol=rtol * np.max(np.abs(twist))

@@ -1,0 +1,217 @@
+"""The one rank rule of the project: unit-free, decided on square-root factors.
+
+A compliance C (6, 6) [SI] mixes m/N with rad/(N m); its eigenvalues, rank and condition
+number in SI change with the length unit (m vs mm) and mean little. Every decision is
+therefore taken on the **scaled** matrices, with a characteristic length L [m] of the
+mechanism (:func:`characteristic_length`): twists (d / L, r) and wrenches (f L, n), so that
+
+    C_s = D C D,   K_s = D^-1 K D^-1,   D = diag(1/L, 1/L, 1/L, 1, 1, 1),
+
+are uniform in rad/(N m) and N m/rad. Multiplying every length by 1000 multiplies L by
+1000 too and leaves C_s, hence every decision, unchanged.
+
+Decisions are taken on a square-root factor B_s (C_s = B_s B_s^T, from the springs, see
+:mod:`closedloop.compliance`), never on C_s itself: its singular values beta carry the
+square roots of the eigenvalues of C_s, so an SVD resolves a 1e-16 eigenvalue ratio that
+an eigen-decomposition of C_s (absolute error eps |C_s|) would turn into noise or a
+negative number. The same rule decides which motions have no restoring spring (on the
+factor sqrt(K_q) N of the joint stiffness).
+
+* **rank**: number of beta_i > :data:`RANK_RTOL` beta_max, i.e. eigenvalues of C_s above
+  RANK_RTOL^2 = 1e-14 times the largest. Below that no double-precision computation of
+  the kinematics tells a very stiff direction from a rigid one.
+* **condition number**: cond(K_s) = (beta_max / beta_min)^2 over the rank, always
+  finite; above :data:`ILL_CONDITIONED` the result is flagged ill-conditioned (close to a
+  singular configuration: the stiffest direction of K is known to about
+  eps sqrt(cond) relative, the softest one to eps).
+* **K** = D K_s D with K_s = U diag(beta^-2) U^T from the SVD of B_s: positive definite
+  by construction, never inv(C).
+
+When only C is known (a closed-form backend, a user's matrix) the factor comes from the
+eigen-decomposition of C_s (:func:`spectrum_from_compliance`); it resolves eigenvalue
+ratios down to about 1e-16, a hundred times below the threshold.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .arrays import readonly
+from .exceptions import InvalidInputError
+
+#: Relative threshold on the singular values of a scaled square-root factor (C_s = B B^T,
+#: K_r = S^T S) below which a direction counts as rigid (compliance) or spring-free
+#: (joint stiffness): 1e-14 on the eigenvalues of C_s and K_r.
+RANK_RTOL = 1e-7
+#: Condition number of the scaled stiffness K_s above which a result is flagged
+#: ill-conditioned (8 decades between the stiffest and the softest scaled direction).
+ILL_CONDITIONED = 1e8
+#: Tolerance on the scaled (dimensionless) compliance for symmetry and semi-definiteness.
+SCALED_TOL = 1e-8
+
+
+def characteristic_length(points: np.ndarray) -> float:
+    """Size [m] of a mechanism: diagonal of the bounding box of its points (n, 3) [m].
+
+    Returns 1.0 when the points coincide (a mechanism of one point has no size); this is
+    the only case where the length unit can then matter.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    size = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) if len(p) else 0.0
+    return size if size > 0.0 and np.isfinite(size) else 1.0
+
+
+def check_length(length) -> float:
+    """Validated characteristic length [m] (finite, > 0)."""
+    if not (isinstance(length, int | float | np.floating) and np.isfinite(length) and length > 0):
+        raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
+    return float(length)
+
+
+def twist_scaling(length: float) -> np.ndarray:
+    """(6,) diagonal of D = diag(1/L, 1/L, 1/L, 1, 1, 1): scaled twist = D twist."""
+    return np.r_[np.full(3, 1.0 / length), np.ones(3)]
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """Rank, rigid directions, conditioning and stiffness of one compliance (module rule).
+
+    Attributes:
+        rank: rank of C (0..6).
+        rigid_directions: (6, 6 - rank) orthonormal basis of the twists that no wrench
+            produces (SI twist coordinates dx, dy, dz, rx, ry, rz), null space of C.
+        condition_number: cond(K_s) of the scaled matrix over its rank (1.0 for rank 0),
+            dimensionless, finite.
+        length: characteristic length L [m] of the scaling.
+        K: (6, 6) stiffness [SI] when rank is 6, else None.
+    """
+
+    rank: int
+    rigid_directions: np.ndarray
+    condition_number: float
+    length: float
+    K: np.ndarray | None
+
+    @property
+    def ill_conditioned(self) -> bool:
+        """True when cond(K_s) exceeds :data:`ILL_CONDITIONED`."""
+        return self.condition_number > ILL_CONDITIONED
+
+
+def split_factor(S: np.ndarray, rtol: float = RANK_RTOL):
+    """SVD split of a factor S (m, n): kept singular values and vectors, and the rest.
+
+    Returns:
+        sigma: (r,) singular values above ``rtol`` times the largest, descending.
+        V: (n, r) right singular vectors of ``sigma``; Z: (n, n - r) orthonormal basis of
+        the remaining directions (S Z ~ 0 on the scale of the rule).
+        U: (m, m) left singular vectors (all of them).
+    """
+    m, n = S.shape
+    if m == 0 or n == 0:
+        return np.zeros(0), np.zeros((n, 0)), np.eye(n), np.eye(m)
+    U, s, Vt = np.linalg.svd(S, full_matrices=True)
+    r = int(np.count_nonzero(s > rtol * s[0])) if s[0] > 0.0 else 0
+    return s[:r], Vt[:r].T, Vt[r:].T, U
+
+
+def _signed(basis: np.ndarray) -> np.ndarray:
+    """Columns with their largest-magnitude entry positive, ordered by the coordinate of
+    that entry (stable output)."""
+    if not basis.shape[1]:
+        return basis
+    top = np.argmax(np.abs(basis), axis=0)
+    signs = np.sign(basis[top, np.arange(basis.shape[1])])
+    return (basis * signs + 0.0)[:, np.argsort(top, kind="stable")]
+
+
+def spectrum_from_factor(
+    B_s: np.ndarray, length: float, range_factor: np.ndarray | None = None
+) -> Spectrum:
+    """Spectrum of C = D^-1 B_s B_s^T D^-1 from its scaled square-root factor B_s (6, r).
+
+    Args:
+        B_s: (6, r) scaled factor [rad/sqrt(N m)]: C_s = B_s B_s^T.
+        length: characteristic length L [m] of the scaling D.
+        range_factor: (6, r') scaled matrix with the range of B_s whose singular values
+            decide the rank and the rigid directions (default: B_s itself). The
+            compliance passes the kinematic part J N V of B_s = J N V diag(1/sigma), so
+            that one enormous compliance (a near-singular pose) is not mistaken for
+            rigidity of the other directions; the condition number and K come from B_s.
+    """
+    d = twist_scaling(length)
+    B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
+    U, beta, _ = np.linalg.svd(B_s, full_matrices=True) if B_s.size else (np.eye(6), [], None)
+    if range_factor is None:
+        rank = int(np.count_nonzero(beta > RANK_RTOL * beta[0])) if len(beta) else 0
+        basis = U
+    else:
+        kept, _, _, basis = split_factor(range_factor)
+        rank = kept.size
+    cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
+    rigid = basis[:, rank:] * d[:, None]  # null(C) = D null(C_s)
+    rigid = np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid
+    K = None
+    if rank == 6:
+        Ub = U / beta  # K_s = U diag(beta^-2) U^T
+        K_s = Ub @ Ub.T
+        K = readonly(0.5 * (K_s + K_s.T) * np.outer(d, d))
+    return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
+
+
+def scaled_compliance_factor(C: np.ndarray, length: float) -> np.ndarray:
+    """(6, 6) square-root factor B_s of C_s = D C D from its eigen-decomposition.
+
+    Raises:
+        InvalidInputError: C is not symmetric positive semi-definite (scaled tolerance
+            :data:`SCALED_TOL`).
+    """
+    d = twist_scaling(length)
+    Cs = C * np.outer(d, d)
+    top = np.max(np.abs(Cs))
+    if top > 0.0 and np.max(np.abs(Cs - Cs.T)) > SCALED_TOL * top:
+        raise InvalidInputError("compliance is not symmetric")
+    mu, U = np.linalg.eigh(0.5 * (Cs + Cs.T))
+    if top > 0.0 and mu[0] < -SCALED_TOL * mu[-1]:
+        raise InvalidInputError(
+            f"compliance is not positive semi-definite (scaled eigenvalue ratio "
+            f"{mu[0] / mu[-1]:.2e})"
+        )
+    return U * np.sqrt(np.clip(mu, 0.0, None))
+
+
+def spectrum_from_compliance(C: np.ndarray, length: float) -> Spectrum:
+    """Spectrum of a symmetric PSD compliance C (6, 6) [SI] given as a matrix.
+
+    Raises:
+        InvalidInputError: C is not symmetric positive semi-definite.
+    """
+    return spectrum_from_factor(scaled_compliance_factor(C, length), length)
+
+
+def batch_rank(C: np.ndarray, length) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rank, condition number and PSD flag of many symmetric compliances (n, 6, 6) [SI].
+
+    The rule of :func:`spectrum_from_compliance`, vectorised over the stack.
+
+    Args:
+        C: (n, 6, 6) symmetric compliances [SI].
+        length: characteristic length [m], one for all or (n,) one per matrix.
+
+    Returns:
+        rank: (n,) int; condition: (n,) cond(K_s) over the rank; psd: (n,) bool.
+    """
+    L = np.broadcast_to(np.asarray(length, dtype=float), (len(C),))
+    d = np.where(np.arange(6) < 3, 1.0 / L[:, None], 1.0)
+    Cs = C * d[:, :, None] * d[:, None, :]
+    mu = np.linalg.eigvalsh(0.5 * (Cs + np.swapaxes(Cs, 1, 2)))
+    top = mu[:, -1:]
+    keep = mu > RANK_RTOL**2 * np.maximum(top, 0.0)
+    rank = np.count_nonzero(keep, axis=1)
+    low = np.min(np.where(keep, mu, np.inf), axis=1)
+    condition = np.where(rank > 0, top[:, 0] / np.where(rank > 0, low, 1.0), 1.0)
+    psd = mu[:, 0] >= -SCALED_TOL * np.maximum(top[:, 0], 0.0)
+    return rank, condition, psd

@@ -1,0 +1,154 @@
+"""A configuration of a closed-loop model: the state every analysis works on.
+
+In the manner of pink's and mink's ``Configuration``: one object a configuration, with
+a Pinocchio Data of its own (never shared, so configurations can be used from several
+threads at once), a read-only q, and the kinematics computed once at construction: joint
+placements and Jacobians, frame placements, the closure residual (checked once against
+:data:`CLOSURE_TOL`), the characteristic length of the mechanism. Jacobians are computed
+on first use and kept.
+
+The closure residual is judged unit-free: metres are divided by the characteristic
+length L (:func:`closedloop.conditioning.characteristic_length` of the joint origins),
+radians are taken as they are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .conditioning import characteristic_length, check_length
+from .exceptions import InvalidInputError, OpenLoopError
+from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
+from .model import ClosedLoopModel
+
+#: Largest scaled closure residual (infinity norm: metres / L, radians) at which a
+#: configuration counts as closed: the tolerance of the compliance, the statics and the
+#: command line alike. Values typed with 7 significant digits close a loop to about 1e-7
+#: of its size; the first-order error of a compliance at such a configuration is of the
+#: same relative size.
+CLOSURE_TOL = 1e-6
+
+
+class Configuration:
+    """Configuration q of a :class:`ClosedLoopModel`, kinematics computed once.
+
+    Args:
+        model: the model with closures and springs.
+        q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints].
+        length: characteristic length L [m] (default: diagonal of the bounding box of the
+            joint origins at q).
+
+    Attributes:
+        model: the :class:`ClosedLoopModel`.
+        q: (nq,) read-only configuration.
+        data: this configuration's own :class:`pinocchio.Data` (kinematics of q).
+        length: characteristic length L [m].
+        residual: (m,) read-only closure residual [m for points; m, rad for welds], in the
+            axes of each closure's side-1 anchor (Pinocchio's convention).
+        closure_error: scaled residual, infinity norm (metres / L, radians).
+    """
+
+    def __init__(self, model: ClosedLoopModel, q, *, length: float | None = None):
+        if not isinstance(model, ClosedLoopModel):
+            raise InvalidInputError(
+                f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
+            )
+        self.model = model
+        q = model.check_configuration(q)
+        q.flags.writeable = False
+        self.q = q
+        pm = model.model
+        self.data = pm.createData()
+        self._constraint_datas = [c.constraint.createData() for c in model.closures]
+        pin.computeJointJacobians(pm, self.data, q)
+        pin.updateFramePlacements(pm, self.data)
+        self.length = (
+            characteristic_length([M.translation for M in self.data.oMi])
+            if length is None
+            else check_length(length)
+        )
+        r = residual_rows(model, self.data, self._constraint_datas)
+        r.flags.writeable = False
+        self.residual = r
+        scaled = np.where(model.linear_rows, r / self.length, r)
+        self.closure_error = float(np.max(np.abs(scaled), initial=0.0))
+        self._closure_jacobian: np.ndarray | None = None
+        self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
+
+    @property
+    def is_closed(self) -> bool:
+        """True when :attr:`closure_error` is within :data:`CLOSURE_TOL`."""
+        return self.closure_error <= CLOSURE_TOL
+
+    def require_closed(self) -> Configuration:
+        """This configuration, or :class:`OpenLoopError` if it does not close the loops."""
+        if not self.is_closed:
+            scaled = np.where(self.model.linear_rows, self.residual / self.length, self.residual)
+            worst = self._closure_of_row(int(np.argmax(np.abs(scaled))))
+            raise OpenLoopError(
+                f"configuration does not close the loops of {self.model.name!r}: scaled "
+                f"residual {self.closure_error:.3e} at closure {worst!r} (metres per "
+                f"characteristic length L = {self.length:.4g} m, radians) exceeds "
+                f"{CLOSURE_TOL:g}; assemble it first (closedloop.assemble)",
+                self.closure_error,
+                CLOSURE_TOL,
+            )
+        return self
+
+    def _closure_of_row(self, row: int) -> str:
+        for c in self.model.closures:
+            if row < c.size:
+                return c.name
+            row -= c.size
+        raise IndexError(row)
+
+    def closure_jacobian(self) -> np.ndarray:
+        """(m, nv) read-only Jacobian of :attr:`residual` with respect to the tangent of q."""
+        if self._closure_jacobian is None:
+            Jc = jacobian_rows(self.model, self.data, self._constraint_datas, calc=False)
+            Jc.flags.writeable = False
+            self._closure_jacobian = Jc
+        return self._closure_jacobian
+
+    def frame_jacobian(self, frame: str, axes: str = "world") -> np.ndarray:
+        """(6, nv) read-only Jacobian of ``frame``: twist (v [m/s], w [rad/s]) at its origin.
+
+        Args:
+            frame: frame name.
+            axes: ``"world"`` (world-aligned axes) or ``"local"`` (the frame's own axes).
+        """
+        key = (frame, axes)
+        if key not in self._frame_jacobians:
+            J = frame_jacobian_rows(self.model, self.data, frame, axes)
+            J.flags.writeable = False
+            self._frame_jacobians[key] = J
+        return self._frame_jacobians[key]
+
+    def frame_placement(self, frame: str) -> pin.SE3:
+        """Placement (copy) of ``frame`` in the world at q."""
+        return self.data.oMf[self.model.frame_id(frame)].copy()
+
+    def __repr__(self) -> str:
+        return (
+            f"Configuration({self.model.name!r}, nq={self.q.size}, "
+            f"closure_error={self.closure_error:.2e}, length={self.length:.4g} m)"
+        )
+
+
+def as_configuration(model, q=None, *, length: float | None = None) -> Configuration:
+    """A :class:`Configuration` from a configuration, or from a model and q (nq,).
+
+    Raises:
+        InvalidInputError: q or ``length`` given with a configuration (it has its own), or
+            no q with a model.
+    """
+    if isinstance(model, Configuration):
+        if q is not None or length is not None:
+            raise InvalidInputError(
+                "q and length belong to the Configuration; give them to Configuration(...)"
+            )
+        return model
+    if q is None:
+        raise InvalidInputError("a configuration q (nq,) is needed with a ClosedLoopModel")
+    return Configuration(model, q, length=length)
