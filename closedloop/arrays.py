@@ -14,6 +14,12 @@ def readonly(a) -> np.ndarray:
     return a
 
 
+def frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only in place (for an array the caller has just created)."""
+    a.flags.writeable = False
+    return a
+
+
 def check_wrench(w) -> np.ndarray:
     """(6,) validated wrench (fx, fy, fz [N], nx, ny, nz [N m]); raises InvalidInputError."""
     w = np.asarray(w, dtype=float).reshape(-1)

@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .arrays import check_wrench, readonly
+from .arrays import check_wrench, frozen, readonly
 from .conditioning import (
     ILL_CONDITIONED,
     RANK_RTOL,
@@ -159,7 +159,7 @@ class ComplianceResult:
 
 
 def _finite(x: np.ndarray, what: str, wrench) -> np.ndarray:
-    if not np.all(np.isfinite(x)):
+    if not np.isfinite(x).all():
         raise InvalidInputError(
             f"the {what} under wrench {np.asarray(wrench).tolist()} overflows the floating "
             "point range; give a smaller load"
@@ -200,6 +200,29 @@ class SpringFactor(NamedTuple):
         return self.N @ (self.V / self.sigma)
 
 
+class _Scaling(NamedTuple):
+    """Unit-free scaling of a model at length L (computed once per model and L)."""
+
+    s_q: np.ndarray  # (nv,) dq = s_q * scaled dq: L for linear coordinates, 1 for angles
+    row_scale: np.ndarray  # (m, 1) closure rows in metres divided by L
+    locked_rows: np.ndarray  # (n_locked, nv) selection rows of the locked coordinates
+    sprung: np.ndarray  # (s,) indices of the coordinates with a finite spring
+    sqrt_k: np.ndarray  # (s,) sqrt of their scaled stiffness k s_q^2 [sqrt(N m)]
+
+    @classmethod
+    def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
+        s_q = np.where(clm.linear_coordinates, L, 1.0)
+        k = clm.stiffness
+        sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
+        return cls(
+            s_q,
+            np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None],
+            rigid_rows(clm),
+            sprung,
+            np.sqrt(k[sprung]) * s_q[sprung],
+        )
+
+
 def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:
     """Admissible motions and spring factor at a configuration (module docstring).
 
@@ -214,16 +237,13 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
             a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
     """
     clm, L = state.model, state.length
-    s_q = np.where(clm.linear_coordinates, L, 1.0)  # dq = s_q * (scaled dq)
-    Jc = state.closure_jacobian() * np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None]
-    locked = rigid_rows(clm)
-    A = np.vstack([Jc, locked]) if len(locked) else Jc
-    N_s, _ = nullspace(A * s_q)
-    k = clm.stiffness
-    sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
-    S = np.sqrt(k[sprung] * s_q[sprung] ** 2)[:, None] * N_s[sprung]
+    sc = clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
+    Jc = state.closure_jacobian() * sc.row_scale
+    A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
+    N_s, _ = nullspace(A * sc.s_q)
+    S = sc.sqrt_k[:, None] * N_s[sc.sprung]
     sigma, V, Z, _ = split_factor(S)
-    N = N_s * s_q[:, None]
+    N = N_s * sc.s_q[:, None]
     if Z.shape[1]:  # spring-free motions must not move the frame
         JN_s = (J * twist_scaling(L)[:, None]) @ N
         moves = np.linalg.norm(JN_s @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN_s), 1e-300)
@@ -274,10 +294,13 @@ def compliance(
     state.require_closed()
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
-    P = f.P
+    NV = f.N @ f.V
+    JNV = (J @ NV) * twist_scaling(state.length)[:, None]  # scaled, kinematic
+    B_s = JNV / f.sigma  # C_s = B_s B_s^T
+    spread = f.sigma[0] / f.sigma[-1] if f.sigma.size else 1.0
+    spectrum = spectrum_from_factor(B_s, state.length, range_factor=JNV, spread=spread)
+    P = NV / f.sigma
     B = J @ P  # C = B B^T
-    d = twist_scaling(state.length)[:, None]
-    spectrum = spectrum_from_factor(d * B, state.length, range_factor=d * (J @ f.N @ f.V))
     C = B @ B.T
     return compliance_result(state, frame, axes, 0.5 * (C + C.T), P @ B.T, f, spectrum)
 
@@ -299,13 +322,13 @@ def compliance_result(
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
     arrays = [C, G] + ([] if spectrum.K is None else [spectrum.K])
-    if not all(np.all(np.isfinite(a)) for a in arrays):
+    if not all(np.isfinite(a).all() for a in arrays):
         raise SingularConfigurationError(
             f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "
             "floating point range (springs near 1e-308, or a singular configuration)"
         )
     return (cls or ComplianceResult)(
-        C=readonly(C),
+        C=frozen(C),
         frame=frame,
         axes=axes,
         point=readonly(state.data.oMf[state.model.frame_id(frame)].translation),
@@ -315,7 +338,7 @@ def compliance_result(
         closure_residual=float(np.max(np.abs(state.residual), initial=0.0)),
         mobility=f.N.shape[1],
         internal_mobilities=f.n_internal,
-        G=readonly(G),
+        G=frozen(G),
         length=spectrum.length,
         condition_number=spectrum.condition_number,
         stiffness_matrix=spectrum.K,

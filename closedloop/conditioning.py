@@ -37,8 +37,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
-from .arrays import readonly
+from .arrays import frozen, readonly
 from .exceptions import InvalidInputError
 
 #: Relative threshold on the singular values of a scaled square-root factor (C_s = B B^T,
@@ -72,7 +73,27 @@ def check_length(length) -> float:
 
 def twist_scaling(length: float) -> np.ndarray:
     """(6,) diagonal of D = diag(1/L, 1/L, 1/L, 1, 1, 1): scaled twist = D twist."""
-    return np.r_[np.full(3, 1.0 / length), np.ones(3)]
+    s = 1.0 / length
+    return np.array((s, s, s, 1.0, 1.0, 1.0))
+
+
+def svd(A: np.ndarray, full_matrices: bool = True):
+    """SVD A = U diag(s) Vt of a small matrix (m, n), straight from LAPACK.
+
+    ``dgesdd`` (a fraction of ``numpy.linalg.svd``'s call cost on 6x6 matrices), with
+    ``dgesvd`` as the fall-back when it does not converge.
+
+    Raises:
+        numpy.linalg.LinAlgError: neither converges (non-finite input).
+    """
+    A = np.asarray(A, dtype=float)
+    flag = int(full_matrices)
+    U, s, Vt, info = scipy.linalg.lapack.dgesdd(A, compute_uv=1, full_matrices=flag)
+    if info > 0:
+        U, s, Vt, info = scipy.linalg.lapack.dgesvd(A, compute_uv=1, full_matrices=flag)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK info {info})")
+    return U, s, Vt
 
 
 @dataclass(frozen=True)
@@ -113,7 +134,7 @@ def split_factor(S: np.ndarray, rtol: float = RANK_RTOL):
     m, n = S.shape
     if m == 0 or n == 0:
         return np.zeros(0), np.zeros((n, 0)), np.eye(n), np.eye(m)
-    U, s, Vt = np.linalg.svd(S, full_matrices=True)
+    U, s, Vt = svd(S)
     r = int(np.count_nonzero(s > rtol * s[0])) if s[0] > 0.0 else 0
     return s[:r], Vt[:r].T, Vt[r:].T, U
 
@@ -129,28 +150,33 @@ def _signed(basis: np.ndarray) -> np.ndarray:
 
 
 def spectrum_from_factor(
-    B_s: np.ndarray, length: float, range_factor: np.ndarray | None = None
+    B_s: np.ndarray,
+    length: float,
+    range_factor: np.ndarray | None = None,
+    spread: float = 1.0,
 ) -> Spectrum:
     """Spectrum of C = D^-1 B_s B_s^T D^-1 from its scaled square-root factor B_s (6, r).
 
     Args:
         B_s: (6, r) scaled factor [rad/sqrt(N m)]: C_s = B_s B_s^T.
         length: characteristic length L [m] of the scaling D.
-        range_factor: (6, r') scaled matrix with the range of B_s whose singular values
+        range_factor: (6, r) matrix A with B_s = A diag(w), w > 0, whose singular values
             decide the rank and the rigid directions (default: B_s itself). The
             compliance passes the kinematic part J N V of B_s = J N V diag(1/sigma), so
             that one enormous compliance (a near-singular pose) is not mistaken for
             rigidity of the other directions; the condition number and K come from B_s.
+        spread: max(w) / min(w). The singular values of A and B_s differ by at most this
+            factor, so A is full rank without being looked at when
+            beta_6 > RANK_RTOL spread beta_1.
     """
     d = twist_scaling(length)
     B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
-    U, beta, _ = np.linalg.svd(B_s, full_matrices=True) if B_s.size else (np.eye(6), [], None)
-    if range_factor is None:
-        rank = int(np.count_nonzero(beta > RANK_RTOL * beta[0])) if len(beta) else 0
-        basis = U
-    else:
-        kept, _, _, basis = split_factor(range_factor)
-        rank = kept.size
+    U, beta, _ = svd(B_s) if B_s.size else (np.eye(6), np.zeros(0), None)
+    rank = int(np.count_nonzero(beta > RANK_RTOL * beta[0])) if beta.size and beta[0] else 0
+    basis = U
+    if range_factor is not None and not (rank == 6 and beta[5] > RANK_RTOL * spread * beta[0]):
+        basis, s_k, _ = svd(range_factor)
+        rank = int(np.count_nonzero(s_k > RANK_RTOL * s_k[0])) if s_k.size and s_k[0] else 0
     cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
     rigid = basis[:, rank:] * d[:, None]  # null(C) = D null(C_s)
     rigid = np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid
@@ -158,7 +184,7 @@ def spectrum_from_factor(
     if rank == 6:
         Ub = U / beta  # K_s = U diag(beta^-2) U^T
         K_s = Ub @ Ub.T
-        K = readonly(0.5 * (K_s + K_s.T) * np.outer(d, d))
+        K = frozen(0.5 * (K_s + K_s.T) * np.outer(d, d))
     return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
 
 

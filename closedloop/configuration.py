@@ -2,14 +2,14 @@
 
 In the manner of pink's and mink's ``Configuration``: one object a configuration, with
 a Pinocchio Data of its own (never shared, so configurations can be used from several
-threads at once), a read-only q, and the kinematics computed once at construction: joint
-placements and Jacobians, frame placements, the closure residual (checked once against
-:data:`CLOSURE_TOL`), the characteristic length of the mechanism. Jacobians are computed
-on first use and kept.
+threads at once; taken from the model's pool of workspaces and given back when the
+configuration is gone), a read-only q, and the kinematics computed once at construction:
+joint placements and Jacobians, frame placements, the closure residual (checked once
+against :data:`CLOSURE_TOL`). Jacobians are computed on first use and kept.
 
 The closure residual is judged unit-free: metres are divided by the characteristic
-length L (:func:`closedloop.conditioning.characteristic_length` of the joint origins),
-radians are taken as they are.
+length L of the mechanism (:attr:`ClosedLoopModel.length`), radians are taken as they
+are.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from .conditioning import characteristic_length, check_length
+from .arrays import frozen
+from .conditioning import check_length
 from .exceptions import InvalidInputError, OpenLoopError
 from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
 from .model import ClosedLoopModel
@@ -36,13 +37,14 @@ class Configuration:
     Args:
         model: the model with closures and springs.
         q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints].
-        length: characteristic length L [m] (default: diagonal of the bounding box of the
-            joint origins at q).
+        length: characteristic length L [m] (default: ``model.length``, the diagonal of the
+            bounding box of the joint origins at the neutral configuration).
 
     Attributes:
         model: the :class:`ClosedLoopModel`.
         q: (nq,) read-only configuration.
-        data: this configuration's own :class:`pinocchio.Data` (kinematics of q).
+        data: this configuration's own :class:`pinocchio.Data` (kinematics of q), valid
+            while the configuration lives (it then goes back to the model's pool).
         length: characteristic length L [m].
         residual: (m,) read-only closure residual [m for points; m, rad for welds], in the
             axes of each closure's side-1 anchor (Pinocchio's convention).
@@ -55,26 +57,23 @@ class Configuration:
                 f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
             )
         self.model = model
-        q = model.check_configuration(q)
-        q.flags.writeable = False
-        self.q = q
+        self.q = q = frozen(model.check_configuration(q))
         pm = model.model
-        self.data = pm.createData()
-        self._constraint_datas = [c.constraint.createData() for c in model.closures]
+        self.data, self._constraint_datas = model.acquire_workspace()
         pin.computeJointJacobians(pm, self.data, q)
         pin.updateFramePlacements(pm, self.data)
-        self.length = (
-            characteristic_length([M.translation for M in self.data.oMi])
-            if length is None
-            else check_length(length)
-        )
-        r = residual_rows(model, self.data, self._constraint_datas)
-        r.flags.writeable = False
-        self.residual = r
+        self.length = model.length if length is None else check_length(length)
+        self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
         scaled = np.where(model.linear_rows, r / self.length, r)
         self.closure_error = float(np.max(np.abs(scaled), initial=0.0))
         self._closure_jacobian: np.ndarray | None = None
         self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
+
+    def __del__(self) -> None:
+        # the workspace goes back to the model's pool (not shared while this one lives)
+        data = self.__dict__.get("data")
+        if data is not None:
+            self.model.release_workspace((data, self._constraint_datas))
 
     @property
     def is_closed(self) -> bool:
@@ -107,8 +106,7 @@ class Configuration:
         """(m, nv) read-only Jacobian of :attr:`residual` with respect to the tangent of q."""
         if self._closure_jacobian is None:
             Jc = jacobian_rows(self.model, self.data, self._constraint_datas, calc=False)
-            Jc.flags.writeable = False
-            self._closure_jacobian = Jc
+            self._closure_jacobian = frozen(Jc)
         return self._closure_jacobian
 
     def frame_jacobian(self, frame: str, axes: str = "world") -> np.ndarray:
@@ -120,9 +118,9 @@ class Configuration:
         """
         key = (frame, axes)
         if key not in self._frame_jacobians:
-            J = frame_jacobian_rows(self.model, self.data, frame, axes)
-            J.flags.writeable = False
-            self._frame_jacobians[key] = J
+            self._frame_jacobians[key] = frozen(
+                frame_jacobian_rows(self.model, self.data, frame, axes)
+            )
         return self._frame_jacobians[key]
 
     def frame_placement(self, frame: str) -> pin.SE3:

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .arrays import frozen
+from .conditioning import characteristic_length
 from .exceptions import InvalidInputError, NameNotFoundError
 
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
@@ -93,12 +95,7 @@ def _linear_coordinates(model: pin.Model) -> np.ndarray:
         if jm.nv:
             S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
             mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
-    return _frozen(mask)
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a.flags.writeable = False
-    return a
+    return frozen(mask)
 
 
 class ClosedLoopModel:
@@ -135,6 +132,9 @@ class ClosedLoopModel:
     ):
         self.model = model
         self._local = threading.local()
+        self._pool: list[tuple[pin.Data, list]] = []
+        self._memo: dict = {}
+        self._length: float | None = None
         self.closures = tuple(
             c if isinstance(c, Closure) else Closure(c, f"closure{i}")
             for i, c in enumerate(closures)
@@ -153,7 +153,7 @@ class ClosedLoopModel:
         self.stiffness = self._stiffness_vector(springs or {}, locked)
         self.linear_coordinates = _linear_coordinates(model)
         rows = [i < 3 for c in self.closures for i in range(c.size)]
-        self.linear_rows = _frozen(np.array(rows, dtype=bool))
+        self.linear_rows = frozen(np.array(rows, dtype=bool))
 
     # ------------------------------------------------------------------ workspaces
     @property
@@ -174,6 +174,42 @@ class ClosedLoopModel:
         """This thread's constraint datas of the closures (see :attr:`data`)."""
         self.data  # noqa: B018  (creates this thread's workspace)
         return self._local.constraint_datas
+
+    def acquire_workspace(self) -> tuple[pin.Data, list]:
+        """A (Data, constraint datas) pair for the exclusive use of one owner.
+
+        Taken from a pool of released workspaces (creating a Data costs more than a whole
+        stiffness query); give it back with :meth:`release_workspace` when the owner is
+        gone. ``list.pop`` and ``list.append`` are atomic, so owners in different threads
+        never get the same pair.
+        """
+        try:
+            return self._pool.pop()
+        except IndexError:
+            return self.model.createData(), [c.constraint.createData() for c in self.closures]
+
+    def release_workspace(self, workspace: tuple[pin.Data, list]) -> None:
+        """Return a workspace of :meth:`acquire_workspace` to the pool (at most 16 kept)."""
+        if len(self._pool) < 16:
+            self._pool.append(workspace)
+
+    def memo(self, key, factory):
+        """``factory()``, computed once per ``key`` for this model (immutable results only)."""
+        try:
+            return self._memo[key]
+        except KeyError:
+            return self._memo.setdefault(key, factory())
+
+    @property
+    def length(self) -> float:
+        """Characteristic length L [m]: diagonal of the bounding box of the joint origins at
+        the neutral configuration (1 m if they coincide), computed once; the default scale
+        of the unit-free rules (:mod:`closedloop.conditioning`)."""
+        if self._length is None:
+            data = self.model.createData()
+            pin.forwardKinematics(self.model, data, pin.neutral(self.model))
+            self._length = characteristic_length([M.translation for M in data.oMi])
+        return self._length
 
     def _stiffness_vector(self, springs, locked) -> np.ndarray:
         k = np.zeros(self.model.nv)
