@@ -14,6 +14,8 @@ are.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pinocchio as pin
 
@@ -150,3 +152,19 @@ def as_configuration(model, q=None, *, length: float | None = None) -> Configura
     if q is None:
         raise InvalidInputError("a configuration q (nq,) is needed with a ClosedLoopModel")
     return Configuration(model, q, length=length)
+
+
+def accepts_configuration(func):
+    """Let ``func(model, q, *args)`` also be called as ``func(state, *args)``.
+
+    A :class:`Configuration` in first place is replaced by its model and its q, so that
+    every function written for ``(model, q)`` works on the state object.
+    """
+
+    @functools.wraps(func)
+    def wrapper(model, *args, **kwargs):
+        if isinstance(model, Configuration):
+            return func(model.model, model.q, *args, **kwargs)
+        return func(model, *args, **kwargs)
+
+    return wrapper

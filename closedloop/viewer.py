@@ -43,6 +43,7 @@ import pinocchio as pin
 from pinocchio.visualize import MeshcatVisualizer
 from pinocchio.visualize.meshcat_visualizer import Plane, applyScalingOnHomegeneousTransform
 
+from .configuration import accepts_configuration
 from .exceptions import InvalidInputError
 from .model import ClosedLoopModel
 from .viewer_scene import (
@@ -303,6 +304,7 @@ def check_output_path(html: str | Path) -> Path:
     return path
 
 
+@accepts_configuration
 def run_view(
     clm: ClosedLoopModel,
     q: np.ndarray,
@@ -322,7 +324,8 @@ def run_view(
 
     Args:
         clm, q, frame, wrench, scale, nonlinear, close_loops, rotational: as in
-            :func:`closedloop.viewer_scene.deflection_scene`.
+            :func:`closedloop.viewer_scene.deflection_scene` (a :class:`Configuration`
+            may stand for clm and q).
         html: file for the self-contained page; None serves the live page (127.0.0.1)
             until Ctrl-C or for ``duration`` [s].
         autoplay: start the load-ramp animation when the page opens.

@@ -48,6 +48,7 @@ import pinocchio as pin
 from .arrays import check_wrench, readonly
 from .assembly import assemble
 from .compliance import ComplianceResult, compliance
+from .configuration import accepts_configuration
 from .exceptions import InvalidInputError
 from .kinematics import frame_jacobian, update_kinematics
 from .model import ClosedLoopModel
@@ -246,6 +247,7 @@ def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rot
     return tuple(out)
 
 
+@accepts_configuration
 def deflection_scene(
     clm: ClosedLoopModel,
     q: np.ndarray,
@@ -261,7 +263,7 @@ def deflection_scene(
     """Poses, amplification, ellipsoids and load ramp for a wrench at ``frame``.
 
     Args:
-        clm: model with closures and springs.
+        clm: model with closures and springs (or a :class:`Configuration`, then no q).
         q: (nq,) assembled configuration (the unloaded pose, rest of the springs).
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.

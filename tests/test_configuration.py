@@ -160,3 +160,13 @@ def test_frame_jacobian_matches_pinocchio(fourbar):
         fourbar.model, data, q, fourbar.model.getFrameId("P"), pin.LOCAL_WORLD_ALIGNED
     )
     np.testing.assert_array_equal(state.frame_jacobian("P"), J)
+
+
+def test_functions_written_for_model_and_q_take_the_state(fourbar):
+    from closedloop.viewer_scene import deflection_scene
+
+    q = cl.assemble(fourbar, actuated=[0.3]).q
+    state = cl.Configuration(fourbar, q)
+    w = [5.0, -2.0, 0.0, 0.0, 0.0, 0.1]
+    a, b = deflection_scene(state, "P", w), deflection_scene(fourbar, q, "P", w)
+    np.testing.assert_array_equal(a.q_deflected, b.q_deflected)
