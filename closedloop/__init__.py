@@ -15,8 +15,6 @@ The modules (``closedloop.compliance``, ``closedloop.assembly``, ...) stay impor
 
 from __future__ import annotations
 
-import importlib
-
 from .assembly import Assembly, assemble
 from .compliance import ComplianceResult, compliance
 from .conditioning import ILL_CONDITIONED, RANK_RTOL
@@ -26,6 +24,8 @@ from .exceptions import (
     ClosedLoopError,
     EquilibriumError,
     InvalidInputError,
+    JointLimitError,
+    JointLimitWarning,
     MechanismError,
     ModelFileError,
     NameNotFoundError,
@@ -36,19 +36,11 @@ from .exceptions import (
 from .indices import StiffnessIndices
 from .io import load_model, robot_data_dir
 from .model import ClosedLoopModel
+from .preload import PreloadedCompliance, preloaded_compliance
+from .statics import Equilibrium, solve_equilibrium
+from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
 
 __version__ = "0.2.0"
-
-#: Names loaded on first use, and the module that defines each.
-_LAZY = {
-    "solve_equilibrium": "statics",
-    "Equilibrium": "statics",
-    "preloaded_compliance": "preload",
-    "PreloadedCompliance": "preload",
-    "tangent_stiffness": "preload",
-    "geometric_stiffness": "preload",
-    "closure_curvature": "preload",
-}
 
 __all__ = [
     "CLOSURE_TOL",
@@ -60,31 +52,26 @@ __all__ = [
     "ClosedLoopModel",
     "ComplianceResult",
     "Configuration",
+    "Equilibrium",
     "EquilibriumError",
     "InvalidInputError",
+    "JointLimitError",
+    "JointLimitWarning",
     "MechanismError",
     "ModelFileError",
     "NameNotFoundError",
     "OpenLoopError",
+    "PreloadedCompliance",
     "RigidDirectionsError",
     "SingularConfigurationError",
     "StiffnessIndices",
     "assemble",
+    "closure_curvature",
     "compliance",
+    "geometric_stiffness",
     "load_model",
+    "preloaded_compliance",
     "robot_data_dir",
-    *_LAZY,
+    "solve_equilibrium",
+    "tangent_stiffness",
 ]
-
-
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'closedloop' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})

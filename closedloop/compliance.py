@@ -286,8 +286,8 @@ def compliance(
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
         SingularConfigurationError: the compliance overflows (springs near 1e-308).
     """
-    if isinstance(model, Configuration) and isinstance(q, str) and frame is None:
-        q, frame = None, q
+    if isinstance(model, Configuration) and isinstance(q, str):  # compliance(state, frame, ...)
+        q, frame, axes = None, q, axes if frame is None else frame
     if frame is None:
         raise TypeError("compliance() needs the name of the loaded frame")
     state = as_configuration(model, q, length=length)

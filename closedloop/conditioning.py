@@ -160,14 +160,14 @@ def spectrum_from_factor(
     Args:
         B_s: (6, r) scaled factor [rad/sqrt(N m)]: C_s = B_s B_s^T.
         length: characteristic length L [m] of the scaling D.
-        range_factor: (6, r) matrix A with B_s = A diag(w), w > 0, whose singular values
-            decide the rank and the rigid directions (default: B_s itself). The
+        range_factor: (6, r) matrix A with B_s = A W, W (r, r) invertible, whose singular
+            values decide the rank and the rigid directions (default: B_s itself). The
             compliance passes the kinematic part J N V of B_s = J N V diag(1/sigma), so
             that one enormous compliance (a near-singular pose) is not mistaken for
             rigidity of the other directions; the condition number and K come from B_s.
-        spread: max(w) / min(w). The singular values of A and B_s differ by at most this
-            factor, so A is full rank without being looked at when
-            beta_6 > RANK_RTOL spread beta_1.
+        spread: cond(W). The singular values of A and B_s differ by at most this factor,
+            so A is full rank without being looked at when beta_6 > RANK_RTOL spread
+            beta_1.
     """
     d = twist_scaling(length)
     B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
@@ -185,6 +185,26 @@ def spectrum_from_factor(
         Ub = U / beta  # K_s = U diag(beta^-2) U^T
         K_s = Ub @ Ub.T
         K = frozen(0.5 * (K_s + K_s.T) * np.outer(d, d))
+    return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
+
+
+def spectrum_of_matrix(C: np.ndarray, length: float, range_factor: np.ndarray) -> Spectrum:
+    """Spectrum of a compliance C (6, 6) [SI] without a symmetric square-root factor.
+
+    For a C that is not symmetric (a preload moment) or not definite (an unstable
+    preloaded equilibrium): rank and rigid directions from ``range_factor`` (as in
+    :func:`spectrum_from_factor`), K = C^-1 by an LU solve of the scaled matrix, and the
+    2-norm condition number of the scaled K.
+    """
+    d = twist_scaling(length)
+    basis, s_k, _ = svd(range_factor)
+    rank = int(np.count_nonzero(s_k > RANK_RTOL * s_k[0])) if s_k.size and s_k[0] else 0
+    rigid = basis[:, rank:] * d[:, None]
+    rigid = np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid
+    Cs = C * np.outer(d, d)
+    s_C = svd(Cs)[1]
+    cond = float(s_C[0] / s_C[rank - 1]) if rank else 1.0
+    K = frozen(np.linalg.solve(Cs, np.eye(6)) * np.outer(d, d)) if rank == 6 else None
     return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
 
 

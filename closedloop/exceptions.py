@@ -88,12 +88,45 @@ class EquilibriumError(ClosedLoopError):
         residual: infinity norm of the closure residual reached [m, rad].
         force_residual: infinity norm of the unbalanced generalised force [N m, N].
         load_fraction: fraction of the wrench at which equilibrium was last found.
+        limit_load: True when the tangent stiffness at the last equilibrium is
+            near-singular (a limit load ends the branch), False for a plain failure of the
+            iterations (None when not examined).
+        stability_margin: that spring-scaled margin (1 unloaded, 0 at a limit), or None.
+        iterations: Newton iterations spent, or None.
     """
 
-    def __init__(self, message: str, residual: float, force_residual: float, load_fraction):
+    def __init__(
+        self,
+        message: str,
+        residual: float,
+        force_residual: float,
+        load_fraction,
+        *,
+        limit_load: bool | None = None,
+        stability_margin: float | None = None,
+        iterations: int | None = None,
+    ):
         self.residual, self.force_residual = residual, force_residual
         self.load_fraction = load_fraction
+        self.limit_load, self.stability_margin = limit_load, stability_margin
+        self.iterations = iterations
         super().__init__(
             f"{message} (closure residual reached: {residual:.3e}, unbalanced force: "
             f"{force_residual:.3e}, equilibrium found up to {load_fraction:.3g} of the load)"
         )
+
+
+class JointLimitError(EquilibriumError):
+    """``enforce_limits=True`` and the load drives joints beyond their position limits.
+
+    Attributes (besides those of :class:`EquilibriumError`):
+        joints: names of the joints outside their limits.
+    """
+
+    def __init__(self, message, residual, force_residual, load_fraction, joints):
+        super().__init__(message, residual, force_residual, load_fraction, limit_load=False)
+        self.joints = tuple(joints)
+
+
+class JointLimitWarning(UserWarning):
+    """An equilibrium lies outside the position limits of some joints."""

@@ -13,18 +13,26 @@ works on the equilibrium equations (virtual work) rather than on an energy:
     F(q, lambda) = g(q) - J(q)^T w + J_c(q)^T lambda = 0,   c(q) = 0,
 
 with g = Jd^T K_q dq the spring forces (Jd = d dq/dq, 1 for 1-dof joints), J (6, nv) the
-frame Jacobian (world-aligned axes, at the frame origin), c (m,) the stacked closure
-residuals, J_c their Jacobian and lambda (m,) the multipliers. Each Newton step splits the
-free coordinates by an SVD of J_c into its row space (a minimum-norm Gauss-Newton step
-that restores the closures; redundant closure rows only lower the rank) and its null
-space N (a Newton step on N^T F with the tangent stiffness of
-:func:`closedloop.preload.tangent_stiffness`). The multipliers are the least-squares
-ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the part of the closure forces that
-redundant rows leave statically indeterminate is set to zero (minimum norm). The load is
-followed from zero (continuation): each increment starts from the tangent prediction
-dq = N K_t^-1 N^T J^T dw, is sized so that this prediction stays small, and is halved
-when Newton fails, so that the solution stays on the branch that starts at q_rest
-(past a limit load, where K_t turns singular, no equilibrium is found on it).
+frame Jacobian (world-aligned axes, at the frame origin), c (m,) the closure residuals of
+:func:`closedloop.tangent.closure_gap` (world gap p2 - p1 of each point closure, log6 of
+each weld: the iterates do not depend on the order in which a pair is written), J_c their
+Jacobian and lambda (m,) the multipliers. Each Newton step splits the free coordinates by
+an SVD of J_c into its row space (a minimum-norm Gauss-Newton step that restores the
+closures; redundant closure rows only lower the rank) and its null space N (a Newton step
+on N^T F with the tangent stiffness of :func:`closedloop.tangent.tangent_stiffness`). The
+multipliers are the least-squares ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the
+part of the closure forces that redundant rows leave statically indeterminate is set to
+zero (minimum norm). The load is followed from zero (continuation): each increment starts
+from the tangent prediction dq = N K_t^-1 N^T J^T dw, is sized so that this prediction
+stays small, and is halved when Newton fails, so that the solution stays on the branch
+that starts at q_rest. When even the smallest increment fails, the tangent stiffness at
+the last equilibrium tells a limit load (near-singular: no equilibrium further on this
+branch) from a plain failure of the iterations.
+
+Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and
+prismatic joints) are not part of the equations: an equilibrium outside them is flagged
+(:attr:`Equilibrium.limits_violated`, :class:`JointLimitWarning`) or refused
+(``enforce_limits=True``, :class:`JointLimitError`).
 
 For a pure force the equilibrium is a stationary point of :func:`potential_energy` on the
 closure manifold, an independent check.
@@ -32,23 +40,19 @@ closure manifold, an independent check.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench, readonly
-from .compliance import spring_subspace
-from .exceptions import EquilibriumError, InvalidInputError
-from .kinematics import (
-    RANK_RTOL,
-    closure_jacobian,
-    closure_residual,
-    frame_jacobian,
-    update_kinematics,
-)
+from .compliance import spring_factor
+from .configuration import Configuration, accepts_configuration
+from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
+from .kinematics import update_kinematics
 from .model import ClosedLoopModel
-from .preload import tangent_stiffness
+from .tangent import EquilibriumEquations
 
 #: Closure tolerance of the equilibrium (infinity norm) [m for points; m, rad for welds].
 CLOSURE_TOL = 1e-12
@@ -56,8 +60,19 @@ CLOSURE_TOL = 1e-12
 FORCE_RTOL = 1e-11
 #: Newton step [rad or m], relative to max(1, |q|), after which q counts as converged.
 STEP_TOL = 1e-12
-#: Largest closure residual accepted in the rest configuration [m, rad].
-REST_TOL = 1e-8
+#: Stability margin (smallest eigenvalue of the symmetric part of the spring-scaled tangent
+#: stiffness, 1 unloaded) at the last equilibrium below which a failed continuation is a
+#: limit load. Near a limit point the margin falls like the square root of the remaining
+#: load, and the continuation stops within the smallest increment of it: measured 0.011 to
+#: 0.053 at the limit loads of the four-bar (five directions) and of the Delta (three); a
+#: Newton failure away from them leaves it O(1) (0.5 to 1 in the tests).
+LIMIT_MARGIN = 0.1
+#: Excursion beyond a joint limit [m or rad] that counts as a violation: above the accuracy
+#: of an equilibrium (1e-12), so that a rest configuration on a limit is not flagged for
+#: rounding, and far below any mechanical clearance.
+LIMIT_TOL = 1e-9
+#: Limits at or beyond this magnitude [m, rad] are Pinocchio's "unbounded" defaults.
+UNBOUNDED_LIMIT = 1e100
 
 
 @dataclass(frozen=True)
@@ -75,15 +90,18 @@ class Equilibrium:
         rotation: (3,) rotation vector of the frame from its unloaded orientation [rad],
             world axes: R = exp(rotation) R_rest.
         joint_deflection: (nv,) difference(q_rest, q) [rad or m].
-        multipliers: (m,) closure multipliers lambda, one per closure row; for a point
-            closure, the force [N] that side 2 exerts on side 1 at the anchor, in the axes
-            of the side-1 anchor frame; for a weld, the wrench [N, N m] conjugate to its
-            log6 residual rows. Minimum-norm when closure rows are redundant (no self-stress).
+        multipliers: (m,) closure multipliers lambda, one per row of
+            :func:`closedloop.tangent.closure_gap`; for a point closure, the force [N] that
+            side 2 exerts on side 1 at the anchor, in world axes; for a weld, the wrench
+            [N, N m] conjugate to its log6 residual rows. Minimum-norm when closure rows
+            are redundant (no self-stress).
         closure_residual: infinity norm of the closure residual at q [m, rad].
         force_residual: infinity norm of the unbalanced generalised force
             (g - J^T w + J_c^T lambda on the free coordinates) [N m, N].
         iterations: Newton iterations, all load increments together.
         load_steps: load increments used (1 when the full load converged at once).
+        limits_violated: names of the joints outside their position limits at q (see
+            :func:`joints_outside_limits`); empty when every limit holds.
     """
 
     q: np.ndarray
@@ -98,11 +116,43 @@ class Equilibrium:
     force_residual: float
     iterations: int
     load_steps: int
+    limits_violated: tuple[str, ...] = ()
 
     @property
     def displacement(self) -> np.ndarray:
         """(6,) (translation [m], rotation vector [rad]) of the frame, world axes."""
         return np.concatenate([self.translation, self.rotation])
+
+
+def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tuple]:
+    """Revolute and prismatic joints whose coordinate in q (nq,) is outside its limits.
+
+    A bound counts when it is finite and below :data:`UNBOUNDED_LIMIT` in magnitude;
+    a joint whose lower limit is not below its upper one (URDF ``<limit>`` without
+    ``lower``/``upper`` reads as [0, 0]) has none. Returns name -> (value, lower, upper)
+    [rad or m] for every coordinate more than :data:`LIMIT_TOL` outside, in joint order.
+    """
+    model, out = clm.model, {}
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.nq != 1 or not jm.shortname().startswith(("JointModelR", "JointModelP")):
+            continue
+        i = jm.idx_q
+        lo, hi, x = lower[i], upper[i], q[i]
+        if not lo < hi:
+            continue
+        below = abs(lo) < UNBOUNDED_LIMIT and x < lo - LIMIT_TOL
+        above = abs(hi) < UNBOUNDED_LIMIT and x > hi + LIMIT_TOL
+        if below or above:
+            out[model.names[j]] = (float(x), float(lo), float(hi))
+    return out
+
+
+def _describe_limits(bad: dict[str, tuple]) -> str:
+    return ", ".join(
+        f"{n} = {x:.6g} (limits [{lo:.6g}, {hi:.6g}])" for n, (x, lo, hi) in bad.items()
+    )
 
 
 def frame_displacement(
@@ -143,93 +193,51 @@ def potential_energy(
     return float(0.5 * np.sum(k * dq * dq) - f @ dp)
 
 
-class _Statics:
-    """Equilibrium equations of one model, frame, wrench and rest configuration."""
-
-    def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
-        self.clm, self.q_rest, self.frame = clm, q_rest, frame
-        self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-        self.free = np.flatnonzero(np.isfinite(clm.stiffness))
-
-    def evaluate(self, q: np.ndarray, w: np.ndarray) -> dict:
-        """Residuals, multipliers and the SVD of the closure Jacobian at q under w."""
-        clm, free = self.clm, self.free
-        update_kinematics(clm, q)
-        c = closure_residual(clm, q, update=False)
-        A = closure_jacobian(clm, q, update=False)[:, free]
-        J = frame_jacobian(clm, q, self.frame, "world", update=False)
-        dq = pin.difference(clm.model, self.q_rest, q)
-        Jd = pin.dDifference(clm.model, self.q_rest, q, pin.ARG1)
-        g = Jd.T @ (self.k * dq)
-        load = J.T @ w
-        F = (g - load)[free]
-        if A.size:
-            U, s, Vt = np.linalg.svd(A, full_matrices=True)
-            r = int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0
-        else:
-            U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0
-        Ur, sr, R, N = U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
-        lam = -Ur @ ((R.T @ F) / sr)
-        unbalanced = F - R @ (R.T @ F)  # F + A^T lam: its component along N
-        scale = max(np.max(np.abs(g[free]), initial=0.0), np.max(np.abs(load[free]), initial=0.0))
-        return {
-            "c": c,
-            "closure": float(np.max(np.abs(c), initial=0.0)),
-            "F": F,
-            "force": float(np.max(np.abs(unbalanced), initial=0.0)),
-            "force_tol": FORCE_RTOL * scale,
-            "lam": lam,
-            "Ur": Ur,
-            "sr": sr,
-            "R": R,
-            "N": N,
-        }
-
-    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> np.ndarray:
-        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w).
-
-        Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
-        closures plus the Newton step of N^T F on the admissible motions. With ``load``
-        (6,): the rate dq/ds of the equilibrium when the wrench grows by s ``load``.
-        """
-        free = self.free
-        H = tangent_stiffness(self.clm, q, self.q_rest, self.frame, w, st["lam"], update=False)
-        H = H[np.ix_(free, free)]
-        R, N = st["R"], st["N"]
-        if load is None:
-            dx = -R @ ((st["Ur"].T @ st["c"]) / st["sr"])  # restores the closures
-            rhs = -N.T @ (st["F"] + H @ dx)
-        else:
-            J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
-            dx, rhs = np.zeros(free.size), N.T @ (J.T @ load)[free]
-        dx += N @ np.linalg.lstsq(N.T @ H @ N, rhs, rcond=1e-12)[0]
-        v = np.zeros(self.clm.model.nv)
-        v[free] = dx
-        return v
-
-    def newton(self, q, w, *, tol: float, max_iter: int, max_step: float):
-        """Newton iterations at a fixed wrench; returns (q or None, state, iterations)."""
-        st = self.evaluate(q, w)
-        for it in range(max_iter + 1):
-            if st["closure"] <= tol and st["force"] <= st["force_tol"]:
-                return q, st, it
-            if it == max_iter:
-                break
-            v = self.step(q, w, st)
-            size = np.max(np.abs(v), initial=0.0)
-            if not np.isfinite(size):
-                break
-            if size > max_step:
-                v *= max_step / size
-            q = pin.integrate(self.clm.model, q, v)
-            st = self.evaluate(q, w)
-            if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
-                break
-            if st["closure"] <= tol and size <= STEP_TOL * max(1.0, np.max(np.abs(q))):
-                return q, st, it + 1  # Newton converges quadratically: q is at rounding level
-        return None, st, max_iter
+def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_step: float):
+    """Newton iterations at a fixed wrench; returns (q or None, state, iterations)."""
+    st = eqs.evaluate(q, w)
+    for it in range(max_iter + 1):
+        if st["closure"] <= tol and st["force"] <= FORCE_RTOL * st["scale"]:
+            return q, st, it
+        if it == max_iter:
+            break
+        v = eqs.step(q, w, st)
+        size = np.max(np.abs(v), initial=0.0)
+        if not np.isfinite(size):
+            break
+        if size > max_step:
+            v *= max_step / size
+        q = pin.integrate(eqs.clm.model, q, v)
+        st = eqs.evaluate(q, w)
+        if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
+            break
+        if st["closure"] <= tol and size <= STEP_TOL * max(1.0, np.max(np.abs(q))):
+            return q, st, it + 1  # Newton converges quadratically: q is at rounding level
+    return None, st, max_iter
 
 
+def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None:
+    """Raise InvalidInputError for a solver argument outside its range (NaN included)."""
+
+    def shown(v) -> str:
+        return repr(v.item() if isinstance(v, np.generic) else v)
+
+    for name, value, unit, allow_inf in (
+        ("tol", tol, "m, rad", False),
+        ("max_step", max_step, "rad or m", True),
+        ("max_increment", max_increment, "rad or m", True),
+    ):
+        ok = isinstance(value, int | float | np.number) and not isinstance(value, bool)
+        if not (ok and value > 0 and (allow_inf or np.isfinite(value))):
+            kind = "> 0 (inf allowed)" if allow_inf else "finite and > 0"
+            raise InvalidInputError(f"{name} must be a number {kind} [{unit}], got {shown(value)}")
+    for name, value, least in (("max_iter", max_iter, 1), ("max_halvings", max_halvings, 0)):
+        ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+        if not (ok and value >= least):
+            raise InvalidInputError(f"{name} must be an integer >= {least}, got {shown(value)}")
+
+
+@accepts_configuration
 def solve_equilibrium(
     clm: ClosedLoopModel,
     q_rest: np.ndarray,
@@ -241,6 +249,7 @@ def solve_equilibrium(
     max_halvings: int = 12,
     max_step: float = 0.5,
     max_increment: float = 0.1,
+    enforce_limits: bool = False,
 ) -> Equilibrium:
     """Static equilibrium of the mechanism under a dead-load wrench at ``frame``.
 
@@ -251,65 +260,98 @@ def solve_equilibrium(
     then exact to rounding.
 
     Args:
-        clm: model with closures and springs.
-        q_rest: (nq,) assembled configuration, rest configuration of the springs.
+        clm: model with closures and springs (or a :class:`Configuration`, then no q_rest:
+            its q is the rest configuration).
+        q_rest: (nq,) assembled configuration, rest configuration of the springs; it must
+            close the loops to :data:`closedloop.configuration.CLOSURE_TOL`.
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin,
             fixed in world axes while the frame moves.
-        tol: closure tolerance (infinity norm) [m, rad].
-        max_iter: Newton iterations per load increment.
-        max_halvings: how many times a failed load increment may be halved.
-        max_step: largest Newton step (infinity norm) [rad or m].
+        tol: closure tolerance (infinity norm) [m, rad], finite and > 0.
+        max_iter: Newton iterations per load increment (>= 1).
+        max_halvings: how many times in all a failed load increment may be halved (>= 0).
+        max_step: largest Newton step (infinity norm) [rad or m], > 0.
         max_increment: largest predicted joint motion per load increment (infinity
-            norm) [rad or m]; larger deflections are followed in several increments.
+            norm) [rad or m], > 0; larger deflections are followed in several increments.
+        enforce_limits: refuse the load as soon as an equilibrium along the way leaves
+            the joint limits (:class:`JointLimitError`) instead of flagging the result.
+
+    Warns:
+        JointLimitWarning: the equilibrium lies outside joint limits (also listed in
+            :attr:`Equilibrium.limits_violated`).
 
     Raises:
-        InvalidInputError: a wrench that is not 6 finite values, a bad q_rest, or a q_rest
-            that violates the closures.
+        InvalidInputError: a wrench that is not 6 finite values, a solver argument out of
+            range, a bad q_rest; :class:`OpenLoopError` for a q_rest that does not close
+            the loops.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame (no equilibrium).
-        EquilibriumError: Newton failed even with the smallest load increment; the error
-            carries the residuals reached.
+        EquilibriumError: no equilibrium found even with the smallest load increment. Its
+            ``limit_load`` is True when the tangent stiffness at the last equilibrium is
+            near-singular (stability margin <= :data:`LIMIT_MARGIN`: a limit load ends the
+            branch), False when Newton merely failed to converge; ``stability_margin``
+            holds that margin. :class:`JointLimitError` (a subclass) with
+            ``enforce_limits``.
     """
+    _check_options(tol, max_iter, max_halvings, max_step, max_increment)
     w = check_wrench(wrench)
-    q_rest = clm.check_configuration(q_rest)
-    clm.frame_id(frame)  # unknown frame: NameNotFoundError before any work
-    r0 = float(np.max(np.abs(closure_residual(clm, q_rest)), initial=0.0))
-    if r0 > REST_TOL:
-        raise InvalidInputError(
-            f"q_rest violates the closures by {r0:.3e} (> {REST_TOL:g}); assemble it first "
-            "(closedloop.assembly.assemble)"
-        )
-    spring_subspace(clm, q_rest, frame_jacobian(clm, q_rest, frame, update=False), frame)
-    statics = _Statics(clm, q_rest, frame)
+    rest = Configuration(clm, q_rest).require_closed()  # the one closure tolerance
+    q_rest = np.array(rest.q)
+    spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
+    eqs = EquilibriumEquations(clm, q_rest, frame)
+    where = f"for wrench {w.tolist()} at frame {frame!r} of {clm.name!r}"
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
+    margin = 1.0  # stability margin of the last equilibrium (1 at rest)
+    if enforce_limits:
+        _enforce_limits(clm, q, eqs.evaluate(q, 0.0 * w), 0.0, where)
     while t < 1.0:
-        st = statics.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
-        rate = statics.step(q, t * w, st, load=w) if np.any(w) else np.zeros(clm.model.nv)
+        st = eqs.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
+        rate = eqs.step(q, t * w, st, load=w) if np.any(w) else np.zeros(clm.model.nv)
         ds = min(dt, 1.0 - t)
         speed = float(np.max(np.abs(rate), initial=0.0))
         if speed * ds > max_increment:
             ds = max_increment / speed
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
+        if not s_try > t:  # also a NaN rate
+            detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
+            raise _failure(eqs, q, t, w, where, detail, iterations, st)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
-        q_new, st_try, it = statics.newton(
-            guess, s_try * w, tol=tol, max_iter=max_iter, max_step=max_step
+        q_new, st_try, it = _newton(
+            eqs, guess, s_try * w, tol=tol, max_iter=max_iter, max_step=max_step
         )
         iterations += it
-        if q_new is None:
+        # An increment whose equilibrium turns unstable far from the predicted point has
+        # jumped across a fold (a limit load) onto another branch: refused like a failed
+        # one. A branch that turns unstable where it is (a bifurcation, e.g. a column
+        # loaded through its hinge) is followed.
+        unstable, margin_new = False, margin
+        if q_new is not None and margin > 0.0:
+            margin_new = eqs.margin(q_new, s_try * w)
+            if margin_new <= 0.0:
+                predicted = np.max(np.abs(pin.difference(clm.model, q, guess)), initial=0.0)
+                corrected = np.max(np.abs(pin.difference(clm.model, guess, q_new)), initial=0.0)
+                unstable = corrected > 0.5 * max(predicted, STEP_TOL)
+        if q_new is None or unstable:
             halvings += 1
             if halvings > max_halvings:
-                raise EquilibriumError(
-                    f"no static equilibrium found for wrench {w.tolist()} at frame {frame!r} "
-                    f"of {clm.name!r} (a limit load, where the tangent stiffness turns "
-                    "singular, ends the branch that starts at q_rest)",
-                    st_try["closure"],
-                    st_try["force"],
-                    t,
+                what = "only an unstable equilibrium found" if unstable else "Newton failed"
+                detail = (
+                    f"{what} at {s_try:.6g} of the load, {iterations} iterations in all "
+                    f"({steps} increments, {halvings - 1} halvings)"
                 )
+                raise _failure(eqs, q, t, w, where, detail, iterations, st_try)
             dt = 0.5 * ds
             continue
-        q, st, t, steps, dt = q_new, st_try, s_try, steps + 1, 2.0 * ds
+        if enforce_limits:
+            _enforce_limits(clm, q_new, st_try, t, where)
+        q, st, t, steps, dt, margin = q_new, st_try, s_try, steps + 1, 2.0 * ds, margin_new
+    bad = joints_outside_limits(clm, q)
+    if bad:
+        warnings.warn(
+            f"the equilibrium {where} is outside the joint limits: {_describe_limits(bad)}",
+            JointLimitWarning,
+            stacklevel=2,
+        )
     disp = frame_displacement(clm, q, q_rest, frame)  # leaves the kinematics of q in clm.data
     return Equilibrium(
         q=readonly(q),
@@ -324,4 +366,49 @@ def solve_equilibrium(
         force_residual=st["force"],
         iterations=iterations,
         load_steps=max(steps, 1),
+        limits_violated=tuple(bad),
+    )
+
+
+def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:
+    """Raise JointLimitError when q is outside the joint limits (``enforce_limits``)."""
+    bad = joints_outside_limits(clm, q)
+    if bad:
+        raise JointLimitError(
+            f"the load drives joints beyond their limits {where}: {_describe_limits(bad)}",
+            st["closure"],
+            st["force"],
+            t_within,
+            bad,
+        )
+
+
+def _failure(eqs: EquilibriumEquations, q, t, w, where, detail, iterations, state):
+    """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
+
+    (q, t): the last equilibrium and its load fraction; ``state``: the :meth:`evaluate`
+    state whose residuals the error reports (of the failed attempt).
+    """
+    margin = eqs.margin(q, t * w)
+    limit = margin <= LIMIT_MARGIN
+    if limit:
+        reason = (
+            f"no static equilibrium found {where} beyond {t:.6g} of the load: a limit load "
+            f"(stability margin {margin:.3g} <= {LIMIT_MARGIN:g} there: the tangent stiffness "
+            f"is near-singular or indefinite) ends the branch that starts at q_rest; {detail}"
+        )
+    else:
+        reason = (
+            f"the solver failed to converge {where}: {detail}; not a limit load (stability "
+            f"margin {margin:.3g} > {LIMIT_MARGIN:g} at {t:.6g} of the load): try a smaller "
+            "max_increment or a larger max_iter"
+        )
+    return EquilibriumError(
+        reason,
+        state["closure"],
+        state["force"],
+        t,
+        limit_load=limit,
+        stability_margin=margin,
+        iterations=iterations,
     )

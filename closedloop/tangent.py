@@ -1,0 +1,386 @@
+"""Closure residual of the statics and the tangent stiffness of the equilibrium equations.
+
+The static equilibrium of a mechanism with joint springs under a dead-load wrench w at a
+frame (see :mod:`closedloop.statics`) solves
+
+    F(q, lambda) = g(q) - J(q)^T w + J_c(q)^T lambda = 0,   c(q) = 0,
+
+with g the spring forces, J (6, nv) the frame Jacobian (world-aligned axes, at the frame
+origin) and c (m,) the stacked closure residuals of :func:`closure_gap`:
+
+* a point closure (ball joint) contributes the **world gap** c = p2 - p1 [m] between its
+  two anchor points, Jacobian J_p2 - J_p1 (point Jacobians, world axes). Unlike
+  Pinocchio's ``R1^T (p2 - p1)`` (axes of side 1), it does not change when either body
+  spins about an axis through the anchor, so the equations, hence Newton's iterates, do
+  not depend on which body is written first; its multipliers lambda are world-axes forces
+  [N] (the force that side 2 exerts on side 1 at the anchor);
+* a weld contributes Pinocchio's log6 residual [m, rad] (:func:`closure_residual`), its
+  multipliers the conjugate wrench [N, N m].
+
+Linearising F along the admissible motions N (nv, d) gives the tangent stiffness
+
+    K_t = K_q - K_G + sum_j lambda_j Hess c_j        (nv, nv), restricted as N^T K_t N,
+
+(Chen and Kao's conservative congruence transformation, extended to loop closures) where
+
+* ``K_G[i, k] = d(J^T w)_i / dq_k = sum_r w_r dJ[r, i]/dq_k`` is the geometric (load)
+  stiffness, J with Pinocchio's LOCAL_WORLD_ALIGNED axes; it enters with a minus sign;
+* ``Hess c_j`` is the second derivative of closure row j (the loop curvature), weighted by
+  the internal force lambda_j of the loop. With redundant closure rows lambda is known
+  only up to a self-stress mu (J_c^T mu = 0); differentiating c = 0 twice along the
+  closure manifold gives mu^T Hess c [v, v] = 0 for every admissible v, so it does not
+  matter on N.
+
+Derivatives with respect to q are taken along ``pin.integrate(model, q, v)``. A
+world-fixed moment is not conservative under finite rotations: its K_G, hence K_t, is
+then not symmetric.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .arrays import check_wrench
+from .exceptions import InvalidInputError
+from .kinematics import (
+    RANK_RTOL,
+    closure_jacobian,
+    closure_residual,
+    frame_jacobian,
+    update_kinematics,
+)
+from .model import ClosedLoopModel
+
+#: Step [rad or m] of the central differences that give the curvature of weld closures.
+#: The error of a central difference is h^2/6 |c'''| (truncation) + eps |J_c| / h (rounding),
+#: smallest near h = (3 eps)^(1/3) ~ 1e-5, where both are ~1e-10 relative to the closure
+#: Jacobian for links of metre scale; that curvature enters K_t multiplied by lambda, so
+#: its relative error in K_t stays ~1e-10.
+WELD_CURVATURE_STEP = 1e-5
+
+#: Smallest singular value of the scaled tangent stiffness (1 without preload), relative
+#: to max(1, its largest), below which it counts as singular (critical preload).
+CRITICAL_RTOL = 1e-12
+
+
+def _hessian(raw: np.ndarray, nv: int) -> np.ndarray:
+    """(6, nv, nv) tensor H[r, i, k] = dJ[r, i]/dq_k from a Pinocchio kinematic Hessian.
+
+    Pinocchio returns the tensor with a memory layout that numpy reads transposed; the
+    column-major reshape restores it (see the Pinocchio notes of the project).
+    """
+    return np.asarray(raw).ravel().reshape((6, nv, nv), order="F")
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _anchor_point(clm: ClosedLoopModel, joint: int, placement: pin.SE3, hessian: bool = False):
+    """Position p (3,) [m], point Jacobian J_p (3, nv) and, with ``hessian``, its derivative
+    H_p (3, nv, nv) (H_p[:, a, b] = dJ_p[:, a]/dq_b) of an anchor point fixed on ``joint``.
+
+    World axes (Pinocchio's LOCAL_WORLD_ALIGNED for a point). From the spatial (WORLD)
+    Jacobian [v0; w] of the joint, the point moves at v0 + w x p, so J_p = J_v - [p]x J_w
+    and dJ_p[:, a]/dq_b = H_v - [p]x H_w - [J_p b]x J_w a. Expects the joint Jacobians
+    (and, with ``hessian``, ``pin.computeJointKinematicHessians``) of the current q.
+    """
+    model, data = clm.model, clm.data
+    p = data.oMi[joint].act(placement.translation)
+    JW = np.asarray(pin.getJointJacobian(model, data, joint, pin.WORLD)).reshape(6, model.nv)
+    Jp = JW[:3] - _skew(p) @ JW[3:]
+    if not hessian:
+        return p, Jp, None
+    HW = _hessian(pin.getJointKinematicHessian(model, data, joint, pin.WORLD), model.nv)
+    Hp = HW[:3] - np.einsum("ij,jab->iab", _skew(p), HW[3:])
+    Hp -= np.cross(Jp.T[None, :, :], JW[3:].T[:, None, :]).transpose(2, 0, 1)
+    return p, Jp, Hp
+
+
+def _rows(clm: ClosedLoopModel):
+    """(closure, row slice) of every closure in the stacked residual."""
+    row = 0
+    for c in clm.closures:
+        yield c, slice(row, row + c.size)
+        row += c.size
+
+
+def closure_gap(
+    clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closure residual c (m,) of the statics and its Jacobian (m, nv) at q.
+
+    Point closures: the world gap p2 - p1 [m] between the anchor points of side 2 and
+    side 1, world axes, Jacobian J_p2 - J_p1 [m/rad or m/m]; it is invariant under a spin
+    of either body about an axis through its anchor. Welds: the log6 rows [m, rad] of
+    :func:`closedloop.kinematics.closure_residual` and their Jacobian. Rows are stacked in
+    the order of ``clm.closures``, 3 per point and 6 per weld.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    if update:
+        update_kinematics(clm, q)
+    m, nv = clm.n_constraints, clm.model.nv
+    c, A = np.zeros(m), np.zeros((m, nv))
+    if any(cl.kind == "6d" for cl in clm.closures):
+        c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
+    for cl, rows in _rows(clm):
+        if cl.kind == "3d":
+            k = cl.constraint
+            p1, J1, _ = _anchor_point(clm, k.joint1_id, k.joint1_placement)
+            p2, J2, _ = _anchor_point(clm, k.joint2_id, k.joint2_placement)
+            c[rows], A[rows] = p2 - p1, J2 - J1
+    return c, A
+
+
+def geometric_stiffness(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, wrench: np.ndarray, *, update: bool = True
+) -> np.ndarray:
+    """(nv, nv) geometric stiffness K_G of a dead-load wrench at a frame.
+
+    ``K_G[i, k] = d(J^T w)_i / dq_k`` with J (6, nv) the Jacobian of ``frame`` (twist at the
+    frame origin, world-aligned axes) and w held fixed in world axes. Units: N m per rad or
+    N per m, per the units of coordinates i and k. It enters the tangent stiffness with a
+    minus sign; it is symmetric when w has no moment.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        frame: name of the loaded frame.
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    w = check_wrench(wrench)
+    fid = clm.frame_id(frame)
+    if update:
+        update_kinematics(clm, q)
+    pin.computeJointKinematicHessians(clm.model, clm.data)
+    raw = pin.getFrameKinematicHessian(clm.model, clm.data, fid, pin.LOCAL_WORLD_ALIGNED)
+    return np.einsum("r,rik->ik", w, _hessian(raw, clm.model.nv))
+
+
+def closure_curvature(
+    clm: ClosedLoopModel, q: np.ndarray, multipliers: np.ndarray, *, update: bool = True
+) -> np.ndarray:
+    """(nv, nv) loop curvature sum_j lambda_j Hess c_j of the rows of :func:`closure_gap`.
+
+    Entry [a, b] = d(J_c^T lambda)_a / dq_b [N m/rad, N/m...]. Point closures: exact,
+    sum_r lambda_r (H_p2 - H_p1)[r] from Pinocchio's kinematic Hessians of the two anchor
+    joints. Weld closures (log6 residual): central differences of the exact closure
+    Jacobian with step :data:`WELD_CURVATURE_STEP` (error ~1e-10 relative).
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        multipliers: (m,) lambda, one per closure row, in the units conjugate to the rows:
+            world-axes forces [N] for point rows, N and N m for weld rows.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    model = clm.model
+    lam = np.asarray(multipliers, dtype=float).reshape(-1)
+    if lam.shape != (clm.n_constraints,):
+        raise InvalidInputError(
+            f"{lam.size} multipliers given; expected one per closure row ({clm.n_constraints})"
+        )
+    if not np.all(np.isfinite(lam)):
+        raise InvalidInputError(f"multipliers must be finite, got {lam.tolist()}")
+    if update:
+        update_kinematics(clm, q)
+    out = np.zeros((model.nv, model.nv))
+    if not np.any(lam):
+        return out
+    pin.computeJointKinematicHessians(model, clm.data)
+    lam_w = np.zeros_like(lam)
+    for cl, rows in _rows(clm):
+        if cl.kind == "6d":
+            lam_w[rows] = lam[rows]
+        elif np.any(lam[rows]):
+            k = cl.constraint
+            _, _, H1 = _anchor_point(clm, k.joint1_id, k.joint1_placement, hessian=True)
+            _, _, H2 = _anchor_point(clm, k.joint2_id, k.joint2_placement, hessian=True)
+            out += np.einsum("r,rab->ab", lam[rows], H2 - H1)
+    if np.any(lam_w):
+        h = WELD_CURVATURE_STEP
+        for b in range(model.nv):
+            e = np.zeros(model.nv)
+            e[b] = h
+            plus = closure_jacobian(clm, pin.integrate(model, q, e)).T @ lam_w
+            minus = closure_jacobian(clm, pin.integrate(model, q, -e)).T @ lam_w
+            out[:, b] += (plus - minus) / (2.0 * h)
+        update_kinematics(clm, q)
+    return out
+
+
+def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
+    """(nv, nv) stiffness of the springs 1/2 sum k_i dq_i^2, dq = difference(q_rest, q).
+
+    ``Jd^T diag(k) Jd`` with Jd = d dq / dq (``pin.dDifference``, ARG1): exact for 1-dof
+    joints (revolute, prismatic), where Jd = 1; for a multi-dof joint carrying a spring it
+    omits the derivative of Jd, exact at zero deflection of that joint. Locked coordinates
+    (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
+    """
+    Jd = pin.dDifference(clm.model, q_rest, q, pin.ARG1)
+    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+    return (Jd.T * k) @ Jd
+
+
+def tangent_stiffness(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    q_rest: np.ndarray,
+    frame: str,
+    wrench: np.ndarray,
+    multipliers: np.ndarray,
+    *,
+    update: bool = True,
+) -> np.ndarray:
+    """(nv, nv) tangent stiffness in joint space, K_q - K_G(w) + sum_j lambda_j Hess c_j.
+
+    Entry [a, b] is the derivative of equilibrium equation a (generalised force on
+    coordinate a [N m or N]) with respect to coordinate b of q [rad or m]. Locked
+    coordinates have zero spring terms; restrict the matrix to the admissible motions.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration (an equilibrium).
+        q_rest: (nq,) rest configuration of the springs.
+        frame: name of the loaded frame.
+        wrench: (6,) dead-load wrench (f [N], n [N m]), world axes, at the frame origin.
+        multipliers: (m,) closure multipliers lambda at q, conjugate to the rows of
+            :func:`closure_gap` (``Equilibrium.multipliers``).
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    if update:
+        update_kinematics(clm, q)
+    K = spring_hessian(clm, q, q_rest)
+    K -= geometric_stiffness(clm, q, frame, wrench, update=False)
+    K += closure_curvature(clm, q, multipliers, update=False)
+    return K
+
+
+def scaled_tangent(
+    clm: ClosedLoopModel, Kt: np.ndarray, N: np.ndarray, V: np.ndarray, ls: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tangent stiffness on the sprung admissible motions, scaled by the springs.
+
+    Args:
+        clm: the model.
+        Kt: (nv, nv) tangent stiffness (:func:`tangent_stiffness`).
+        N: (nv, d) admissible motions; V (d, s), ls (s,): eigenvectors and eigenvalues of
+            their spring stiffness N^T K_q N with a restoring spring
+            (:func:`closedloop.compliance.spring_subspace`).
+
+    Returns:
+        M: (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I), dimensionless:
+            the identity without preload, singular at a critical load.
+        P: (d, d) preload part N^T (K_t - K_q) N of the restricted tangent stiffness.
+        T: (d, s) the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
+    """
+    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+    P = N.T @ (Kt - np.diag(k)) @ N
+    T = V / np.sqrt(ls)
+    return np.eye(T.shape[1]) + T.T @ P @ T, P, T
+
+
+def stability_margin(M: np.ndarray) -> float:
+    """Smallest eigenvalue of the symmetric part of M (:func:`scaled_tangent`); 1 if empty."""
+    return float(np.min(np.linalg.eigvalsh(0.5 * (M + M.T)), initial=1.0))
+
+
+class EquilibriumEquations:
+    """The equilibrium equations F = 0, c = 0 of one model, loaded frame and rest q.
+
+    Works on the free coordinates (finite stiffness); locked ones keep their rest values.
+    Used by :func:`closedloop.statics.solve_equilibrium`.
+    """
+
+    def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
+        self.clm, self.q_rest, self.frame = clm, q_rest, frame
+        self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+        self.free = np.flatnonzero(np.isfinite(clm.stiffness))
+
+    def evaluate(self, q: np.ndarray, w: np.ndarray) -> dict:
+        """State at q under the wrench w (6,): residuals, multipliers, SVD of J_c.
+
+        Keys: ``c`` (m,) closure residual; ``closure`` its infinity norm [m, rad]; ``F``
+        the generalised force g - J^T w on the free coordinates [N m, N]; ``force`` the
+        infinity norm of its unbalanced part F + J_c^T lambda; ``scale`` the largest
+        spring or load generalised force; ``lam`` (m,) least-squares multipliers; ``Ur``,
+        ``sr``, ``R``, ``N``: the SVD of J_c on the free coordinates (row space, null space).
+        Leaves the kinematics of q in ``clm.data``.
+        """
+        clm, free = self.clm, self.free
+        c, A = closure_gap(clm, q)
+        A = A[:, free]
+        J = frame_jacobian(clm, q, self.frame, "world", update=False)
+        dq = pin.difference(clm.model, self.q_rest, q)
+        Jd = pin.dDifference(clm.model, self.q_rest, q, pin.ARG1)
+        g = Jd.T @ (self.k * dq)
+        load = J.T @ w
+        F = (g - load)[free]
+        if A.size:
+            U, s, Vt = np.linalg.svd(A, full_matrices=True)
+            r = int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0
+        else:
+            U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0
+        Ur, sr, R, N = U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
+        lam = -Ur @ ((R.T @ F) / sr)
+        unbalanced = F - R @ (R.T @ F)  # F + A^T lam: its component along N
+        return {
+            "c": c,
+            "closure": float(np.max(np.abs(c), initial=0.0)),
+            "F": F,
+            "force": float(np.max(np.abs(unbalanced), initial=0.0)),
+            "scale": max(
+                np.max(np.abs(g[free]), initial=0.0), np.max(np.abs(load[free]), initial=0.0)
+            ),
+            "lam": lam,
+            "Ur": Ur,
+            "sr": sr,
+            "R": R,
+            "N": N,
+        }
+
+    def _restricted(self, q, w, st: dict) -> np.ndarray:
+        H = tangent_stiffness(self.clm, q, self.q_rest, self.frame, w, st["lam"], update=False)
+        return H[np.ix_(self.free, self.free)]
+
+    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> np.ndarray:
+        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w).
+
+        Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
+        closures plus the Newton step of N^T F on the admissible motions. With ``load``
+        (6,): the rate dq/ds of the equilibrium when the wrench grows by s ``load``.
+        """
+        free, H = self.free, self._restricted(q, w, st)
+        R, N = st["R"], st["N"]
+        if load is None:
+            dx = -R @ ((st["Ur"].T @ st["c"]) / st["sr"])  # restores the closures
+            rhs = -N.T @ (st["F"] + H @ dx)
+        else:
+            J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
+            dx, rhs = np.zeros(free.size), N.T @ (J.T @ load)[free]
+        dx += N @ np.linalg.lstsq(N.T @ H @ N, rhs, rcond=1e-12)[0]
+        v = np.zeros(self.clm.model.nv)
+        v[free] = dx
+        return v
+
+    def margin(self, q: np.ndarray, w: np.ndarray) -> float:
+        """Stability margin at an equilibrium q (nq,) under the wrench w (6,).
+
+        As in :class:`closedloop.preload.PreloadedCompliance`: the smallest eigenvalue of
+        the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by
+        their spring stiffness; 1 unloaded, 0 where K_t turns singular, < 0 if unstable.
+        Spring-free motions (a rod spinning about its axis) are left out; the sprung ones
+        are the right singular vectors of sqrt(k) N above ``RANK_RTOL`` times the largest.
+        """
+        st = self.evaluate(q, w)
+        N = st["N"]
+        _, sig, Vt = np.linalg.svd(np.sqrt(self.k[self.free])[:, None] * N, full_matrices=False)
+        keep = sig > RANK_RTOL * sig[0] if sig.size else np.zeros(0, bool)
+        T = N @ (Vt[keep].T / sig[keep])  # T^T K_q T = I on the sprung motions
+        return stability_margin(T.T @ self._restricted(q, w, st) @ T)
