@@ -135,8 +135,20 @@ def split_factor(S: np.ndarray, rtol: float = RANK_RTOL):
     if m == 0 or n == 0:
         return np.zeros(0), np.zeros((n, 0)), np.eye(n), np.eye(m)
     U, s, Vt = svd(S)
-    r = int(np.count_nonzero(s > rtol * s[0])) if s[0] > 0.0 else 0
+    r = rule_rank(s, rtol)
     return s[:r], Vt[:r].T, Vt[r:].T, U
+
+
+def rule_rank(s: np.ndarray, rtol: float = RANK_RTOL) -> int:
+    """Number of singular values s (descending) above ``rtol`` times the largest."""
+    return int(np.count_nonzero(s > rtol * s[0])) if s.size and s[0] > 0.0 else 0
+
+
+def _rigid_directions(U: np.ndarray, rank: int, d: np.ndarray) -> np.ndarray:
+    """(6, 6 - rank) orthonormal null space of C from the left singular vectors U (6, 6)
+    of a scaled factor: null(C) = D null(C_s), signed and ordered."""
+    rigid = U[:, rank:] * d[:, None]
+    return readonly(_signed(np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid))
 
 
 def _signed(basis: np.ndarray) -> np.ndarray:
@@ -172,20 +184,17 @@ def spectrum_from_factor(
     d = twist_scaling(length)
     B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
     U, beta, _ = svd(B_s) if B_s.size else (np.eye(6), np.zeros(0), None)
-    rank = int(np.count_nonzero(beta > RANK_RTOL * beta[0])) if beta.size and beta[0] else 0
-    basis = U
+    rank, basis = rule_rank(beta), U
     if range_factor is not None and not (rank == 6 and beta[5] > RANK_RTOL * spread * beta[0]):
         basis, s_k, _ = svd(range_factor)
-        rank = int(np.count_nonzero(s_k > RANK_RTOL * s_k[0])) if s_k.size and s_k[0] else 0
+        rank = rule_rank(s_k)
     cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
-    rigid = basis[:, rank:] * d[:, None]  # null(C) = D null(C_s)
-    rigid = np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid
     K = None
     if rank == 6:
         Ub = U / beta  # K_s = U diag(beta^-2) U^T
         K_s = Ub @ Ub.T
         K = frozen(0.5 * (K_s + K_s.T) * np.outer(d, d))
-    return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
+    return Spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
 
 
 def spectrum_of_matrix(C: np.ndarray, length: float, range_factor: np.ndarray) -> Spectrum:
@@ -198,14 +207,12 @@ def spectrum_of_matrix(C: np.ndarray, length: float, range_factor: np.ndarray) -
     """
     d = twist_scaling(length)
     basis, s_k, _ = svd(range_factor)
-    rank = int(np.count_nonzero(s_k > RANK_RTOL * s_k[0])) if s_k.size and s_k[0] else 0
-    rigid = basis[:, rank:] * d[:, None]
-    rigid = np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid
+    rank = rule_rank(s_k)
     Cs = C * np.outer(d, d)
     s_C = svd(Cs)[1]
     cond = float(s_C[0] / s_C[rank - 1]) if rank else 1.0
     K = frozen(np.linalg.solve(Cs, np.eye(6)) * np.outer(d, d)) if rank == 6 else None
-    return Spectrum(rank, readonly(_signed(rigid)), cond, float(length), K)
+    return Spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
 
 
 def scaled_compliance_factor(C: np.ndarray, length: float) -> np.ndarray:

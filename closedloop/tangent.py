@@ -42,9 +42,9 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench
+from .conditioning import rule_rank
 from .exceptions import InvalidInputError
 from .kinematics import (
-    RANK_RTOL,
     closure_jacobian,
     closure_residual,
     frame_jacobian,
@@ -324,7 +324,7 @@ class EquilibriumEquations:
         F = (g - load)[free]
         if A.size:
             U, s, Vt = np.linalg.svd(A, full_matrices=True)
-            r = int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0
+            r = rule_rank(s)
         else:
             U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0
         Ur, sr, R, N = U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
@@ -381,6 +381,6 @@ class EquilibriumEquations:
         st = self.evaluate(q, w)
         N = st["N"]
         _, sig, Vt = np.linalg.svd(np.sqrt(self.k[self.free])[:, None] * N, full_matrices=False)
-        keep = sig > RANK_RTOL * sig[0] if sig.size else np.zeros(0, bool)
-        T = N @ (Vt[keep].T / sig[keep])  # T^T K_q T = I on the sprung motions
+        r = rule_rank(sig)
+        T = N @ (Vt[:r].T / sig[:r])  # T^T K_q T = I on the sprung motions
         return stability_margin(T.T @ self._restricted(q, w, st) @ T)
