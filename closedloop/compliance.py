@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+import scipy.linalg
 
 from .arrays import check_wrench, frozen, readonly
 from .conditioning import (
@@ -86,6 +87,8 @@ class ComplianceResult:
             dimensionless; above ``ILL_CONDITIONED`` (1e8) the result is ill-conditioned.
         stiffness_matrix: (6, 6) K [SI] from the square-root factor when rank is 6, else
             None; read it as :attr:`K`, which explains a missing K.
+        path: how the admissible motions were found (:class:`SpringFactor`):
+            ``"serial"``, ``"partitioned"`` or ``"null-space"``.
     """
 
     C: np.ndarray
@@ -102,6 +105,7 @@ class ComplianceResult:
     length: float = field(kw_only=True)
     condition_number: float = field(kw_only=True)
     stiffness_matrix: np.ndarray | None = field(kw_only=True, repr=False)
+    path: str = field(kw_only=True, default="null-space")
 
     @property
     def is_full_rank(self) -> bool:
@@ -154,6 +158,7 @@ class ComplianceResult:
             "closure_residual": self.closure_residual,
             "mobility": self.mobility,
             "internal_mobilities": self.internal_mobilities,
+            "path": self.path,
             "units": UNITS,
         }
 
@@ -187,12 +192,16 @@ class SpringFactor(NamedTuple):
         sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
             [sqrt(N m)].
         n_internal: number of spring-free motions that do not move the frame (left out).
+        path: how N was found: ``"serial"`` (no closure, no passive joint: N selects the
+            spring coordinates), ``"partitioned"`` (the passive joints follow the springs
+            through the closures, dq_p = X dq_s) or ``"null-space"`` (the general path).
     """
 
     N: np.ndarray
     V: np.ndarray
     sigma: np.ndarray
     n_internal: int
+    path: str = "null-space"
 
     @property
     def P(self) -> np.ndarray:
@@ -208,6 +217,7 @@ class _Scaling(NamedTuple):
     locked_rows: np.ndarray  # (n_locked, nv) selection rows of the locked coordinates
     sprung: np.ndarray  # (s,) indices of the coordinates with a finite spring
     sqrt_k: np.ndarray  # (s,) sqrt of their scaled stiffness k s_q^2 [sqrt(N m)]
+    passive: np.ndarray  # (p,) indices of the coordinates without spring (k = 0)
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
@@ -220,16 +230,73 @@ class _Scaling(NamedTuple):
             rigid_rows(clm),
             sprung,
             np.sqrt(k[sprung]) * s_q[sprung],
+            np.flatnonzero(k == 0.0),
         )
 
 
-def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:
+#: The partitioned path is taken when the passive part of the scaled closure Jacobian is
+#: well conditioned (reciprocal condition estimate above this): then both paths give C
+#: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
+#: decides, with the rank rule.
+PARTITION_RCOND = 1e-6
+#: Largest residual |J_s + J_p X| of the partitioned closure equations, relative to |J_s|,
+#: for the springs to move freely (else some spring coordinates are tied by the loops).
+PARTITION_RTOL = 1e-9
+
+
+def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | None:
+    """Spring factor without a null space, when the springs determine everything.
+
+    With the closure rows J_c dq = J_s dq_s + J_p dq_p = 0 (scaled, locked coordinates
+    still), a passive part J_p of full column rank fixes dq_p = X dq_s, X = -J_p^+ J_s,
+    for every spring motion dq_s when J_s + J_p X = 0; the admissible motions are then
+    N = [I; X] in the spring coordinates, where K_r = diag(k s_q^2) is already diagonal.
+    Returns None when this does not apply (the null-space path then decides).
+    """
+    nv, s, p = state.model.model.nv, sc.sprung, sc.passive
+    T = np.zeros((nv, s.size))
+    T[s, np.arange(s.size)] = 1.0
+    Jc = state.closure_jacobian()
+    if p.size:
+        if Jc.shape[0] < p.size:
+            return None
+        Jc = Jc * sc.row_scale
+        J_s = Jc[:, s] * sc.s_q[s]
+        # least squares min |J_p X + J_s| by QR (LAPACK dgels): R in qr[:p, :p], the
+        # residual's components in x[p:]
+        qr, x, info = scipy.linalg.lapack.dgels(Jc[:, p] * sc.s_q[p], -J_s)
+        if info != 0 or scipy.linalg.lapack.dtrcon(qr[: p.size, : p.size])[0] <= PARTITION_RCOND:
+            return None
+        scale = np.max(np.abs(J_s), initial=0.0)
+        if np.max(np.abs(x[p.size :]), initial=0.0) > PARTITION_RTOL * scale:
+            return None
+        T[p] = x[: p.size]
+    elif Jc.shape[0]:
+        return None  # loops without passive joints tie the springs together
+    # the same spring-free rule as the null-space path, which would find singular values
+    # of the spring factor between min(sqrt_k) / |T| and max(sqrt_k)
+    if sc.sqrt_k.size and sc.sqrt_k.min() <= RANK_RTOL * sc.sqrt_k.max() * np.linalg.norm(T):
+        return None
+    V = np.eye(s.size)
+    path = "partitioned" if Jc.shape[0] else "serial"
+    return SpringFactor(T * sc.s_q[:, None], V, sc.sqrt_k, 0, path)
+
+
+#: Values of the ``path`` argument of :func:`compliance`.
+PATHS = ("auto", "null-space")
+
+
+def spring_factor(
+    state: Configuration, J: np.ndarray, frame: str, path: str = "auto"
+) -> SpringFactor:
     """Admissible motions and spring factor at a configuration (module docstring).
 
     Args:
         state: the configuration.
         J: (6, nv) Jacobian of the loaded frame (any reference axes) [m/rad, 1].
         frame: name of the loaded frame (for messages).
+        path: ``"auto"`` (the serial or partitioned path where it applies, else the null
+            space) or ``"null-space"`` (always the general path).
 
     Raises:
         MechanismError: a spring-free motion moves the frame (no static equilibrium):
@@ -238,6 +305,11 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
     """
     clm, L = state.model, state.length
     sc = clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
+    if path not in PATHS:
+        raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
+    fast = _partitioned_factor(state, sc) if path == "auto" else None
+    if fast is not None:
+        return fast
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)
@@ -265,6 +337,7 @@ def compliance(
     axes: str = "world",
     *,
     length: float | None = None,
+    path: str = "auto",
 ) -> ComplianceResult:
     """Cartesian compliance of ``frame`` at a configuration (see the module docstring).
 
@@ -279,6 +352,9 @@ def compliance(
         axes: ``"world"`` (world-aligned axes, default) or ``"local"``.
         length: characteristic length [m] of the unit-free rules, with a model (default:
             that of the configuration, the size of its joint origins).
+        path: ``"auto"`` (default: the serial or partitioned fast path where it applies)
+            or ``"null-space"`` (the general path, e.g. to cross-check); the path taken is
+            in the result.
 
     Raises:
         NameNotFoundError: unknown frame.
@@ -293,11 +369,11 @@ def compliance(
     state = as_configuration(model, q, length=length)
     state.require_closed()
     J = state.frame_jacobian(frame, axes)
-    f = spring_factor(state, J, frame)
+    f = spring_factor(state, J, frame, path)
     NV = f.N @ f.V
     JNV = (J @ NV) * twist_scaling(state.length)[:, None]  # scaled, kinematic
     B_s = JNV / f.sigma  # C_s = B_s B_s^T
-    spread = f.sigma[0] / f.sigma[-1] if f.sigma.size else 1.0
+    spread = f.sigma.max() / f.sigma.min() if f.sigma.size else 1.0
     spectrum = spectrum_from_factor(B_s, state.length, range_factor=JNV, spread=spread)
     P = NV / f.sigma
     B = J @ P  # C = B B^T
@@ -342,6 +418,7 @@ def compliance_result(
         length=spectrum.length,
         condition_number=spectrum.condition_number,
         stiffness_matrix=spectrum.K,
+        path=f.path,
         **extra,
     )
 
