@@ -9,7 +9,7 @@ import pinocchio as pin
 import scipy.linalg
 
 from .exceptions import AssemblyError, InvalidInputError
-from .kinematics import closure_jacobian, closure_residual
+from .kinematics import closure_residual, jacobian_rows
 from .model import ClosedLoopModel
 
 #: Default closure tolerance [m for points; m and rad for welds], infinity norm.
@@ -102,7 +102,8 @@ def assemble(
     it = 0
     while err > tol and it < max_iter:
         it += 1
-        J = closure_jacobian(clm, q, update=False)[:, free]
+        # the kinematics and constraint datas of q are those of its residual evaluation
+        J = jacobian_rows(clm, clm.data, clm.constraint_datas, calc=False)[:, free]
         step = np.zeros(model.nv)
         step[free] = -min_norm_solve(J, r)
         for _ in range(30):
