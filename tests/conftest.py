@@ -1,10 +1,13 @@
-"""Shared fixtures: paths of the local robot files used by the tests."""
+"""Shared fixtures: paths of the local robot files, and the models several modules load."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
+from helpers import UR5_JOINTS, UR5_Q
 
-from closedloop.io import robot_data_dir
+from closedloop.assembly import assemble
+from closedloop.io import load_urdf, robot_data_dir
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -37,3 +40,20 @@ def ur5_urdf() -> Path:
 def panda_urdf() -> Path:
     """Franka Panda URDF shipped by example-robot-data (two finger joints)."""
     return robot_data_dir() / "panda_description" / "urdf" / "panda.urdf"
+
+
+# ---------------------------------------------------------------------------- models
+# Module scope: one model per test module, as when each module defined its own. The
+# viewer and configuration tests define fixtures of the same names that load the model
+# another way (load_model); theirs take precedence in their modules.
+@pytest.fixture(scope="module")
+def fourbar(fourbar_urdf, fourbar_yaml):
+    """(model, q): the four-bar of urdf/ assembled at crank = 0.3 rad."""
+    clm = load_urdf(fourbar_urdf, fourbar_yaml)
+    return clm, np.array(assemble(clm, [0.3]).q)
+
+
+@pytest.fixture(scope="module")
+def ur5(ur5_urdf):
+    """(model, q): the UR5 with 1e4 N m/rad on every joint, at UR5_Q (a copy)."""
+    return load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4)), UR5_Q.copy()

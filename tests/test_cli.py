@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import assert_close_in_norm
 
 from closedloop.cli import main
 
@@ -43,11 +44,6 @@ def ur5_reference(ur5_urdf: Path, q, frame: str = "tool0", rf=pin.LOCAL_WORLD_AL
     return J @ J.T / UR5_K, J, data.oMf[fid].translation
 
 
-def assert_close_scaled(actual, desired, rtol):
-    desired = np.asarray(desired)
-    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.max(np.abs(desired)))
-
-
 def stiffness_args(ur5_urdf: Path, q=UR5_Q, *extra) -> list:
     return [
         "stiffness",
@@ -69,10 +65,10 @@ def test_ur5_example_json_matches_J_Kinv_JT(ur5_urdf, capsys):
     doc = json.loads(out)
     assert JSON_KEYS <= set(doc)
     C_ref, _, point = ur5_reference(ur5_urdf, UR5_Q)
-    assert_close_scaled(doc["C"], C_ref, RTOL_EXACT)
+    assert_close_in_norm(doc["C"], C_ref, RTOL_EXACT)
     # K = C^-1: C is well conditioned here (cond ~ 80), so the inverse keeps ~1e-14.
-    assert_close_scaled(doc["K"], np.linalg.inv(C_ref), RTOL_EXACT)
-    assert_close_scaled(doc["point"], point, RTOL_EXACT)
+    assert_close_in_norm(doc["K"], np.linalg.inv(C_ref), RTOL_EXACT)
+    assert_close_in_norm(doc["point"], point, RTOL_EXACT)
     assert (doc["frame"], doc["axes"], doc["rank"], doc["rigid_directions"]) == (
         "tool0",
         "world",
@@ -86,7 +82,7 @@ def test_ur5_example_local_axes(ur5_urdf, capsys):
     code, out, _ = run(capsys, *stiffness_args(ur5_urdf, UR5_Q, "--json", "--axes", "local"))
     assert code == 0
     C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q, rf=pin.LOCAL)
-    assert_close_scaled(json.loads(out)["C"], C_ref, RTOL_EXACT)
+    assert_close_in_norm(json.loads(out)["C"], C_ref, RTOL_EXACT)
 
 
 def parse_matrix(text: str, title: str) -> np.ndarray:
@@ -100,8 +96,8 @@ def test_ur5_example_text_report(ur5_urdf, capsys):
     code, out, err = run(capsys, *stiffness_args(ur5_urdf))
     assert (code, err) == (0, "")
     C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q)
-    assert_close_scaled(parse_matrix(out, "compliance C"), C_ref, RTOL_PRINTED)
-    assert_close_scaled(parse_matrix(out, "stiffness K"), np.linalg.inv(C_ref), RTOL_PRINTED)
+    assert_close_in_norm(parse_matrix(out, "compliance C"), C_ref, RTOL_PRINTED)
+    assert_close_in_norm(parse_matrix(out, "stiffness K"), np.linalg.inv(C_ref), RTOL_PRINTED)
     assert "[m/N" in out and "[N/m" in out and "world-aligned" in out
 
 
@@ -124,7 +120,7 @@ def test_ur5_springs_file(ur5_urdf, tmp_path, capsys):
     )
     assert code == 0
     _, J, _ = ur5_reference(ur5_urdf, UR5_Q)
-    assert_close_scaled(json.loads(out)["C"], (J / k) @ J.T, RTOL_EXACT)
+    assert_close_in_norm(json.loads(out)["C"], (J / k) @ J.T, RTOL_EXACT)
 
 
 # -------------------------------------------------------------- rigid directions: exit 1
@@ -170,7 +166,7 @@ def test_fourbar_urdf_and_mjcf_agree_through_the_cli(capsys):
     common = ["--frame", "P", "--actuated", 0.8, "--json"]
     C_urdf = json.loads(run(capsys, "stiffness", *FOURBAR["urdf"], *common)[1])["C"]
     C_mjcf = json.loads(run(capsys, "stiffness", *FOURBAR["mjcf"], *common)[1])["C"]
-    assert_close_scaled(C_mjcf, C_urdf, 1e-9)  # same tolerance as RTOL_TWIN in test_io.py
+    assert_close_in_norm(C_mjcf, C_urdf, 1e-9)  # same tolerance as RTOL_TWIN in test_io.py
 
 
 # ---------------------------------------------------------------------- errors: exit 2
@@ -237,7 +233,7 @@ def test_subprocess_example_and_error(ur5_urdf, tmp_path):
     done = python_m(*stiffness_args(ur5_urdf, UR5_Q, "--json"))
     assert (done.returncode, done.stderr) == (0, "")
     C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q)
-    assert_close_scaled(json.loads(done.stdout)["C"], C_ref, RTOL_EXACT)
+    assert_close_in_norm(json.loads(done.stdout)["C"], C_ref, RTOL_EXACT)
 
     done = python_m("stiffness", tmp_path / "missing.urdf", "--frame", "tool0")
     assert done.returncode == 2 and done.stdout == ""

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 from closedloop.assembly import assemble
@@ -30,10 +32,9 @@ K_T, K_R = np.array([1e5, 2e5, 5e5]), np.array([50.0, 80.0, 300.0])  # [N/m], [N
 T, R = slice(0, 3), slice(3, 6)
 
 
-def close(actual, desired, rtol=INDEX_RTOL):
-    """Entries agree to rtol, near-zero ones to rtol times the largest entry."""
-    desired = np.asarray(desired, dtype=float)
-    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.abs(desired).max())
+#: The shared scaled comparison at this module's tolerance: entries agree to INDEX_RTOL,
+#: near-zero ones to INDEX_RTOL times the largest entry.
+close = functools.partial(assert_close_in_norm, rtol=INDEX_RTOL)
 
 
 def same_axis(u, v):

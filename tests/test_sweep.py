@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import assert_close_in_norm
 
 from cahyman_pin import api, sweep_exec
 from cahyman_pin.params import DEFAULT_PARAMS
@@ -59,8 +60,7 @@ def assert_matches_pointwise(result: SweepResult, rtol: float) -> None:
     pts = result.points
     for i in np.flatnonzero(result.ok):
         ref = pointwise(pts, result.backend, i)
-        scale = np.max(np.abs(ref.C))
-        np.testing.assert_allclose(result.C[i], ref.C, rtol=rtol, atol=rtol * scale)
+        assert_close_in_norm(result.C[i], ref.C, rtol)
         got = {name: result.indices[name][i] for name in SCALAR_INDICES}
         expected = {"det_K": ref.det_K, "condition_number": ref.condition_number}
         if ref.indices is not None:
@@ -74,9 +74,7 @@ def assert_matches_pointwise(result: SweepResult, rtol: float) -> None:
             tol = max(rtol, K_PATH_RTOL) if name in ("det_K", "condition_number") else rtol
             np.testing.assert_allclose(got[name], value, rtol=tol, err_msg=f"{name} at {i}")
         twist = ref.deflection(WRENCH).M
-        np.testing.assert_allclose(
-            result.indices["deflection"][i], twist, rtol=rtol, atol=rtol * np.max(np.abs(twist))
-        )
+        assert_close_in_norm(result.indices["deflection"][i], twist, rtol)
 
 
 # ---------------------------------------------------------------- points

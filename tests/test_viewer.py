@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
+from helpers import UR5_Q
 
 from cahyman_pin.cli import main as cahyman_main
 from cahyman_pin.model import cahyman_model
@@ -40,7 +41,6 @@ ATOL_PLACEMENT = 1e-12
 #: gap is of second order, ~ (s |dq|)^2 / L, some centimetres here (0.095 m measured).
 OPEN_GAP = 1e-3
 FOURBAR_WRENCH = [3.0, 0.0, -20.0, 0.0, 0.0, 0.0]  # [N, N m] at P
-UR5_Q = [0.0, -1.0, 1.5, -0.5, 1.2, 0.3]  # [rad]
 UR5_WRENCH = [10.0, -5.0, -40.0, 0.0, 0.0, 2.0]
 BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")
 EXTERNAL = re.compile(r"<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*[\"']?https?:", re.I)

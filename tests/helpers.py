@@ -1,0 +1,144 @@
+"""Shared test helpers: the scaled comparison, the balance check, small test mechanisms.
+
+A plain module, not a test module (pytest puts ``tests/`` on ``sys.path``): test modules
+import from here and from :mod:`mechanisms`, never from one another. Fixtures that
+several modules use are in ``conftest.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import scipy.linalg
+
+from closedloop.assembly import assemble
+from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
+from closedloop.model import ClosedLoopModel, Closure
+
+UR5_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+#: The documented UR5 example configuration [rad].
+UR5_Q = np.array([0.0, -1.0, 1.5, -0.5, 1.2, 0.3])
+
+# Unbalanced virtual work on the admissible motions, relative to the applied generalised
+# load max|J^T w|: the solver stops at 1e-11 of its largest generalised force (spring or
+# load, here at most 1.3 max|J^T w|): measured 1e-16 to 1.3e-11. The iterate one Newton
+# step before the solver's last leaves 1.7e-10 (30 N on the four-bar) to 1e-2: a solver
+# stopping one step early fails every test that checks the balance.
+RTOL_BALANCE = 1e-10
+# Closure residual of an equilibrium [m, rad]: the solver's tolerance CLOSURE_TOL.
+ATOL_CLOSURE = 1e-12
+
+
+# ---------------------------------------------------------------------------- assertions
+def assert_close_in_norm(actual, desired, rtol) -> None:
+    """Entries agree to rtol of themselves, with an absolute floor rtol * max|desired|.
+
+    The one scaled comparison of the tests: near-zero (or exactly zero) entries of a
+    matrix or vector are compared to rtol times its largest entry.
+    """
+    desired = np.asarray(desired, dtype=float)
+    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.abs(desired).max())
+
+
+def assert_balanced(clm: ClosedLoopModel, eq) -> None:
+    """The equilibrium closes the loops and balances the virtual work, relative to the load.
+
+    Independent of the solver's equations: N spans the tangent motions that keep
+    Pinocchio's anchor closures (``closure_jacobian``) and the locked joints (scipy's null
+    space); on them the spring forces g = Jd^T K dq balance the generalised load J^T w to
+    :data:`RTOL_BALANCE` times max |J^T w|.
+    """
+    m, q, q0 = clm.model, eq.q, eq.q_rest
+    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+    g = pin.dDifference(m, q0, q, pin.ARG1).T @ (k * pin.difference(m, q0, q))
+    load = frame_jacobian(clm, q, eq.frame).T @ eq.wrench
+    locked = np.eye(m.nv)[np.isinf(clm.stiffness)]
+    N = scipy.linalg.null_space(np.vstack([closure_jacobian(clm, q), locked]))
+    assert np.abs(closure_residual(clm, q)).max(initial=0.0) <= ATOL_CLOSURE
+    unbalanced = np.abs(N.T @ (g - load)).max()
+    assert unbalanced <= RTOL_BALANCE * np.abs(load).max(), (unbalanced, np.abs(load).max())
+
+
+# ---------------------------------------------------------------------------- kinematics
+def frame_placement(clm: ClosedLoopModel, q, frame: str) -> pin.SE3:
+    """World placement of ``frame`` at q (a copy), from Pinocchio's forward kinematics."""
+    d = clm.model.createData()
+    pin.framesForwardKinematics(clm.model, d, q)
+    return d.oMf[clm.frame_id(frame)].copy()
+
+
+# ---------------------------------------------------------------------------- mechanisms
+def _z_to(a: np.ndarray) -> np.ndarray:
+    """Rotation matrix taking the z axis to the unit vector a."""
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(z, a)
+    return pin.exp3(v / np.linalg.norm(v) * np.arctan2(np.linalg.norm(v), z @ a))
+
+
+def spherical_fourbar(springs=(300.0, 200.0, 800.0)) -> tuple[ClosedLoopModel, np.ndarray]:
+    """Spherical four-bar: four revolute axes through the origin, closed by a 3D point.
+
+    Every point of the mechanism stays on its sphere about the origin, so the point
+    closure has 3 rows of rank 2 (a redundant spatial closure). Assembled by construction
+    at q = 0, then driven to crank = 0.4 rad. Returns the model (springs on the crank, the
+    coupler and the rocker [N m/rad]) and the assembled configuration.
+    """
+    a2, a3, a4 = (np.array(v) / np.linalg.norm(v) for v in ([0.6, 0, 0.8], [5, 6, 6], [-2, 7, 7]))
+    m = pin.Model()  # crank axis: z
+    m.name = "spherical_fourbar"
+    crank = m.addJoint(0, pin.JointModelRZ(), pin.SE3(np.eye(3), np.zeros(3)), "crank")
+    coupler = m.addJoint(crank, pin.JointModelRZ(), pin.SE3(_z_to(a2), np.zeros(3)), "coupler")
+    rocker = m.addJoint(0, pin.JointModelRZ(), pin.SE3(_z_to(a4), np.zeros(3)), "rocker")
+    for j, R, name in ((coupler, _z_to(a2), "C_coupler"), (rocker, _z_to(a4), "C_rocker")):
+        m.addFrame(pin.Frame(name, j, pin.SE3(np.eye(3), R.T @ (0.2 * a3)), pin.OP_FRAME))
+        m.appendBodyToJoint(j, pin.Inertia.FromSphere(0.1, 0.01), pin.SE3.Identity())
+    tool = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.5])), np.array([0.09, 0.06, 0.1]))
+    m.addFrame(pin.Frame("tool", coupler, tool, pin.OP_FRAME))
+    fa, fb = m.frames[m.getFrameId("C_coupler")], m.frames[m.getFrameId("C_rocker")]
+    closure = pin.PointAnchorConstraintModel(
+        m, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement
+    )
+    clm = ClosedLoopModel(m, [Closure(closure, "C")], actuated=["crank"], springs={"crank": 1.0})
+    q0 = np.array(assemble(clm, [0.4], q0=np.zeros(3)).q)
+    k = dict(zip(("crank", "coupler", "rocker"), springs, strict=True))
+    return clm.with_springs(k), q0
+
+
+def welded_fourbar(fourbar_clm, q0) -> ClosedLoopModel:
+    """The four-bar with its point closure replaced by a weld (6 rows of rank 3).
+
+    The weld placement on the rocker side is that of the coupler-side frame at q0, so q0
+    stays assembled; the coupler is then rigidly fixed to the rocker (a triangle).
+    """
+    m, d = fourbar_clm.model, fourbar_clm.model.createData()
+    pin.framesForwardKinematics(m, d, q0)
+    fa = m.frames[m.getFrameId("closedloop1_A")]
+    fb = m.frames[m.getFrameId("closedloop1_B")]
+    placement_b = d.oMi[fb.parentJoint].inverse() * d.oMf[m.getFrameId("closedloop1_A")]
+    weld = pin.FrameAnchorConstraintModel(
+        m, fa.parentJoint, fa.placement, fb.parentJoint, placement_b
+    )
+    springs = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
+    return ClosedLoopModel(m, [Closure(weld, "weld")], ["crank"], springs, name="welded")
+
+
+def pendulum(k: float = 40.0, length: float = 0.5) -> ClosedLoopModel:
+    """A hinge about y with a spring k [N m/rad] and a frame 'tip' at (0, 0, L) on it.
+
+    The hinge sits on a locked prismatic joint (a support along z), which also keeps
+    nv = 2 (with nv = 1 Pinocchio returns Jacobians as 1-D arrays).
+    """
+    m = pin.Model()
+    support = m.addJoint(0, pin.JointModelPZ(), pin.SE3.Identity(), "support")
+    j = m.addJoint(support, pin.JointModelRY(), pin.SE3.Identity(), "hinge")
+    m.addFrame(pin.Frame("tip", j, pin.SE3(np.eye(3), np.array([0, 0, length])), pin.OP_FRAME))
+    return ClosedLoopModel(
+        m, actuated=["hinge"], springs={"hinge": k}, locked=["support"], name="pendulum"
+    )

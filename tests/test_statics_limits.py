@@ -1,0 +1,197 @@
+"""Tests of the refusals and limits of the nonlinear statics (closedloop.statics).
+
+Bad inputs and solver arguments, mechanisms without an equilibrium, loads past a limit
+load (a fold), Newton failures that are not one, and joint limits flagged or enforced.
+Expected values: the messages and fields of the errors, the joint limits of the model
+files, and the virtual-work balance of the equilibria that are returned (helpers).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from helpers import assert_balanced, pendulum
+
+from closedloop.exceptions import (
+    InvalidInputError,
+    MechanismError,
+    NameNotFoundError,
+    OpenLoopError,
+)
+from closedloop.statics import (
+    EquilibriumError,
+    JointLimitError,
+    JointLimitWarning,
+    potential_energy,
+    solve_equilibrium,
+)
+
+
+# ---------------------------------------------------------------------------- errors
+@pytest.mark.parametrize(
+    "wrench", [np.zeros(5), np.zeros((2, 6)), [1.0, 0, 0, np.nan, 0, 0], [np.inf, 0, 0, 0, 0, 0]]
+)
+def test_bad_wrench_is_rejected(fourbar, wrench):
+    clm, q0 = fourbar
+    with pytest.raises(InvalidInputError, match="wrench must be 6 finite values"):
+        solve_equilibrium(clm, q0, "P", wrench)
+
+
+def test_bad_rest_configuration_is_rejected(fourbar):
+    clm, q0 = fourbar
+    with pytest.raises(OpenLoopError, match=r"does not close the loops of 'fourbar'"):
+        solve_equilibrium(clm, q0 + 0.01, "P", np.ones(6))
+    with pytest.raises(InvalidInputError, match="expected nq=5"):
+        solve_equilibrium(clm, q0[:4], "P", np.ones(6))
+    with pytest.raises(NameNotFoundError, match="unknown frame 'Q'"):
+        solve_equilibrium(clm, q0, "Q", np.ones(6))
+    with pytest.raises(InvalidInputError, match="force must be 3 values"):
+        potential_energy(clm, q0, q0, "P", np.ones(6))
+
+
+def test_mechanism_has_no_equilibrium(fourbar):
+    clm, q0 = fourbar
+    free_crank = clm.with_springs({"crank": 0.0, "crank_axial": 1e5, "rocker_axial": 2e5})
+    with pytest.raises(MechanismError, match="still a mechanism"):
+        solve_equilibrium(free_crank, q0, "P", [1.0, 0, 0, 0, 0, 0])
+
+
+def test_past_the_limit_load_no_equilibrium_is_found(fourbar):
+    """The four-bar loaded along (1, 0, -1) has a limit load near 993 N (toggle)."""
+    clm, q0 = fourbar
+    with pytest.raises(EquilibriumError, match=r"beyond 0\.3\d* of the load: a limit load") as err:
+        solve_equilibrium(clm, q0, "P", [3000.0, 0, -3000.0, 0, 0, 0])
+    assert 0.25 < err.value.load_fraction < 0.34  # 993 N / 3000 N
+    assert err.value.limit_load
+    assert err.value.force_residual > 0
+
+
+def test_a_newton_failure_is_not_called_a_limit_load(fourbar):
+    """Too few iterations: the tangent stiffness is still far from singular (margin ~1)."""
+    clm, q0 = fourbar
+    with pytest.raises(EquilibriumError, match=r"failed to converge .* not a limit load") as err:
+        solve_equilibrium(clm, q0, "P", [300.0, 0, -300.0, 0, 0, 0], max_iter=1, max_halvings=0)
+    assert err.value.load_fraction == 0.0
+    assert err.value.residual > 1e-12
+    assert not err.value.limit_load
+    assert err.value.stability_margin == pytest.approx(1.0)  # unloaded: K_t = K_q
+    assert err.value.iterations == 1
+    with pytest.raises(EquilibriumError, match=r"Newton failed at .* iterations in all") as err:
+        solve_equilibrium(clm, q0, "P", [300.0, 0, -300.0, 0, 0, 0], max_iter=2, max_halvings=2)
+    assert 0.0 < err.value.load_fraction < 1.0 and not err.value.limit_load
+    assert 0.5 < err.value.stability_margin < 1.0
+
+
+def test_vanishing_load_increments_stop_the_solver(fourbar):
+    """Halving without end makes the increment vanish next to the limit load: no loop."""
+    clm, q0 = fourbar
+    with pytest.raises(EquilibriumError, match="no progress, the load increment") as err:
+        solve_equilibrium(
+            clm, q0, "P", [3000.0, 0, -3000.0, 0, 0, 0], max_iter=3, max_halvings=10**4
+        )
+    assert err.value.limit_load
+    assert 0.25 < err.value.load_fraction < 0.34
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("max_increment", 0.0, r"max_increment must be a number > 0 .*got 0.0"),
+        ("max_increment", -0.1, r"max_increment must be a number > 0 .*got -0.1"),
+        ("max_increment", np.nan, r"max_increment must be a number > 0 .*got nan"),
+        ("max_step", 0.0, r"max_step must be a number > 0 .*got 0.0"),
+        ("max_step", np.float64("nan"), r"max_step must be a number > 0 .*got nan"),
+        ("tol", 0.0, r"tol must be a number finite and > 0 \[m, rad\], got 0.0"),
+        ("tol", -1e-12, r"tol must be a number finite and > 0 .*got -1e-12"),
+        ("tol", np.nan, r"tol must be a number finite and > 0 .*got nan"),
+        ("tol", np.inf, r"tol must be a number finite and > 0 .*got inf"),
+        ("tol", "1e-9", r"tol must be a number finite and > 0 .*got '1e-9'"),
+        ("max_iter", 0, r"max_iter must be an integer >= 1, got 0"),
+        ("max_iter", 2.5, r"max_iter must be an integer >= 1, got 2.5"),
+        ("max_iter", True, r"max_iter must be an integer >= 1, got True"),
+        ("max_halvings", np.int64(-1), r"max_halvings must be an integer >= 0, got -1"),
+        ("max_halvings", np.nan, r"max_halvings must be an integer >= 0, got nan"),
+    ],
+)
+def test_bad_solver_arguments_are_rejected(fourbar, option, value, message):
+    clm, q0 = fourbar
+    with pytest.raises(InvalidInputError, match=message):
+        solve_equilibrium(clm, q0, "P", [1.0, 0, 0, 0, 0, 0], **{option: value})
+
+
+def test_infinite_increment_and_step_are_allowed(fourbar):
+    clm, q0 = fourbar
+    eq = solve_equilibrium(clm, q0, "P", [30.0, 0, -30.0, 0, 0, 0], max_increment=np.inf)
+    assert eq.load_steps == 1
+    assert_balanced(clm, eq)
+    assert_balanced(
+        clm, solve_equilibrium(clm, q0, "P", [30.0, 0, -30.0, 0, 0, 0], max_step=np.inf)
+    )
+
+
+# ---------------------------------------------------------------------------- joint limits
+# From urdf/fourbar.urdf: the axial joints of crank and rocker are limited to +-0.01 m.
+FOURBAR_AXIAL_LIMIT = 0.01
+
+
+def test_equilibrium_outside_the_joint_limits_is_flagged_and_warned(fourbar):
+    clm, q0 = fourbar
+    w = [-3000.0, 0, 3000.0, 0, 0, 0]
+    with pytest.warns(JointLimitWarning, match=r"outside the joint limits: crank_axial = "):
+        eq = solve_equilibrium(clm, q0, "P", w)
+    assert_balanced(clm, eq)
+    outside = [
+        n for n in ("crank_axial", "rocker_axial")
+        if abs(eq.q[clm.model.joints[clm.joint_id(n)].idx_q]) > FOURBAR_AXIAL_LIMIT
+    ]  # fmt: skip
+    assert eq.limits_violated == tuple(outside) == ("crank_axial", "rocker_axial")
+
+
+def test_enforced_limits_refuse_the_load_where_a_joint_leaves_them(fourbar):
+    clm, q0 = fourbar
+    w = np.array([-3000.0, 0, 3000.0, 0, 0, 0])
+    with pytest.raises(JointLimitError, match=r"beyond their limits .*crank_axial") as err:
+        solve_equilibrium(clm, q0, "P", w, enforce_limits=True)
+    assert isinstance(err.value, EquilibriumError) and not err.value.limit_load
+    assert "crank_axial" in err.value.joints
+    t = err.value.load_fraction
+    assert 0.0 < t < 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", JointLimitWarning)  # within the limits up to t
+        assert solve_equilibrium(clm, q0, "P", t * w).limits_violated == ()
+
+
+def test_limits_of_pinocchio_defaults_and_empty_ranges_are_ignored():
+    """A hinge built without limits (+-1.8e308) and one with [0, 0] (a URDF <limit>
+    without lower/upper) have none; a real range [-0.1, 0.1] rad is checked."""
+    k, L, w = 40.0, 0.5, [30.0, 0, 20.0, 0, 0, 0]  # deflects the hinge by 0.29 rad
+    for lower, upper, flagged in ((None, None, ()), (0.0, 0.0, ()), (-0.1, 0.1, ("hinge",))):
+        clm = pendulum(k, L)
+        if lower is not None:
+            clm.model.lowerPositionLimit[1], clm.model.upperPositionLimit[1] = lower, upper
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            eq = solve_equilibrium(clm, [0.2, 0.0], "tip", w)
+        assert eq.limits_violated == flagged
+        assert len(caught) == len(flagged)
+        assert abs(eq.q[1]) > 0.2  # rad: outside [-0.1, 0.1]
+
+
+def test_cahyman_telescope_below_its_stop_is_flagged_and_refused():
+    """CaHyMan at s_4 = 0 (its lower limit): a push towards the base shortens the
+    telescope s_4 below 0, which the first release returned silently (-143 m at 1e8 N)."""
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    model = cahyman_model(DEFAULT_PARAMS)
+    q = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
+    i = model.clm.model.joints[model.clm.joint_id("s_4")].idx_q
+    w = np.array([-100.0, -100.0, -100.0, 0, 0, 0])
+    with pytest.warns(JointLimitWarning, match=r"s_4 = -0.000\d+ \(limits \[0, 0.05\]\)"):
+        eq = solve_equilibrium(model.clm, q, "M", w)
+    assert eq.q[i] < -1e-4 and eq.limits_violated == ("s_4",)
+    with pytest.raises(JointLimitError, match="s_4") as err:
+        solve_equilibrium(model.clm, q, "M", 1e6 * w, enforce_limits=True)
+    assert err.value.load_fraction == 0.0 and err.value.joints == ("s_4",)
