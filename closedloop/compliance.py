@@ -135,11 +135,13 @@ class ComplianceResult:
 
     def deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(6,) twist (dx, dy, dz [m], rx, ry, rz [rad]) of the frame under ``wrench`` (6,)."""
-        return _finite(self.C @ check_wrench(wrench), "deflection", wrench)
+        w = check_wrench(wrench)
+        return _finite(lambda: self.C @ w, "deflection", wrench)
 
     def joint_deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(nv,) joint deflection dq (tangent of q) [rad or m] under ``wrench`` (6,)."""
-        return _finite(self.G @ check_wrench(wrench), "joint deflection", wrench)
+        w = check_wrench(wrench)
+        return _finite(lambda: self.G @ w, "joint deflection", wrench)
 
     def to_dict(self) -> dict:
         """JSON-ready summary: K (or None), C, frame, axes, point, rank, conditioning, units."""
@@ -163,7 +165,10 @@ class ComplianceResult:
         }
 
 
-def _finite(x: np.ndarray, what: str, wrench) -> np.ndarray:
+def _finite(product, what: str, wrench) -> np.ndarray:
+    """``product()`` (a map applied to the wrench), or a typed error if it overflows."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = product()
     if not np.isfinite(x).all():
         raise InvalidInputError(
             f"the {what} under wrench {np.asarray(wrench).tolist()} overflows the floating "

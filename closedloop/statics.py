@@ -151,7 +151,7 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
 
 def _describe_limits(bad: dict[str, tuple]) -> str:
     return ", ".join(
-        f"{n} = {x:.6g} (limits [{lo:.6g}, {hi:.6g}])" for n, (x, lo, hi) in bad.items()
+        f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])" for n, (x, lo, hi) in bad.items()
     )
 
 
@@ -350,7 +350,7 @@ def solve_equilibrium(
         warnings.warn(
             f"the equilibrium {where} is outside the joint limits: {_describe_limits(bad)}",
             JointLimitWarning,
-            stacklevel=2,
+            stacklevel=3,  # the caller of the accepts_configuration wrapper
         )
     disp = frame_displacement(clm, q, q_rest, frame)  # leaves the kinematics of q in clm.data
     return Equilibrium(
