@@ -140,7 +140,7 @@ def leg_compliance(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
     """
     J = leg_jacobian(alpha, params)
     k_inv = np.array([1.0 / params.K_T, 1.0 / params.K_b, 1.0 / params.K_d])
-    return np.einsum("...ij,j,...kj->...ik", J, k_inv, J)
+    return (J * k_inv) @ J.swapaxes(-1, -2)
 
 
 def twist_H_to_leg_displacements(R: np.ndarray, params: CaHyManParams = DEFAULT_PARAMS):
@@ -219,7 +219,7 @@ def arm_compliance(R: np.ndarray, alpha4, s4, params: CaHyManParams = DEFAULT_PA
     """
     A = arm_jacobian(R, alpha4, s4, params)
     k_inv = np.array([1.0 / params.K_4, 1.0 / params.K_s, 1.0 / params.K_T4])
-    return np.einsum("...ij,j,...kj->...ik", A, k_inv, A)
+    return (A * k_inv) @ A.swapaxes(-1, -2)
 
 
 def _block_diag3(blocks: np.ndarray) -> np.ndarray:
@@ -284,18 +284,25 @@ def consistent_breakdown(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARA
         SingularConfigurationError: a crank lies along its coupler.
         AssemblyError: the plate cannot be assembled.
     """
+    parts = _compliance_parts(alpha, alpha4, s4, params)
+    pose, C_leg, G = parts[0], parts[2], parts[3]
+    K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(np.linalg.inv(C_leg)) @ G)
+    return ConsistentCompliance(*parts[:6], K_H, *parts[6:])
+
+
+def _compliance_parts(alpha, alpha4, s4, params: CaHyManParams):
+    """(pose, M, C_leg, G, A_d, C_H, T, C_ser, C): the consistent compliance without K_H."""
     alpha, alpha4, s4 = check_pose_inputs(alpha, alpha4, s4, params)
     C_leg = leg_compliance(alpha, params)
     pose = plate_pose(alpha, params)
     G = twist_H_to_leg_displacements(pose.R, params)
     A_d = np.linalg.inv(G)
     C_H = _sym(A_d @ _block_diag3(C_leg) @ A_d.swapaxes(-1, -2))
-    K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(np.linalg.inv(C_leg)) @ G)
     _, M = extremity(pose, alpha4, s4, params)
     Tr = twist_transport_H_to_M(M - pose.H)
     C_ser = arm_compliance(pose.R, alpha4, s4, params)
     C = _sym(Tr @ C_H @ Tr.swapaxes(-1, -2) + C_ser)
-    return ConsistentCompliance(pose, M, C_leg, G, A_d, C_H, K_H, Tr, C_ser, C)
+    return pose, M, C_leg, G, A_d, C_H, Tr, C_ser, C
 
 
 def consistent_compliance(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARAMS):
@@ -317,7 +324,9 @@ def consistent_compliance(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PAR
         SingularConfigurationError: a crank lies along its coupler.
         AssemblyError: the plate cannot be assembled.
     """
-    return consistent_breakdown(alpha, alpha4, s4, params).C
+    C = _compliance_parts(alpha, alpha4, s4, params)[-1]
+    C.setflags(write=False)
+    return C
 
 
 def plate_stiffness(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
