@@ -130,9 +130,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--ks", choices=sorted(KS_PRESETS), default="assumed",
                    help="K_s preset: assumed 0.697e6 N/m or printed 0.697 N/m")  # fmt: skip
     p.add_argument("--backend", default="generic", help="stiffness backend (default generic)")
-    p.add_argument("--start", choices=STARTS, default="neighbour",
-                   help="generic backend: assembly from the previous point (neighbour, "
-                   "default) or from the closed-form geometry (closed_form, faster)")  # fmt: skip
+    p.add_argument("--start", choices=STARTS, default="closed_form",
+                   help="generic backend: assembly from the closed-form geometry "
+                   "(closed_form, default, faster) or from the previous point (neighbour)")  # fmt: skip
     p.add_argument("--index", choices=sorted(INDEX_UNITS), default="det_K",
                    help="index to plot (default det_K); all are saved")  # fmt: skip
     p.add_argument("--force", nargs=3, type=finite_float, metavar=("FX", "FY", "FZ"),

@@ -17,7 +17,8 @@ Everything is SI: angles in rad, lengths in m, springs in N/m or N m/rad.
 
 A grid is computed along a path that moves one grid step at a time (a boustrophedon:
 rows alternate direction, design axes outermost so that the model changes rarely), so
-that each generic assembly starts from its neighbour's configuration. The path is cut
+that each generic assembly can start from its neighbour's configuration (``start=
+"neighbour"``; by default it starts from the closed-form geometry). The path is cut
 into chunks of contiguous points, one task each for a ``concurrent.futures.Executor``:
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
 (``pip install .[dask]``). Results do not depend on the executor. Execution details
@@ -266,7 +267,7 @@ def sweep(
     *,
     backend: str = "generic",
     wrench=None,
-    start: str = "neighbour",
+    start: str = "closed_form",
     executor: Executor | str = "processes",
     workers: int | None = None,
     chunk_size: int | None = None,
@@ -281,10 +282,11 @@ def sweep(
             backend (see :func:`cahyman_pin.api.backend_names`).
         wrench: (6,) wrench at M (fx, fy, fz [N], nx, ny, nz [N m]), world axes, for the
             ``deflection`` indices; None for none.
-        start: generic backend only: where each assembly starts, ``"neighbour"`` (the
-            previous point's configuration, extrapolated along the path) or
-            ``"closed_form"`` (CaHyMan's closed-form geometry, exact, computed per chunk
-            at once; faster, and the same start as :func:`cahyman_pin.api.stiffness`).
+        start: generic backend only: where each assembly starts, ``"closed_form"``
+            (default: CaHyMan's closed-form geometry, exact, computed per chunk at once;
+            faster, and the same start as :func:`cahyman_pin.api.stiffness`) or
+            ``"neighbour"`` (the previous point's configuration, extrapolated along the
+            path: for variants of the machine without a closed form).
         executor: ``"processes"`` (local process pool, default), ``"serial"``, or any
             ``concurrent.futures.Executor`` (e.g. ``dask.distributed.Client.get_executor()``);
             tasks are pickled, so a registered backend must be importable by the workers.

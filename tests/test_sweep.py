@@ -109,7 +109,7 @@ def test_grid_inputs_and_validation():
 
 # ---------------------------------------------------------------- equal to api.stiffness
 def test_generic_sweep_equals_pointwise_queries():
-    res = sweep(small_grid(), wrench=WRENCH, executor="serial")
+    res = sweep(small_grid(), wrench=WRENCH, start="neighbour", executor="serial")
     assert np.all(res.status == "ok") and np.all(res.rank == 6)
     assert res.iterations.max() > 0  # the assemblies did run from neighbours
     assert_matches_pointwise(res, SAME_PATH_RTOL)
