@@ -285,7 +285,7 @@ def consistent_breakdown(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARA
         AssemblyError: the plate cannot be assembled.
     """
     parts = _compliance_parts(alpha, alpha4, s4, params)
-    pose, C_leg, G = parts[0], parts[2], parts[3]
+    C_leg, G = parts[2], parts[3]
     K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(np.linalg.inv(C_leg)) @ G)
     return ConsistentCompliance(*parts[:6], K_H, *parts[6:])
 

@@ -132,7 +132,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--backend", default="generic", help="stiffness backend (default generic)")
     p.add_argument("--start", choices=STARTS, default="closed_form",
                    help="generic backend: assembly from the closed-form geometry "
-                   "(closed_form, default, faster) or from the previous point (neighbour)")  # fmt: skip
+                   "(closed_form, default, faster) or from the previous point "
+                   "(neighbour)")  # fmt: skip
     p.add_argument("--index", choices=sorted(INDEX_UNITS), default="det_K",
                    help="index to plot (default det_K); all are saved")  # fmt: skip
     p.add_argument("--force", nargs=3, type=finite_float, metavar=("FX", "FY", "FZ"),
