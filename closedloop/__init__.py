@@ -38,6 +38,7 @@ from .io import load_model, robot_data_dir
 from .model import ClosedLoopModel
 from .preload import PreloadedCompliance, preloaded_compliance
 from .statics import Equilibrium, solve_equilibrium
+from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
 from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
 
 __version__ = "0.2.0"
@@ -46,6 +47,7 @@ __all__ = [
     "CLOSURE_TOL",
     "ILL_CONDITIONED",
     "RANK_RTOL",
+    "STANDARD_GRAVITY",
     "Assembly",
     "AssemblyError",
     "ClosedLoopError",
@@ -54,6 +56,7 @@ __all__ = [
     "Configuration",
     "Equilibrium",
     "EquilibriumError",
+    "GravityLoad",
     "InvalidInputError",
     "JointLimitError",
     "JointLimitWarning",
@@ -61,6 +64,7 @@ __all__ = [
     "ModelFileError",
     "NameNotFoundError",
     "OpenLoopError",
+    "Payload",
     "PreloadedCompliance",
     "RigidDirectionsError",
     "SingularConfigurationError",

@@ -343,6 +343,9 @@ def compliance(
     *,
     length: float | None = None,
     path: str = "auto",
+    gravity=None,
+    payloads=(),
+    preload=None,
 ) -> ComplianceResult:
     """Cartesian compliance of ``frame`` at a configuration (see the module docstring).
 
@@ -360,6 +363,13 @@ def compliance(
         path: ``"auto"`` (default: the serial or partitioned fast path where it applies)
             or ``"null-space"`` (the general path, e.g. to cross-check); the path taken is
             in the result.
+        gravity: (3,) acceleration [m/s^2], world axes, weighing the model's link inertias
+            (and ``payloads``, :class:`closedloop.gravity.Payload`); with it, or with
+            ``preload`` (6,) (a dead-load wrench at the frame origin [N, N m], world
+            axes), q is the springs' rest configuration, the mechanism settles under the
+            preload (:func:`closedloop.statics.solve_equilibrium`) and the result is the
+            tangent compliance there (:class:`closedloop.preload.PreloadedCompliance`,
+            with the sag of the frame, q_eq and the spring forces).
 
     Raises:
         NameNotFoundError: unknown frame.
@@ -373,6 +383,14 @@ def compliance(
         raise TypeError("compliance() needs the name of the loaded frame")
     state = as_configuration(model, q, length=length)
     state.require_closed()
+    if gravity is not None or payloads or preload is not None:
+        # the preloaded compliance builds on this module: imported here, on demand
+        from .preload import preloaded_compliance
+        from .statics import solve_equilibrium
+
+        w0 = np.zeros(6) if preload is None else preload
+        eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
+        return preloaded_compliance(state.model, eq, axes)
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame, path)
     NV = f.N @ f.V

@@ -19,7 +19,7 @@ The second-order pieces used to live here; their names stay importable from this
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -69,10 +69,16 @@ class PreloadedCompliance(ComplianceResult):
         stability_margin: smallest eigenvalue of the symmetric part of K_t scaled by the
             unloaded spring stiffness (1 without preload, <= 0 past a static instability;
             for a non-conservative preload a divergence indicator only).
+        equilibrium: the preloaded equilibrium (its rest configuration, the weight, the
+            multipliers); ``q`` above is its configuration q_eq.
+        spring_forces: (nv,) forces of the springs at q_eq, k dq [N m or N] (0 on passive
+            and locked coordinates), dq = difference(q_rest, q_eq).
     """
 
     preload: np.ndarray
     stability_margin: float
+    equilibrium: Equilibrium | None = field(default=None, repr=False)
+    spring_forces: np.ndarray | None = field(default=None, repr=False)
 
     # K: from a square-root factor when the preload is conservative and stable, else the
     # plain inverse of C (not symmetric under a preload moment); see ComplianceResult.K.
@@ -82,11 +88,23 @@ class PreloadedCompliance(ComplianceResult):
         """True when the preloaded equilibrium is statically stable (margin > 0)."""
         return self.stability_margin > 0.0
 
+    @property
+    def sag(self) -> np.ndarray:
+        """(6,) twist of the frame from the rest configuration to q_eq under the preload:
+        (translation [m], rotation vector [rad]), world axes, at the frame origin."""
+        return self.equilibrium.displacement
+
     def to_dict(self) -> dict:
-        """JSON-ready summary: that of :class:`ComplianceResult` plus the preload."""
+        """JSON-ready summary: that of :class:`ComplianceResult` plus the preload: its
+        description, the sag, q_eq, the stability margin."""
         out = super().to_dict()
+        eq = self.equilibrium
         out["preload"] = self.preload.tolist()
         out["stability_margin"] = self.stability_margin
+        if eq is not None:
+            out.update(sag=eq.displacement.tolist(), q_eq=eq.q.tolist(), q_rest=eq.q_rest.tolist())
+            out["weight"] = None if eq.gravity is None else eq.gravity.to_dict()
+            out["spring_forces"] = self.spring_forces.tolist()
         return out
 
 
@@ -118,11 +136,15 @@ def preloaded_compliance(
     state = Configuration(clm, eq.q)
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
-    Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers)
+    Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers, gravity=eq.load)
+    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+    about = {"equilibrium": eq, "spring_forces": readonly(k * eq.joint_deflection)}
     M, P, T = scaled_tangent(clm, Kt, f.N, f.V, f.sigma**2)  # P: preload part; T^T K_r T = I
     if not np.any(P):
         base = compliance(state, frame, axes)
-        return PreloadedCompliance(**base.__dict__, preload=readonly(w0), stability_margin=1.0)
+        return PreloadedCompliance(
+            **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
+        )
     s_M = np.linalg.svd(M, compute_uv=False)
     if s_M.size and s_M[-1] <= CRITICAL_RTOL * max(1.0, s_M[0]):
         raise SingularConfigurationError(
@@ -154,4 +176,5 @@ def preloaded_compliance(
         cls=PreloadedCompliance,
         preload=readonly(w0),
         stability_margin=margin,
+        **about,
     )

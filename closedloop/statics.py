@@ -41,6 +41,7 @@ closure manifold, an independent check.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,7 @@ from .arrays import check_wrench, readonly
 from .compliance import spring_factor
 from .configuration import Configuration, accepts_configuration
 from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
+from .gravity import GravityLoad, Load, Payload
 from .kinematics import update_kinematics
 from .model import ClosedLoopModel
 from .tangent import EquilibriumEquations
@@ -102,6 +104,8 @@ class Equilibrium:
         load_steps: load increments used (1 when the full load converged at once).
         limits_violated: names of the joints outside their position limits at q (see
             :func:`joints_outside_limits`); empty when every limit holds.
+        gravity: the weight of the links and payloads that acts with the wrench
+            (:class:`closedloop.gravity.GravityLoad`), or None.
     """
 
     q: np.ndarray
@@ -117,11 +121,17 @@ class Equilibrium:
     iterations: int
     load_steps: int
     limits_violated: tuple[str, ...] = ()
+    gravity: GravityLoad | None = None
 
     @property
     def displacement(self) -> np.ndarray:
         """(6,) (translation [m], rotation vector [rad]) of the frame, world axes."""
         return np.concatenate([self.translation, self.rotation])
+
+    @property
+    def load(self) -> Load:
+        """The full load: the wrench and the weight."""
+        return Load(self.wrench, self.gravity)
 
 
 def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tuple]:
@@ -174,15 +184,22 @@ def frame_displacement(
 
 
 def potential_energy(
-    clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray, frame: str, force: np.ndarray
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    q_rest: np.ndarray,
+    frame: str,
+    force: np.ndarray,
+    gravity: GravityLoad | None = None,
 ) -> float:
-    """Potential energy [J] of the springs and of a dead-load force at a frame origin.
+    """Potential energy [J] of the springs, a dead-load force at a frame origin, the weight.
 
-    ``1/2 sum k_i dq_i^2 - f . (p(q) - p(q_rest))`` over the spring coordinates
-    (0 < k < inf), dq = difference(q_rest, q). A world-fixed moment has no potential.
+    ``1/2 sum k_i dq_i^2 - f . (p(q) - p(q_rest)) + V_g(q) - V_g(q_rest)`` over the spring
+    coordinates (0 < k < inf), dq = difference(q_rest, q). A world-fixed moment has no
+    potential.
 
     Args:
         force: (3,) force [N], world axes, at the origin of ``frame``.
+        gravity: the weight (:class:`closedloop.gravity.GravityLoad`), or None.
     """
     f = np.asarray(force, dtype=float).reshape(-1)
     if f.shape != (3,):
@@ -190,7 +207,8 @@ def potential_energy(
     k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
     dq = pin.difference(clm.model, q_rest, q)
     dp = frame_displacement(clm, q, q_rest, frame)[:3]
-    return float(0.5 * np.sum(k * dq * dq) - f @ dp)
+    weight = 0.0 if gravity is None else gravity.potential(q) - gravity.potential(q_rest)
+    return float(0.5 * np.sum(k * dq * dq) - f @ dp + weight)
 
 
 def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_step: float):
@@ -250,6 +268,8 @@ def solve_equilibrium(
     max_step: float = 0.5,
     max_increment: float = 0.1,
     enforce_limits: bool = False,
+    gravity=None,
+    payloads: Sequence[Payload] = (),
 ) -> Equilibrium:
     """Static equilibrium of the mechanism under a dead-load wrench at ``frame``.
 
@@ -275,6 +295,10 @@ def solve_equilibrium(
             norm) [rad or m], > 0; larger deflections are followed in several increments.
         enforce_limits: refuse the load as soon as an equilibrium along the way leaves
             the joint limits (:class:`JointLimitError`) instead of flagging the result.
+        gravity: (3,) acceleration [m/s^2], world axes, that weighs the model's link
+            inertias (and ``payloads``) together with the wrench; None: no weight.
+        payloads: point masses at frames (:class:`closedloop.gravity.Payload`), with
+            ``gravity``.
 
     Warns:
         JointLimitWarning: the equilibrium lies outside joint limits (also listed in
@@ -294,19 +318,25 @@ def solve_equilibrium(
             ``enforce_limits``.
     """
     _check_options(tol, max_iter, max_halvings, max_step, max_increment)
-    w = check_wrench(wrench)
+    if payloads and gravity is None:
+        raise InvalidInputError(
+            "payloads weigh nothing without gravity: give gravity=(gx, gy, gz) [m/s^2]"
+        )
+    weight = None if gravity is None else GravityLoad(clm, gravity, payloads)
+    w = Load(check_wrench(wrench), weight)
     rest = Configuration(clm, q_rest).require_closed()  # the one closure tolerance
     q_rest = np.array(rest.q)
     spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
     eqs = EquilibriumEquations(clm, q_rest, frame)
-    where = f"for wrench {w.tolist()} at frame {frame!r} of {clm.name!r}"
+    weighed = "" if weight is None else f" and the weight under gravity {weight.gravity.tolist()}"
+    where = f"for wrench {w.wrench.tolist()}{weighed} at frame {frame!r} of {clm.name!r}"
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
     margin = 1.0  # stability margin of the last equilibrium (1 at rest)
     if enforce_limits:
         _enforce_limits(clm, q, eqs.evaluate(q, 0.0 * w), 0.0, where)
     while t < 1.0:
         st = eqs.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
-        rate = eqs.step(q, t * w, st, load=w) if np.any(w) else np.zeros(clm.model.nv)
+        rate = eqs.step(q, t * w, st, load=w) if w.any() else np.zeros(clm.model.nv)
         ds = min(dt, 1.0 - t)
         speed = float(np.max(np.abs(rate), initial=0.0))
         if speed * ds > max_increment:
@@ -357,7 +387,7 @@ def solve_equilibrium(
         q=readonly(q),
         q_rest=readonly(q_rest),
         frame=frame,
-        wrench=readonly(w),
+        wrench=readonly(w.wrench),
         translation=readonly(disp[:3]),
         rotation=readonly(disp[3:]),
         joint_deflection=readonly(pin.difference(clm.model, q_rest, q)),
@@ -367,6 +397,7 @@ def solve_equilibrium(
         iterations=iterations,
         load_steps=max(steps, 1),
         limits_violated=tuple(bad),
+        gravity=weight,
     )
 
 

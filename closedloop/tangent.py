@@ -44,6 +44,7 @@ import pinocchio as pin
 from .arrays import check_wrench
 from .conditioning import rule_rank
 from .exceptions import InvalidInputError
+from .gravity import Load, as_load
 from .kinematics import (
     closure_jacobian,
     closure_residual,
@@ -236,9 +237,11 @@ def tangent_stiffness(
     wrench: np.ndarray,
     multipliers: np.ndarray,
     *,
+    gravity: Load | None = None,
     update: bool = True,
 ) -> np.ndarray:
-    """(nv, nv) tangent stiffness in joint space, K_q - K_G(w) + sum_j lambda_j Hess c_j.
+    """(nv, nv) tangent stiffness in joint space, K_q - K_G(w) + sum_j lambda_j Hess c_j
+    (+ dG/dq of the weight).
 
     Entry [a, b] is the derivative of equilibrium equation a (generalised force on
     coordinate a [N m or N]) with respect to coordinate b of q [rad or m]. Locked
@@ -252,6 +255,7 @@ def tangent_stiffness(
         wrench: (6,) dead-load wrench (f [N], n [N m]), world axes, at the frame origin.
         multipliers: (m,) closure multipliers lambda at q, conjugate to the rows of
             :func:`closure_gap` (``Equilibrium.multipliers``).
+        gravity: a :class:`closedloop.gravity.Load` whose weight (scaled) adds dG/dq.
         update: recompute the kinematics of q first (else they must be current).
     """
     if update:
@@ -259,6 +263,8 @@ def tangent_stiffness(
     K = spring_hessian(clm, q, q_rest)
     K -= geometric_stiffness(clm, q, frame, wrench, update=False)
     K += closure_curvature(clm, q, multipliers, update=False)
+    if gravity is not None:
+        K += gravity.stiffness(q, clm.model.nv)
     return K
 
 
@@ -303,11 +309,13 @@ class EquilibriumEquations:
         self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
 
-    def evaluate(self, q: np.ndarray, w: np.ndarray) -> dict:
-        """State at q under the wrench w (6,): residuals, multipliers, SVD of J_c.
+    def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
+        """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
+        multipliers, SVD of J_c.
 
         Keys: ``c`` (m,) closure residual; ``closure`` its infinity norm [m, rad]; ``F``
-        the generalised force g - J^T w on the free coordinates [N m, N]; ``force`` the
+        the generalised force g + G - J^T w on the free coordinates [N m, N] (G: the
+        weight, if any); ``force`` the
         infinity norm of its unbalanced part F + J_c^T lambda; ``scale`` the largest
         spring or load generalised force; ``lam`` (m,) least-squares multipliers; ``Ur``,
         ``sr``, ``R``, ``N``: the SVD of J_c on the free coordinates (row space, null space).
@@ -320,7 +328,7 @@ class EquilibriumEquations:
         dq = pin.difference(clm.model, self.q_rest, q)
         Jd = pin.dDifference(clm.model, self.q_rest, q, pin.ARG1)
         g = Jd.T @ (self.k * dq)
-        load = J.T @ w
+        load = self.generalised_load(q, w, J)
         F = (g - load)[free]
         if A.size:
             U, s, Vt = np.linalg.svd(A, full_matrices=True)
@@ -345,8 +353,16 @@ class EquilibriumEquations:
             "N": N,
         }
 
+    def generalised_load(self, q: np.ndarray, w: Load | np.ndarray, J: np.ndarray) -> np.ndarray:
+        """(nv,) J^T w - G(q): the wrench and the weight as generalised forces [N m, N]."""
+        w = as_load(w)
+        return J.T @ w.wrench - w.forces(q, self.clm.model.nv)
+
     def _restricted(self, q, w, st: dict) -> np.ndarray:
-        H = tangent_stiffness(self.clm, q, self.q_rest, self.frame, w, st["lam"], update=False)
+        w = as_load(w)
+        H = tangent_stiffness(
+            self.clm, q, self.q_rest, self.frame, w.wrench, st["lam"], gravity=w, update=False
+        )
         return H[np.ix_(self.free, self.free)]
 
     def step(self, q, w, st: dict, load: np.ndarray | None = None) -> np.ndarray:
@@ -354,7 +370,8 @@ class EquilibriumEquations:
 
         Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
         closures plus the Newton step of N^T F on the admissible motions. With ``load``
-        (6,): the rate dq/ds of the equilibrium when the wrench grows by s ``load``.
+        (a :class:`Load` or a wrench (6,)): the rate dq/ds of the equilibrium when the
+        load grows by s ``load``.
         """
         free, H = self.free, self._restricted(q, w, st)
         R, N = st["R"], st["N"]
@@ -363,14 +380,14 @@ class EquilibriumEquations:
             rhs = -N.T @ (st["F"] + H @ dx)
         else:
             J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
-            dx, rhs = np.zeros(free.size), N.T @ (J.T @ load)[free]
+            dx, rhs = np.zeros(free.size), N.T @ self.generalised_load(q, load, J)[free]
         dx += N @ np.linalg.lstsq(N.T @ H @ N, rhs, rcond=1e-12)[0]
         v = np.zeros(self.clm.model.nv)
         v[free] = dx
         return v
 
-    def margin(self, q: np.ndarray, w: np.ndarray) -> float:
-        """Stability margin at an equilibrium q (nq,) under the wrench w (6,).
+    def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
+        """Stability margin at an equilibrium q (nq,) under the load w.
 
         As in :class:`closedloop.preload.PreloadedCompliance`: the smallest eigenvalue of
         the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by

@@ -1,0 +1,159 @@
+"""Gravity of the model's own link inertias, and payloads, as a preload of the statics.
+
+The weight of the links (URDF ``<inertial>``, MJCF masses) under a uniform acceleration
+g (3,) [m/s^2] has the potential V(q) = -sum_b m_b g . c_b(q) (c_b the body centres of
+mass); its generalised force is Pinocchio's generalised gravity G(q) = dV/dq
+(``pin.computeGeneralizedGravity``: the joint torques that hold the robot still), and its
+stiffness dG/dq (``pin.computeGeneralizedGravityDerivatives``), both along the tangent of
+q. A payload is a point mass [kg] at a frame, with an offset [m] in the frame's axes; it
+enters as one more body on the frame's joint, so that G and dG/dq include it.
+
+In the equilibrium equations of :mod:`closedloop.tangent` the weight adds G(q) to the
+spring forces and dG/dq to the tangent stiffness.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .arrays import check_wrench, readonly
+from .exceptions import InvalidInputError
+from .model import ClosedLoopModel
+
+#: Standard gravity along -z [m/s^2].
+STANDARD_GRAVITY = (0.0, 0.0, -9.80665)
+
+
+def _vector3(value, what: str) -> np.ndarray:
+    v = np.asarray(value, dtype=float).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        shown = np.asarray(value).tolist()
+        raise InvalidInputError(f"{what} must be 3 finite numbers, got {shown}")
+    return v
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A point mass carried by a frame.
+
+    Attributes:
+        mass: mass [kg], finite and >= 0.
+        frame: name of the frame that carries it.
+        offset: (3,) position of the mass [m] in the frame's axes, from its origin.
+    """
+
+    mass: float
+    frame: str
+    offset: np.ndarray = field(default_factory=lambda: readonly(np.zeros(3)))
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.mass, int | float | np.floating) and np.isfinite(self.mass)):
+            raise InvalidInputError(f"payload mass must be a finite number [kg], got {self.mass!r}")
+        if self.mass < 0.0:
+            raise InvalidInputError(f"payload mass must be >= 0 [kg], got {self.mass}")
+        if not isinstance(self.frame, str):
+            raise InvalidInputError(f"payload frame must be a frame name, got {self.frame!r}")
+        object.__setattr__(self, "offset", readonly(_vector3(self.offset, "payload offset")))
+
+    def to_dict(self) -> dict:
+        """JSON-ready description (SI)."""
+        return {"mass_kg": float(self.mass), "frame": self.frame, "offset_m": self.offset.tolist()}
+
+
+class GravityLoad:
+    """Weight of a model's links and payloads under the acceleration ``gravity``.
+
+    Args:
+        clm: the model (its inertias are used; it is not changed).
+        gravity: (3,) acceleration [m/s^2], world axes (default :data:`STANDARD_GRAVITY`).
+        payloads: point masses at frames.
+
+    Raises:
+        InvalidInputError: non-finite gravity, a bad payload.
+        NameNotFoundError: a payload frame that the model does not have.
+    """
+
+    def __init__(
+        self,
+        clm: ClosedLoopModel,
+        gravity=STANDARD_GRAVITY,
+        payloads: Sequence[Payload] = (),
+    ):
+        self.gravity = readonly(_vector3(gravity, "gravity [m/s^2]"))
+        self.payloads = tuple(payloads)
+        model = pin.Model(clm.model)  # a copy: the payloads become bodies of its own
+        model.gravity = pin.Motion(np.r_[self.gravity, np.zeros(3)])
+        for p in self.payloads:
+            if not isinstance(p, Payload):
+                raise InvalidInputError(f"payloads must be Payload objects, got {p!r}")
+            f = model.frames[clm.frame_id(p.frame)]
+            at = f.placement * pin.SE3(np.eye(3), p.offset)
+            point_mass = pin.Inertia(p.mass, np.zeros(3), np.zeros((3, 3)))
+            model.appendBodyToJoint(f.parentJoint, point_mass, at)
+        self.model = model
+        self.mass = float(sum(I.mass for I in model.inertias))
+
+    def forces(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """(nv,) generalised gravity scale G(q) [N m, N]: the weight's dV/dq."""
+        return scale * pin.computeGeneralizedGravity(self.model, self.model.createData(), q)
+
+    def stiffness(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """(nv, nv) scale dG/dq [N m/rad, N/m, mixed]: the weight's part of K_t."""
+        data = self.model.createData()
+        return scale * pin.computeGeneralizedGravityDerivatives(self.model, data, q)
+
+    def potential(self, q: np.ndarray) -> float:
+        """Potential energy V(q) of the weight [J] (zero at the world origin)."""
+        return float(pin.computePotentialEnergy(self.model, self.model.createData(), q))
+
+    def to_dict(self) -> dict:
+        """JSON-ready description: gravity [m/s^2], total mass [kg], payloads."""
+        return {
+            "gravity_m_s2": self.gravity.tolist(),
+            "mass_kg": self.mass,
+            "payloads": [p.to_dict() for p in self.payloads],
+        }
+
+
+@dataclass(frozen=True)
+class Load:
+    """What the statics follow from zero: a dead-load wrench at a frame, and the weight.
+
+    ``t * load`` is the load at fraction t of the continuation (both scaled).
+
+    Attributes:
+        wrench: (6,) (f [N], n [N m]), world axes, at the loaded frame's origin.
+        gravity: the weight, or None.
+        scale: fraction of the weight applied (1 for the full load).
+    """
+
+    wrench: np.ndarray
+    gravity: GravityLoad | None = None
+    scale: float = 1.0
+
+    def __rmul__(self, t: float) -> Load:
+        return Load(t * self.wrench, self.gravity, t * self.scale)
+
+    def any(self) -> bool:
+        """True when something is applied."""
+        weight = self.gravity is not None and self.scale != 0.0 and self.gravity.mass > 0.0
+        return bool(np.any(self.wrench)) or (weight and bool(np.any(self.gravity.gravity)))
+
+    def forces(self, q: np.ndarray, nv: int) -> np.ndarray:
+        """(nv,) generalised weight scale G(q) (zero without gravity) [N m, N]."""
+        return np.zeros(nv) if self.gravity is None else self.gravity.forces(q, self.scale)
+
+    def stiffness(self, q: np.ndarray, nv: int) -> np.ndarray:
+        """(nv, nv) the weight's stiffness scale dG/dq (zero without gravity)."""
+        if self.gravity is None:
+            return np.zeros((nv, nv))
+        return self.gravity.stiffness(q, self.scale)
+
+
+def as_load(w) -> Load:
+    """A :class:`Load` from a Load or a wrench (6,) (fx, fy, fz [N], nx, ny, nz [N m])."""
+    return w if isinstance(w, Load) else Load(check_wrench(w))

@@ -1,0 +1,192 @@
+"""Gravity and payloads as preloads: sag and tangent compliance against independent solves."""
+
+import mechanisms as mech
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.optimize
+from helpers import assert_close_in_norm
+
+import closedloop as cl
+from closedloop.gravity import GravityLoad, Payload
+from closedloop.io import load_urdf, robot_data_dir
+from closedloop.statics import frame_displacement
+
+G = np.array([0.0, 0.0, -9.81])  # m/s^2
+UR5_K = 1e3  # N m/rad: every joint, soft enough for a visible sag
+UR5_POSES = (
+    np.array([0.0, -1.0, 1.5, -0.5, 1.2, 0.3]),
+    np.array([0.4, -0.6, 0.9, -1.2, -1.0, 0.8]),
+)
+#: Newton on K (q - q0) + G(q) = 0 and the engine both converge to rounding; the
+#: reference's dG/dq by central differences (step 1e-6 rad) carries ~1e-10 relative,
+#: amplified by the condition of K + dG/dq (~10): 1e-7 leaves a wide margin.
+RTOL_UR5 = 1e-7
+#: Finite differences of the nonlinear equilibrium: central, wrench step H_WRENCH; the
+#: truncation error is O(h^2 |d3 q / dw3|) ~ 1e-8 relative here, far below 1e-5.
+RTOL_FD = 1e-5
+H_WRENCH = 1e-2  # N or N m
+
+
+def _ur5():
+    return load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=UR5_K)
+
+
+def _gravity_torques(model, q):
+    model.gravity = pin.Motion(np.r_[G, 0, 0, 0])
+    return pin.computeGeneralizedGravity(model, model.createData(), q)
+
+
+def _ur5_reference(clm, q0):
+    """q_eq from Newton on K (q - q0) + G(q) = 0, and J (K + dG/dq)^-1 J^T there, with
+    Pinocchio's generalised gravity and central differences for dG/dq."""
+    model, K = pin.Model(clm.model), UR5_K * np.eye(6)
+
+    def dG(q, h=1e-6):
+        cols = [(_gravity_torques(model, q + h * e) - _gravity_torques(model, q - h * e)) / (2 * h)
+                for e in np.eye(6)]  # fmt: skip
+        return np.array(cols).T
+
+    q = q0.copy()
+    for _ in range(50):
+        r = K @ (q - q0) + _gravity_torques(model, q)
+        if np.max(np.abs(r)) < 1e-12:
+            break
+        q = q - np.linalg.solve(K + dG(q), r)
+    data = model.createData()
+    J = pin.computeFrameJacobian(model, data, q, model.getFrameId("tool0"), pin.LOCAL_WORLD_ALIGNED)
+    return q, J @ np.linalg.solve(K + dG(q), J.T)
+
+
+@pytest.mark.parametrize("pose", [0, 1])
+def test_ur5_sag_and_tangent_compliance_under_its_own_weight(pose):
+    clm, q0 = _ur5(), UR5_POSES[pose]
+    q_ref, C_ref = _ur5_reference(clm, q0)
+    res = cl.compliance(clm, q0, "tool0", gravity=G)
+    np.testing.assert_allclose(res.q, q_ref, rtol=0, atol=RTOL_UR5 * np.abs(q_ref - q0).max())
+    assert_close_in_norm(res.C, C_ref, RTOL_UR5)
+    sag = frame_displacement(clm, q_ref, q0, "tool0")
+    assert_close_in_norm(res.sag, sag, RTOL_UR5)
+    assert np.linalg.norm(sag[:3]) > 1e-3  # m: a real sag at 1e3 N m/rad
+    assert_close_in_norm(res.spring_forces, UR5_K * (q_ref - q0), RTOL_UR5)
+    doc = res.to_dict()
+    assert doc["weight"]["gravity_m_s2"] == G.tolist() and len(doc["sag"]) == 6
+    np.testing.assert_allclose(doc["weight"]["mass_kg"], sum(I.mass for I in clm.model.inertias))
+
+
+def _equilibrium_displacements(clm, q0, frame, gravity, payloads, w0):
+    """(6, 6) central finite differences of the frame's equilibrium pose per wrench unit."""
+    base = cl.solve_equilibrium(clm, q0, frame, w0, gravity=gravity, payloads=payloads)
+    cols = []
+    for e in np.eye(6):
+        plus, minus = (
+            cl.solve_equilibrium(
+                clm, q0, frame, w0 + s * H_WRENCH * e, gravity=gravity, payloads=payloads
+            )
+            for s in (1.0, -1.0)
+        )
+        d = frame_displacement(clm, plus.q, base.q, frame) - frame_displacement(
+            clm, minus.q, base.q, frame
+        )
+        cols.append(d / (2 * H_WRENCH))
+    return base, np.array(cols).T
+
+
+def test_fourbar_with_a_heavy_coupler_matches_finite_differences(fourbar):
+    # 5 kg on the coupler, 0.1 m off its frame: the loop multipliers carry the weight,
+    # and their curvature term changes the compliance (checked below against no gravity)
+    clm, q0 = fourbar
+    payloads = [Payload(5.0, "coupler_link", np.array([0.05, 0.0, 0.1]))]
+    res = cl.compliance(clm, q0, "P", gravity=G, payloads=payloads)
+    base, C_fd = _equilibrium_displacements(clm, q0, "P", G, payloads, np.zeros(6))
+    np.testing.assert_allclose(res.q, base.q, rtol=0, atol=1e-12)
+    assert_close_in_norm(res.C, C_fd, RTOL_FD)
+    unloaded = cl.compliance(clm, q0, "P")
+    assert np.abs(res.C - unloaded.C).max() > 1e3 * RTOL_FD * np.abs(unloaded.C).max()
+    assert np.abs(base.multipliers).max() > 1.0  # N: the loop carries part of the weight
+
+
+def test_cahyman_with_masses_matches_finite_differences():
+    from cahyman_pin.model import cahyman_model
+
+    model = cahyman_model()
+    q0 = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01)
+    payloads = [Payload(2.0, "M"), Payload(3.0, "H")]
+    res = cl.compliance(model.clm, q0, "M", gravity=G, payloads=payloads)
+    _, C_fd = _equilibrium_displacements(model.clm, q0, "M", G, payloads, np.zeros(6))
+    assert_close_in_norm(res.C, C_fd, RTOL_FD)
+    assert np.linalg.norm(res.sag[:3]) > 0.0
+
+
+def test_payload_beyond_a_limit_load_is_refused():
+    # the general Stewart platform pushed along its compression direction: limit load
+    # ~2.5e4 N (see test_mechanisms); a payload weighing 1.2 times that
+    m = mech.stewart(position=(0.1, -0.05, 0.9), psi=0.3, tilt=(0.1, -0.15),
+                     anchors=mech.perturbed_anchors(seed=0))  # fmt: skip
+    down = np.array([0.05, 0.1, -1.0]) / np.linalg.norm([0.05, 0.1, -1.0])
+    heavy = Payload(1.2 * 2.5e4 / 9.81, m.frame)
+    with pytest.raises(cl.EquilibriumError, match="limit load") as err:
+        cl.compliance(m.clm, m.q, m.frame, gravity=9.81 * down, payloads=[heavy])
+    assert err.value.limit_load
+    light = Payload(0.5 * 2.5e4 / 9.81, m.frame)  # half the limit: found, and stable
+    assert cl.compliance(m.clm, m.q, m.frame, gravity=9.81 * down, payloads=[light]).is_stable
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"gravity": (0.0, np.nan, -9.81)}, r"gravity \[m/s\^2\] must be 3 finite numbers"),
+        ({"gravity": (0.0, -9.81)}, r"gravity \[m/s\^2\] must be 3 finite numbers"),
+        ({"payloads": [Payload(1.0, "P")]}, r"payloads weigh nothing without gravity"),
+    ],
+)
+def test_bad_gravity_is_refused(fourbar, kwargs, match):
+    clm, q0 = fourbar
+    with pytest.raises(cl.InvalidInputError, match=match):
+        cl.solve_equilibrium(clm, q0, "P", np.zeros(6), **kwargs)
+
+
+def test_bad_payloads_are_refused(fourbar):
+    clm, _ = fourbar
+    with pytest.raises(cl.InvalidInputError, match=r"payload mass must be >= 0 \[kg\], got -1"):
+        Payload(-1.0, "P")
+    with pytest.raises(cl.InvalidInputError, match=r"payload mass must be a finite number"):
+        Payload(float("nan"), "P")
+    with pytest.raises(cl.InvalidInputError, match=r"payload offset must be 3 finite"):
+        Payload(1.0, "P", np.array([0.0, np.inf, 0.0]))
+    with pytest.raises(cl.NameNotFoundError, match=r"unknown frame 'nowhere'"):
+        GravityLoad(clm, G, [Payload(1.0, "nowhere")])
+
+
+def test_energy_of_the_weight_is_minimal_at_the_equilibrium(fourbar):
+    # independent of the equations: minimise springs + weight on the closure manifold
+    clm, q0 = fourbar
+    payloads = [Payload(2.0, "coupler_link")]
+    eq = cl.solve_equilibrium(clm, q0, "P", np.zeros(6), gravity=G, payloads=payloads)
+    weight = GravityLoad(clm, G, payloads)
+    free = np.flatnonzero(clm.stiffness < np.inf)
+
+    def energy(x):
+        q = pin.integrate(clm.model, q0, _embed(clm, free, x))
+        return cl.statics.potential_energy(clm, q, q0, "P", np.zeros(3), weight)
+
+    # the loop is planar: its out-of-plane closure row is identically zero, left out
+    in_plane = np.abs(cl.kinematics.closure_jacobian(clm, q0)).max(axis=1) > 1e-12
+
+    def closure(x):
+        q = pin.integrate(clm.model, q0, _embed(clm, free, x))
+        return cl.kinematics.closure_residual(clm, q)[in_plane]
+
+    x0 = pin.difference(clm.model, q0, eq.q)[free]
+    out = scipy.optimize.minimize(
+        energy, np.zeros(free.size), constraints={"type": "eq", "fun": closure},
+        method="SLSQP", options={"ftol": 1e-15, "maxiter": 500},
+    )  # fmt: skip
+    assert out.success, out.message
+    np.testing.assert_allclose(out.x, x0, rtol=0, atol=1e-6 * np.abs(x0).max())
+
+
+def _embed(clm, free, x):
+    v = np.zeros(clm.model.nv)
+    v[free] = x
+    return v
