@@ -33,12 +33,12 @@ from .exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
+from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
 from .indices import StiffnessIndices
 from .io import load_model, robot_data_dir
 from .model import ClosedLoopModel
 from .preload import PreloadedCompliance, preloaded_compliance
 from .statics import Equilibrium, solve_equilibrium
-from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
 from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
 
 __version__ = "0.2.0"
