@@ -29,6 +29,13 @@ top face, z up, x towards leg 1):
   sliding link ``telescope``; frame ``M`` at its tip, x axis along the arm direction w:
   M = Q + (L + s_4) w at rest.
 
+Masses (``CaHyManParams.m_*``, default 0: no ``<inertial>`` is written), placed where the
+lever arms of the paper's eq. (11) put them (an interpretation: the paper gives the arms,
+not the bodies): m_HQ at the middle of HQ (on the plate), m_QM at Q and m_M4 (the motor
+of alpha_4) at L / 2 on ``arm``, m_MM2 at M2, and the linear motor m_M5 half at M2 and
+half at M, so that its centre is at L + s_4 / 2 from Q, as eq. (11) has it. The legs'
+links carry no mass (the paper names none).
+
 Closure file: the "Extended URDF" keys ``closed_loop``, ``type``, ``name_mot`` plus the
 ``springs`` extension read by :func:`closedloop.io.read_closure_file`.
 """
@@ -37,6 +44,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import yaml
 
 from closedloop.io import ClosureSpec
@@ -127,11 +135,32 @@ def _box(size) -> str:
     return f'<box size="{_vec(size, _short)}"/>'
 
 
-def _link(name: str, *visuals: str) -> str:
-    if not visuals:
+def _link(name: str, *visuals: str, masses=()) -> str:
+    """A link with its visuals and, when their total is > 0, the inertial of point masses
+    ``masses``: (mass [kg], (x, y, z) [m] in the link frame) pairs."""
+    inertial = _inertial(masses)
+    if not visuals and not inertial:
         return f'  <link name="{name}"/>'
-    body = "".join(f"\n    {v}" for v in visuals)
+    body = "".join(f"\n    {v}" for v in (*visuals, *inertial))
     return f'  <link name="{name}">{body}\n  </link>'
+
+
+def _inertial(masses) -> list[str]:
+    """URDF inertial of point masses: total mass, centre of mass, inertia about it."""
+    m = sum(mass for mass, _ in masses)
+    if m <= 0.0:
+        return []
+    com = sum(mass * np.asarray(at, float) for mass, at in masses) / m
+    inertia = np.zeros((3, 3))
+    for mass, at in masses:
+        r = np.asarray(at, float) - com
+        inertia += mass * (r @ r * np.eye(3) - np.outer(r, r))
+    (ixx, ixy, ixz), (_, iyy, iyz), (_, _, izz) = inertia
+    return [
+        f"<inertial>{_origin(com)}<mass value=\"{_num(m)}\"/>"
+        f'<inertia ixx="{_num(ixx)}" ixy="{_num(ixy)}" ixz="{_num(ixz)}" iyy="{_num(iyy)}" '
+        f'iyz="{_num(iyz)}" izz="{_num(izz)}"/></inertial>'
+    ]
 
 
 def _joint(name, kind, parent, child, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), axis=None,
@@ -208,7 +237,8 @@ def _plate_and_arm(p: CaHyManParams, z: _Sizes) -> list[str]:
     out += [
         _joint(PLATE_JOINT, "floating", "fixed_plate", "mobile_plate"),
         _link("mobile_plate", _visual(_cylinder(z.mobile_radius, z.plate), "grey"),
-              _visual(_cylinder(z.rod, p.HQ), "dark", (0, 0, p.HQ / 2))),
+              _visual(_cylinder(z.rod, p.HQ), "dark", (0, 0, p.HQ / 2)),
+              masses=[(p.m_HQ, (0, 0, p.HQ / 2))]),
         *_fixed_frame(FRAME_H, "mobile_plate"),
     ]  # fmt: skip
     for k in LEGS:
@@ -218,14 +248,16 @@ def _plate_and_arm(p: CaHyManParams, z: _Sizes) -> list[str]:
         "  <!-- telescopic arm: Q = H + HQ z_p, w = cos(alpha_4) x_p + sin(alpha_4) z_p -->",
         *_fixed_frame("Q", "mobile_plate", (0, 0, p.HQ), _visual(_sphere(1.5 * z.rod), "dark")),
         _joint("alpha_4", "revolute", "Q", "arm", axis=(0, -1, 0), limits=_REVOLUTE),
-        _link("arm", _visual(_cylinder(1.5 * z.rod, p.L), "blue", (p.L / 2, 0, 0), _ROD_ALONG_X)),
+        _link("arm", _visual(_cylinder(1.5 * z.rod, p.L), "blue", (p.L / 2, 0, 0), _ROD_ALONG_X),
+              masses=[(p.m_QM, (0, 0, 0)), (p.m_M4, (p.L / 2, 0, 0))]),
         _joint("arm_axial", "prismatic", "arm", "M2", (p.L, 0, 0), axis=(1, 0, 0),
                limits=_VIRTUAL),
-        _link("M2"),
+        _link("M2", masses=[(p.m_MM2, (0, 0, 0)), (p.m_M5 / 2, (0, 0, 0))]),
         _joint("s_4", "prismatic", "M2", "telescope", axis=(1, 0, 0),
                limits=(0.0, p.s4_max, 1e3)),
         _link("telescope",
-              _visual(_cylinder(z.rod, tele), "orange", (-tele / 2, 0, 0), _ROD_ALONG_X)),
+              _visual(_cylinder(z.rod, tele), "orange", (-tele / 2, 0, 0), _ROD_ALONG_X),
+              masses=[(p.m_M5 / 2, (0, 0, 0))]),
         *_fixed_frame(FRAME_M, "telescope", (0, 0, 0), _visual(_sphere(z.ball), "red")),
     ]  # fmt: skip
     return out

@@ -190,3 +190,22 @@ def _embed(clm, free, x):
     v = np.zeros(clm.model.nv)
     v[free] = x
     return v
+
+
+@pytest.mark.parametrize(("legs_deg", "alpha4_deg", "s4"), [(30.0, 30.0, 0.0), (90.0, 10.0, 0.05)])
+def test_cahyman_masses_sit_where_eq_11_puts_them(legs_deg, alpha4_deg, s4):
+    # With the plate level (equal cranks) the weight's moment about the alpha_4 axis is
+    # the paper's eq. (11) lever sum g cos(alpha_4) [m_M4 L/2 + m_MM2 L + m_M5 (L + s4/2)]
+    from cahyman_pin.model import CaHyManModel
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    p = DEFAULT_PARAMS.replace(m_HQ=0.5, m_QM=0.3, m_MM2=0.4, m_M4=1.2, m_M5=0.8)
+    model = CaHyManModel(p)
+    a4 = np.deg2rad(alpha4_deg)
+    q = model.assemble(np.deg2rad([legs_deg] * 3), a4, s4)
+    masses = sum(I.mass for I in model.clm.model.inertias)
+    np.testing.assert_allclose(masses, p.m_HQ + p.m_QM + p.m_MM2 + p.m_M4 + p.m_M5, rtol=1e-12)
+    torque = GravityLoad(model.clm, G).forces(q)[model.clm.joint_v_slice("alpha_4")][0]
+    lever = p.m_M4 * p.L / 2 + p.m_MM2 * p.L + p.m_M5 * (p.L + s4 / 2)
+    # positive alpha_4 raises the arm: holding it up against gravity takes +g cos(a4) lever
+    np.testing.assert_allclose(torque, 9.81 * np.cos(a4) * lever, rtol=1e-12)
