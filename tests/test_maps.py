@@ -1,0 +1,120 @@
+"""Stiffness maps of any robot: every point equals a direct query; failures recorded."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import mechanisms as mech
+import numpy as np
+import pytest
+from helpers import assert_close_in_norm
+
+import closedloop as cl
+from closedloop.io import reference_configuration
+from closedloop.maps import INDICES, ModelSource, grid_points, stiffness_map
+
+#: A map point is the very computation of a direct query from the same start: equal to
+#: rounding (the assembly may start elsewhere: its result is closed to 1e-12 m).
+RTOL_SAME = 1e-12
+CRANKS = np.linspace(0.1, 2.9, 15)
+WRENCH = np.array([3.0, 0.0, -2.0, 0.0, 0.4, 0.0])
+
+
+def test_fourbar_crank_range_equals_direct_queries(fourbar_urdf, fourbar_yaml):
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    m = stiffness_map(clm, "P", sweeps={"crank": CRANKS}, wrench=WRENCH)
+    assert m.shape == (15,) and m.swept == ("crank",)
+    assert set(m.indices) == set(INDICES)
+    assert np.all(m.status == "rank_deficient")  # a planar loop is rigid out of its plane
+    q = reference_configuration(clm)  # the map's start, then each point from the last
+    for i, crank in enumerate(CRANKS):
+        q = cl.assemble(clm, actuated=[crank], q0=q).q
+        res = cl.compliance(clm, q, "P")
+        assert_close_in_norm(m.C[i], res.C, RTOL_SAME)
+        d = res.deflection(WRENCH)
+        np.testing.assert_allclose(m.indices["deflection_translation"][i],
+                                   np.linalg.norm(d[:3]), rtol=RTOL_SAME)  # fmt: skip
+        s = cl.StiffnessIndices.from_result(res)
+        np.testing.assert_allclose(m.indices["min_translational"][i],
+                                   s.min_translational_stiffness.value, rtol=RTOL_SAME)  # fmt: skip
+    assert np.all(np.isnan(m.indices["det_K"]))  # K does not exist
+
+
+def test_stewart_grid_of_two_legs_with_unreachable_points():
+    m = mech.stewart()
+    lengths = m.geometry["lengths"]
+    fixed = {f"leg{i}": lengths[i] for i in range(2, 6)}
+    axes = {"leg0": lengths[0] + np.array([-0.05, 0.0, 0.05, 5.0]),
+            "leg1": lengths[1] + np.array([-0.03, 0.03])}  # fmt: skip
+    res = stiffness_map(m.clm, m.frame, sweeps=axes, fixed=fixed)
+    assert res.shape == (4, 2)
+    status = res.status.reshape(res.shape)
+    assert np.all(status[:3] == "ok") and np.all(status[3] == "unreachable")  # a 5 m longer leg
+    assert "cannot close the loops" in res.reasons[6]
+    assert np.all(np.isnan(res.grid("det_K")[3]))
+    for i in np.flatnonzero(res.ok):
+        q = cl.assemble(m.clm, res.inputs[i], m.q).q
+        assert_close_in_norm(res.C[i], cl.compliance(m.clm, q, m.frame).C, 1e-9)
+        np.testing.assert_allclose(res.indices["det_K"][i],
+                                   np.linalg.det(cl.compliance(m.clm, q, m.frame).K),
+                                   rtol=1e-8)  # fmt: skip
+
+
+def test_executors_give_identical_maps(fourbar_urdf, fourbar_yaml):
+    source = ModelSource(str(fourbar_urdf), str(fourbar_yaml))
+    kw = {"sweeps": {"crank": CRANKS}, "wrench": WRENCH, "chunk": 4}
+    serial = stiffness_map(source, "P", **kw)
+    with ThreadPoolExecutor(2) as pool:
+        threads = stiffness_map(source, "P", executor=pool, **kw)
+    processes = stiffness_map(source, "P", workers=2, **kw)
+    for other in (threads, processes):
+        np.testing.assert_array_equal(other.C, serial.C)
+        np.testing.assert_array_equal(other.status, serial.status)
+        for name in serial.indices:
+            np.testing.assert_array_equal(other.indices[name], serial.indices[name])
+
+
+def test_boustrophedon_path():
+    clm = mech.rrr3().clm
+    names = list(clm.actuated)
+    pts, shape, order = grid_points(clm, {names[0]: [0.0, 0.1, 0.2], names[1]: [1.0, 2.0]},
+                                    {names[2]: 0.5})  # fmt: skip
+    assert shape == (3, 2) and pts.shape == (6, 3)
+    np.testing.assert_array_equal(order, [0, 1, 3, 2, 4, 5])  # every step a neighbour
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"sweeps": {"nope": [0.1]}}, r"'nope' is not an actuated joint; expected one of"),
+        ({"sweeps": {"crank": [np.nan]}}, r"every swept joint needs finite values"),
+        ({}, r"give either sweeps \(with fixed\) or points"),
+        ({"points": np.zeros((2, 3))}, r"points must be \(n, 1\) finite actuated values"),
+        ({"sweeps": {"crank": [0.1]}, "workers": 2}, r"worker processes need a ModelSource"),
+        ({"sweeps": {"crank": [0.1]}, "wrench": [1.0, 2.0]}, r"wrench must be 6 finite"),
+    ],
+)
+def test_bad_maps_are_refused(fourbar_urdf, fourbar_yaml, kwargs, match):
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    with pytest.raises(cl.InvalidInputError, match=match):
+        stiffness_map(clm, "P", **kwargs)
+
+
+def test_map_files(tmp_path):
+    m = mech.stewart()
+    lengths = m.geometry["lengths"]
+    fixed = {f"leg{i}": lengths[i] for i in range(2, 6)}
+    axes = {"leg0": lengths[0] + np.array([-0.02, 0.0, 5.0]), "leg1": lengths[1] + [0.0, 0.02]}
+    res = stiffness_map(m.clm, m.frame, sweeps=axes, fixed=fixed, wrench=WRENCH)
+    paths = res.save(tmp_path / "out", index="min_translational")
+    assert [p.name for p in paths] == ["map.npz", "map.csv", "map.png"]
+    data = np.load(paths[0])
+    np.testing.assert_array_equal(data["leg0"], res.inputs[:, 0])
+    np.testing.assert_array_equal(data["det_K"], res.indices["det_K"])
+    assert list(data["status"]).count("unreachable") == 2
+    lines = paths[1].read_text().splitlines()
+    assert lines[0].startswith("leg0,leg1,") and len(lines) == 7 and "nan" in lines[-1]
+    assert paths[2].stat().st_size > 10_000  # a real picture
+    with pytest.raises(cl.InvalidInputError, match=r"index 'nope'; expected one of"):
+        res.save(tmp_path, index="nope")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(cl.InvalidInputError, match=r"cannot write to"):
+        res.save(tmp_path / "file" / "sub")
