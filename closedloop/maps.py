@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import functools
 import textwrap
-from collections.abc import Mapping, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -289,6 +289,7 @@ def stiffness_map(
     workers: int | None = None,
     executor: Executor | None = None,
     chunk: int = CHUNK,
+    progress: Callable[[int, int], None] | None = None,
 ) -> StiffnessMap:
     """Stiffness indices at many configurations (see the module docstring).
 
@@ -301,6 +302,8 @@ def stiffness_map(
         workers: local processes (a :class:`ModelSource` is required), default serial.
         executor: any ``concurrent.futures.Executor`` (e.g. Dask's) instead.
         chunk: points per task.
+        progress: called as ``progress(done, total)`` after each task (in the caller's
+            thread).
 
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
@@ -332,11 +335,23 @@ def stiffness_map(
         executor = ProcessPoolExecutor(workers)
     pieces = [order[i : i + chunk] for i in range(0, len(order), chunk)]
     tasks = [(model, frame, pts[p], w) for p in pieces]
+    results: list = [None] * len(tasks)
+    done = 0
+
+    def finished(k: int, result) -> None:
+        nonlocal done
+        results[k], done = result, done + len(pieces[k])
+        if progress is not None:
+            progress(done, len(pts))
+
     if executor is None:
-        results = [_chunk(*t) for t in tasks]
+        for k, t in enumerate(tasks):
+            finished(k, _chunk(*t))
     else:
         with executor if workers is not None else _NoClose(executor) as ex:
-            results = list(ex.map(_chunk, *zip(*tasks, strict=True)))
+            futures = {ex.submit(_chunk, *t): k for k, t in enumerate(tasks)}
+            for f in as_completed(futures):
+                finished(futures[f], f.result())
     n = len(pts)
     C, status, reasons = np.full((n, 6, 6), np.nan), np.empty(n, dtype=object), [""] * n
     values = {name: np.full(n, np.nan) for name in INDICES}

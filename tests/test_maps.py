@@ -61,7 +61,9 @@ def test_stewart_grid_of_two_legs_with_unreachable_points():
 def test_executors_give_identical_maps(fourbar_urdf, fourbar_yaml):
     source = ModelSource(str(fourbar_urdf), str(fourbar_yaml))
     kw = {"sweeps": {"crank": CRANKS}, "wrench": WRENCH, "chunk": 4}
-    serial = stiffness_map(source, "P", **kw)
+    calls = []
+    serial = stiffness_map(source, "P", progress=lambda d, n: calls.append((d, n)), **kw)
+    assert calls == [(4, 15), (8, 15), (12, 15), (15, 15)]
     with ThreadPoolExecutor(2) as pool:
         threads = stiffness_map(source, "P", executor=pool, **kw)
     processes = stiffness_map(source, "P", workers=2, **kw)
