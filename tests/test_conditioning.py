@@ -230,3 +230,23 @@ def test_configuration_scale_is_used_by_the_compliance():
     clm = _ur5()
     state = Configuration(clm, UR5_Q, length=2.0)
     assert compliance(state, "tool0").length == 2.0
+
+
+@pytest.mark.parametrize("elbow", [1e-4, 1e-5, 1e-6, 1e-8])
+def test_ur5_decision_is_the_same_in_the_api_the_indices_the_cli_and_the_json(elbow, capsys):
+    import json
+
+    from closedloop.cli import main
+
+    clm = _ur5()
+    q = UR5_Q.copy()
+    q[2] = elbow
+    res = compliance(clm, q, "tool0")
+    path = str(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf")
+    code = main(["stiffness", path, "--frame", "tool0", "--q", *map(repr, q.tolist()),
+                 "--joint-stiffness", repr(UR5_K), "--json"])  # fmt: skip
+    doc = json.loads(capsys.readouterr().out)
+    assert code == (0 if res.is_full_rank else 1)
+    assert doc["rank"] == res.rank == StiffnessIndices.from_result(res).rank
+    assert doc["ill_conditioned"] == res.ill_conditioned
+    assert (doc["K"] is None) == (not res.is_full_rank)
