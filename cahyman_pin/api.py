@@ -15,8 +15,10 @@ Backends compute the matrices: ``"generic"`` (default) is the Pinocchio model of
 :mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`; ``"consistent"`` is
 the closed form of :mod:`cahyman_pin.backend_consistent`; ``"published"`` the paper's
 matrices as printed (:mod:`cahyman_pin.backend_published`, its own coordinates, not
-symmetric). Another backend is a function ``f(params, alpha, alpha4, s4) ->
-BackendResult`` registered with ``register_backend("name", f)``.
+symmetric) with the parameters' K_s (``params.with_ks("printed")`` for the printed 0.697
+N/m; every other damaged place as published). Another backend is a function
+``f(params, alpha, alpha4, s4) -> BackendResult`` registered with
+``register_backend("name", f)``.
 """
 
 from __future__ import annotations
@@ -26,14 +28,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from closedloop.arrays import check_wrench, readonly
+from closedloop.arrays import check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices
 
 from .backend_consistent import consistent_breakdown
-from .backend_published import published_stiffness
+from .backend_published import PublishedOptions, published_stiffness
 from .model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from .params import DEFAULT_PARAMS, CaHyManParams
 from .urdf_builder import FRAME_H, FRAME_M
@@ -49,12 +51,15 @@ class BackendResult:
         C_platform: (6, 6) twist of the plate at H (world axes) per wrench at M, or None
             when the backend does not provide it.
         details: backend-specific extras (e.g. the configuration q).
+        axes: coordinates of C: ``"world"`` (twist at M, world axes) or a description of
+            the backend's own coordinates.
     """
 
     C: np.ndarray
     pose: CaHyManPose
     C_platform: np.ndarray | None = None
     details: dict = field(default_factory=dict)
+    axes: str = "world"
 
 
 Backend = Callable[[CaHyManParams, np.ndarray, float, float], BackendResult]
@@ -80,7 +85,7 @@ def get_backend(name: str) -> Backend:
     Raises:
         InvalidInputError: unknown name (the message lists the choices).
     """
-    if name not in _BACKENDS:
+    if not isinstance(name, str) or name not in _BACKENDS:
         raise InvalidInputError(
             f"unknown backend {name!r}; expected one of {list(backend_names())}"
         )
@@ -120,19 +125,30 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
     )
 
 
-def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
-    """The paper's matrices as printed (see :mod:`cahyman_pin.backend_published`).
+#: The coordinates of the published backend's C (see :mod:`cahyman_pin.backend_published`).
+PUBLISHED_AXES = (
+    "paper: translations of H plus those of M, plate rotation vector (world) plus the arm "
+    "angle about -y_p; not world axes at M"
+)
 
-    Its C is in the paper's own mixed coordinates and is not symmetric; C_platform is the
-    plate term K_PAR^-1 of eq. (3) (displacement of H). No load is given, so the weight
-    terms of eq. (11) are zero. ``details["result"]`` holds every matrix.
+
+def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
+    """The paper's matrices as printed (see :mod:`cahyman_pin.backend_published`), with
+    ``params.K_s`` (option ``ks="params"``; the paper prints 0.697 N/m:
+    ``params.with_ks("printed")``).
+
+    Its C is in the paper's own mixed coordinates (:data:`PUBLISHED_AXES`) and is not
+    symmetric; C_platform is the plate term K_PAR^-1 of eq. (3) (displacement of H). No
+    load is given, so the weight terms of eq. (11) are zero. ``details["result"]`` holds
+    every matrix.
     """
-    r = published_stiffness(alpha, alpha4, s4, params)
+    r = published_stiffness(alpha, alpha4, s4, params, PublishedOptions(ks="params"))
     return BackendResult(
         C=r.C,
         pose=closed_form_pose(alpha, alpha4, s4, params),
         C_platform=r.C_PAR,
         details={"result": r},
+        axes=PUBLISHED_AXES,
     )
 
 
@@ -178,9 +194,11 @@ class CaHyManStiffness:
         C_platform: (6, 6) twist of the plate at H per wrench at M, or None.
         pose: plate and arm pose.
         indices: :class:`closedloop.indices.StiffnessIndices` of C, or None when C is not
-            symmetric (the as-published backend): K, det_K, eigenvalues and condition
+            symmetric (the published backend): K, det_K, eigenvalues and condition
             number are then those of the plain inverse of C.
         details: backend extras (generic: ``q``, ``compliance``).
+        axes: coordinates of C and K: ``"world"`` (at M, world axes) or the backend's own
+            (the published backend: :data:`PUBLISHED_AXES`).
     """
 
     alpha: np.ndarray
@@ -193,6 +211,7 @@ class CaHyManStiffness:
     pose: CaHyManPose
     indices: StiffnessIndices | None
     details: dict = field(default_factory=dict, repr=False)
+    axes: str = "world"
 
     @property
     def K(self) -> np.ndarray:
@@ -251,7 +270,7 @@ class CaHyManStiffness:
             "rank": 6 if self.indices is None else self.indices.rank,
             "reference_point": "M",
             "M_m": self.pose.M.tolist(),
-            "axes": "world",
+            "axes": self.axes,
             "order": list(TWIST_LABELS),
             "platform": self.pose.to_dict(),
             "inputs": {
@@ -319,6 +338,8 @@ def stiffness(
     """
     if not isinstance(params, CaHyManParams):
         raise InvalidInputError(f"params must be a CaHyManParams, got {type(params).__name__}")
+    alpha, alpha4, s4 = (real_array(v, n) for v, n in ((alpha, "alpha"), (alpha4, "alpha4"),
+                                                         (s4, "s4")))  # fmt: skip
     alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, params)
     result = get_backend(backend)(params, alpha, alpha4, s4)
     return CaHyManStiffness(
@@ -332,4 +353,5 @@ def stiffness(
         pose=result.pose,
         indices=_indices(result, params, backend),
         details=result.details,
+        axes=result.axes,
     )

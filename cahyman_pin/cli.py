@@ -8,8 +8,14 @@ Inputs are in the paper's units (degrees, millimetres); outputs are SI (JSON wit
 
 Subcommands: every module named in :data:`SUBCOMMAND_MODULES` provides
 ``add_parser(subparsers)``, which adds its parser and sets ``func`` (``args -> int``) as
-its default; :func:`add_pose_arguments` and :func:`stiffness_from_args` are shared.
-Bad input prints one line ``cahyman: error: ...`` on stderr and exits with status 2.
+its default; :func:`add_pose_arguments` and :func:`stiffness_from_args` are shared. Only
+the module of the subcommand that runs is imported (the others stand in by their help
+line), so that ``cahyman stiffness`` does not pay for matplotlib or the sweep machinery.
+
+Exit status (as for ``closedloop``, :func:`closedloop.exceptions.exit_status`): 0 ok; 1 the
+compliance is rank deficient (K does not exist); 2 bad input; 3 the computation failed on
+valid input (an unreachable pose, a singular configuration); 141 standard output closed
+early (``| head``). Errors are one line ``cahyman: error: ...`` on stderr.
 """
 
 from __future__ import annotations
@@ -23,18 +29,28 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from closedloop.exceptions import ClosedLoopError
+from closedloop import __version__
+from closedloop.blas import single_threaded_blas
+from closedloop.cli import Parser, closed_pipe, error_line, output_file
+from closedloop.exceptions import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_RANK_DEFICIENT,
+    ClosedLoopError,
+    exit_status,
+)
 
-from .api import CaHyManStiffness, stiffness
+from .api import CaHyManStiffness, backend_names, stiffness
 from .params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED
 
 PROG = "cahyman"
-#: Modules adding further subcommands (each defines ``add_parser(subparsers)``).
-SUBCOMMAND_MODULES: tuple[str, ...] = (
-    "cahyman_pin.report",
-    "cahyman_pin.map_cli",
-    "cahyman_pin.view",
-)
+#: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).
+SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
+    "report": ("cahyman_pin.report", "write the comparison report against the paper"),
+    "map": ("cahyman_pin.map_cli", "a stiffness index over swept inputs (NPZ, CSV, PNG)"),
+    "view": ("cahyman_pin.view", "meshcat view of the deflection under a wrench at M"),
+}
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
 KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
@@ -44,9 +60,36 @@ class UsageError(Exception):
     """A command-line error (bad option or value)."""
 
 
-class _Parser(argparse.ArgumentParser):
+#: The exit statuses, as the help states them.
+EXIT_HELP = (
+    f"Exit status: {EXIT_OK} ok; {EXIT_RANK_DEFICIENT} rank deficient (K does not exist); "
+    f"{EXIT_BAD_INPUT} bad input; {EXIT_FAILED} computation failed (unreachable pose, "
+    "singular configuration)."
+)
+
+
+class _Parser(Parser):
     def error(self, message: str):  # one line, no usage block
         raise UsageError(message)
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --ks and --backend (choices and defaults in the help)."""
+    parser.add_argument(
+        "--ks",
+        choices=sorted(KS_PRESETS),
+        default="assumed",
+        help="K_s for every backend: assumed 0.697e6 N/m or printed 0.697 N/m, the paper's "
+        "value (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=backend_names(),
+        default="generic",
+        help="stiffness backend: generic (Pinocchio model), consistent (closed form), "
+        "published (the paper's matrices as printed, in its own coordinates) "
+        "(default: %(default)s)",
+    )
 
 
 def finite_float(text: str) -> float:
@@ -85,13 +128,7 @@ def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S4",
         help="telescope stroke s_4 [mm] (default: %(default)s)",
     )
-    parser.add_argument(
-        "--ks",
-        choices=sorted(KS_PRESETS),
-        default="assumed",
-        help="K_s preset: assumed 0.697e6 N/m or printed 0.697 N/m",
-    )
-    parser.add_argument("--backend", default="generic", help="stiffness backend")
+    add_backend_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
 
 
@@ -121,9 +158,10 @@ def inputs_echo(args: argparse.Namespace) -> dict:
     }
 
 
-def _matrix(name: str, A: np.ndarray, unit: str) -> str:
+def _matrix(name: str, A: np.ndarray, unit: str, axes: str = "world") -> str:
     rows = "\n".join("  " + " ".join(f"{x: .6e}" for x in row) for row in A)
-    return f"{name} [{unit}] (order dx dy dz rx ry rz; at M, world axes):\n{rows}"
+    where = "at M, world axes" if axes == "world" else f"coordinates of the {axes}"
+    return f"{name} [{unit}] (order dx dy dz rx ry rz; {where}):\n{rows}"
 
 
 def _vec(v, scale: float = 1.0, fmt: str = "{: .6g}") -> str:
@@ -144,30 +182,33 @@ def _run_stiffness(args: argparse.Namespace) -> int:
     r = stiffness_from_args(args)
     out = r.to_dict()
     out["inputs"] = inputs_echo(args)
+    status = EXIT_OK if r.is_full_rank else EXIT_RANK_DEFICIENT
     if args.json:
         print(json.dumps(out, indent=2, allow_nan=False))
-        return 0
+        return status
     print(f"CaHyMan at alpha = {args.alpha} deg, alpha4 = {args.alpha4} deg, "
           f"s4 = {args.s4} mm (K_s {args.ks}, backend {args.backend})")  # fmt: skip
     print("\n".join(_pose_lines(r)))
     if r.is_full_rank:
-        print(_matrix("K", r.K, "N/m, N/rad, N m/m, N m/rad"))
+        print(_matrix("K", r.K, "N/m, N/rad, N m/m, N m/rad", r.axes))
         print(f"det K = {r.det_K:.6e} N^6/rad^3")
         print(f"eigenvalues of K [SI] = {_vec(np.real_if_close(r.eigenvalues))}")
         print(f"condition number of K [SI] = {r.condition_number:.6g}")
     else:
         print(f"K does not exist: compliance rank {out['rank']} < 6")
+
     if r.indices is not None:
         flag = "; ILL-CONDITIONED: near a singular pose" if r.indices.ill_conditioned else ""
         print(f"condition number of the scaled K = {r.indices.scaled_condition_number:.3e} "
               f"(lengths per L = {r.params.length:.4g} m){flag}")  # fmt: skip
-    print(_matrix("C", r.C, "m/N, m/(N m), rad/N, rad/(N m)"))
-    return 0
+    print(_matrix("C", r.C, "m/N, m/(N m), rad/N, rad/(N m)", r.axes))
+    return status
 
 
 def _add_stiffness(subparsers) -> None:
     p = subparsers.add_parser("stiffness", help="6x6 stiffness and compliance at M",
-                              description="Stiffness K and compliance C at M (SI).")  # fmt: skip
+                              description="Stiffness K and compliance C at M (SI).",
+                              epilog=EXIT_HELP)  # fmt: skip
     add_pose_arguments(p)
     p.set_defaults(func=_run_stiffness)
 
@@ -193,7 +234,10 @@ def _run_deflect(args: argparse.Namespace) -> int:
         "inputs": inputs_echo(args),
         "units": "SI, with _mm and _deg copies; twists at M (arm link) and at H (plate), "
         "world axes; rotations are small rotation vectors",
+        "axes": r.axes,
     }
+    if r.axes != "world":
+        out["units"] = f"SI, with _mm and _deg copies; twist of M in the {r.axes}"
     if args.json:
         print(json.dumps(out, indent=2, allow_nan=False))
         return 0
@@ -208,7 +252,8 @@ def _run_deflect(args: argparse.Namespace) -> int:
 
 def _add_deflect(subparsers) -> None:
     p = subparsers.add_parser("deflect", help="deflection of M and of the platform under a load",
-                              description="Small deflection under a wrench at M.")  # fmt: skip
+                              description="Small deflection under a wrench at M.",
+                              epilog=EXIT_HELP)  # fmt: skip
     add_pose_arguments(p)
     p.add_argument(
         "--force",
@@ -224,27 +269,57 @@ def _add_deflect(subparsers) -> None:
 
 
 # ------------------------------------------------------------------ entry point
-def build_parser() -> argparse.ArgumentParser:
-    """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`."""
-    parser = _Parser(prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator).")
+def command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand named by ``argv`` (its first word that is not an option), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`.
+
+    Args:
+        command: the subcommand that will run: only its module is imported; the other
+            modules' subcommands are placeholders that carry their help line (enough for
+            ``cahyman --help`` and for the list of choices of an unknown command).
+    """
+    parser = _Parser(
+        prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator). " + EXIT_HELP
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_stiffness(subparsers)
     _add_deflect(subparsers)
-    for name in SUBCOMMAND_MODULES:
-        importlib.import_module(name).add_parser(subparsers)
+    for name, (module, help_line) in SUBCOMMAND_MODULES.items():
+        if command == name:
+            importlib.import_module(module).add_parser(subparsers)
+        else:
+            subparsers.add_parser(name, help=help_line, add_help=False)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status (2 on bad input)."""
+    """Run the command line; returns the exit status (see the module docstring)."""
+    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
     try:
-        args = build_parser().parse_args(argv)
-        return int(args.func(args) or 0)
-    except (UsageError, ClosedLoopError) as e:
-        message = " ".join(str(e).split())
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-        return 2
-    except SystemExit as e:  # --help
+        argv = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(command_of(argv)).parse_args(argv)
+        if getattr(args, "html", None):
+            output_file(args.html, "--html")  # before any work
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+        return status
+    except BrokenPipeError:
+        return closed_pipe()
+    except UsageError as e:
+        print(error_line(PROG, e), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except ClosedLoopError as e:
+        print(error_line(PROG, e), file=sys.stderr)
+        return exit_status(e)
+    except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
+        print(error_line(PROG, f"numerical failure: {e}"), file=sys.stderr)
+        return EXIT_FAILED
+    except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
 
 

@@ -88,6 +88,14 @@ def _check_alpha(alpha: np.ndarray) -> np.ndarray:
     return alpha
 
 
+def _degrees(alpha: np.ndarray) -> str:
+    """Crank angles [rad] of the poses that fail, in degrees for a message: ``[-85, 60, 60]``
+    for one pose, ``[-85, 60, 60], [90, -90, 90]`` for several (6 significant digits)."""
+    return ", ".join(
+        "[" + ", ".join(f"{a:.6g}" for a in row) + "]" for row in np.rad2deg(alpha).reshape(-1, 3)
+    )
+
+
 def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     """Closed-form direct kinematics of CaPaMan: leg inputs -> plate pose.
 
@@ -106,7 +114,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     bad = cphi > 1.0
     if np.any(bad):
         raise AssemblyError(
-            f"plate cannot be assembled at alpha={np.rad2deg(alpha[bad]).tolist()} deg: "
+            f"plate cannot be assembled at alpha={_degrees(alpha[bad])} deg: "
             "height differences between legs exceed the plate radius",
             float(np.max(cphi - 1.0) * 3 * p.r_p),
         )
@@ -117,7 +125,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     bad = np.abs(s_tp) > 1.0
     if np.any(bad):
         raise AssemblyError(
-            f"plate cannot be assembled at alpha={np.rad2deg(alpha[bad]).tolist()} deg: "
+            f"plate cannot be assembled at alpha={_degrees(alpha[bad])} deg: "
             "in-plane leg offsets exceed the plate radius",
             float(np.max(np.abs(s_tp) - 1.0) * 1.5 * p.r_p),
         )

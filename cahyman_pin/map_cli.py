@@ -30,13 +30,11 @@ import argparse
 import math
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-from .cli import DEFAULT_POSE, KS_PRESETS, UsageError, finite_float
+from closedloop.cli import output_folder
+
+from .cli import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
 from .model import check_inputs
 from .params import DEFAULT_PARAMS, CaHyManParams
 from .sweep import INDEX_UNITS, SweepResult, grid, sweep
@@ -44,6 +42,8 @@ from .sweep_exec import STARTS
 from .sweep_points import param_unit
 
 DEFAULT_OUT = Path("cahyman-map")
+#: Failed points printed one by one; the others are counted ("... and N more").
+SHOWN_FAILURES = 3
 #: Most points a map may have (a guard against typing one zero too many).
 MAX_POINTS = 2_000_000
 #: Pose inputs: grid axis -> (option, unit shown, factor from the shown unit to SI).
@@ -127,9 +127,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--param", type=parse_param, action="append", default=[],
                    metavar="NAME=SPEC", help="design parameter in SI, e.g. b=0.04:0.12:9 "
                    "(repeatable)")  # fmt: skip
-    p.add_argument("--ks", choices=sorted(KS_PRESETS), default="assumed",
-                   help="K_s preset: assumed 0.697e6 N/m or printed 0.697 N/m")  # fmt: skip
-    p.add_argument("--backend", default="generic", help="stiffness backend (default generic)")
+    add_backend_arguments(p)
     p.add_argument("--start", choices=STARTS, default="closed_form",
                    help="generic backend: assembly from the closed-form geometry "
                    "(closed_form, default, faster) or from the previous point "
@@ -196,6 +194,11 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
         shown: axis name -> (unit shown, factor from the shown unit to SI).
         path: PNG file to write.
     """
+    import matplotlib  # lazily: a second of start-up, for the figure only
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     v = result.grid_values(index)
     unit, scale = DISPLAY.get(index, (INDEX_UNITS[index], 1.0))
     v = v * scale
@@ -228,6 +231,24 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def describe_point(result: SweepResult, i: int, shown: dict) -> str:
+    """The swept inputs of point ``i`` in the units shown (``alpha_1 = 30 deg, b = 0.08 m``).
+
+    Args:
+        result: the sweep (a grid).
+        i: index of the point.
+        shown: swept axis name -> (unit shown, factor from the shown unit to SI).
+    """
+    p = result.points
+    values = {f"alpha{k + 1}": p.alpha[i, k] for k in range(3)}
+    values.update(alpha=p.alpha[i, 0], alpha4=p.alpha4[i], s4=p.s4[i])
+    values.update({k: v[i] for k, v in p.design.items()})
+    return ", ".join(
+        f"{TITLES.get(name, name)} = {float(values[name]) / factor:.6g} {unit}"
+        for name, (unit, factor) in shown.items()
+    )
 
 
 def _check_values(inputs: dict, params: CaHyManParams) -> None:
@@ -263,6 +284,7 @@ def _run(args: argparse.Namespace) -> int:
     params = params.replace(**design) if design else params
     alpha = [fixed.pop(f"alpha{k}", 0.0) for k in (1, 2, 3)]
     _check_values(inputs, params)
+    output_folder(args.out)  # a bad --out stops here, before the sweep
     points = grid(
         {k: v[0] * v[2] for k, v in swept.items()},
         alpha=alpha,
@@ -289,7 +311,11 @@ def _run(args: argparse.Namespace) -> int:
     if np.any(np.isfinite(values)):
         unit = INDEX_UNITS[args.index]
         print(f"{args.index}: min {np.nanmin(values):.6g}, max {np.nanmax(values):.6g} [{unit}]")
-    for i, status, reason in result.failures()[:3]:
-        print(f"point {i} {status}: {reason}")
+    failures = result.failures()
+    for i, status, reason in failures[:SHOWN_FAILURES]:
+        print(f"point {i} ({describe_point(result, i, shown)}) {status}: {reason}")
+    if len(failures) > SHOWN_FAILURES:
+        print(f"... and {len(failures) - SHOWN_FAILURES} more (status and reason of every point "
+              f"in {args.out / 'map.npz'})")  # fmt: skip
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

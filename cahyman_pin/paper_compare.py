@@ -22,8 +22,8 @@ from .backend_published import PublishedOptions, published_stiffness
 from .paper_data import LOADS, TABLES, PaperPose
 from .params import CaHyManParams
 
-#: Backends compared, in table-column order, with their column titles.
-BACKENDS = {"published": "as published", "consistent": "consistent", "generic": "generic"}
+#: Backends compared, in table-column order, with their titles (their registered names).
+BACKENDS = {"published": "published", "consistent": "consistent", "generic": "generic"}
 #: Row labels at a regular pose, and at phi = 90 deg.
 ROWS_REGULAR = ("dx [mm]", "dy [mm]", "dz [mm]", "dphi [deg]", "dpsi [deg]", "dtheta [deg]")
 ROWS_LEVEL = ("dx [mm]", "dy [mm]", "dz [mm]", "tilt [deg]", "yaw d(theta+psi) [deg]")

@@ -1,8 +1,9 @@
 """CaHyMan parameters: every dimension, spring and mass of the reference model.
 
 The defaults are those of the project's reference reading of the mechanism (the paper
-gives the springs, not the dimensions). All values are SI: metres, radians, newtons,
-N/m for axial springs, N m/rad for torsional springs, kilograms.
+gives the springs, not the dimensions; :data:`SOURCES` says where each default comes from).
+All values are SI: metres, radians, newtons, N/m for axial springs, N m/rad for torsional
+springs, kilograms. :func:`read_params_file` reads any of them from a YAML file.
 """
 
 from __future__ import annotations
@@ -10,8 +11,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import InvalidInputError, ModelFileError
 
 #: K_s as printed in the paper [N/m]. It gives 1.4 m of deflection per newton.
 K_S_PRINTED = 0.697
@@ -125,3 +127,68 @@ class CaHyManParams:
 
 
 DEFAULT_PARAMS = CaHyManParams()
+
+_DIMENSION = "assumed: the paper gives no dimensions"
+#: Where each default comes from: ``"paper"`` (printed in the stiffness paper), or
+#: ``"assumed: ..."`` with the reason (project reference model, ``cahyman-model.md``).
+SOURCES: dict[str, str] = {
+    **dict.fromkeys(_LENGTHS, _DIMENSION),
+    **dict.fromkeys(("K_T", "K_b", "K_d", "K_T4", "K_4"), "paper"),
+    "K_s": "assumed: 0.697e6 N/m, the printed 0.697 N/m times 1e6 (the printed value gives "
+    "1.4 m of deflection per newton, which no table shows)",
+    **dict.fromkeys(_MASSES, "assumed: 0 (the paper names the masses without values)"),
+    "gravity": "standard gravity (acts only through the masses)",
+    "s4_max": "from the paper's cases (s_4 = 0, 25, 50 mm)",
+}
+
+
+def source(params: CaHyManParams, name: str) -> str:
+    """Where the value of field ``name`` of ``params`` comes from: :data:`SOURCES` for a
+    default value, ``"given"`` for a value that differs from the default (``"given (the
+    paper's printed value)"`` for K_s = 0.697 N/m)."""
+    value = getattr(params, name)
+    if value == getattr(DEFAULT_PARAMS, name):
+        return SOURCES[name]
+    if name == "K_s" and value == K_S_PRINTED:
+        return "given (the paper's printed value)"
+    return "given"
+
+
+def read_params_file(path: str | Path, base: CaHyManParams = DEFAULT_PARAMS) -> CaHyManParams:
+    """Parameters from a YAML mapping ``{field: value}`` of any :class:`CaHyManParams` fields
+    (SI); the others keep their value in ``base``. Example: ``K_s: 0.697`` or ``b: 0.09``.
+
+    Raises:
+        ModelFileError: a missing or unreadable file, invalid YAML, not a mapping.
+        InvalidInputError: an unknown field or a value that is not a valid number (the
+            message names the file, the field and the value).
+    """
+    import yaml  # only when a file is read
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise ModelFileError(f"parameter file {str(path)!r} cannot be read: {e.strerror}") from None
+    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        msg = " ".join(str(e).split())
+        raise ModelFileError(f"parameter file {str(path)!r} is not valid YAML: {msg}") from None
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, dict):
+        raise ModelFileError(
+            f"parameter file {str(path)!r}: expected a mapping field -> value, got "
+            f"{type(doc).__name__}"
+        )
+    values = {}
+    for name, value in doc.items():
+        if isinstance(value, str):  # YAML 1.1 reads 1e5 as a string
+            try:
+                value = float(value)
+            except ValueError:
+                pass
+        values[str(name)] = value
+    try:
+        return base.replace(**values)
+    except InvalidInputError as e:
+        raise InvalidInputError(f"parameter file {str(path)!r}: {e}") from None

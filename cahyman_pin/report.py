@@ -1,7 +1,9 @@
 """The comparison report: the paper's tables and figures against the three backends.
 
-``cahyman report [--out DIR]`` writes ``report.md``, a self-contained ``report.html`` and
-the figures (PNG) into DIR (default ``./cahyman-report``).
+``cahyman report [--out DIR] [--params FILE]`` writes ``report.md``, a self-contained
+``report.html`` and the figures (PNG) into DIR (default ``./cahyman-report``); FILE is a
+YAML mapping of :class:`cahyman_pin.params.CaHyManParams` fields (SI) that replace the
+defaults. The report lists every parameter with its source (paper, assumed, or given).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from closedloop.cli import output_folder
 from closedloop.compliance import TWIST_LABELS
 
 from .backend_published import CHOICES
@@ -21,7 +24,7 @@ from .figures import figure5, figure_load
 from .paper_compare import BACKENDS, TableValues, backend_compliance, table_values
 from .paper_data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_residual
 from .paper_effects import EFFECTS, effect_changes
-from .params import DEFAULT_PARAMS, CaHyManParams
+from .params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, read_params_file, source
 
 DEFAULT_OUT = Path("cahyman-report")
 
@@ -55,11 +58,14 @@ def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
     )
 
 
-def _intro(doc: Document, params: CaHyManParams) -> None:
+def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None) -> None:
+    given = f"the parameter file {str(params_file)!r}" if params_file else "no parameter file"
+    assumed = [f.name for f in dataclasses.fields(params) if source(params, f.name).startswith(
+        "assumed")]  # fmt: skip
     doc.add(
         Paragraph(
             "This report compares the displacements published for CaHyMan (Tables 1-3, "
-            "Figs. 5-7 of the stiffness paper) with three backends: 'as published' (the "
+            "Figs. 5-7 of the stiffness paper) with three backends: 'published' (the "
             "paper's closed-form matrices as printed, with the smallest choice at each "
             "damaged place), 'consistent' (the same closed-form structure with every damaged "
             "place resolved) and 'generic' (the Pinocchio model with loop closures and "
@@ -67,9 +73,20 @@ def _intro(doc: Document, params: CaHyManParams) -> None:
             "SI; tables are in the paper's units (mm, deg)."
         ),
         Heading("Parameters", 3),
+        Paragraph(
+            f"The parameters used, from the defaults of cahyman_pin/params.py and {given}. "
+            "'paper' marks a value printed in the paper, 'given' a value of the parameter "
+            "file; the values marked 'assumed' are not in the paper "
+            f"({', '.join(assumed) if assumed else 'none here'}) and shape every number below. "
+            f"The published backend always takes K_s = {K_S_PRINTED:g} N/m as printed (the "
+            "first of the choices below), whatever K_s is here."
+        ),
         Table(
-            ("parameter", "value (SI)"),
-            tuple((f.name, f"{getattr(params, f.name):g}") for f in dataclasses.fields(params)),
+            ("parameter", "value (SI)", "source"),
+            tuple(
+                (f.name, f"{getattr(params, f.name):g}", source(params, f.name))
+                for f in dataclasses.fields(params)
+            ),
         ),
         Heading("Choices made to run the published formulation", 3),
         Table(("place", "choice"), tuple(CHOICES)),
@@ -80,12 +97,12 @@ def _summary(doc: Document, tables: list[TableValues]) -> None:
     """Findings in numbers, computed from the tables below."""
     gap = max(np.nanmax(np.abs(tv.values["consistent"] - tv.values["generic"])) for tv in tables)
     rows = []
-    for b, title in BACKENDS.items():
+    for b in BACKENDS:
         trans = [np.abs(tv.values[b][:3] - tv.values["paper"][:3]) for tv in tables]
         rot = [np.abs(tv.values[b][3:] - tv.values["paper"][3:]) for tv in tables]
         ratio = [np.abs(tv.values[b][3:]) / np.abs(tv.values["paper"][3:]) for tv in tables]
         rows.append((
-            title,
+            b,
             fmt(max(np.nanmax(t) for t in trans), 3),
             fmt(max(np.nanmax(r) for r in rot), 3),
             fmt(np.nanmedian(np.concatenate([r.ravel() for r in ratio])), 3),
@@ -101,7 +118,7 @@ def _summary(doc: Document, tables: list[TableValues]) -> None:
         Paragraph(
             "The consistent closed form and the generic Pinocchio backend, two independent "
             "implementations, agree on every table cell to within "
-            f"{gap:.1e} (mm or deg). Neither they nor the as-published formulation "
+            f"{gap:.1e} (mm or deg). Neither they nor the published backend "
             "reproduces the published tables; the largest differences over the three "
             "tables are:"
         ),
@@ -144,8 +161,8 @@ def _tables(doc: Document, tables: list[TableValues]) -> None:
                     f"{', '.join(fmt(x) for x in p[5])} deg for the three loads."
                 )
             )
-        header = ("row", "published")
-        for b in BACKENDS.values():
+        header = ("row", "paper")
+        for b in BACKENDS:
             header += (b, "diff")
         for j, label in enumerate(LOAD_LABELS):
             rows = []
@@ -181,9 +198,9 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
         Heading("Where the differences come from"),
         Paragraph(
             "Each effect below is one damaged place, repaired alone while every other place "
-            "stays as published; the numbers are the change it makes to the as-published "
-            "cells (mm, deg), per load column. 'singular' marks a matrix the formulation "
-            "cannot invert at that pose."
+            "stays as published; the numbers are the change it makes to the cells of the "
+            "published backend (mm, deg), per load column. 'singular' marks a matrix the "
+            "formulation cannot invert at that pose."
         ),
     )
     changes = effect_changes(params)
@@ -221,7 +238,7 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
         Heading("Stiffness matrices at the three configurations"),
         Paragraph(
             "K at M, world axes, SI (N/m, N/rad, N m/rad), order dx dy dz rx ry rz, from the "
-            "generic backend; eigenvalues and determinant for every backend (the as-published "
+            "generic backend; eigenvalues and determinant for every backend (the published "
             "K is in its own mixed coordinates, see the choices above)."
         ),
     )
@@ -239,13 +256,13 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
             )
         )
         rows = []
-        for b, title in BACKENDS.items():
+        for b in BACKENDS:
             ev = np.linalg.eigvals(K[b])
             ev = ev[np.argsort(ev.real)]
             ev_text = ", ".join(
                 f"{e.real:.4g}" if abs(e.imag) < 1e-9 * abs(e) else f"{e:.3g}" for e in ev
             )
-            rows.append((title, f"{np.linalg.det(K[b]):.4g}", ev_text))
+            rows.append((b, f"{np.linalg.det(K[b]):.4g}", ev_text))
         rel = np.max(np.abs(K["consistent"] - K["generic"])) / np.max(np.abs(K["generic"]))
         doc.add(
             Table(("backend", "det K", "eigenvalues of K (ascending)"), tuple(rows)),
@@ -256,13 +273,23 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
         )
 
 
-def build_report(out: Path = DEFAULT_OUT, params: CaHyManParams = DEFAULT_PARAMS) -> Document:
-    """Compute everything and write report.md, report.html and the figures into ``out``."""
+def build_report(
+    out: Path = DEFAULT_OUT,
+    params: CaHyManParams = DEFAULT_PARAMS,
+    params_file: Path | None = None,
+) -> Document:
+    """Compute everything and write report.md, report.html and the figures into ``out``.
+
+    Args:
+        out: output folder (created).
+        params: the parameters of every backend.
+        params_file: the file ``params`` were read from, named in the report (None: none).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
-    _intro(doc, params)
+    _intro(doc, params, params_file)
     _summary(doc, tables)
     _tables(doc, tables)
     _linearity(doc)
@@ -274,7 +301,7 @@ def build_report(out: Path = DEFAULT_OUT, params: CaHyManParams = DEFAULT_PARAMS
             "det K is in SI (N^6/rad^3) and does not depend on the reference point: moving "
             "the point along the arm (Fig. 5d, s_4) only transports the same compliance, so "
             "det K of the consistent and generic models is constant there, whereas the "
-            "as-published K, in its own mixed coordinates, is not (crosses mark a negative "
+            "published backend's K, in its own mixed coordinates, is not (crosses mark a negative "
             "determinant, which a symmetric positive definite K cannot have). Figs. 6 and 7 "
             "are linear in the load for every backend; the rotations are shown as the small "
             "rotation vector of the arm in world axes because the plate is level at this "
@@ -291,15 +318,26 @@ def build_report(out: Path = DEFAULT_OUT, params: CaHyManParams = DEFAULT_PARAMS
 
 def add_parser(subparsers) -> None:
     """The ``report`` subcommand."""
-    p = subparsers.add_parser("report", help="write the comparison report against the paper")
+    p = subparsers.add_parser(
+        "report",
+        help="write the comparison report against the paper",
+        description="The comparison report against the paper: report.md, report.html and "
+        "the figures in --out.",
+    )
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help=f"output folder (default: ./{DEFAULT_OUT})")  # fmt: skip
+    p.add_argument("--params", type=Path, metavar="FILE",
+                   help="YAML mapping of CaHyMan parameters (SI) replacing the defaults, e.g. "
+                   "'K_s: 0.697' or 'b: 0.09'; fields: " + ", ".join(CaHyManParams.field_names())
+                   )  # fmt: skip
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    params = DEFAULT_PARAMS if args.params is None else read_params_file(args.params)
+    output_folder(args.out)  # a bad --out stops here, before the computations
     start = time.perf_counter()
-    build_report(args.out, DEFAULT_PARAMS)
+    build_report(args.out, params, args.params)
     print(f"report written to {args.out / 'report.md'} and {args.out / 'report.html'} "
           f"in {time.perf_counter() - start:.1f} s")  # fmt: skip
     return 0

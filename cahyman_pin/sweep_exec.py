@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from closedloop.blas import single_threaded_blas
 from closedloop.compliance import compliance
 from closedloop.exceptions import (
     AssemblyError,
@@ -364,7 +365,10 @@ def run_chunks(
         if executor == "serial":
             yield from serial()
         elif executor == "processes":
-            with ProcessPoolExecutor(max_workers=workers or default_workers()) as ex:
+            pool = ProcessPoolExecutor(
+                workers or default_workers(), initializer=single_threaded_blas
+            )
+            with pool as ex:
                 yield from pooled(ex)
         elif isinstance(executor, Executor):
             yield from pooled(executor)

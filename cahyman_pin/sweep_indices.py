@@ -2,7 +2,7 @@
 
 The formulas are those of :class:`closedloop.indices.StiffnessIndices` for a symmetric
 compliance and of :class:`cahyman_pin.api.CaHyManStiffness` for a non-symmetric one (the
-as-published backend), applied to a stack of matrices, so that a sweep reproduces
+published backend), applied to a stack of matrices, so that a sweep reproduces
 point-by-point :func:`cahyman_pin.api.stiffness` queries. Arrays are SI: C (n, 6, 6) at
 M in world axes, twists (dx, dy, dz [m], rx, ry, rz [rad]), wrenches (fx, fy, fz [N],
 nx, ny, nz [N m]).
@@ -69,7 +69,7 @@ def stiffness_indices(
 
     Symmetric C: the formulas of :class:`closedloop.indices.StiffnessIndices`
     (det K = 1 / det C, condition number from the eigenvalues of K = C^-1, extreme
-    principal stiffnesses from the 3x3 blocks of C). Non-symmetric C (as published):
+    principal stiffnesses from the 3x3 blocks of C). Non-symmetric C (published backend):
     those of :class:`cahyman_pin.api.CaHyManStiffness` (K the plain inverse, det K and
     the 2-norm condition number of K); the principal stiffnesses are NaN.
 

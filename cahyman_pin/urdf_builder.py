@@ -157,7 +157,7 @@ def _inertial(masses) -> list[str]:
         inertia += mass * (r @ r * np.eye(3) - np.outer(r, r))
     (ixx, ixy, ixz), (_, iyy, iyz), (_, _, izz) = inertia
     return [
-        f"<inertial>{_origin(com)}<mass value=\"{_num(m)}\"/>"
+        f'<inertial>{_origin(com)}<mass value="{_num(m)}"/>'
         f'<inertia ixx="{_num(ixx)}" ixy="{_num(ixy)}" ixz="{_num(ixz)}" iyy="{_num(iyy)}" '
         f'iyz="{_num(iyz)}" izz="{_num(izz)}"/></inertial>'
     ]

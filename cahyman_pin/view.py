@@ -9,7 +9,8 @@ Examples::
     cahyman view --force 0 0 -50 --scale 200          # live, amplification 200
 
 The drawing (ghost of the nominal pose, amplified deflected pose, arrows, compliance
-ellipsoid, load-ramp animation) is :mod:`closedloop.viewer`'s; the model is the Pinocchio
+ellipsoids, grid, HTML legend with the pose below, load-ramp animation) is
+:mod:`closedloop.viewer`'s; the model is the Pinocchio
 model of :mod:`cahyman_pin.model`, hence ``--backend`` must stay ``generic``. With
 ``--json`` the summary is printed as one JSON object and the other lines go to stderr.
 """
@@ -43,7 +44,12 @@ def run(args: argparse.Namespace) -> int:
         )
     model = cahyman_model(DEFAULT_PARAMS.with_ks(args.ks))
     q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
-    scene = view_from_args(model.clm, q, FRAME_M, args, out=_stderr if args.json else print)
+    pose = (
+        f"alpha = ({', '.join(f'{a:g}' for a in args.alpha)}) deg, alpha4 = {args.alpha4:g} deg, "
+        f"s4 = {args.s4:g} mm, K_s {args.ks}"
+    )
+    out = _stderr if args.json else print
+    scene = view_from_args(model.clm, q, FRAME_M, args, out=out, pose=pose, prog="cahyman")
     if args.json:
         print(json.dumps({**scene.to_dict(), "html": args.html}, allow_nan=False))
     return 0

@@ -15,6 +15,7 @@ The modules (``closedloop.compliance``, ``closedloop.assembly``, ...) stay impor
 
 from __future__ import annotations
 
+from . import data
 from .assembly import Assembly, assemble
 from .compliance import ComplianceResult, compliance
 from .conditioning import ILL_CONDITIONED, RANK_RTOL
@@ -72,6 +73,7 @@ __all__ = [
     "assemble",
     "closure_curvature",
     "compliance",
+    "data",
     "geometric_stiffness",
     "load_model",
     "preloaded_compliance",

@@ -20,9 +20,33 @@ def frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def real_array(value, name: str) -> np.ndarray:
+    """``value`` as a float array, refusing what is not real numbers.
+
+    Args:
+        value: a number or a (nested) sequence or array of numbers (ints, floats, bools).
+        name: the argument, named by the error message.
+
+    Raises:
+        InvalidInputError: strings, complex numbers (their imaginary part would be dropped),
+            ``None`` or other objects, ragged sequences.
+    """
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nesting
+        a = None
+    if a is None or a.dtype.kind not in "biuf":
+        text = " ".join(repr(value).split())
+        text = text if len(text) <= 80 else text[:77] + "..."
+        kind = type(value).__name__ if a is None or a.dtype.kind != "c" else "complex"
+        kind = f"ragged {kind}" if a is None else kind
+        raise InvalidInputError(f"{name} must be real numbers, got {text} ({kind})")
+    return a.astype(float)
+
+
 def check_wrench(w) -> np.ndarray:
     """(6,) validated wrench (fx, fy, fz [N], nx, ny, nz [N m]); raises InvalidInputError."""
-    w = np.asarray(w, dtype=float).reshape(-1)
+    w = real_array(w, "wrench").reshape(-1)
     if w.shape != (6,) or not np.all(np.isfinite(w)):
         raise InvalidInputError(
             f"wrench must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"

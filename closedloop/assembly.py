@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from .arrays import real_array
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import closure_residual, jacobian_rows
 from .model import ClosedLoopModel
@@ -87,7 +88,7 @@ def assemble(
     model = clm.model
     q = clm.check_configuration(pin.neutral(model) if q0 is None else q0)
     if actuated is not None:
-        actuated = np.asarray(actuated, dtype=float).reshape(-1)
+        actuated = real_array(actuated, "actuated").reshape(-1)
         if actuated.shape != (len(clm.actuated),):
             raise InvalidInputError(
                 f"{actuated.size} actuated values given; expected {len(clm.actuated)} "

@@ -1,39 +1,71 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
 ``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
-under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); its exit code is 0 or 2.
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`).
 
-Exit codes:
+MODEL is a robot file, a bundled model by name (``fourbar``, with its closure file) or an
+example-robot-data robot by name (``ur5``, ``panda``, ...; see :mod:`closedloop.data`).
+
+Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`):
 
 * ``0`` - the stiffness K exists; K and C printed.
 * ``1`` - the analysis succeeded but C is rank deficient: the frame is rigid along some
   directions, K does not exist. C and the rigid directions are printed (JSON: ``"K": null``).
   This is an answer, not an error, hence not 2; it differs from 0 so that scripts notice.
-* ``2`` - usage or input error (missing file, unknown frame or joint, malformed closure
-  file, wrong number of values, NaN, negative stiffness, loops that cannot be closed,
-  a mechanism without equilibrium): one line ``closedloop: error: <message>`` on stderr.
-  A command-line syntax error is reported by argparse (usage line, then the error).
+* ``2`` - bad input (missing file, unknown frame or joint, malformed closure file, wrong
+  number of values, NaN, negative stiffness, an output path that cannot be written, a
+  ``--q`` that does not close the loops): one line ``closedloop: error: <message>`` on
+  stderr. A command-line syntax error is reported by argparse (usage line, then the error).
+* ``3`` - the computation failed on valid input (loops that cannot be closed for these
+  actuated values, no static equilibrium, a singular configuration or a mechanism): one
+  line on stderr.
+* ``141`` - standard output was closed early (``| head``); nothing more is written.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import sys
+import tempfile
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
+from . import __version__, cli_identify, cli_map
 from .assembly import assemble
-from .compliance import TWIST_LABELS, UNITS, ComplianceResult, compliance, describe_directions
+from .blas import single_threaded_blas
+from .compliance import (
+    TWIST_LABELS,
+    UNITS,
+    ComplianceResult,
+    compliance,
+    describe_directions,
+    energy_shares,
+)
 from .conditioning import ILL_CONDITIONED
 from .configuration import Configuration
-from .exceptions import ClosedLoopError, OpenLoopError
+from .data import BUNDLED_MODELS, ROBOTS, resolve
+from .exceptions import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_RANK_DEFICIENT,
+    ClosedLoopError,
+    InvalidInputError,
+    OpenLoopError,
+    exit_status,
+)
 from .io import load_model, read_springs_file, reference_configuration
 from .model import ClosedLoopModel
 
 PROG = "closedloop"
-EXIT_OK, EXIT_RIGID, EXIT_ERROR = 0, 1, 2
+EXIT_RIGID, EXIT_ERROR = EXIT_RANK_DEFICIENT, EXIT_BAD_INPUT
+#: Exit status when standard output is closed early (128 + SIGPIPE, as a shell reports).
+EXIT_PIPE = 141
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
 
 EPILOG = """\
@@ -56,19 +88,95 @@ condition number of 1e8 the result is flagged ill-conditioned (near a singular p
 an eigenvalue ratio of 1e-14 C is rank deficient.
 
 Exit status: 0 K exists; 1 C is rank deficient (the rigid directions are named, K does
-not exist, JSON "K": null); 2 error (one line on stderr).
+not exist, JSON "K": null); 2 bad input; 3 the computation failed (loops that cannot be
+closed, no equilibrium, a singular configuration); errors are one line on stderr.
 
-Example:
-  closedloop stiffness ur5_robot.urdf --frame tool0 --q 0 -1.0 1.5 -0.5 1.2 0.3 \\
-      --joint-stiffness 1e4
+Examples:
+  closedloop stiffness ur5 --frame tool0 --q 0 -1.0 1.5 -0.5 1.2 0.3 --joint-stiffness 1e4
+  closedloop stiffness fourbar --frame P --actuated 0.3
 """
+
+#: A command-line value that reads as a negative number (``-1e5``, ``-.5``, ``-inf``).
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser that takes ``-1e5``, ``-.5`` or ``-inf`` for values, not options
+    (argparse's own rule knows only ``-1`` and ``-1.5``); its subparsers are of this class."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
+
+
+def output_folder(path: str | Path, option: str = "--out") -> Path:
+    """Create the output folder ``path`` (and its parents) now, before any work.
+
+    Raises:
+        InvalidInputError: ``path`` is a file, lies under a file, or cannot be created or
+            written; the message names the option and the path.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InvalidInputError(f"{option} {str(path)!r} is a file; expected a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+    except OSError as e:
+        raise InvalidInputError(
+            f"{option} {str(path)!r}: cannot create or write this folder ({e.strerror})"
+        ) from None
+    return path
+
+
+def output_file(path: str | Path, option: str) -> Path:
+    """Check, before any work, that the file ``path`` can be written in an existing folder.
+
+    Raises:
+        InvalidInputError: ``path`` is a folder, or its folder is missing, is a file or
+            cannot be written; the message names the option and the path.
+    """
+    path = Path(path)
+    parent = path.parent
+    if path.is_dir():
+        raise InvalidInputError(f"{option} {str(path)!r} is a folder; expected a file")
+    if not parent.is_dir():
+        what = "is not a folder" if parent.exists() else "does not exist"
+        raise InvalidInputError(f"{option} {str(path)!r}: folder {str(parent)!r} {what}")
+    try:
+        tempfile.TemporaryFile(dir=parent).close()
+    except OSError as e:
+        raise InvalidInputError(
+            f"{option} {str(path)!r}: cannot write in {str(parent)!r} ({e.strerror})"
+        ) from None
+    return path
+
+
+def closed_pipe() -> int:
+    """After a :class:`BrokenPipeError` on stdout: send what is left to /dev/null (so that
+    the interpreter's final flush stays quiet) and return :data:`EXIT_PIPE`."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout without a file descriptor (captured in a test)
+        return EXIT_PIPE
+    os.close(devnull)
+    return EXIT_PIPE
+
+
+def error_line(prog: str, error: BaseException) -> str:
+    """The one-line message of an error: ``prog: error: message`` (whitespace folded)."""
+    return f"{prog}: error: {' '.join(str(error).split())}"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``closedloop`` command."""
-    parser = argparse.ArgumentParser(
-        prog=PROG, description="Stiffness and compliance of robots with closed loops."
+    parser = Parser(
+        prog=PROG,
+        description="Stiffness and compliance of robots with closed loops. Exit status: 0 "
+        "ok, 1 rank deficient (K does not exist), 2 bad input, 3 computation failed.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     p = sub.add_parser(
         "stiffness",
@@ -80,31 +188,33 @@ def build_parser() -> argparse.ArgumentParser:
     add_model_arguments(p)
     p.add_argument("--axes", choices=("world", "local"), default="world", help="axes of K and C")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--wrench", nargs=6, type=float, metavar="W",
+        help="fx fy fz [N] nx ny nz [N m] at the frame (in --axes): print the share of the "
+        "deflection energy stored in each spring and beam",
+    )  # fmt: skip
     p.set_defaults(func=stiffness)
     v = sub.add_parser(
         "view",
         help="meshcat view of the deflection under a wrench",
-        description="Nominal pose (ghost), amplified deflected pose, wrench arrows and\n"
-        "compliance ellipsoid in a meshcat viewer. --html writes a self-contained page;\n"
-        "without it the viewer is served on 127.0.0.1 until Ctrl-C.",
+        description="Nominal pose (translucent ghost), amplified deflected pose, wrench arrows,\n"
+        "compliance ellipsoids and an HTML legend (load, amplification, real displacements\n"
+        "in mm and deg, colour key) in a meshcat viewer. --html writes a self-contained\n"
+        "page; without it the viewer is served on 127.0.0.1 until Ctrl-C or SIGTERM.",
         epilog=EPILOG.split("\n\nOutput:")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_model_arguments(v)
     add_view_arguments(v)
     v.set_defaults(func=view)
+    cli_map.add_parser(sub, add_source_arguments)
+    cli_identify.add_parser(sub, lambda p: add_source_arguments(p, frame=False))
     return parser
 
 
 def add_model_arguments(p: argparse.ArgumentParser) -> None:
     """MODEL, --closures, --frame, --q | --actuated, --joint-stiffness | --springs."""
-    p.add_argument("model", metavar="MODEL", help="robot file: .urdf, or .xml/.mjcf (MJCF)")
-    p.add_argument(
-        "--closures",
-        metavar="FILE",
-        help="closure file (URDF) or side file with name_mot/springs/locked (MJCF)",
-    )
-    p.add_argument("--frame", required=True, metavar="NAME", help="loaded frame")
+    add_source_arguments(p)
     config = p.add_mutually_exclusive_group()
     config.add_argument(
         "--q", nargs="+", type=float, metavar="Q", help="full configuration (nq values)"
@@ -112,6 +222,24 @@ def add_model_arguments(p: argparse.ArgumentParser) -> None:
     config.add_argument(
         "--actuated", nargs="+", type=float, metavar="A", help="actuated joint values"
     )
+
+
+def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None:
+    """MODEL, --closures, --frame (if ``frame``), --joint-stiffness | --springs."""
+    p.add_argument(
+        "model",
+        metavar="MODEL",
+        help="robot file (.urdf, .xml/.mjcf MJCF, .sdf), a bundled model by name "
+        f"({', '.join(BUNDLED_MODELS)}) or an example-robot-data robot by name "
+        f"({', '.join(ROBOTS)})",
+    )
+    p.add_argument(
+        "--closures",
+        metavar="FILE",
+        help="closure file (URDF) or side file with name_mot/springs/locked (MJCF, SDF)",
+    )
+    if frame:
+        p.add_argument("--frame", required=True, metavar="NAME", help="loaded frame")
     springs = p.add_mutually_exclusive_group()
     springs.add_argument(
         "--joint-stiffness",
@@ -161,12 +289,26 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="without --html: serve for this long (default: until Ctrl-C)",
     )
-    p.add_argument("--autoplay", action="store_true", help="play the load ramp on opening")
+    p.add_argument(
+        "--autoplay",
+        action="store_true",
+        help="play the load ramp (looping) once the page has loaded",
+    )
+    p.add_argument("--no-legend", action="store_true", help="no HTML legend on the page")
 
 
-def view_from_args(clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=print):
-    """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options."""
+def view_from_args(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=print, pose=None, prog=PROG
+):
+    """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options.
+
+    Warnings (a view without load) go to stderr, one line each, prefixed by ``prog``.
+    ``pose``: the pose as the page's legend writes it (default q).
+    """
     from .viewer import run_view  # meshcat is imported only for a view
+
+    def warn(line: str) -> None:
+        print(f"{prog}: warning: {line}", file=sys.stderr)
 
     return run_view(
         clm,
@@ -180,7 +322,10 @@ def view_from_args(clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=pr
         html=args.html,
         duration=args.duration,
         autoplay=args.autoplay,
+        legend=not args.no_legend,
+        pose=pose,
         out=out,
+        warn=warn,
     )
 
 
@@ -249,9 +394,10 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
 def model_from_args(args: argparse.Namespace, geometry: bool = False):
     """(model, :class:`Configuration`) from :func:`add_model_arguments`' options."""
     springs = read_springs_file(args.springs) if args.springs else None
+    robot, closures = resolve(args.model, args.closures)
     clm = load_model(
-        args.model,
-        args.closures,
+        robot,
+        closures,
         springs=springs,
         joint_stiffness=args.joint_stiffness,
         geometry=geometry,
@@ -264,11 +410,14 @@ def stiffness(args: argparse.Namespace) -> int:
     """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
     clm, state = model_from_args(args)
     res = compliance(state, args.frame, axes=args.axes)
+    shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
-        print(json.dumps(doc, allow_nan=False))
+        print(json.dumps(doc | ({"energy_shares": shares} if shares else {}), allow_nan=False))
     else:
         print(format_report(clm, res))
+        for name, share in (shares or {}).items():  # the per-element breakdown
+            print(f"energy share {share:7.2%}  {name}")
     return EXIT_OK if res.is_full_rank else EXIT_RIGID
 
 
@@ -281,16 +430,26 @@ def view(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``closedloop`` command; returns the exit code (see module doc)."""
+    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:  # --help (0) or a usage error (2), already printed
         return e.code if isinstance(e.code, int) else EXIT_ERROR
     try:
-        return args.func(args)
+        if getattr(args, "html", None):
+            output_file(args.html, "--html")  # before any work
+        code = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+        return code
+    except BrokenPipeError:
+        return closed_pipe()
     except ClosedLoopError as e:
-        print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
-        return EXIT_ERROR
+        print(error_line(PROG, e), file=sys.stderr)
+        return exit_status(e)
+    except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
+        print(error_line(PROG, f"numerical failure: {e}"), file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":

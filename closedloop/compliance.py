@@ -2,9 +2,10 @@
 
 Method (the Jacobian method K = J^-T K_q J^-1 generalised to loops). Let N (nv, d) span
 the tangent motions dq that keep every closure and locked joint (``J_c N = 0``), K_q the
-diagonal joint stiffness (0 for passive joints) and J (6, nv) the frame Jacobian. With
-dq = N y, the potential energy of the springs is 1/2 y^T (N^T K_q N) y and a wrench w at
-the frame does the work w^T J N y, so at equilibrium
+joint stiffness (0 for passive joints; diagonal, or block diagonal with the coupled
+springs of multi-dof joints, ``ClosedLoopModel.spring_blocks``) and J (6, nv) the frame
+Jacobian. With dq = N y, the potential energy of the springs is 1/2 y^T (N^T K_q N) y
+and a wrench w at the frame does the work w^T J N y, so at equilibrium
 
     K_r y = N^T J^T w,   K_r = N^T K_q N   (d, d)
     dq = G w,            G = N K_r^+ N^T J^T   (nv, 6)
@@ -18,11 +19,12 @@ internal mobility (e.g. a link spinning about its own axis) and is left out.
 Numerics (:mod:`closedloop.conditioning`). Everything is computed in unit-free
 coordinates: lengths divided by the characteristic length L of the configuration, in
 joint space (prismatic coordinates dq / L, their springs k L^2 [N m]) as in Cartesian
-space. K_r is never formed: the SVD of its square-root factor S = sqrt(K_q) N gives
-K_r = V diag(sigma^2) V^T to the precision of S, and a motion is spring-free when its
-sigma is below ``RANK_RTOL`` times the largest (the same rule as the rank of C, on the
-same square-root scale). C = B B^T with B = J N V diag(1/sigma), and K comes from the SVD
-of B, never from inv(C), which would lose cond(C) = cond(J)^2 digits.
+space. K_r is never formed: the SVD of its square-root factor S = R N (K_q = R^T R; R is
+sqrt(k), or the transposed Cholesky factor of a block) gives K_r = V diag(sigma^2) V^T to
+the precision of S, and a motion is spring-free when its sigma is below ``RANK_RTOL``
+times the largest (the same rule as the rank of C, on the same square-root scale).
+C = B B^T with B = J N V diag(1/sigma), and K comes from the SVD of B, never from
+inv(C), which would lose cond(C) = cond(J)^2 digits.
 """
 
 from __future__ import annotations
@@ -207,11 +209,17 @@ class SpringFactor(NamedTuple):
     sigma: np.ndarray
     n_internal: int
     path: str = "null-space"
+    identity_V: bool = False  # V is the identity (the fast paths without block springs)
+
+    @property
+    def NV(self) -> np.ndarray:
+        """(nv, s) N V: the sprung admissible motions."""
+        return self.N if self.identity_V else self.N @ self.V
 
     @property
     def P(self) -> np.ndarray:
         """(nv, s) N V diag(1/sigma): dq = P P^T J^T w, C = (J P) (J P)^T."""
-        return self.N @ (self.V / self.sigma)
+        return self.NV / self.sigma
 
 
 class _Scaling(NamedTuple):
@@ -223,12 +231,23 @@ class _Scaling(NamedTuple):
     sprung: np.ndarray  # (s,) indices of the coordinates with a finite spring
     sqrt_k: np.ndarray  # (s,) sqrt of their scaled stiffness k s_q^2 [sqrt(N m)]
     passive: np.ndarray  # (p,) indices of the coordinates without spring (k = 0)
+    # With spring blocks (else None): the scaled square root R_s (s, s) of the sprung
+    # stiffness, diag(s_q) K_ss diag(s_q) = R_s^T R_s, and its SVD R_s = U diag(sigma) V^T,
+    # which is the spring factor of the fast paths on y = dq_s: K_r = V diag(sigma^2) V^T.
+    root: np.ndarray | None = None
+    root_V: np.ndarray | None = None
+    root_sigma: np.ndarray | None = None
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
         s_q = np.where(clm.linear_coordinates, L, 1.0)
         k = clm.stiffness
         sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
+        root = root_V = root_sigma = None
+        if clm.spring_blocks:
+            root = clm.spring_root[np.ix_(sprung, sprung)] * s_q[sprung]
+            _, root_sigma, Vt = np.linalg.svd(root)
+            root_V = Vt.T
         return cls(
             s_q,
             np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None],
@@ -236,7 +255,15 @@ class _Scaling(NamedTuple):
             sprung,
             np.sqrt(k[sprung]) * s_q[sprung],
             np.flatnonzero(k == 0.0),
+            root,
+            root_V,
+            root_sigma,
         )
+
+    @property
+    def fast_factor(self) -> tuple[np.ndarray | None, np.ndarray]:
+        """(V (s, s) or None for the identity, sigma (s,)): the spring factor on y = dq_s."""
+        return (None, self.sqrt_k) if self.root is None else (self.root_V, self.root_sigma)
 
 
 #: The partitioned path is taken when the passive part of the scaled closure Jacobian is
@@ -255,7 +282,8 @@ def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | No
     With the closure rows J_c dq = J_s dq_s + J_p dq_p = 0 (scaled, locked coordinates
     still), a passive part J_p of full column rank fixes dq_p = X dq_s, X = -J_p^+ J_s,
     for every spring motion dq_s when J_s + J_p X = 0; the admissible motions are then
-    N = [I; X] in the spring coordinates, where K_r = diag(k s_q^2) is already diagonal.
+    N = [I; X] in the spring coordinates, where K_r = diag(k s_q^2) is already diagonal
+    (with spring blocks: K_r = R_s^T R_s, whose SVD is computed once per model).
     Returns None when this does not apply (the null-space path then decides).
     """
     nv, s, p = state.model.model.nv, sc.sprung, sc.passive
@@ -279,12 +307,14 @@ def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | No
     elif Jc.shape[0]:
         return None  # loops without passive joints tie the springs together
     # the same spring-free rule as the null-space path, which would find singular values
-    # of the spring factor between min(sqrt_k) / |T| and max(sqrt_k)
-    if sc.sqrt_k.size and sc.sqrt_k.min() <= RANK_RTOL * sc.sqrt_k.max() * np.linalg.norm(T):
+    # of the spring factor between min(sigma) / |T| and max(sigma)
+    V, sigma = sc.fast_factor
+    if sigma.size and sigma.min() <= RANK_RTOL * sigma.max() * np.linalg.norm(T):
         return None
-    V = np.eye(s.size)
     path = "partitioned" if Jc.shape[0] else "serial"
-    return SpringFactor(T * sc.s_q[:, None], V, sc.sqrt_k, 0, path)
+    if V is None:  # diagonal springs: y = dq_s already diagonalises K_r
+        return SpringFactor(T * sc.s_q[:, None], np.eye(s.size), sigma, 0, path, True)
+    return SpringFactor(T * sc.s_q[:, None], V, sigma, 0, path)
 
 
 #: Values of the ``path`` argument of :func:`compliance`.
@@ -318,7 +348,10 @@ def spring_factor(
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)
-    S = sc.sqrt_k[:, None] * N_s[sc.sprung]
+    if sc.root is None:
+        S = sc.sqrt_k[:, None] * N_s[sc.sprung]
+    else:  # spring blocks: S^T S = N_s^T diag(s_q) K_q diag(s_q) N_s
+        S = sc.root @ N_s[sc.sprung]
     sigma, V, Z, _ = split_factor(S)
     N = N_s * sc.s_q[:, None]
     if Z.shape[1]:  # spring-free motions must not move the frame
@@ -393,7 +426,7 @@ def compliance(
         return preloaded_compliance(state.model, eq, axes)
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame, path)
-    NV = f.N @ f.V
+    NV = f.NV
     JNV = (J @ NV) * twist_scaling(state.length)[:, None]  # scaled, kinematic
     B_s = JNV / f.sigma  # C_s = B_s B_s^T
     spread = f.sigma.max() / f.sigma.min() if f.sigma.size else 1.0
@@ -444,6 +477,41 @@ def compliance_result(
         path=f.path,
         **extra,
     )
+
+
+def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dict[str, float]:
+    """Share of the deflection energy under ``wrench`` stored in each spring and each beam:
+    "which element limits the stiffness at this frame for this load?".
+
+    The joint deflection dq = G w stores 1/2 dq_j^T K_j dq_j in the spring of joint j (a
+    number per coordinate or a block; a beam's is its virtual joint ``<link>_beam``,
+    :mod:`closedloop.beams`); at equilibrium the energies sum to the work 1/2 w^T C w, so
+    the shares sum to 1. For the unloaded compliance (a preloaded one adds the preload's
+    own energy terms, which are not split).
+
+    Args:
+        clm: the model of ``result``.
+        result: a compliance of ``clm`` (:func:`compliance`).
+        wrench: (6,) (f [N], n [N m]) at the result's point, in its axes.
+
+    Returns:
+        joint name -> share (dimensionless, >= 0), every joint with a finite spring, in
+        the model's order; empty when the wrench does no work (w^T C w = 0).
+    """
+    w = check_wrench(wrench)
+    dq = result.G @ w
+    f = clm.spring_forces(dq)
+    total = float(w @ result.C @ w)
+    out = {}
+    k = clm.stiffness
+    for j in range(1, clm.model.njoints):
+        jm = clm.model.joints[j]
+        v = slice(jm.idx_v, jm.idx_v + jm.nv)
+        if jm.nv and np.any((k[v] > 0) & np.isfinite(k[v])):
+            out[clm.model.names[j]] = float(dq[v] @ f[v])
+    if total <= 0.0:
+        return {}
+    return {n: e / total for n, e in out.items()}
 
 
 def spring_subspace(

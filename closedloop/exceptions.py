@@ -130,3 +130,31 @@ class JointLimitError(EquilibriumError):
 
 class JointLimitWarning(UserWarning):
     """An equilibrium lies outside the position limits of some joints."""
+
+
+#: Exit status of the command lines (``closedloop``, ``cahyman``): success.
+EXIT_OK = 0
+#: The analysis succeeded but the compliance is rank deficient: the stiffness does not exist.
+EXIT_RANK_DEFICIENT = 1
+#: Bad input: usage, file, name, value (the message names it).
+EXIT_BAD_INPUT = 2
+#: The computation failed on valid input: assembly, equilibrium, singular configuration.
+EXIT_FAILED = 3
+
+_FAILURES = (AssemblyError, EquilibriumError, MechanismError, SingularConfigurationError)
+
+
+def exit_status(error: ClosedLoopError) -> int:
+    """Exit status of a command line that stops on ``error``.
+
+    :data:`EXIT_RANK_DEFICIENT` for :class:`RigidDirectionsError`, :data:`EXIT_FAILED` for
+    :class:`AssemblyError`, :class:`EquilibriumError` (and :class:`JointLimitError`),
+    :class:`MechanismError` and :class:`SingularConfigurationError`,
+    :data:`EXIT_BAD_INPUT` for the others (:class:`InvalidInputError`,
+    :class:`ModelFileError`, :class:`NameNotFoundError`, :class:`OpenLoopError`).
+    """
+    if isinstance(error, RigidDirectionsError):
+        return EXIT_RANK_DEFICIENT
+    if isinstance(error, _FAILURES):
+        return EXIT_FAILED
+    return EXIT_BAD_INPUT

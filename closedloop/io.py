@@ -7,6 +7,8 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
+    beams: {link: {end: joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}
+                                           # optional flexible links (closedloop.beams)
 
 A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
 number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
@@ -42,14 +44,16 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError
-from .mjcf import read_mjcf_extras
+from .mjcf import place_free_joints, read_mjcf_extras, single_root_copy
 from .model import ClosedLoopModel, Closure, closure_between_frames
+from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
-MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
-CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked")
-SIDE_FILE_KEYS = ("name_mot", "springs", "locked")
+MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
+CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams")
+SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
 #: MJCF equality constraints that Pinocchio turns into anchor constraints.
 
 Stiffness = float | list[float]
@@ -67,6 +71,7 @@ class ClosureSpec:
     actuated: tuple[str, ...] | None = None
     springs: dict[str, Stiffness] = field(default_factory=dict)
     locked: tuple[str, ...] = ()
+    beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.beams)
 
 
 # ---------------------------------------------------------------------------- YAML files
@@ -174,7 +179,20 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         actuated=_name_list(doc, "name_mot", where),
         springs=_check_springs(doc.get("springs") or {}, where),
         locked=_name_list(doc, "locked", where) or (),
+        beams=_check_beams(doc.get("beams") or {}, where),
     )
+
+
+def _check_beams(beams, where: str) -> dict[str, dict]:
+    """``beams:`` mapping link name -> beam mapping; the beams module checks the contents."""
+    if not isinstance(beams, dict) or not all(
+        isinstance(k, str) and isinstance(v, dict) for k, v in beams.items()
+    ):
+        raise ModelFileError(
+            f"{where}: beams must be a mapping link name -> {{end, E, G, section, theory}} "
+            f"or {{end, stiffness_6x6}}, got {beams!r}"
+        )
+    return beams
 
 
 def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
@@ -256,7 +274,7 @@ class _Tree:
     undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
 
 
-def _read_urdf(path: Path, closures: str | Path | None, geometry: bool) -> _Tree:
+def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
     model = _parse(lambda: pin.buildModelFromUrdf(str(path)), path, "robot file")
     visual = _geometry(
         geometry,
@@ -265,31 +283,37 @@ def _read_urdf(path: Path, closures: str | Path | None, geometry: bool) -> _Tree
         ),
         path,
     )
+    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
+    tree, blocks = model, {}
+    if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
+        model, (visual,), blocks, _ = apply_beams(model, [visual], {**spec.beams, **beams})
     if closures is None:
-        actuated, locked = _serial_defaults(model, path)
-        return _Tree(model, [], actuated, {}, locked, visual)
-    spec = read_closure_file(closures)
+        actuated, locked = _serial_defaults(tree, path)
+        return _Tree(model, [], actuated, blocks, locked, visual)
     loops = [
         closure_between_frames(model, a, b, t)
         for (a, b), t in zip(spec.pairs, spec.types, strict=True)
     ]
-    return _Tree(model, loops, spec.actuated or (), spec.springs, spec.locked, visual)
+    springs = {**spec.springs, **blocks}
+    return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual)
 
 
 def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
-    model, points, welds = _parse(
-        lambda: pin.buildModelAndConstraintsFromMJCF(str(path)), path, "robot file"
-    )
+    with tempfile.TemporaryDirectory() as folder:  # several root bodies: Pinocchio reads a copy
+        parsed = str(single_root_copy(path, Path(folder)) or path)
+        model, points, welds = _parse(
+            lambda: pin.buildModelAndConstraintsFromMJCF(parsed), path, "robot file"
+        )
+        constraints = place_free_joints(model, [*points, *welds])
+        visual = _geometry(
+            geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
+        )
     actuated, stiffness, names, undriven = read_mjcf_extras(path)
     where = f"robot file {str(path)!r}"
     springs = {n: k for n, v in stiffness.items() if (k := _number(v, where, n)) > 0}
     spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
-    constraints = [*points, *welds]
     if len(names) != len(constraints):
         names = [f"closure{i}" for i in range(len(constraints))]
-    visual = _geometry(
-        geometry, lambda: pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL), path
-    )
     return _Tree(
         model,
         [Closure(c, n) for c, n in zip(constraints, names, strict=True)],
@@ -298,6 +322,15 @@ def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tre
         spec.locked,
         visual,
         tuple(undriven) if spec.actuated is None else (),
+    )
+
+
+def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
+    robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.sdf
+    spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
+    springs = {**robot.springs, **spec.springs}
+    return _Tree(
+        robot.model, robot.closures, spec.actuated or (), springs, spec.locked, robot.visual
     )
 
 
@@ -310,8 +343,15 @@ def load_model(
     actuated: Sequence[str] | None = None,
     geometry: bool = True,
     file_format: str | None = None,
+    free_base: bool = False,
+    beams: Mapping[str, Mapping] | None = None,
 ) -> ClosedLoopModel:
-    """Load a URDF (``.urdf``) or MJCF (``.xml``, ``.mjcf``) model.
+    """Load a URDF (``.urdf``), MJCF (``.xml``, ``.mjcf``) or SDF (``.sdf``) model.
+
+    An SDF model's loops are its loop-closing joints and its springs the joints'
+    ``spring_stiffness`` (:mod:`closedloop.sdf`; it names no actuated joint: give them as
+    ``actuated`` or springs); its rest configuration puts the springs at their
+    ``spring_reference`` (:func:`reference_configuration`).
 
     An MJCF model's loops are its ``<equality><connect|weld>`` constraints. Pinocchio
     computes the ``<connect>`` anchor on the second body at ``qpos0``, so the file's
@@ -326,22 +366,45 @@ def load_model(
             spring otherwise.
         actuated: actuated joints, replacing those of the files or the serial default.
         geometry: also load the visual geometry (meshes must be found).
-        file_format: ``"urdf"`` or ``"mjcf"``; default: from the file suffix.
+        file_format: ``"urdf"``, ``"mjcf"`` or ``"sdf"``; default: from the file suffix.
+        free_base: SDF only: a free-flyer root joint instead of the root link fixed.
+        beams: flexible links, link name -> beam (:mod:`closedloop.beams`), merged over
+            the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (map a
+            configuration with :func:`closedloop.beams.map_configuration`).
 
     Raises:
         ModelFileError: missing or unparsable robot or closure file, unknown format; the
             message names the file and the fault.
         NameNotFoundError: a frame or joint name that the model does not have.
-        InvalidInputError: a negative or NaN stiffness given as keyword.
+        InvalidInputError: a negative or NaN stiffness given as keyword; a path that is
+            not a str or os.PathLike.
     """
+    for name, value in (("path", path), ("closures", closures)):
+        if not isinstance(value, str | os.PathLike) and (name == "path" or value is not None):
+            raise InvalidInputError(
+                f"load_model: {name} must be a file path (str or os.PathLike), got {value!r}"
+            )
+    if springs is not None and not isinstance(springs, Mapping):
+        raise InvalidInputError(
+            f"load_model: springs must be a mapping joint name -> stiffness, got "
+            f"{type(springs).__name__}"
+        )
     kind = file_format or MODEL_SUFFIXES.get(Path(path).suffix.lower())
-    if kind not in ("urdf", "mjcf"):
+    if kind not in ("urdf", "mjcf", "sdf") or (free_base and kind != "sdf"):
         raise ModelFileError(
             f"robot file {str(path)!r}: unknown format {kind or Path(path).suffix!r}; expected "
-            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf' or 'mjcf'"
+            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf' or 'sdf' "
+            "(free_base: SDF only)"
         )
     path = _existing(path, "robot file")
-    tree = (_read_urdf if kind == "urdf" else _read_mjcf)(path, closures, geometry)
+    if kind == "sdf":
+        tree = _read_sdf(path, closures, geometry, free_base)
+    else:
+        tree = (
+            _read_urdf(path, closures, geometry, beams or {})
+            if kind == "urdf"
+            else _read_mjcf(path, closures, geometry)
+        )
     if actuated is None and tree.undriven:
         raise ModelFileError(
             f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
@@ -361,9 +424,14 @@ def load_model(
             )
         for name in actuated:
             springs.setdefault(name, k)
-    return ClosedLoopModel(
+    clm = ClosedLoopModel(
         tree.model, tree.loops, actuated, springs, tree.locked, visual_model=tree.visual
     )
+    if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
+        side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
+        if side or beams:
+            clm = insert_beams(clm, {**side, **(beams or {})})
+    return clm
 
 
 def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:
@@ -372,9 +440,11 @@ def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -
 
 
 def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
-    """(nq,) start configuration: the MJCF ``qpos0`` if the model has one, else neutral."""
+    """(nq,) start configuration: the MJCF ``qpos0`` or the SDF rest configuration
+    (springs at their ``spring_reference``) if the model has one, else neutral."""
     refs = clm.model.referenceConfigurations
-    q = refs["qpos0"] if "qpos0" in refs else pin.neutral(clm.model)
+    key = next((k for k in ("qpos0", REST) if k in refs), None)
+    q = refs[key] if key else pin.neutral(clm.model)
     return np.array(q, dtype=float)
 
 

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .assembly import assemble
+from .blas import single_threaded_blas
 from .compliance import compliance
 from .exceptions import (
     AssemblyError,
@@ -77,10 +78,11 @@ class ModelSource:
 
 @functools.lru_cache(maxsize=8)
 def _load(source: ModelSource) -> ClosedLoopModel:
+    springs = {k: list(v) if isinstance(v, tuple) else v for k, v in source.springs}
     return load_model(
         source.path,
         source.closures,
-        springs=dict(source.springs) or None,
+        springs=springs or None,
         joint_stiffness=source.joint_stiffness,
     )
 
@@ -332,7 +334,7 @@ def stiffness_map(
     if workers is not None and executor is None:
         if not isinstance(model, ModelSource):
             raise InvalidInputError("worker processes need a ModelSource (files), not a model")
-        executor = ProcessPoolExecutor(workers)
+        executor = ProcessPoolExecutor(workers, initializer=single_threaded_blas)
     pieces = [order[i : i + chunk] for i in range(0, len(order), chunk)]
     tasks = [(model, frame, pts[p], w) for p in pieces]
     results: list = [None] * len(tasks)

@@ -10,6 +10,14 @@ lumped into the joint coordinates: each velocity coordinate carries a stiffness 
   "virtual" joints standing for link compliance are ordinary joints with a spring;
 * ``inf``    - locked (rigid).
 
+A spring may also couple the coordinates of one multi-dof joint: its stiffness is then a
+symmetric positive definite (nv_j, nv_j) matrix (a *block*, e.g. the 6x6 tip stiffness of
+a flexible link on a 6-dof virtual joint, :mod:`closedloop.beams`), its energy
+1/2 dq_j^T K_j dq_j. The per-coordinate vector :attr:`ClosedLoopModel.stiffness` then
+holds the block's diagonal (finite and > 0, so the 0/inf rules are unchanged) and
+:attr:`ClosedLoopModel.spring_blocks` the blocks; :attr:`ClosedLoopModel.spring_matrix`
+is the whole joint stiffness K_q (nv, nv), block diagonal.
+
 Actuated joints are the inputs of :func:`closedloop.assembly.assemble`. An actuated joint
 without a spring is a rigid actuator (locked).
 """
@@ -19,13 +27,17 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 import pinocchio as pin
 
-from .arrays import frozen
+from .arrays import frozen, real_array
 from .conditioning import characteristic_length
 from .exceptions import InvalidInputError, NameNotFoundError
+
+#: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
+POOL_SIZE = 4
 
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
 
@@ -51,15 +63,24 @@ class Closure:
         return self.constraint.residualSize()
 
 
+def _check_name(kind: str, name) -> None:
+    if not isinstance(name, str):
+        raise InvalidInputError(f"{kind} name must be a str, got {name!r} ({type(name).__name__})")
+
+
 def frame_id(model: pin.Model, name: str) -> int:
-    """Index of frame ``name``; raises :class:`NameNotFoundError` listing the frames."""
+    """Index of frame ``name``; raises :class:`NameNotFoundError` listing the frames
+    (:class:`InvalidInputError` when ``name`` is not a str)."""
+    _check_name("frame", name)
     if not model.existFrame(name):
         raise NameNotFoundError("frame", name, [f.name for f in model.frames])
     return model.getFrameId(name)
 
 
 def joint_id(model: pin.Model, name: str) -> int:
-    """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints."""
+    """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints
+    (:class:`InvalidInputError` when ``name`` is not a str)."""
+    _check_name("joint", name)
     if not model.existJointName(name):
         raise NameNotFoundError("joint", name, list(model.names)[1:])
     return model.getJointId(name)
@@ -98,6 +119,38 @@ def _linear_coordinates(model: pin.Model) -> np.ndarray:
     return frozen(mask)
 
 
+#: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
+#: read from 36 printed numbers is symmetric to their ~1e-16 rounding).
+BLOCK_SYMMETRY_RTOL = 1e-9
+
+
+def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
+    """Validated read-only (nv, nv) symmetric positive definite block of joint ``name``."""
+    if K.shape != (nv, nv):
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} has shape {K.shape}; expected ({nv}, {nv})"
+        )
+    if not np.all(np.isfinite(K)):
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} has non-finite entries: {K.tolist()}"
+        )
+    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
+    if skew > BLOCK_SYMMETRY_RTOL * scale:
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} is not symmetric (max |K - K^T| = {skew:.3g}, "
+            f"max |K| = {scale:.3g}); expected a symmetric positive definite matrix"
+        )
+    K = 0.5 * (K + K.T)
+    try:
+        np.linalg.cholesky(K)
+    except np.linalg.LinAlgError:
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} is not positive definite (eigenvalues "
+            f"{np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive definite matrix"
+        ) from None
+    return frozen(K)
+
+
 class ClosedLoopModel:
     """Kinematic tree + loop closures + actuated joints + per-coordinate stiffness.
 
@@ -105,14 +158,19 @@ class ClosedLoopModel:
         model: Pinocchio model of the kinematic tree (frames included).
         closures: loop closures (:class:`Closure` or bare anchor constraints).
         actuated: names of the actuated joints (one coordinate each).
-        springs: joint name -> stiffness, a number or one value per velocity coordinate of
-            the joint [N m/rad or N/m]; ``0`` makes it passive, ``inf`` locks it.
+        springs: joint name -> stiffness, a number, one value per velocity coordinate of
+            the joint [N m/rad or N/m] (``0`` makes it passive, ``inf`` locks it), or a
+            symmetric positive definite (nv_j, nv_j) matrix coupling the joint's
+            coordinates (units of coordinate i times coordinate j: N/m, N, N m/rad).
         locked: names of joints held rigid.
         visual_model, collision_model: optional geometry for viewers.
         name: display name.
 
     Attributes:
-        stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf).
+        stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf);
+            the diagonal of a block.
+        spring_blocks: read-only mapping joint name -> (nv_j, nv_j) read-only SPD block
+            (empty when every spring is per coordinate).
         linear_coordinates: (nv,) read-only bool, True for translational coordinates [m]
             (prismatic, linear part of a free flyer), False for rotations [rad].
         linear_rows: (m,) read-only bool, True for the closure rows in metres (point
@@ -150,6 +208,8 @@ class ClosedLoopModel:
                     f"actuated joint {n!r} must have one coordinate (revolute or prismatic), "
                     f"it has nq={model.joints[j].nq}, nv={model.joints[j].nv}"
                 )
+        self._spec = (dict(springs or {}), tuple(locked))
+        self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
         self.stiffness = self._stiffness_vector(springs or {}, locked)
         self.linear_coordinates = _linear_coordinates(model)
         rows = [i < 3 for c in self.closures for i in range(c.size)]
@@ -189,8 +249,9 @@ class ClosedLoopModel:
             return self.model.createData(), [c.constraint.createData() for c in self.closures]
 
     def release_workspace(self, workspace: tuple[pin.Data, list]) -> None:
-        """Return a workspace of :meth:`acquire_workspace` to the pool (at most 16 kept)."""
-        if len(self._pool) < 16:
+        """Return a workspace of :meth:`acquire_workspace` to the pool (at most
+        :data:`POOL_SIZE` kept: a Data grows like nv^2 and more)."""
+        if len(self._pool) < POOL_SIZE:
             self._pool.append(workspace)
 
     def memo(self, key, factory):
@@ -218,13 +279,21 @@ class ClosedLoopModel:
         for name in locked:
             jm = self.model.joints[joint_id(self.model, name)]
             k[jm.idx_v : jm.idx_v + jm.nv] = np.inf
+        if not isinstance(springs, Mapping):
+            raise InvalidInputError(
+                f"springs must be a mapping joint name -> stiffness, got {type(springs).__name__}"
+            )
+        blocks = {}
         for name, value in springs.items():
             jm = self.model.joints[joint_id(self.model, name)]
-            values = (
-                np.broadcast_to(np.asarray(value, float), (jm.nv,))
-                if np.ndim(value) == 0
-                else np.asarray(value, float)
-            )
+            value = real_array(value, f"stiffness of joint {name!r}")
+            if value.ndim == 2 and value.size > 1:
+                blocks[name] = _spd_block(name, value, jm.nv)
+                k[jm.idx_v : jm.idx_v + jm.nv] = np.diag(blocks[name])
+                continue
+            if value.ndim == 2:  # a 1x1 block is a number
+                value = value.reshape(-1)
+            values = np.broadcast_to(value, (jm.nv,)) if value.ndim == 0 else value
             if values.shape != (jm.nv,):
                 raise InvalidInputError(
                     f"stiffness of joint {name!r} has {values.size} values; expected 1 or {jm.nv}"
@@ -236,7 +305,56 @@ class ClosedLoopModel:
                 )
             k[jm.idx_v : jm.idx_v + jm.nv] = values
         k.flags.writeable = False
+        self.spring_blocks = MappingProxyType(blocks)
         return k
+
+    # ------------------------------------------------------------------ joint stiffness
+    @property
+    def springs(self) -> dict:
+        """The spring specification given (joint name -> number, list or block), a copy."""
+        return dict(self._spec[0])
+
+    @property
+    def locked(self) -> tuple[str, ...]:
+        """Names of the joints given as locked."""
+        return self._spec[1]
+
+    @property
+    def spring_matrix(self) -> np.ndarray:
+        """(nv, nv) read-only joint stiffness K_q of the finite springs: the blocks and
+        diag(k) elsewhere, 0 on passive and locked coordinates [N m/rad, N/m, N]."""
+        return self.memo("spring_matrix", self._spring_matrix)
+
+    def _spring_matrix(self) -> np.ndarray:
+        k = self.stiffness
+        K = np.diag(np.where(np.isinf(k), 0.0, k))
+        for name, block in self.spring_blocks.items():
+            v = self.joint_v_slice(name)
+            K[v, v] = block
+        return frozen(K)
+
+    @property
+    def spring_root(self) -> np.ndarray:
+        """(nv, nv) read-only square root R of :attr:`spring_matrix`, K_q = R^T R: sqrt(k)
+        on the diagonal, the transposed Cholesky factor (upper triangular) of each block
+        [sqrt(N m), per the joint units]."""
+        return self.memo("spring_root", self._spring_root)
+
+    def _spring_root(self) -> np.ndarray:
+        k = self.stiffness
+        R = np.diag(np.sqrt(np.where(np.isinf(k), 0.0, k)))
+        for name, block in self.spring_blocks.items():
+            v = self.joint_v_slice(name)
+            R[v, v] = np.linalg.cholesky(block).T
+        return frozen(R)
+
+    def spring_forces(self, dq: np.ndarray) -> np.ndarray:
+        """(nv,) generalised spring forces K_q dq [N m, N] of a deflection dq (nv,)
+        (tangent of q [rad, m]); 0 on passive and locked coordinates."""
+        if not self.spring_blocks:
+            k = self.stiffness
+            return np.where(np.isinf(k), 0.0, k) * dq
+        return self.spring_matrix @ dq
 
     # ------------------------------------------------------------------ naming helpers
     def frame_id(self, name: str) -> int:
@@ -270,7 +388,7 @@ class ClosedLoopModel:
     def with_springs(
         self, springs: Mapping[str, float | Sequence[float]], locked: Iterable[str] = ()
     ) -> ClosedLoopModel:
-        """Same model and closures with another spring specification."""
+        """Same model and closures with another spring specification (blocks included)."""
         return ClosedLoopModel(
             self.model,
             self.closures,
@@ -282,9 +400,20 @@ class ClosedLoopModel:
             self.name,
         )
 
+    def with_beams(self, beams: Mapping[str, Mapping]) -> ClosedLoopModel:
+        """This model with flexible links: each beam (link name -> specification: end, E,
+        G, section, theory, or stiffness_6x6) becomes a 6-dof virtual joint
+        ``<link>_beam`` with its tip stiffness as a block spring
+        (:func:`closedloop.beams.insert_beams`). The new model has more coordinates: map a
+        configuration with :func:`closedloop.beams.map_configuration`.
+        """
+        from .beams import insert_beams  # beams builds models: imported on demand
+
+        return insert_beams(self, beams)
+
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """Validated copy of a configuration vector q (nq,)."""
-        q = np.array(q, dtype=float).reshape(-1)
+        q = real_array(q, "q").reshape(-1)
         if q.shape != (self.model.nq,):
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
         if not np.all(np.isfinite(q)):

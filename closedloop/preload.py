@@ -71,8 +71,8 @@ class PreloadedCompliance(ComplianceResult):
             for a non-conservative preload a divergence indicator only).
         equilibrium: the preloaded equilibrium (its rest configuration, the weight, the
             multipliers); ``q`` above is its configuration q_eq.
-        spring_forces: (nv,) forces of the springs at q_eq, k dq [N m or N] (0 on passive
-            and locked coordinates), dq = difference(q_rest, q_eq).
+        spring_forces: (nv,) forces of the springs at q_eq, K_q dq [N m or N] (0 on
+            passive and locked coordinates), dq = difference(q_rest, q_eq).
     """
 
     preload: np.ndarray
@@ -137,8 +137,7 @@ def preloaded_compliance(
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
     Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers, gravity=eq.load)
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-    about = {"equilibrium": eq, "spring_forces": readonly(k * eq.joint_deflection)}
+    about = {"equilibrium": eq, "spring_forces": readonly(clm.spring_forces(eq.joint_deflection))}
     M, P, T = scaled_tangent(clm, Kt, f.N, f.V, f.sigma**2)  # P: preload part; T^T K_r T = I
     if not np.any(P):
         base = compliance(state, frame, axes)
@@ -159,7 +158,7 @@ def preloaded_compliance(
     if conservative:  # K_t and C symmetric up to rounding
         C = 0.5 * (C + C.T)
     d = twist_scaling(state.length)[:, None]
-    kinematic = d * (J @ f.N @ f.V)  # rank and rigid directions, as without preload
+    kinematic = d * (J @ f.NV)  # rank and rigid directions, as without preload
     if conservative and margin > 0.0:  # M = L L^T: C = (B L^-T) (B L^-T)^T
         F = scipy.linalg.solve_triangular(np.linalg.cholesky(M), B.T, lower=True).T
         spectrum = spectrum_from_factor(d * F, state.length, kinematic, spread=np.inf)

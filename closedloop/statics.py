@@ -2,10 +2,11 @@
 
 The wrench w = (f [N], n [N m]) acts at the origin of a frame, with both the force and the
 moment fixed in world axes while the frame moves (a dead load). The springs of the model
-store 1/2 sum_i k_i dq_i^2 with dq = ``pin.difference(model, q_rest, q)`` on the spring
-coordinates; their rest configuration q_rest is the assembled configuration at which the
-load is applied. Locked coordinates (k = inf, including actuated joints without a spring)
-keep their values of q_rest; passive ones (k = 0) follow the closures.
+store 1/2 dq^T K_q dq (1/2 sum_i k_i dq_i^2 without spring blocks) with
+dq = ``pin.difference(model, q_rest, q)`` on the spring coordinates; their rest
+configuration q_rest is the assembled configuration at which the load is applied.
+Locked coordinates (k = inf, including actuated joints without a spring) keep their
+values of q_rest; passive ones (k = 0) follow the closures.
 
 A moment fixed in world axes is not conservative under finite rotations, so the solver
 works on the equilibrium equations (virtual work) rather than on an energy:
@@ -193,9 +194,9 @@ def potential_energy(
 ) -> float:
     """Potential energy [J] of the springs, a dead-load force at a frame origin, the weight.
 
-    ``1/2 sum k_i dq_i^2 - f . (p(q) - p(q_rest)) + V_g(q) - V_g(q_rest)`` over the spring
-    coordinates (0 < k < inf), dq = difference(q_rest, q). A world-fixed moment has no
-    potential.
+    ``1/2 dq^T K_q dq - f . (p(q) - p(q_rest)) + V_g(q) - V_g(q_rest)`` over the spring
+    coordinates (0 < k < inf; K_q = ``clm.spring_matrix``, diag(k) or with blocks),
+    dq = difference(q_rest, q). A world-fixed moment has no potential.
 
     Args:
         force: (3,) force [N], world axes, at the origin of ``frame``.
@@ -204,11 +205,10 @@ def potential_energy(
     f = np.asarray(force, dtype=float).reshape(-1)
     if f.shape != (3,):
         raise InvalidInputError(f"force must be 3 values (fx fy fz), got {f.size}")
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
     dq = pin.difference(clm.model, q_rest, q)
     dp = frame_displacement(clm, q, q_rest, frame)[:3]
     weight = 0.0 if gravity is None else gravity.potential(q) - gravity.potential(q_rest)
-    return float(0.5 * np.sum(k * dq * dq) - f @ dp + weight)
+    return float(0.5 * dq @ clm.spring_forces(dq) - f @ dp + weight)
 
 
 def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_step: float):

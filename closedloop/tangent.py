@@ -217,16 +217,47 @@ def closure_curvature(
 
 
 def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
-    """(nv, nv) stiffness of the springs 1/2 sum k_i dq_i^2, dq = difference(q_rest, q).
+    """(nv, nv) stiffness of the springs 1/2 dq^T K_q dq, dq = difference(q_rest, q).
 
-    ``Jd^T diag(k) Jd`` with Jd = d dq / dq (``pin.dDifference``, ARG1): exact for 1-dof
-    joints (revolute, prismatic), where Jd = 1; for a multi-dof joint carrying a spring it
-    omits the derivative of Jd, exact at zero deflection of that joint. Locked coordinates
-    (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
+    ``Jd^T K_q Jd + sum_i (K_q dq)_i Hess dq_i`` with Jd = d dq / dq (``pin.dDifference``,
+    ARG1) and K_q the joint stiffness (``clm.spring_matrix``: diag(k), or a block for the
+    coupled spring of a multi-dof joint). For 1-dof joints (revolute, prismatic) and the
+    other vector-space joints Jd is constant and the second term vanishes; for a sprung
+    joint on a Lie group (free flyer, spherical, planar: nq != nv) it is the derivative of
+    Jd^T f at fixed f = K_q dq, by central differences with step
+    :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f|), zero at zero deflection. Locked
+    coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
     """
-    Jd = pin.dDifference(clm.model, q_rest, q, pin.ARG1)
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-    return (Jd.T * k) @ Jd
+    model = clm.model
+    Jd = pin.dDifference(model, q_rest, q, pin.ARG1)
+    if clm.spring_blocks:
+        H = Jd.T @ clm.spring_matrix @ Jd
+    else:
+        k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+        H = (Jd.T * k) @ Jd
+    curved = clm.memo("lie_group_springs", lambda: _lie_group_springs(clm))
+    if curved.size:
+        f = clm.spring_forces(pin.difference(model, q_rest, q))
+        h = WELD_CURVATURE_STEP
+        for b in curved:
+            if not np.any(f[curved]):
+                break
+            e = np.zeros(model.nv)
+            e[b] = h
+            plus = pin.dDifference(model, q_rest, pin.integrate(model, q, e), pin.ARG1).T @ f
+            minus = pin.dDifference(model, q_rest, pin.integrate(model, q, -e), pin.ARG1).T @ f
+            H[:, b] += (plus - minus) / (2.0 * h)
+    return H
+
+
+def _lie_group_springs(clm: ClosedLoopModel) -> np.ndarray:
+    """Velocity indices of the sprung coordinates of joints with nq != nv (Lie groups)."""
+    k, out = clm.stiffness, []
+    for jm in clm.model.joints[1:]:
+        v = slice(jm.idx_v, jm.idx_v + jm.nv)
+        if jm.nq != jm.nv and np.any((k[v] > 0) & np.isfinite(k[v])):
+            out.extend(range(v.start, v.stop))
+    return np.array(out, dtype=int)
 
 
 def tangent_stiffness(
@@ -286,8 +317,7 @@ def scaled_tangent(
         P: (d, d) preload part N^T (K_t - K_q) N of the restricted tangent stiffness.
         T: (d, s) the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
     """
-    k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-    P = N.T @ (Kt - np.diag(k)) @ N
+    P = N.T @ (Kt - clm.spring_matrix) @ N
     T = V / np.sqrt(ls)
     return np.eye(T.shape[1]) + T.T @ P @ T, P, T
 
@@ -307,6 +337,8 @@ class EquilibriumEquations:
     def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
         self.clm, self.q_rest, self.frame = clm, q_rest, frame
         self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+        # square root of the springs on the free coordinates, K_ff = R_f^T R_f
+        self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
 
     def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
@@ -327,7 +359,7 @@ class EquilibriumEquations:
         J = frame_jacobian(clm, q, self.frame, "world", update=False)
         dq = pin.difference(clm.model, self.q_rest, q)
         Jd = pin.dDifference(clm.model, self.q_rest, q, pin.ARG1)
-        g = Jd.T @ (self.k * dq)
+        g = Jd.T @ (self.k * dq if self.root is None else clm.spring_forces(dq))
         load = self.generalised_load(q, w, J)
         F = (g - load)[free]
         if A.size:
@@ -393,11 +425,12 @@ class EquilibriumEquations:
         the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by
         their spring stiffness; 1 unloaded, 0 where K_t turns singular, < 0 if unstable.
         Spring-free motions (a rod spinning about its axis) are left out; the sprung ones
-        are the right singular vectors of sqrt(k) N above ``RANK_RTOL`` times the largest.
+        are the right singular vectors of R N (K_q = R^T R) above ``RANK_RTOL`` times the largest.
         """
         st = self.evaluate(q, w)
         N = st["N"]
-        _, sig, Vt = np.linalg.svd(np.sqrt(self.k[self.free])[:, None] * N, full_matrices=False)
+        S = np.sqrt(self.k[self.free])[:, None] * N if self.root is None else self.root @ N
+        _, sig, Vt = np.linalg.svd(S, full_matrices=False)
         r = rule_rank(sig)
         T = N @ (Vt[:r].T / sig[:r])  # T^T K_q T = I on the sprung motions
         return stability_margin(T.T @ self._restricted(q, w, st) @ T)

@@ -1,23 +1,35 @@
 """Meshcat viewer of the deflection of a mechanism under a wrench, with a static export.
 
-One meshcat scene (a meshcat server on 127.0.0.1, started for the viewer) holds two
-Pinocchio :class:`~pinocchio.visualize.MeshcatVisualizer` of the same model:
+One meshcat scene, served by :mod:`closedloop.viewer_server` (the meshcat server on
+127.0.0.1 only, stopped with the viewer), holds:
 
-* ``nominal``: the unloaded pose q, recoloured translucent (a ghost);
-* ``deflected``: the amplified deflected pose integrate(q, s dq) in the model's colours,
-  with the amplification s as its property ``amplification`` and in a text label;
+* ``robots`` (:mod:`closedloop.viewer_mesh`, each mesh sent once): ``nominal``, the
+  unloaded pose q as a translucent ghost (material overridden on a copy of the visual
+  model, for every mesh type), and ``deflected``, the amplified deflected pose
+  integrate(q, s dq), coloured by the magnitude of the real first-order displacement of
+  its surface at the full load (meshes per vertex, primitives at their origin; colour bar
+  in mm in the legend), or in the model's colours; the amplification s is the property
+  ``amplification`` of ``/meshcat/robots``;
+* ``load`` (at the deflected origin of the loaded frame, world axes): the force (red, one
+  head) and moment (purple, two heads) as arrows of fixed length rho = ``LEVER_FRACTION``
+  L (L the model size; the legend gives the components);
+* ``compliance``: the compliance ellipsoids (translation green, rotation orange) of
+  :mod:`closedloop.viewer_scene`, at most ``ELLIPSOID_MAX_FRACTION`` L (the legend shows
+  the shrink factor) and at least ``ELLIPSOID_MIN_FRACTION`` L (a rigid direction shows
+  as a flat disc);
+* ``grid``: a square grid in the plane of the model's lowest point, its step a round
+  length near L / ``GRID_DIVISIONS`` (meshcat's 20 m grid is hidden);
+* an animation (meshcat ``Animation``, "Animations" in the page's controls) that ramps the
+  load from 0 to the wrench and back, armed once the scene has loaded
+  (:mod:`closedloop.viewer_page`, which also writes the HTML legend and the title);
+* in the live page, an amplification slider: :meth:`DeflectionViewer.serve` hands the
+  chosen value to a callback that redraws the scene (:func:`run_view` does), and the page
+  reloads with it.
 
-and, under ``load`` (at the deflected origin of the loaded frame, world axes), the force
-(red, one head) and moment (purple, two heads) as arrows of fixed length rho =
-``LEVER_FRACTION`` L (L the model size; the label gives the magnitudes), and under
-``compliance`` the compliance ellipsoids (translation green, rotation orange) of
-:mod:`closedloop.viewer_scene`, whose radii are floored at ``ELLIPSOID_MIN_FRACTION`` L so
-that a rigid direction shows as a flat disc. An animation (meshcat ``Animation``, open
-"Animations" in the page's controls) ramps the load from 0 to the wrench.
-
-The scene is translated so that the centre of the model's bounding box is at the origin
-of the three.js world (the camera orbits about it); the grid and axes follow, so they
-still mark the world ground plane and origin.
+The scene is translated so that the centre of everything drawn (both robots' geometry,
+arrows, ellipsoids) is at the origin of the three.js world (the camera orbits about it)
+and the camera placed so that all of it is in view; meshcat's axes follow, so they still
+mark the world origin.
 
 Example::
 
@@ -31,68 +43,60 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
+import signal
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import meshcat
-import meshcat.animation
-import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
-from pinocchio.visualize import MeshcatVisualizer
-from pinocchio.visualize.meshcat_visualizer import Plane, applyScalingOnHomegeneousTransform
 
 from .configuration import accepts_configuration
-from .exceptions import InvalidInputError
+from .exceptions import ClosedLoopError, InvalidInputError
 from .model import ClosedLoopModel
-from .viewer_scene import (
-    LEVER_FRACTION,
-    DeflectionScene,
-    Ellipsoid,
-    bounding_box,
-    deflection_scene,
+from .viewer_draw import (  # noqa: F401  (constants: part of this module's interface)
+    ANIMATION_DURATION,
+    BACKGROUND,
+    CAMERA_DIRECTION,
+    CAMERA_MARGIN,
+    COMPLIANCE,
+    ELLIPSOID_COLORS,
+    ELLIPSOID_MIN_FRACTION,
+    FORCE_COLOR,
+    GHOST_RGBA,
+    GRID,
+    LOAD,
+    TORQUE_COLOR,
+    colormap,
+    draw_ellipsoid,
+    draw_grid,
+    draw_load,
+    ellipsoid_box,
+    grid_step,
+    homogeneous,
+    legend_info,
+    look_at,
 )
+from .viewer_mesh import ROBOTS, RobotPair
+from .viewer_page import overlay
+from .viewer_scene import LEVER_FRACTION, DeflectionScene, deflection_scene
+from .viewer_server import GET_CONTROL, SET_OVERLAY, insert_overlay, start_server, stop_server
 
-GHOST, DEFLECTED, LOAD, COMPLIANCE, LABEL = "nominal", "deflected", "load", "compliance", "label"
-#: Colour and opacity (RGBA, 0..1) of the nominal pose.
-GHOST_RGBA = (0.55, 0.62, 0.75, 0.3)
-FORCE_COLOR, TORQUE_COLOR = 0xD62728, 0x9467BD
-ELLIPSOID_COLORS = {"translation": 0x2CA02C, "rotation": 0xFF7F0E}
-ELLIPSOID_OPACITY = 0.35
-#: Arrow shaft radius and smallest drawn ellipsoid radius, per model size L.
-SHAFT_FRACTION, ELLIPSOID_MIN_FRACTION = 0.006, 0.002
-#: Camera: direction from the scene centre (world axes) and distance per model size L.
-CAMERA_DIRECTION, CAMERA_DISTANCE = (0.45, -1.0, 0.5), 1.2
-#: Label: width of a line's square text plane and height of its last line above the
-#: highest origin, per L; font size [px] on the 256 px canvas of a line.
-LABEL_WIDTH, LABEL_RISE, LABEL_FONT = 0.5, 0.1, 30
-#: Duration of the load-ramp animation [s].
-ANIMATION_DURATION = 2.0
-
-Y_AXIS = np.array([0.0, 1.0, 0.0])  # axis of meshcat (three.js) cylinders and cones
+#: Seconds between two checks of the live page's slider while serving.
+CONTROL_POLL = 0.2
 
 
-def _pose(R: np.ndarray | None = None, p=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """(4, 4) homogeneous transform of rotation R (default identity) and translation p [m]."""
-    T = np.eye(4)
-    T[:3, 3] = p
-    if R is not None:
-        T[:3, :3] = R
-    return T
+class _Command:
+    """A meshcat command given as its msgpack-ready dict (``window.send`` lowers it)."""
 
+    def __init__(self, data: dict):
+        self.data = data
 
-def _y_to(d: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation taking the y axis to the unit vector d."""
-    return pin.Quaternion.FromTwoVectors(Y_AXIS, d).matrix()
-
-
-def _look_at(eye: np.ndarray) -> np.ndarray:
-    """(4, 4) pose of a three.js camera (y up, looking along -z) at ``eye`` aimed at 0."""
-    z = eye / np.linalg.norm(eye)
-    x = np.cross(Y_AXIS, z)
-    x /= np.linalg.norm(x)
-    return _pose(np.column_stack([x, np.cross(z, x), z]), eye)
+    def lower(self) -> dict:
+        return self.data
 
 
 class DeflectionViewer:
@@ -101,10 +105,13 @@ class DeflectionViewer:
     Args:
         clm: model with visual geometry (load it with ``geometry=True``).
         viewer: a meshcat visualizer to draw into; default: a new one, with its own
-            meshcat server on 127.0.0.1, stopped by :meth:`close`.
+            meshcat server on 127.0.0.1 (:mod:`closedloop.viewer_server`), stopped by
+            :meth:`close`. The legend and the page script are in the live page of that
+            server only (and in :meth:`static_html` always).
 
     Raises:
-        InvalidInputError: the model has no visual geometry.
+        InvalidInputError: the model has no visual geometry, or a geometry that cannot be
+            drawn.
     """
 
     def __init__(self, clm: ClosedLoopModel, viewer: meshcat.Visualizer | None = None):
@@ -113,25 +120,18 @@ class DeflectionViewer:
                 f"model {clm.name!r} has no visual geometry to show; load it with geometry"
             )
         self.clm = clm
-        self._owns_server = viewer is None
+        self.robots = RobotPair(clm.model, clm.visual_model, GHOST_RGBA)
+        self._server = None
         if viewer is None:
-            with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
-                viewer = meshcat.Visualizer()
+            self._server, zmq_url, _ = start_server()
+            try:
+                with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+                    viewer = meshcat.Visualizer(zmq_url=zmq_url)
+            except BaseException:
+                self.close()
+                raise
         self.viewer = viewer
-        try:
-            self.robots = {name: self._load_robot(name) for name in (GHOST, DEFLECTED)}
-        except BaseException:
-            self.close()
-            raise
-        for g in clm.visual_model.geometryObjects:
-            node = self.robots[GHOST].getViewerNodeName(g, pin.GeometryType.VISUAL)
-            self.viewer[node].set_property("color", list(GHOST_RGBA))
-
-    def _load_robot(self, root: str) -> MeshcatVisualizer:
-        robot = MeshcatVisualizer(self.clm.model, None, self.clm.visual_model)
-        robot.initViewer(viewer=self.viewer)
-        robot.loadViewerModel(rootNodeName=root)
-        return robot
+        self.overlay = overlay(None, meshes=0, clips=0, autoplay=False, robots=ROBOTS)
 
     # ------------------------------------------------------------------ drawing
     def show(
@@ -140,112 +140,108 @@ class DeflectionViewer:
         *,
         animate: bool = True,
         autoplay: bool = False,
-        label: bool = True,
+        legend: bool = True,
+        pose_text: str | None = None,
+        colour_by_displacement: bool = True,
     ) -> None:
         """Draw ``scene`` (replacing any previous one).
 
         Args:
             scene: from :func:`closedloop.viewer_scene.deflection_scene` for this model.
             animate: add the load-ramp animation.
-            autoplay: start the animation when the page opens (else the page shows the
-                deflected pose and the animation waits for "play").
-            label: draw the text label (amplification and load magnitudes).
+            autoplay: play the animation once the page has loaded (else the page shows the
+                deflected pose and the animation waits for "play" or the time slider).
+            legend: write the HTML legend into the page.
+            pose_text: the pose as the legend writes it (default: q, rad or m).
+            colour_by_displacement: colour the deflected robot by the magnitude of the real
+                (not amplified) first-order displacement of its surface at the full load,
+                0 to the largest (colour bar in the legend, mm); False, or no deflection:
+                the model's colours.
         """
         if scene.q.shape != (self.clm.model.nq,):
             raise InvalidInputError("scene was computed for another model")
-        for node in (LOAD, COMPLIANCE, LABEL):
+        for node in (LOAD, COMPLIANCE, GRID):
             self.viewer[node].delete()
-        self.robots[GHOST].display(scene.q)
-        self.robots[DEFLECTED].display(scene.q_deflected)
-        self.viewer[DEFLECTED].set_property("amplification", scene.scale)
-        lo, hi = bounding_box(self.clm, scene.q)
+        colours, colour_max = None, None
+        if colour_by_displacement and scene.max_displacement > 0.0:
+            magnitudes = self.robots.displacements(scene.q, scene.dq)
+            colour_max = max(float(np.max(m)) for m in magnitudes)
+            colours = [
+                c if len(m) > 1 else c[0] for m in magnitudes for c in [colormap(m / colour_max)]
+            ]
+        command = self.robots.command(scene.q, scene.q_deflected, colours)
+        self.viewer.window.send(_Command(command))
+        self.viewer[ROBOTS].set_property("amplification", scene.scale)
+        floor = ELLIPSOID_MIN_FRACTION * scene.size
+        lo, hi = self._bounds(scene, floor)
         centre = 0.5 * (lo + hi)
-        for node in ("/meshcat", "/Grid", "/Axes"):
-            self.viewer[node].set_transform(_pose(p=-centre))
-        camera = CAMERA_DISTANCE * scene.size * np.array(CAMERA_DIRECTION)
+        for node in ("/meshcat", "/Axes"):
+            self.viewer[node].set_transform(homogeneous(p=-centre))
+        self.viewer["/Grid"].set_property("visible", False)
+        self.viewer["/Background"].set_property("top_color", list(BACKGROUND[0]))
+        self.viewer["/Background"].set_property("bottom_color", list(BACKGROUND[1]))
+        step = grid_step(scene.size)
+        draw_grid(self.viewer, centre, lo[2], step, scene.size)
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+        camera = CAMERA_MARGIN * radius * np.array(CAMERA_DIRECTION)
         camera /= np.linalg.norm(CAMERA_DIRECTION)
         eye = np.array([camera[0], camera[2], -camera[1]])  # world (z up) -> three.js (y up)
-        self.viewer["/Cameras/default/rotated/<object>"].set_transform(_look_at(eye))
-        self._draw_load(scene)
+        self.viewer["/Cameras/default/rotated/<object>"].set_transform(look_at(eye))
+        draw_load(self.viewer, scene)
         for e in scene.ellipsoids:
-            self._draw_ellipsoid(e, ELLIPSOID_MIN_FRACTION * scene.size)
-        if label:
-            self._draw_label(scene, centre + np.array([0.0, 0.0, 0.5 * (hi - lo)[2]]), camera)
+            draw_ellipsoid(self.viewer, e, floor)
+        clips = 0
         if animate:
-            self._animate(scene, autoplay)
+            clips = self._animate(scene)
+        info = legend_info(self.clm, scene, pose_text, colour_max) if legend else None
+        meshes = 2 * self.clm.visual_model.ngeoms
+        args = {"meshes": meshes, "clips": clips, "autoplay": autoplay, "robots": ROBOTS}
+        self.overlay = overlay(info, **args)
+        if self._server is not None:  # the live page: with the amplification slider
+            live = overlay(info, **args, slider=scene.scale)
+            window = self.viewer.window
+            window.zmq_socket.send_multipart([SET_OVERLAY, json.dumps(live).encode()])
+            window.zmq_socket.recv()
 
-    def _draw_load(self, scene: DeflectionScene) -> None:
-        node = self.viewer[LOAD]
-        node.set_transform(_pose(p=scene.point_deflected))
-        length, radius = LEVER_FRACTION * scene.size, SHAFT_FRACTION * scene.size
-        for name, v, color, heads in (
-            ("force", scene.wrench[:3], FORCE_COLOR, 1),
-            ("torque", scene.wrench[3:], TORQUE_COLOR, 2),
-        ):
+    def _bounds(self, scene: DeflectionScene, floor: float) -> np.ndarray:
+        """(2, 3) world box [m] of both robots' geometry, the arrows and the ellipsoids."""
+        boxes = [self.robots.bounds(scene.q), self.robots.bounds(scene.q_deflected)]
+        length = LEVER_FRACTION * scene.size
+        for v in (scene.wrench[:3], scene.wrench[3:]):
             if np.any(v):
-                self._draw_arrow(node[name], v / np.linalg.norm(v), length, radius, color, heads)
+                tip = scene.point_deflected + length * v / np.linalg.norm(v)
+                boxes.append(np.array([tip, tip]))
+        boxes += [ellipsoid_box(e, floor) for e in scene.ellipsoids if np.any(e.radii > 0.0)]
+        boxes = np.array(boxes)
+        return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
 
-    @staticmethod
-    def _draw_arrow(node, d: np.ndarray, length: float, radius: float, color, heads: int):
-        """Arrow from the node origin along unit d: a cylinder and ``heads`` cones."""
-        material = mg.MeshLambertMaterial(color=color)
-        head = 5.0 * radius
-        shaft = length - heads * head
-        node.set_transform(_pose(_y_to(d)))
-        node["shaft"].set_object(mg.Cylinder(shaft, radius), material)
-        node["shaft"].set_transform(_pose(p=0.5 * shaft * Y_AXIS))
-        for k in range(heads):
-            cone = node[f"head{k}"]
-            cone.set_object(mg.Cylinder(head, radiusTop=0.0, radiusBottom=2.5 * radius), material)
-            cone.set_transform(_pose(p=(shaft + (k + 0.5) * head) * Y_AXIS))
-
-    def _draw_ellipsoid(self, e: Ellipsoid, floor: float) -> None:
-        if not np.any(e.radii > 0.0):
-            return
-        material = mg.MeshLambertMaterial(
-            color=ELLIPSOID_COLORS[e.kind], opacity=ELLIPSOID_OPACITY, depthWrite=False
-        )
-        node = self.viewer[COMPLIANCE][e.kind]
-        node.set_object(mg.Ellipsoid(np.maximum(e.radii, floor)), material)
-        R = e.axes * np.sign(np.linalg.det(e.axes))  # a rotation, not a reflection
-        node.set_transform(_pose(R, e.centre))
-
-    def _draw_label(self, scene: DeflectionScene, top: np.ndarray, camera: np.ndarray):
-        f, n = np.linalg.norm(scene.wrench[:3]), np.linalg.norm(scene.wrench[3:])
-        lines = (
-            f"deflection x{scene.scale:.4g}" + (" (auto)" if scene.auto_scaled else ""),
-            f"{scene.frame}: |f| {f:.3g} N, |n| {n:.3g} N m",
-        )
-        width = LABEL_WIDTH * scene.size
-        z = np.array([camera[0], camera[1], 0.0])  # face the camera, text upright
-        z = z / np.linalg.norm(z) if np.any(z) else np.array([0.0, -1.0, 0.0])
-        R = np.column_stack([np.cross([0.0, 0.0, 1.0], z), [0.0, 0.0, 1.0], z])
-        for i, text in enumerate(lines):
-            texture = mg.GenericTexture(
-                {"type": "_text", "text": text, "font_size": LABEL_FONT, "font_face": "sans-serif"}
-            )
-            material = mg.MeshBasicMaterial(map=texture, transparent=True, depthWrite=False)
-            node = self.viewer[LABEL][f"line{i}"]
-            node.set_object(Plane(width, width), material)
-            rise = LABEL_RISE * scene.size + 1.5 * (len(lines) - 1 - i) * LABEL_FONT / 256 * width
-            node.set_transform(_pose(R, top + np.array([0.0, 0.0, rise])))
-
-    def _animate(self, scene: DeflectionScene, autoplay: bool) -> None:
+    def _animate(self, scene: DeflectionScene) -> int:
+        """Send the load-ramp animation (not playing); returns its number of clips."""
         frames = len(scene.ramp)
-        animation = meshcat.animation.Animation(default_framerate=frames / ANIMATION_DURATION)
-        robot, fid = self.robots[DEFLECTED], self.clm.frame_id(scene.frame)
-        vm, vd = self.clm.visual_model, robot.visual_data
+        fps = (frames - 1) / ANIMATION_DURATION
+        fid = self.clm.frame_id(scene.frame)
+        model, data = self.clm.model, self.clm.model.createData()
+        load = {"fps": fps, "name": "default", "tracks": []}
+        position = {"name": ".position", "type": "vector3", "keys": []}
+        grow = {"name": ".scale", "type": "vector3", "keys": []}
         for k, (t, q) in enumerate(zip(scene.ramp, scene.ramp_q, strict=True)):
-            pin.framesForwardKinematics(robot.model, robot.data, q)
-            pin.updateGeometryPlacements(robot.model, robot.data, vm, vd)
-            with animation.at_frame(self.viewer, k) as frame:
-                for i, g in enumerate(vm.geometryObjects):
-                    T = applyScalingOnHomegeneousTransform(vd.oMg[i].homogeneous, g.meshScale)
-                    frame[robot.getViewerNodeName(g, pin.GeometryType.VISUAL)].set_transform(T)
-                frame[LOAD].set_transform(_pose(p=robot.data.oMf[fid].translation))
-                grow = max(float(t), 1e-3)  # a zero scale makes three.js normals singular
-                frame[LOAD].set_property("scale", "vector3", [grow] * 3)
-        self.viewer.set_animation(animation, play=autoplay)
+            pin.framesForwardKinematics(model, data, q)
+            position["keys"].append({"time": k, "value": data.oMf[fid].translation.tolist()})
+            g = max(float(t), 1e-3)  # a zero scale makes three.js normals singular
+            grow["keys"].append({"time": k, "value": [g, g, g]})
+        load["tracks"] = [position, grow]
+        animations = [
+            {"path": f"/meshcat/{ROBOTS}", "clip": self.robots.clip(scene.ramp_q, fps)},
+            {"path": f"/meshcat/{LOAD}", "clip": load},
+        ]
+        command = {
+            "type": "set_animation",
+            "path": "",
+            "animations": animations,
+            "options": {"play": False, "repetitions": 1},
+        }
+        self.viewer.window.send(_Command(command))
+        return len(animations)
 
     # ------------------------------------------------------------------ output
     @property
@@ -254,8 +250,8 @@ class DeflectionViewer:
         return self.viewer.url()
 
     def static_html(self) -> str:
-        """Self-contained HTML page of the current scene (viewer code and data inline)."""
-        return self.viewer.static_html()
+        """Self-contained HTML page of the current scene (viewer code, data and legend inline)."""
+        return insert_overlay(self.viewer.static_html(), self.overlay)
 
     def save_html(self, path: str | Path) -> Path:
         """Write :meth:`static_html` to ``path``; returns the path.
@@ -270,28 +266,72 @@ class DeflectionViewer:
             raise InvalidInputError(f"cannot write HTML file {str(path)!r}: {e.strerror}") from None
         return path
 
-    def serve(self, duration: float | None = None, out: Callable[[str], None] = print) -> None:
-        """Print :attr:`url` and keep serving until Ctrl-C or for ``duration`` [s]."""
-        out(f"meshcat viewer at {self.url} (Ctrl-C to stop)")
+    def poll_control(self) -> dict:
+        """The latest control message of the live page (the slider), or {} (fetched once).
+
+        Raises:
+            InvalidInputError: this viewer did not start the server.
+        """
+        if self._server is None:
+            raise InvalidInputError("the viewer draws into a server it did not start")
+        self.viewer.window.zmq_socket.send_multipart([GET_CONTROL])
+        return json.loads(self.viewer.window.zmq_socket.recv().decode("utf-8"))
+
+    def serve(
+        self,
+        duration: float | None = None,
+        out: Callable[[str], None] = print,
+        on_amplification: Callable[[float], None] | None = None,
+    ) -> None:
+        """Print :attr:`url` and serve until Ctrl-C (SIGINT), SIGTERM or ``duration`` [s].
+
+        Args:
+            duration: seconds to serve; None: until a signal.
+            out: receives the line giving the URL.
+            on_amplification: called with each amplification chosen on the live page's
+                slider (checked every ``CONTROL_POLL`` s); it redraws the scene.
+        """
         end = np.inf if duration is None else time.monotonic() + duration
-        with contextlib.suppress(KeyboardInterrupt):
+        with contextlib.suppress(KeyboardInterrupt), _sigterm_interrupts():
+            out(f"meshcat viewer at {self.url} (Ctrl-C to stop)")  # signals handled from here
             while (left := end - time.monotonic()) > 0.0:
-                time.sleep(min(left, 0.5))
+                time.sleep(min(left, CONTROL_POLL if on_amplification else 0.5))
+                if on_amplification is not None and self._server is not None:
+                    value = self.poll_control().get("amplification")
+                    if isinstance(value, (int, float)) and np.isfinite(value) and value >= 0:
+                        on_amplification(float(value))
 
     def close(self) -> None:
         """Stop the meshcat server that this viewer started (if any)."""
-        window = self.viewer.window
-        if self._owns_server and getattr(window, "server_proc", None) is not None:
-            window.zmq_socket.close(linger=0)
-            window.server_proc.kill()
-            window.server_proc.wait()
-            window.server_proc = None
+        if self._server is not None:
+            viewer = getattr(self, "viewer", None)
+            if viewer is not None:
+                viewer.window.zmq_socket.close(linger=0)
+            stop_server(self._server)
+            self._server = None
 
     def __enter__(self) -> DeflectionViewer:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """SIGTERM raises KeyboardInterrupt (as SIGINT does) inside the block (main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(*_):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def check_output_path(html: str | Path) -> Path:
@@ -318,7 +358,10 @@ def run_view(
     html: str | Path | None = None,
     duration: float | None = None,
     autoplay: bool = False,
+    legend: bool = True,
+    pose: str | None = None,
     out: Callable[[str], None] = print,
+    warn: Callable[[str], None] | None = None,
 ) -> DeflectionScene:
     """Compute and show a deflection; write the page to ``html`` or serve it live.
 
@@ -328,8 +371,11 @@ def run_view(
             may stand for clm and q).
         html: file for the self-contained page; None serves the live page (127.0.0.1)
             until Ctrl-C or for ``duration`` [s].
-        autoplay: start the load-ramp animation when the page opens.
+        autoplay: play the load-ramp animation once the page has loaded.
+        legend: write the HTML legend into the page.
+        pose: the pose as the legend writes it (default: q, rad or m).
         out: receives the lines to print (summary, file or URL).
+        warn: receives a warning line (a zero wrench: the view shows the unloaded pose).
 
     Returns:
         The scene drawn.
@@ -347,11 +393,24 @@ def run_view(
         close_loops=close_loops,
         rotational=rotational,
     )
+    if warn is not None and not np.any(scene.wrench):
+        warn("no load (--force, --torque): the view shows the unloaded pose")
+    options = {"nonlinear": nonlinear, "close_loops": close_loops, "rotational": rotational}
     with DeflectionViewer(clm) as viewer:
-        viewer.show(scene, autoplay=autoplay)
+        viewer.show(scene, autoplay=autoplay, legend=legend, pose_text=pose)
         out(scene.summary())
         if path is not None:
             out(f"wrote {viewer.save_html(path)}")
-        else:
-            viewer.serve(duration, out)
+            return scene
+
+        def amplify(value: float) -> None:  # the live page's slider
+            try:
+                shown = deflection_scene(clm, scene.q, frame, wrench, scale=value, **options)
+            except ClosedLoopError as e:  # e.g. loops that cannot be closed: keep the view
+                out(f"amplification x{value:.4g} not shown: {' '.join(str(e).split())}")
+                return
+            viewer.show(shown, autoplay=autoplay, legend=legend, pose_text=pose)
+            out(shown.summary())
+
+        viewer.serve(duration, out, on_amplification=amplify)
     return scene

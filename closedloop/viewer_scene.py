@@ -35,7 +35,11 @@ axes, at the frame origin), eigenvalues lambda_i and unit eigenvectors v_i:
   L (the length of the drawn arrows): the amplified rotations under all moments of the
   applied magnitude, drawn as the arc length [m] they give at radius rho.
 
-No ellipsoid is drawn for a zero wrench.
+No ellipsoid is drawn for a zero wrench. An ellipsoid larger than the model is drawn
+shrunk: its radii times ``shrink`` = min(1, ``ELLIPSOID_MAX_FRACTION`` L / largest radius)
+(:attr:`Ellipsoid.drawn_radii`; the viewer's legend shows the factor).
+
+A load whose deflection overflows (``--force 1e300``) is refused (InvalidInputError).
 """
 
 from __future__ import annotations
@@ -60,6 +64,8 @@ AUTO_FRACTION = 0.1
 LEVER_FRACTION = 0.25
 #: Number of poses of the load-ramp animation (load fractions 0 .. 1, evenly spaced).
 ANIMATION_FRAMES = 25
+#: Largest drawn ellipsoid semi-axis, per model size L.
+ELLIPSOID_MAX_FRACTION = 0.25
 
 
 @dataclass(frozen=True)
@@ -71,12 +77,19 @@ class Ellipsoid:
         centre: (3,) centre [m], world frame.
         radii: (3,) semi-axes [m] (see the module docstring), ascending.
         axes: (3, 3) unit directions of the semi-axes (columns), world axes.
+        shrink: factor (0, 1] of the drawn radii (module docstring).
     """
 
     kind: str
     centre: np.ndarray
     radii: np.ndarray
     axes: np.ndarray
+    shrink: float = 1.0
+
+    @property
+    def drawn_radii(self) -> np.ndarray:
+        """(3,) semi-axes drawn [m]: ``shrink * radii``."""
+        return self.shrink * self.radii
 
 
 @dataclass(frozen=True)
@@ -96,6 +109,8 @@ class DeflectionScene:
         q_deflected: (nq,) integrate(q, s dq).
         point: (3,) loaded frame origin at q [m], world frame.
         point_deflected: (3,) loaded frame origin at q_deflected [m], world frame.
+        frame_twist: (6,) first-order displacement J dq of the loaded frame (translation of
+            its origin [m], rotation [rad]), world axes, not amplified (= C w if linear).
         compliance: compliance at the loaded frame, world axes, at q.
         ellipsoids: translational (and, on request, rotational) compliance ellipsoids.
         ramp: (n,) load fractions of the animation, 0 .. 1.
@@ -114,6 +129,7 @@ class DeflectionScene:
     q_deflected: np.ndarray
     point: np.ndarray
     point_deflected: np.ndarray
+    frame_twist: np.ndarray
     compliance: ComplianceResult
     ellipsoids: tuple[Ellipsoid, ...]
     ramp: np.ndarray
@@ -147,8 +163,14 @@ class DeflectionScene:
             "wrench": self.wrench.tolist(),
             "point_m": self.point.tolist(),
             "point_deflected_m": self.point_deflected.tolist(),
+            "frame_twist": self.frame_twist.tolist(),
             "ellipsoids": [
-                {"kind": e.kind, "radii_m": e.radii.tolist(), "axes": e.axes.T.tolist()}
+                {
+                    "kind": e.kind,
+                    "radii_m": e.radii.tolist(),
+                    "axes": e.axes.T.tolist(),
+                    "shrink": e.shrink,
+                }
                 for e in self.ellipsoids
             ],
         }
@@ -230,12 +252,20 @@ def compliance_ellipsoid(
         kind: ``"translation"`` or ``"rotation"``.
     """
     lam, V = np.linalg.eigh(0.5 * (block + block.T))
-    radii = length * magnitude * np.clip(lam, 0.0, None)  # rounding may leave -1e-20
+    with np.errstate(over="ignore", invalid="ignore"):
+        radii = length * magnitude * np.clip(lam, 0.0, None)  # rounding may leave -1e-20
     return Ellipsoid(kind, readonly(centre), readonly(radii), readonly(V))
 
 
+def capped(e: Ellipsoid, size: float, fraction: float = ELLIPSOID_MAX_FRACTION) -> Ellipsoid:
+    """``e`` with ``shrink`` so that its largest drawn radius is at most fraction * size."""
+    largest = float(np.max(e.radii))
+    shrink = min(1.0, fraction * size / largest) if largest > 0.0 else 1.0
+    return Ellipsoid(e.kind, e.centre, e.radii, e.axes, shrink)
+
+
 def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rotational: bool):
-    f, n = np.linalg.norm(w[:3]), np.linalg.norm(w[3:])
+    f, n = _norm(w[:3]), _norm(w[3:])
     if f == 0.0 and n == 0.0:
         return ()
     force = f if f > 0.0 else n / size
@@ -244,7 +274,22 @@ def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rot
         rho = LEVER_FRACTION * size
         moment = n if n > 0.0 else f * rho
         out.append(compliance_ellipsoid(res.C[3:, 3:], moment, s * rho, res.point, "rotation"))
-    return tuple(out)
+    return tuple(capped(e, size) for e in out)
+
+
+def _norm(v: np.ndarray) -> float:
+    """Euclidean norm without overflow for finite entries (inf only if it exceeds 1.8e308)."""
+    m = float(np.max(np.abs(v)))
+    return m * float(np.linalg.norm(v / m)) if m > 0.0 else 0.0
+
+
+def _check_finite(w: np.ndarray, **values) -> None:
+    for name, value in values.items():
+        if not np.all(np.isfinite(value)):
+            raise InvalidInputError(
+                f"load {w.tolist()} too large: the {name.replace('_', ' ')} overflows "
+                "(not a finite number); give a smaller wrench"
+            )
 
 
 @accepts_configuration
@@ -275,7 +320,8 @@ def deflection_scene(
         frames: number of poses of the load ramp (>= 2).
 
     Raises:
-        InvalidInputError: bad wrench, scale or frame count.
+        InvalidInputError: bad wrench, scale or frame count; a wrench whose deflection
+            overflows.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame.
         EquilibriumError: (nonlinear) no equilibrium on the branch of q.
@@ -299,7 +345,10 @@ def deflection_scene(
         steps, equilibrium = [t * dq_lin for t in ramp], None
     dq = steps[-1]
     size = model_size(clm, q)
-    d_max = largest_displacement(clm, q, frame, dq)
+    with np.errstate(over="ignore", invalid="ignore"):
+        twist = frame_jacobian(clm, q, frame, "world") @ dq
+        d_max = largest_displacement(clm, q, frame, dq)
+    _check_finite(w, joint_deflection=dq, frame_displacement=twist, largest_displacement=d_max)
     s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
     ramp_q = [pin.integrate(clm.model, q, s * v) for v in steps]
     if close_loops and clm.closures:
@@ -308,6 +357,8 @@ def deflection_scene(
     update_kinematics(clm, ramp_q[-1])
     point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
     update_kinematics(clm, q)
+    ellipsoids = _ellipsoids(res, w, s, size, rotational)
+    _check_finite(w, compliance_ellipsoid=[e.radii for e in ellipsoids])
     return DeflectionScene(
         frame=frame,
         q=q,
@@ -320,8 +371,9 @@ def deflection_scene(
         q_deflected=readonly(ramp_q[-1]),
         point=res.point,
         point_deflected=readonly(point_deflected),
+        frame_twist=readonly(twist),
         compliance=res,
-        ellipsoids=_ellipsoids(res, w, s, size, rotational),
+        ellipsoids=ellipsoids,
         ramp=readonly(ramp),
         ramp_q=readonly(ramp_q),
         equilibrium=equilibrium,

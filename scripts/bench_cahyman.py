@@ -1,150 +1,148 @@
-"""Time CaHyMan stiffness queries, sweeps and a 1e5-pose map against computeJointJacobians."""
+"""Benchmark CaHyMan (issue 10): queries, sweeps, a 1e5-pose map, closed form, command line."""
 
 from __future__ import annotations
 
-import argparse
-import statistics
-import time
-from collections.abc import Callable
+import shutil
+import sys
+from functools import partial
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from benchtools import Mode, Table, fmt_time, interleaved, parse_mode, wall_ratio
 
 from cahyman_pin.api import stiffness
 from cahyman_pin.backend_consistent import consistent_compliance
-from cahyman_pin.model import CaHyManModel
+from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
-from cahyman_pin.sweep_exec import default_workers
-from cahyman_pin.sweep_indices import stiffness_indices
-from cahyman_pin.urdf_builder import FRAME_M
+from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.compliance import compliance
+from closedloop.configuration import Configuration
+from closedloop.indices import StiffnessIndices
 
-#: Table 3's pose [rad, rad, m], where single queries are timed.
+#: Table 3's pose (alpha [rad], alpha_4 [rad], s_4 [m]), where single queries are timed.
 POSE = (np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
-#: Leg-input range of the maps [deg]; the arm is fixed at alpha_4 = 45 deg, s_4 = 25 mm.
+#: The same pose on the command line (degrees, mm).
+CLI_POSE = ["--alpha", "45", "60", "75", "--alpha4", "45", "--s4", "0", "--json"]
+#: Leg-input range of the sweeps and maps [deg]; the arm is fixed at alpha_4 = 45 deg.
 RANGE_DEG = (40.0, 80.0)
-TARGETS_US = {
-    "generic query": 100.0,
-    "warm assembly + query": 150.0,
-    "closed-form start + query": 150.0,
-    "closed form, batch": 5.0,
-}
-TARGET_MAP_S = 15.0
+#: Grid sides of the serial sweeps; map grids (alpha_1, alpha_2, alpha_3 sides).
+SWEEPS = (
+    ("3a", "neighbour", "warm-started assembly + query in a sweep"),
+    ("3b", "closed_form", "closed-form start + query in a sweep"),
+)
+SWEEP_SIDE = {"smoke": 3, "quick": 15, "full": 41}
+MAP_SIDES = {"smoke": (6, 6, 1), "quick": (100, 100, 1), "full": (100, 100, 10)}
+MAP_REPEATS = {"smoke": 1, "quick": 3, "full": 3}
+#: No new map run after this many seconds of map runs [s].
+MAP_BUDGET = {"smoke": 0.0, "quick": 15.0, "full": 90.0}
+BATCH = {"smoke": 100, "quick": 10_000, "full": 10_000}
+WORKERS = 2
 
 
-def median_time(call: Callable[[], object], calls: int, repeats: int) -> float:
-    """Median over ``repeats`` batches of the mean time of one call [s]."""
-    call()  # warm-up
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            call()
-        times.append((time.perf_counter() - start) / calls)
-    return statistics.median(times)
-
-
-def leg_grid(n_side: int):
-    """n_side x n_side grid of alpha_1, alpha_2 over RANGE_DEG, alpha_3 = 60 deg [SI]."""
-    a = np.deg2rad(np.linspace(*RANGE_DEG, n_side))
-    return grid(
-        {"alpha1": a, "alpha2": a},
-        alpha=np.deg2rad([60.0, 60.0, 60.0]),
-        alpha4=POSE[1],
-        s4=0.025,
+def full_query(model: CaHyManModel, q: np.ndarray, path: str):
+    """What ``api.stiffness`` computes once q is assembled: C, G, K, rank, residual (the
+    compliance result), the plate twist J_H G, the pose and the stiffness indices."""
+    length = model.params.length
+    state = Configuration(model.clm, q, length=length)
+    result = compliance(state, FRAME_M, path=path)
+    return (
+        result,
+        state.frame_jacobian(FRAME_H) @ result.G,
+        model.pose(q),
+        StiffnessIndices.from_result(result, length=length),
     )
 
 
-def median_sweep(points, repeats: int, **kw) -> tuple[float, object]:
-    """Median wall time [s] of ``sweep(points, **kw)`` and the last result."""
-    times, result = [], None
-    for _ in range(repeats):
-        result = sweep(points, **kw)
-        times.append(result.seconds)
-    return statistics.median(times), result
+def leg_grid(sides: tuple[int, int, int]):
+    """Grid of alpha_1 x alpha_2 x alpha_3 over RANGE_DEG (alpha_3 = 60 deg if one value)."""
+    axes = {f"alpha{k + 1}": np.deg2rad(np.linspace(*RANGE_DEG, n))
+            for k, n in enumerate(sides) if n > 1}  # fmt: skip
+    alpha = None if len(axes) == 3 else np.deg2rad([60.0, 60.0, 60.0])
+    return grid(axes, alpha=alpha, alpha4=POSE[1], s4=0.025)
 
 
-def iteration_counts(result) -> dict[int, int]:
-    """Number of generic assemblies per Gauss-Newton iteration count."""
-    counts = np.bincount(result.iterations[result.iterations >= 0])
-    return {i: c for i, c in enumerate(counts.tolist()) if c}
+def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> None:
+    for p, key in (("auto", "1a"), ("null-space", "1b")):
+        taken = compliance(model.clm, q, FRAME_M, path=p).path
+        t = interleaved(lambda p=p: full_query(model, q, p), unit, mode)
+        table.units(key, "CaHyMan generic query at an assembled pose, like for like (C, G, K, "
+                    f"rank, residual, J_H G, pose, indices), path={p!r} -> {taken}",
+                    "<= 50 units" if p == "auto" else "-", t)  # fmt: skip
+    for p, key in (("auto", "1c"), ("null-space", "1d")):
+        t = interleaved(lambda p=p: compliance(model.clm, q, FRAME_M, path=p), unit, mode)
+        table.units(key, f"CaHyMan `closedloop.compliance` alone, path={p!r}",
+                    "<= 25 units (C alone)" if p == "auto" else "-", t)  # fmt: skip
+    t = interleaved(lambda: stiffness(*POSE), unit, mode)
+    table.units("1e", "`cahyman_pin.api.stiffness` whole call (closed-form start, assembly, "
+                "query)", "-", t)  # fmt: skip
 
 
-def row(name: str, seconds: float, unit: float, per: str = "per pose") -> None:
-    target = TARGETS_US.get(name)
-    verdict = (
-        ""
-        if target is None
-        else f"target <= {target:g} us: " + ("met" if seconds * 1e6 <= target else "NOT met")
-    )
-    print(f"{name:34s} {seconds * 1e6:10.1f} us {per:9s} {seconds / unit:8.0f} x unit  {verdict}")
+def bench_sweeps(table: Table, mode: Mode, unit) -> None:
+    side = SWEEP_SIDE[mode.name]
+    points = leg_grid((side, side, 1))
+    n = len(points)
+    step = (RANGE_DEG[1] - RANGE_DEG[0]) / (side - 1)
+    for key, start, name in SWEEPS:
+        run = partial(sweep, points, executor="serial", chunk_size=n, start=start)
+        t = interleaved(run, unit, mode, per=n)
+        iterations = np.bincount(run().iterations.clip(0)).tolist()
+        table.units(key, f"{name} ({n} poses, {step:g} deg steps, serial, indices included)",
+                    "<= 100 units", t, " per pose")  # fmt: skip
+        table.note(f"{key}: Gauss-Newton iterations per assembly (count of 0, 1, 2...): "
+                   f"{iterations}")  # fmt: skip
+
+
+def bench_map(table: Table, mode: Mode, unit) -> None:
+    points = leg_grid(MAP_SIDES[mode.name])
+    n = len(points)
+    runs = Mode(mode.name, MAP_REPEATS[mode.name], 0.0)
+    result = {}
+
+    def run():
+        result["r"] = sweep(points, workers=WORKERS)
+
+    t = interleaved(run, unit, runs, once=True, budget=MAP_BUDGET[mode.name])
+    per_core = t.seconds * WORKERS / n
+    label = {"smoke": " (smoke run: a tiny map)", "quick": " (--quick: 1e4 poses, not 1e5)",
+             "full": ""}[mode.name]  # fmt: skip
+    table.row("4", f"{n}-pose generic map, {WORKERS} processes, start='closed_form'{label}",
+              "<= 10 s (1e5 poses)", f"{t.seconds:.2f} s",
+              f"{per_core * 1e6:.0f} us = {per_core / t.unit:.0f} units per pose per core "
+              f"(median of {t.repeats})")  # fmt: skip
+    table.note(f"4 (last run): {result['r'].summary()}")
+
+
+def bench_closed_form(table: Table, mode: Mode, unit) -> None:
+    rng = np.random.default_rng(0)
+    n = BATCH[mode.name]
+    alpha = np.deg2rad(rng.uniform(*RANGE_DEG, (n, 3)))
+    alpha4, s4 = np.deg2rad(rng.uniform(0.0, 90.0, n)), rng.uniform(0.0, 0.05, n)
+    t = interleaved(lambda: consistent_compliance(alpha, alpha4, s4), unit, mode, per=n)
+    table.row("5", f"consistent closed form, batched ({n} poses)", "<= 5 us/pose",
+              f"{t.seconds * 1e6:.2f} us/pose", f"{t.ratio:.1f} units per pose")  # fmt: skip
+
+
+def bench_cli(table: Table, mode: Mode) -> None:
+    exe = shutil.which("cahyman", path=str(Path(sys.executable).parent))
+    command = [exe] if exe else [sys.executable, "-m", "cahyman_pin"]
+    t = wall_ratio([*command, "stiffness", *CLI_POSE], [sys.executable, "-c", "pass"], mode)
+    table.row("7", "`cahyman stiffness --json` wall vs `python -c pass`", "<= 10x",
+              f"{t.ratio:.1f}x", f"{fmt_time(t.seconds)} vs {fmt_time(t.unit)}")  # fmt: skip
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--quick", action="store_true",
-                        help="fewer repeats and a 1e4-pose map instead of 1e5")  # fmt: skip
-    args = parser.parse_args()
-    repeats = 3 if args.quick else 7
-    calls = 200 if args.quick else 1000
-    workers = default_workers()
-
-    model = CaHyManModel()
-    clm = model.clm
+    mode = parse_mode(__doc__)
+    table = Table("CaHyMan benchmarks", mode)
+    model = cahyman_model()
     q = model.assemble(*POSE)
-    data = clm.model.createData()
-    unit = median_time(lambda: pin.computeJointJacobians(clm.model, data, q), 20 * calls, repeats)
-    print(f"CaHyMan nq={clm.model.nq} nv={clm.model.nv} closures={len(clm.closures)}; "
-          f"medians of {repeats} runs; {workers} cores")  # fmt: skip
-    row("unit: computeJointJacobians", unit, unit, "per call")
-
-    query = median_time(lambda: compliance(clm, q, FRAME_M, "world"), calls, repeats)
-    row("generic query", query, unit)
-    api_call = median_time(lambda: stiffness(*POSE), calls // 4, repeats)
-    row("api.stiffness (cold, one call)", api_call, unit)
-
-    points = leg_grid(21 if args.quick else 41)
-    n = len(points)
-    step = (RANGE_DEG[1] - RANGE_DEG[0]) / (points.shape[0] - 1)
-    print(f"{'':34s} sweeps: {n} poses, alpha_1 x alpha_2 in {step:g} deg steps, serial, "
-          "indices included")  # fmt: skip
-    for name, start in (("warm assembly + query", "neighbour"),
-                        ("closed-form start + query", "closed_form")):  # fmt: skip
-        seconds, result = median_sweep(
-            points, repeats, executor="serial", chunk_size=n, start=start
-        )
-        row(name, seconds / n, unit)
-        print(f"{'':34s} (Gauss-Newton iterations: {iteration_counts(result)})")
-
-    def cold_pass() -> None:
-        for i in range(n):
-            qi = model.assemble(points.alpha[i], points.alpha4[i], points.s4[i])
-            compliance(clm, qi, FRAME_M, "world")
-
-    row("cold assembly + query", median_time(cold_pass, 1, repeats) / n, unit)
-
-    one = median_time(lambda: consistent_compliance(*POSE), calls, repeats)
-    row("closed form, one pose", one, unit)
-    rng = np.random.default_rng(0)
-    batch = 10_000
-    alpha = np.deg2rad(rng.uniform(*RANGE_DEG, (batch, 3)))
-    alpha4, s4 = np.deg2rad(rng.uniform(0.0, 90.0, batch)), rng.uniform(0.0, 0.05, batch)
-    per = median_time(lambda: consistent_compliance(alpha, alpha4, s4), 1, repeats) / batch
-    row("closed form, batch", per, unit)
-    C = consistent_compliance(alpha, alpha4, s4)
-    ok = np.ones(batch, dtype=bool)
-    indices = median_time(lambda: stiffness_indices(C, ok, ok, None), 1, repeats) / batch
-    row("indices, batch (any backend)", indices, unit)
-
-    side = 100 if args.quick else 316
-    big = leg_grid(side)
-    for start in ("neighbour", "closed_form"):
-        res = sweep(big, start=start, workers=workers, show_progress=True)
-        verdict = "met" if res.seconds <= TARGET_MAP_S else "NOT met"
-        print(f"{len(big)}-pose generic map, start={start}, {workers} processes: "
-              f"{res.seconds:.2f} s wall ({res.seconds / len(big) * 1e6 * workers:.0f} us per "
-              f"pose per core; iterations {iteration_counts(res)}; {res.summary()})"
-              + ("" if args.quick else f"; target <= {TARGET_MAP_S:g} s: {verdict}"))  # fmt: skip
+    unit = partial(pin.computeJointJacobians, model.clm.model, model.clm.model.createData(), q)
+    bench_queries(table, mode, model, q, unit)
+    bench_sweeps(table, mode, unit)
+    bench_map(table, mode, unit)
+    bench_closed_form(table, mode, unit)
+    bench_cli(table, mode)
+    table.close()
 
 
 if __name__ == "__main__":

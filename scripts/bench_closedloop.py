@@ -1,60 +1,125 @@
-"""Time a stiffness query (compliance, K) on the UR5 and four-bar against computeJointJacobians."""
+"""Benchmark closedloop (issue 10): UR5 serial query, growth of the query with nv."""
 
 from __future__ import annotations
 
-import statistics
-import time
-from collections.abc import Callable
-from pathlib import Path
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
+from benchtools import Mode, Table, fmt_time, growth_exponent, interleaved, parse_mode
 
-from closedloop.assembly import assemble
 from closedloop.compliance import compliance
 from closedloop.io import load_urdf, robot_data_dir
+from closedloop.model import ClosedLoopModel
 
-ROOT = Path(__file__).resolve().parent.parent
-BATCHES = 7
-
-
-def median_time(call: Callable[[], object], calls: int) -> float:
-    """Median over BATCHES batches of the mean time of one call [s]."""
-    call()  # warm-up
-    times = []
-    for _ in range(BATCHES):
-        start = time.perf_counter()
-        for _ in range(calls):
-            call()
-        times.append((time.perf_counter() - start) / calls)
-    return statistics.median(times)
+#: UR5 pose of the serial query [rad].
+UR5_Q = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])
+#: Four-bars in series (nv = 3 per loop) and serial chains (nv = n) of the growth rows.
+LOOPS = {"smoke": (4, 8, 16), "quick": (4, 16, 33, 66, 133),
+         "full": (4, 8, 16, 25, 33, 50, 66, 100, 133)}  # fmt: skip
+JOINTS = {"smoke": (10, 25, 50), "quick": (10, 50, 100, 200, 400),
+          "full": (10, 25, 50, 75, 100, 150, 200, 300, 400)}  # fmt: skip
+CRANK, GROUND, SPRING = 0.3, 0.2, 1e3  # [m], [m], [N m/rad]
 
 
-def stiffness_query(clm, q, frame):
-    """compliance(), then K; a rank-deficient C (the planar four-bar: rank 3) has no K."""
-    result = compliance(clm, q, frame)
-    return result.K if result.is_full_rank else result.C
+def _placement(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> pin.SE3:
+    return pin.SE3(np.eye(3), np.array([x, y, z]))
 
 
-def bench(name, clm, q, frame, calls):
-    data = clm.model.createData()
-    query = median_time(lambda: stiffness_query(clm, q, frame), calls)
-    jacobians = median_time(lambda: pin.computeJointJacobians(clm.model, data, q), 20 * calls)
-    print(
-        f"{name:9s} nv={clm.model.nv}  closures={len(clm.closures)}  "
-        f"query {query * 1e6:8.1f} us  computeJointJacobians {jacobians * 1e6:6.2f} us  "
-        f"ratio {query / jacobians:6.0f}"
+def fourbar_chain(n: int) -> tuple[ClosedLoopModel, np.ndarray, str]:
+    """n planar parallelogram four-bars in series, each standing on the previous rocker.
+
+    Loop i: crank at A = (0, 0), rocker at D = (GROUND, 0) of its base body (the world,
+    then the previous rocker), coupler on the crank tip; a point closure joins the coupler
+    tip to the rocker tip. Springs on the cranks; coupler and rocker passive. At crank
+    angle t (coupler -t, rocker t) every loop closes exactly.
+    """
+    model, closures, q = pin.Model(), [], []
+    base = 0
+    for i in range(n):
+        t = 0.8 if i % 2 == 0 else -0.8
+        crank = model.addJoint(base, pin.JointModelRZ(), _placement(), f"crank{i}")
+        coupler = model.addJoint(crank, pin.JointModelRZ(), _placement(CRANK), f"coupler{i}")
+        rocker = model.addJoint(base, pin.JointModelRZ(), _placement(GROUND), f"rocker{i}")
+        closures.append(pin.PointAnchorConstraintModel(
+            model, coupler, _placement(GROUND), rocker, _placement(CRANK)))  # fmt: skip
+        q += [t, -t, t]
+        base = rocker
+    model.addFrame(pin.Frame("tip", base, _placement(CRANK), pin.FrameType.OP_FRAME))
+    cranks = [f"crank{i}" for i in range(n)]
+    clm = ClosedLoopModel(model, closures, cranks, {c: SPRING for c in cranks}, name=f"4bar{n}")
+    return clm, np.array(q), "tip"
+
+
+def serial_chain(n: int) -> tuple[ClosedLoopModel, np.ndarray, str]:
+    """n revolute joints (axes z, y, x in turn, 0.1 m apart), a spring on each."""
+    model = pin.Model()
+    joints = (pin.JointModelRZ, pin.JointModelRY, pin.JointModelRX)
+    parent = 0
+    for i in range(n):
+        parent = model.addJoint(parent, joints[i % 3](), _placement(0.1 if i else 0.0), f"j{i}")
+    model.addFrame(pin.Frame("tip", parent, _placement(0.1), pin.FrameType.OP_FRAME))
+    q = 0.3 * np.sin(np.arange(n) + 1.0)
+    springs = {f"j{i}": SPRING for i in range(n)}
+    return ClosedLoopModel(model, springs=springs, name=f"serial{n}"), q, "tip"
+
+
+def unit_of(clm: ClosedLoopModel, q: np.ndarray):
+    """One computeJointJacobians call on the model (the unit), on a Data of the model's
+    pool: the unit and the query never run at once, and a Data of a 400-joint chain
+    costs seconds to create."""
+    workspace = clm.acquire_workspace()
+    clm.release_workspace(workspace)
+    return partial(pin.computeJointJacobians, clm.model, workspace[0], q)
+
+
+def bench_ur5(table: Table, mode: Mode) -> None:
+    path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
+    ur5 = load_urdf(path, joint_stiffness=1e4, geometry=False)
+    unit = unit_of(ur5, UR5_Q)
+    for key, p, target in (("2", "auto", "<= 10 units"), ("2b", "null-space", "-")):
+        t = interleaved(lambda p=p: compliance(ur5, UR5_Q, "tool0", path=p), unit, mode)
+        taken = compliance(ur5, UR5_Q, "tool0", path=p).path
+        table.units(key, f"UR5 (serial) query, `compliance(..., path={p!r})` -> {taken}",
+                    target, t)  # fmt: skip
+
+
+def bench_growth(table: Table, mode: Mode) -> None:
+    families = (
+        ("6a", "6c", "chains of four-bars", fourbar_chain, LOOPS[mode.name]),
+        ("6b", "6d", "serial chains", serial_chain, JOINTS[mode.name]),
     )
+    for key_auto, key_ns, label, build, sizes in families:
+        models = [build(n) for n in sizes]
+        nv = [clm.model.nv for clm, _, _ in models]
+        for key, p in ((key_auto, "auto"), (key_ns, "null-space")):
+            seconds, details = [], []
+            for clm, q, frame in models:
+                t = interleaved(lambda c=clm, q=q, f=frame, p=p: compliance(c, q, f, path=p),
+                                unit_of(clm, q), mode)  # fmt: skip
+                seconds.append(t.seconds)
+                taken = compliance(clm, q, frame, path=p).path
+                details.append(f"nv={clm.model.nv}: {fmt_time(t.seconds)} = {t.ratio:.0f} "
+                               f"units ({taken})")  # fmt: skip
+            exponent = growth_exponent(nv, seconds)
+            upper = sorted(nv)[len(nv) // 2 :]
+            table.row(
+                key,
+                f"growth of the query with nv, {label}, path={p!r} (fit on nv {upper[0]}-"
+                f"{upper[-1]})",
+                "<= 1.2 up to nv = 400" if p == "auto" else "-",
+                f"exponent {exponent:.2f}",
+                f"nv {nv[0]}: {fmt_time(seconds[0])}, nv {nv[-1]}: {fmt_time(seconds[-1])}",
+            )
+            table.note(f"{key} ({label}, {p}): " + "; ".join(details))
 
 
 def main() -> None:
-    ur5_path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
-    names = list(pin.buildModelFromUrdf(str(ur5_path)).names)[1:]
-    ur5 = load_urdf(ur5_path, springs={n: 1e4 for n in names})
-    fourbar = load_urdf(ROOT / "urdf/fourbar.urdf", ROOT / "urdf/fourbar.yaml")
-    print(f"median of {BATCHES} batches; query = compliance(...) then .K (four-bar: rank 3, no K)")
-    bench("UR5", ur5, np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2]), "tool0", 2000)
-    bench("four-bar", fourbar, assemble(fourbar, [0.4]).q, "P", 2000)
+    mode = parse_mode(__doc__)
+    table = Table("closedloop benchmarks", mode)
+    bench_ur5(table, mode)
+    bench_growth(table, mode)
+    table.close()
 
 
 if __name__ == "__main__":

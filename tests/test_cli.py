@@ -216,14 +216,14 @@ def test_q_and_actuated_are_exclusive(ur5_urdf, capsys):
 
 
 # ------------------------------------------------------------------------- subprocess
-def python_m(*args) -> subprocess.CompletedProcess:
+def python_m(*args, cwd=REPO) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.run(
         [sys.executable, "-m", "closedloop", *map(str, args)],
         capture_output=True,
         text=True,
         env=env,
-        cwd=REPO,
+        cwd=cwd,
         timeout=120,
         check=False,
     )
@@ -239,3 +239,95 @@ def test_subprocess_example_and_error(ur5_urdf, tmp_path):
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith("closedloop: error: robot file") and done.stderr.count("\n") == 1
     assert "Traceback" not in done.stderr
+
+
+# ------------------------------------------------------------ exit status 3, names, pipes
+WELD = REPO / "tests" / "data" / "fourbar_weld.yaml"  # a weld the four-bar cannot reach
+
+
+def test_loops_that_cannot_be_closed_exit_3(capsys):
+    code, out, err = run(
+        capsys, "stiffness", "fourbar", "--closures", WELD, "--frame", "P", "--actuated", 0.3
+    )
+    assert (code, out) == (3, "")
+    assert err.startswith("closedloop: error: cannot close the loops") and err.count("\n") == 1
+
+
+def test_help_and_version(capsys):
+    import closedloop
+
+    code, out, _ = run(capsys, "--version")
+    assert (code, out) == (0, f"closedloop {closedloop.__version__}\n")
+    code, out, _ = run(capsys, "stiffness", "--help")
+    flat = " ".join(out.split())
+    assert code == 0 and "2 bad input; 3 the computation failed" in flat
+    assert "ur5" in flat and "fourbar" in flat  # MODEL may be a name
+
+
+def test_negative_numbers_in_e_notation_are_values(ur5_urdf, capsys):
+    q = ["0", "-1e0", "1.5", "-5E-1", "1.2", "3e-1"]
+    code, out, err = run(capsys, *stiffness_args(ur5_urdf, q, "--json"))
+    assert (code, err) == (0, "")
+    np.testing.assert_array_equal(json.loads(out)["q"], UR5_Q)
+
+
+def test_models_by_name_from_an_empty_folder(ur5_urdf, tmp_path):
+    by_name = python_m(*stiffness_args("ur5", UR5_Q, "--json"), cwd=tmp_path)
+    assert (by_name.returncode, by_name.stderr) == (0, "")
+    C_ref, _, _ = ur5_reference(ur5_urdf, UR5_Q)
+    assert_close_in_norm(json.loads(by_name.stdout)["C"], C_ref, RTOL_EXACT)
+    fourbar = python_m("stiffness", "fourbar", "--frame", "P", "--actuated", 0.8, "--json",
+                       cwd=tmp_path)  # fmt: skip
+    files = python_m("stiffness", *FOURBAR["urdf"], "--frame", "P", "--actuated", 0.8, "--json")
+    assert fourbar.returncode == files.returncode == 1  # planar: rank 3, K does not exist
+    assert json.loads(fourbar.stdout)["C"] == json.loads(files.stdout)["C"]
+    panda = python_m("stiffness", "panda", "--frame", "panda_hand", "--joint-stiffness", 1e4,
+                     "--q", 0, -0.5, 0, -2, 0, 1.5, 0.8, 0, 0, "--json", cwd=tmp_path)  # fmt: skip
+    assert panda.returncode == 0 and json.loads(panda.stdout)["rank"] == 6
+
+
+def test_unknown_model_name_lists_the_names(capsys):
+    code, _, err = run(capsys, "stiffness", "ur6", "--frame", "tool0")
+    assert code == 2 and err.count("\n") == 1
+    assert "model 'ur6' is neither a file nor a known name" in err and "'ur5'" in err
+
+
+@pytest.mark.parametrize(
+    ("html", "match"),
+    [
+        ("/proc/x/view.html", "folder '/proc/x' does not exist"),
+        ("{tmp}", "is a folder; expected a file"),
+        ("{tmp}/file.txt/view.html", "is not a folder"),
+    ],
+)
+def test_bad_html_path_exits_2_before_any_work(tmp_path, capsys, monkeypatch, html, match):
+    (tmp_path / "file.txt").write_text("")
+    import closedloop.cli as cli
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the model was loaded before the output path was checked")
+
+    monkeypatch.setattr(cli, "load_model", no_work)
+    line = ["view", "fourbar", "--frame", "P", "--html", html.format(tmp=tmp_path)]
+    code, out, err = run(capsys, *line)
+    assert (code, out) == (2, "")
+    assert err.startswith("closedloop: error: --html ") and err.count("\n") == 1
+    assert match in err
+
+
+def test_closed_pipe_ends_quietly(ur5_urdf):
+    read, write = os.pipe()
+    os.close(read)  # the reader (``| head``) has gone before the first line
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "closedloop", *map(str, stiffness_args(ur5_urdf))],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(REPO)},
+            timeout=120,
+            check=False,
+        )
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (141, "")

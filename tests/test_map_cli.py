@@ -85,7 +85,7 @@ def test_failed_points_are_reported_not_fatal(capsys, tmp_path):
         (["--alpha", "30:90:3", "--param", "zz=1"], "NAME one of"),
         (["--alpha", "30:90:3", "--index", "deflection_rotation"], "--force"),
         (["--alpha", "30:90:3", "--alpha4", "0,1", "--s4", "0,1"], "one or two inputs"),
-        (["--alpha", "30:90:3", "--backend", "nope"], "unknown backend"),
+        (["--alpha", "30:90:3", "--backend", "nope"], "invalid choice: 'nope'"),
         (["--alpha", "30:90:3", "--s4", "80"], "outside the stroke"),
         (["--alpha", "30:90:3", "--param", "b=-1"], "must be > 0"),
         (["--alpha", "30:90:3", "--s4", "0:60:4"], "outside the stroke"),
@@ -101,3 +101,43 @@ def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("cahyman: error:"), err
     assert message in lines[0]
+
+
+def test_failed_points_name_the_swept_values_cleanly_and_count_the_rest(capsys, tmp_path):
+    # alpha_1 = -85 deg: the plate cannot be assembled once the cranks are long enough
+    status, out, err = run(capsys, tmp_path, "--alpha", "60", "--alpha1", "-85",
+                           "--param", "b=0.02:0.12:11")  # fmt: skip
+    assert status == 0, err
+    res = SweepResult.load_npz(tmp_path / "map.npz")
+    failed = np.flatnonzero(res.status != "ok")
+    assert len(failed) == 4  # b = 0.09 ... 0.12 m
+    lines = [ln for ln in out.splitlines() if ln.startswith("point ")]
+    assert len(lines) == 3
+    assert lines[0].startswith(f"point {failed[0]} (b = 0.09 m) unreachable: plate cannot be "
+                               "assembled at alpha=[-85, 60, 60] deg")  # fmt: skip
+    assert "[[" not in out and "9999" not in out and "0000000" not in out
+    assert "... and 1 more" in out
+
+
+def test_bad_out_folder_is_refused_before_the_sweep(capsys, tmp_path, monkeypatch):
+    import cahyman_pin.map_cli as map_cli
+
+    def no_sweep(*args, **kwargs):
+        raise AssertionError("the sweep ran before the output folder was checked")
+
+    monkeypatch.setattr(map_cli, "sweep", no_sweep)
+    (tmp_path / "file").write_text("")
+    for out, match in (
+        (tmp_path / "file", "is a file; expected a folder"),
+        (tmp_path / "file" / "sub", "cannot create or write this folder"),
+        ("/proc/x", "cannot create or write this folder"),
+    ):
+        status = main(["map", "--alpha", "30:90:3", "--workers", "1", "--out", str(out)])
+        err = capsys.readouterr().err
+        assert status == 2 and err.count("\n") == 1 and match in err, err
+
+
+def test_backend_choices_in_help(capsys, tmp_path):
+    status = main(["map", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert status == 0 and "{consistent,generic,published}" in out and "(default: generic)" in out

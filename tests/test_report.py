@@ -55,7 +55,7 @@ def test_every_table_cell_present(built):
         assert [t.caption for t in tables] == [f"{pose.label}, load {lab}" for lab in LOAD_LABELS]
         level = pose.label in ("Table 1", "Table 2")  # alpha_1 = alpha_2 = alpha_3: phi = 90
         for t in tables:
-            assert t.header == ("row", "published", "as published", "diff", "consistent",
+            assert t.header == ("row", "paper", "published", "diff", "consistent",
                                 "diff", "generic", "diff")  # fmt: skip
             assert len(t.rows) == (5 if level else 6)
             for row in t.rows:

@@ -1,34 +1,53 @@
 """Deflection viewer: scene maths against independent routes, the exported page's commands.
 
 The static page embeds every meshcat command as a base64 msgpack blob; the tests decode
-them and check what the scene holds (objects, colours, placements, animation), not only
-that a file was written.
+them and check what the scene holds (both robots in one object with each mesh once, their
+materials and placements, arrows, ellipsoids, grid, camera, animation) and the legend's
+text, not only that a file was written. The command lines are in ``test_viewer_cli.py``,
+the page in a real browser in ``test_browser.py``.
 """
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import json
 import re
 import urllib.request
+from collections import Counter
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
 from helpers import UR5_Q
+from tornado.websocket import websocket_connect
 
-from cahyman_pin.cli import main as cahyman_main
 from cahyman_pin.model import cahyman_model
 from closedloop.assembly import ASSEMBLY_TOL, assemble
-from closedloop.cli import main as closedloop_main
 from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError
 from closedloop.io import load_model
 from closedloop.kinematics import closure_residual
 from closedloop.statics import solve_equilibrium
-from closedloop.viewer import ELLIPSOID_MIN_FRACTION, GHOST_RGBA, DeflectionViewer
-from closedloop.viewer_scene import AUTO_FRACTION, LEVER_FRACTION, deflection_scene
+from closedloop.viewer import (
+    CAMERA_MARGIN,
+    ELLIPSOID_MIN_FRACTION,
+    GHOST_RGBA,
+    DeflectionViewer,
+    colormap,
+    ellipsoid_box,
+    grid_step,
+    legend_info,
+)
+from closedloop.viewer_mesh import node_name
+from closedloop.viewer_page import legend_rows
+from closedloop.viewer_scene import (
+    AUTO_FRACTION,
+    ELLIPSOID_MAX_FRACTION,
+    LEVER_FRACTION,
+    deflection_scene,
+)
 
 #: Central differences of positions (metre-sized links, unit-sized dq) with step FD_STEP:
 #: truncation ~ FD_STEP^2, rounding ~ 1e-16 / FD_STEP; both far below FD_RTOL.
@@ -42,6 +61,9 @@ ATOL_PLACEMENT = 1e-12
 OPEN_GAP = 1e-3
 FOURBAR_WRENCH = [3.0, 0.0, -20.0, 0.0, 0.0, 0.0]  # [N, N m] at P
 UR5_WRENCH = [10.0, -5.0, -40.0, 0.0, 0.0, 2.0]
+PANDA_Q = [0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8, 0.02, 0.02]
+#: The issue's bound for the UR5 page (18.7 MB with every mesh twice as Collada text).
+UR5_MAX_PAGE_BYTES = 10_000_000
 BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")
 EXTERNAL = re.compile(r"<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*[\"']?https?:", re.I)
 
@@ -93,6 +115,17 @@ def fourbar(fourbar_urdf, fourbar_yaml):
 @pytest.fixture(scope="module")
 def ur5(ur5_urdf):
     return load_model(ur5_urdf, joint_stiffness=1e4), np.array(UR5_Q)
+
+
+@pytest.fixture(scope="module")
+def panda(panda_urdf):
+    return load_model(panda_urdf, joint_stiffness=1e4), np.array(PANDA_Q)
+
+
+@pytest.fixture(scope="module")
+def cahyman():
+    model = cahyman_model()
+    return model.clm, model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -224,32 +257,174 @@ def test_model_without_geometry_is_refused(fourbar_urdf, fourbar_yaml):
         DeflectionViewer(clm)
 
 
+def test_overflowing_load_is_refused(fourbar):
+    clm, q = fourbar
+    with pytest.raises(InvalidInputError, match="too large"):
+        deflection_scene(clm, q, "P", [1e300, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_large_ellipsoids_are_shrunk_to_a_fraction_of_the_model(cahyman):
+    clm, q = cahyman
+    scene = deflection_scene(clm, q, "M", [0.0, 0.0, 0.0, 0.0, 0.0, 5.0], rotational=True)
+    assert {e.kind for e in scene.ellipsoids} == {"translation", "rotation"}
+    for e in scene.ellipsoids:
+        assert np.max(e.radii) > ELLIPSOID_MAX_FRACTION * scene.size  # the issue's case
+        np.testing.assert_allclose(np.max(e.drawn_radii), ELLIPSOID_MAX_FRACTION * scene.size)
+        assert 0.0 < e.shrink < 1.0
+
+
+@pytest.mark.parametrize(
+    ("size", "step"), [(0.524, 0.05), (1.0, 0.1), (0.0123, 0.002), (3.0, 0.5), (70.0, 10.0)]
+)
+def test_grid_step_is_a_round_length_near_an_eighth_of_the_size(size, step):
+    assert grid_step(size) == pytest.approx(step, rel=1e-12)
+
+
 # ------------------------------------------------------------------ exported page
-def test_static_page_is_self_contained(fourbar_export):
+def robots_object(cmds: list[dict]) -> dict:
+    """The three.js JSON of both robots (the one set_object at /meshcat/robots)."""
+    (c,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/robots"]
+    return c["object"]
+
+
+def robot_groups(obj: dict, root: str) -> dict[str, dict]:
+    """Group name -> group of one robot ('nominal' or 'deflected')."""
+    (robot,) = [g for g in obj["object"]["children"] if g["name"] == root]
+    return {g["name"]: g for g in robot["children"]}
+
+
+def json_matrix(o: dict) -> np.ndarray:
+    return np.array(o["matrix"], dtype=float).reshape(4, 4).T
+
+
+def test_static_page_is_self_contained_and_titled(fourbar_export):
     _, html, cmds = fourbar_export
     assert "<script" in html and EXTERNAL.search(html) is None
-    assert len(cmds) > 50
+    assert "<title>fourbar: deflection at P (closedloop viewer)</title>" in html
+    assert len(cmds) > 10
 
 
 def test_page_holds_ghost_and_deflected_poses(fourbar, fourbar_export):
     clm, q = fourbar
     scene, _, cmds = fourbar_export
-    objects, transforms = by_path(cmds, "set_object"), by_path(cmds, "set_transform")
+    obj = robots_object(cmds)
+    materials = {m["uuid"]: m for m in obj["materials"]}
     for root, q_root in (("nominal", q), ("deflected", scene.q_deflected)):
-        for name, placement in geometry_placements(clm, q_root).items():
-            path = f"/meshcat/{root}/visuals/{name}"
-            assert path in objects
-            np.testing.assert_allclose(matrix(transforms[path]), placement, atol=ATOL_PLACEMENT)
-            colour = properties(cmds, path).get("color")
+        groups = robot_groups(obj, root)
+        for g in clm.visual_model.geometryObjects:
+            group = groups[node_name(root, g.name)]
+            placement = geometry_placements(clm, q_root)[g.name]
+            np.testing.assert_allclose(json_matrix(group), placement, atol=ATOL_PLACEMENT)
+            (mesh,) = group["children"]
+            m = materials[mesh["material"]]
             if root == "nominal":
-                np.testing.assert_allclose(colour, GHOST_RGBA)
-            else:
-                assert colour is None  # the model's own colours
-    assert properties(cmds, "/meshcat/deflected")["amplification"] == scene.scale
+                assert (m["transparent"], m["opacity"]) == (True, GHOST_RGBA[3])
+                assert m["depthWrite"] is False
+            else:  # primitives: one colour, the displacement at the origin (colour test)
+                assert (m["transparent"], m["opacity"]) == (False, 1.0)
+    assert properties(cmds, "/meshcat/robots")["amplification"] == scene.scale
 
 
-def test_page_holds_arrows_ellipsoids_and_label(fourbar_export):
-    scene, _, cmds = fourbar_export
+@pytest.mark.parametrize("robot", ["ur5", "panda"])
+@pytest.mark.parametrize("coloured", [True, False])
+def test_dae_robot_page_embeds_each_mesh_once_with_a_translucent_ghost(
+    robot, coloured, request, tmp_path
+):
+    """One buffer a mesh file (model colours) or a geometry object (vertex colours: the
+    Panda's two fingers share finger.dae but not their colours), each used by both robots."""
+    clm, q = request.getfixturevalue(robot)
+    frame = "tool0" if robot == "ur5" else "panda_hand"
+    scene = deflection_scene(clm, q, frame, UR5_WRENCH, rotational=True)
+    html, cmds = export(clm, scene, tmp_path, colour_by_displacement=coloured)
+    obj = robots_object(cmds)
+    paths = [g.meshPath for g in clm.visual_model.geometryObjects]
+    assert all(f.endswith(".dae") for f in paths)
+    uses = Counter(
+        mesh["geometry"]
+        for root in ("nominal", "deflected")
+        for group in robot_groups(obj, root).values()
+        for mesh in group["children"]
+    )
+    assert set(uses) == {geo["uuid"] for geo in obj["geometries"]}
+    if coloured:
+        assert sorted(uses.values()) == [2] * len(paths)
+    else:
+        assert sorted(uses.values()) == sorted(2 * paths.count(f) for f in set(paths))
+    materials = {m["uuid"]: m for m in obj["materials"]}
+    for group in robot_groups(obj, "nominal").values():
+        (mesh,) = group["children"]
+        assert materials[mesh["material"]]["opacity"] < 1.0
+        assert materials[mesh["material"]]["transparent"]
+    assert not any(c["type"] == "set_property" and c["property"] == "color" for c in cmds)
+    if robot == "ur5":
+        assert len(html.encode()) < UR5_MAX_PAGE_BYTES
+
+
+def rgb_of(m: dict) -> np.ndarray:
+    return np.array([(m["color"] >> k & 0xFF) / 255 for k in (16, 8, 0)])
+
+
+def fd_surface_displacements(clm, q, dq, g_index, local) -> np.ndarray:
+    """|displacement| [m] of points ``local`` (n, 3) of a geometry object, central
+    differences of its placement along dq (an independent route from the Jacobians)."""
+
+    def world(eps):
+        data, gdata = clm.model.createData(), clm.visual_model.createData()
+        pin.forwardKinematics(clm.model, data, pin.integrate(clm.model, q, eps * dq))
+        pin.updateGeometryPlacements(clm.model, data, clm.visual_model, gdata)
+        M = gdata.oMg[g_index]
+        return local @ M.rotation.T + M.translation
+
+    return np.linalg.norm((world(FD_STEP) - world(-FD_STEP)) / (2.0 * FD_STEP), axis=1)
+
+
+def test_model_colours_on_request(fourbar, tmp_path):
+    clm, q = fourbar
+    scene = deflection_scene(clm, q, "P", FOURBAR_WRENCH)
+    html, cmds = export(clm, scene, tmp_path, colour_by_displacement=False)
+    obj = robots_object(cmds)
+    materials = {m["uuid"]: m for m in obj["materials"]}
+    groups = robot_groups(obj, "deflected")
+    for g in clm.visual_model.geometryObjects:
+        (mesh,) = groups[node_name("deflected", g.name)]["children"]
+        np.testing.assert_allclose(
+            rgb_of(materials[mesh["material"]]), g.meshColor[:3], atol=0.5 / 255
+        )
+    assert "model colours" in html and "colour bar" not in html
+
+
+def test_deflected_colours_follow_the_real_surface_displacement(ur5, fourbar, tmp_path):
+    """UR5: vertex colours of the meshes; four-bar: one colour a primitive (its origin)."""
+    for (clm, q), frame, w in ((ur5, "tool0", UR5_WRENCH), (fourbar, "P", FOURBAR_WRENCH)):
+        scene = deflection_scene(clm, q, frame, w)
+        html, cmds = export(clm, scene, tmp_path, name=f"{clm.name}.html")
+        obj = robots_object(cmds)
+        buffers = {geo["uuid"]: geo for geo in obj["geometries"]}
+        materials = {m["uuid"]: m for m in obj["materials"]}
+        groups = robot_groups(obj, "deflected")
+        seen, expected = [], []
+        for i, g in enumerate(clm.visual_model.geometryObjects):
+            (mesh,) = groups[node_name("deflected", g.name)]["children"]
+            attributes = buffers[mesh["geometry"]].get("data", {}).get("attributes", {})
+            if "color" in attributes:  # a mesh: its vertices
+                local = np.frombuffer(attributes["position"]["array"].data, np.float32)
+                colours = np.frombuffer(attributes["color"]["array"].data, np.float32)
+                assert materials[mesh["material"]]["vertexColors"] == 2  # three.js enum
+                seen.append(colours.reshape(-1, 3))
+                expected.append(fd_surface_displacements(clm, q, scene.dq, i, local.reshape(-1, 3)))
+            else:  # a primitive: its origin
+                seen.append(rgb_of(materials[mesh["material"]])[None])
+                expected.append(fd_surface_displacements(clm, q, scene.dq, i, np.zeros((1, 3))))
+        top = max(float(np.max(e)) for e in expected)
+        for colours, d in zip(seen, expected, strict=True):
+            atol = 1e-5 if colours.shape[0] > 1 else 0.5 / 255 + 1e-6  # float32 / 8-bit colour
+            np.testing.assert_allclose(colours, colormap(d / top), atol=atol)
+        assert f"(0 to {1e3 * top:.4g} mm)" in html
+
+
+def test_page_holds_arrows_ellipsoids_grid_and_legend(fourbar, fourbar_export):
+    clm, _ = fourbar
+    scene, html, cmds = fourbar_export
     objects, transforms = by_path(cmds, "set_object"), by_path(cmds, "set_transform")
     np.testing.assert_allclose(matrix(transforms["/meshcat/load"])[:3, 3], scene.point_deflected)
     f = scene.wrench[:3] / np.linalg.norm(scene.wrench[:3])
@@ -265,51 +440,66 @@ def test_page_holds_arrows_ellipsoids_and_label(fourbar_export):
         drawn = np.array(objects[path]["object"]["object"]["matrix"]).reshape(4, 4).T
         T = matrix(transforms[path])
         M = T[:3, :3] @ drawn[:3, :3]  # unit sphere -> drawn ellipsoid
-        floor = ELLIPSOID_MIN_FRACTION * scene.size
-        r = np.maximum(e.radii, floor)
+        r = np.maximum(e.drawn_radii, ELLIPSOID_MIN_FRACTION * scene.size)
         np.testing.assert_allclose(M @ M.T, e.axes @ np.diag(r**2) @ e.axes.T, atol=1e-12)
         np.testing.assert_allclose(T[:3, 3], scene.point, atol=ATOL_PLACEMENT)
-    texts = [
-        o["object"]["textures"][0]["text"]
-        for p, o in objects.items()
-        if p.startswith("/meshcat/label/")
-    ]
-    assert f"deflection x{scene.scale:.4g} (auto)" in texts
+    # grid: meshcat's 20 m grid hidden, ours of squares of grid_step(L)
+    assert properties(cmds, "/Grid")["visible"] is False
+    step = grid_step(scene.size)
+    points = objects["/meshcat/grid"]["object"]["geometries"][0]["data"]["attributes"]
+    xyz = np.frombuffer(points["position"]["array"].data, dtype=np.float32).reshape(-1, 3)
+    np.testing.assert_allclose(np.diff(np.unique(xyz[:, 0].round(9))), step, rtol=1e-5)
+    # legend: the rows in the page, numbers from the scene
+    info_rows = legend_rows(legend_info(clm, scene))  # the rows above the colour key
+    assert all(row in html for row in info_rows)
+    mm = 1e3 * scene.max_displacement
+    assert f"largest point displacement {mm:.4g} mm (real)" in html
+    twist_mm = 1e3 * np.linalg.norm(scene.frame_twist[:3])
+    assert f"(norm {twist_mm:.4g} mm)" in html
+    assert f"\u00d7{scene.scale:.4g} (automatic; linear deflection)" in html
+    assert f"grid: squares of {step:.3g} m" in html
+    assert "force arrow (one head)" in html and "moment arrow" not in html
+
+
+def test_camera_frames_robots_arrows_and_ellipsoids(cahyman, tmp_path):
+    clm, q = cahyman
+    scene = deflection_scene(clm, q, "M", [0.0, 0.0, 0.0, 0.0, 0.0, 5.0], rotational=True)
+    html, cmds = export(clm, scene, tmp_path)
+    transforms = by_path(cmds, "set_transform")
+    centre = -matrix(transforms["/meshcat"])[:3, 3]
+    eye = matrix(transforms["/Cameras/default/rotated/<object>"])[:3, 3]
+    radius = np.linalg.norm(eye) / CAMERA_MARGIN  # the drawn content lies in this sphere
+    floor = ELLIPSOID_MIN_FRACTION * scene.size
+    for e in scene.ellipsoids:
+        lo, hi = ellipsoid_box(e, floor)
+        assert np.linalg.norm(np.maximum(np.abs(lo - centre), np.abs(hi - centre))) <= (
+            radius * (1 + RTOL_EXACT)
+        )
+    tip = scene.point_deflected + LEVER_FRACTION * scene.size * np.array([0.0, 0.0, 1.0])
+    assert np.linalg.norm(tip - centre) <= radius
+    assert "shrunk \u00d7" in html and "moment arrow (two heads)" in html
 
 
 def test_page_holds_the_load_ramp_animation(fourbar, fourbar_export):
     clm, _ = fourbar
-    scene, _, cmds = fourbar_export
+    scene, html, cmds = fourbar_export
     (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    assert anim["options"]["play"] is False  # the page script plays it once loaded
     clips = {a["path"]: a["clip"] for a in anim["animations"]}
-    name = clm.visual_model.geometryObjects[0].name
-    last = geometry_placements(clm, scene.ramp_q[-1])[name]
-    (position,) = [
-        t for t in clips[f"/meshcat/deflected/visuals/{name}"]["tracks"] if t["name"] == ".position"
-    ]
-    assert len(position["keys"]) == len(scene.ramp)
-    np.testing.assert_allclose(position["keys"][-1]["value"], last[:3, 3], atol=ATOL_PLACEMENT)
+    for g in clm.visual_model.geometryObjects:
+        last = geometry_placements(clm, scene.ramp_q[-1])[g.name]
+        name = node_name("deflected", g.name)
+        (position,) = [
+            t for t in clips["/meshcat/robots"]["tracks"] if t["name"] == f"{name}.position"
+        ]
+        assert len(position["keys"]) == len(scene.ramp)
+        np.testing.assert_allclose(position["keys"][-1]["value"], last[:3, 3], atol=ATOL_PLACEMENT)
     (grow,) = [t for t in clips["/meshcat/load"]["tracks"] if t["name"] == ".scale"]
     np.testing.assert_allclose(grow["keys"][-1]["value"], [1.0, 1.0, 1.0])
+    assert '"autoplay": false' in html and '"meshes": 14' in html  # 2 x 7 geometry objects
 
 
-def test_ur5_page_recolours_its_mesh_ghost(ur5, tmp_path):
-    clm, q = ur5
-    scene = deflection_scene(clm, q, "tool0", UR5_WRENCH, rotational=True)
-    _, cmds = export(clm, scene, tmp_path)
-    objects = by_path(cmds, "set_object")
-    for g in clm.visual_model.geometryObjects:
-        assert objects[f"/meshcat/deflected/visuals/{g.name}"]["object"]["object"]["type"] == (
-            "_meshfile_object"
-        )
-        np.testing.assert_allclose(
-            properties(cmds, f"/meshcat/nominal/visuals/{g.name}")["color"], GHOST_RGBA
-        )
-    assert {"/meshcat/compliance/translation", "/meshcat/compliance/rotation"} <= set(objects)
-    assert {"/meshcat/load/torque/head0", "/meshcat/load/torque/head1"} <= set(objects)
-
-
-def test_live_server_serves_the_viewer_on_localhost(fourbar):
+def test_live_server_serves_the_page_with_the_legend_on_localhost(fourbar):
     clm, q = fourbar
     lines = []
     with DeflectionViewer(clm) as viewer:
@@ -317,93 +507,35 @@ def test_live_server_serves_the_viewer_on_localhost(fourbar):
         assert viewer.url.startswith("http://127.0.0.1:")
         direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # no proxy
         with direct.open(viewer.url, timeout=10) as page:
-            assert b"<script" in page.read()
+            text = page.read().decode("utf-8")
+        assert '<div id="closedloop-legend">' in text and "<title>fourbar: deflection" in text
         viewer.serve(duration=0.0, out=lines.append)
-        proc = viewer.viewer.window.server_proc
-    assert proc is None or proc.poll() is not None  # closed with the viewer
+        proc = viewer._server
+    assert viewer._server is None and proc.poll() is not None  # stopped with the viewer
     assert lines == [f"meshcat viewer at {viewer.url} (Ctrl-C to stop)"]
 
 
-# ------------------------------------------------------------------ command lines
-def run(main, capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
+def test_live_page_slider_sends_the_amplification_to_the_viewer(fourbar):
+    """The live page's slider posts ``{"type": "closedloop", "amplification": s}`` on the
+    viewer's websocket (as this test does); serving hands it to ``on_amplification``."""
+    clm, q = fourbar
+    chosen = 12.5
+    with DeflectionViewer(clm) as viewer:
+        viewer.show(deflection_scene(clm, q, "P", FOURBAR_WRENCH))
+        direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+        with direct.open(viewer.url, timeout=10) as page:
+            assert 'id="closedloop-slider"' in page.read().decode("utf-8")
+        assert 'id="closedloop-slider"' not in viewer.static_html()  # no server offline
 
+        async def slide():
+            url = viewer.url.replace("http://", "ws://").replace("/static/", "/")
+            ws = await websocket_connect(url)
+            await ws.write_message(json.dumps({"type": "closedloop", "amplification": chosen}))
+            await asyncio.sleep(0.3)  # the server reads it
+            ws.close()
 
-def test_closedloop_view_writes_the_page(fourbar_urdf, fourbar_yaml, tmp_path, capsys):
-    html = tmp_path / "fourbar.html"
-    code, out, err = run(
-        closedloop_main,
-        capsys,
-        "view",
-        fourbar_urdf,
-        "--closures",
-        fourbar_yaml,
-        "--frame",
-        "P",
-        "--actuated",
-        0.3,
-        "--force",
-        0,
-        0,
-        -20,
-        "--scale",
-        50,
-        "--html",
-        html,
-    )
-    assert (code, err) == (0, "")
-    assert "amplified x50 (given" in out and f"wrote {html}" in out
-    cmds = commands(html.read_text(encoding="utf-8"))
-    assert properties(cmds, "/meshcat/deflected")["amplification"] == 50.0
-
-
-def test_cahyman_view_writes_the_page(tmp_path, capsys):
-    html = tmp_path / "cahyman.html"
-    code, out, err = run(cahyman_main, capsys, "view", "--force", 10, 0, -20, "--html", html)
-    assert (code, err) == (0, "")
-    assert out.endswith(f"wrote {html}\n")
-    objects = by_path(commands(html.read_text(encoding="utf-8")), "set_object")
-    names = [g.name for g in cahyman_model().clm.visual_model.geometryObjects]
-    for root in ("nominal", "deflected"):
-        assert all(f"/meshcat/{root}/visuals/{n}" in objects for n in names)
-    assert "/meshcat/compliance/translation" in objects
-
-
-def test_cahyman_view_json_goes_to_stdout(tmp_path, capsys):
-    html = tmp_path / "cahyman.html"
-    code, out, err = run(cahyman_main, capsys, "view", "--scale", 30, "--json", "--html", html)
-    assert code == 0 and f"wrote {html}" in err
-    doc = json.loads(out)
-    assert (doc["scale"], doc["auto_scaled"], doc["html"]) == (30.0, False, str(html))
-
-
-@pytest.mark.parametrize(
-    "argv",
-    [
-        ["--frame", "nowhere"],
-        ["--frame", "P", "--scale", "-2"],
-        ["--frame", "P", "--force", "nan", "0", "0"],
-        ["--frame", "P", "--html", "/no/such/folder/page.html"],
-    ],
-)
-def test_closedloop_view_bad_input_exits_2_with_one_line(
-    fourbar_urdf, fourbar_yaml, capsys, tmp_path, argv
-):
-    argv = [a.replace("/no/such", str(tmp_path / "missing")) for a in argv]
-    if "--html" not in argv:
-        argv += ["--html", str(tmp_path / "page.html")]
-    code, out, err = run(
-        closedloop_main, capsys, "view", fourbar_urdf, "--closures", fourbar_yaml, *argv
-    )
-    assert code == 2 and out == ""
-    assert len(err.splitlines()) == 1 and err.startswith("closedloop: error: ")
-    assert not (tmp_path / "page.html").exists()
-
-
-@pytest.mark.parametrize("argv", [["--backend", "consistent"], ["--scale", "inf"], ["--s4", "999"]])
-def test_cahyman_view_bad_input_exits_2_with_one_line(capsys, tmp_path, argv):
-    code, out, err = run(cahyman_main, capsys, "view", *argv, "--html", tmp_path / "x.html")
-    assert code == 2 and out == ""
-    assert len(err.splitlines()) == 1 and err.startswith("cahyman: error: ")
+        asyncio.run(slide())
+        seen = []
+        viewer.serve(duration=1.0, out=lambda _: None, on_amplification=seen.append)
+        assert seen == [chosen]
+        assert viewer.poll_control() == {}  # fetched once

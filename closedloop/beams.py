@@ -1,0 +1,442 @@
+"""Flexible links as 6-dof virtual springs from beam theory (the Virtual Joint Method).
+
+A flexible link is a rigid body with a 6-dof virtual spring at its end (Pashkevich,
+Klimchik and Chablat's Virtual Joint Method). A *beam* on a link is straight, from the
+origin of the link's frame (its start, clamped) to the origin of its ``end`` joint (the
+tip): its length is that distance. The tip carries the ``end`` joint and everything beyond
+it; the link's other child joints stay rigid with the start. :func:`apply_beams` puts a
+6-dof virtual joint (a Pinocchio free flyer named ``<link>_beam``) between the link and
+its ``end``, placed at the end joint's origin with the end joint's axes, and gives it the
+beam's tip stiffness as an SPD block spring (:mod:`closedloop.model`). Its coordinates
+dq = (v, w) are the twist of the tip (translation [m], small rotation [rad]) in the end
+joint's axes, so the block is the tip stiffness in that frame, wrench (f [N], n [N m]).
+
+Tip stiffness of a clamped straight beam (length L, beam axes: x along the beam, y and
+z the section's principal axes), from its tip compliance C_b (wrench at the tip, beam
+axes): axial L/(E A), torsion L/(G J); bending in the x-y plane (deflection along y,
+Euler-Bernoulli, second moment Iz) C[v, f_y] = L^3/(3 E Iz), C[v, n_z] = C[th_z, f_y] =
+L^2/(2 E Iz), C[th_z, n_z] = L/(E Iz); in the x-z plane the same with Iy and the sign of
+the v-theta coupling reversed (a force along +z turns the tip about -y). Timoshenko adds
+the shear compliance L/(kappa G A) to the deflection under the transverse force, with
+Cowper's shear coefficients (nu = E/(2G) - 1): circle 6(1+nu)/(7+6nu); tube
+6(1+nu)(1+m^2)^2/((7+6nu)(1+m^2)^2 + (20+12nu)m^2), m = d_inner/d; rectangle
+10(1+nu)/(12+11nu); an explicit section gives ``kappa_y``, ``kappa_z``.
+
+Sections: ``circle`` (d), ``tube`` (d outer diameter, t wall), Iy = Iz = I, J = 2 I;
+``rectangle`` (b along the section's y axis, h along z): Iy = b h^3/12, Iz = h b^3/12,
+J from Roark's approximation a c^3 (1/3 - 0.21 (c/a) (1 - c^4/(12 a^4))), a >= c the
+sides (within 0.5% of the exact series); or explicit {A, Iy, Iz, J} [m^2, m^4]. The
+section's y axis is ``y_axis`` (a vector in the link frame) made orthogonal to the beam;
+default: the link frame axis most orthogonal to the beam, made orthogonal to it.
+
+Inertia: the link's own inertia stays at the beam's start (on the link's parent joint);
+bodies beyond a ``fixed`` end (merged by Pinocchio's URDF parser into the link's joint)
+move with the tip. Frames keep their indices (the virtual joint's frame is appended);
+joints from the virtual joint on get new indices; frames, geometry objects and closure
+anchors beyond the tip follow it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import InvalidInputError
+
+THEORIES = ("euler-bernoulli", "timoshenko")
+SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
+EXPLICIT = ("A", "Iy", "Iz", "J")
+BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6")
+
+
+class BeamError(InvalidInputError):
+    """A beam specification that cannot be used; the message names the beam and the value."""
+
+    def __init__(self, beam: str, message: str):
+        self.beam = beam
+        super().__init__(f"beam {beam!r}: {message}")
+
+
+def _positive(beam: str, what: str, value) -> float:
+    try:
+        x = float(value)  # "2.1e11" from a YAML 1.1 file is a number
+    except (TypeError, ValueError):
+        raise BeamError(beam, f"{what} is {value!r}; expected a number > 0") from None
+    if not (math.isfinite(x) and x > 0):
+        raise BeamError(beam, f"{what} is {value!r}; expected a finite number > 0")
+    return x
+
+
+@dataclass(frozen=True)
+class Section:
+    """Cross-section properties: area A [m^2], second moments Iy, Iz and torsion constant J
+    [m^4] about the section's principal axes y, z; Timoshenko shear coefficients (None:
+    from the shape, Cowper); ``y_axis`` (3,) in the link frame or None (module docstring);
+    ``m``: inner/outer diameter ratio of a tube."""
+
+    A: float
+    Iy: float
+    Iz: float
+    J: float
+    shape: str = "explicit"
+    kappa_y: float | None = None
+    kappa_z: float | None = None
+    y_axis: tuple[float, float, float] | None = None
+    m: float = 0.0
+
+    def kappa(self, nu: float) -> tuple[float, float]:
+        """(kappa_y, kappa_z) shear coefficients (dimensionless) at Poisson ratio nu."""
+        if self.shape == "rectangle":
+            k = 10 * (1 + nu) / (12 + 11 * nu)
+        elif self.shape in ("circle", "tube"):
+            m2 = self.m**2
+            k = 6 * (1 + nu) * (1 + m2) ** 2 / ((7 + 6 * nu) * (1 + m2) ** 2 + (20 + 12 * nu) * m2)
+        else:
+            k = None
+        return (self.kappa_y or k, self.kappa_z or k)
+
+
+def section_from_spec(beam: str, spec) -> Section:
+    """A :class:`Section` from its mapping (``{shape: circle, d: ..}``, ``{A: .., Iy: ..}``)."""
+    if isinstance(spec, Section):
+        return spec
+    if not isinstance(spec, Mapping):
+        raise BeamError(beam, f"section is {spec!r}; expected a mapping (shape and sizes)")
+    spec = dict(spec)
+    y_axis = spec.pop("y_axis", None)
+    if y_axis is not None:
+        y = np.asarray([float(v) for v in y_axis]) if isinstance(y_axis, list | tuple) else None
+        if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
+            raise BeamError(beam, f"section y_axis is {y_axis!r}; expected 3 numbers, not all 0")
+        y_axis = tuple(y)
+    kap = {k: _positive(beam, f"section {k}", spec.pop(k)) for k in ("kappa_y", "kappa_z")
+           if k in spec}  # fmt: skip
+    shape = spec.pop("shape", None)
+    if shape is None:
+        if set(spec) != set(EXPLICIT):
+            raise BeamError(beam, f"section keys {sorted(spec)}; expected shape: "
+                            f"{'|'.join(SHAPES)} with its sizes, or {list(EXPLICIT)}")  # fmt: skip
+        v = {k: _positive(beam, f"section {k}", spec[k]) for k in EXPLICIT}
+        return Section(v["A"], v["Iy"], v["Iz"], v["J"], "explicit", y_axis=y_axis, **kap)
+    if shape not in SHAPES or set(spec) != set(SHAPES[shape]):
+        expected = ", ".join(f"{s} ({', '.join(k)})" for s, k in SHAPES.items())
+        raise BeamError(beam, f"section {shape!r} with {sorted(spec)}; expected one of {expected}")
+    v = {k: _positive(beam, f"section {k}", spec[k]) for k in SHAPES[shape]}
+    if shape in ("circle", "tube"):
+        r = v["d"] / 2
+        ri = 0.0 if shape == "circle" else r - v["t"]
+        if ri < 0:
+            raise BeamError(beam, f"tube wall t = {v['t']} m is thicker than its radius {r} m")
+        A, Ir = math.pi * (r**2 - ri**2), math.pi * (r**4 - ri**4) / 4
+        return Section(A, Ir, Ir, 2 * Ir, shape, y_axis=y_axis, m=ri / r, **kap)
+    b, h = v["b"], v["h"]
+    a, c = max(b, h), min(b, h)
+    J = a * c**3 * (1 / 3 - 0.21 * (c / a) * (1 - c**4 / (12 * a**4)))
+    return Section(b * h, b * h**3 / 12, h * b**3 / 12, J, shape, y_axis=y_axis, **kap)
+
+
+def clamped_compliance(L: float, E: float, G: float, s: Section, theory: str) -> np.ndarray:
+    """(6, 6) tip compliance of a clamped straight beam [m/N, rad/N, rad/(N m)], beam axes
+    (x along the beam), twist (v, w) of the tip per wrench (f, n) at the tip."""
+    C = np.zeros((6, 6))
+    C[0, 0], C[3, 3] = L / (E * s.A), L / (G * s.J)
+    ky, kz = s.kappa(E / (2 * G) - 1) if theory == "timoshenko" else (None, None)
+    for lin, ang, inertia, sign, kappa in ((1, 5, s.Iz, 1.0, ky), (2, 4, s.Iy, -1.0, kz)):
+        EI = E * inertia
+        C[lin, lin] = L**3 / (3 * EI) + (L / (kappa * G * s.A) if kappa else 0.0)
+        C[lin, ang] = C[ang, lin] = sign * L**2 / (2 * EI)
+        C[ang, ang] = L / EI
+    return C
+
+
+def beam_axes(beam: str, axis: np.ndarray, y_axis) -> np.ndarray:
+    """(3, 3) rotation whose columns are the beam axes x (along ``axis``), y, z, in the
+    frame of ``axis`` (the link frame); y from ``y_axis`` or the default rule."""
+    x = axis / np.linalg.norm(axis)
+    y = np.eye(3)[np.argmin(np.abs(x))] if y_axis is None else np.asarray(y_axis, float)
+    y = y - (y @ x) * x
+    if np.linalg.norm(y) < 1e-9 * np.linalg.norm(y_axis if y_axis is not None else y):
+        shown = np.asarray(y_axis, float).tolist()
+        raise BeamError(beam, f"section y_axis {shown} is parallel to the beam {x.tolist()}")
+    y /= np.linalg.norm(y)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def transport_stiffness(K: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(6, 6) stiffness K given in axes B re-expressed in axes E at the same point, with R
+    (3, 3) the rotation of E in B (columns: E's axes in B): R6^T K R6, R6 = diag(R, R)."""
+    R6 = np.zeros((6, 6))
+    R6[:3, :3] = R6[3:, 3:] = R
+    return R6.T @ K @ R6
+
+
+@dataclass(frozen=True)
+class _Site:
+    """Where a beam sits: the link's frame, its parent joint, the end's placement."""
+
+    link_frame: int
+    joint: int  # parent joint of the link (the beam's start)
+    end: str
+    end_joint: int | None  # the moving end joint, or None for a fixed end
+    end_frame: int  # the end's JOINT or FIXED_JOINT frame
+    placement: pin.SE3  # the end's origin and axes in the parent joint's frame
+
+
+def _site(model: pin.Model, beam: str, end: str | None) -> _Site:
+    bodies = [f.name for f in model.frames if f.type == pin.BODY]
+    if beam not in bodies:
+        raise BeamError(beam, f"unknown link; expected one of {bodies[:12]}")
+    fl = next(i for i, f in enumerate(model.frames) if f.type == pin.BODY and f.name == beam)
+    kinds = (pin.JOINT, pin.FIXED_JOINT)
+    children = [i for i, f in enumerate(model.frames) if f.parentFrame == fl and f.type in kinds]
+    names = [model.frames[i].name for i in children]
+    if end is None:
+        if len(children) != 1:
+            raise BeamError(beam, f"the link has {len(children)} child joints {names}: give end")
+        end = names[0]
+    if end not in names:
+        known = model.existJointName(end) or any(
+            f.name == end and f.type == pin.FIXED_JOINT for f in model.frames
+        )
+        what = "is not a child joint of the link" if known else "is not a joint of the model"
+        raise BeamError(beam, f"end {end!r} {what}; expected one of {names}")
+    fe = children[names.index(end)]
+    frame = model.frames[fe]
+    if frame.type == pin.JOINT:
+        j = frame.parentJoint
+        return _Site(fl, model.parents[j], end, j, fe, model.jointPlacements[j].copy())
+    return _Site(fl, frame.parentJoint, end, None, fe, frame.placement.copy())
+
+
+def _descendant_frames(model: pin.Model, root: int) -> set[int]:
+    out, grew = {root}, True
+    while grew:
+        new = {i for i, f in enumerate(model.frames) if f.parentFrame in out and i not in out}
+        new.discard(0)
+        out |= new
+        grew = bool(new)
+    return out
+
+
+#: Per-velocity-coordinate fields of a Pinocchio model carried over to the new model.
+_NV_ATTRIBUTES = (
+    "lowerEffortLimit", "upperEffortLimit", "lowerVelocityLimit", "upperVelocityLimit",
+    "armature", "damping", "rotorInertia", "rotorGearRatio", "lowerDryFrictionLimit",
+    "upperDryFrictionLimit",
+)  # fmt: skip
+
+
+def _insert(model, geometries, site: _Site, name: str):
+    """A copy of ``model`` (and of the geometry models) with a free-flyer ``name`` between
+    the site's joint and its end; returns (model, geometries, old -> new joint index)."""
+    if model.existJointName(name):
+        raise BeamError(name, f"the model already has a joint named {name!r}")
+    if site.end_joint is not None:
+        moved_frames = set()
+        moved_joints = {site.end_joint}
+    else:
+        moved_frames = _descendant_frames(model, site.end_frame)
+        moved_joints = {
+            f.parentJoint for f in model.frames if f.type == pin.JOINT
+            and f.parentJoint > 0 and f.parentFrame in moved_frames
+        }  # fmt: skip
+    Mv = site.placement
+    children = {j: [] for j in range(model.njoints)}
+    for j in range(1, model.njoints):
+        children[model.parents[j]].append(j)
+    siblings = children[site.joint]
+    at = min((siblings.index(j) for j in moved_joints), default=len(siblings))
+    siblings.insert(at, "V")
+    children["V"] = sorted(moved_joints)
+    for j in moved_joints:
+        children[site.joint].remove(j)
+    order, stack = [], list(reversed(children[0]))
+    while stack:  # depth first, children in their original order
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(children[j]))
+    new, index = pin.Model(), {0: 0}
+    new.name, new.gravity, new.inertias[0] = model.name, model.gravity, model.inertias[0]
+    inertia_tip = pin.Inertia.Zero()
+    for i in moved_frames:
+        f = model.frames[i]
+        inertia_tip = inertia_tip + Mv.actInv(f.placement).act(f.inertia)
+    for j in order:
+        if j == "V":
+            index["V"] = new.addJoint(index[site.joint], pin.JointModelFreeFlyer(), Mv, name)
+            new.inertias[index["V"]] = inertia_tip
+            continue
+        parent = "V" if j in moved_joints else model.parents[j]
+        M = Mv.actInv(model.jointPlacements[j]) if j in moved_joints else model.jointPlacements[j]
+        jm = model.joints[j]
+        q, v = slice(jm.idx_q, jm.idx_q + jm.nq), slice(jm.idx_v, jm.idx_v + jm.nv)
+        index[j] = jn = new.addJoint(index[parent], jm, M, model.names[j])
+        new.inertias[jn] = model.inertias[j]
+        nm = new.joints[jn]
+        nq, nv = slice(nm.idx_q, nm.idx_q + nm.nq), slice(nm.idx_v, nm.idx_v + nm.nv)
+        for attr in ("lowerPositionLimit", "upperPositionLimit"):
+            getattr(new, attr)[nq] = getattr(model, attr)[q]
+        for attr in _NV_ATTRIBUTES:
+            if hasattr(model, attr):
+                getattr(new, attr)[nv] = getattr(model, attr)[v]
+    if moved_frames:  # their inertias move from the start to the tip
+        dyn = model.inertias[site.joint].toDynamicParameters()
+        dyn -= Mv.act(inertia_tip).toDynamicParameters()
+        new.inertias[index[site.joint]] = pin.Inertia.FromDynamicParameters(dyn)
+    for i, f in enumerate(model.frames):
+        if i == 0:
+            continue
+        joint, M = index[f.parentJoint], f.placement
+        if i in moved_frames:
+            joint, M = index["V"], Mv.actInv(f.placement)
+        new.addFrame(pin.Frame(f.name, joint, f.parentFrame, M, f.type, f.inertia), False)
+    new.addFrame(pin.Frame(name, index["V"], site.link_frame, pin.SE3.Identity(), pin.JOINT),
+                 False)  # fmt: skip
+    for entry in model.referenceConfigurations:
+        new.referenceConfigurations[entry.key()] = map_configuration(model, new, entry.data())
+    out = []
+    for geo in geometries:
+        if geo is None:
+            out.append(None)
+            continue
+        g = geo.copy()
+        for obj in g.geometryObjects:
+            if obj.parentFrame in moved_frames:
+                obj.parentJoint, obj.placement = index["V"], Mv.actInv(obj.placement)
+            else:
+                obj.parentJoint = index[obj.parentJoint]
+        out.append(g)
+    return new, out, index
+
+
+def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:
+    """(new.nq,) configuration of ``new`` with the values of ``q`` (old.nq,) on the joints
+    of the same name, neutral on the others (the beams' virtual joints: undeflected)."""
+    q, out = np.asarray(q, float), pin.neutral(new)
+    for j in range(1, old.njoints):
+        jo = old.joints[j]
+        jn = new.joints[new.getJointId(old.names[j])]
+        out[jn.idx_q : jn.idx_q + jn.nq] = q[jo.idx_q : jo.idx_q + jo.nq]
+    return out
+
+
+def _matrix(beam: str, what: str, value) -> np.ndarray:
+    try:
+        K = np.array([float(v) for v in np.asarray(value, dtype=object).reshape(-1)])
+    except (TypeError, ValueError):
+        raise BeamError(beam, f"{what} is {value!r}; expected 36 numbers") from None
+    if K.size != 36:
+        raise BeamError(beam, f"{what} has {K.size} numbers; expected 36 (a 6x6 matrix)")
+    K = K.reshape(6, 6)
+    sym = np.max(np.abs(K - K.T)) <= 1e-9 * np.max(np.abs(K))
+    if not (np.all(np.isfinite(K)) and sym and np.all(np.linalg.eigvalsh(0.5 * (K + K.T)) > 0)):
+        raise BeamError(beam, f"{what} {K.tolist()} is not symmetric positive definite")
+    return 0.5 * (K + K.T)
+
+
+def beam_stiffness(model: pin.Model, beam: str, spec: Mapping) -> tuple[str | None, np.ndarray]:
+    """(end, K) of one beam: its end joint and its (6, 6) tip stiffness in the end joint's
+    axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the ``beams:``
+    entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
+    compliance_6x6 given in that same frame)."""
+    if not isinstance(spec, Mapping):
+        raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
+    unknown = set(spec) - set(BEAM_KEYS)
+    if unknown:
+        raise BeamError(beam, f"unknown key(s) {sorted(unknown)}; expected {list(BEAM_KEYS)}")
+    end = spec.get("end")
+    if end is not None and not isinstance(end, str):
+        raise BeamError(beam, f"end is {end!r}; expected a joint name")
+    site = _site(model, beam, end)
+    given = [k for k in ("stiffness_6x6", "compliance_6x6") if k in spec]
+    if given:
+        if len(given) == 2 or any(k in spec for k in ("E", "G", "section", "theory")):
+            raise BeamError(beam, f"give either {given[0]} or E, G and section, not both")
+        M = _matrix(beam, given[0], spec[given[0]])
+        return site.end, M if given[0] == "stiffness_6x6" else np.linalg.inv(M)
+    missing = [k for k in ("E", "G", "section") if k not in spec]
+    if missing:
+        raise BeamError(beam, f"missing {missing}; expected E, G, section (or stiffness_6x6)")
+    E, G = _positive(beam, "E [Pa]", spec["E"]), _positive(beam, "G [Pa]", spec["G"])
+    theory = spec.get("theory", "euler-bernoulli")
+    if theory not in THEORIES:
+        raise BeamError(beam, f"theory {theory!r}; expected one of {list(THEORIES)}")
+    section = section_from_spec(beam, spec["section"])
+    if theory == "timoshenko" and None in section.kappa(E / (2 * G) - 1):
+        raise BeamError(beam, "an explicit section needs kappa_y and kappa_z for timoshenko")
+    link = model.frames[site.link_frame].placement
+    M_LE = link.actInv(site.placement)  # the end in the link frame
+    length = float(np.linalg.norm(M_LE.translation))
+    if length <= 1e-12:
+        raise BeamError(beam, f"length {length} m: end {site.end!r} is at the link's origin")
+    R_LB = beam_axes(beam, M_LE.translation, section.y_axis)
+    K_b = np.linalg.inv(clamped_compliance(length, E, G, section, theory))
+    K = transport_stiffness(K_b, R_LB.T @ M_LE.rotation)
+    return site.end, 0.5 * (K + K.T)
+
+
+def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping]):
+    """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
+    inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
+
+    Args:
+        model: the kinematic tree (not modified).
+        geometries: geometry models (or None) of ``model``, carried over.
+        beams: link name -> specification.
+
+    Returns:
+        (model, geometries, springs, index): the new model, its geometry models, the
+        block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]} and the map
+        old joint index -> new joint index.
+
+    Raises:
+        BeamError: a bad specification (the message names the beam and the value).
+    """
+    if not isinstance(beams, Mapping):
+        raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
+    springs, index = {}, {j: j for j in range(model.njoints)}
+    geometries = list(geometries)
+    for beam, spec in beams.items():
+        end, K = beam_stiffness(model, beam, spec)
+        name = f"{beam}_beam"
+        model, geometries, step = _insert(model, geometries, _site(model, beam, end), name)
+        index = {j: step[i] for j, i in index.items()}
+        springs[name] = K
+    return model, geometries, springs, index
+
+
+def insert_beams(clm, beams: Mapping[str, Mapping]):
+    """:class:`ClosedLoopModel` ``clm`` with ``beams`` (:func:`apply_beams`) on its links.
+
+    Actuated joints, springs and locked joints keep their names; closure anchors are
+    carried over on their joints (an anchor on a link's parent joint stays with the beam's
+    start: to close a loop at a beam's tip, name a frame beyond a fixed end in the closure
+    file, whose closures are built after the beams). A configuration of ``clm`` maps to
+    the new model by :func:`map_configuration`.
+
+    Raises:
+        BeamError: a bad specification (the message names the beam and the value).
+    """
+    from .model import ClosedLoopModel, Closure
+
+    geoms = [clm.visual_model, clm.collision_model]
+    model, geoms, springs, index = apply_beams(clm.model, geoms, beams)
+    closures = [
+        Closure(type(k)(model, index[k.joint1_id], k.joint1_placement, index[k.joint2_id],
+                        k.joint2_placement), c.name)
+        for c in clm.closures for k in [c.constraint]
+    ]  # fmt: skip
+    return ClosedLoopModel(
+        model,
+        closures,
+        clm.actuated,
+        {**clm.springs, **springs},
+        clm.locked,
+        geoms[0],
+        geoms[1],
+        clm.name,
+    )

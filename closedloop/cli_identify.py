@@ -1,0 +1,53 @@
+"""``closedloop identify``: spring stiffnesses fitted to measured deflections.
+
+    closedloop identify MODEL [--closures F] --measurements FILE --fit NAME [NAME ...]
+        [--joint-stiffness K | --springs FILE] [--json]
+
+``--fit`` names joints; ``a+b`` ties joints a and b to one value. Start values come from
+the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the YAML
+of :func:`closedloop.identification.read_measurements` (``frame``, ``measurements``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from .identification import identify, read_measurements
+
+
+def add_parser(sub, model_arguments) -> None:
+    """The ``identify`` subparser; ``model_arguments(p)`` adds MODEL, --closures, springs."""
+    p = sub.add_parser(
+        "identify",
+        help="fit spring stiffnesses to measured deflections",
+        description=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    model_arguments(p)
+    p.add_argument("--measurements", required=True, metavar="FILE", help="measurement YAML")
+    p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run_identify)
+
+
+def run_identify(args) -> int:
+    """Run ``closedloop identify``; returns the exit code (0)."""
+    from .cli_map import model_source  # MODEL, --closures and springs, as for a map
+
+    clm = model_source(args).load()
+    frame, data = read_measurements(args.measurements)
+    groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
+    fit = identify(clm, data, frame, groups)
+    if args.json:
+        print(json.dumps({"model": clm.name, "frame": frame, **fit.to_dict()}, allow_nan=False))
+        return 0
+    print(f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
+          f"weighted residual RMS {fit.residual_rms:.3g}")  # fmt: skip
+    for name in fit.names:
+        if fit.estimates[name] is None:
+            print(f"  {name}: not identifiable from these data")
+        else:
+            print(f"  {name} = {fit.estimates[name]:.6g} +- {fit.std_errors[name]:.2g} "
+                  "[N m/rad or N/m]")  # fmt: skip
+    return 0

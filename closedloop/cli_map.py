@@ -1,0 +1,182 @@
+"""``closedloop map``: a stiffness index over a grid of actuated inputs, as data and a figure.
+
+    closedloop map MODEL [--closures F] --frame NAME --sweep JOINT=START:STOP:NUM
+        [--sweep ...] [--fixed JOINT=VALUE ...] | --points FILE
+        [--index NAME] [--force FX FY FZ] [--torque NX NY NZ]
+        [--workers N | --scheduler ADDRESS] [--out DIR]
+
+Values are SI (rad, m). ``--points`` reads a text file of actuated values, one point a row
+(whitespace or comma separated, the model's actuated order). The files are written by
+:meth:`closedloop.maps.StiffnessMap.save`. ``--scheduler`` runs the chunks on a Dask
+distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
+``dask worker ADDRESS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .exceptions import InvalidInputError
+from .maps import CHUNK, INDICES, ModelSource, stiffness_map
+
+#: Points timed first for the estimate of a long map.
+PROBE = 3
+#: Seconds between progress lines when standard error is not a terminal.
+PROGRESS_PERIOD = 5.0
+
+
+def _sweep(text: str) -> tuple[str, np.ndarray]:
+    try:
+        name, spec = text.split("=", 1)
+        start, stop, num = spec.split(":")
+        values = np.linspace(float(start), float(stop), int(num))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected JOINT=START:STOP:NUM (SI, NUM >= 1 points)"
+        ) from None
+    if values.size < 1 or not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected finite START, STOP and NUM >= 1")
+    return name, values
+
+
+def _fixed(text: str) -> tuple[str, float]:
+    try:
+        name, value = text.split("=", 1)
+        return name, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected JOINT=VALUE (SI)") from None
+
+
+def add_parser(sub, parent_arguments) -> None:
+    """The ``map`` subparser; ``parent_arguments(p)`` adds MODEL, --closures, --frame and
+    the springs options."""
+    p = sub.add_parser(
+        "map",
+        help="a stiffness index over a grid of actuated inputs (NPZ, CSV, PNG)",
+        description=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parent_arguments(p)
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--sweep", type=_sweep, action="append", metavar="JOINT=START:STOP:NUM")
+    what.add_argument("--points", metavar="FILE", help="actuated values, one point a row")
+    p.add_argument("--fixed", type=_fixed, action="append", default=[], metavar="JOINT=VALUE")
+    p.add_argument("--index", choices=sorted(INDICES), default="det_K", help="index to plot")
+    for name, unit in (("--force", "N"), ("--torque", "N m")):
+        p.add_argument(name, nargs=3, type=float, metavar=("X", "Y", "Z"),
+                       help=f"load of the deflection indices, world axes [{unit}]")  # fmt: skip
+    run = p.add_mutually_exclusive_group()
+    run.add_argument("--workers", type=int, metavar="N", help="local processes")
+    run.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786")
+    p.add_argument("--chunk", type=int, default=CHUNK, metavar="N", help="points per task")
+    p.add_argument("--out", default="closedloop-map", metavar="DIR", help="output folder")
+    p.set_defaults(func=run_map)
+
+
+def _points(path: str) -> np.ndarray:
+    try:
+        text = Path(path).read_text().replace(",", " ")
+    except OSError as e:
+        raise InvalidInputError(f"--points {path!r}: {e.strerror}") from None
+    try:
+        rows = [[float(x) for x in line.split()] for line in text.splitlines() if line.strip()]
+        return np.array(rows, dtype=float)
+    except ValueError:
+        raise InvalidInputError(f"--points {path!r}: expected rows of numbers") from None
+
+
+def _executor(args):
+    if args.scheduler is None:
+        return None
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
+    try:
+        return Client(args.scheduler, timeout="10s").get_executor()
+    except (OSError, TimeoutError) as e:
+        raise InvalidInputError(
+            f"cannot reach the Dask scheduler {args.scheduler!r}: {e}"
+        ) from None
+
+
+def model_source(args) -> ModelSource:
+    """The :class:`ModelSource` of the MODEL, --closures and springs options."""
+    from .data import resolve
+    from .io import read_springs_file
+
+    robot, closures = resolve(args.model, args.closures)
+    springs = read_springs_file(args.springs) if args.springs else {}
+    frozen = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in springs.items()))
+    return ModelSource(str(robot), None if closures is None else str(closures), frozen,
+                       args.joint_stiffness)  # fmt: skip
+
+
+def run_map(args) -> int:
+    """Run ``closedloop map``; returns the exit code (0)."""
+    from .cli import output_folder  # the command line's shared checks (it imports this)
+
+    out = output_folder(args.out)  # before any work
+    source = model_source(args)
+    clm = source.load()
+    clm.frame_id(args.frame)
+    wrench = None
+    if args.force is not None or args.torque is not None:
+        wrench = np.r_[args.force or (0.0, 0.0, 0.0), args.torque or (0.0, 0.0, 0.0)]
+    if args.sweep:
+        grid = {"sweeps": dict(args.sweep), "fixed": dict(args.fixed)}
+        n = int(np.prod([v.size for _, v in args.sweep]))
+    else:
+        grid = {"points": _points(args.points)}
+        n = len(grid["points"])
+    options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk}
+    if n > PROBE:  # an estimate before a long run, from a few points computed here
+        t0 = time.perf_counter()
+        probe = {"points": _first(clm, grid)} if args.sweep else {"points": grid["points"][:PROBE]}
+        stiffness_map(clm, **options, **probe)
+        per_point = (time.perf_counter() - t0) / PROBE
+        share = max(1, args.workers or 1)
+        print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
+              f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
+    result = stiffness_map(
+        source if (args.workers or args.scheduler) else clm,
+        workers=args.workers,
+        executor=_executor(args),
+        progress=_reporter(n),
+        **options,
+        **grid,
+    )
+    paths = result.save(out, args.index)
+    counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
+    print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def _first(clm, grid) -> np.ndarray:
+    from .maps import grid_points
+
+    return grid_points(clm, grid["sweeps"], grid["fixed"])[0][:PROBE]
+
+
+def _reporter(total: int):
+    """Progress on stderr: a bar on a terminal, a line every PROGRESS_PERIOD s elsewhere."""
+    start, last = time.perf_counter(), [0.0]
+    tty = sys.stderr.isatty()
+
+    def report(done: int, n: int) -> None:
+        now = time.perf_counter() - start
+        if tty:
+            print(f"\r{done}/{n} points {now:6.1f} s", end="" if done < n else "\n",
+                  file=sys.stderr)  # fmt: skip
+        elif now - last[0] >= PROGRESS_PERIOD or done == n:
+            last[0] = now
+            print(f"{done}/{n} points, {now:.1f} s", file=sys.stderr)
+
+    return report

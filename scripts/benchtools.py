@@ -1,0 +1,226 @@
+"""Shared helpers of the benchmark scripts: modes, interleaved timing, environment, table."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Mode:
+    """How hard to measure: repeats (medians over them) and the length of one batch [s]."""
+
+    name: str
+    repeats: int
+    batch_seconds: float
+
+    @property
+    def smoke(self) -> bool:
+        return self.name == "smoke"
+
+
+MODES = {
+    "smoke": Mode("smoke", 1, 0.0),  # one call of everything: checks that rows print
+    "quick": Mode("quick", 5, 0.01),
+    "full": Mode("full", 9, 0.04),
+}
+
+
+#: Environment variables that set the number of BLAS / LAPACK threads.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def parse_mode(doc: str, argv: Sequence[str] | None = None) -> Mode:
+    """--quick / --smoke / (default) full, from the command line.
+
+    ``--blas-threads N`` runs the script again with N BLAS threads (the variables must be
+    set before numpy is loaded); the sweep workers inherit them.
+    """
+    parser = argparse.ArgumentParser(description=doc)
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--quick", action="store_true", help="short run (< 60 s)")
+    group.add_argument("--smoke", action="store_true", help="one iteration of each row")
+    parser.add_argument(
+        "--blas-threads", type=int, metavar="N", help="BLAS threads per process (default: all)"
+    )
+    args = parser.parse_args(argv)
+    if args.blas_threads is not None and argv is None:
+        wanted = str(args.blas_threads)
+        if any(os.environ.get(k) != wanted for k in BLAS_THREAD_VARIABLES):
+            os.environ.update(dict.fromkeys(BLAS_THREAD_VARIABLES, wanted))
+            os.execv(sys.executable, [sys.executable, *sys.argv])
+    return MODES["smoke" if args.smoke else "quick" if args.quick else "full"]
+
+
+#: Shortest batch of unit calls [s] (also in a smoke run: a single call is too noisy).
+UNIT_BATCH_SECONDS = 0.002
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Medians over repeats: time of one call [s], of one unit call [s], and their ratio."""
+
+    seconds: float
+    unit: float
+    ratio: float
+    repeats: int = 1
+
+
+def _calls(func: Callable[[], object], seconds: float) -> int:
+    """Calls per batch so that a batch lasts about ``seconds`` (after one warm-up call)."""
+    start = time.perf_counter()
+    func()
+    one = time.perf_counter() - start
+    return max(1, int(seconds / max(one, 1e-9)))
+
+
+def _batch(func: Callable[[], object], calls: int) -> float:
+    start = time.perf_counter()
+    for _ in range(calls):
+        func()
+    return (time.perf_counter() - start) / calls
+
+
+def interleaved(
+    func: Callable[[], object],
+    unit: Callable[[], object],
+    mode: Mode,
+    per: int = 1,
+    once: bool = False,
+    budget: float = float("inf"),
+) -> Timing:
+    """Time ``func`` against ``unit`` in alternating batches (unit, func, unit, func...).
+
+    Each repeat's ratio uses the unit batch timed just before it; ``per`` divides the
+    time of one ``func`` call (e.g. the number of poses of a sweep); ``once``: one call
+    of ``func`` per repeat and no warm-up (long runs), and no new repeat once the repeats
+    have taken ``budget`` seconds.
+    """
+    n_func = 1 if once else _calls(func, mode.batch_seconds)
+    n_unit = _calls(unit, max(mode.batch_seconds, UNIT_BATCH_SECONDS))
+    times, units, ratios = [], [], []
+    start = time.perf_counter()
+    for _ in range(mode.repeats):
+        if times and time.perf_counter() - start > budget:
+            break
+        u = _batch(unit, n_unit)
+        f = _batch(func, n_func) / per
+        times.append(f)
+        units.append(u)
+        ratios.append(f / u)
+    return Timing(
+        statistics.median(times), statistics.median(units), statistics.median(ratios), len(times)
+    )
+
+
+def wall_ratio(command: Sequence[str], reference: Sequence[str], mode: Mode) -> Timing:
+    """Median wall time of a command and of a reference command, run alternately."""
+    runs = 1 if mode.smoke else 5 if mode.name == "quick" else 9
+
+    def run(cmd: Sequence[str]) -> float:
+        start = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        return time.perf_counter() - start
+
+    run(command)  # warm the file cache
+    pairs = [(run(reference), run(command)) for _ in range(runs)]
+    ref = [r for r, _ in pairs]
+    cmd = [c for _, c in pairs]
+    ratios = [c / r for r, c in pairs]
+    return Timing(statistics.median(cmd), statistics.median(ref), statistics.median(ratios), runs)
+
+
+def growth_exponent(nv: Sequence[int], seconds: Sequence[float]) -> float:
+    """Slope of log(time) against log(nv), least squares on the upper half of the sizes."""
+    order = np.argsort(nv)
+    upper = order[len(order) // 2 :]
+    x, y = np.log(np.asarray(nv, float)[upper]), np.log(np.asarray(seconds, float)[upper])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def fmt_time(seconds: float) -> str:
+    """A time with a readable unit (ns, us, ms, s)."""
+    if not math.isfinite(seconds):
+        return str(seconds)
+    for scale, name in ((1.0, "s"), (1e-3, "ms"), (1e-6, "us")):
+        if seconds >= scale:
+            return f"{seconds / scale:.3g} {name}"
+    return f"{seconds * 1e9:.3g} ns"
+
+
+def cores() -> tuple[int, int]:
+    """(cores of the machine, cores usable by this process)."""
+    total = os.cpu_count() or 1
+    try:
+        return total, len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return total, total
+
+
+def lapack_probe() -> str:
+    """Time of a small least-squares solve (dgels, 27 x 15, 12 right-hand sides): a few us
+    single-threaded; 10-100x more when a multi-threaded BLAS fights a loaded machine."""
+    import scipy.linalg
+
+    rng = np.random.default_rng(0)
+    A, B = rng.standard_normal((27, 15)), rng.standard_normal((27, 12))
+    t = interleaved(lambda: scipy.linalg.lapack.dgels(A, B), lambda: None, MODES["quick"])
+    setting = ", ".join(f"{k}={os.environ.get(k, 'unset')}" for k in BLAS_THREAD_VARIABLES)
+    return f"LAPACK probe: dgels 27x15 {fmt_time(t.seconds)} ({setting})"
+
+
+def load() -> str:
+    """The load average (1, 5, 15 min) as text."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+class Table:
+    """A Markdown table of rows (id, row, target, measured, absolute), printed as it grows.
+
+    The environment (versions, cores, load average) comes before it, the notes and the
+    load average at the end after it.
+    """
+
+    HEADER = ("id", "row (issue 10)", "target", "measured", "absolute")
+
+    def __init__(self, title: str, mode: Mode):
+        import pinocchio as pin
+
+        total, usable = cores()
+        print(f"# {title} ({mode.name} run: medians of {mode.repeats} repeats)")
+        print(f"python {platform.python_version()}, pin {pin.__version__}, numpy {np.__version__}"
+              f"; {total} cores ({usable} usable); load average at start: {load()}")  # fmt: skip
+        print(lapack_probe())
+        print("unit = one pinocchio.computeJointJacobians call on the same model, timed in "
+              "alternating batches with the row\n")  # fmt: skip
+        print("| " + " | ".join(self.HEADER) + " |")
+        print("|" + " --- |" * len(self.HEADER), flush=True)
+        self.notes: list[str] = []
+
+    def row(self, key: str, name: str, target: str, measured: str, absolute: str) -> None:
+        print(f"| {key} | {name} | {target} | {measured} | {absolute} |", flush=True)
+
+    def units(self, key: str, name: str, target: str, t: Timing, what: str = "") -> None:
+        """A row measured in units of the computeJointJacobians call."""
+        unit = f"unit {fmt_time(t.unit)}"
+        self.row(key, name, target, f"{t.ratio:.1f} units", f"{fmt_time(t.seconds)}{what}; {unit}")
+
+    def note(self, text: str) -> None:
+        self.notes.append(text)
+
+    def close(self) -> None:
+        print()
+        for text in self.notes:
+            print(f"* {text}")
+        print(f"* load average at end: {load()}", flush=True)
+        sys.stdout.flush()
