@@ -31,14 +31,13 @@ import numpy as np
 
 from closedloop import __version__
 from closedloop.blas import single_threaded_blas
-from closedloop.cli import Parser, closed_pipe, error_line, output_file
+from closedloop.cli import Parser, error_line, run_command
 from closedloop.exceptions import (
     EXIT_BAD_INPUT,
     EXIT_FAILED,
     EXIT_OK,
     EXIT_RANK_DEFICIENT,
-    ClosedLoopError,
-    exit_status,
+    InvalidInputError,
 )
 
 from .api import CaHyManStiffness, backend_names, stiffness
@@ -56,8 +55,8 @@ DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
 KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
 
 
-class UsageError(Exception):
-    """A command-line error (bad option or value)."""
+class UsageError(InvalidInputError):
+    """A command-line error (bad option or value): exit status 2."""
 
 
 #: The exit statuses, as the help states them.
@@ -303,24 +302,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         argv = sys.argv[1:] if argv is None else list(argv)
         args = build_parser(command_of(argv)).parse_args(argv)
-        if getattr(args, "html", None):
-            output_file(args.html, "--html")  # before any work
-        status = int(args.func(args) or 0)
-        sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
-        return status
-    except BrokenPipeError:
-        return closed_pipe()
     except UsageError as e:
         print(error_line(PROG, e), file=sys.stderr)
         return EXIT_BAD_INPUT
-    except ClosedLoopError as e:
-        print(error_line(PROG, e), file=sys.stderr)
-        return exit_status(e)
-    except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
-        print(error_line(PROG, f"numerical failure: {e}"), file=sys.stderr)
-        return EXIT_FAILED
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else 0
+    return run_command(PROG, args)
 
 
 if __name__ == "__main__":

@@ -436,19 +436,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:  # --help (0) or a usage error (2), already printed
         return e.code if isinstance(e.code, int) else EXIT_ERROR
+    return run_command(PROG, args)
+
+
+def run_command(prog: str, args: argparse.Namespace) -> int:
+    """Run a parsed subcommand ``args.func(args)`` and return its exit status; a closed
+    pipe, a typed error or a LAPACK failure end as one line and the documented status
+    (:func:`closedloop.exceptions.exit_status`). Shared by both command lines."""
     try:
         if getattr(args, "html", None):
             output_file(args.html, "--html")  # before any work
-        code = args.func(args)
+        status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
-        return code
+        return status
     except BrokenPipeError:
         return closed_pipe()
     except ClosedLoopError as e:
-        print(error_line(PROG, e), file=sys.stderr)
+        print(error_line(prog, e), file=sys.stderr)
         return exit_status(e)
     except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
-        print(error_line(PROG, f"numerical failure: {e}"), file=sys.stderr)
+        print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
 
 
