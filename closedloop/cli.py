@@ -59,6 +59,7 @@ from .exceptions import (
     OpenLoopError,
     exit_status,
 )
+from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
 from .model import ClosedLoopModel
 
@@ -193,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="fx fy fz [N] nx ny nz [N m] at the frame (in --axes): print the share of the "
         "deflection energy stored in each spring and beam",
     )  # fmt: skip
+    add_preload_arguments(p)
     p.set_defaults(func=stiffness)
     v = sub.add_parser(
         "view",
@@ -248,6 +250,46 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
         help="stiffness of every actuated joint without spring [N m/rad or N/m]",
     )
     springs.add_argument("--springs", metavar="FILE", help="YAML mapping joint -> stiffness")
+
+
+def add_preload_arguments(p: argparse.ArgumentParser) -> None:
+    """--gravity [GX GY GZ], --payload MASS [X Y Z], --preload FX FY FZ NX NY NZ (SI)."""
+    p.add_argument(
+        "--gravity", nargs="*", type=float, metavar="G",
+        help="weigh the model's link inertias: GX GY GZ [m/s^2], world axes (no values: "
+        "0 0 -9.81); q is then the springs' rest configuration and the result the tangent "
+        "compliance where the mechanism settles, with its sag",
+    )  # fmt: skip
+    p.add_argument(
+        "--payload", nargs="+", type=float, metavar="V",
+        help="MASS [kg] [X Y Z]: a point mass at the loaded frame, offset in its axes [m] "
+        "(needs --gravity)",
+    )  # fmt: skip
+    p.add_argument(
+        "--preload", nargs=6, type=float, metavar="W",
+        help="dead-load wrench fx fy fz [N] nx ny nz [N m] at the frame, world axes",
+    )  # fmt: skip
+
+
+def preload_from_args(args: argparse.Namespace) -> dict:
+    """Keyword arguments of :func:`closedloop.compliance.compliance` for the preload."""
+    out: dict = {}
+    if args.gravity is not None:
+        if len(args.gravity) not in (0, 3):
+            raise InvalidInputError(f"--gravity takes 0 or 3 values, got {len(args.gravity)}")
+        out["gravity"] = tuple(args.gravity) or (0.0, 0.0, -9.81)
+    if args.payload is not None:
+        if len(args.payload) not in (1, 4):
+            raise InvalidInputError(
+                f"--payload takes MASS or MASS X Y Z, got {len(args.payload)} values"
+            )
+        if args.gravity is None:
+            raise InvalidInputError("--payload weighs nothing without --gravity")
+        offset = args.payload[1:] or [0.0, 0.0, 0.0]
+        out["payloads"] = [Payload(args.payload[0], args.frame, offset)]
+    if args.preload is not None:
+        out["preload"] = args.preload
+    return out
 
 
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
@@ -406,16 +448,25 @@ def model_from_args(args: argparse.Namespace, geometry: bool = False):
     return clm, configuration(clm, args.q, args.actuated)
 
 
+def _vector(v) -> str:
+    return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
+
+
 def stiffness(args: argparse.Namespace) -> int:
     """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
     clm, state = model_from_args(args)
-    res = compliance(state, args.frame, axes=args.axes)
+    res = compliance(state, args.frame, axes=args.axes, **preload_from_args(args))
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
         print(json.dumps(doc | ({"energy_shares": shares} if shares else {}), allow_nan=False))
     else:
         print(format_report(clm, res))
+        if getattr(res, "equilibrium", None) is not None:
+            sag = res.sag
+            print(f"sag under the preload: {_vector(1e3 * sag[:3])} mm, "
+                  f"{_vector(np.degrees(sag[3:]))} deg (world axes); stability margin "
+                  f"{res.stability_margin:.3g}")  # fmt: skip
         for name, share in (shares or {}).items():  # the per-element breakdown
             print(f"energy share {share:7.2%}  {name}")
     return EXIT_OK if res.is_full_rank else EXIT_RIGID

@@ -209,3 +209,27 @@ def test_cahyman_masses_sit_where_eq_11_puts_them(legs_deg, alpha4_deg, s4):
     lever = p.m_M4 * p.L / 2 + p.m_MM2 * p.L + p.m_M5 * (p.L + s4 / 2)
     # positive alpha_4 raises the arm: holding it up against gravity takes +g cos(a4) lever
     np.testing.assert_allclose(torque, 9.81 * np.cos(a4) * lever, rtol=1e-12)
+
+
+def test_command_line_gravity_payload_and_preload(capsys):
+    import json
+
+    from closedloop.cli import main
+
+    q = UR5_POSES[0]
+    args = ["stiffness", str(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"),
+            "--frame", "tool0", "--q", *map(repr, q.tolist()), "--joint-stiffness", repr(UR5_K),
+            "--gravity", "--payload", "2", "0", "0", "0.05", "--preload", "1", "0", "0", "0",
+            "0", "0", "--json"]  # fmt: skip
+    assert main(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    ref = cl.compliance(_ur5(), q, "tool0", gravity=(0.0, 0.0, -9.81),
+                        payloads=[Payload(2.0, "tool0", np.array([0.0, 0.0, 0.05]))],
+                        preload=[1.0, 0, 0, 0, 0, 0])  # fmt: skip
+    np.testing.assert_allclose(doc["sag"], ref.sag, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(doc["q_eq"], ref.q, rtol=1e-12)
+    assert doc["weight"]["payloads"][0]["mass_kg"] == 2.0 and doc["preload"][0] == 1.0
+    for bad, match in ((["--payload", "2"], "weighs nothing without --gravity"),
+                       (["--gravity", "1", "2"], "--gravity takes 0 or 3 values")):  # fmt: skip
+        assert main(args[:13] + bad) == 2
+        assert match in capsys.readouterr().err
