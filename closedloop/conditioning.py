@@ -144,9 +144,14 @@ def rule_rank(s: np.ndarray, rtol: float = RANK_RTOL) -> int:
     return int(np.count_nonzero(s > rtol * s[0])) if s.size and s[0] > 0.0 else 0
 
 
+_NO_DIRECTIONS = readonly(np.zeros((6, 0)))
+
+
 def _rigid_directions(U: np.ndarray, rank: int, d: np.ndarray) -> np.ndarray:
     """(6, 6 - rank) orthonormal null space of C from the left singular vectors U (6, 6)
     of a scaled factor: null(C) = D null(C_s), signed and ordered."""
+    if rank == 6:
+        return _NO_DIRECTIONS
     rigid = U[:, rank:] * d[:, None]
     return readonly(_signed(np.linalg.qr(rigid)[0] if rigid.shape[1] else rigid))
 

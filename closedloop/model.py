@@ -192,6 +192,7 @@ class ClosedLoopModel:
         self._local = threading.local()
         self._pool: list[tuple[pin.Data, list]] = []
         self._memo: dict = {}
+        self._frame_ids: dict[str, int] = {}
         self._length: float | None = None
         self.closures = tuple(
             c if isinstance(c, Closure) else Closure(c, f"closure{i}")
@@ -358,8 +359,13 @@ class ClosedLoopModel:
 
     # ------------------------------------------------------------------ naming helpers
     def frame_id(self, name: str) -> int:
-        """Index of frame ``name`` (raises :class:`NameNotFoundError`)."""
-        return frame_id(self.model, name)
+        """Index of frame ``name`` (raises :class:`NameNotFoundError`); remembered."""
+        try:
+            return self._frame_ids[name]
+        except (KeyError, TypeError):  # TypeError: an unhashable name, refused below
+            fid = frame_id(self.model, name)
+            self._frame_ids[name] = fid
+            return fid
 
     def joint_id(self, name: str) -> int:
         """Index of joint ``name`` (raises :class:`NameNotFoundError`)."""
@@ -416,7 +422,7 @@ class ClosedLoopModel:
         q = real_array(q, "q").reshape(-1)
         if q.shape != (self.model.nq,):
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
-        if not np.all(np.isfinite(q)):
+        if not np.isfinite(q).all():
             raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
         return q
 
