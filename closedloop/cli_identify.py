@@ -13,8 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from .identification import identify, read_measurements
-
 
 def add_parser(sub, model_arguments) -> None:
     """The ``identify`` subparser; ``model_arguments(p)`` adds MODEL, --closures, springs."""
@@ -34,6 +32,7 @@ def add_parser(sub, model_arguments) -> None:
 def run_identify(args) -> int:
     """Run ``closedloop identify``; returns the exit code (0)."""
     from .cli_map import model_source  # MODEL, --closures and springs, as for a map
+    from .identification import identify, read_measurements  # scipy.optimize: on demand
 
     clm = model_source(args).load()
     frame, data = read_measurements(args.measurements)
