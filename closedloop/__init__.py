@@ -22,6 +22,7 @@ from .conditioning import ILL_CONDITIONED, RANK_RTOL
 from .configuration import CLOSURE_TOL, Configuration
 from .exceptions import (
     AssemblyError,
+    BeamError,
     ClosedLoopError,
     EquilibriumError,
     InvalidInputError,
@@ -51,6 +52,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "Assembly",
     "AssemblyError",
+    "BeamError",
     "ClosedLoopError",
     "ClosedLoopModel",
     "ComplianceResult",

@@ -45,20 +45,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
+from .exceptions import BeamError, InvalidInputError
 
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
 EXPLICIT = ("A", "Iy", "Iz", "J")
 BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6")
-
-
-class BeamError(InvalidInputError):
-    """A beam specification that cannot be used; the message names the beam and the value."""
-
-    def __init__(self, beam: str, message: str):
-        self.beam = beam
-        super().__init__(f"beam {beam!r}: {message}")
 
 
 def _positive(beam: str, what: str, value) -> float:

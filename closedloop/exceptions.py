@@ -34,6 +34,14 @@ class InvalidInputError(ClosedLoopError, ValueError):
     """A numerical input with the wrong shape, sign or value (NaN, negative stiffness...)."""
 
 
+class BeamError(InvalidInputError):
+    """A beam specification that cannot be used; the message names the beam and the value."""
+
+    def __init__(self, beam: str, message: str):
+        self.beam = beam
+        super().__init__(f"beam {beam!r}: {message}")
+
+
 class ModelFileError(ClosedLoopError, ValueError):
     """A robot or closure file that is missing or cannot be parsed."""
 
