@@ -30,29 +30,40 @@ inv(C), which would lose cond(C) = cond(J)^2 digits.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
 from .arrays import check_wrench, frozen, readonly
 from .conditioning import (
     ILL_CONDITIONED,
-    RANK_RTOL,
     Spectrum,
     spectrum_from_factor,
-    split_factor,
     twist_scaling,
 )
 from .configuration import Configuration, as_configuration
 from .exceptions import (
     InvalidInputError,
-    MechanismError,
     RigidDirectionsError,
     SingularConfigurationError,
 )
-from .kinematics import nullspace, rigid_rows
 from .model import ClosedLoopModel
+from .springs import PATHS, SpringFactor, spring_factor, spring_subspace
+
+# the admissible motions and the spring factor live in closedloop.springs; their names stay
+# importable from here (first release)
+__all__ = [
+    "PATHS",
+    "TWIST_LABELS",
+    "UNITS",
+    "ComplianceResult",
+    "SpringFactor",
+    "compliance",
+    "compliance_result",
+    "describe_directions",
+    "energy_shares",
+    "spring_factor",
+    "spring_subspace",
+]
 
 #: Labels of the twist / wrench coordinates, in order.
 TWIST_LABELS = ("dx", "dy", "dz", "rx", "ry", "rz")
@@ -187,185 +198,6 @@ def describe_directions(V: np.ndarray) -> str:
         terms = [f"{c:+.2f} {lab}" for c, lab in zip(v, TWIST_LABELS, strict=True) if abs(c) > 5e-3]
         parts.append("[" + " ".join(terms) + "]")
     return ", ".join(parts)
-
-
-class SpringFactor(NamedTuple):
-    """Admissible motions and the square-root factor of their spring stiffness.
-
-    Attributes:
-        N: (nv, d) basis of the admissible motions dq = N y (closures and locks kept),
-            orthonormal in the scaled joint coordinates (prismatic ones divided by L).
-        V: (d, s) orthonormal directions of y with a restoring spring.
-        sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
-            [sqrt(N m)].
-        n_internal: number of spring-free motions that do not move the frame (left out).
-        path: how N was found: ``"serial"`` (no closure, no passive joint: N selects the
-            spring coordinates), ``"partitioned"`` (the passive joints follow the springs
-            through the closures, dq_p = X dq_s) or ``"null-space"`` (the general path).
-    """
-
-    N: np.ndarray
-    V: np.ndarray
-    sigma: np.ndarray
-    n_internal: int
-    path: str = "null-space"
-    identity_V: bool = False  # V is the identity (the fast paths without block springs)
-
-    @property
-    def NV(self) -> np.ndarray:
-        """(nv, s) N V: the sprung admissible motions."""
-        return self.N if self.identity_V else self.N @ self.V
-
-    @property
-    def P(self) -> np.ndarray:
-        """(nv, s) N V diag(1/sigma): dq = P P^T J^T w, C = (J P) (J P)^T."""
-        return self.NV / self.sigma
-
-
-class _Scaling(NamedTuple):
-    """Unit-free scaling of a model at length L (computed once per model and L)."""
-
-    s_q: np.ndarray  # (nv,) dq = s_q * scaled dq: L for linear coordinates, 1 for angles
-    row_scale: np.ndarray  # (m, 1) closure rows in metres divided by L
-    locked_rows: np.ndarray  # (n_locked, nv) selection rows of the locked coordinates
-    sprung: np.ndarray  # (s,) indices of the coordinates with a finite spring
-    sqrt_k: np.ndarray  # (s,) sqrt of their scaled stiffness k s_q^2 [sqrt(N m)]
-    passive: np.ndarray  # (p,) indices of the coordinates without spring (k = 0)
-    # With spring blocks (else None): the scaled square root R_s (s, s) of the sprung
-    # stiffness, diag(s_q) K_ss diag(s_q) = R_s^T R_s, and its SVD R_s = U diag(sigma) V^T,
-    # which is the spring factor of the fast paths on y = dq_s: K_r = V diag(sigma^2) V^T.
-    root: np.ndarray | None = None
-    root_V: np.ndarray | None = None
-    root_sigma: np.ndarray | None = None
-
-    @classmethod
-    def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
-        s_q = np.where(clm.linear_coordinates, L, 1.0)
-        k = clm.stiffness
-        sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
-        root = root_V = root_sigma = None
-        if clm.spring_blocks:
-            root = clm.spring_root[np.ix_(sprung, sprung)] * s_q[sprung]
-            _, root_sigma, Vt = np.linalg.svd(root)
-            root_V = Vt.T
-        return cls(
-            s_q,
-            np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None],
-            rigid_rows(clm),
-            sprung,
-            np.sqrt(k[sprung]) * s_q[sprung],
-            np.flatnonzero(k == 0.0),
-            root,
-            root_V,
-            root_sigma,
-        )
-
-    @property
-    def fast_factor(self) -> tuple[np.ndarray | None, np.ndarray]:
-        """(V (s, s) or None for the identity, sigma (s,)): the spring factor on y = dq_s."""
-        return (None, self.sqrt_k) if self.root is None else (self.root_V, self.root_sigma)
-
-
-#: The partitioned path is taken when the passive part of the scaled closure Jacobian is
-#: well conditioned (reciprocal condition estimate above this): then both paths give C
-#: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
-#: decides, with the rank rule.
-PARTITION_RCOND = 1e-6
-#: Largest residual |J_s + J_p X| of the partitioned closure equations, relative to |J_s|,
-#: for the springs to move freely (else some spring coordinates are tied by the loops).
-PARTITION_RTOL = 1e-9
-
-
-def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | None:
-    """Spring factor without a null space, when the springs determine everything.
-
-    With the closure rows J_c dq = J_s dq_s + J_p dq_p = 0 (scaled, locked coordinates
-    still), a passive part J_p of full column rank fixes dq_p = X dq_s, X = -J_p^+ J_s,
-    for every spring motion dq_s when J_s + J_p X = 0; the admissible motions are then
-    N = [I; X] in the spring coordinates, where K_r = diag(k s_q^2) is already diagonal
-    (with spring blocks: K_r = R_s^T R_s, whose SVD is computed once per model).
-    Returns None when this does not apply (the null-space path then decides).
-    """
-    nv, s, p = state.model.model.nv, sc.sprung, sc.passive
-    T = np.zeros((nv, s.size))
-    T[s, np.arange(s.size)] = 1.0
-    Jc = state.closure_jacobian()
-    if p.size:
-        if Jc.shape[0] < p.size:
-            return None
-        Jc = Jc * sc.row_scale
-        J_s = Jc[:, s] * sc.s_q[s]
-        # least squares min |J_p X + J_s| by QR (LAPACK dgels): R in qr[:p, :p], the
-        # residual's components in x[p:]
-        qr, x, info = scipy.linalg.lapack.dgels(Jc[:, p] * sc.s_q[p], -J_s)
-        if info != 0 or scipy.linalg.lapack.dtrcon(qr[: p.size, : p.size])[0] <= PARTITION_RCOND:
-            return None
-        scale = np.max(np.abs(J_s), initial=0.0)
-        if np.max(np.abs(x[p.size :]), initial=0.0) > PARTITION_RTOL * scale:
-            return None
-        T[p] = x[: p.size]
-    elif Jc.shape[0]:
-        return None  # loops without passive joints tie the springs together
-    # the same spring-free rule as the null-space path, which would find singular values
-    # of the spring factor between min(sigma) / |T| and max(sigma)
-    V, sigma = sc.fast_factor
-    if sigma.size and sigma.min() <= RANK_RTOL * sigma.max() * np.linalg.norm(T):
-        return None
-    path = "partitioned" if Jc.shape[0] else "serial"
-    if V is None:  # diagonal springs: y = dq_s already diagonalises K_r
-        return SpringFactor(T * sc.s_q[:, None], np.eye(s.size), sigma, 0, path, True)
-    return SpringFactor(T * sc.s_q[:, None], V, sigma, 0, path)
-
-
-#: Values of the ``path`` argument of :func:`compliance`.
-PATHS = ("auto", "null-space")
-
-
-def spring_factor(
-    state: Configuration, J: np.ndarray, frame: str, path: str = "auto"
-) -> SpringFactor:
-    """Admissible motions and spring factor at a configuration (module docstring).
-
-    Args:
-        state: the configuration.
-        J: (6, nv) Jacobian of the loaded frame (any reference axes) [m/rad, 1].
-        frame: name of the loaded frame (for messages).
-        path: ``"auto"`` (the serial or partitioned path where it applies, else the null
-            space) or ``"null-space"`` (always the general path).
-
-    Raises:
-        MechanismError: a spring-free motion moves the frame (no static equilibrium):
-            a joint without spring, or a singular configuration where the springs resist
-            a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
-    """
-    clm, L = state.model, state.length
-    sc = clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
-    if path not in PATHS:
-        raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
-    fast = _partitioned_factor(state, sc) if path == "auto" else None
-    if fast is not None:
-        return fast
-    Jc = state.closure_jacobian() * sc.row_scale
-    A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
-    N_s, _ = nullspace(A * sc.s_q)
-    if sc.root is None:
-        S = sc.sqrt_k[:, None] * N_s[sc.sprung]
-    else:  # spring blocks: S^T S = N_s^T diag(s_q) K_q diag(s_q) N_s
-        S = sc.root @ N_s[sc.sprung]
-    sigma, V, Z, _ = split_factor(S)
-    N = N_s * sc.s_q[:, None]
-    if Z.shape[1]:  # spring-free motions must not move the frame
-        JN_s = (J * twist_scaling(L)[:, None]) @ N
-        moves = np.linalg.norm(JN_s @ Z, axis=0) > RANK_RTOL * max(np.linalg.norm(JN_s), 1e-300)
-        if np.any(moves):
-            raise MechanismError(
-                f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} "
-                "motion(s) with no restoring spring (or one below 1e-14 of the stiffest, a "
-                f"singular configuration) move it, driven mostly by "
-                f"{_main_joints(clm, N @ Z[:, moves])}; add springs, lock joints or move away "
-                "from the singularity"
-            )
-    return SpringFactor(N, V, sigma, Z.shape[1])
 
 
 def compliance(
@@ -512,33 +344,3 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
     if total <= 0.0:
         return {}
     return {n: e / total for n, e in out.items()}
-
-
-def spring_subspace(
-    clm: ClosedLoopModel, q: np.ndarray, J: np.ndarray, frame: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Admissible motions and the eigen-decomposition of their spring stiffness K_r.
-
-    The form of :func:`spring_factor` for a model and q (first release).
-
-    Returns:
-        N: (nv, d) basis of the admissible motions (closures and locks kept).
-        V: (d, s) orthonormal eigenvectors of K_r = N^T K_q N with a restoring spring.
-        lam: (s,) their eigenvalues sigma^2 (> 0).
-        n_internal: number of spring-free motions that do not move the frame (left out).
-
-    Raises:
-        MechanismError: a spring-free motion moves the frame (no static equilibrium).
-    """
-    f = spring_factor(Configuration(clm, q), J, frame)
-    return f.N, f.V, f.sigma**2, f.n_internal
-
-
-def _main_joints(clm: ClosedLoopModel, dq: np.ndarray) -> str:
-    weight = np.linalg.norm(np.atleast_2d(dq.T).T, axis=1)
-    names = []
-    for j in range(1, clm.model.njoints):
-        jm = clm.model.joints[j]
-        names.append((float(np.max(weight[jm.idx_v : jm.idx_v + jm.nv])), clm.model.names[j]))
-    top = sorted(names, reverse=True)[:3]
-    return ", ".join(repr(n) for w, n in top if w > 1e-6)

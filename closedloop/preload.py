@@ -25,11 +25,12 @@ import numpy as np
 import scipy.linalg
 
 from .arrays import check_wrench, readonly
-from .compliance import ComplianceResult, compliance, compliance_result, spring_factor
+from .compliance import ComplianceResult, compliance, compliance_result
 from .conditioning import spectrum_from_factor, spectrum_of_matrix, twist_scaling
 from .configuration import Configuration
 from .exceptions import SingularConfigurationError
 from .model import ClosedLoopModel
+from .springs import spring_factor
 from .statics import Equilibrium
 from .tangent import (
     CRITICAL_RTOL,

@@ -49,12 +49,12 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench, readonly
-from .compliance import spring_factor
 from .configuration import Configuration, accepts_configuration
 from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
 from .gravity import GravityLoad, Load, Payload
 from .kinematics import update_kinematics
 from .model import ClosedLoopModel
+from .springs import spring_factor
 from .tangent import EquilibriumEquations
 
 #: Closure tolerance of the equilibrium (infinity norm) [m for points; m, rad for welds].
