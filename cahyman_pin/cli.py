@@ -31,7 +31,7 @@ import numpy as np
 
 from closedloop import __version__
 from closedloop.blas import single_threaded_blas
-from closedloop.cli import Parser, error_line, run_command
+from closedloop.cli_common import Parser, error_line, run_command
 from closedloop.exceptions import (
     EXIT_BAD_INPUT,
     EXIT_FAILED,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.cli import output_folder
+from closedloop.cli_common import output_folder
 
 from .cli import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
 from .model import check_inputs

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.cli import output_folder
+from closedloop.cli_common import output_folder
 from closedloop.compliance import TWIST_LABELS
 
 from .backend_published import CHOICES

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cli_common import output_folder
 from .exceptions import InvalidInputError
 from .maps import CHUNK, INDICES, ModelSource, stiffness_map
 
@@ -119,8 +120,6 @@ def model_source(args) -> ModelSource:
 
 def run_map(args) -> int:
     """Run ``closedloop map``; returns the exit code (0)."""
-    from .cli import output_folder  # the command line's shared checks (it imports this)
-
     out = output_folder(args.out)  # before any work
     source = model_source(args)
     clm = source.load()
