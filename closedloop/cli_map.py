@@ -91,7 +91,8 @@ def _points(path: str) -> np.ndarray:
         raise InvalidInputError(f"--points {path!r}: expected rows of numbers") from None
 
 
-def _executor(args):
+def _client(args):
+    """The Dask client of ``--scheduler`` (None without), to be closed by the caller."""
     if args.scheduler is None:
         return None
     try:
@@ -99,7 +100,7 @@ def _executor(args):
     except ImportError:
         raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
     try:
-        return Client(args.scheduler, timeout="10s").get_executor()
+        return Client(args.scheduler, timeout="10s")
     except (OSError, TimeoutError) as e:
         raise InvalidInputError(
             f"cannot reach the Dask scheduler {args.scheduler!r}: {e}"
@@ -142,14 +143,19 @@ def run_map(args) -> int:
         share = max(1, args.workers or 1)
         print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
               f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
-    result = stiffness_map(
-        source if (args.workers or args.scheduler) else clm,
-        workers=args.workers,
-        executor=_executor(args),
-        progress=_reporter(n),
-        **options,
-        **grid,
-    )
+    client = _client(args)
+    try:
+        result = stiffness_map(
+            source if (args.workers or args.scheduler) else clm,
+            workers=args.workers,
+            executor=None if client is None else client.get_executor(),
+            progress=_reporter(n),
+            **options,
+            **grid,
+        )
+    finally:
+        if client is not None:
+            client.close()
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))

@@ -1,6 +1,7 @@
 """``closedloop map`` and ``closedloop identify`` from the command line."""
 
 import json
+import logging
 import subprocess
 import sys
 
@@ -56,8 +57,8 @@ def test_map_on_a_dask_cluster_equals_the_serial_map(tmp_path, fourbar_urdf, fou
     args = ["map", str(fourbar_urdf), "--closures", str(fourbar_yaml), "--frame", "P",
             "--sweep", "crank=0.2:1.4:7", "--chunk", "2"]  # fmt: skip
     assert main([*args, "--out", str(tmp_path / "serial")]) == 0
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:  # fmt: skip
         assert main([*args, "--scheduler", cluster.scheduler_address,
                      "--out", str(tmp_path / "dask")]) == 0  # fmt: skip
     a, b = np.load(tmp_path / "serial/map.npz"), np.load(tmp_path / "dask/map.npz")
