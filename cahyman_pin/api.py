@@ -92,22 +92,32 @@ def get_backend(name: str) -> Backend:
     return _BACKENDS[name]
 
 
-def generic_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
+def generic_backend(
+    params: CaHyManParams, alpha, alpha4: float, s4: float, *, weight: bool = False
+) -> BackendResult:
     """Pinocchio model + closedloop compliance (the reference backend).
 
-    ``details`` holds ``q`` (nq,), the assembled configuration, and ``compliance``, the
-    :class:`closedloop.compliance.ComplianceResult` at M.
+    With ``weight``, the assembled configuration is the springs' rest configuration: the
+    machine settles under the weight of its masses (``params.m_*``, gravity
+    ``params.gravity`` along -z) and the result is the tangent compliance there
+    (:func:`closedloop.compliance.compliance` with ``gravity``); its ``sag`` is that of M.
+
+    ``details`` holds ``q`` (nq,), the configuration of the result (the sagged one with
+    ``weight``), and ``compliance``, the :class:`closedloop.compliance.ComplianceResult`.
     """
     model = cahyman_model(params)
     q = model.assemble(alpha, alpha4, s4)
     state = Configuration(model.clm, q, length=params.length)
-    result = compliance(state, FRAME_M)
+    gravity = (0.0, 0.0, -params.gravity) if weight else None
+    result = compliance(state, FRAME_M, gravity=gravity)
+    if weight:  # the plate Jacobian at the sagged configuration
+        state = Configuration(model.clm, result.q, length=params.length)
     J_H = state.frame_jacobian(FRAME_H)
     return BackendResult(
         C=result.C,
-        pose=model.pose(q),
+        pose=model.pose(result.q),
         C_platform=readonly(J_H @ result.G),
-        details={"q": q, "compliance": result},
+        details={"q": result.q, "compliance": result},
     )
 
 
@@ -280,6 +290,11 @@ class CaHyManStiffness:
                 "K_s_N_per_m": self.params.K_s,
             },
             "backend": self.backend,
+            "sag_M": (
+                self.details["compliance"].sag.tolist()
+                if hasattr(self.details.get("compliance"), "sag")
+                else None
+            ),
             "units": {**UNITS, "det_K": "N^6/rad^3"},
         }
 
@@ -322,6 +337,7 @@ def stiffness(
     *,
     params: CaHyManParams = DEFAULT_PARAMS,
     backend: str = "generic",
+    weight: bool = False,
 ) -> CaHyManStiffness:
     """Stiffness and compliance of CaHyMan at M for the given inputs.
 
@@ -331,6 +347,9 @@ def stiffness(
         s4: telescope stroke [m], in [0, params.s4_max].
         params: parameters (e.g. ``DEFAULT_PARAMS.with_ks("printed")``).
         backend: name of the backend (see :func:`backend_names`).
+        weight: the machine under the weight of its masses (``params.m_*``), generic
+            backend only (:func:`generic_backend`): the tangent compliance at the sagged
+            pose, and ``details["compliance"].sag`` the sag of M.
 
     Raises:
         InvalidInputError: bad input or unknown backend.
@@ -341,7 +360,17 @@ def stiffness(
     alpha, alpha4, s4 = (real_array(v, n) for v, n in ((alpha, "alpha"), (alpha4, "alpha4"),
                                                          (s4, "s4")))  # fmt: skip
     alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, params)
-    result = get_backend(backend)(params, alpha, alpha4, s4)
+    if weight and backend != "generic":
+        raise InvalidInputError(
+            f"the weight needs the generic backend (the closed forms have no masses), got "
+            f"backend {backend!r}"
+        )
+    solve = get_backend(backend)
+    result = (
+        generic_backend(params, alpha, alpha4, s4, weight=True)
+        if weight
+        else solve(params, alpha, alpha4, s4)
+    )
     return CaHyManStiffness(
         alpha=readonly(alpha),
         alpha4=alpha4,

@@ -131,14 +131,41 @@ def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
 
 
+def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --gravity and --mass NAME=KG (the masses of the paper's eq. 11)."""
+    parser.add_argument(
+        "--gravity", action="store_true",
+        help="the machine under the weight of its masses (generic backend): the tangent "
+        "compliance at the sagged pose, and the sag of M",
+    )  # fmt: skip
+    parser.add_argument(
+        "--mass", action="append", default=[], metavar="NAME=KG",
+        help="a mass of the paper's eq. 11 [kg]: m_HQ, m_QM, m_MM2, m_M4, m_M5 (default 0)",
+    )  # fmt: skip
+
+
+def _masses(args: argparse.Namespace) -> dict[str, float]:
+    out = {}
+    for item in getattr(args, "mass", []):
+        name, _, value = item.partition("=")
+        if name not in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5") or not value:
+            raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of m_HQ, "
+                             "m_QM, m_MM2, m_M4, m_M5")  # fmt: skip
+        out[name] = finite_float(value)
+    return out
+
+
 def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
     """Stiffness at the pose given by :func:`add_pose_arguments`' options (converted to SI)."""
+    params = DEFAULT_PARAMS.with_ks(args.ks)
+    masses = _masses(args)
     return stiffness(
         np.deg2rad(args.alpha),
         math.radians(args.alpha4),
         args.s4 / 1000.0,
-        params=DEFAULT_PARAMS.with_ks(args.ks),
+        params=params.replace(**masses) if masses else params,
         backend=args.backend,
+        weight=getattr(args, "gravity", False),
     )
 
 
@@ -209,6 +236,7 @@ def _add_stiffness(subparsers) -> None:
                               description="Stiffness K and compliance C at M (SI).",
                               epilog=EXIT_HELP)  # fmt: skip
     add_pose_arguments(p)
+    add_weight_arguments(p)
     p.set_defaults(func=_run_stiffness)
 
 
@@ -254,6 +282,7 @@ def _add_deflect(subparsers) -> None:
                               description="Small deflection under a wrench at M.",
                               epilog=EXIT_HELP)  # fmt: skip
     add_pose_arguments(p)
+    add_weight_arguments(p)
     p.add_argument(
         "--force",
         nargs=3,

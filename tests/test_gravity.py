@@ -233,3 +233,28 @@ def test_command_line_gravity_payload_and_preload(capsys):
                        (["--gravity", "1", "2"], "--gravity takes 0 or 3 values")):  # fmt: skip
         assert main(args[:13] + bad) == 2
         assert match in capsys.readouterr().err
+
+
+def test_cahyman_weight_from_the_api_and_the_command_line(capsys):
+    import json
+
+    from cahyman_pin.api import stiffness
+    from cahyman_pin.cli import main
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    p = DEFAULT_PARAMS.replace(m_M4=1.2, m_M5=0.8)
+    alpha, a4, s4 = np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.02
+    r = stiffness(alpha, a4, s4, params=p, weight=True)
+    model = r.details["compliance"]
+    rest = cl.Configuration(cahyman_model(p).clm, model.equilibrium.q_rest)
+    ref = cl.compliance(rest, "M", gravity=(0.0, 0.0, -p.gravity))  # the same, directly
+    assert_close_in_norm(r.C, ref.C, 1e-12)
+    assert np.linalg.norm(model.sag[:3]) > 1e-5  # m: it does sag
+    code = main(["stiffness", "--alpha", "45", "60", "75", "--alpha4", "45", "--s4", "20",
+                 "--gravity", "--mass", "m_M4=1.2", "--mass", "m_M5=0.8", "--json"])  # fmt: skip
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    np.testing.assert_allclose(doc["sag_M"], model.sag, rtol=1e-12, atol=1e-18)
+    assert main(["stiffness", "--gravity", "--backend", "consistent"]) == 2
+    assert "needs the generic backend" in capsys.readouterr().err
