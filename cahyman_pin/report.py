@@ -11,19 +11,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from closedloop.cli_common import output_folder
 from closedloop.compliance import TWIST_LABELS
+from closedloop.exceptions import JointLimitWarning
 
+from .api import stiffness
 from .backend_published import CHOICES
 from .document import Document, Figure, Heading, Paragraph, Table
 from .figures import figure5, figure_load
 from .paper_compare import BACKENDS, TableValues, backend_compliance, table_values
 from .paper_data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_residual
-from .paper_effects import EFFECTS, effect_changes
+from .paper_effects import EFFECTS, ILLUSTRATIVE_MASS, effect_changes
 from .params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, read_params_file, source
 
 DEFAULT_OUT = Path("cahyman-report")
@@ -233,6 +236,48 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
     )
 
 
+def weight_rows(params: CaHyManParams) -> list[tuple[str, np.ndarray, float]]:
+    """(pose label, sag of M (6,) [m, rad], relative change of C) under the weight of the
+    illustrative masses of the eq. (11) effect, as a preload (generic backend)."""
+    masses = {m: ILLUSTRATIVE_MASS for m in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")}
+    heavy = params.replace(**masses)
+    out = []
+    for pose in TABLE_POSES:
+        alpha, alpha4, s4 = pose.si
+        unloaded = stiffness(alpha, alpha4, s4, params=heavy)
+        with warnings.catch_warnings():  # at full or zero stroke the sag may pass a limit
+            warnings.simplefilter("ignore", JointLimitWarning)
+            weighed = stiffness(alpha, alpha4, s4, params=heavy, weight=True)
+        change = np.linalg.norm(weighed.C - unloaded.C) / np.linalg.norm(unloaded.C)
+        out.append((pose.label, weighed.details["compliance"].sag, float(change)))
+    return out
+
+
+def _weight(doc: Document, params: CaHyManParams) -> None:
+    doc.add(
+        Heading("The weight as a preload (what eq. (11) tries)"),
+        Paragraph(
+            "Eq. (11) puts the weights into the load matrix, divided by load components that "
+            "are zero in the tables' columns. The consistent way is a preload: the machine "
+            "settles under its weight (the five named masses, each "
+            f"{ILLUSTRATIVE_MASS} kg here as in the effect above, placed where eq. (11)'s "
+            "lever arms put them: cahyman_pin/urdf_builder.py), and the compliance is the "
+            "tangent one at that equilibrium (geometric stiffness and loop curvature "
+            "included). Below: the sag of M from the unloaded pose (mm, deg, world axes) and "
+            "the relative change of C (Frobenius norm), generic backend. A linear model's "
+            "answer to a load does not depend on the weight; the tangent one changes by the "
+            "amount shown, which is the size of what eq. (11) could add."
+        ),
+    )
+    rows = [
+        (label, *(fmt(1e3 * x, 3, "+") for x in sag[:3]),
+         *(fmt(np.rad2deg(x), 3, "+") for x in sag[3:]), fmt(change, 2))
+        for label, sag, change in weight_rows(params)
+    ]  # fmt: skip
+    doc.add(Table(("pose", "dx [mm]", "dy [mm]", "dz [mm]", "rx [deg]", "ry [deg]", "rz [deg]",
+                   "|dC| / |C|"), tuple(rows)))  # fmt: skip
+
+
 def _matrices(doc: Document, params: CaHyManParams) -> None:
     doc.add(
         Heading("Stiffness matrices at the three configurations"),
@@ -294,6 +339,7 @@ def build_report(
     _tables(doc, tables)
     _linearity(doc)
     _effects(doc, params, tables)
+    _weight(doc, params)
     _matrices(doc, params)
     doc.add(
         Heading("Figures"),

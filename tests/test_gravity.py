@@ -1,5 +1,7 @@
 """Gravity and payloads as preloads: sag and tangent compliance against independent solves."""
 
+import warnings
+
 import mechanisms as mech
 import numpy as np
 import pinocchio as pin
@@ -258,3 +260,24 @@ def test_cahyman_weight_from_the_api_and_the_command_line(capsys):
     np.testing.assert_allclose(doc["sag_M"], model.sag, rtol=1e-12, atol=1e-18)
     assert main(["stiffness", "--gravity", "--backend", "consistent"]) == 2
     assert "needs the generic backend" in capsys.readouterr().err
+
+
+def test_report_weight_section_is_the_preloaded_compliance():
+    # the report's numbers recomputed here: the equilibrium under the weight, directly
+    from cahyman_pin.model import CaHyManModel
+    from cahyman_pin.paper_data import TABLE_POSES
+    from cahyman_pin.paper_effects import ILLUSTRATIVE_MASS
+    from cahyman_pin.params import DEFAULT_PARAMS
+    from cahyman_pin.report import weight_rows
+
+    masses = dict.fromkeys(("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5"), ILLUSTRATIVE_MASS)
+    model = CaHyManModel(DEFAULT_PARAMS.replace(**masses))
+    rows = weight_rows(DEFAULT_PARAMS)
+    assert [r[0] for r in rows] == [p.label for p in TABLE_POSES]
+    for (_, sag, change), pose in zip(rows, TABLE_POSES, strict=True):
+        q = model.assemble(*pose.si)
+        with warnings.catch_warnings():  # a stroke at its end may sag past it: flagged
+            warnings.simplefilter("ignore", cl.JointLimitWarning)
+            eq = cl.solve_equilibrium(model.clm, q, "M", np.zeros(6), gravity=(0, 0, -9.81))
+        np.testing.assert_allclose(sag, eq.displacement, rtol=1e-9, atol=1e-15)
+        assert 0.0 < change < 0.1
