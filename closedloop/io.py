@@ -44,6 +44,7 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError
 from .mjcf import place_free_joints, read_mjcf_extras, single_root_copy
@@ -52,7 +53,7 @@ from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
 MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
-CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams")
+CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
 #: MJCF equality constraints that Pinocchio turns into anchor constraints.
 
@@ -72,6 +73,7 @@ class ClosureSpec:
     springs: dict[str, Stiffness] = field(default_factory=dict)
     locked: tuple[str, ...] = ()
     beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.beams)
+    balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.balls)
 
 
 # ---------------------------------------------------------------------------- YAML files
@@ -180,6 +182,7 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         springs=_check_springs(doc.get("springs") or {}, where),
         locked=_name_list(doc, "locked", where) or (),
         beams=_check_beams(doc.get("beams") or {}, where),
+        balls=_name_list(doc, "balls", where) or (),
     )
 
 
@@ -275,7 +278,18 @@ class _Tree:
 
 
 def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
-    model = _parse(lambda: pin.buildModelFromUrdf(str(path)), path, "robot file")
+    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
+    if spec.balls:
+        copy = urdf_with_balls(path, spec.balls)
+        try:
+            return _read_urdf_tree(copy, spec, closures, geometry, beams, shown=path)
+        finally:
+            copy.unlink()
+    return _read_urdf_tree(path, spec, closures, geometry, beams)
+
+
+def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=None) -> _Tree:
+    model = _parse(lambda: pin.buildModelFromUrdf(str(path)), shown or path, "robot file")
     visual = _geometry(
         geometry,
         lambda: pin.buildGeomFromUrdf(
@@ -283,7 +297,6 @@ def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=No
         ),
         path,
     )
-    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
     tree, blocks = model, {}
     if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
         model, (visual,), blocks, _ = apply_beams(model, [visual], {**spec.beams, **beams})
@@ -294,7 +307,7 @@ def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=No
         closure_between_frames(model, a, b, t)
         for (a, b), t in zip(spec.pairs, spec.types, strict=True)
     ]
-    springs = {**spec.springs, **blocks}
+    springs = ball_springs({**spec.springs, **blocks}, spec.balls)
     return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual)
 
 
