@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.cli_common import output_folder
+from closedloop.cli_common import dask_client, output_folder
 
 from .cli import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
 from .model import check_inputs
@@ -138,8 +138,11 @@ def add_parser(subparsers) -> None:
                    help="force at M [N], world axes, for the deflection indices")  # fmt: skip
     p.add_argument("--torque", nargs=3, type=finite_float, metavar=("NX", "NY", "NZ"),
                    help="torque at M [N m], world axes, for the deflection indices")  # fmt: skip
-    p.add_argument("--workers", type=int, default=None,
-                   help="worker processes (default: all cores; 1: no pool)")  # fmt: skip
+    run = p.add_mutually_exclusive_group()
+    run.add_argument("--workers", type=int, default=None,
+                     help="worker processes (default: all cores; 1: no pool)")  # fmt: skip
+    run.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run on a Dask cluster, e.g. tcp://HOST:8786")  # fmt: skip
     p.add_argument("--chunk-size", type=int, default=None, help="points per task")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
@@ -292,17 +295,22 @@ def _run(args: argparse.Namespace) -> int:
         s4=fixed.get("s4"),
         params=params,
     )
+    client = dask_client(args.scheduler)
     executor = "serial" if args.workers == 1 else "processes"
-    result = sweep(
-        points,
-        backend=args.backend,
-        wrench=_wrench(args),
-        start=args.start,
-        executor=executor,
-        workers=args.workers,
-        chunk_size=args.chunk_size,
-        show_progress=True,
-    )
+    try:
+        result = sweep(
+            points,
+            backend=args.backend,
+            wrench=_wrench(args),
+            start=args.start,
+            executor=executor if client is None else client.get_executor(),
+            workers=args.workers,
+            chunk_size=args.chunk_size,
+            show_progress=True,
+        )
+    finally:
+        if client is not None:
+            client.close()
     paths = result.save(args.out, "map")
     shown = {k: (v[1], v[2]) for k, v in swept.items()}
     paths.append(plot_map(result, args.index, shown, args.out / f"map_{args.index}.png"))

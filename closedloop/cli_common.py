@@ -110,3 +110,18 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
+
+
+def dask_client(address: str | None):
+    """A Dask distributed client of the scheduler at ``address`` (None for None); the
+    caller closes it. An unreachable scheduler or a missing Dask is one typed error."""
+    if address is None:
+        return None
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError) as e:
+        raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli_common import output_folder
+from .cli_common import dask_client, output_folder
 from .exceptions import InvalidInputError
 from .maps import CHUNK, INDICES, ModelSource, stiffness_map
 
@@ -91,22 +91,6 @@ def _points(path: str) -> np.ndarray:
         raise InvalidInputError(f"--points {path!r}: expected rows of numbers") from None
 
 
-def _client(args):
-    """The Dask client of ``--scheduler`` (None without), to be closed by the caller."""
-    if args.scheduler is None:
-        return None
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
-    try:
-        return Client(args.scheduler, timeout="10s")
-    except (OSError, TimeoutError) as e:
-        raise InvalidInputError(
-            f"cannot reach the Dask scheduler {args.scheduler!r}: {e}"
-        ) from None
-
-
 def model_source(args) -> ModelSource:
     """The :class:`ModelSource` of the MODEL, --closures and springs options."""
     from .data import resolve
@@ -143,7 +127,7 @@ def run_map(args) -> int:
         share = max(1, args.workers or 1)
         print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
               f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
-    client = _client(args)
+    client = dask_client(args.scheduler)
     try:
         result = stiffness_map(
             source if (args.workers or args.scheduler) else clm,

@@ -17,7 +17,7 @@ SAME_RTOL = 1e-9
 
 def run(capsys, tmp_path, *argv: str) -> tuple[int, str, str]:
     """``cahyman map ARGV --out TMP`` (no process pool unless --workers is given)."""
-    workers = [] if "--workers" in argv else ["--workers", "1"]
+    workers = [] if "--workers" in argv or "--scheduler" in argv else ["--workers", "1"]
     status = main(["map", *argv, *workers, "--out", str(tmp_path)])
     out, err = capsys.readouterr()
     return status, out, err
@@ -141,3 +141,24 @@ def test_backend_choices_in_help(capsys, tmp_path):
     status = main(["map", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert status == 0 and "{consistent,generic,published}" in out and "(default: generic)" in out
+
+
+def test_dask_cluster_gives_the_serial_map(capsys, tmp_path):
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    args = ("--alpha", "40:80:4", "--alpha4", "60", "--s4", "25", "--workers", "1")
+    status, _, err = run(capsys, tmp_path / "serial", *args)
+    assert status == 0, err
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:  # fmt: skip
+        status, _, err = run(capsys, tmp_path / "dask", *args[:-2], "--scheduler",
+                             cluster.scheduler_address)  # fmt: skip
+    assert status == 0, err
+    a = SweepResult.load_npz(tmp_path / "serial" / "map.npz")
+    b = SweepResult.load_npz(tmp_path / "dask" / "map.npz")
+    for name in a.indices:
+        np.testing.assert_array_equal(a.indices[name], b.indices[name], err_msg=name)
+    status, _, err = run(capsys, tmp_path / "x", *args[:-2], "--scheduler", "tcp://127.0.0.1:9")
+    assert status == 2 and "cannot reach the Dask scheduler" in err
