@@ -41,7 +41,7 @@ from closedloop.exceptions import (
 )
 
 from .api import CaHyManStiffness, backend_names, stiffness
-from .params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED
+from .params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
 
 PROG = "cahyman"
 #: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).
@@ -131,6 +131,10 @@ def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
 
 
+#: Masses settable with --mass.
+MASS_NAMES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5", *LEG_MASSES)
+
+
 def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     """Options --gravity and --mass NAME=KG (the masses of the paper's eq. 11)."""
     parser.add_argument(
@@ -140,7 +144,8 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     parser.add_argument(
         "--mass", action="append", default=[], metavar="NAME=KG",
-        help="a mass of the paper's eq. 11 [kg]: m_HQ, m_QM, m_MM2, m_M4, m_M5 (default 0)",
+        help="a mass [kg]: the paper's m_HQ, m_QM, m_MM2, m_M4, m_M5, or a leg link's "
+        "m_b, m_c, m_d, m_h (default 0)",
     )  # fmt: skip
 
 
@@ -148,9 +153,9 @@ def _masses(args: argparse.Namespace) -> dict[str, float]:
     out = {}
     for item in getattr(args, "mass", []):
         name, _, value = item.partition("=")
-        if name not in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5") or not value:
-            raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of m_HQ, "
-                             "m_QM, m_MM2, m_M4, m_M5")  # fmt: skip
+        if name not in MASS_NAMES or not value:
+            raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "
+                             f"{', '.join(MASS_NAMES)}")  # fmt: skip
         out[name] = finite_float(value)
     return out
 

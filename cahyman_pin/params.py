@@ -25,6 +25,8 @@ _KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
 _LENGTHS = ("a", "b", "h", "r_e", "r_p", "HQ", "L")
 _SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
 _MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
+#: Masses of each leg's links (the same in the three legs); the paper names none.
+LEG_MASSES = ("m_b", "m_c", "m_d", "m_h")
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,8 @@ class CaHyManParams:
         K_s: axial stiffness of the linear motor and link MM2 (joint s_4) [N/m].
         K_4: axial stiffness of link QM2, in series with K_s [N/m].
         m_HQ, m_QM, m_MM2, m_M4, m_M5: masses named by the paper [kg] (0: no gravity).
+        m_b, m_c, m_d, m_h: mass of each leg's input crank, coupler, follower crank and
+            connecting bar [kg], at the middle of the link (0 by default).
         gravity: gravitational acceleration [m/s^2], acting along -z.
         s4_max: stroke of the linear motor, s_4 in [0, s4_max] [m].
     """
@@ -68,6 +72,10 @@ class CaHyManParams:
     m_MM2: float = 0.0
     m_M4: float = 0.0
     m_M5: float = 0.0
+    m_b: float = 0.0
+    m_c: float = 0.0
+    m_d: float = 0.0
+    m_h: float = 0.0
     gravity: float = 9.81
     s4_max: float = 0.050
 
@@ -85,7 +93,7 @@ class CaHyManParams:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be > 0"
                 )
-        for name in (*_MASSES, "gravity"):
+        for name in (*_MASSES, *LEG_MASSES, "gravity"):
             if getattr(self, name) < 0.0:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be >= 0"
@@ -137,6 +145,7 @@ SOURCES: dict[str, str] = {
     "K_s": "assumed: 0.697e6 N/m, the printed 0.697 N/m times 1e6 (the printed value gives "
     "1.4 m of deflection per newton, which no table shows)",
     **dict.fromkeys(_MASSES, "assumed: 0 (the paper names the masses without values)"),
+    **dict.fromkeys(LEG_MASSES, "assumed: 0 (the paper names no mass for the legs)"),
     "gravity": "standard gravity (acts only through the masses)",
     "s4_max": "from the paper's cases (s_4 = 0, 25, 50 mm)",
 }

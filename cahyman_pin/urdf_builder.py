@@ -33,8 +33,8 @@ Masses (``CaHyManParams.m_*``, default 0: no ``<inertial>`` is written), placed 
 lever arms of the paper's eq. (11) put them (an interpretation: the paper gives the arms,
 not the bodies): m_HQ at the middle of HQ (on the plate), m_QM at Q and m_M4 (the motor
 of alpha_4) at L / 2 on ``arm``, m_MM2 at M2, and the linear motor m_M5 half at M2 and
-half at M, so that its centre is at L + s_4 / 2 from Q, as eq. (11) has it. The legs'
-links carry no mass (the paper names none).
+half at M, so that its centre is at L + s_4 / 2 from Q, as eq. (11) has it. Each leg's
+links carry m_b, m_c, m_d, m_h at their middles (the paper names no leg masses).
 
 Closure file: the "Extended URDF" keys ``closed_loop``, ``type``, ``name_mot`` plus the
 ``springs`` extension read by :func:`closedloop.io.read_closure_file`.
@@ -207,23 +207,25 @@ def _leg(k: int, p: CaHyManParams, z: _Sizes) -> list[str]:
     out += [
         _joint(f"alpha_{k}", "revolute", "fixed_plate", f"crank_b_{k}", b0, rpy, (1, 0, 0),
                _REVOLUTE),
-        _link(f"crank_b_{k}", crank, hinge),
+        _link(f"crank_b_{k}", crank, hinge, masses=[(p.m_b, (0, p.b / 2, 0))]),
         _joint(f"b_{k}_axial", "prismatic", f"crank_b_{k}", f"crank_b_{k}_tip", (0, p.b, 0),
                axis=(0, 1, 0), limits=_VIRTUAL),
         _link(f"crank_b_{k}_tip", hinge),
         _joint(f"c_{k}", "revolute", f"crank_b_{k}_tip", f"coupler_{k}", axis=(1, 0, 0),
                limits=_REVOLUTE),
         _link(f"coupler_{k}",
-              _visual(_cylinder(z.rod, p.a), "orange", (0, p.a / 2, 0), _ROD_ALONG_Y)),
+              _visual(_cylinder(z.rod, p.a), "orange", (0, p.a / 2, 0), _ROD_ALONG_Y),
+              masses=[(p.m_c, (0, p.a / 2, 0))]),
         *_fixed_frame(f"coupler_{k}_end", f"coupler_{k}", (0, p.a, 0), hinge),
         _joint(f"s_{k}", "prismatic", f"coupler_{k}", f"bar_{k}", (0, p.a / 2, 0),
                axis=(1, 0, 0), limits=(-p.r_e - p.r_p, p.r_e + p.r_p, 1e3)),
         _link(f"bar_{k}", _visual(_box((4 * z.rod, 3 * z.rod, 3 * z.rod)), "grey"),
-              _visual(_cylinder(z.rod, p.h), "green", (0, 0, p.h / 2))),
+              _visual(_cylinder(z.rod, p.h), "green", (0, 0, p.h / 2)),
+              masses=[(p.m_h, (0, 0, p.h / 2))]),
         *_fixed_frame(f"H_{k}", f"bar_{k}", (0, 0, p.h), _visual(_sphere(z.ball), "red")),
         _joint(f"d_{k}", "revolute", "fixed_plate", f"crank_d_{k}", d0, rpy, (1, 0, 0),
                _REVOLUTE),
-        _link(f"crank_d_{k}", crank, hinge),
+        _link(f"crank_d_{k}", crank, hinge, masses=[(p.m_d, (0, p.b / 2, 0))]),
         _joint(f"d_{k}_axial", "prismatic", f"crank_d_{k}", f"crank_d_{k}_tip", (0, p.b, 0),
                axis=(0, 1, 0), limits=_VIRTUAL),
         _link(f"crank_d_{k}_tip"),

@@ -287,3 +287,21 @@ def test_report_weight_section_is_the_preloaded_compliance():
             eq = cl.solve_equilibrium(model.clm, q, "M", np.zeros(6), gravity=(0, 0, -9.81))
         np.testing.assert_allclose(sag, eq.displacement, rtol=1e-9, atol=1e-15)
         assert 0.0 < change < 0.1
+
+
+def test_cahyman_leg_masses_sit_at_the_middle_of_their_links():
+    # m_b alone: the weight's moment about each crank's axis is m_b g (b / 2) cos(alpha_k)
+    from cahyman_pin.model import CaHyManModel
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    p = DEFAULT_PARAMS.replace(m_b=0.3, m_c=0.2, m_d=0.25, m_h=0.1)
+    masses = sum(I.mass for I in CaHyManModel(p).clm.model.inertias)
+    np.testing.assert_allclose(masses, 3 * (0.3 + 0.2 + 0.25 + 0.1), rtol=1e-12)
+    model = CaHyManModel(DEFAULT_PARAMS.replace(m_b=0.3))
+    alpha = np.deg2rad([40.0, 60.0, 75.0])
+    q = model.assemble(alpha, 0.3, 0.01)
+    G_q = GravityLoad(model.clm, G).forces(q)
+    for k, a in enumerate(alpha, start=1):
+        torque = G_q[model.clm.joint_v_slice(f"alpha_{k}")][0]
+        np.testing.assert_allclose(torque, 0.3 * 9.81 * model.params.b / 2 * np.cos(a),
+                                   rtol=1e-12)  # fmt: skip
