@@ -104,10 +104,15 @@ def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: s
     return Closure(constraint, f"{frame_a}<->{frame_b}")
 
 
-def _linear_coordinates(model: pin.Model) -> np.ndarray:
-    """(nv,) read-only mask of the translational velocity coordinates (prismatic, the
-    linear part of a free flyer...), read off the joint motion subspaces: a coordinate is
-    linear when it moves its joint without rotating it."""
+def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
+    """What a model's neutral configuration tells, from one forward kinematics:
+
+    * (nv,) read-only mask of the translational velocity coordinates (prismatic, the
+      linear part of a free flyer...), read off the joint motion subspaces: a coordinate
+      is linear when it moves its joint without rotating it;
+    * the characteristic length [m]: diagonal of the bounding box of the joint origins
+      (:func:`closedloop.conditioning.characteristic_length`).
+    """
     data = model.createData()
     pin.forwardKinematics(model, data, pin.neutral(model))
     mask = np.zeros(model.nv, dtype=bool)
@@ -116,7 +121,7 @@ def _linear_coordinates(model: pin.Model) -> np.ndarray:
         if jm.nv:
             S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
             mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
-    return frozen(mask)
+    return frozen(mask), characteristic_length([M.translation for M in data.oMi])
 
 
 #: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
@@ -187,13 +192,14 @@ class ClosedLoopModel:
         visual_model: pin.GeometryModel | None = None,
         collision_model: pin.GeometryModel | None = None,
         name: str = "",
+        *,
+        _neutral: tuple[np.ndarray, float] | None = None,  # with_springs: the same model
     ):
         self.model = model
         self._local = threading.local()
         self._pool: list[tuple[pin.Data, list]] = []
         self._memo: dict = {}
         self._frame_ids: dict[str, int] = {}
-        self._length: float | None = None
         self.closures = tuple(
             c if isinstance(c, Closure) else Closure(c, f"closure{i}")
             for i, c in enumerate(closures)
@@ -212,7 +218,7 @@ class ClosedLoopModel:
         self._spec = (dict(springs or {}), tuple(locked))
         self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
         self.stiffness = self._stiffness_vector(springs or {}, locked)
-        self.linear_coordinates = _linear_coordinates(model)
+        self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
         rows = [i < 3 for c in self.closures for i in range(c.size)]
         self.linear_rows = frozen(np.array(rows, dtype=bool))
 
@@ -265,12 +271,8 @@ class ClosedLoopModel:
     @property
     def length(self) -> float:
         """Characteristic length L [m]: diagonal of the bounding box of the joint origins at
-        the neutral configuration (1 m if they coincide), computed once; the default scale
-        of the unit-free rules (:mod:`closedloop.conditioning`)."""
-        if self._length is None:
-            data = self.model.createData()
-            pin.forwardKinematics(self.model, data, pin.neutral(self.model))
-            self._length = characteristic_length([M.translation for M in data.oMi])
+        the neutral configuration (1 m if they coincide); the default scale of the
+        unit-free rules (:mod:`closedloop.conditioning`)."""
         return self._length
 
     def _stiffness_vector(self, springs, locked) -> np.ndarray:
@@ -404,6 +406,7 @@ class ClosedLoopModel:
             self.visual_model,
             self.collision_model,
             self.name,
+            _neutral=(self.linear_coordinates, self._length),
         )
 
     def with_beams(self, beams: Mapping[str, Mapping]) -> ClosedLoopModel:
