@@ -65,9 +65,8 @@ class Configuration:
         pin.computeJointJacobians(pm, self.data, q)
         pin.updateFramePlacements(pm, self.data)
         self.length = model.length if length is None else check_length(length)
-        self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
-        scaled = np.where(model.linear_rows, r / self.length, r)
-        self.closure_error = float(np.max(np.abs(scaled), initial=0.0))
+        self.residual = frozen(residual_rows(model, self.data, self._constraint_datas))
+        self.closure_error = float(np.max(np.abs(self._scaled_residual()), initial=0.0))
         self._closure_jacobian: np.ndarray | None = None
         self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
 
@@ -85,8 +84,7 @@ class Configuration:
     def require_closed(self) -> Configuration:
         """This configuration, or :class:`OpenLoopError` if it does not close the loops."""
         if not self.is_closed:
-            scaled = np.where(self.model.linear_rows, self.residual / self.length, self.residual)
-            worst = self._closure_of_row(int(np.argmax(np.abs(scaled))))
+            worst = self._closure_of_row(int(np.argmax(np.abs(self._scaled_residual()))))
             raise OpenLoopError(
                 f"configuration does not close the loops of {self.model.name!r}: scaled "
                 f"residual {self.closure_error:.3e} at closure {worst!r} (metres per "
@@ -96,6 +94,11 @@ class Configuration:
                 CLOSURE_TOL,
             )
         return self
+
+    def _scaled_residual(self) -> np.ndarray:
+        """(m,) residual with its metres divided by the length L (radians as they are)."""
+        r = self.residual
+        return np.where(self.model.linear_rows, r / self.length, r)
 
     def _closure_of_row(self, row: int) -> str:
         for c in self.model.closures:
