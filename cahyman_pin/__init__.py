@@ -5,9 +5,9 @@ Main entry points: :class:`CaHyManParams` (dimensions and springs, SI),
 kinematics) and :func:`stiffness` (6x6 stiffness and compliance at the arm extremity M).
 """
 
-from .api import CaHyManStiffness, Deflection, backend_names, register_backend, stiffness
-from .model import CaHyManModel, CaHyManPose, cahyman_model
-from .params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.api import CaHyManStiffness, Deflection, backend_names, register_backend, stiffness
+from cahyman_pin.model import CaHyManModel, CaHyManPose, cahyman_model
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 
 __all__ = [
     "DEFAULT_PARAMS",

@@ -1,5 +1,5 @@
 """``python -m cahyman_pin``: the ``cahyman`` command line."""
 
-from .cli import main
+from cahyman_pin.cli import main
 
 raise SystemExit(main())

@@ -13,8 +13,8 @@ is the small rotation vector of the arm link that carries M.
 
 Backends compute the matrices: ``"generic"`` (default) is the Pinocchio model of
 :mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`; ``"consistent"`` is
-the closed form of :mod:`cahyman_pin.backend_consistent`; ``"published"`` the paper's
-matrices as printed (:mod:`cahyman_pin.backend_published`, its own coordinates, not
+the closed form of :mod:`cahyman_pin.backends.consistent`; ``"published"`` the paper's
+matrices as printed (:mod:`cahyman_pin.backends.published`, its own coordinates, not
 symmetric) with the parameters' K_s (``params.with_ks("printed")`` for the printed 0.697
 N/m; every other damaged place as published). Another backend is a function
 ``f(params, alpha, alpha4, s4) -> BackendResult`` registered with
@@ -28,17 +28,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cahyman_pin.backends.consistent import consistent_breakdown
+from cahyman_pin.backends.published import PublishedOptions, published_stiffness
+from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.arrays import check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices
-
-from .backend_consistent import consistent_breakdown
-from .backend_published import PublishedOptions, published_stiffness
-from .model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
-from .params import DEFAULT_PARAMS, CaHyManParams
-from .urdf_builder import FRAME_H, FRAME_M
 
 
 @dataclass(frozen=True)
@@ -135,7 +134,7 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
     )
 
 
-#: The coordinates of the published backend's C (see :mod:`cahyman_pin.backend_published`).
+#: The coordinates of the published backend's C (see :mod:`cahyman_pin.backends.published`).
 PUBLISHED_AXES = (
     "paper: translations of H plus those of M, plate rotation vector (world) plus the arm "
     "angle about -y_p; not world axes at M"
@@ -143,7 +142,7 @@ PUBLISHED_AXES = (
 
 
 def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
-    """The paper's matrices as printed (see :mod:`cahyman_pin.backend_published`), with
+    """The paper's matrices as printed (see :mod:`cahyman_pin.backends.published`), with
     ``params.K_s`` (option ``ks="params"``; the paper prints 0.697 N/m:
     ``params.with_ks("printed")``).
 

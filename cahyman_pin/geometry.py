@@ -16,9 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import AssemblyError, InvalidInputError
-
-from .params import CaHyManParams
 
 #: Leg angles delta_k [rad].
 DELTA = np.deg2rad([0.0, 120.0, 240.0])

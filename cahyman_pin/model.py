@@ -16,15 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.arrays import readonly
-from closedloop.assembly import assemble as assemble_loops
-from closedloop.exceptions import InvalidInputError
-from closedloop.kinematics import closure_residual, update_kinematics
-from closedloop.model import ClosedLoopModel, closure_between_frames
-
-from . import geometry
-from .params import DEFAULT_PARAMS, CaHyManParams
-from .urdf_builder import (
+from cahyman_pin import geometry
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.urdf_builder import (
     FRAME_H,
     FRAME_M,
     LEGS,
@@ -33,6 +27,11 @@ from .urdf_builder import (
     build_urdf,
     closure_spec,
 )
+from closedloop.arrays import readonly
+from closedloop.assembly import assemble as assemble_loops
+from closedloop.exceptions import InvalidInputError
+from closedloop.kinematics import closure_residual, update_kinematics
+from closedloop.model import ClosedLoopModel, closure_between_frames
 
 #: Below this value of cos(phi) the plate normal is vertical and only theta + psi is
 #: defined: :func:`paper_angles` then reports psi = 0 and theta = the yaw.

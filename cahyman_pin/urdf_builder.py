@@ -47,10 +47,9 @@ import math
 import numpy as np
 import yaml
 
+from cahyman_pin.geometry import DELTA, T, U
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.io import ClosureSpec
-
-from .geometry import DELTA, T, U
-from .params import DEFAULT_PARAMS, CaHyManParams
 
 LEGS = (1, 2, 3)
 #: Actuated joints, in the order of the inputs (alpha_1, alpha_2, alpha_3, alpha_4, s_4).

@@ -12,7 +12,7 @@ import pinocchio as pin
 from benchtools import Mode, Table, fmt_time, interleaved, parse_mode, wall_ratio
 
 from cahyman_pin.api import stiffness
-from cahyman_pin.backend_consistent import consistent_compliance
+from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M

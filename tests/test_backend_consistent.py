@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from cahyman_pin import geometry
-from cahyman_pin.backend_consistent import (
+from cahyman_pin.backends.consistent import (
     arm_compliance,
     consistent_breakdown,
     consistent_compliance,

@@ -10,8 +10,8 @@ from helpers import assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 from cahyman_pin import geometry
-from cahyman_pin.backend_consistent import consistent_compliance
-from cahyman_pin.backend_published import (
+from cahyman_pin.backends.consistent import consistent_compliance
+from cahyman_pin.backends.published import (
     CHOICES,
     PublishedOptions,
     published_stiffness,
@@ -74,7 +74,7 @@ def test_R_PAR_is_rz_ry_rz_and_R_SP_embeds_it():
     np.testing.assert_array_equal(r.R_SP[3:, 3:], np.eye(3))
     np.testing.assert_array_equal(r.R_SP[:3, 3:], np.zeros((3, 3)))
     # and eq. (6) with explicit sines at random angles
-    from cahyman_pin.backend_published import r_par
+    from cahyman_pin.backends.published import r_par
 
     for _ in range(5):
         f, t, s = rng.uniform(-3, 3, 3)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cahyman_pin.api import backend_names, stiffness
-from cahyman_pin.backend_consistent import consistent_compliance
+from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.params import DEFAULT_PARAMS
 from closedloop.exceptions import InvalidInputError
 

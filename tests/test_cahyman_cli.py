@@ -202,7 +202,7 @@ def test_published_backend_text_mode_names_its_coordinates(capsys):
 
 
 def test_published_backend_honours_ks_and_does_not_claim_world_axes(capsys):
-    from cahyman_pin.backend_published import PublishedOptions, published_stiffness
+    from cahyman_pin.backends.published import PublishedOptions, published_stiffness
     from cahyman_pin.params import K_S_ASSUMED, K_S_PRINTED
 
     docs = {}
@@ -263,7 +263,7 @@ def test_closed_pipe_ends_quietly(argv):
     ],
 )
 def test_report_bad_out_is_one_line_before_any_work(capsys, tmp_path, monkeypatch, out, match):
-    import cahyman_pin.report as report
+    import cahyman_pin.cli.report as report
 
     def no_work(*args, **kwargs):
         raise AssertionError("the report was computed before the output folder was checked")
@@ -299,8 +299,9 @@ def test_rank_deficient_compliance_exits_1(capsys, monkeypatch):
 
 
 # ------------------------------------------------------------------ start-up
-LAZY_MODULES = ("matplotlib", "cahyman_pin.report", "cahyman_pin.map_cli", "cahyman_pin.view",
-                "cahyman_pin.sweep", "cahyman_pin.figures", "closedloop.viewer")  # fmt: skip
+LAZY_MODULES = ("matplotlib", "cahyman_pin.paper.report", "cahyman_pin.cli.map",
+                "cahyman_pin.cli.view", "cahyman_pin.sweep.engine", "cahyman_pin.paper.figures",
+                "closedloop.viewer")  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -381,7 +382,7 @@ def test_report_missing_parameter_file(capsys, tmp_path):
 
 
 def test_view_bad_html_path_is_one_line_before_any_work(capsys, tmp_path, monkeypatch):
-    import cahyman_pin.view as view
+    import cahyman_pin.cli.view as view
 
     def no_work(*args, **kwargs):
         raise AssertionError("the model was built before the output path was checked")

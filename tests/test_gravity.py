@@ -112,7 +112,7 @@ def test_fourbar_with_a_heavy_coupler_matches_finite_differences(fourbar):
 def test_cahyman_with_masses_matches_finite_differences(table):
     # the paper's five masses (0.5 kg each, an illustration) at the three table poses
     from cahyman_pin.model import CaHyManModel
-    from cahyman_pin.paper_data import TABLE_POSES
+    from cahyman_pin.paper.data import TABLE_POSES
     from cahyman_pin.params import DEFAULT_PARAMS
 
     masses = dict.fromkeys(("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5"), 0.5)
@@ -271,10 +271,10 @@ def test_cahyman_weight_from_the_api_and_the_command_line(capsys):
 def test_report_weight_section_is_the_preloaded_compliance():
     # the report's numbers recomputed here: the equilibrium under the weight, directly
     from cahyman_pin.model import CaHyManModel
-    from cahyman_pin.paper_data import TABLE_POSES
-    from cahyman_pin.paper_effects import ILLUSTRATIVE_MASS
+    from cahyman_pin.paper.data import TABLE_POSES
+    from cahyman_pin.paper.effects import ILLUSTRATIVE_MASS
+    from cahyman_pin.paper.report import weight_rows
     from cahyman_pin.params import DEFAULT_PARAMS
-    from cahyman_pin.report import weight_rows
 
     masses = dict.fromkeys(("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5"), ILLUSTRATIVE_MASS)
     model = CaHyManModel(DEFAULT_PARAMS.replace(**masses))

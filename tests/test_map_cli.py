@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cahyman_pin.cli import main
-from cahyman_pin.map_cli import parse_values
+from cahyman_pin.cli.map import parse_values
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, sweep
 
@@ -120,7 +120,7 @@ def test_failed_points_name_the_swept_values_cleanly_and_count_the_rest(capsys, 
 
 
 def test_bad_out_folder_is_refused_before_the_sweep(capsys, tmp_path, monkeypatch):
-    import cahyman_pin.map_cli as map_cli
+    import cahyman_pin.cli.map as map_cli
 
     def no_sweep(*args, **kwargs):
         raise AssertionError("the sweep ran before the output folder was checked")

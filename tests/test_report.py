@@ -5,10 +5,11 @@ import re
 import numpy as np
 import pytest
 
-from cahyman_pin import paper_data, report
 from cahyman_pin.cli import main
-from cahyman_pin.document import Figure, Table
-from cahyman_pin.paper_data import LOAD_LABELS, TABLE_POSES, TABLES
+from cahyman_pin.paper import data as paper_data
+from cahyman_pin.paper import report
+from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES
+from cahyman_pin.paper.document import Figure, Table
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 from helpers import assert_close_in_norm
 
-from cahyman_pin import api, sweep_exec
+from cahyman_pin import api
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, pose_list, sweep
-from cahyman_pin.sweep_points import path_order
+from cahyman_pin.sweep import execution as sweep_exec
+from cahyman_pin.sweep.points import path_order
 from closedloop.exceptions import InvalidInputError
 
 #: Sweep against point-by-point api.stiffness. Both run the same functions on the same

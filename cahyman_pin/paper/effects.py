@@ -1,7 +1,7 @@
 """Accounting for the differences between the published tables and the consistent model.
 
 Each effect is one damaged place of the paper's closed form (see
-:data:`cahyman_pin.backend_published.CHOICES`), switched from its as-published reading to
+:data:`cahyman_pin.backends.published.CHOICES`), switched from its as-published reading to
 its consistent one while every other place stays as published; the change it makes in
 each table cell, in the paper's units, is its contribution.
 """
@@ -13,12 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cahyman_pin.backends.published import PublishedOptions
+from cahyman_pin.paper.compare import backend_compliance, paper_coordinates
+from cahyman_pin.paper.data import LOADS, TABLE_POSES, PaperPose
+from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
-
-from .backend_published import PublishedOptions
-from .paper_compare import backend_compliance, paper_coordinates
-from .paper_data import LOADS, TABLE_POSES, PaperPose
-from .params import CaHyManParams
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.arrays import readonly
 from closedloop.exceptions import InvalidInputError
-
-from .params import DEFAULT_PARAMS, CaHyManParams
 
 #: Pose inputs a grid axis can sweep ("alpha": alpha_1 = alpha_2 = alpha_3 together).
 POSE_AXES = ("alpha", "alpha1", "alpha2", "alpha3", "alpha4", "s4")

@@ -6,7 +6,7 @@ project's reference model, "Known damage", items 1 to 8); at each one this modul
 the smallest choice that lets the formula run, listed in :data:`CHOICES` and switchable
 through :class:`PublishedOptions` (defaults = as published). With
 ``PublishedOptions.consistent()`` every switch takes its consistent value and the result
-equals :func:`cahyman_pin.backend_consistent.consistent_compliance`.
+equals :func:`cahyman_pin.backends.consistent.consistent_compliance`.
 
 Coordinates (defaults). Load F_M = (F_e, T_e) [N, N m], the same six numbers fed to both
 chains as eq. (3) does (M_FT reads them in the arm frame, K_SER in world axes for forces).
@@ -27,12 +27,11 @@ from typing import Literal
 
 import numpy as np
 
+from cahyman_pin.angles import COS_PHI_MIN, euler_rate_matrix
+from cahyman_pin.backends import consistent as bc
+from cahyman_pin.geometry import DELTA, PlatePose, extremity, leg_plane_coordinates, plate_pose
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
-
-from . import backend_consistent as bc
-from .angles import COS_PHI_MIN, euler_rate_matrix
-from .geometry import DELTA, PlatePose, extremity, leg_plane_coordinates, plate_pose
-from .params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams
 
 #: Gravity and its sixth as printed in eq. (11) [m/s^2].
 G_PRINTED, G_SIXTH_PRINTED = 9.81, 1.635

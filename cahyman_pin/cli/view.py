@@ -24,12 +24,11 @@ import sys
 
 import numpy as np
 
+from cahyman_pin.cli.options import UsageError, add_pose_arguments
+from cahyman_pin.model import cahyman_model
+from cahyman_pin.params import DEFAULT_PARAMS
+from cahyman_pin.urdf_builder import FRAME_M
 from closedloop.cli import add_view_arguments, view_from_args
-
-from .cli import UsageError, add_pose_arguments
-from .model import cahyman_model
-from .params import DEFAULT_PARAMS
-from .urdf_builder import FRAME_M
 
 
 def _stderr(line: str) -> None:

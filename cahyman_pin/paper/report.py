@@ -1,36 +1,28 @@
 """The comparison report: the paper's tables and figures against the three backends.
 
-``cahyman report [--out DIR] [--params FILE]`` writes ``report.md``, a self-contained
-``report.html`` and the figures (PNG) into DIR (default ``./cahyman-report``); FILE is a
-YAML mapping of :class:`cahyman_pin.params.CaHyManParams` fields (SI) that replace the
-defaults. The report lists every parameter with its source (paper, assumed, or given).
+:func:`build_report` writes ``report.md``, a self-contained ``report.html`` and the
+figures (PNG) into a folder (the command is ``cahyman report``, :mod:`cahyman_pin.cli.report`).
+The report lists every parameter with its source (paper, assumed, or given).
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from closedloop.cli_common import output_folder
+from cahyman_pin.api import stiffness
+from cahyman_pin.backends.published import CHOICES
+from cahyman_pin.paper.compare import BACKENDS, TableValues, backend_compliance, table_values
+from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_residual
+from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
+from cahyman_pin.paper.effects import EFFECTS, ILLUSTRATIVE_MASS, effect_changes
+from cahyman_pin.paper.figures import figure5, figure_load
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import JointLimitWarning
-
-from .api import stiffness
-from .backend_published import CHOICES
-from .document import Document, Figure, Heading, Paragraph, Table
-from .figures import figure5, figure_load
-from .paper_compare import BACKENDS, TableValues, backend_compliance, table_values
-from .paper_data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_residual
-from .paper_effects import EFFECTS, ILLUSTRATIVE_MASS, effect_changes
-from .params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, read_params_file, source
-
-DEFAULT_OUT = Path("cahyman-report")
-
 
 #: Table cells (mm, deg) below this magnitude are rounding noise of exact zeros.
 ZERO_CELL = 1e-9
@@ -319,7 +311,7 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
 
 
 def build_report(
-    out: Path = DEFAULT_OUT,
+    out: Path,
     params: CaHyManParams = DEFAULT_PARAMS,
     params_file: Path | None = None,
 ) -> Document:
@@ -360,30 +352,3 @@ def build_report(
     (out / "report.md").write_text(doc.to_markdown(out))
     (out / "report.html").write_text(doc.to_html())
     return doc
-
-
-def add_parser(subparsers) -> None:
-    """The ``report`` subcommand."""
-    p = subparsers.add_parser(
-        "report",
-        help="write the comparison report against the paper",
-        description="The comparison report against the paper: report.md, report.html and "
-        "the figures in --out.",
-    )
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                   help=f"output folder (default: ./{DEFAULT_OUT})")  # fmt: skip
-    p.add_argument("--params", type=Path, metavar="FILE",
-                   help="YAML mapping of CaHyMan parameters (SI) replacing the defaults, e.g. "
-                   "'K_s: 0.697' or 'b: 0.09'; fields: " + ", ".join(CaHyManParams.field_names())
-                   )  # fmt: skip
-    p.set_defaults(func=_run)
-
-
-def _run(args: argparse.Namespace) -> int:
-    params = DEFAULT_PARAMS if args.params is None else read_params_file(args.params)
-    output_folder(args.out)  # a bad --out stops here, before the computations
-    start = time.perf_counter()
-    build_report(args.out, params, args.params)
-    print(f"report written to {args.out / 'report.md'} and {args.out / 'report.html'} "
-          f"in {time.perf_counter() - start:.1f} s")  # fmt: skip
-    return 0

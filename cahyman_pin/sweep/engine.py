@@ -22,7 +22,7 @@ that each generic assembly can start from its neighbour's configuration (``start
 into chunks of contiguous points, one task each for a ``concurrent.futures.Executor``:
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
 (``pip install .[dask]``). Results do not depend on the executor. Execution details
-are in :mod:`cahyman_pin.sweep_exec`.
+are in :mod:`cahyman_pin.sweep.execution`.
 """
 
 from __future__ import annotations
@@ -37,14 +37,20 @@ from pathlib import Path
 
 import numpy as np
 
+from cahyman_pin.api import get_backend
+from cahyman_pin.params import CaHyManParams
+from cahyman_pin.sweep.execution import STARTS, Chunk, default_workers, run_chunks
+from cahyman_pin.sweep.indices import INDEX_UNITS, STATUS, classify, stiffness_indices
+from cahyman_pin.sweep.points import (
+    INPUT_UNITS,
+    POSE_AXES,
+    SweepPoints,
+    grid,
+    param_unit,
+    pose_list,
+)
 from closedloop.arrays import check_wrench, readonly
 from closedloop.exceptions import InvalidInputError
-
-from .api import get_backend
-from .params import CaHyManParams
-from .sweep_exec import STARTS, Chunk, default_workers, run_chunks
-from .sweep_indices import INDEX_UNITS, STATUS, classify, stiffness_indices
-from .sweep_points import INPUT_UNITS, POSE_AXES, SweepPoints, grid, param_unit, pose_list
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
@@ -68,7 +74,7 @@ class SweepResult:
         wrench: (6,) wrench at M for the deflection [N, N m], or None.
         C: (n, 6, 6) compliance at M, world axes [SI]; NaN where the point failed.
         rank: (n,) rank of C (-1 where the point failed).
-        status: (n,) status names (see :data:`cahyman_pin.sweep_exec.STATUS`): ``ok``,
+        status: (n,) status names (see :data:`cahyman_pin.sweep.execution.STATUS`): ``ok``,
             ``rank_deficient`` (C exists, K does not), ``invalid``, ``unreachable``,
             ``singular``, ``failed``.
         reasons: (n,) error message per point ('' where ok).

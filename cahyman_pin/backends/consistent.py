@@ -29,10 +29,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from cahyman_pin.geometry import EZ, PlatePose, T, U, arm_direction, extremity, plate_pose
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
-
-from .geometry import EZ, PlatePose, T, U, arm_direction, extremity, plate_pose
-from .params import DEFAULT_PARAMS, CaHyManParams
 
 #: |sin alpha_k| below which the parallelogram is singular (cranks along the coupler).
 SIN_ALPHA_MIN = 1e-9

@@ -14,12 +14,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from cahyman_pin.paper.compare import BACKENDS, backend_compliance
+from cahyman_pin.paper.data import FIG5A, FIG5BCD, FIG67, PaperPose
+from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
 from closedloop.progress import progress
-
-from .paper_compare import BACKENDS, backend_compliance
-from .paper_data import FIG5A, FIG5BCD, FIG67, PaperPose
-from .params import CaHyManParams
 
 STYLES = {"published": ("tab:red", "--"), "consistent": ("tab:blue", "-"),
           "generic": ("k", ":")}  # fmt: skip

@@ -14,13 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cahyman_pin.angles import COS_PHI_MIN, rotvec_to_euler_increments, yaw_tilt_increments
+from cahyman_pin.api import stiffness
+from cahyman_pin.backends.published import PublishedOptions, published_stiffness
+from cahyman_pin.paper.data import LOADS, TABLES, PaperPose
+from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
-
-from .angles import COS_PHI_MIN, rotvec_to_euler_increments, yaw_tilt_increments
-from .api import stiffness
-from .backend_published import PublishedOptions, published_stiffness
-from .paper_data import LOADS, TABLES, PaperPose
-from .params import CaHyManParams
 
 #: Backends compared, in table-column order, with their titles (their registered names).
 BACKENDS = {"published": "published", "consistent": "consistent", "generic": "generic"}

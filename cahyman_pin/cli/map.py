@@ -21,7 +21,7 @@ three (alpha_1, alpha_2, alpha_3). A value starting with a minus sign needs ``=`
 ``--alpha4=-30:30:13``. One swept input gives a curve, two a heat map. The folder ``--out``
 receives ``map.npz`` (everything, SI), ``map.csv`` when the map is small and
 ``map_<index>.png``. ``--start closed_form`` starts every generic assembly from CaHyMan's
-closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep`).
+closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep.engine`).
 """
 
 from __future__ import annotations
@@ -32,14 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
+from cahyman_pin.cli.options import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
+from cahyman_pin.model import check_inputs
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
+from cahyman_pin.sweep.execution import STARTS
+from cahyman_pin.sweep.points import param_unit
 from closedloop.cli_common import dask_client, output_folder
-
-from .cli import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
-from .model import check_inputs
-from .params import DEFAULT_PARAMS, CaHyManParams
-from .sweep import INDEX_UNITS, SweepResult, grid, sweep
-from .sweep_exec import STARTS
-from .sweep_points import param_unit
 
 DEFAULT_OUT = Path("cahyman-map")
 #: Failed points printed one by one; the others are counted ("... and N more").
@@ -276,7 +275,7 @@ def _run(args: argparse.Namespace) -> int:
     if len(swept) > 2:
         raise UsageError(
             f"a map sweeps one or two inputs, got {len(swept)} ({', '.join(swept)}); "
-            "use cahyman_pin.sweep from Python for more"
+            "use cahyman_pin.sweep.engine from Python for more"
         )
     n = math.prod(v[0].size for v in swept.values())
     if n > MAX_POINTS:

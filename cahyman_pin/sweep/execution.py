@@ -1,7 +1,7 @@
 """Execution of CaHyMan sweeps: chunk kernels and executors.
 
 A sweep is cut into chunks of points that are contiguous along its path (see
-:mod:`cahyman_pin.sweep`); each chunk is one task for a ``concurrent.futures.Executor``
+:mod:`cahyman_pin.sweep.engine`); each chunk is one task for a ``concurrent.futures.Executor``
 and is computed by :func:`run_chunk`:
 
 * ``"generic"``: per point, :meth:`CaHyManModel.assemble` then
@@ -20,7 +20,7 @@ sweep. Programming errors (anything but :class:`ClosedLoopError` and
 ``numpy.linalg.LinAlgError``) do propagate.
 
 The stiffness indices are computed afterwards, for all points at once
-(:mod:`cahyman_pin.sweep_indices`).
+(:mod:`cahyman_pin.sweep.indices`).
 """
 
 from __future__ import annotations
@@ -35,6 +35,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from cahyman_pin.backends.consistent import consistent_compliance
+from cahyman_pin.model import CaHyManModel, check_inputs
+from cahyman_pin.params import CaHyManParams
+from cahyman_pin.sweep.indices import FAILED, INVALID, OK, SINGULAR, UNREACHABLE
+from cahyman_pin.urdf_builder import FRAME_M
 from closedloop.blas import single_threaded_blas
 from closedloop.compliance import compliance
 from closedloop.exceptions import (
@@ -46,12 +51,6 @@ from closedloop.exceptions import (
     SingularConfigurationError,
 )
 from closedloop.progress import progress
-
-from .backend_consistent import consistent_compliance
-from .model import CaHyManModel, check_inputs
-from .params import CaHyManParams
-from .sweep_indices import FAILED, INVALID, OK, SINGULAR, UNREACHABLE
-from .urdf_builder import FRAME_M
 
 #: Starts of the generic assembly: the previous point's configuration (extrapolated),
 #: or the closed-form geometry of CaHyMan, computed for a whole chunk at once.
@@ -116,7 +115,7 @@ class ChunkResult:
     Attributes:
         C: (c, 6, 6) compliance at M, world axes [SI]; NaN where the point failed.
         rank: (c,) rank of C from the generic solver, -1 otherwise (set later).
-        status: (c,) status codes (:data:`cahyman_pin.sweep_indices.STATUS`).
+        status: (c,) status codes (:data:`cahyman_pin.sweep.indices.STATUS`).
         reasons: error message per failed point, by position in the chunk.
         iterations: (c,) Gauss-Newton iterations of the assembly (generic), else -1.
     """

@@ -1,0 +1,88 @@
+"""Command line ``cahyman``: stiffness and deflection of CaHyMan at a pose.
+
+Inputs are in the paper's units (degrees, millimetres); outputs are SI (JSON with
+``--json``) with the paper's units beside them in the readable print. Examples::
+
+    cahyman stiffness --alpha 45 60 75 --alpha4 45 --s4 0 --json
+    cahyman deflect --force 1 1 1 --torque 0 0 0
+
+Subcommands: every module named in :data:`SUBCOMMAND_MODULES` provides
+``add_parser(subparsers)``, which adds its parser and sets ``func`` (``args -> int``) as
+its default; :func:`add_pose_arguments` and :func:`stiffness_from_args` are shared. Only
+the module of the subcommand that runs is imported (the others stand in by their help
+line), so that ``cahyman stiffness`` does not pay for matplotlib or the sweep machinery.
+
+Exit status (as for ``closedloop``, :func:`closedloop.exceptions.exit_status`): 0 ok; 1 the
+compliance is rank deficient (K does not exist); 2 bad input; 3 the computation failed on
+valid input (an unreachable pose, a singular configuration); 141 standard output closed
+early (``| head``). Errors are one line ``cahyman: error: ...`` on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from cahyman_pin.cli.options import EXIT_HELP, CahymanParser, UsageError
+from cahyman_pin.cli.stiffness import add_deflect, add_stiffness
+from closedloop import __version__
+from closedloop.blas import single_threaded_blas
+from closedloop.cli_common import error_line, run_command
+from closedloop.exceptions import EXIT_BAD_INPUT
+
+PROG = "cahyman"
+#: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).
+SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
+    "report": ("cahyman_pin.cli.report", "write the comparison report against the paper"),
+    "map": ("cahyman_pin.cli.map", "a stiffness index over swept inputs (NPZ, CSV, PNG)"),
+    "view": ("cahyman_pin.cli.view", "meshcat view of the deflection under a wrench at M"),
+}
+
+
+# ------------------------------------------------------------------ entry point
+def command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand named by ``argv`` (its first word that is not an option), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`.
+
+    Args:
+        command: the subcommand that will run: only its module is imported; the other
+            modules' subcommands are placeholders that carry their help line (enough for
+            ``cahyman --help`` and for the list of choices of an unknown command).
+    """
+    parser = CahymanParser(
+        prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator). " + EXIT_HELP
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    add_stiffness(subparsers)
+    add_deflect(subparsers)
+    for name, (module, help_line) in SUBCOMMAND_MODULES.items():
+        if command == name:
+            importlib.import_module(module).add_parser(subparsers)
+        else:
+            subparsers.add_parser(name, help=help_line, add_help=False)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (see the module docstring)."""
+    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
+    try:
+        argv = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(command_of(argv)).parse_args(argv)
+    except UsageError as e:
+        print(error_line(PROG, e), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SystemExit as e:  # --help, --version
+        return e.code if isinstance(e.code, int) else 0
+    return run_command(PROG, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

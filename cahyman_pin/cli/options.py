@@ -1,0 +1,158 @@
+"""Options shared by the ``cahyman`` subcommands: the pose in the paper's units (deg, mm)
+converted once to SI, the backend and K_s choices, masses; the usage error (exit 2)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
+from closedloop.cli_common import Parser
+from closedloop.exceptions import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_RANK_DEFICIENT,
+    InvalidInputError,
+)
+
+#: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
+DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
+KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
+
+
+class UsageError(InvalidInputError):
+    """A command-line error (bad option or value): exit status 2."""
+
+
+#: The exit statuses, as the help states them.
+EXIT_HELP = (
+    f"Exit status: {EXIT_OK} ok; {EXIT_RANK_DEFICIENT} rank deficient (K does not exist); "
+    f"{EXIT_BAD_INPUT} bad input; {EXIT_FAILED} computation failed (unreachable pose, "
+    "singular configuration)."
+)
+
+
+class CahymanParser(Parser):
+    def error(self, message: str):  # one line, no usage block
+        raise UsageError(message)
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --ks and --backend (choices and defaults in the help)."""
+    parser.add_argument(
+        "--ks",
+        choices=sorted(KS_PRESETS),
+        default="assumed",
+        help="K_s for every backend: assumed 0.697e6 N/m or printed 0.697 N/m, the paper's "
+        "value (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=backend_names(),
+        default="generic",
+        help="stiffness backend: generic (Pinocchio model), consistent (closed form), "
+        "published (the paper's matrices as printed, in its own coordinates) "
+        "(default: %(default)s)",
+    )
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite real number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --alpha, --alpha4, --s4 (paper units), --ks, --backend, --json."""
+    d = DEFAULT_POSE
+    parser.add_argument(
+        "--alpha",
+        nargs=3,
+        type=finite_float,
+        default=list(d["alpha"]),
+        metavar=("A1", "A2", "A3"),
+        help="crank angles alpha_1..3 [deg] (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--alpha4",
+        type=finite_float,
+        default=d["alpha4"],
+        metavar="A4",
+        help="arm angle alpha_4 [deg] (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--s4",
+        type=finite_float,
+        default=d["s4"],
+        metavar="S4",
+        help="telescope stroke s_4 [mm] (default: %(default)s)",
+    )
+    add_backend_arguments(parser)
+    parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
+
+
+#: Masses settable with --mass.
+MASS_NAMES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5", *LEG_MASSES)
+
+
+def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options --gravity and --mass NAME=KG (the masses of the paper's eq. 11)."""
+    parser.add_argument(
+        "--gravity", action="store_true",
+        help="the machine under the weight of its masses (generic backend): the tangent "
+        "compliance at the sagged pose, and the sag of M",
+    )  # fmt: skip
+    parser.add_argument(
+        "--mass", action="append", default=[], metavar="NAME=KG",
+        help="a mass [kg]: the paper's m_HQ, m_QM, m_MM2, m_M4, m_M5, or a leg link's "
+        "m_b, m_c, m_d, m_h (default 0)",
+    )  # fmt: skip
+
+
+def _masses(args: argparse.Namespace) -> dict[str, float]:
+    out = {}
+    for item in getattr(args, "mass", []):
+        name, _, value = item.partition("=")
+        if name not in MASS_NAMES or not value:
+            raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "
+                             f"{', '.join(MASS_NAMES)}")  # fmt: skip
+        out[name] = finite_float(value)
+    return out
+
+
+def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
+    """Stiffness at the pose given by :func:`add_pose_arguments`' options (converted to SI)."""
+    params = DEFAULT_PARAMS.with_ks(args.ks)
+    masses = _masses(args)
+    return stiffness(
+        np.deg2rad(args.alpha),
+        math.radians(args.alpha4),
+        args.s4 / 1000.0,
+        params=params.replace(**masses) if masses else params,
+        backend=args.backend,
+        weight=getattr(args, "gravity", False),
+    )
+
+
+def inputs_echo(args: argparse.Namespace) -> dict:
+    """The pose options as given (paper units) and in SI."""
+    return {
+        "alpha_deg": list(args.alpha),
+        "alpha4_deg": args.alpha4,
+        "s4_mm": args.s4,
+        "alpha_rad": np.deg2rad(args.alpha).tolist(),
+        "alpha4_rad": math.radians(args.alpha4),
+        "s4_m": args.s4 / 1000.0,
+        "ks": args.ks,
+        "K_s_N_per_m": KS_PRESETS[args.ks],
+        "backend": args.backend,
+    }

@@ -1,0 +1,3 @@
+"""The paper and the comparison with it: published values (:mod:`.data`), the backends
+in the paper's coordinates (:mod:`.compare`), the named effects (:mod:`.effects`), the
+figures (:mod:`.figures`) and the report (:mod:`.report`, :mod:`.document`)."""
