@@ -29,6 +29,15 @@ sides (within 0.5% of the exact series); or explicit {A, Iy, Iz, J} [m^2, m^4]. 
 section's y axis is ``y_axis`` (a vector in the link frame) made orthogonal to the beam;
 default: the link frame axis most orthogonal to the beam, made orthogonal to it.
 
+``section: geometry`` (URDF files only, :func:`urdf_shapes`) takes the section from the
+link's ``<collision>`` elements, or its ``<visual>`` ones when it has none: they must hold
+exactly one cylinder or box (other shapes, such as meshes, are ignored), whose axis must
+lie along the beam within ``ALIGN_TOLERANCE``. A cylinder gives a circle of its diameter;
+a box the rectangle of its two sides across the beam: the box axis along the beam is i
+(x, y, z = 0, 1, 2), the section's y axis is box axis i + 1 (mod 3), b its size, and h
+the size along box axis i + 2 (mod 3). The shape's length and position are not used (the
+beam runs from the link's origin to its end joint).
+
 Inertia: the link's own inertia stays at the beam's start (on the link's parent joint);
 bodies beyond a ``fixed`` end (merged by Pinocchio's URDF parser into the link's joint)
 move with the tip. Frames keep their indices (the virtual joint's frame is appended);
@@ -39,6 +48,7 @@ anchors beyond the tip follow it.
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -51,6 +61,12 @@ THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
 EXPLICIT = ("A", "Iy", "Iz", "J")
 BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6")
+#: ``section: geometry``: the section from the link's URDF cylinder or box.
+GEOMETRY = "geometry"
+#: Largest angle [rad] between the axis of that shape and the beam (0.057 deg): far above
+#: the rounding of angles written with 4 decimals in URDF files (1.5708 for pi/2 is off by
+#: 3.7e-6 rad), far below a deliberate tilt; the section is used with the beam's axes.
+ALIGN_TOLERANCE = 1e-3
 
 
 def _positive(beam: str, what: str, value) -> float:
@@ -129,6 +145,98 @@ def section_from_spec(beam: str, spec) -> Section:
     a, c = max(b, h), min(b, h)
     J = a * c**3 * (1 / 3 - 0.21 * (c / a) * (1 - c**4 / (12 * a**4)))
     return Section(b * h, b * h**3 / 12, h * b**3 / 12, J, shape, y_axis=y_axis, **kap)
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One ``<collision>`` or ``<visual>`` element of a URDF link, as written: ``kind`` the
+    tag of its geometry (cylinder, box, mesh, sphere...), ``sizes`` that tag's attributes
+    (radius, length [m] / size "x y z" [m] / filename...), ``rpy`` its origin's roll, pitch,
+    yaw [rad] in the link frame."""
+
+    source: str  # "collision" or "visual"
+    kind: str
+    sizes: dict[str, str]
+    rpy: str = "0 0 0"
+
+
+def urdf_shapes(path) -> dict[str, list[Shape]]:
+    """Link name -> its collision elements (its visual ones when it has none) of the URDF
+    file ``path``, for ``section: geometry``."""
+    out = {}
+    for link in ET.parse(path).getroot().iter("link"):
+        for source in ("collision", "visual"):
+            shapes = []
+            for element in link.findall(source):
+                geometry = element.find("geometry")
+                origin = element.find("origin")
+                rpy = "0 0 0" if origin is None else origin.get("rpy", "0 0 0")
+                for g in [] if geometry is None else list(geometry)[:1]:
+                    shapes.append(Shape(source, g.tag, dict(g.attrib), rpy))
+            if shapes:
+                out[link.get("name")] = shapes
+                break
+    return out
+
+
+def _numbers(beam: str, what: str, text: str, n: int) -> np.ndarray:
+    try:
+        x = np.array([float(v) for v in str(text).split()])
+    except ValueError:
+        x = np.zeros(0)
+    if x.shape != (n,) or not np.all(np.isfinite(x)):
+        raise BeamError(beam, f"section geometry: {what} is {text!r}; expected {n} numbers")
+    return x
+
+
+def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) -> dict:
+    """The section mapping (``{shape: circle, d}`` or ``{shape: rectangle, b, h, y_axis}``)
+    of ``section: geometry`` (module docstring) for a beam along ``axis`` (3,) in the link
+    frame, from the link's ``shapes`` (:func:`urdf_shapes`; None: not read from a URDF).
+
+    Raises:
+        BeamError: no URDF, no cylinder or box, several of them, a shape across the beam.
+    """
+    if shapes is None:
+        raise BeamError(
+            beam,
+            "section geometry is read from the link's URDF cylinder or box: "
+            "give the beam to load_model with the URDF file, or give a section",
+        )
+    if not shapes:
+        raise BeamError(
+            beam,
+            "section geometry: the link has no collision or visual geometry "
+            "in the URDF; expected a cylinder or box",
+        )
+    found = [s for s in shapes if s.kind in ("cylinder", "box")]
+    source = shapes[0].source
+    if len(found) != 1:
+        kinds = [s.kind for s in shapes]
+        raise BeamError(
+            beam,
+            f"section geometry: the link's {source} geometry is {kinds}; "
+            "expected exactly one cylinder or box",
+        )
+    shape = found[0]
+    R = pin.rpy.rpyToMatrix(*_numbers(beam, f"{source} origin rpy", shape.rpy, 3))
+    x = axis / np.linalg.norm(axis)
+    i = 2 if shape.kind == "cylinder" else int(np.argmax(np.abs(R.T @ x)))
+    angle = math.asin(min(1.0, float(np.linalg.norm(np.cross(R[:, i], x)))))
+    if angle > ALIGN_TOLERANCE:
+        raise BeamError(
+            beam,
+            f"section geometry: the {source} {shape.kind}'s axis "
+            f"{np.round(R[:, i], 6).tolist()} (link frame) is at "
+            f"{math.degrees(angle):.3g} deg from the beam {np.round(x, 6).tolist()}; "
+            f"expected along it (within {ALIGN_TOLERANCE} rad)",
+        )
+    if shape.kind == "cylinder":
+        radius = _numbers(beam, f"{source} cylinder radius", shape.sizes.get("radius"), 1)
+        return {"shape": "circle", "d": float(2 * radius[0])}
+    size = _numbers(beam, f"{source} box size", shape.sizes.get("size"), 3).tolist()
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return {"shape": "rectangle", "b": size[j], "h": size[k], "y_axis": R[:, j].tolist()}
 
 
 def clamped_compliance(L: float, E: float, G: float, s: Section, theory: str) -> np.ndarray:
@@ -330,11 +438,14 @@ def _matrix(beam: str, what: str, value) -> np.ndarray:
     return 0.5 * (K + K.T)
 
 
-def beam_stiffness(model: pin.Model, beam: str, spec: Mapping) -> tuple[str | None, np.ndarray]:
+def beam_stiffness(
+    model: pin.Model, beam: str, spec: Mapping, shapes: list[Shape] | None = None
+) -> tuple[str | None, np.ndarray]:
     """(end, K) of one beam: its end joint and its (6, 6) tip stiffness in the end joint's
     axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the ``beams:``
     entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
-    compliance_6x6 given in that same frame)."""
+    compliance_6x6 given in that same frame); ``shapes``: the link's URDF shapes, for
+    ``section: geometry`` (:func:`geometry_section`)."""
     if not isinstance(spec, Mapping):
         raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
     unknown = set(spec) - set(BEAM_KEYS)
@@ -357,21 +468,24 @@ def beam_stiffness(model: pin.Model, beam: str, spec: Mapping) -> tuple[str | No
     theory = spec.get("theory", "euler-bernoulli")
     if theory not in THEORIES:
         raise BeamError(beam, f"theory {theory!r}; expected one of {list(THEORIES)}")
-    section = section_from_spec(beam, spec["section"])
-    if theory == "timoshenko" and None in section.kappa(E / (2 * G) - 1):
-        raise BeamError(beam, "an explicit section needs kappa_y and kappa_z for timoshenko")
     link = model.frames[site.link_frame].placement
     M_LE = link.actInv(site.placement)  # the end in the link frame
     length = float(np.linalg.norm(M_LE.translation))
     if length <= 1e-12:
         raise BeamError(beam, f"length {length} m: end {site.end!r} is at the link's origin")
+    given = spec["section"]
+    if given == GEOMETRY:
+        given = geometry_section(beam, shapes, M_LE.translation)
+    section = section_from_spec(beam, given)
+    if theory == "timoshenko" and None in section.kappa(E / (2 * G) - 1):
+        raise BeamError(beam, "an explicit section needs kappa_y and kappa_z for timoshenko")
     R_LB = beam_axes(beam, M_LE.translation, section.y_axis)
     K_b = np.linalg.inv(clamped_compliance(length, E, G, section, theory))
     K = transport_stiffness(K_b, R_LB.T @ M_LE.rotation)
     return site.end, 0.5 * (K + K.T)
 
 
-def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping]):
+def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None):
     """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
     inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
 
@@ -379,6 +493,7 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping]):
         model: the kinematic tree (not modified).
         geometries: geometry models (or None) of ``model``, carried over.
         beams: link name -> specification.
+        urdf: the URDF file of ``model``, for ``section: geometry`` (None: not allowed).
 
     Returns:
         (model, geometries, springs, index): the new model, its geometry models, the
@@ -392,8 +507,11 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping]):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
     springs, index = {}, {j: j for j in range(model.njoints)}
     geometries = list(geometries)
+    wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
+    shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
     for beam, spec in beams.items():
-        end, K = beam_stiffness(model, beam, spec)
+        link_shapes = None if shapes is None else shapes.get(beam, [])
+        end, K = beam_stiffness(model, beam, spec, link_shapes)
         name = f"{beam}_beam"
         model, geometries, step = _insert(model, geometries, _site(model, beam, end), name)
         index = {j: step[i] for j, i in index.items()}

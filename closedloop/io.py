@@ -8,7 +8,8 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
     beams: {link: {end: joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}
-                                           # optional flexible links (closedloop.beams)
+                                           # optional flexible links (closedloop.beams);
+                                           # section: geometry = the link's URDF shape
 
 A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
 number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
@@ -299,7 +300,8 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     )
     tree, blocks = model, {}
     if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
-        model, (visual,), blocks, _ = apply_beams(model, [visual], {**spec.beams, **beams})
+        both = {**spec.beams, **beams}
+        model, (visual,), blocks, _ = apply_beams(model, [visual], both, urdf=path)
     if closures is None:
         actuated, locked = _serial_defaults(tree, path)
         return _Tree(model, [], actuated, blocks, locked, visual)

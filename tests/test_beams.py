@@ -171,6 +171,100 @@ def test_stiffness_6x6_equals_its_beam(tmp_path):
     assert_close_in_norm(cl.compliance(comp, q, "tip").C, C, RTOL_EXACT)
 
 
+# ------------------------------------------------------------------------ section: geometry
+def shape_axes(i: int) -> np.ndarray:
+    """(3, 3) axes of a URDF shape (columns, link frame) whose axis i lies along AXIS."""
+    R = beam_frame()  # columns AXIS, y, z
+    return np.roll(R, i, axis=1)  # column i is AXIS
+
+
+def geometry_urdf(tmp_path, elements: str, length=0.7) -> str:
+    """The cantilever's URDF with ``elements`` (collision / visual XML) on link 'ground'."""
+    xyz = " ".join(map(str, length * AXIS))
+    path = tmp_path / "shaped.urdf"
+    path.write_text(
+        f'<robot name="shaped"><link name="ground">{elements}</link><link name="tip">'
+        '<inertial><mass value="1.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" '
+        'ixz="0" iyz="0"/></inertial></link><joint name="tip_joint" type="fixed">'
+        f'<parent link="ground"/><child link="tip"/><origin xyz="{xyz}" rpy="0.3 -0.5 1.1"/>'
+        "</joint></robot>"
+    )
+    return str(path)
+
+
+def element(source: str, geometry: str, axes: np.ndarray) -> str:
+    rpy = " ".join(f"{v:.17g}" for v in pin.rpy.matrixToRpy(axes))
+    return (
+        f'<{source}><origin xyz="0.1 0 0" rpy="{rpy}"/><geometry>{geometry}</geometry></{source}>'
+    )
+
+
+def geometry_block(path, section="geometry", theory="euler-bernoulli") -> np.ndarray:
+    spec = {"end": "tip_joint", **STEEL, "section": section, "theory": theory}
+    return load_model(path, beams={"ground": spec}, geometry=False).spring_blocks["ground_beam"]
+
+
+@pytest.mark.parametrize("theory", ["euler-bernoulli", "timoshenko"])
+def test_geometry_cylinder_is_a_circle_of_its_diameter(tmp_path, theory):
+    """The collision cylinder (along the beam, its own rotation about its axis arbitrary)
+    is used, not the visual box."""
+    axes = shape_axes(2) @ pin.rpy.rpyToMatrix(0.0, 0.0, 0.4)  # turned about its own axis
+    shapes = element("collision", '<cylinder radius="0.015" length="0.3"/>', axes) + element(
+        "visual", '<box size="0.1 0.1 0.1"/>', shape_axes(0)
+    )
+    path = geometry_urdf(tmp_path, shapes)
+    expected = geometry_block(path, {"shape": "circle", "d": 0.03}, theory)
+    assert_close_in_norm(geometry_block(path, theory=theory), expected, 1e-12)
+
+
+@pytest.mark.parametrize("along", [0, 1, 2])
+def test_geometry_box_is_its_rectangle_across_the_beam(tmp_path, along):
+    """A visual box (no collision element) of sides 0.01, 0.02, 0.05 m along its axes,
+    axis ``along`` along the beam: the rectangle of the other two sides, the side along box
+    axis along + 1 as b (section y), the one along along + 2 as h; equivalently the same
+    rectangle turned by 90 degrees (b and h swapped, y along the other box axis)."""
+    sizes = np.array([0.01, 0.02, 0.05])
+    axes = shape_axes(along)
+    size = " ".join(map(str, sizes))
+    path = geometry_urdf(tmp_path, element("visual", f'<box size="{size}"/>', axes))
+    j, k = (along + 1) % 3, (along + 2) % 3
+    rect = {"shape": "rectangle", "b": sizes[j], "h": sizes[k], "y_axis": axes[:, j].tolist()}
+    turned = {"shape": "rectangle", "b": sizes[k], "h": sizes[j], "y_axis": axes[:, k].tolist()}
+    K = geometry_block(path)
+    assert_close_in_norm(K, geometry_block(path, rect), 1e-12)
+    assert_close_in_norm(K, geometry_block(path, turned), 1e-9)  # other algebra: rounding
+
+
+@pytest.mark.parametrize(
+    "shapes, match",
+    [
+        ("", r"beam 'ground': section geometry: the link has no collision or visual geometry"),
+        ('<collision><geometry><mesh filename="arm.stl"/></geometry></collision>',
+         r"the link's collision geometry is \['mesh'\]; expected exactly one cylinder or box"),
+        ('<visual><geometry><sphere radius="0.02"/></geometry></visual>',
+         r"the link's visual geometry is \['sphere'\]; expected exactly one cylinder or box"),
+        (2 * '<collision><geometry><cylinder radius="0.01" length="0.1"/></geometry></collision>',
+         r"collision geometry is \['cylinder', 'cylinder'\]; expected exactly one"),
+        ('<collision><geometry><cylinder radius="0.01" length="0.1"/></geometry></collision>',
+         r"the collision cylinder's axis \[0.0, 0.0, 1.0\] \(link frame\) is at 48.2 deg "
+         r"from the beam \[0.333333, 0.666667, 0.666667\]; expected along it"),  # acos(2/3)
+        (element("collision", '<cylinder radius="-0.01" length="0.1"/>', shape_axes(2)),
+         r"beam 'ground': section d is -0.02; expected a finite number > 0"),
+    ],
+)  # fmt: skip
+def test_bad_geometry_sections_are_refused(tmp_path, shapes, match):
+    with pytest.raises(BeamError, match=match):
+        geometry_block(geometry_urdf(tmp_path, shapes))
+
+
+def test_geometry_section_needs_the_urdf(tmp_path):
+    shapes = element("collision", '<cylinder radius="0.015" length="0.3"/>', shape_axes(2))
+    clm = load_model(geometry_urdf(tmp_path, shapes), geometry=False)
+    spec = {"end": "tip_joint", **STEEL, "section": "geometry"}
+    with pytest.raises(BeamError, match=r"beam 'ground': section geometry is read from the link"):
+        clm.with_beams({"ground": spec})
+
+
 # ------------------------------------------------------------------------ frame FEM
 def element_stiffness(p1, p2, E, G, A, I, J) -> np.ndarray:
     """(12, 12) 3D Euler-Bernoulli frame element, round section (Iy = Iz = I), global axes,
