@@ -413,6 +413,37 @@ def _insert(model, geometries, site: _Site, name: str):
     return new, out, index
 
 
+@dataclass(frozen=True)
+class InsertedBeam:
+    """A beam of a model built by :func:`apply_beams`: its virtual joint ``joint`` (index)
+    named ``name``, the link's frame ``link_frame`` (index, the beam's clamped start), and
+    ``rest`` the virtual joint's placement at rest in the link frame (its translation, (3,)
+    [m], is the undeflected beam from start to tip)."""
+
+    name: str
+    link_frame: int
+    joint: int
+    rest: pin.SE3
+
+
+def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
+    """The beams of ``model``: its ``<link>_beam`` joint frames whose parent frame is the
+    link's body frame, on the joint's parent joint (as :func:`apply_beams` builds them)."""
+    out = []
+    for f in model.frames:
+        link = model.frames[f.parentFrame]
+        j = f.parentJoint
+        if (
+            f.type == pin.JOINT
+            and link.type == pin.BODY
+            and f.name == f"{link.name}_beam"
+            and link.parentJoint == model.parents[j]
+        ):
+            rest = link.placement.actInv(model.jointPlacements[j])
+            out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
+    return out
+
+
 def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:
     """(new.nq,) configuration of ``new`` with the values of ``q`` (old.nq,) on the joints
     of the same name, neutral on the others (the beams' virtual joints: undeflected)."""

@@ -17,6 +17,8 @@ One meshcat scene, served by :mod:`closedloop.viewer_server` (the meshcat server
   :mod:`closedloop.viewer_scene`, at most ``ELLIPSOID_MAX_FRACTION`` L (the legend shows
   the shrink factor) and at least ``ELLIPSOID_MIN_FRACTION`` L (a rigid direction shows
   as a flat disc);
+* ``beams``: each flexible link's axis bent (:func:`closedloop.viewer_scene.beam_curves`),
+  a chain of thin cylinders from the beam's clamped start to its deflected tip;
 * ``grid``: a square grid in the plane of the model's lowest point, its step a round
   length near L / ``GRID_DIVISIONS`` (meshcat's 20 m grid is hidden);
 * an animation (meshcat ``Animation``, "Animations" in the page's controls) that ramps the
@@ -60,6 +62,8 @@ from .model import ClosedLoopModel
 from .viewer_draw import (  # noqa: F401  (constants: part of this module's interface)
     ANIMATION_DURATION,
     BACKGROUND,
+    BEAM_FRACTION,
+    BEAMS,
     CAMERA_DIRECTION,
     CAMERA_MARGIN,
     COMPLIANCE,
@@ -70,7 +74,9 @@ from .viewer_draw import (  # noqa: F401  (constants: part of this module's inte
     GRID,
     LOAD,
     TORQUE_COLOR,
+    beam_clip,
     colormap,
+    draw_beams,
     draw_ellipsoid,
     draw_grid,
     draw_load,
@@ -82,7 +88,7 @@ from .viewer_draw import (  # noqa: F401  (constants: part of this module's inte
 )
 from .viewer_mesh import ROBOTS, RobotPair
 from .viewer_page import overlay
-from .viewer_scene import LEVER_FRACTION, DeflectionScene, deflection_scene
+from .viewer_scene import LEVER_FRACTION, DeflectionScene, beam_curves, deflection_scene
 from .viewer_server import GET_CONTROL, SET_OVERLAY, insert_overlay, start_server, stop_server
 
 #: Seconds between two checks of the live page's slider while serving.
@@ -160,7 +166,7 @@ class DeflectionViewer:
         """
         if scene.q.shape != (self.clm.model.nq,):
             raise InvalidInputError("scene was computed for another model")
-        for node in (LOAD, COMPLIANCE, GRID):
+        for node in (LOAD, COMPLIANCE, GRID, BEAMS):
             self.viewer[node].delete()
         colours, colour_max = None, None
         if colour_by_displacement and scene.max_displacement > 0.0:
@@ -190,6 +196,7 @@ class DeflectionViewer:
         draw_load(self.viewer, scene)
         for e in scene.ellipsoids:
             draw_ellipsoid(self.viewer, e, floor)
+        draw_beams(self.viewer, scene.beams, BEAM_FRACTION * scene.size)
         clips = 0
         if animate:
             clips = self._animate(scene)
@@ -212,6 +219,7 @@ class DeflectionViewer:
                 tip = scene.point_deflected + length * v / np.linalg.norm(v)
                 boxes.append(np.array([tip, tip]))
         boxes += [ellipsoid_box(e, floor) for e in scene.ellipsoids if np.any(e.radii > 0.0)]
+        boxes += [np.array([b.points.min(axis=0), b.points.max(axis=0)]) for b in scene.beams]
         boxes = np.array(boxes)
         return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
 
@@ -234,6 +242,9 @@ class DeflectionViewer:
             {"path": f"/meshcat/{ROBOTS}", "clip": self.robots.clip(scene.ramp_q, fps)},
             {"path": f"/meshcat/{LOAD}", "clip": load},
         ]
+        if scene.beams:
+            curves = [beam_curves(self.clm, q) for q in scene.ramp_q]
+            animations.append({"path": f"/meshcat/{BEAMS}", "clip": beam_clip(curves, fps)})
         command = {
             "type": "set_animation",
             "path": "",

@@ -13,15 +13,17 @@ import numpy as np
 import pinocchio as pin
 
 from .model import ClosedLoopModel
-from .viewer_scene import LEVER_FRACTION, DeflectionScene, Ellipsoid
+from .viewer_scene import LEVER_FRACTION, BeamCurve, DeflectionScene, Ellipsoid
 
-LOAD, COMPLIANCE, GRID = "load", "compliance", "grid"
+LOAD, COMPLIANCE, GRID, BEAMS = "load", "compliance", "grid", "beams"
 #: Colour and opacity (RGBA, 0..1) of the nominal pose.
 GHOST_RGBA = (0.55, 0.55, 0.6, 0.3)
 FORCE_COLOR, TORQUE_COLOR = 0xD62728, 0x9467BD
 ELLIPSOID_COLORS = {"translation": 0x2CA02C, "rotation": 0xFF7F0E}
 ELLIPSOID_OPACITY = 0.35
 GRID_COLOR = 0x7F7F7F
+#: Colour of the drawn beam curves and their radius per model size L.
+BEAM_COLOR, BEAM_FRACTION = 0x1F77B4, 0.004
 #: Page background, top and bottom colours (RGB, 0..1): light, as in FEA post-processors.
 BACKGROUND = ((1.0, 1.0, 1.0), (0.78, 0.81, 0.86))
 #: Arrow shaft radius and smallest drawn ellipsoid radius, per model size L.
@@ -194,3 +196,47 @@ def draw_ellipsoid(viewer, e: Ellipsoid, floor: float) -> None:
     node.set_object(mg.Ellipsoid(np.maximum(e.drawn_radii, floor)), material)
     R = e.axes * np.sign(np.linalg.det(e.axes))  # a rotation, not a reflection
     node.set_transform(homogeneous(R, e.centre))
+
+
+def beam_segments(curve: BeamCurve) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """(node name, R (3, 3), centre (3,) [m], length [m]) of each segment of a beam curve:
+    the rotation taking y to the segment, world frame (a drawn segment is meshcat's unit
+    cylinder, height 1 along y, scaled by its length along y)."""
+    out = []
+    p = curve.points
+    for k in range(len(p) - 1):
+        d = p[k + 1] - p[k]
+        length = float(np.linalg.norm(d))
+        R = y_to(d / length) if length > 0.0 else np.eye(3)
+        out.append((f"{curve.name}_{k}", R, 0.5 * (p[k] + p[k + 1]), max(length, 1e-12)))
+    return out
+
+
+def draw_beams(viewer, curves: tuple[BeamCurve, ...], radius: float) -> None:
+    """Each beam curve as a chain of cylinders of ``radius`` [m] (one node a segment)."""
+    material = mg.MeshLambertMaterial(color=BEAM_COLOR)
+    for curve in curves:
+        for name, R, centre, length in beam_segments(curve):
+            node = viewer[BEAMS][name]
+            node.set_object(mg.Cylinder(1.0, radius), material)
+            node.set_transform(homogeneous(R @ np.diag([1.0, length, 1.0]), centre))
+
+
+def beam_clip(ramp_curves: list[tuple[BeamCurve, ...]], fps: float) -> dict:
+    """Animation clip (three.js JSON, times in frames) of the beam segments, one key a
+    pose: position, quaternion and length (scale along y) of each segment."""
+    tracks = {}
+    for k, curves in enumerate(ramp_curves):
+        for curve in curves:
+            for name, R, centre, length in beam_segments(curve):
+                quat = pin.Quaternion(R).coeffs()  # x, y, z, w as three.js
+                for prop, kind, value in (
+                    ("position", "vector3", centre),
+                    ("quaternion", "quaternion", quat),
+                    ("scale", "vector3", (1.0, length, 1.0)),
+                ):
+                    track = tracks.setdefault(
+                        (name, prop), {"name": f"{name}.{prop}", "type": kind, "keys": []}
+                    )
+                    track["keys"].append({"time": k, "value": [float(x) for x in value]})
+    return {"fps": fps, "name": "default", "tracks": list(tracks.values())}

@@ -39,6 +39,16 @@ No ellipsoid is drawn for a zero wrench. An ellipsoid larger than the model is d
 shrunk: its radii times ``shrink`` = min(1, ``ELLIPSOID_MAX_FRACTION`` L / largest radius)
 (:attr:`Ellipsoid.drawn_radii`; the viewer's legend shows the factor).
 
+Flexible links (the beams of :mod:`closedloop.beams`) are drawn bent: the link's mesh
+stays rigid with the beam's clamped start and its ``end`` rides on the tip, and between
+them the beam's axis is the cubic Hermite curve of :func:`beam_curves` from the start
+(the link frame origin, tangent along the undeflected beam) to the tip (the virtual
+joint's origin, tangent along the undeflected beam turned by the tip's rotation), both
+tangents of the beam's length L. To first order in the tip's deflection this is the
+Euler-Bernoulli deflection line of a clamped beam loaded at its tip (a cubic: it has the
+tip's displacement and slope), e.g. 5 F L^3 / (48 E I) at mid-length under a tip force F;
+an unloaded beam is the straight segment from start to tip.
+
 A load whose deflection overflows (``--force 1e300``) is refused (InvalidInputError).
 """
 
@@ -51,6 +61,7 @@ import pinocchio as pin
 
 from .arrays import check_wrench, readonly
 from .assembly import assemble
+from .beams import inserted_beams
 from .compliance import ComplianceResult, compliance
 from .configuration import accepts_configuration
 from .exceptions import InvalidInputError
@@ -66,6 +77,39 @@ LEVER_FRACTION = 0.25
 ANIMATION_FRAMES = 25
 #: Largest drawn ellipsoid semi-axis, per model size L.
 ELLIPSOID_MAX_FRACTION = 0.25
+#: Points of each drawn beam curve, start and tip included (evenly spaced parameter).
+BEAM_POINTS = 13
+
+
+@dataclass(frozen=True)
+class BeamCurve:
+    """A flexible link's axis as drawn: ``name`` its virtual joint, ``points`` (n, 3) [m],
+    world frame, from the clamped start to the tip (the curve of :func:`beam_curves`)."""
+
+    name: str
+    points: np.ndarray
+
+
+def beam_curves(clm: ClosedLoopModel, q: np.ndarray, n: int = BEAM_POINTS) -> tuple:
+    """The beams of ``clm`` at q (nq,) as :class:`BeamCurve` of n points: the cubic Hermite
+    curve p(u) = h00 p0 + h10 d0 + h01 p1 + h11 d1, u in [0, 1] (module docstring), with
+    p0, p1 the start and tip [m] and d0, d1 the tangents [m] (world frame)."""
+    update_kinematics(clm, clm.check_configuration(q))
+    u = np.linspace(0.0, 1.0, n)[:, None]
+    h00, h10, h01, h11 = (
+        2 * u**3 - 3 * u**2 + 1,
+        u**3 - 2 * u**2 + u,
+        3 * u**2 - 2 * u**3,
+        u**3 - u**2,
+    )
+    out = []
+    for b in inserted_beams(clm.model):
+        start, tip = clm.data.oMf[b.link_frame], clm.data.oMi[b.joint]
+        d0 = start.rotation @ b.rest.translation
+        d1 = tip.rotation @ (b.rest.rotation.T @ b.rest.translation)
+        p = h00 * start.translation + h10 * d0 + h01 * tip.translation + h11 * d1
+        out.append(BeamCurve(b.name, readonly(p)))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -116,6 +160,7 @@ class DeflectionScene:
         ramp: (n,) load fractions of the animation, 0 .. 1.
         ramp_q: (n, nq) amplified configurations integrate(q, s dq(t)) for each fraction t.
         equilibrium: the nonlinear equilibrium under the full wrench, or None (linear).
+        beams: the flexible links at q_deflected (:func:`beam_curves`; () without beams).
     """
 
     frame: str
@@ -135,6 +180,7 @@ class DeflectionScene:
     ramp: np.ndarray
     ramp_q: np.ndarray
     equilibrium: Equilibrium | None
+    beams: tuple[BeamCurve, ...] = ()
 
     @property
     def nonlinear(self) -> bool:
@@ -356,6 +402,7 @@ def deflection_scene(
     ramp_q = np.array(ramp_q)
     update_kinematics(clm, ramp_q[-1])
     point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
+    beams = beam_curves(clm, ramp_q[-1])
     update_kinematics(clm, q)
     ellipsoids = _ellipsoids(res, w, s, size, rotational)
     _check_finite(w, compliance_ellipsoid=[e.radii for e in ellipsoids])
@@ -377,4 +424,5 @@ def deflection_scene(
         ramp=readonly(ramp),
         ramp_q=readonly(ramp_q),
         equilibrium=equilibrium,
+        beams=beams,
     )

@@ -25,6 +25,7 @@ from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
 from closedloop.assembly import ASSEMBLY_TOL, assemble
+from closedloop.beams import map_configuration
 from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError
 from closedloop.io import load_model
@@ -539,3 +540,128 @@ def test_live_page_slider_sends_the_amplification_to_the_viewer(fourbar):
         viewer.serve(duration=1.0, out=lambda _: None, on_amplification=seen.append)
         assert seen == [chosen]
         assert viewer.poll_control() == {}  # fetched once
+
+
+# ------------------------------------------------------------------ beams drawn bent
+#: A steel rod of diameter ROD_D, length ROD_L [m], along world x, clamped at link 'post'.
+ROD_L, ROD_D, STEEL = 0.6, 0.02, {"E": 2.1e11, "G": 8.1e10}
+#: Tip force [N] along y: tip deflection F L^3 / (3 E I) = 4.4e-7 m, tip slope 1.1e-6 rad.
+ROD_FORCE = 1e-2
+#: Hermite curve vs the Euler-Bernoulli deflection line at scale 1: second-order terms,
+#: ~ the tip slope (1e-6) relative.
+RTOL_FIRST_ORDER = 1e-5
+UR5_BEAMS = {
+    "shoulder_link": "shoulder_lift_joint",
+    "upper_arm_link": "elbow_joint",
+    "forearm_link": "wrist_1_joint",
+    "wrist_1_link": "wrist_2_joint",
+    "wrist_2_link": "wrist_3_joint",
+    "wrist_3_link": "ee_fixed_joint",
+}
+
+
+@pytest.fixture(scope="module")
+def rod(tmp_path_factory):
+    """The rod as a beam on link 'post', its tip the fixed joint to link 'tip' at (L, 0, 0);
+    visual cylinders (primitives: no mesh files)."""
+    path = tmp_path_factory.mktemp("rod") / "rod.urdf"
+    inertial = (
+        '<inertial><mass value="0.5"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" '
+        'ixz="0" iyz="0"/></inertial>'
+    )
+    rod = (
+        f'<visual><origin xyz="{ROD_L / 2} 0 0" rpy="0 1.5707963267948966 0"/><geometry>'
+        f'<cylinder radius="{ROD_D / 2}" length="{ROD_L}"/></geometry></visual>'
+    )
+    box = '<visual><geometry><box size="0.05 0.05 0.05"/></geometry></visual>'
+    path.write_text(
+        f'<robot name="rod"><link name="post">{inertial}{rod}</link><link name="tip">'
+        f'{inertial}{box}</link><joint name="tip_joint" type="fixed"><parent link="post"/>'
+        f'<child link="tip"/><origin xyz="{ROD_L} 0 0"/></joint></robot>'
+    )
+    beam = {"end": "tip_joint", **STEEL, "section": {"shape": "circle", "d": ROD_D}}
+    clm = load_model(path, beams={"post": beam})
+    return clm, pin.neutral(clm.model)
+
+
+def test_bent_rod_is_the_euler_bernoulli_deflection_line(rod):
+    clm, q = rod
+    scene = deflection_scene(clm, q, "tip", [0.0, ROD_FORCE, 0.0, 0.0, 0.0, 0.0], scale=1.0)
+    (curve,) = scene.beams
+    assert curve.name == "post_beam" and curve.points.shape == (13, 3)
+    model, data = clm.model, clm.model.createData()
+    pin.framesForwardKinematics(model, data, scene.q_deflected)
+    tip = data.oMf[model.getFrameId("tip")].translation  # the end's frame, forward kinematics
+    np.testing.assert_allclose(curve.points[-1], tip, rtol=0, atol=ATOL_PLACEMENT)
+    np.testing.assert_allclose(curve.points[0], [0.0, 0.0, 0.0], rtol=0, atol=ATOL_PLACEMENT)
+    EI = STEEL["E"] * np.pi * ROD_D**4 / 64
+    x = np.linspace(0.0, ROD_L, 13)  # u evenly spaced: x = u L to first order
+    v = ROD_FORCE * x**2 * (3 * ROD_L - x) / (6 * EI)  # clamped beam, tip force
+    np.testing.assert_allclose(curve.points[:, 1], v, rtol=RTOL_FIRST_ORDER, atol=0)
+    assert curve.points[6, 1] == pytest.approx(
+        5 * ROD_FORCE * ROD_L**3 / (48 * EI), rel=RTOL_FIRST_ORDER
+    )
+
+
+@pytest.fixture(scope="module")
+def ur5_flex(ur5_urdf):
+    tube = {"E": 7.0e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.06, "t": 0.004}}
+    beams = {link: {**tube, "end": end} for link, end in UR5_BEAMS.items()}
+    rigid = load_model(ur5_urdf, joint_stiffness=1e4, geometry=False)
+    return rigid, rigid.with_beams(beams)
+
+
+def test_unloaded_beams_are_straight_from_start_to_tip(ur5_flex):
+    """At rest each curve is the segment from the link's origin to its end joint's origin,
+    evenly divided, as the rigid UR5's forward kinematics places them."""
+    rigid, flex = ur5_flex
+    scene = deflection_scene(flex, map_configuration(rigid.model, flex.model, UR5_Q), "ee_link",
+                             np.zeros(6))  # fmt: skip
+    data = rigid.model.createData()
+    pin.framesForwardKinematics(rigid.model, data, UR5_Q)
+    assert [c.name for c in scene.beams] == [f"{link}_beam" for link in UR5_BEAMS]
+    for curve, (link, end) in zip(scene.beams, UR5_BEAMS.items(), strict=True):
+        a = data.oMf[rigid.model.getFrameId(link)].translation
+        b = data.oMf[rigid.model.getFrameId(end)].translation
+        u = np.linspace(0.0, 1.0, len(curve.points))[:, None]
+        np.testing.assert_allclose(curve.points, a + u * (b - a), rtol=0, atol=ATOL_PLACEMENT)
+
+
+def test_loaded_beam_tips_follow_their_end_joints(ur5_flex):
+    rigid, flex = ur5_flex
+    q = map_configuration(rigid.model, flex.model, UR5_Q)
+    scene = deflection_scene(flex, q, "ee_link", UR5_WRENCH)
+    data = flex.model.createData()
+    pin.framesForwardKinematics(flex.model, data, scene.q_deflected)
+    for curve, (link, end) in zip(scene.beams, UR5_BEAMS.items(), strict=True):
+        start = data.oMf[flex.model.getFrameId(link)].translation
+        tip = data.oMf[flex.model.getFrameId(end)].translation
+        np.testing.assert_allclose(curve.points[0], start, rtol=0, atol=ATOL_PLACEMENT)
+        np.testing.assert_allclose(curve.points[-1], tip, rtol=0, atol=ATOL_PLACEMENT)
+        chord = tip - start
+        off = (
+            curve.points
+            - start
+            - np.outer(curve.points @ chord - start @ chord, chord) / (chord @ chord)
+        )
+        assert np.max(np.linalg.norm(off, axis=1)) > 1e-6 * np.linalg.norm(chord)  # bent
+
+
+def test_page_draws_the_beam_as_segments_of_its_curve(rod, tmp_path):
+    clm, q = rod
+    scene = deflection_scene(clm, q, "tip", [0.0, 50.0, -30.0, 0.0, 0.0, 0.0])
+    _, cmds = export(clm, scene, tmp_path)
+    objects, transforms = by_path(cmds, "set_object"), by_path(cmds, "set_transform")
+    (curve,) = scene.beams
+    ends = np.array([[0.0, -0.5, 0.0, 1.0], [0.0, 0.5, 0.0, 1.0]])  # the unit cylinder's
+    for k in range(len(curve.points) - 1):
+        path = f"/meshcat/beams/post_beam_{k}"
+        assert objects[path]["object"]["geometries"][0]["type"] == "CylinderGeometry"
+        drawn = (matrix(transforms[path]) @ ends.T).T[:, :3]
+        np.testing.assert_allclose(drawn, curve.points[k : k + 2], rtol=0, atol=ATOL_PLACEMENT)
+    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/beams"]
+    tracks = {t["name"]: t["keys"] for t in clip["tracks"]}
+    last = tracks["post_beam_11.position"][-1]["value"]
+    np.testing.assert_allclose(last, 0.5 * (curve.points[-2] + curve.points[-1]), atol=1e-12)
+    assert len(tracks["post_beam_0.scale"]) == len(scene.ramp)
