@@ -1,16 +1,30 @@
-"""A tiny document model rendered both to Markdown and to self-contained HTML.
+"""The report's builder: a list of blocks written as Markdown, rendered to HTML by Markdown.
 
-A report is a list of blocks (headings, paragraphs, tables, figures, code); the same
-list gives ``report.md`` (figures linked as files) and ``report.html`` (figures embedded
-as base64 PNG, no external resource).
+A report is a :class:`Document` of headings, paragraphs, tables and figures. The same
+blocks give ``report.md`` (figures linked as files next to it) and ``report.html``: that
+Markdown rendered by Python-Markdown (``tables`` extension), every figure embedded as a
+base64 data URI, so the page needs no other file and no network.
 """
 
 from __future__ import annotations
 
 import base64
 import html
+import mimetypes
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.etree.ElementTree import Element
+
+import markdown
+from markdown.extensions import Extension
+from markdown.treeprocessors import Treeprocessor
+
+_STYLE = (
+    "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
+    "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;"
+    "padding:2px 6px;text-align:right}th{background:#eee}img{max-width:100%}"
+)
 
 
 def _md_row(cells) -> str:
@@ -41,12 +55,23 @@ class Figure:
     caption: str
 
 
-@dataclass(frozen=True)
-class Code:
-    text: str
+Block = Heading | Paragraph | Table | Figure
 
 
-Block = Heading | Paragraph | Table | Figure | Code
+class _EmbedImages(Treeprocessor):
+    """Replace the ``src`` of every image (a file path) by the file's data URI."""
+
+    def run(self, root: Element) -> None:
+        for img in root.iter("img"):
+            path = Path(img.get("src", ""))
+            mime = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
+            data = base64.b64encode(path.read_bytes()).decode("ascii")
+            img.set("src", f"data:{mime};base64,{data}")
+
+
+class _Embed(Extension):
+    def extendMarkdown(self, md: markdown.Markdown) -> None:
+        md.treeprocessors.register(_EmbedImages(md), "embed_images", 0)
 
 
 @dataclass
@@ -60,14 +85,30 @@ class Document:
         self.blocks.extend(blocks)
 
     def to_markdown(self, relative_to: Path) -> str:
+        """The Markdown of the report, figures linked relative to the folder ``relative_to``."""
+        base = Path(relative_to).resolve()
+        return self._markdown(lambda p: Path(p).resolve().relative_to(base).as_posix())
+
+    def to_html(self) -> str:
+        """A self-contained HTML page: the Markdown rendered, every figure embedded."""
+        body = markdown.markdown(
+            self._markdown(lambda p: Path(p).resolve().as_posix()),
+            extensions=["tables", _Embed()],
+            output_format="html",
+        )
+        return (
+            '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            f"<title>{html.escape(self.title)}</title><style>{_STYLE}</style></head>"
+            f"<body>\n{body}\n</body></html>\n"
+        )
+
+    def _markdown(self, link: Callable[[Path], str]) -> str:
         out = [f"# {self.title}", ""]
         for b in self.blocks:
             if isinstance(b, Heading):
                 out += ["#" * b.level + " " + b.text, ""]
             elif isinstance(b, Paragraph):
                 out += [b.text, ""]
-            elif isinstance(b, Code):
-                out += ["```", b.text, "```", ""]
             elif isinstance(b, Table):
                 if b.caption:
                     out += [f"*{b.caption}*", ""]
@@ -76,42 +117,8 @@ class Document:
                 out += [_md_row(r) for r in b.rows]
                 out.append("")
             elif isinstance(b, Figure):
-                rel = Path(b.path).resolve().relative_to(Path(relative_to).resolve())
-                out += [f"![{b.caption}]({rel.as_posix()})", "", f"*{b.caption}*", ""]
-        return "\n".join(out)
-
-    def to_html(self) -> str:
-        e = html.escape
-        out = [
-            "<!DOCTYPE html>",
-            '<html lang="en"><head><meta charset="utf-8">',
-            f"<title>{e(self.title)}</title>",
-            "<style>body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
-            "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;"
-            "padding:2px 6px;text-align:right}th{background:#eee}"
-            "img{max-width:100%}figcaption,.caption{font-style:italic}"
-            "pre{background:#f6f6f6;padding:0.5em}</style></head><body>",
-            f"<h1>{e(self.title)}</h1>",
-        ]
-        for b in self.blocks:
-            if isinstance(b, Heading):
-                out.append(f"<h{b.level}>{e(b.text)}</h{b.level}>")
-            elif isinstance(b, Paragraph):
-                out.append(f"<p>{e(b.text)}</p>")
-            elif isinstance(b, Code):
-                out.append(f"<pre>{e(b.text)}</pre>")
-            elif isinstance(b, Table):
-                if b.caption:
-                    out.append(f'<p class="caption">{e(b.caption)}</p>')
-                out.append("<table><tr>" + "".join(f"<th>{e(h)}</th>" for h in b.header) + "</tr>")
-                for r in b.rows:
-                    out.append("<tr>" + "".join(f"<td>{e(c)}</td>" for c in r) + "</tr>")
-                out.append("</table>")
-            elif isinstance(b, Figure):
-                data = base64.b64encode(Path(b.path).read_bytes()).decode("ascii")
-                out.append(
-                    f'<figure><img alt="{e(b.caption)}" src="data:image/png;base64,{data}">'
-                    f"<figcaption>{e(b.caption)}</figcaption></figure>"
-                )
-        out.append("</body></html>")
+                target = link(b.path)
+                if any(c in target for c in " ()<>"):
+                    target = f"<{target}>"
+                out += [f"![{b.caption}]({target})", "", f"*{b.caption}*", ""]
         return "\n".join(out)
