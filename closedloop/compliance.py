@@ -34,12 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .arrays import check_wrench, frozen, readonly
-from .conditioning import (
-    ILL_CONDITIONED,
-    Spectrum,
-    spectrum_from_factor,
-    twist_scaling,
-)
+from .conditioning import ILL_CONDITIONED, Spectrum, spectrum_from_factor
 from .configuration import Configuration, as_configuration
 from .exceptions import (
     InvalidInputError,
@@ -47,7 +42,15 @@ from .exceptions import (
     SingularConfigurationError,
 )
 from .model import ClosedLoopModel
-from .springs import PATHS, SpringFactor, spring_factor, spring_subspace
+from .springs import (
+    PATHS,
+    SpringFactor,
+    check_path,
+    partition,
+    scaling,
+    spring_factor,
+    spring_subspace,
+)
 
 # the admissible motions and the spring factor live in closedloop.springs; their names stay
 # importable from here (first release)
@@ -256,17 +259,57 @@ def compliance(
         w0 = np.zeros(6) if preload is None else preload
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
         return preloaded_compliance(state.model, eq, axes)
+    check_path(path)
     J = state.frame_jacobian(frame, axes)
+    sc = scaling(state)
+    fast = partition(state, sc) if path == "auto" else None
+    if fast is not None:
+        return _fast_compliance(state, frame, axes, J, sc, *fast)
     f = spring_factor(state, J, frame, path)
     NV = f.NV
-    JNV = (J @ NV) * twist_scaling(state.length)[:, None]  # scaled, kinematic
+    JNV = (J @ NV) * sc.d[:, None]  # scaled, kinematic
     B_s = JNV / f.sigma  # C_s = B_s B_s^T
     spread = f.sigma.max() / f.sigma.min() if f.sigma.size else 1.0
     spectrum = spectrum_from_factor(B_s, state.length, range_factor=JNV, spread=spread)
     P = NV / f.sigma
     B = J @ P  # C = B B^T
-    C = B @ B.T
-    return compliance_result(state, frame, axes, 0.5 * (C + C.T), P @ B.T, f, spectrum)
+    return compliance_result(state, frame, axes, B @ B.T, P @ B.T, f, spectrum)
+
+
+def _fast_compliance(
+    state: Configuration, frame: str, axes: str, J: np.ndarray, sc, path: str, X
+) -> ComplianceResult:
+    """The serial and partitioned paths without forming N (nv, s).
+
+    In the scaled spring coordinates y = dq_s / s_q (dq_p = s_q X y on the passive ones,
+    :func:`closedloop.springs.partition`) the frame moves by M y, M = J_s + J_p X (6, s)
+    with scaled columns, and K_r = W^-T W^-1 (W = diag(1/sqrt_k), or V diag(1/sigma) with
+    spring blocks): C = B B^T with B = M W, G = P B^T with P = [W; X W] s_q, the same
+    factor as the null-space path's (module docstring) on the same spectrum rule.
+    """
+    M = J if sc.angular else J * sc.s_q
+    if not sc.all_sprung:
+        M = M[:, sc.sprung] if X is None else M[:, sc.sprung] + M[:, sc.passive] @ X
+    if sc.W is None:  # diagonal springs
+        kinematic, B = M, M * sc.inv_sigma
+        H = B.T * sc.inv_sigma[:, None]  # W B^T (s, 6)
+    else:
+        kinematic, B = M @ sc.root_V, M @ sc.W
+        H = sc.W @ B.T
+    d = sc.d[:, None]
+    spectrum = spectrum_from_factor(
+        B * d, state.length, kinematic * d, sc.spread, scales=(sc.d, sc.dd)
+    )
+    if sc.all_sprung:
+        G = H if sc.angular else H * sc.s_q[:, None]
+    else:
+        G = np.zeros((sc.s_q.size, 6))
+        G[sc.sprung] = H
+        if X is not None:
+            G[sc.passive] = X @ H
+        if not sc.angular:
+            G *= sc.s_q[:, None]
+    return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
 
 
 def compliance_result(
@@ -285,7 +328,26 @@ def compliance_result(
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
-    total = C.sum() + G.sum() + (0.0 if spectrum.K is None else spectrum.K.sum())
+    mobility, internal = f.N.shape[1], f.n_internal
+    return _result(state, frame, axes, C, G, spectrum, mobility, internal, f.path, cls, **extra)
+
+
+def _result(
+    state: Configuration,
+    frame: str,
+    axes: str,
+    C: np.ndarray,
+    G: np.ndarray,
+    spectrum: Spectrum,
+    mobility: int,
+    n_internal: int,
+    path: str,
+    cls: type[ComplianceResult] | None = None,
+    **extra,
+) -> ComplianceResult:
+    """:func:`compliance_result` from the numbers of the spring factor."""
+    K = spectrum.K
+    total = C.sum() + G.sum() + (0.0 if K is None else K.sum())
     if not np.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
         raise SingularConfigurationError(
             f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "
@@ -299,14 +361,14 @@ def compliance_result(
         q=state.q,
         rank=spectrum.rank,
         rigid_directions=spectrum.rigid_directions,
-        closure_residual=float(np.max(np.abs(state.residual), initial=0.0)),
-        mobility=f.N.shape[1],
-        internal_mobilities=f.n_internal,
+        closure_residual=state.residual_norm,
+        mobility=mobility,
+        internal_mobilities=n_internal,
         G=frozen(G),
         length=spectrum.length,
         condition_number=spectrum.condition_number,
-        stiffness_matrix=spectrum.K,
-        path=f.path,
+        stiffness_matrix=K,
+        path=path,
         **extra,
     )
 

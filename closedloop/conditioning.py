@@ -171,6 +171,7 @@ def spectrum_from_factor(
     length: float,
     range_factor: np.ndarray | None = None,
     spread: float = 1.0,
+    scales: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Spectrum:
     """Spectrum of C = D^-1 B_s B_s^T D^-1 from its scaled square-root factor B_s (6, r).
 
@@ -185,20 +186,26 @@ def spectrum_from_factor(
         spread: cond(W). The singular values of A and B_s differ by at most this factor,
             so A is full rank without being looked at when beta_6 > RANK_RTOL spread
             beta_1.
+        scales: (d (6,), outer(d, d) (6, 6)) of :func:`twist_scaling` at ``length``, when
+            the caller has them.
     """
-    d = twist_scaling(length)
+    d, dd = scales if scales is not None else (twist_scaling(length), None)
     B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
-    U, beta, _ = svd(B_s) if B_s.size else (np.eye(6), np.zeros(0), None)
-    rank, basis = rule_rank(beta), U
-    if range_factor is not None and not (rank == 6 and beta[5] > RANK_RTOL * spread * beta[0]):
-        basis, s_k, _ = svd(range_factor)
-        rank = rule_rank(s_k)
+    # the left singular vectors U (6, 6) are all needed (rigid directions): the thin SVD
+    # has them when r >= 6
+    U, beta, _ = svd(B_s, B_s.shape[1] < 6) if B_s.size else (np.eye(6), np.zeros(0), None)
+    if beta.size >= 6 and beta[5] > RANK_RTOL * spread * beta[0]:
+        rank, basis = 6, U  # full rank, and so is the range factor (spread >= 1)
+    else:
+        rank, basis = rule_rank(beta), U
+        if range_factor is not None:
+            basis, s_k, _ = svd(range_factor, range_factor.shape[1] < 6)
+            rank = rule_rank(s_k)
     cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
     K = None
     if rank == 6:
-        Ub = U / beta  # K_s = U diag(beta^-2) U^T
-        K_s = Ub @ Ub.T
-        K = frozen(0.5 * (K_s + K_s.T) * np.outer(d, d))
+        Ub = U / beta  # K_s = U diag(beta^-2) U^T (symmetric: numpy's A @ A.T is a syrk)
+        K = frozen((Ub @ Ub.T) * (np.outer(d, d) if dd is None else dd))
     return Spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
 
 

@@ -50,6 +50,7 @@ class Configuration:
         length: characteristic length L [m].
         residual: (m,) read-only closure residual [m for points; m, rad for welds], in the
             axes of each closure's side-1 anchor (Pinocchio's convention).
+        residual_norm: infinity norm of :attr:`residual` [m, rad].
         closure_error: scaled residual, infinity norm (metres / L, radians).
     """
 
@@ -66,7 +67,11 @@ class Configuration:
         pin.updateFramePlacements(pm, self.data)
         self.length = model.length if length is None else check_length(length)
         self.residual = frozen(residual_rows(model, self.data, self._constraint_datas))
-        self.closure_error = float(np.max(np.abs(self._scaled_residual()), initial=0.0))
+        if self.residual.size:
+            self.residual_norm = float(np.max(np.abs(self.residual)))
+            self.closure_error = float(np.max(np.abs(self._scaled_residual())))
+        else:  # a serial robot closes no loop
+            self.residual_norm = self.closure_error = 0.0
         self._closure_jacobian: np.ndarray | None = None
         self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
 

@@ -27,13 +27,28 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
+def _closure_rows(clm: ClosedLoopModel) -> tuple[tuple, ...]:
+    """(constraint, first row, last row + 1, is a weld) of every closure (once per model)."""
+
+    def rows():
+        out, start = [], 0
+        for c in clm.closures:
+            out.append((c.constraint, start, start + c.size, c.kind == "6d"))
+            start += c.size
+        return tuple(out)
+
+    return clm.memo("closure_rows", rows)
+
+
 def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
     """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
-    out = [np.zeros(0)]
-    for c, cd in zip(clm.closures, constraint_datas, strict=True):
-        c.constraint.calc(clm.model, data, cd)
-        out.append(np.array(cd.constraint_position_error))
-    return np.concatenate(out)
+    rows = _closure_rows(clm)
+    out = np.empty(rows[-1][2] if rows else 0)
+    model = clm.model
+    for (c, a, b, _), cd in zip(rows, constraint_datas, strict=True):
+        c.calc(model, data, cd)
+        out[a:b] = cd.constraint_position_error
+    return out
 
 
 def jacobian_rows(
@@ -45,16 +60,18 @@ def jacobian_rows(
         calc: evaluate the constraints first (False when :func:`residual_rows` has just
             done it with the same datas).
     """
-    nv = clm.model.nv
-    rows = [np.zeros((0, nv))]
-    for c, cd in zip(clm.closures, constraint_datas, strict=True):
+    rows = _closure_rows(clm)
+    model = clm.model
+    out = np.empty((rows[-1][2] if rows else 0, model.nv))
+    for (c, a, b, weld), cd in zip(rows, constraint_datas, strict=True):
         if calc:
-            c.constraint.calc(clm.model, data, cd)
-        J = np.asarray(c.constraint.jacobian(clm.model, data, cd)).reshape(-1, nv)
-        if c.kind == "6d":
-            J = pin.Jlog6(cd.c1Mc2.inverse()) @ J
-        rows.append(J)
-    return np.vstack(rows)
+            c.calc(model, data, cd)
+        J = c.jacobian(model, data, cd)
+        if model.nv == 1:  # a one-dof model gives a vector
+            J = np.reshape(J, (-1, 1))
+        # for a weld, the derivative of log6 of the relative placement
+        out[a:b] = pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J
+    return out
 
 
 def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: str) -> np.ndarray:

@@ -18,6 +18,7 @@ frame is a :class:`MechanismError`.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -64,7 +65,8 @@ class SpringFactor(NamedTuple):
 
 
 class _Scaling(NamedTuple):
-    """Unit-free scaling of a model at length L (computed once per model and L)."""
+    """Unit-free scaling of a model at length L, and the index sets and factors of the fast
+    paths (computed once per model and L)."""
 
     s_q: np.ndarray  # (nv,) dq = s_q * scaled dq: L for linear coordinates, 1 for angles
     row_scale: np.ndarray  # (m, 1) closure rows in metres divided by L
@@ -75,36 +77,77 @@ class _Scaling(NamedTuple):
     # With spring blocks (else None): the scaled square root R_s (s, s) of the sprung
     # stiffness, diag(s_q) K_ss diag(s_q) = R_s^T R_s, and its SVD R_s = U diag(sigma) V^T,
     # which is the spring factor of the fast paths on y = dq_s: K_r = V diag(sigma^2) V^T.
-    root: np.ndarray | None = None
-    root_V: np.ndarray | None = None
-    root_sigma: np.ndarray | None = None
+    root: np.ndarray | None
+    root_V: np.ndarray | None
+    root_sigma: np.ndarray | None
+    # the closure rows' scaling split by columns: scaled J_s = Jc[:, sprung] * scale_s
+    # (m, s), scaled -J_p = Jc[:, passive] * scale_p (m, p)
+    scale_s: np.ndarray
+    scale_p: np.ndarray
+    d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
+    dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
+    all_sprung: bool  # every coordinate has a finite spring (sprung = arange(nv))
+    angular: bool  # no linear coordinate (s_q = 1)
+    sigma: np.ndarray  # (s,) the spring factor's singular values on y = dq_s
+    inv_sigma: np.ndarray  # (s,) 1 / sigma
+    spread: float  # max(sigma) / min(sigma), 1 without springs
+    W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
         s_q = np.where(clm.linear_coordinates, L, 1.0)
         k = clm.stiffness
         sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
-        root = root_V = root_sigma = None
+        passive = np.flatnonzero(k == 0.0)
+        sqrt_k = np.sqrt(k[sprung]) * s_q[sprung]
+        root = root_V = root_sigma = W = None
+        sigma = sqrt_k
         if clm.spring_blocks:
             root = clm.spring_root[np.ix_(sprung, sprung)] * s_q[sprung]
             _, root_sigma, Vt = np.linalg.svd(root)
-            root_V = Vt.T
+            root_V, sigma = Vt.T, root_sigma
+            W = root_V / root_sigma
+        row_scale = np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None]
+        d = twist_scaling(L)
         return cls(
             s_q,
-            np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None],
+            row_scale,
             rigid_rows(clm),
             sprung,
-            np.sqrt(k[sprung]) * s_q[sprung],
-            np.flatnonzero(k == 0.0),
+            sqrt_k,
+            passive,
             root,
             root_V,
             root_sigma,
+            row_scale * s_q[sprung],
+            -row_scale * s_q[passive],
+            d,
+            np.outer(d, d),
+            sprung.size == k.size,
+            not np.any(clm.linear_coordinates),
+            sigma,
+            1.0 / sigma,
+            float(sigma.max() / sigma.min()) if sigma.size else 1.0,
+            W,
         )
 
     @property
     def fast_factor(self) -> tuple[np.ndarray | None, np.ndarray]:
         """(V (s, s) or None for the identity, sigma (s,)): the spring factor on y = dq_s."""
         return (None, self.sqrt_k) if self.root is None else (self.root_V, self.root_sigma)
+
+    def spring_free(self, norm_T2: float) -> bool:
+        """The null-space path's spring-free rule on the fast paths' factor: that path
+        would find singular values of the spring factor between min(sigma) / |T| and
+        max(sigma), |T|^2 = s + norm_T2 for N = [I; X] (norm_T2 = |X|_F^2)."""
+        s = self.sigma.size
+        return s > 0 and 1.0 <= RANK_RTOL * self.spread * math.sqrt(s + norm_T2)
+
+
+def scaling(state: Configuration) -> _Scaling:
+    """The scaling of a configuration's model at its length (computed once per model and L)."""
+    clm, L = state.model, state.length
+    return clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
 
 
 #: The partitioned path is taken when the passive part of the scaled closure Jacobian is
@@ -117,49 +160,79 @@ PARTITION_RCOND = 1e-6
 PARTITION_RTOL = 1e-9
 
 
-def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | None:
-    """Spring factor without a null space, when the springs determine everything.
+def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
+    """X (p, s) = -J_p^+ J_s from the closure Jacobian Jc (m, nv), m >= p, or None when
+    J_p is ill conditioned or J_s + J_p X does not vanish (module constants).
+
+    QR of J_p (LAPACK dgeqrf, dormqr) and the inverse of its triangle (dtrtri): unlike
+    dgels' triangular solve, none of them wakes a multi-threaded BLAS on a small matrix.
+    """
+    lapack, p = scipy.linalg.lapack, sc.passive.size
+    J_s = Jc[:, sc.sprung] * sc.scale_s  # scaled
+    minus_Jp = np.multiply(Jc[:, sc.passive], sc.scale_p, order="F")
+    qr, tau, _, info = lapack.dgeqrf(minus_Jp, overwrite_a=1)
+    R = np.triu(qr[:p])
+    if info != 0 or lapack.dtrcon(R)[0] <= PARTITION_RCOND:
+        return None
+    # Q^T J_s: its first p rows give X = R^-1 (Q^T J_s)[:p], the others the residual
+    c, _, info = lapack.dormqr("L", "T", qr, tau, J_s, lwork=64 * J_s.shape[1])
+    if info != 0 or abs(c[p:]).max(initial=0.0) > PARTITION_RTOL * abs(J_s).max():
+        return None
+    R_inv, info = lapack.dtrtri(R, overwrite_c=1)
+    return R_inv @ c[:p] if info == 0 else None
+
+
+def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | None] | None:
+    """The fast path at a configuration: ``("serial", None)``, ``("partitioned", X)`` or
+    None (the null-space path then decides).
 
     With the closure rows J_c dq = J_s dq_s + J_p dq_p = 0 (scaled, locked coordinates
-    still), a passive part J_p of full column rank fixes dq_p = X dq_s, X = -J_p^+ J_s,
-    for every spring motion dq_s when J_s + J_p X = 0; the admissible motions are then
-    N = [I; X] in the spring coordinates, where K_r = diag(k s_q^2) is already diagonal
-    (with spring blocks: K_r = R_s^T R_s, whose SVD is computed once per model).
-    Returns None when this does not apply (the null-space path then decides).
+    still), a passive part J_p of full column rank fixes dq_p = X dq_s, X = -J_p^+ J_s
+    (p, s), for every spring motion dq_s when J_s + J_p X = 0; the admissible motions are
+    then N = [I; X] in the scaled spring coordinates, where K_r = diag(k s_q^2) is already
+    diagonal (with spring blocks: K_r = R_s^T R_s, whose SVD is computed once per model).
+    Without closures nor passive joints N selects the spring coordinates (serial).
     """
-    nv, s, p = state.model.model.nv, sc.sprung, sc.passive
-    T = np.zeros((nv, s.size))
-    T[s, np.arange(s.size)] = 1.0
-    Jc = state.closure_jacobian()
-    if p.size:
-        if Jc.shape[0] < p.size:
+    p, m = sc.passive.size, state.residual.size
+    X, norm2 = None, 0.0
+    if p:
+        if m < p or not sc.sprung.size:
             return None
-        Jc = Jc * sc.row_scale
-        J_s = Jc[:, s] * sc.s_q[s]
-        # least squares min |J_p X + J_s| by QR (LAPACK dgels): R in qr[:p, :p], the
-        # residual's components in x[p:]
-        qr, x, info = scipy.linalg.lapack.dgels(Jc[:, p] * sc.s_q[p], -J_s)
-        if info != 0 or scipy.linalg.lapack.dtrcon(qr[: p.size, : p.size])[0] <= PARTITION_RCOND:
+        X = _passive_motion(state.closure_jacobian(), sc)
+        if X is None:
             return None
-        scale = np.max(np.abs(J_s), initial=0.0)
-        if np.max(np.abs(x[p.size :]), initial=0.0) > PARTITION_RTOL * scale:
-            return None
-        T[p] = x[: p.size]
-    elif Jc.shape[0]:
+        norm2 = float(np.vdot(X, X))
+    elif m:
         return None  # loops without passive joints tie the springs together
-    # the same spring-free rule as the null-space path, which would find singular values
-    # of the spring factor between min(sigma) / |T| and max(sigma)
-    V, sigma = sc.fast_factor
-    if sigma.size and sigma.min() <= RANK_RTOL * sigma.max() * np.linalg.norm(T):
+    if sc.spring_free(norm2):
         return None
-    path = "partitioned" if Jc.shape[0] else "serial"
+    return ("partitioned", X) if m else ("serial", None)
+
+
+def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | None:
+    """The spring factor of the fast path (:func:`partition`), or None."""
+    fast = partition(state, sc)
+    if fast is None:
+        return None
+    path, X = fast
+    T = np.zeros((state.model.model.nv, sc.sprung.size))
+    T[sc.sprung, np.arange(sc.sprung.size)] = 1.0
+    if X is not None:
+        T[sc.passive] = X
+    V, sigma = sc.fast_factor
     if V is None:  # diagonal springs: y = dq_s already diagonalises K_r
-        return SpringFactor(T * sc.s_q[:, None], np.eye(s.size), sigma, 0, path, True)
+        return SpringFactor(T * sc.s_q[:, None], np.eye(sigma.size), sigma, 0, path, True)
     return SpringFactor(T * sc.s_q[:, None], V, sigma, 0, path)
 
 
 #: Values of the ``path`` argument of :func:`compliance`.
 PATHS = ("auto", "null-space")
+
+
+def check_path(path: str) -> None:
+    """Refuse a ``path`` argument that is not one of :data:`PATHS` (InvalidInputError)."""
+    if path not in PATHS:
+        raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
 
 
 def spring_factor(
@@ -179,10 +252,8 @@ def spring_factor(
             a joint without spring, or a singular configuration where the springs resist
             a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
     """
-    clm, L = state.model, state.length
-    sc = clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
-    if path not in PATHS:
-        raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
+    check_path(path)
+    clm, L, sc = state.model, state.length, scaling(state)
     fast = _partitioned_factor(state, sc) if path == "auto" else None
     if fast is not None:
         return fast
