@@ -29,6 +29,7 @@ from cahyman_pin.urdf_builder import (
 )
 from closedloop.arrays import readonly
 from closedloop.assembly import assemble as assemble_loops
+from closedloop.beams import apply_beams
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics import closure_residual, update_kinematics
 from closedloop.model import ClosedLoopModel, closure_between_frames
@@ -134,17 +135,23 @@ def closed_form_pose(alpha, alpha4, s4, p: CaHyManParams = DEFAULT_PARAMS) -> Ca
 
 
 def build_closed_loop_model(p: CaHyManParams = DEFAULT_PARAMS) -> ClosedLoopModel:
-    """ClosedLoopModel of CaHyMan for parameters ``p``, built in memory (no files)."""
+    """ClosedLoopModel of CaHyMan for parameters ``p``, built in memory (no files); with
+    ``p.links_as_beams`` the beams are inserted before the closures are built, so that the
+    closure frames at their tips (coupler ends, H_k) follow the tips."""
     urdf = build_urdf(p)
     model = pin.buildModelFromXML(urdf)
     visual = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.VISUAL)
     spec = closure_spec(p)
+    springs = spec.springs
+    if spec.beams:
+        model, (visual,), blocks, _ = apply_beams(model, [visual], spec.beams)
+        springs = {**springs, **blocks}
     closures = [
         closure_between_frames(model, a, b, kind)
         for (a, b), kind in zip(spec.pairs, spec.types, strict=True)
     ]
     return ClosedLoopModel(
-        model, closures, spec.actuated, spec.springs, spec.locked, visual_model=visual,
+        model, closures, spec.actuated, springs, spec.locked, visual_model=visual,
         name="cahyman",
     )  # fmt: skip
 

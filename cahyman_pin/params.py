@@ -27,6 +27,8 @@ _SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
 _MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
 #: Masses of each leg's links (the same in the three legs); the paper names none.
 LEG_MASSES = ("m_b", "m_c", "m_d", "m_h")
+#: Material [Pa] and tube sizes [m] of the links as beams (``links_as_beams``).
+BEAM_FIELDS = ("E_beam", "G_beam", "d_leg", "t_leg", "d_arm", "t_arm", "d_MM2", "t_MM2", "L_MM2")
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,16 @@ class CaHyManParams:
             connecting bar [kg], at the middle of the link (0 by default).
         gravity: gravitational acceleration [m/s^2], acting along -z.
         s4_max: stroke of the linear motor, s_4 in [0, s4_max] [m].
+        links_as_beams: model each leg's links (b, c, d, h) and the arm's links (QM2,
+            MM2) as beams (:mod:`closedloop.beams`, :func:`cahyman_pin.urdf_builder.beams`)
+            instead of the paper's lumped axial springs K_b, K_d, K_4 (default False: the
+            paper's model). The motor springs K_T, K_T4, K_s stay.
+        E_beam, G_beam: Young's and shear moduli of the links as beams [Pa] (assumed:
+            aluminium alloy).
+        d_leg, t_leg: outer diameter and wall of the tube of each leg link [m] (assumed).
+        d_arm, t_arm: outer diameter and wall of the arm tube QM2 [m] (assumed).
+        d_MM2, t_MM2, L_MM2: outer diameter, wall and length of the sliding tube MM2 [m]
+            (assumed; a beam of constant length clamped at its driven end).
     """
 
     a: float = 0.200
@@ -78,17 +90,33 @@ class CaHyManParams:
     m_h: float = 0.0
     gravity: float = 9.81
     s4_max: float = 0.050
+    links_as_beams: bool = False
+    E_beam: float = 7.0e10
+    G_beam: float = 2.6e10
+    d_leg: float = 0.012
+    t_leg: float = 0.002
+    d_arm: float = 0.020
+    t_arm: float = 0.002
+    d_MM2: float = 0.014
+    t_MM2: float = 0.002
+    L_MM2: float = 0.060
 
     def __post_init__(self) -> None:
+        if not isinstance(self.links_as_beams, bool):
+            raise InvalidInputError(
+                f"CaHyMan parameter links_as_beams={self.links_as_beams!r} must be true or false"
+            )
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.name == "links_as_beams":
+                continue
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise InvalidInputError(
                     f"CaHyMan parameter {f.name}={value!r} must be a real number"
                 )
             if not math.isfinite(value):
                 raise InvalidInputError(f"CaHyMan parameter {f.name}={value!r} must be finite")
-        for name in (*_LENGTHS, *_SPRINGS, "s4_max"):
+        for name in (*_LENGTHS, *_SPRINGS, "s4_max", *BEAM_FIELDS):
             if getattr(self, name) <= 0.0:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be > 0"
@@ -148,6 +176,11 @@ SOURCES: dict[str, str] = {
     **dict.fromkeys(LEG_MASSES, "assumed: 0 (the paper names no mass for the legs)"),
     "gravity": "standard gravity (acts only through the masses)",
     "s4_max": "from the paper's cases (s_4 = 0, 25, 50 mm)",
+    "links_as_beams": "the paper's model: lumped axial springs K_b, K_d, K_4",
+    **dict.fromkeys(("E_beam", "G_beam"), "assumed: aluminium alloy (used with links_as_beams)"),
+    **dict.fromkeys(
+        BEAM_FIELDS[2:], "assumed: the paper gives no sections (used with links_as_beams)"
+    ),
 }
 
 

@@ -36,8 +36,22 @@ of alpha_4) at L / 2 on ``arm``, m_MM2 at M2, and the linear motor m_M5 half at 
 half at M, so that its centre is at L + s_4 / 2 from Q, as eq. (11) has it. Each leg's
 links carry m_b, m_c, m_d, m_h at their middles (the paper names no leg masses).
 
+Links as beams (``CaHyManParams.links_as_beams``, :func:`beams`): each leg's input crank
+``crank_b_k`` (to ``b_k_axial``, length b), coupler ``coupler_k`` (to its far end, length
+a; the slider at C_k stays rigid with B_k), follower crank ``crank_d_k`` (to
+``d_k_axial``, length b) and connecting bar ``bar_k`` (to H_k, length h) are tubes
+(d_leg, t_leg), the arm ``arm`` (QM2, to ``arm_axial``, length L) a tube (d_arm, t_arm),
+of material E_beam, G_beam, each a cantilever from its link frame (Euler-Bernoulli,
+:mod:`closedloop.beams`). The sliding tube MM2 is a tube (d_MM2, t_MM2) of constant length
+L_MM2 clamped at its driven end: ``s_4`` then moves a link ``telescope_root`` at
+M - L_MM2 w (the s_4 joint's origin moves back by L_MM2 along the arm, M stays at
+Q + (L + s_4) w) carrying the telescope on the fixed joint ``telescope_fixed``. The
+virtual joints of K_b, K_d and K_4 are locked (the beams carry the links' axial
+stiffness); the motors' K_T, K_T4, K_s stay.
+
 Closure file: the "Extended URDF" keys ``closed_loop``, ``type``, ``name_mot`` plus the
-``springs`` extension read by :func:`closedloop.io.read_closure_file`.
+``springs`` extension read by :func:`closedloop.io.read_closure_file` (and ``locked``,
+``beams`` with links as beams).
 """
 
 from __future__ import annotations
@@ -91,10 +105,36 @@ def springs(p: CaHyManParams) -> dict[str, float]:
     return {name: float(value) for name, value in out.items()}
 
 
+def beams(p: CaHyManParams) -> dict[str, dict]:
+    """Link name -> beam (:mod:`closedloop.beams`) of the links as beams (module docstring);
+    empty unless ``p.links_as_beams``."""
+    if not p.links_as_beams:
+        return {}
+
+    def tube(end: str, d: float, t: float) -> dict:
+        section = {"shape": "tube", "d": float(d), "t": float(t)}
+        return {"end": end, "E": float(p.E_beam), "G": float(p.G_beam), "section": section}
+
+    out = {}
+    for k in LEGS:
+        out[f"crank_b_{k}"] = tube(f"b_{k}_axial", p.d_leg, p.t_leg)
+        out[f"coupler_{k}"] = tube(f"coupler_{k}_end_fixed", p.d_leg, p.t_leg)
+        out[f"crank_d_{k}"] = tube(f"d_{k}_axial", p.d_leg, p.t_leg)
+        out[f"bar_{k}"] = tube(f"H_{k}_fixed", p.d_leg, p.t_leg)
+    out["arm"] = tube("arm_axial", p.d_arm, p.t_arm)
+    out["telescope_root"] = tube("telescope_fixed", p.d_MM2, p.t_MM2)
+    return out
+
+
 def closure_spec(p: CaHyManParams = DEFAULT_PARAMS) -> ClosureSpec:
-    """Closures, actuated joints and springs of the CaHyMan model (the closure file's data)."""
+    """Closures, actuated joints, springs (and, with links as beams, the locked virtual
+    joints and the beams) of the CaHyMan model (the closure file's data)."""
     pairs = closure_pairs()
-    return ClosureSpec(pairs, ("3d",) * len(pairs), ACTUATED, springs(p), ())
+    types = ("3d",) * len(pairs)
+    if not p.links_as_beams:
+        return ClosureSpec(pairs, types, ACTUATED, springs(p), ())
+    motors = {n: k for n, k in springs(p).items() if n not in VIRTUAL_JOINTS}
+    return ClosureSpec(pairs, types, ACTUATED, motors, VIRTUAL_JOINTS, beams(p))
 
 
 # ---------------------------------------------------------------------- XML helpers
@@ -245,6 +285,23 @@ def _plate_and_arm(p: CaHyManParams, z: _Sizes) -> list[str]:
     for k in LEGS:
         out += _fixed_frame(f"ball_{k}", "mobile_plate", p.r_p * U[k - 1])
     tele = 1.2 * p.s4_max
+    telescope = _link(
+        "telescope",
+        _visual(_cylinder(z.rod, tele), "orange", (-tele / 2, 0, 0), _ROD_ALONG_X),
+        masses=[(p.m_M5 / 2, (0, 0, 0))],
+    )
+    if p.links_as_beams:  # s_4 moves the sliding tube's driven end (module docstring)
+        sliding = [
+            _joint("s_4", "prismatic", "M2", "telescope_root", (-p.L_MM2, 0, 0), axis=(1, 0, 0),
+                   limits=(0.0, p.s4_max, 1e3)),
+            _link("telescope_root"),
+            _joint("telescope_fixed", "fixed", "telescope_root", "telescope", (p.L_MM2, 0, 0)),
+        ]  # fmt: skip
+    else:
+        sliding = [
+            _joint("s_4", "prismatic", "M2", "telescope", axis=(1, 0, 0),
+                   limits=(0.0, p.s4_max, 1e3)),
+        ]  # fmt: skip
     out += [
         "  <!-- telescopic arm: Q = H + HQ z_p, w = cos(alpha_4) x_p + sin(alpha_4) z_p -->",
         *_fixed_frame("Q", "mobile_plate", (0, 0, p.HQ), _visual(_sphere(1.5 * z.rod), "dark")),
@@ -254,11 +311,8 @@ def _plate_and_arm(p: CaHyManParams, z: _Sizes) -> list[str]:
         _joint("arm_axial", "prismatic", "arm", "M2", (p.L, 0, 0), axis=(1, 0, 0),
                limits=_VIRTUAL),
         _link("M2", masses=[(p.m_MM2, (0, 0, 0)), (p.m_M5 / 2, (0, 0, 0))]),
-        _joint("s_4", "prismatic", "M2", "telescope", axis=(1, 0, 0),
-               limits=(0.0, p.s4_max, 1e3)),
-        _link("telescope",
-              _visual(_cylinder(z.rod, tele), "orange", (-tele / 2, 0, 0), _ROD_ALONG_X),
-              masses=[(p.m_M5 / 2, (0, 0, 0))]),
+        *sliding,
+        telescope,
         *_fixed_frame(FRAME_M, "telescope", (0, 0, 0), _visual(_sphere(z.ball), "red")),
     ]  # fmt: skip
     return out
@@ -305,6 +359,11 @@ def build_closure_yaml(p: CaHyManParams = DEFAULT_PARAMS) -> str:
         default_flow_style=None,
     )
     springs_text = yaml.safe_dump({"springs": spec.springs}, sort_keys=False)
+    beams_text = ""
+    if spec.beams:
+        beams_text = "# Links as beams (closedloop.beams), their lumped axial springs locked.\n"
+        beams_text += yaml.safe_dump({"beams": spec.beams}, sort_keys=False)
+    locked = yaml.safe_dump({"locked": list(spec.locked)}, default_flow_style=None)
     return (
         '# Loop closures of cahyman.urdf ("Extended URDF" convention, with springs),\n'
         "# generated by cahyman_pin.urdf_builder; do not edit: run\n"
@@ -312,5 +371,5 @@ def build_closure_yaml(p: CaHyManParams = DEFAULT_PARAMS) -> str:
         "# Parallelograms: coupler end <-> follower-crank tip; ball joints: H_k <-> ball_k.\n"
         + body
         + "# Joint stiffness [N m/rad for revolute, N/m for prismatic joints]; joints not\n"
-        "# listed are passive.\n" + springs_text + "locked: []\n"
+        "# listed are passive.\n" + springs_text + locked + beams_text
     )
