@@ -57,6 +57,7 @@ from .conditioning import (
     RANK_RTOL,
     SCALED_TOL,
     Spectrum,
+    batch_rank,
     check_length,
     spectrum_from_compliance,
     spectrum_from_factor,
@@ -423,3 +424,95 @@ def _jsonable(value):
     if isinstance(value, tuple):
         return [{k: _jsonable(v) for k, v in vars(screw).items()} for screw in value]
     return float(value) if isinstance(value, np.floating) else value
+
+
+#: Indices of many compliances at once (:func:`batch_indices`), and their units (SI).
+BATCH_INDICES = {
+    "det_K": "N^6/rad^3",
+    "condition_number": "1 (cond of the scaled K_s: unit-free, see closedloop.conditioning)",
+    "condition_number_si": "1 (cond of the SI matrix K: depends on the length unit)",
+    "min_translational": "N/m",
+    "max_translational": "N/m",
+    "min_rotational": "N m/rad",
+    "max_rotational": "N m/rad",
+    "deflection_translation": "m",
+    "deflection_rotation": "rad",
+}
+
+
+def _block_extremes(C: np.ndarray, block: slice) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) min and max principal stiffness of a 3x3 block of symmetric compliances (the
+    rule of :meth:`StiffnessIndices.min_translational_stiffness`: the minimum exists
+    unless the block is rigid, the maximum only when no direction of it is), NaN else."""
+    c = np.linalg.eigvalsh(C[:, block, block])
+    rigid = c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0)
+    with np.errstate(divide="ignore"):
+        low = np.where(rigid.all(axis=1), np.nan, 1.0 / c[:, -1])
+        high = np.where(rigid.any(axis=1), np.nan, 1.0 / c[:, 0])
+    return low, high
+
+
+def batch_indices(
+    C: np.ndarray,
+    rank: np.ndarray,
+    length,
+    wrench: np.ndarray | None = None,
+    symmetric: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """The indices of :data:`BATCH_INDICES` for n compliances at once (NaN where one does
+    not exist), by the definitions of :class:`StiffnessIndices`.
+
+    * ``det_K``: det K = 1 / det C, full rank only.
+    * ``condition_number``: cond(K_s) of the scaled stiffness over the rank, at the
+      characteristic length L (:func:`closedloop.conditioning.batch_rank`; as
+      :attr:`StiffnessIndices.scaled_condition_number`): unit-free, the one to compare.
+    * ``condition_number_si``: cond(K) of the SI matrix, full rank only (as
+      :attr:`StiffnessIndices.condition_number`): changes with the length unit.
+    * ``min/max_translational``, ``min/max_rotational``: extreme principal stiffnesses of
+      the 3x3 blocks of C [N/m, N m/rad].
+    * ``deflection_translation``, ``deflection_rotation``: |d| [m], |r| [rad] of the twist
+      C w under ``wrench`` (only with a wrench).
+
+    A non-symmetric C (a closed form in its own coordinates, e.g. CaHyMan's published
+    matrices) has K = C^-1, det K = det(C^-1), the 2-norm condition numbers of K and of
+    K_s = D^-1 K D^-1, and no principal stiffnesses.
+
+    Args:
+        C: (n, 6, 6) compliances [SI] at one reference point; rows with a NaN are skipped.
+        rank: (n,) rank of each C (6: K exists).
+        length: characteristic length L [m], one or (n,).
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]) at the same point, or None.
+        symmetric: (n,) bool, which C are symmetric (default: all).
+
+    Returns:
+        name -> (n,) array (units in :data:`BATCH_INDICES`; no deflections without wrench).
+    """
+    n = len(C)
+    L = np.broadcast_to(np.asarray(length, dtype=float), (n,))
+    out = {name: np.full(n, np.nan) for name in BATCH_INDICES}
+    finite = np.all(np.isfinite(C), axis=(1, 2))
+    sym = finite if symmetric is None else finite & symmetric
+    full = finite & (np.asarray(rank) == 6)
+    if np.any(sym):
+        _, out["condition_number"][sym], _ = batch_rank(C[sym], L[sym])
+        for kind, block in (("translational", T), ("rotational", R)):
+            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(C[sym], block)
+    both = sym & full
+    if np.any(both):
+        c = np.linalg.eigvalsh(C[both])
+        out["det_K"][both] = 1.0 / np.linalg.det(C[both])
+        out["condition_number_si"][both] = c[:, -1] / c[:, 0]
+    other = ~sym & full
+    if np.any(other):
+        K = np.linalg.inv(C[other])
+        d = np.where(np.arange(6) < 3, 1.0 / L[other, None], 1.0)
+        out["det_K"][other] = np.linalg.det(K)
+        out["condition_number_si"][other] = np.linalg.cond(K)
+        out["condition_number"][other] = np.linalg.cond(K / d[:, :, None] / d[:, None, :])
+    if wrench is None:
+        del out["deflection_translation"], out["deflection_rotation"]
+        return out
+    twist = C[finite] @ np.asarray(wrench, dtype=float)
+    out["deflection_translation"][finite] = np.linalg.norm(twist[:, :3], axis=1)
+    out["deflection_rotation"][finite] = np.linalg.norm(twist[:, 3:], axis=1)
+    return out

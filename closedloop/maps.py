@@ -1,24 +1,35 @@
-"""Stiffness maps of any robot over its workspace: a grid or a list of actuated inputs.
+"""Stiffness maps of any robot over its workspace: the one sweep engine of the project.
 
-Each point is a vector of actuated values (the model's ``actuated`` joints, SI). The
-loops are closed by :func:`closedloop.assembly.assemble`, started from the previous
-point's configuration along the path (a grid is walked as a boustrophedon: one grid
-step at a time, so that every start is a neighbour; the first point of a chunk starts
-from the model's reference configuration), then the compliance at the frame is computed
-and its indices (:data:`INDICES`). A point that fails is recorded (status and reason,
-NaN in its indices), never the whole map lost.
+A map computes the compliance at a frame for many inputs (actuated values, SI). The
+engine, shared with CaHyMan's maps (:mod:`cahyman_pin.sweep`), has four parts:
 
-The points are cut into chunks, contiguous along the path, one task each for a
-``concurrent.futures.Executor`` (serial by default, local processes with ``workers``).
-Tasks carry a :class:`ModelSource` (files and options, not the model: Pinocchio's
-constraint models cannot be pickled), which each process loads once.
+* a **path** through the points (:func:`path_order`: a grid is walked by unit steps, a
+  boustrophedon in two dimensions) cut into **chunks** of contiguous points;
+* a **kernel**, any picklable callable ``kernel(task) -> ChunkResult`` computing one chunk
+  (compliance, rank, status and reason per point; a point that fails is recorded, never
+  the whole map lost);
+* :func:`run_tasks`: the chunks in this process, on local processes or on any
+  ``concurrent.futures.Executor`` (e.g. Dask's ``Client.get_executor()``): the results do
+  not depend on the executor;
+* :func:`gather`, :func:`classify` and :func:`closedloop.indices.batch_indices`: per-point
+  arrays (no per-point Python objects: statuses and reasons are small integer codes), the
+  rank and status from C, the indices of all points at once.
+
+The kernel of this module (:func:`assemble_chunk`) works for any
+:class:`~closedloop.model.ClosedLoopModel`: each point is assembled by
+:func:`closedloop.assembly.assemble` from the previous point's configuration along the
+path (or from a per-point start provider), then :func:`closedloop.compliance.compliance`
+is queried. Every chunk carries the configuration its first point starts from, computed
+serially along the path before the chunks are sent (:func:`border_starts`), so that a
+chunk border does not restart from the reference configuration (which may lie on another
+assembly mode).
 """
 
 from __future__ import annotations
 
 import functools
 import textwrap
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +39,7 @@ import numpy as np
 from .assembly import assemble
 from .blas import single_threaded_blas
 from .compliance import compliance
+from .conditioning import batch_rank
 from .exceptions import (
     AssemblyError,
     ClosedLoopError,
@@ -36,27 +48,112 @@ from .exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
-from .indices import StiffnessIndices
+from .indices import BATCH_INDICES, batch_indices
 from .io import load_model, reference_configuration
 from .model import ClosedLoopModel
 
-#: Indices of a map and their units (SI; the condition number is that of the scaled K).
-INDICES = {
-    "det_K": "N^6/rad^3",
-    "condition_number": "1 (scaled K: lengths per the mechanism size)",
-    "min_translational": "N/m",
-    "max_translational": "N/m",
-    "min_rotational": "N m/rad",
-    "max_rotational": "N m/rad",
-    "deflection_translation": "m",
-    "deflection_rotation": "rad",
-}
-#: Status of a point.
-STATUS = ("ok", "rank_deficient", "unreachable", "singular", "failed")
-#: Points per task when not given: enough to amortise the model load in each process.
-CHUNK = 200
+#: Indices of a map and their units (SI; ``condition_number`` is the unit-free scaled one,
+#: ``condition_number_si`` that of the SI matrix).
+INDICES = BATCH_INDICES
+#: Status of a point, by code (its index in this tuple).
+STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
+OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED = range(len(STATUS))
+#: Exceptions recorded per point (anything else, a programming error, propagates).
+POINT_ERRORS = (ClosedLoopError, np.linalg.LinAlgError)
+#: Points per task when not given: enough to amortise a task's overhead (pickling, the
+#: model load in a fresh process), small enough for a few tasks per core.
+CHUNK = 500
+#: Points between two assemblies of the serial pass that computes the chunks' starts:
+#: a continuation step short enough to stay on one assembly mode.
+BORDER_STRIDE = 16
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
+#: Relative tolerance of the symmetry test of a compliance.
+SYMMETRY_RTOL = 1e-9
+
+
+def status_code(error: Exception) -> int:
+    """Status code (index in :data:`STATUS`) of a point that raised ``error``."""
+    if isinstance(error, InvalidInputError):
+        return INVALID
+    if isinstance(error, AssemblyError):
+        return UNREACHABLE
+    if isinstance(error, SingularConfigurationError | MechanismError | RigidDirectionsError):
+        return SINGULAR
+    return FAILED
+
+
+@dataclass
+class ChunkResult:
+    """What a kernel returns for c points (SI).
+
+    Attributes:
+        C: (c, 6, 6) compliance at the frame [SI], NaN where the point failed.
+        rank: (c,) rank of C from the solver, -1 where unknown (set by :func:`classify`).
+        status: (c,) status codes (:data:`STATUS`).
+        length: (c,) characteristic length [m] of the scaled indices.
+        iterations: (c,) Gauss-Newton iterations of the assembly, -1 if none.
+        reasons: error message per failed point, by position in the chunk.
+    """
+
+    C: np.ndarray
+    rank: np.ndarray
+    status: np.ndarray
+    length: np.ndarray
+    iterations: np.ndarray
+    reasons: dict[int, str] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, n: int) -> ChunkResult:
+        """n points, all ``ok`` until recorded otherwise, C NaN."""
+        return cls(
+            C=np.full((n, 6, 6), np.nan),
+            rank=np.full(n, -1, dtype=np.int8),
+            status=np.zeros(n, dtype=np.int8),
+            length=np.full(n, np.nan),
+            iterations=np.full(n, -1, dtype=np.int16),
+        )
+
+    def fail(self, i: int, error: Exception) -> None:
+        """Record the failure of point i."""
+        self.status[i] = status_code(error)
+        self.reasons[int(i)] = " ".join(str(error).split()) or type(error).__name__
+
+
+def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
+                    length=None):  # fmt: skip
+    """Assemble and query the points ``rows`` of a chunk in order (warm-started).
+
+    Args:
+        clm: the :class:`ClosedLoopModel`.
+        frame: the loaded frame.
+        out: the :class:`ChunkResult` to fill.
+        rows: positions in the chunk, in path order.
+        solve: ``solve(i, q0) -> Assembly`` of the point at position i from ``q0`` (nq,).
+        first: start of the first point, passed to ``solve`` (None too).
+        starts: (len(rows), nq) start of every point (a start provider), or None: each
+            point starts from the last assembled one.
+        axes, length: as :func:`closedloop.compliance.compliance`.
+
+    Returns:
+        The last assembled configuration (``first`` if none).
+    """
+    q_prev = first
+    for k, i in enumerate(rows):
+        try:
+            a = solve(i, q_prev if starts is None else starts[k])
+            c = compliance(clm, a.q, frame, axes, length=length)
+        except POINT_ERRORS as e:
+            out.fail(i, e)
+            continue
+        out.C[i], out.rank[i], out.length[i], out.iterations[i] = (
+            c.C,
+            c.rank,
+            c.length,
+            a.iterations,
+        )
+        q_prev = a.q
+    return q_prev
 
 
 @dataclass(frozen=True)
@@ -87,6 +184,217 @@ def _load(source: ModelSource) -> ClosedLoopModel:
     )
 
 
+def _model(model: ClosedLoopModel | ModelSource) -> ClosedLoopModel:
+    return model.load() if isinstance(model, ModelSource) else model
+
+
+@dataclass(frozen=True)
+class MapChunk:
+    """One task of :func:`assemble_chunk`: points contiguous along the path.
+
+    Attributes:
+        model: the model or its :class:`ModelSource` (Pinocchio's constraint models cannot
+            be pickled: process executors need the source).
+        frame: the loaded frame.
+        points: (c, n_act) actuated values [rad, m], in path order.
+        first: (nq,) configuration the first point starts from, or None (reference).
+        start: start provider ``start(clm, points) -> (c, nq)`` or None (picklable).
+    """
+
+    model: ClosedLoopModel | ModelSource
+    frame: str
+    points: np.ndarray
+    first: np.ndarray | None = None
+    start: Callable | None = None
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def assemble_chunk(chunk: MapChunk) -> ChunkResult:
+    """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started."""
+    clm = _model(chunk.model)
+    out = ChunkResult.empty(len(chunk))
+    starts = None if chunk.start is None else chunk.start(clm, chunk.points)
+    first = reference_configuration(clm) if chunk.first is None else chunk.first
+    assemble_points(clm, chunk.frame, out, range(len(chunk)),
+                    lambda i, q0: assemble(clm, chunk.points[i], q0), first, starts)  # fmt: skip
+    return out
+
+
+def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
+    """Start configuration of each chunk, by a serial continuation along the path.
+
+    The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
+    each from the previous one (the first from the reference configuration), and keeps
+    the configurations at the borders ``firsts``: the first point of a chunk then starts
+    on the assembly mode the path followed, as in a serial run. A point that cannot be
+    assembled is passed over (the continuation goes on from the last configuration).
+
+    Args:
+        points: (n, n_act) actuated values in path order [rad, m].
+        firsts: path positions of the chunks' first points (ascending, from 0).
+
+    Returns:
+        One (nq,) configuration, or None for the first chunk (the reference), per border.
+    """
+    q = reference_configuration(clm)
+    wanted = set(firsts[1:])
+    visit = sorted(wanted | set(range(BORDER_STRIDE, max(wanted, default=0), BORDER_STRIDE)))
+    found = {}
+    for p in visit:
+        try:
+            q = assemble(clm, points[p], q).q
+        except POINT_ERRORS:
+            pass
+        found[p] = q
+    return [found.get(p) for p in firsts]
+
+
+def run_tasks(
+    kernel: Callable,
+    tasks: Sequence,
+    executor: Executor | None = None,
+    workers: int | None = None,
+) -> Iterator[tuple[int, ChunkResult]]:
+    """Yield (task index, ``kernel(task)``) as the tasks finish.
+
+    Args:
+        kernel: picklable callable (a module-level function) for process executors.
+        tasks: the tasks (picklable for process executors).
+        executor: any ``concurrent.futures.Executor``, used as given and left open.
+        workers: without an executor, local processes (a pool shut down at the end);
+            None or 1: this process.
+
+    Raises:
+        InvalidInputError: ``workers`` not a positive integer.
+    """
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    if executor is None and (workers or 1) == 1:
+        for k, task in enumerate(tasks):
+            yield k, kernel(task)
+        return
+    pool = executor or ProcessPoolExecutor(workers, initializer=single_threaded_blas)
+    futures = {pool.submit(kernel, task): k for k, task in enumerate(tasks)}
+    try:
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    finally:
+        for future in futures:
+            future.cancel()
+        if executor is None:
+            pool.shutdown()
+
+
+@dataclass(frozen=True)
+class PointData:
+    """Per-point results of a map, in storage order (numpy arrays only).
+
+    Attributes:
+        C: (n, 6, 6) compliance [SI], NaN where the point failed.
+        rank: (n,) int8 rank of C, -1 where unknown.
+        codes: (n,) int8 status codes (:data:`STATUS`).
+        length: (n,) characteristic length [m].
+        iterations: (n,) int16 assembly iterations, -1 if none.
+        reason_codes: (n,) int32 index of each point's reason in ``reason_texts``.
+        reason_texts: distinct reasons, ``reason_texts[0] == ""``.
+    """
+
+    C: np.ndarray
+    rank: np.ndarray
+    codes: np.ndarray
+    length: np.ndarray
+    iterations: np.ndarray
+    reason_codes: np.ndarray
+    reason_texts: list
+
+    def set_reason(self, i: int, text: str) -> None:
+        """Record the reason of point i (while the data is being completed)."""
+        if text not in self.reason_texts:
+            self.reason_texts.append(text)
+        self.reason_codes[i] = self.reason_texts.index(text)
+
+
+def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData:
+    """Per-point arrays from the results of the chunks.
+
+    Args:
+        n: number of points.
+        pieces: storage indices of each chunk's points, in chunk order.
+        results: (chunk index, :class:`ChunkResult`) pairs in any order
+            (e.g. :func:`run_tasks`).
+    """
+    data = PointData(C=np.full((n, 6, 6), np.nan), rank=np.full(n, -1, dtype=np.int8),
+                     codes=np.zeros(n, dtype=np.int8), length=np.full(n, np.nan),
+                     iterations=np.full(n, -1, dtype=np.int16),
+                     reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
+    for k, r in results:
+        p = pieces[k]
+        data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
+        data.length[p], data.iterations[p] = r.length, r.iterations
+        for i, text in r.reasons.items():
+            data.set_reason(p[i], text)
+    return data
+
+
+def classify(data: PointData) -> np.ndarray:
+    """Complete the rank and status of computed points from their compliance (in place).
+
+    A symmetric C without a rank (not from the solver: a closed form) gets the rank of
+    :func:`closedloop.conditioning.batch_rank`, and becomes ``failed`` if it is not
+    positive semi-definite; a non-symmetric C counts as full rank (K = C^-1); a computed
+    point of rank < 6 becomes ``rank_deficient``; C is NaN wherever the status is neither.
+
+    Returns:
+        (n,) bool: C is symmetric (and computed).
+    """
+    C, rank, codes = data.C, data.rank, data.codes
+    computed = (codes == OK) & np.all(np.isfinite(C), axis=(1, 2))
+    Ct = C.swapaxes(1, 2)
+    symmetric = computed & np.all(np.abs(C - Ct) <= SYMMETRY_RTOL * np.abs(Ct), axis=(1, 2))
+    unknown = symmetric & (rank < 0)
+    if np.any(unknown):
+        rank[unknown], _, psd = batch_rank(C[unknown], data.length[unknown])
+        for i in np.flatnonzero(unknown)[~psd]:
+            codes[i], symmetric[i] = FAILED, False
+            data.set_reason(i, "compliance is not positive semi-definite")
+    rank[computed & ~symmetric & (codes == OK)] = 6
+    for i in np.flatnonzero((codes == OK) & (rank < 6)):
+        codes[i] = RANK_DEFICIENT
+        data.set_reason(i, f"compliance has rank {rank[i]} < 6: the stiffness does not exist")
+    C[~np.isin(codes, (OK, RANK_DEFICIENT))] = np.nan
+    return symmetric
+
+
+def path_order(shape: tuple, outer: Sequence[int] = ()) -> np.ndarray:
+    """Flat (C-order) indices of a grid along a path of unit steps.
+
+    The path is the reflected mixed-radix Gray code: each axis runs backwards when the
+    positions of the slower axes sum to an odd number, so consecutive points differ by
+    one step along one axis (a boustrophedon in two dimensions).
+
+    Args:
+        shape: grid shape.
+        outer: axes that vary slowest, slowest first (the others follow in grid order).
+
+    Returns:
+        (prod(shape),) read-only flat indices in path order.
+    """
+    perm = [*outer, *(a for a in range(len(shape)) if a not in outer)]
+    pshape = [shape[a] for a in perm]
+    idx = np.indices(pshape).reshape(len(pshape), -1)
+    path, parity = np.empty_like(idx), np.zeros(idx.shape[1], dtype=np.int64)
+    for j, size in enumerate(pshape):
+        path[j] = np.where(parity % 2 == 1, size - 1 - idx[j], idx[j])
+        parity += path[j]
+    original = np.empty_like(path)
+    original[perm] = path
+    order = np.ravel_multi_index(tuple(original), shape)
+    order.flags.writeable = False
+    return order
+
+
 @dataclass(frozen=True)
 class StiffnessMap:
     """A stiffness map (arrays read-only; point i is row i).
@@ -100,8 +408,7 @@ class StiffnessMap:
         frame: loaded frame.
         wrench: (6,) wrench of the deflection indices [N, N m], or None.
         indices: name -> (n,) values (units in :data:`INDICES`), NaN where not defined.
-        C: (n, 6, 6) compliance at the frame [SI], NaN where the point failed.
-        status: (n,) status names (:data:`STATUS`); reasons: n messages ("" when ok).
+        data: the per-point arrays (C, rank, status and reason codes).
     """
 
     joints: tuple[str, ...]
@@ -112,14 +419,27 @@ class StiffnessMap:
     frame: str
     wrench: np.ndarray | None
     indices: dict
-    C: np.ndarray = field(repr=False)
-    status: np.ndarray = field(repr=False)
-    reasons: tuple[str, ...] = field(repr=False)
+    data: PointData = field(repr=False)
+
+    @property
+    def C(self) -> np.ndarray:
+        """(n, 6, 6) compliance at the frame [SI], NaN where the point failed."""
+        return self.data.C
+
+    @property
+    def status(self) -> np.ndarray:
+        """(n,) status names (:data:`STATUS`)."""
+        return np.asarray(STATUS)[self.data.codes]
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """n messages ("" when ok), built on demand."""
+        return tuple(np.asarray(self.data.reason_texts)[self.data.reason_codes].tolist())
 
     @property
     def ok(self) -> np.ndarray:
         """(n,) bool: the compliance was computed (status ok or rank_deficient)."""
-        return np.isin(self.status, ("ok", "rank_deficient"))
+        return np.isin(self.data.codes, (OK, RANK_DEFICIENT))
 
     def grid(self, name: str) -> np.ndarray:
         """Index ``name`` reshaped to the grid."""
@@ -127,8 +447,9 @@ class StiffnessMap:
 
     def save(self, out: str | Path, index: str = "det_K") -> list[Path]:
         """Write ``map.npz`` (every index under its name, the inputs under the joint
-        names, C, status, reasons), ``map.csv`` when at most :data:`CSV_MAX_POINTS`
-        points, and ``map.png`` (curve or heat map of ``index``); returns the paths.
+        names, C, rank, status, reasons, shape), ``map.csv`` when at most
+        :data:`CSV_MAX_POINTS` points, and ``map.png`` (curve or heat map of ``index``);
+        returns the paths.
 
         Raises:
             InvalidInputError: unknown index, or ``out`` not a writable folder.
@@ -142,9 +463,10 @@ class StiffnessMap:
             raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
         columns = {n: self.inputs[:, j] for j, n in enumerate(self.joints)}
         paths = [out / "map.npz"]
-        np.savez(paths[0], **columns, **self.indices, C=self.C, status=self.status,
-                 reasons=np.asarray(self.reasons), shape=np.asarray(self.shape))  # fmt: skip
-        if len(self.status) <= CSV_MAX_POINTS:
+        np.savez(paths[0], **columns, **self.indices, C=self.C, rank=self.data.rank,
+                 status=self.status, reasons=np.asarray(self.reasons),
+                 shape=np.asarray(self.shape))  # fmt: skip
+        if len(self.inputs) <= CSV_MAX_POINTS:
             paths.append(out / "map.csv")
             names = [*self.joints, *self.indices, "status"]
             rows = [[*map(repr, r), s] for r, s in zip(
@@ -196,7 +518,7 @@ def grid_points(
 
     Args:
         clm: the model (its actuated joints are the inputs).
-        sweeps: swept joint -> its values [rad, m] (one or two joints).
+        sweeps: swept joint -> its values [rad, m].
         fixed: value of every other actuated joint [rad, m].
 
     Raises:
@@ -221,63 +543,7 @@ def grid_points(
             points[:, j] = mesh[list(sweeps).index(name)].reshape(-1)
         else:
             points[:, j] = float(fixed[name])
-    order = np.arange(points.shape[0]).reshape(shape)
-    if len(shape) == 2:  # boustrophedon: every other row backwards
-        order[1::2] = order[1::2, ::-1]
-    return points, shape, order.reshape(-1)
-
-
-def _point(clm, frame, actuated, q0, wrench):
-    """(C, indices, status, reason, q) of one point."""
-    nan = dict.fromkeys(INDICES, np.nan)
-    try:
-        q = assemble(clm, actuated, q0).q
-    except AssemblyError as e:
-        return None, nan, "unreachable", str(e), None
-    try:
-        res = compliance(clm, q, frame)
-    except (MechanismError, SingularConfigurationError) as e:
-        return None, nan, "singular", str(e), q
-    except ClosedLoopError as e:
-        return None, nan, "failed", str(e), q
-    s, out = StiffnessIndices.from_result(res), dict(nan)
-    for name, get in (
-        ("det_K", lambda: s.determinant),
-        ("condition_number", lambda: s.scaled_condition_number),
-        ("min_translational", lambda: s.min_translational_stiffness.value),
-        ("max_translational", lambda: s.max_translational_stiffness.value),
-        ("min_rotational", lambda: s.min_rotational_stiffness.value),
-        ("max_rotational", lambda: s.max_rotational_stiffness.value),
-    ):
-        try:
-            out[name] = get()
-        except RigidDirectionsError:
-            pass
-    if wrench is not None:
-        d = res.deflection(wrench)
-        out["deflection_translation"] = float(np.linalg.norm(d[:3]))
-        out["deflection_rotation"] = float(np.linalg.norm(d[3:]))
-    status = "ok" if res.is_full_rank else "rank_deficient"
-    return res.C, out, status, "" if status == "ok" else f"rank {res.rank} < 6", q
-
-
-def _chunk(model, frame, points: np.ndarray, wrench) -> tuple:
-    """Indices, C, status, reasons of consecutive points, warm-started along them."""
-    clm = model.load() if isinstance(model, ModelSource) else model
-    n = len(points)
-    C, status, reasons = np.full((n, 6, 6), np.nan), [], []
-    values = {name: np.full(n, np.nan) for name in INDICES}
-    q_prev = reference_configuration(clm)
-    for i, actuated in enumerate(points):
-        c, idx, st, why, q = _point(clm, frame, actuated, q_prev, wrench)
-        if c is not None:
-            C[i] = c
-        for name, v in idx.items():
-            values[name][i] = v
-        status.append(st)
-        reasons.append(why)
-        q_prev = q if q is not None else reference_configuration(clm)
-    return values, C, status, reasons
+    return points, shape, path_order(shape)
 
 
 def stiffness_map(
@@ -288,6 +554,7 @@ def stiffness_map(
     fixed: Mapping[str, float] | None = None,
     points: np.ndarray | None = None,
     wrench: np.ndarray | None = None,
+    start: Callable | None = None,
     workers: int | None = None,
     executor: Executor | None = None,
     chunk: int = CHUNK,
@@ -299,11 +566,16 @@ def stiffness_map(
         model: the model, or a :class:`ModelSource` (needed by process executors).
         frame: the loaded frame.
         sweeps, fixed: a grid (:func:`grid_points`); or
-        points: (n, n_act) actuated values [rad, m] in the model's actuated order.
+        points: (n, n_act) actuated values [rad, m] in the model's actuated order, a path.
         wrench: (6,) wrench [N, N m] at the frame for the deflection indices, or None.
+        start: start provider ``start(clm, points (c, n_act)) -> (c, nq)``: every point
+            starts from its own configuration (e.g. a closed-form guess) instead of the
+            previous point's; picklable for process executors. Default None.
         workers: local processes (a :class:`ModelSource` is required), default serial.
         executor: any ``concurrent.futures.Executor`` (e.g. Dask's) instead.
-        chunk: points per task.
+        chunk: points per task; the results depend on it only within the assembly
+            tolerance (each chunk's first point starts from the serial continuation of
+            :func:`border_starts`), not on the executor.
         progress: called as ``progress(done, total)`` after each task (in the caller's
             thread).
 
@@ -311,7 +583,7 @@ def stiffness_map(
         InvalidInputError: bad grid, points, wrench, workers or chunk.
         NameNotFoundError: unknown frame.
     """
-    clm = model.load() if isinstance(model, ModelSource) else model
+    clm = _model(model)
     clm.frame_id(frame)
     w = None if wrench is None else np.asarray(wrench, dtype=float)
     if w is not None and (w.shape != (6,) or not np.all(np.isfinite(w))):
@@ -331,42 +603,26 @@ def stiffness_map(
         shape, order, swept = (len(pts),), np.arange(len(pts)), tuple(clm.actuated)
     if not isinstance(chunk, int) or chunk < 1:
         raise InvalidInputError(f"chunk must be a positive integer, got {chunk!r}")
-    if workers is not None and executor is None:
-        if not isinstance(model, ModelSource):
-            raise InvalidInputError("worker processes need a ModelSource (files), not a model")
-        executor = ProcessPoolExecutor(workers, initializer=single_threaded_blas)
-    pieces = [order[i : i + chunk] for i in range(0, len(order), chunk)]
-    tasks = [(model, frame, pts[p], w) for p in pieces]
-    results: list = [None] * len(tasks)
-    done = 0
-
-    def finished(k: int, result) -> None:
-        nonlocal done
-        results[k], done = result, done + len(pieces[k])
-        if progress is not None:
-            progress(done, len(pts))
-
-    if executor is None:
-        for k, t in enumerate(tasks):
-            finished(k, _chunk(*t))
-    else:
-        with executor if workers is not None else _NoClose(executor) as ex:
-            futures = {ex.submit(_chunk, *t): k for k, t in enumerate(tasks)}
-            for f in as_completed(futures):
-                finished(futures[f], f.result())
+    if (workers or 1) > 1 and executor is None and not isinstance(model, ModelSource):
+        raise InvalidInputError("worker processes need a ModelSource (files), not a model")
     n = len(pts)
-    C, status, reasons = np.full((n, 6, 6), np.nan), np.empty(n, dtype=object), [""] * n
-    values = {name: np.full(n, np.nan) for name in INDICES}
-    for p, (vals, c, st, why) in zip(pieces, results, strict=True):
-        C[p], status[p] = c, st
-        for name in INDICES:
-            values[name][p] = vals[name]
-        for i, text in zip(p, why, strict=True):
-            reasons[i] = text
-    if w is None:
-        for name in ("deflection_translation", "deflection_rotation"):
-            del values[name]
-    for a in (pts, C, *values.values()):
+    firsts = list(range(0, n, chunk))
+    pieces = [order[f : f + chunk] for f in firsts]
+    borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
+    tasks = [MapChunk(model, frame, pts[p], q, start) for p, q in zip(pieces, borders, strict=True)]
+
+    def reported() -> Iterator[tuple[int, ChunkResult]]:
+        done = 0
+        for k, result in run_tasks(assemble_chunk, tasks, executor, workers):
+            done += len(pieces[k])
+            if progress is not None:
+                progress(done, n)
+            yield k, result
+
+    data = gather(n, pieces, reported())
+    symmetric = classify(data)
+    values = batch_indices(data.C, data.rank, data.length, w, symmetric)
+    for a in (pts, data.C, data.rank, data.codes, *values.values()):
         a.flags.writeable = False
     return StiffnessMap(
         joints=tuple(clm.actuated),
@@ -379,20 +635,5 @@ def stiffness_map(
         frame=frame,
         wrench=w,
         indices=values,
-        C=C,
-        status=status.astype(str),
-        reasons=tuple(reasons),
+        data=data,
     )
-
-
-class _NoClose:
-    """Context manager that leaves a caller's executor open."""
-
-    def __init__(self, executor: Executor):
-        self.executor = executor
-
-    def __enter__(self) -> Executor:
-        return self.executor
-
-    def __exit__(self, *exc) -> None:
-        return None

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from closedloop.assembly import assemble
 from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError, RigidDirectionsError
-from closedloop.indices import StiffnessIndices
+from closedloop.indices import BATCH_INDICES, StiffnessIndices, batch_indices
 from closedloop.io import load_urdf, robot_data_dir
 
 REPO = Path(__file__).resolve().parent.parent
@@ -323,3 +323,60 @@ def test_invalid_length(length):
 def test_homogenised_index_needs_a_length():
     with pytest.raises(InvalidInputError, match=r"characteristic length \[m\] is needed"):
         StiffnessIndices.from_stiffness(np.eye(6)).homogenised_condition_number()
+
+
+# ---------------------------------------------------------------- batched
+def test_batched_indices_equal_the_single_ones():
+    """batch_indices on a stack (full rank, rank 3, rotations rigid, a NaN row) equals
+    StiffnessIndices point by point; a non-symmetric C follows its own definitions."""
+    rng = np.random.default_rng(11)
+    plane = np.zeros((6, 6))
+    A = rng.normal(size=(3, 3)) * [[1e-2], [1e-2], [1e-1]]
+    plane[np.ix_([0, 2, 4], [0, 2, 4])] = A @ A.T * 1e-3
+    stack = [np.linalg.inv(random_stiffness(rng)) for _ in range(3)]
+    stack += [plane, np.diag([1e-5, 2e-5, 3e-5, 0.0, 0.0, 0.0]), np.full((6, 6), np.nan)]
+    asym = np.linalg.inv(random_stiffness(rng)) + 1e-7 * rng.normal(size=(6, 6))
+    C = np.array([*stack, asym])
+    length, w = 0.3, np.array([1.0, -2.0, 0.5, 0.1, 0.0, 0.3])
+    single = [StiffnessIndices.from_compliance(c, length=length) for c in stack[:5]]
+    rank = np.array([s.rank for s in single] + [-1, 6])
+    symmetric = np.array([True] * 6 + [False])
+    got = batch_indices(C, rank, length, w, symmetric)
+    assert set(got) == set(BATCH_INDICES)
+    getters = {
+        "det_K": lambda s: s.determinant,
+        "condition_number": lambda s: s.scaled_condition_number,
+        "condition_number_si": lambda s: s.condition_number,
+        "min_translational": lambda s: s.min_translational_stiffness.value,
+        "max_translational": lambda s: s.max_translational_stiffness.value,
+        "min_rotational": lambda s: s.min_rotational_stiffness.value,
+        "max_rotational": lambda s: s.max_rotational_stiffness.value,
+    }
+    for i, s in enumerate(single):
+        for name, get in getters.items():
+            try:
+                expected = get(s)
+            except RigidDirectionsError:
+                expected = np.nan
+            np.testing.assert_allclose(got[name][i], expected, rtol=INDEX_RTOL,
+                                       err_msg=f"{name} at {i}")  # fmt: skip
+        d = C[i] @ w
+        np.testing.assert_allclose(got["deflection_translation"][i], np.linalg.norm(d[:3]),
+                                   rtol=INDEX_RTOL)  # fmt: skip
+        np.testing.assert_allclose(got["deflection_rotation"][i], np.linalg.norm(d[3:]),
+                                   rtol=INDEX_RTOL)  # fmt: skip
+    assert all(np.isnan(v[5]) for v in got.values())  # the NaN row
+    K = np.linalg.inv(asym)
+    D = np.r_[np.full(3, length), np.ones(3)]
+    np.testing.assert_allclose(got["det_K"][6], np.linalg.det(K), rtol=INDEX_RTOL)
+    np.testing.assert_allclose(
+        got["condition_number_si"][6],
+        np.linalg.norm(K, 2) * np.linalg.norm(asym, 2),
+        rtol=INDEX_RTOL,
+    )
+    Ks = D[:, None] * K * D[None, :]
+    np.testing.assert_allclose(got["condition_number"][6],
+                               np.linalg.norm(Ks, 2) * np.linalg.norm(np.linalg.inv(Ks), 2),
+                               rtol=INDEX_RTOL)  # fmt: skip
+    assert np.isnan(got["min_translational"][6])
+    assert "deflection_rotation" not in batch_indices(C, rank, length)

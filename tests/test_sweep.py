@@ -10,8 +10,8 @@ from cahyman_pin import api
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, pose_list, sweep
 from cahyman_pin.sweep import execution as sweep_exec
-from cahyman_pin.sweep.points import path_order
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import ClosedLoopError, InvalidInputError, SingularConfigurationError
+from closedloop.maps import STATUS, path_order, status_code
 
 #: Sweep against point-by-point api.stiffness. Both run the same functions on the same
 #: inputs (CaHyManModel.assemble, closedloop.compliance.compliance at M, the formulas of
@@ -26,12 +26,15 @@ SAME_PATH_RTOL = 1e-10
 CLOSED_FORM_START_RTOL = 1e-13
 #: The indices that need K: the API takes K from the square-root factor of the generic
 #: solver, the batched sweep from inv(C); the two differ by about eps cond(C_SI), cond(C_SI)
-#: ~ 4e3 here, i.e. 1e-12.
+#: ~ 4e3 here, i.e. 1e-12. The scaled condition number: the API's from the solver's
+#: square-root factor, the sweep's from the eigenvalues of C_s (batch_rank): same bound.
 K_PATH_RTOL = 1e-11
+K_INDICES = ("det_K", "condition_number", "condition_number_si")
 WRENCH = np.array([1.0, -2.0, 0.5, 0.3, 0.0, -0.2])
 SCALAR_INDICES = (
     "det_K",
     "condition_number",
+    "condition_number_si",
     "min_translational",
     "max_translational",
     "min_rotational",
@@ -55,24 +58,40 @@ def pointwise(points, backend: str, i: int) -> api.CaHyManStiffness:
     )
 
 
+def scaled_condition(K: np.ndarray, length: float) -> float:
+    """2-norm condition number of K_s = D^-1 K D^-1, D = diag(1/L, 1/L, 1/L, 1, 1, 1)."""
+    d = np.r_[np.full(3, length), np.ones(3)]
+    return float(np.linalg.cond(d[:, None] * K * d[None, :]))
+
+
 def assert_matches_pointwise(result: SweepResult, rtol: float) -> None:
-    """C, deflection and block indices within ``rtol``; det K and cond K within
-    max(rtol, K_PATH_RTOL)."""
+    """Every point against its own ``api.stiffness`` query: C, deflection and block indices
+    within ``rtol``, det K and the condition numbers within max(rtol, K_PATH_RTOL); a
+    failed point has the status of the query's exception and its message as reason."""
     pts = result.points
-    for i in np.flatnonzero(result.ok):
+    for i in range(len(result)):
+        if not result.ok[i]:
+            with pytest.raises(ClosedLoopError) as error:
+                pointwise(pts, result.backend, i)
+            assert STATUS[status_code(error.value)] == result.status[i]
+            assert result.reasons[i] == " ".join(str(error.value).split())
+            continue
         ref = pointwise(pts, result.backend, i)
         assert_close_in_norm(result.C[i], ref.C, rtol)
         got = {name: result.indices[name][i] for name in SCALAR_INDICES}
-        expected = {"det_K": ref.det_K, "condition_number": ref.condition_number}
+        expected = {"det_K": ref.det_K, "condition_number_si": ref.condition_number}
         if ref.indices is not None:
             expected.update(
+                condition_number=ref.indices.scaled_condition_number,
                 min_translational=ref.indices.min_translational_stiffness.value,
                 max_translational=ref.indices.max_translational_stiffness.value,
                 min_rotational=ref.indices.min_rotational_stiffness.value,
                 max_rotational=ref.indices.max_rotational_stiffness.value,
             )
+        else:
+            expected["condition_number"] = scaled_condition(ref.K, pts.params_at(i).length)
         for name, value in expected.items():
-            tol = max(rtol, K_PATH_RTOL) if name in ("det_K", "condition_number") else rtol
+            tol = max(rtol, K_PATH_RTOL) if name in K_INDICES else rtol
             np.testing.assert_allclose(got[name], value, rtol=tol, err_msg=f"{name} at {i}")
         twist = ref.deflection(WRENCH).M
         assert_close_in_norm(result.indices["deflection"][i], twist, rtol)
@@ -223,17 +242,17 @@ def test_invalid_design_values_are_marked():
     assert list(res.status) == ["ok", "invalid"] and "must be > 0" in res.reasons[1]
 
 
-def test_rank_deficient_compliance_keeps_the_indices_that_exist(monkeypatch):
+def test_rank_deficient_closed_form_is_a_singular_pose_as_in_the_api(monkeypatch):
     def rigid_about_z(params, alpha, alpha4, s4):  # no rotation about z
         return api.BackendResult(C=np.diag([1e-6, 2e-6, 3e-6, 1e-3, 2e-3, 0.0]), pose=None)
 
     monkeypatch.setitem(api._BACKENDS, "rigid_about_z", rigid_about_z)
     res = sweep(small_grid(), backend="rigid_about_z", executor="serial")
-    assert np.all(res.status == "rank_deficient") and np.all(res.rank == 5)
-    assert np.all(np.isnan(res.indices["det_K"]))
-    np.testing.assert_allclose(res.indices["min_translational"], 1 / 3e-6)
-    np.testing.assert_allclose(res.indices["min_rotational"], 1 / 2e-3)
-    assert np.all(np.isnan(res.indices["max_rotational"]))
+    assert np.all(res.status == "singular") and np.all(res.rank == 5)
+    assert "numerical rank 5 < 6" in res.reasons[0]
+    assert np.all(np.isnan(res.indices["det_K"])) and np.all(np.isnan(res.C))
+    with pytest.raises(SingularConfigurationError, match="numerical rank 5 < 6"):
+        pointwise(res.points, "rigid_about_z", 0)
 
 
 def test_bad_arguments_raise():

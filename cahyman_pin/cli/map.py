@@ -55,7 +55,7 @@ POSE_OPTIONS = {
     "s4": ("s4", "mm", 1e-3),
 }
 #: Indices plotted on a log scale (they span decades), and display scales of the others.
-LOG_INDICES = ("det_K", "condition_number")
+LOG_INDICES = ("det_K", "condition_number", "condition_number_si")
 DISPLAY = {"deflection_translation": ("mm", 1e3), "deflection_rotation": ("deg", 180 / math.pi)}
 
 

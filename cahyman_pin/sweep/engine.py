@@ -29,7 +29,9 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import itertools
 import json
+import os
 import time
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -39,8 +41,7 @@ import numpy as np
 
 from cahyman_pin.api import get_backend
 from cahyman_pin.params import CaHyManParams
-from cahyman_pin.sweep.execution import STARTS, Chunk, default_workers, run_chunks
-from cahyman_pin.sweep.indices import INDEX_UNITS, STATUS, classify, stiffness_indices
+from cahyman_pin.sweep.execution import STARTS, Chunk, run_chunk
 from cahyman_pin.sweep.points import (
     INPUT_UNITS,
     POSE_AXES,
@@ -49,14 +50,32 @@ from cahyman_pin.sweep.points import (
     param_unit,
     pose_list,
 )
-from closedloop.arrays import check_wrench, readonly
+from closedloop.arrays import check_wrench, frozen, readonly
 from closedloop.exceptions import InvalidInputError
+from closedloop.indices import batch_indices
+from closedloop.maps import (
+    INDICES,
+    OK,
+    RANK_DEFICIENT,
+    SINGULAR,
+    STATUS,
+    PointData,
+    classify,
+    gather,
+    run_tasks,
+)
+from closedloop.progress import progress
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
-#: Chunk size limits: long chunks keep the warm start going, many chunks balance the load.
+#: Indices of a sweep and their units (SI), as every map of the project; with a wrench,
+#: also ``deflection`` (n, 6), the twist of M [m, rad].
+INDEX_UNITS = INDICES
+#: Chunk size limits: long chunks amortise a task's overhead, many chunks balance the load.
 MAX_CHUNK = {"consistent": 20_000}
 DEFAULT_MAX_CHUNK = 1_000
+#: Chunks per worker by default: enough for the load to balance at the end of a sweep.
+CHUNKS_PER_WORKER = 4
 
 
 def _slug(unit: str) -> str:
@@ -72,36 +91,53 @@ class SweepResult:
         points: the inputs.
         backend: backend name.
         wrench: (6,) wrench at M for the deflection [N, N m], or None.
-        C: (n, 6, 6) compliance at M, world axes [SI]; NaN where the point failed.
-        rank: (n,) rank of C (-1 where the point failed).
-        status: (n,) status names (see :data:`cahyman_pin.sweep.execution.STATUS`): ``ok``,
-            ``rank_deficient`` (C exists, K does not), ``invalid``, ``unreachable``,
-            ``singular``, ``failed``.
-        reasons: (n,) error message per point ('' where ok).
         indices: name -> (n,) value [SI] (units in :data:`INDEX_UNITS`), NaN where it does
             not exist; ``deflection`` (n, 6) when a wrench was given.
-        iterations: (n,) Gauss-Newton iterations of each generic assembly (-1 otherwise).
+        data: the per-point arrays (:class:`closedloop.maps.PointData`: C, rank, status
+            and reason codes, assembly iterations).
         seconds: wall time of the computation [s].
     """
 
     points: SweepPoints
     backend: str
     wrench: np.ndarray | None
-    C: np.ndarray
-    rank: np.ndarray
-    status: np.ndarray
-    reasons: tuple
     indices: dict
-    iterations: np.ndarray
+    data: PointData
     seconds: float
 
     def __len__(self) -> int:
-        return len(self.rank)
+        return len(self.data.codes)
+
+    @property
+    def C(self) -> np.ndarray:
+        """(n, 6, 6) compliance at M, world axes [SI]; NaN where the point failed."""
+        return self.data.C
+
+    @property
+    def rank(self) -> np.ndarray:
+        """(n,) rank of C (-1 where the point failed)."""
+        return self.data.rank
+
+    @property
+    def status(self) -> np.ndarray:
+        """(n,) status names (:data:`closedloop.maps.STATUS`): ``ok``, ``rank_deficient``
+        (C exists, K does not), ``invalid``, ``unreachable``, ``singular``, ``failed``."""
+        return np.asarray(STATUS)[self.data.codes]
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """(n,) error message per point ('' where ok), built on demand."""
+        return tuple(np.asarray(self.data.reason_texts)[self.data.reason_codes].tolist())
+
+    @property
+    def iterations(self) -> np.ndarray:
+        """(n,) Gauss-Newton iterations of each generic assembly (-1 otherwise)."""
+        return self.data.iterations
 
     @property
     def ok(self) -> np.ndarray:
         """(n,) bool: the point was computed (status ``ok`` or ``rank_deficient``)."""
-        return np.isin(self.status, ("ok", "rank_deficient"))
+        return np.isin(self.data.codes, (OK, RANK_DEFICIENT))
 
     def grid_values(self, name: str) -> np.ndarray:
         """Index ``name`` reshaped to the grid shape (the trailing 6 of ``deflection`` kept)."""
@@ -112,12 +148,14 @@ class SweepResult:
 
     def failures(self) -> list[tuple[int, str, str]]:
         """(index, status, reason) of every point that was not computed."""
-        return [(int(i), str(self.status[i]), self.reasons[i]) for i in np.flatnonzero(~self.ok)]
+        texts = self.data.reason_texts
+        return [(int(i), STATUS[self.data.codes[i]], texts[self.data.reason_codes[i]])
+                for i in np.flatnonzero(~self.ok)]  # fmt: skip
 
     def summary(self) -> str:
         """One line: number of points, how many per status, wall time."""
-        names, counts = np.unique(self.status, return_counts=True)
-        parts = ", ".join(f"{c} {s}" for s, c in zip(names, counts, strict=True))
+        counts = np.bincount(self.data.codes, minlength=len(STATUS))
+        parts = ", ".join(f"{c} {s}" for s, c in zip(STATUS, counts, strict=True) if c)
         return f"{len(self)} points ({parts}) in {self.seconds:.2f} s, backend {self.backend}"
 
     # ------------------------------------------------------------------ files
@@ -162,7 +200,6 @@ class SweepResult:
     def save_npz(self, path) -> Path:
         """Write everything (inputs, C, indices, status, reasons, metadata) as NPZ."""
         p = self.points
-        texts, codes = np.unique(np.asarray(self.reasons, dtype=str), return_inverse=True)
         meta = {
             "backend": self.backend,
             "params": dataclasses.asdict(p.params),
@@ -175,8 +212,9 @@ class SweepResult:
         }
         arrays = {
             "alpha": p.alpha, "alpha4": p.alpha4, "s4": p.s4, "order": p.order, "C": self.C,
-            "rank": self.rank, "status": self.status, "reason_texts": texts,
-            "reason_codes": codes.astype(np.int32), "iterations": self.iterations,
+            "rank": self.rank, "status": self.status, "length": self.data.length,
+            "reason_texts": np.asarray(self.data.reason_texts),
+            "reason_codes": self.data.reason_codes, "iterations": self.iterations,
             "wrench": np.full(6, np.nan) if self.wrench is None else self.wrench,
             "meta": np.array(json.dumps(meta)),
         }  # fmt: skip
@@ -200,12 +238,18 @@ class SweepResult:
                 order=f["order"],
             )  # fmt: skip
             wrench = None if np.all(np.isnan(f["wrench"])) else readonly(f["wrench"])
+            names, inverse = np.unique(f["status"], return_inverse=True)
+            codes = np.array([STATUS.index(name) for name in names], dtype=np.int8)[inverse]
+            data = PointData(
+                C=readonly(f["C"]), rank=frozen(f["rank"]), codes=frozen(codes.reshape(-1)),
+                length=readonly(f["length"]), iterations=frozen(f["iterations"]),
+                reason_codes=frozen(f["reason_codes"]),
+                reason_texts=f["reason_texts"].tolist(),
+            )  # fmt: skip
             return cls(
-                points=points, backend=meta["backend"], wrench=wrench, C=readonly(f["C"]),
-                rank=f["rank"], status=f["status"],
-                reasons=tuple(f["reason_texts"][f["reason_codes"]].tolist()),
+                points=points, backend=meta["backend"], wrench=wrench,
                 indices={k: readonly(f[f"index_{k}"]) for k in meta["indices"]},
-                iterations=f["iterations"], seconds=float(meta["seconds"]),
+                data=data, seconds=float(meta["seconds"]),
             )  # fmt: skip
 
     def save(self, directory, stem: str = "sweep") -> list[Path]:
@@ -218,54 +262,52 @@ class SweepResult:
         return paths
 
 
-def _chunks(points: SweepPoints, backend: str, start: str, chunk_size: int) -> list[Chunk]:
+def _chunks(points: SweepPoints, backend: str, start: str, pieces: list) -> list[Chunk]:
     func = get_backend(backend)
     names = tuple(points.design)
     design = np.column_stack([points.design[k] for k in names]) if names else None
-    out = []
-    for first in range(0, len(points), chunk_size):
-        idx = points.order[first : first + chunk_size]
-        out.append(
-            Chunk(
-                backend=backend,
-                start=start,
-                func=func,
-                params=points.params,
-                design_names=names,
-                alpha=points.alpha[idx],
-                alpha4=points.alpha4[idx],
-                s4=points.s4[idx],
-                design=np.zeros((idx.size, 0)) if design is None else design[idx],
-            )
+    return [
+        Chunk(
+            backend=backend,
+            start=start,
+            func=func,
+            params=points.params,
+            design_names=names,
+            alpha=points.alpha[idx],
+            alpha4=points.alpha4[idx],
+            s4=points.s4[idx],
+            design=np.zeros((idx.size, 0)) if design is None else design[idx],
         )
-    return out
+        for idx in pieces
+    ]
 
 
 def default_chunk_size(n: int, backend: str, workers: int) -> int:
-    """About four chunks per worker, at most 1000 points (20000 for the closed form)."""
+    """About :data:`CHUNKS_PER_WORKER` chunks per worker, at most :data:`DEFAULT_MAX_CHUNK`
+    points (:data:`MAX_CHUNK` for the batched closed form)."""
     limit = MAX_CHUNK.get(backend, DEFAULT_MAX_CHUNK)
-    return int(min(max(-(-n // (4 * max(workers, 1))), 1), limit))
+    return int(min(max(-(-n // (CHUNKS_PER_WORKER * max(workers, 1))), 1), limit))
 
 
-def _lengths(points: SweepPoints) -> np.ndarray:
-    """(n,) characteristic length [m] of the machine at each point (``params.length``),
-    computed once per distinct design; invalid designs (failed points) get the base one."""
-    n, base = len(points), points.params.length
-    if not points.design:
-        return np.full(n, base)
-    names = list(points.design)
-    rows, inverse = np.unique(
-        np.column_stack([points.design[k] for k in names]), axis=0, return_inverse=True
+def _executor(executor, workers: int | None) -> tuple[Executor | None, int]:
+    """(executor, local processes) of :func:`closedloop.maps.run_tasks`."""
+    if executor == "serial":
+        return None, 1
+    if executor == "processes":
+        return None, workers or default_workers()
+    if isinstance(executor, Executor):
+        return executor, 1
+    raise InvalidInputError(
+        f"executor {executor!r}; expected 'processes', 'serial' or a concurrent.futures.Executor"
     )
-    values = []
-    for row in rows:
-        try:
-            values.append(
-                points.params.replace(**dict(zip(names, row.tolist(), strict=True))).length
-            )
-        except InvalidInputError:
-            values.append(base)
-    return np.asarray(values)[inverse.reshape(-1)]
+
+
+def default_workers() -> int:
+    """Number of worker processes by default: the usable cores."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def sweep(
@@ -291,15 +333,15 @@ def sweep(
         start: generic backend only: where each assembly starts, ``"closed_form"``
             (default: CaHyMan's closed-form geometry, exact, computed per chunk at once;
             faster, and the same start as :func:`cahyman_pin.api.stiffness`) or
-            ``"neighbour"`` (the previous point's configuration, extrapolated along the
-            path: for variants of the machine without a closed form).
+            ``"neighbour"`` (the previous point's configuration; the first point of each
+            chunk from the closed form).
         executor: ``"processes"`` (local process pool, default), ``"serial"``, or any
             ``concurrent.futures.Executor`` (e.g. ``dask.distributed.Client.get_executor()``);
             tasks are pickled, so a registered backend must be importable by the workers.
         workers: processes of the local pool (default: every usable core).
-        chunk_size: points per task (default :func:`default_chunk_size`); each chunk
-            starts cold, so the results depend on it (slightly: within the assembly
-            tolerance), not on the executor.
+        chunk_size: points per task (default :func:`default_chunk_size`); with
+            ``start="neighbour"`` each chunk's first point starts from the closed form, so
+            the results depend on it (within the assembly tolerance), not on the executor.
         show_progress: progress bar on stderr.
 
     Raises:
@@ -313,36 +355,41 @@ def sweep(
         raise InvalidInputError(f"start {start!r}; expected one of {list(STARTS)}")
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
-    n_workers = workers or (1 if executor == "serial" else default_workers())
+    pool, n_workers = _executor(executor, workers)
     size = chunk_size or default_chunk_size(len(points), backend, n_workers)
     if not isinstance(size, int) or size < 1:
         raise InvalidInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     t0 = time.perf_counter()
-    chunks = _chunks(points, backend, start, size)
-    results = run_chunks(chunks, executor, workers, show_progress, f"{backend} sweep")
     n = len(points)
-    C, rank = np.full((n, 6, 6), np.nan), np.full(n, -1, dtype=np.int8)
-    codes, iterations = np.zeros(n, dtype=np.int8), np.full(n, -1, dtype=np.int16)
-    reasons = [""] * n
-    offset = 0
-    for r in results:
-        idx = points.order[offset : offset + len(r.rank)]
-        C[idx], rank[idx], codes[idx], iterations[idx] = r.C, r.rank, r.status, r.iterations
-        for i, text in r.reasons.items():
-            reasons[idx[i]] = text
-        offset += len(r.rank)
-    symmetric = classify(C, rank, codes, reasons, _lengths(points))
-    indices = stiffness_indices(C, codes == STATUS.index("ok"), symmetric, w)
+    pieces = [points.order[f : f + size] for f in range(0, n, size)]
+    chunks = _chunks(points, backend, start, pieces)
+
+    def by_point():  # one item per point done, for the progress bar
+        for k, result in run_tasks(run_chunk, chunks, pool, n_workers):
+            yield k, result
+            yield from itertools.repeat(None, len(pieces[k]) - 1)
+
+    done = progress(by_point(), total=n, label=f"{backend} sweep", enabled=show_progress)
+    data = gather(n, pieces, (item for item in done if item is not None))
+    from_C = data.rank < 0  # closed forms: the rank comes from C
+    symmetric = classify(data)
+    for i in np.flatnonzero(from_C & (data.codes == RANK_DEFICIENT)):
+        data.codes[i] = SINGULAR  # as api.stiffness: a singular pose, not rigidity
+        data.set_reason(i, f"the {backend} compliance at M has numerical rank "
+                        f"{data.rank[i]} < 6: a singular pose, where one direction is "
+                        "almost free")  # fmt: skip
+        data.C[i] = np.nan
+    indices = batch_indices(data.C, data.rank, data.length, w, symmetric)
+    if w is not None:
+        indices["deflection"] = data.C @ w
+    for a in (data.C, data.rank, data.codes, data.iterations, data.length, data.reason_codes):
+        a.flags.writeable = False
     return SweepResult(
         points=points,
         backend=backend,
         wrench=w,
-        C=readonly(C),
-        rank=rank,
-        status=np.asarray(STATUS)[codes],
-        reasons=tuple(reasons),
         indices={k: readonly(v) for k, v in indices.items()},
-        iterations=iterations,
+        data=data,
         seconds=time.perf_counter() - t0,
     )
 

@@ -2,8 +2,8 @@
 
 Inputs are SI: crank angles alpha_1..3 and arm angle alpha_4 in rad, stroke s_4 in m,
 design values in the units of :class:`~cahyman_pin.params.CaHyManParams`. A grid is
-computed along a path of unit steps (:func:`path_order`) so that each point starts from
-its neighbour's configuration.
+computed along a path of unit steps (:func:`closedloop.maps.path_order`) so that each
+point can start from its neighbour's configuration.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.arrays import readonly
 from closedloop.exceptions import InvalidInputError
+from closedloop.maps import path_order
 
 #: Pose inputs a grid axis can sweep ("alpha": alpha_1 = alpha_2 = alpha_3 together).
 POSE_AXES = ("alpha", "alpha1", "alpha2", "alpha3", "alpha4", "s4")
@@ -71,34 +72,6 @@ class SweepPoints:
     def params_at(self, i: int) -> CaHyManParams:
         """Parameters of point i."""
         return self.params.replace(**{k: float(v[i]) for k, v in self.design.items()})
-
-
-def path_order(shape: tuple, outer: list[int]) -> np.ndarray:
-    """Flat (C-order) indices of a grid along a path of unit steps.
-
-    The path is the reflected mixed-radix Gray code: each axis runs backwards when the
-    positions of the slower axes sum to an odd number, so consecutive points differ by
-    one step along one axis (a boustrophedon in two dimensions).
-
-    Args:
-        shape: grid shape.
-        outer: axes that vary slowest, slowest first (the others follow in grid order).
-
-    Returns:
-        (prod(shape),) read-only flat indices in path order.
-    """
-    perm = [*outer, *(a for a in range(len(shape)) if a not in outer)]
-    pshape = [shape[a] for a in perm]
-    idx = np.indices(pshape).reshape(len(pshape), -1)
-    path, parity = np.empty_like(idx), np.zeros(idx.shape[1], dtype=np.int64)
-    for j, size in enumerate(pshape):
-        path[j] = np.where(parity % 2 == 1, size - 1 - idx[j], idx[j])
-        parity += path[j]
-    original = np.empty_like(path)
-    original[perm] = path
-    order = np.ravel_multi_index(tuple(original), shape)
-    order.flags.writeable = False
-    return order
 
 
 def _check_params(params) -> CaHyManParams:
@@ -227,6 +200,5 @@ __all__ = [
     "SweepPoints",
     "grid",
     "param_unit",
-    "path_order",
     "pose_list",
 ]
