@@ -16,8 +16,12 @@ import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm
 
+from cahyman_pin.api import stiffness
 from cahyman_pin.model import CaHyManModel, closed_form_pose
-from cahyman_pin.params import CaHyManParams
+from cahyman_pin.paper.beams import beam_rows, beams_section
+from cahyman_pin.paper.data import TABLE_POSES
+from cahyman_pin.paper.document import Document, Table
+from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import VIRTUAL_JOINTS, build_closure_yaml, build_urdf
 from closedloop.beams import BeamError, map_configuration
 from closedloop.compliance import compliance
@@ -139,3 +143,23 @@ def test_bad_beam_parameters_are_refused():
         CaHyManParams(d_leg=-0.01)
     with pytest.raises(BeamError, match=r"beam 'crank_b_1': tube wall t = 0.007 m is thicker"):
         CaHyManModel(CaHyManParams(links_as_beams=True, t_leg=0.007))
+
+
+def test_report_section_rows_against_the_closed_form():
+    """beam_rows: the lumped rows' diagonal is the consistent closed form's (an independent
+    implementation of the paper's model); every row's energy shares sum to 1; the section
+    shows the rows."""
+    rows = beam_rows(DEFAULT_PARAMS)
+    assert [(label, b) for label, b, _, _ in rows] == [
+        (pose.label, b) for pose in TABLE_POSES for b in (False, True)
+    ]
+    poses = [pose for pose in TABLE_POSES for _ in range(2)]
+    for (_, as_beams, diag, shares), pose in zip(rows, poses, strict=True):
+        assert sum(shares.values()) == pytest.approx(1.0, rel=1e-9)
+        if not as_beams:
+            C = stiffness(*pose.si, backend="consistent").C
+            assert_close_in_norm(diag, np.diag(C), RTOL_EXACT)
+    doc = Document("x")
+    beams_section(doc, DEFAULT_PARAMS)
+    table = next(b for b in doc.blocks if isinstance(b, Table))
+    assert table.rows[1][:3] == ("Table 1", "beam links", f"{1e6 * rows[1][2][0]:.4g}")
