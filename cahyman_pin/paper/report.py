@@ -21,13 +21,28 @@ from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_r
 from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
 from cahyman_pin.paper.effects import EFFECTS, ILLUSTRATIVE_MASS, effect_changes
 from cahyman_pin.paper.figures import figure5, figure_load
-from cahyman_pin.paper.numbers import fmt, two_decimals
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import JointLimitWarning
 
+#: Table cells (mm, deg) below this magnitude are rounding noise of exact zeros.
+ZERO_CELL = 1e-9
+
+
+def fmt(v: float, digits: int = 4, sign: str = "") -> str:
+    """A number for a table cell ('n/a' for NaN, 0 for rounding noise below ZERO_CELL)."""
+    if not np.isfinite(v):
+        return "n/a"
+    return "0" if abs(v) < ZERO_CELL else f"{v:{sign}.{digits}g}"
+
+
 def _diff(v: float, ref: float) -> str:
     return fmt(v - ref, 3, "+")
+
+
+def _two_decimals(v: float) -> str:
+    """The precision of the published tables (0.01 mm or deg); no negative zero."""
+    return f"{round(v, 2) + 0.0:.2f}"
 
 
 def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
@@ -167,7 +182,7 @@ def _linearity(doc: Document) -> None:
         ),
     )
     rows = tuple(
-        (row, *(two_decimals(linearity_residual(TABLES[p.label])[i]) for p in TABLE_POSES))
+        (row, *(_two_decimals(linearity_residual(TABLES[p.label])[i]) for p in TABLE_POSES))
         for i, row in enumerate(("dx [mm]", "dy [mm]", "dz [mm]", "dphi [deg]", "dpsi [deg]",
                                  "dtheta [deg]"))
     )  # fmt: skip
