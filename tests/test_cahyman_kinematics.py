@@ -28,6 +28,17 @@ MAX_WARM_ITERATIONS = 6
 
 N_POSES = 200
 
+#: The model document's leg frames: delta_k = 0, 120, 240 deg, radial u_k (x towards leg
+#: 1), tangential t_k = z x u_k; ball k sits at r_p u_k in the plate frame.
+SQ3 = np.sqrt(3.0)
+U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
+T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
+
+
+def rot_y(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
 
 def random_inputs(rng: np.random.Generator, n: int):
     """n random (alpha (3,) [rad], alpha_4 [rad], s_4 [m]) in the issue's ranges."""
@@ -48,21 +59,31 @@ def model() -> CaHyManModel:
 
 
 def _compare_with_closed_form(m: CaHyManModel, alpha, alpha4, s4):
-    """Assemble with Pinocchio and compare every point and rotation with geometry.py."""
+    """Assemble with Pinocchio; check the points against the model document and the plate
+    pose against the closed-form direct kinematics of geometry.py."""
+    p = m.params
     asm = m.assemble(alpha, alpha4, s4, full_output=True)
     got = m.pose(asm.q)
-    plate = geometry.plate_pose(alpha, m.params)
-    Q, M = geometry.extremity(plate, alpha4, s4, m.params)
+    plate = geometry.plate_pose(alpha, p)
     np.testing.assert_allclose(got.H, plate.H, rtol=0, atol=POSITION_TOL)
-    np.testing.assert_allclose(
-        got.H_k, geometry.ball_centres(plate, m.params), rtol=0, atol=POSITION_TOL
-    )
-    np.testing.assert_allclose(got.Q, Q, rtol=0, atol=POSITION_TOL)
-    np.testing.assert_allclose(got.M, M, rtol=0, atol=POSITION_TOL)
-    np.testing.assert_allclose(got.s, plate.s, rtol=0, atol=POSITION_TOL)
     np.testing.assert_allclose(got.R, plate.R, rtol=0, atol=ROTATION_TOL)
-    R_M = geometry.arm_rotation(plate.R, alpha4)
-    np.testing.assert_allclose(got.R_M, R_M, rtol=0, atol=ROTATION_TOL)
+    # ball k: at r_p u_k in the plate frame, at (b cos alpha_k, b sin alpha_k + h) in the
+    # plane (t_k, z) of leg k (base O_k = r_e u_k), at stroke s_k = u_k . H_k - r_e
+    np.testing.assert_allclose(got.H_k, got.H + p.r_p * U @ plate.R.T, rtol=0, atol=POSITION_TOL)
+    leg = got.H_k - p.r_e * U
+    np.testing.assert_allclose(
+        np.einsum("ki,ki->k", T, leg), p.b * np.cos(alpha), rtol=0, atol=POSITION_TOL
+    )
+    np.testing.assert_allclose(leg[:, 2], p.b * np.sin(alpha) + p.h, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.s, np.einsum("ki,ki->k", U, leg), rtol=0, atol=POSITION_TOL)
+    # arm: Q = H + HQ z_p, M = Q + (L + s_4) w, w = cos(alpha_4) x_p + sin(alpha_4) z_p;
+    # the link carrying M is the plate turned by alpha_4 about -y_p
+    R = plate.R
+    w = np.cos(alpha4) * R[:, 0] + np.sin(alpha4) * R[:, 2]
+    Q = plate.H + p.HQ * R[:, 2]
+    np.testing.assert_allclose(got.Q, Q, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.M, Q + (p.L + s4) * w, rtol=0, atol=POSITION_TOL)
+    np.testing.assert_allclose(got.R_M, R @ rot_y(-alpha4), rtol=0, atol=ROTATION_TOL)
     assert asm.residual <= RESIDUAL_TOL
     assert m.residual(asm.q) <= RESIDUAL_TOL
     assert asm.iterations <= MAX_COLD_ITERATIONS
