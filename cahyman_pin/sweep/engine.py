@@ -77,6 +77,9 @@ DEFAULT_MAX_CHUNK = 1_000
 #: Chunks per worker by default: the last chunks, finishing alone, leave a core idle for
 #: at most 1/16 of the run (a task costs about 1 ms of overhead).
 CHUNKS_PER_WORKER = 16
+#: Fewest points per task: a task costs about 1 ms, and each chunk's first point starts
+#: afresh (from the closed form) with ``start="neighbour"``.
+MIN_CHUNK = 64
 
 
 def _slug(unit: str) -> str:
@@ -284,10 +287,13 @@ def _chunks(points: SweepPoints, backend: str, start: str, pieces: list) -> list
 
 
 def default_chunk_size(n: int, backend: str, workers: int) -> int:
-    """About :data:`CHUNKS_PER_WORKER` chunks per worker, at most :data:`DEFAULT_MAX_CHUNK`
-    points (:data:`MAX_CHUNK` for the batched closed form)."""
+    """Points per task: one task per :data:`DEFAULT_MAX_CHUNK` points serially (:data:`MAX_CHUNK`
+    for the batched closed form), else about :data:`CHUNKS_PER_WORKER` tasks per worker
+    of at least :data:`MIN_CHUNK` points."""
     limit = MAX_CHUNK.get(backend, DEFAULT_MAX_CHUNK)
-    return int(min(max(-(-n // (CHUNKS_PER_WORKER * max(workers, 1))), 1), limit))
+    if workers <= 1:
+        return limit
+    return int(min(max(-(-n // (CHUNKS_PER_WORKER * workers)), MIN_CHUNK), limit))
 
 
 def _executor(executor, workers: int | None) -> tuple[Executor | None, int]:
