@@ -28,8 +28,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cahyman_pin.backends.consistent import consistent_breakdown
-from cahyman_pin.backends.published import PublishedOptions, published_stiffness
 from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
@@ -125,6 +123,8 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
 
     The plate twist at H per wrench at M is C_H T^T (T^T carries the wrench from M to H).
     """
+    from cahyman_pin.backends.consistent import consistent_breakdown  # on demand: start-up
+
     parts = consistent_breakdown(alpha, alpha4, s4, params)
     return BackendResult(
         C=parts.C,
@@ -151,6 +151,8 @@ def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) ->
     load is given, so the weight terms of eq. (11) are zero. ``details["result"]`` holds
     every matrix.
     """
+    from cahyman_pin.backends.published import PublishedOptions, published_stiffness
+
     r = published_stiffness(alpha, alpha4, s4, params, PublishedOptions(ks="params"))
     return BackendResult(
         C=r.C,

@@ -15,33 +15,109 @@ The modules (``closedloop.compliance``, ``closedloop.assembly``, ...) stay impor
 
 from __future__ import annotations
 
-from . import data
-from .assembly import Assembly, assemble
-from .compliance import ComplianceResult, compliance
-from .conditioning import ILL_CONDITIONED, RANK_RTOL
-from .configuration import CLOSURE_TOL, Configuration
-from .exceptions import (
-    AssemblyError,
-    BeamError,
-    ClosedLoopError,
-    EquilibriumError,
-    InvalidInputError,
-    JointLimitError,
-    JointLimitWarning,
-    MechanismError,
-    ModelFileError,
-    NameNotFoundError,
-    OpenLoopError,
-    RigidDirectionsError,
-    SingularConfigurationError,
-)
-from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
-from .indices import StiffnessIndices
-from .io import load_model, robot_data_dir
-from .model import ClosedLoopModel
-from .preload import PreloadedCompliance, preloaded_compliance
-from .statics import Equilibrium, solve_equilibrium
-from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
+import importlib
+import sys
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+#: Public name -> the module that defines it; imported on first use (module-level
+#: ``__getattr__``), so that ``import closedloop.exceptions`` or a command line that needs a
+#: few modules does not load scipy, yaml or every other module. The submodules among them:
+#: :data:`_SUBMODULES`.
+_EXPORTS = {
+    "data": ".data",
+    **dict.fromkeys(("Assembly", "assemble"), ".assembly"),
+    **dict.fromkeys(("ComplianceResult", "compliance"), ".compliance"),
+    **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".conditioning"),
+    **dict.fromkeys(("CLOSURE_TOL", "Configuration"), ".configuration"),
+    **dict.fromkeys(
+        (
+            "AssemblyError",
+            "BeamError",
+            "ClosedLoopError",
+            "EquilibriumError",
+            "InvalidInputError",
+            "JointLimitError",
+            "JointLimitWarning",
+            "MechanismError",
+            "ModelFileError",
+            "NameNotFoundError",
+            "OpenLoopError",
+            "RigidDirectionsError",
+            "SingularConfigurationError",
+        ),
+        ".exceptions",
+    ),
+    **dict.fromkeys(("STANDARD_GRAVITY", "GravityLoad", "Payload"), ".gravity"),
+    "StiffnessIndices": ".indices",
+    **dict.fromkeys(("load_model", "robot_data_dir"), ".io"),
+    "ClosedLoopModel": ".model",
+    **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".preload"),
+    **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".statics"),
+    **dict.fromkeys(("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".tangent"),
+}
+_SUBMODULES = frozenset({"data"})
+
+if TYPE_CHECKING:  # the names as static analysis sees them
+    from . import data
+    from .assembly import Assembly, assemble
+    from .compliance import ComplianceResult, compliance
+    from .conditioning import ILL_CONDITIONED, RANK_RTOL
+    from .configuration import CLOSURE_TOL, Configuration
+    from .exceptions import (
+        AssemblyError,
+        BeamError,
+        ClosedLoopError,
+        EquilibriumError,
+        InvalidInputError,
+        JointLimitError,
+        JointLimitWarning,
+        MechanismError,
+        ModelFileError,
+        NameNotFoundError,
+        OpenLoopError,
+        RigidDirectionsError,
+        SingularConfigurationError,
+    )
+    from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
+    from .indices import StiffnessIndices
+    from .io import load_model, robot_data_dir
+    from .model import ClosedLoopModel
+    from .preload import PreloadedCompliance, preloaded_compliance
+    from .statics import Equilibrium, solve_equilibrium
+    from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    mod = importlib.import_module(module, __name__)
+    value = mod if name in _SUBMODULES else getattr(mod, name)
+    globals()[name] = value  # once: later lookups do not come here
+    return value
+
+
+class _Package(ModuleType):
+    """The package, which keeps ``closedloop.compliance`` the function.
+
+    Importing a submodule binds it to its name in the package: ``closedloop.compliance``
+    would become the module once anything imported ``closedloop.compliance``. As when the
+    package imported every name eagerly, the exported function of that name wins.
+    """
+
+    def __setattr__(self, name: str, value) -> None:
+        if isinstance(value, ModuleType) and name in _EXPORTS and name not in _SUBMODULES:
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
+
 
 __version__ = "0.2.0"
 

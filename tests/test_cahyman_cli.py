@@ -331,6 +331,13 @@ def test_help_lists_every_subcommand_without_importing_them(capsys):
 
 
 # ------------------------------------------------------------------ report parameters
+def parameter_rows(markdown: str) -> dict[str, tuple[str, str]]:
+    """name -> (value, source) of the report's parameter table (first, second, last cell)."""
+    table = markdown.split("| parameter |", 1)[1].split("\n\n", 1)[0]
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in table.splitlines()[2:]]
+    return {c[0]: (c[1], c[-1]) for c in cells}
+
+
 def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
     from cahyman_pin.params import DEFAULT_PARAMS
 
@@ -340,16 +347,20 @@ def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
                               "--out", str(out))  # fmt: skip
     assert (status, err.count("error")) == (0, 0) and "report written" in stdout
     text = (out / "report.md").read_text()
-    assert "| b | 0.09 | given |" in text and "| L | 0.16 | given |" in text
-    assert "| K_s | 0.697 | given (the paper's printed value) |" in text
-    assert "| a | 0.2 | assumed: the paper gives no dimensions |" in text
-    assert "| K_T | 4672 | paper |" in text
+    rows = parameter_rows(text)
+    assert rows["b"] == ("0.09", "given") and rows["L"] == ("0.16", "given")
+    assert rows["K_s"] == ("0.697", "given (the paper's printed value)")
+    assert rows["a"] == ("0.2", "assumed: the paper gives no dimensions")
+    assert rows["K_T"] == ("4672", "paper")
     assert f"the parameter file {str(tmp_path / 'p.yaml')!r}" in text
     default = tmp_path / "default"
     assert run(capsys, "report", "--out", str(default))[0] == 0
     text = (default / "report.md").read_text()
-    assert "| K_s | 697000 | assumed: 0.697e6 N/m, the printed 0.697 N/m times 1e6" in text
-    assert "| b | 0.08 | assumed" in text and "no parameter file" in text
+    rows = parameter_rows(text)
+    assert rows["K_s"][0] == "697000"
+    assert rows["K_s"][1].startswith("assumed: 0.697e6 N/m, the printed 0.697 N/m times 1e6")
+    assert rows["b"][0] == "0.08" and rows["b"][1].startswith("assumed")
+    assert "no parameter file" in text
     # the values reach the computations: the consistent and generic columns change
     assert (out / "report.md").read_text().split("## Tables")[1] != text.split("## Tables")[1]
     assert DEFAULT_PARAMS.b == 0.08

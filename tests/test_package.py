@@ -1,0 +1,61 @@
+"""The packages' names, imported on first use: every public name resolves, and importing a
+small module does not load the heavy ones."""
+
+import subprocess
+import sys
+import types
+
+import pytest
+
+import cahyman_pin
+import closedloop
+
+
+def loaded_after(statement: str) -> set[str]:
+    """The top-level modules loaded by ``statement`` in a fresh interpreter."""
+    code = f"import sys; {statement}; print(' '.join(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)  # fmt: skip
+    return {name.split(".")[0] for name in done.stdout.split()}
+
+
+@pytest.mark.parametrize("package", [closedloop, cahyman_pin])
+def test_every_public_name_resolves(package):
+    for name in package.__all__:
+        value = getattr(package, name)
+        assert value is not None
+        assert name in dir(package)
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        package.nothing  # noqa: B018
+
+
+def test_compliance_is_the_function_even_after_its_module_is_imported():
+    import closedloop.compliance  # binds the submodule's name in the package
+    from closedloop.compliance import compliance
+
+    assert closedloop.compliance is compliance
+    assert isinstance(compliance, types.FunctionType)
+    assert isinstance(closedloop.data, types.ModuleType)  # a submodule that is a name
+
+
+@pytest.mark.parametrize(
+    ("statement", "absent"),
+    [
+        ("import closedloop", {"pinocchio", "scipy", "yaml", "matplotlib", "meshcat"}),
+        ("import closedloop.exceptions", {"pinocchio", "scipy", "numpy"}),
+        ("import cahyman_pin", {"pinocchio", "scipy", "yaml", "matplotlib"}),
+        ("import cahyman_pin.params", {"pinocchio", "scipy", "matplotlib"}),
+        ("from closedloop import InvalidInputError", {"pinocchio", "scipy"}),
+    ],
+)
+def test_importing_a_light_module_loads_no_heavy_one(statement, absent):
+    assert not loaded_after(statement) & absent
+
+
+def test_the_stiffness_command_loads_no_plotting_or_viewer():
+    loaded = loaded_after(
+        "import os; from cahyman_pin.cli import main; sys.stdout = open(os.devnull, 'w'); "
+        "assert main(['stiffness', '--json']) == 0; sys.stdout = sys.__stdout__"
+    )
+    assert "pinocchio" in loaded  # the generic backend ran
+    assert not loaded & {"matplotlib", "meshcat", "tqdm", "markdown", "dask"}
