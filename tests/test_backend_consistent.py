@@ -53,6 +53,28 @@ NEWTON_TOL = 1e-16
 # Normalising length for mixing translations and rotations in one comparison [m].
 ELL = 0.1
 
+#: The model document's leg frames: delta_k = 0, 120, 240 deg, radial u_k (x towards leg
+#: 1), tangential t_k = z x u_k; leg base O_k = r_e u_k, ball k at r_p u_k in the plate frame.
+SQ3 = np.sqrt(3.0)
+U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
+T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
+
+
+def rot_y(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def ball_centres(H: np.ndarray, R: np.ndarray, p) -> np.ndarray:
+    """(3, 3) ball centres H + R r_p u_k [m], one leg per row."""
+    return H + p.r_p * U @ R.T
+
+
+def leg_plane_points(Hk: np.ndarray, p) -> np.ndarray:
+    """(6,) (y_1, z_1, ..., z_3): ball k in the plane (t_k, z) of leg k, from O_k."""
+    leg = Hk - p.r_e * U
+    return np.ravel(np.column_stack([np.einsum("ki,ki->k", T, leg), leg[:, 2]]))
+
 
 def _e(angle: float) -> np.ndarray:
     return np.array([np.cos(angle), np.sin(angle)])
@@ -78,15 +100,13 @@ def plate_from_leg_points(yz: np.ndarray, guess: geometry.PlatePose, p):
     """Plate centre and orientation putting ball k at in-plane (y_k, z_k).
 
     Newton iterations on (H, rotation vector about the guess) with a finite-difference
-    Jacobian, until the residual is at round-off level.
+    Jacobian, until the residual is at round-off level. The guess (the closed-form pose)
+    only starts the iterations.
     """
-    O = p.r_e * geometry.U
 
     def residual(x):
         R = Rotation.from_rotvec(x[3:]).as_matrix() @ guess.R
-        Hk = x[:3] + (R @ (p.r_p * geometry.U).T).T
-        res = [(geometry.T[k] @ (Hk[k] - O[k]), Hk[k, 2]) for k in range(3)]
-        return np.ravel(res) - np.ravel(yz)
+        return leg_plane_points(ball_centres(x[:3], R, p), p) - np.ravel(yz)
 
     x = np.concatenate([guess.H, np.zeros(3)])
     for _ in range(30):
@@ -109,7 +129,7 @@ def nonlinear_extremity(q: np.ndarray, alpha, alpha4, s4, p, guess):
     a4 = alpha4 + q[9]
     w = np.cos(a4) * R[:, 0] + np.sin(a4) * R[:, 2]
     M = H + p.HQ * R[:, 2] + (p.L + s4 + q[10] + q[11]) * w
-    return M, R @ geometry.rot_y(-a4)
+    return M, R @ rot_y(-a4)
 
 
 def nonlinear_jacobian(alpha, alpha4, s4, p) -> np.ndarray:
@@ -177,13 +197,20 @@ def test_A_d_matches_finite_differences_of_plate_pose():
     rng = np.random.default_rng(11)
     for alpha in [TABLE_POSES["table3"][0], TABLE_POSES["table1"][0], *random_poses(rng, 3)[0]]:
         A_d = plate_twist_from_leg_displacements(alpha, p)
+        guess = geometry.plate_pose(alpha, p)
         for k in range(3):
             da = np.zeros(3)
             da[k] = STEP_ANGLE
-            pp, pm = geometry.plate_pose(alpha + da, p), geometry.plate_pose(alpha - da, p)
-            twist = np.concatenate(
-                [pp.H - pm.H, Rotation.from_matrix(pp.R @ pm.R.T).as_rotvec()]
-            ) / (2 * STEP_ANGLE)
+            # the plates that put the balls at the legs' points (b cos, b sin + h)
+            (Hp, Rp), (Hm, Rm) = (
+                plate_from_leg_points(
+                    np.column_stack([p.b * np.cos(a), p.b * np.sin(a) + p.h]), guess, p
+                )
+                for a in (alpha + da, alpha - da)
+            )
+            twist = np.concatenate([Hp - Hm, Rotation.from_matrix(Rp @ Rm.T).as_rotvec()]) / (
+                2 * STEP_ANGLE
+            )
             dv = np.zeros(6)  # (dy_k, dz_k) per unit d alpha_k: b (-sin, cos)
             dv[2 * k : 2 * k + 2] = p.b * np.array([-np.sin(alpha[k]), np.cos(alpha[k])])
             np.testing.assert_allclose(A_d @ dv, twist, rtol=FD_RTOL, atol=FD_ATOL_REL)
@@ -201,10 +228,7 @@ def test_G_matches_ball_centres_of_a_moved_plate():
         moved = []
         for sign in (1.0, -1.0):
             R = Rotation.from_rotvec(sign * xi[3:]).as_matrix() @ pose.R
-            Hk = geometry.ball_centres(
-                geometry.PlatePose(pose.H + sign * xi[:3], R, 0.0, 0.0, 0.0, pose.s), p
-            )
-            moved.append(np.ravel([(geometry.T[k] @ Hk[k], Hk[k, 2]) for k in range(3)]))
+            moved.append(leg_plane_points(ball_centres(pose.H + sign * xi[:3], R, p), p))
         G_fd[:, i] = (moved[0] - moved[1]) / (2 * STEP_ANGLE)
     np.testing.assert_allclose(twist_H_to_leg_displacements(pose.R, p), G_fd, atol=FD_ATOL_REL)
     np.testing.assert_allclose(
@@ -257,9 +281,9 @@ def test_pieces_compose():
 def test_arm_compliance_along_the_arm_is_the_series_springs():
     p = DEFAULT_PARAMS
     alpha, alpha4, s4 = TABLE_POSES["table3"]
-    pose = geometry.plate_pose(alpha, p)
-    w = geometry.arm_direction(pose.R, alpha4)
-    C = arm_compliance(pose.R, alpha4, s4, p)
+    R = geometry.plate_pose(alpha, p).R
+    w = np.cos(alpha4) * R[:, 0] + np.sin(alpha4) * R[:, 2]  # x_p towards z_p
+    C = arm_compliance(R, alpha4, s4, p)
     expected = 1 / p.K_4 + 1 / p.K_s
     np.testing.assert_allclose(w @ C[:3, :3] @ w, expected, rtol=EXACT_RTOL)
 
