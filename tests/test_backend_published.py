@@ -63,13 +63,20 @@ def test_shapes_of_every_matrix():
         r.C[0, 0] = 0.0  # read-only
 
 
+def rz_ry_rz(phi: float, theta: float, psi: float) -> np.ndarray:
+    """Rz(theta) Ry(pi/2 - phi) Rz(psi), the model document's reading of eq. (6)."""
+    return (
+        Rotation.from_euler("z", theta).as_matrix()
+        @ Rotation.from_euler("y", np.pi / 2 - phi).as_matrix()
+        @ Rotation.from_euler("z", psi).as_matrix()
+    )
+
+
 def test_R_PAR_is_rz_ry_rz_and_R_SP_embeds_it():
     rng = np.random.default_rng(2)
     r = published_stiffness(*T3)
     pose = r.pose
-    np.testing.assert_allclose(
-        r.R_PAR, geometry.plate_rotation(pose.phi, pose.theta, pose.psi), atol=ENTRY_RTOL
-    )
+    np.testing.assert_allclose(r.R_PAR, rz_ry_rz(pose.phi, pose.theta, pose.psi), atol=ENTRY_RTOL)
     np.testing.assert_array_equal(r.R_SP[:3, :3], r.R_PAR)
     np.testing.assert_array_equal(r.R_SP[3:, 3:], np.eye(3))
     np.testing.assert_array_equal(r.R_SP[:3, 3:], np.zeros((3, 3)))
@@ -78,12 +85,7 @@ def test_R_PAR_is_rz_ry_rz_and_R_SP_embeds_it():
 
     for _ in range(5):
         f, t, s = rng.uniform(-3, 3, 3)
-        expected = (
-            Rotation.from_euler("z", t).as_matrix()
-            @ Rotation.from_euler("y", np.pi / 2 - f).as_matrix()
-            @ Rotation.from_euler("z", s).as_matrix()
-        )
-        np.testing.assert_allclose(r_par(f, t, s), expected, atol=ENTRY_RTOL)
+        np.testing.assert_allclose(r_par(f, t, s), rz_ry_rz(f, t, s), atol=ENTRY_RTOL)
 
 
 def test_Kss_entries_at_table3():
@@ -187,7 +189,7 @@ def test_beta_equal_alpha_makes_the_printed_leg_blocks_singular():
 def test_printed_A_d_reproduces_x_H_and_z_H_and_is_singular_at_tables_1_and_2():
     p = DEFAULT_PARAMS
     r = published_stiffness(*T3, options=PublishedOptions(a_d="printed"))
-    y, z = geometry.leg_plane_coordinates(T3[0], p)
+    y, z = p.b * np.cos(T3[0]), p.b * np.sin(T3[0]) + p.h  # ball k in the plane of leg k
     v = np.ravel(np.column_stack([y, z]))  # (y1, z1, y2, z2, y3, z3), pose coordinates
     np.testing.assert_allclose(r.A_d[[0, 2]] @ v, r.pose.H[[0, 2]], rtol=ENTRY_RTOL)
     for case, divisor in (("table1", "Delta y_1"), ("table2", "C_psi")):
