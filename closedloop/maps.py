@@ -298,7 +298,8 @@ class PointData:
         length: (n,) characteristic length [m].
         iterations: (n,) int16 assembly iterations, -1 if none.
         reason_codes: (n,) int32 index of each point's reason in ``reason_texts``.
-        reason_texts: distinct reasons, ``reason_texts[0] == ""``.
+        reason_texts: distinct reasons, ``reason_texts[0] == ""`` (a failed point's
+            message usually names its own numbers: one text per failed point).
     """
 
     C: np.ndarray
@@ -308,12 +309,16 @@ class PointData:
     iterations: np.ndarray
     reason_codes: np.ndarray
     reason_texts: list
+    _codes: dict = field(default_factory=dict, repr=False, compare=False)
 
     def set_reason(self, i: int, text: str) -> None:
         """Record the reason of point i (while the data is being completed)."""
-        if text not in self.reason_texts:
+        if not self._codes:
+            self._codes.update((t, k) for k, t in enumerate(self.reason_texts))
+        if text not in self._codes:
+            self._codes[text] = len(self.reason_texts)
             self.reason_texts.append(text)
-        self.reason_codes[i] = self.reason_texts.index(text)
+        self.reason_codes[i] = self._codes[text]
 
 
 def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData:

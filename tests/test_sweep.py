@@ -300,3 +300,12 @@ def test_parquet_needs_pyarrow(tmp_path):
             res.save_parquet(tmp_path / "s.parquet")
     else:
         assert res.save_parquet(tmp_path / "s.parquet").exists()
+
+
+def test_results_keep_no_python_object_per_point():
+    res = sweep(small_grid(), backend="consistent", wrench=WRENCH, executor="serial")
+    arrays = [res.C, res.rank, res.data.codes, res.data.length, res.iterations,
+              res.data.reason_codes, *res.indices.values()]  # fmt: skip
+    assert all(isinstance(a, np.ndarray) and a.dtype != object for a in arrays)
+    assert res.data.reason_texts == [""]  # every point ok: one shared empty reason
+    assert res.data.codes.dtype == np.int8 and res.data.reason_codes.dtype == np.int32

@@ -1,6 +1,6 @@
-"""CaHyMan over many poses and designs: points (:mod:`.points`), chunked execution on any
-``concurrent.futures`` executor (:mod:`.execution`), the indices and status per point
-(:mod:`.indices`), and the driver with its result and files (:mod:`.engine`)."""
+"""CaHyMan over many poses and designs, on the project's one sweep engine
+(:mod:`closedloop.maps`): points (:mod:`.points`), the kernel of a chunk for each backend
+(:mod:`.execution`), and the driver with its result and files (:mod:`.engine`)."""
 
 from cahyman_pin.sweep.engine import INDEX_UNITS, SweepResult, sweep
 from cahyman_pin.sweep.points import grid, pose_list

@@ -21,8 +21,12 @@ that each generic assembly can start from its neighbour's configuration (``start
 "neighbour"``; by default it starts from the closed-form geometry). The path is cut
 into chunks of contiguous points, one task each for a ``concurrent.futures.Executor``:
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
-(``pip install .[dask]``). Results do not depend on the executor. Execution details
-are in :mod:`cahyman_pin.sweep.execution`.
+(``pip install .[dask]``). Results do not depend on the executor. The path, the
+chunks, the executors, the per-point arrays and the indices are those of every map of the
+project (:mod:`closedloop.maps`, :func:`closedloop.indices.batch_indices`): the
+``condition_number`` is the unit-free one of the scaled K, ``condition_number_si`` that of
+the SI matrix (:attr:`cahyman_pin.api.CaHyManStiffness.condition_number`). Only the
+kernels are CaHyMan's (:mod:`cahyman_pin.sweep.execution`).
 """
 
 from __future__ import annotations
