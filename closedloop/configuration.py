@@ -68,8 +68,9 @@ class Configuration:
         self.length = model.length if length is None else check_length(length)
         self.residual = frozen(residual_rows(model, self.data, self._constraint_datas))
         if self.residual.size:
-            self.residual_norm = float(np.max(np.abs(self.residual)))
-            self.closure_error = float(np.max(np.abs(self._scaled_residual())))
+            size = abs(self.residual)
+            self.residual_norm = float(size.max())
+            self.closure_error = float((size * self._row_scale()).max())
         else:  # a serial robot closes no loop
             self.residual_norm = self.closure_error = 0.0
         self._closure_jacobian: np.ndarray | None = None
@@ -100,10 +101,14 @@ class Configuration:
             )
         return self
 
+    def _row_scale(self) -> np.ndarray:
+        """(m,) scale of the residual rows: 1 / L for metres, 1 for radians."""
+        rows, L = self.model.linear_rows, self.length
+        return self.model.memo(("row_scale", L), lambda: np.where(rows, 1.0 / L, 1.0))
+
     def _scaled_residual(self) -> np.ndarray:
         """(m,) residual with its metres divided by the length L (radians as they are)."""
-        r = self.residual
-        return np.where(self.model.linear_rows, r / self.length, r)
+        return self.residual * self._row_scale()
 
     def _closure_of_row(self, row: int) -> str:
         for c in self.model.closures:

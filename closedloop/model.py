@@ -422,7 +422,10 @@ class ClosedLoopModel:
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """Validated copy of a configuration vector q (nq,)."""
-        q = real_array(q, "q").reshape(-1)
+        if type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1:
+            q = q.copy()  # the common case, without the conversions of real_array
+        else:
+            q = real_array(q, "q").reshape(-1)
         if q.shape != (self.model.nq,):
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
         if not np.isfinite(q).all():

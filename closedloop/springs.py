@@ -92,6 +92,7 @@ class _Scaling(NamedTuple):
     inv_sigma: np.ndarray  # (s,) 1 / sigma
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
+    upper: np.ndarray  # (p, p) 1 on and above the diagonal, 0 below
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
@@ -129,6 +130,7 @@ class _Scaling(NamedTuple):
             1.0 / sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
+            np.triu(np.ones((passive.size, passive.size))),
         )
 
     @property
@@ -171,7 +173,7 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     J_s = Jc[:, sc.sprung] * sc.scale_s  # scaled
     minus_Jp = np.multiply(Jc[:, sc.passive], sc.scale_p, order="F")
     qr, tau, _, info = lapack.dgeqrf(minus_Jp, overwrite_a=1)
-    R = np.triu(qr[:p])
+    R = qr[:p] * sc.upper  # the triangle (Householder vectors below it)
     if info != 0 or lapack.dtrcon(R)[0] <= PARTITION_RCOND:
         return None
     # Q^T J_s: its first p rows give X = R^-1 (Q^T J_s)[:p], the others the residual

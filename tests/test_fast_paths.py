@@ -1,0 +1,124 @@
+"""The pieces of the fast compliance paths against independent computations.
+
+The path equality on every test mechanism is in test_compliance_paths.py; here: the
+passive motion X against numpy's SVD least squares, the serial path of a chain with
+locked, prismatic and block-spring joints against C = J K^-1 J^T written out, the exact
+symmetry of C and K, and the validation of q and the closure residual norm.
+"""
+
+from __future__ import annotations
+
+import mechanisms as mech
+import numpy as np
+import pinocchio as pin
+import pytest
+from test_compliance_paths import CASES
+from test_spring_blocks import serial_with_block
+
+import closedloop as cl
+from closedloop.configuration import Configuration
+from closedloop.springs import partition, scaling
+
+#: X = -J_p^+ J_s by QR (the library) and by SVD (numpy.linalg.lstsq) on a passive part
+#: of condition ~1e2: they agree to rounding times the condition.
+RTOL_LSTSQ = 1e-12
+#: C = J K^-1 J^T by an explicit inverse of the 6x6 block vs the scaled factor: rounding
+#: times cond(K_q) ~ 1e4 here.
+RTOL_CLOSED_FORM = 1e-10
+
+
+def test_passive_motion_is_the_least_squares_solution():
+    from cahyman_pin.model import cahyman_model
+
+    m = cahyman_model()
+    q = m.assemble(np.deg2rad([50.0, 65.0, 70.0]), np.deg2rad(30.0), 0.02)
+    state = Configuration(m.clm, q)
+    sc = scaling(state)
+    path, X = partition(state, sc)
+    assert path == "partitioned"
+    Jc = np.where(m.clm.linear_rows[:, None], state.closure_jacobian() / state.length,
+                  state.closure_jacobian())  # fmt: skip
+    s_q = np.where(m.clm.linear_coordinates, state.length, 1.0)
+    J_p = Jc[:, sc.passive] * s_q[sc.passive]
+    J_s = Jc[:, sc.sprung] * s_q[sc.sprung]
+    reference = np.linalg.lstsq(J_p, -J_s, rcond=None)[0]
+    np.testing.assert_allclose(X, reference, rtol=0, atol=RTOL_LSTSQ * np.abs(reference).max())
+    # the closures hold along every spring motion
+    np.testing.assert_allclose(J_s + J_p @ X, 0.0, atol=RTOL_LSTSQ * np.abs(J_s).max())
+
+
+def _chain_with_locked_prismatic_and_block():
+    """RZ (spring), PX (spring, N/m), RY (locked), spherical (3x3 block), tool frame."""
+    model = pin.Model()
+    j0 = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "base")
+    j1 = model.addJoint(j0, pin.JointModelPX(), pin.SE3(np.eye(3), np.array([0.3, 0, 0])), "slide")
+    j2 = model.addJoint(j1, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0, 0, 0.2])), "lock")
+    place = pin.SE3(pin.exp3(np.array([0.1, 0.2, -0.3])), np.array([0.25, 0.05, 0.0]))
+    j3 = model.addJoint(j2, pin.JointModelSpherical(), place, "wrist")
+    model.addFrame(pin.Frame("tool", j3, pin.SE3(np.eye(3), np.array([0.1, 0.0, 0.05])),
+                             pin.OP_FRAME))  # fmt: skip
+    block = np.array([[300.0, 40.0, -20.0], [40.0, 250.0, 10.0], [-20.0, 10.0, 200.0]])
+    springs = {"base": 2e3, "slide": 5e5, "wrist": block}
+    clm = cl.ClosedLoopModel(model, springs=springs, locked=["lock"], name="mixed")
+    q = pin.neutral(model)
+    q[:3] = [0.4, 0.05, -0.3]
+    q[3:] = pin.Quaternion(pin.exp3(np.array([0.2, -0.1, 0.3]))).coeffs()
+    return clm, q
+
+
+@pytest.mark.parametrize("axes", ["world", "local"])
+def test_serial_path_with_locked_prismatic_and_block_springs(axes):
+    clm, q = _chain_with_locked_prismatic_and_block()
+    res = cl.compliance(clm, q, "tool", axes)
+    assert res.path == "serial"
+    data = clm.model.createData()
+    pin.computeJointJacobians(clm.model, data, q)
+    pin.updateFramePlacements(clm.model, data)
+    ref = pin.LOCAL_WORLD_ALIGNED if axes == "world" else pin.LOCAL
+    J = pin.getFrameJacobian(clm.model, data, clm.model.getFrameId("tool"), ref)
+    kept = [0, 1, 3, 4, 5]  # every coordinate but the locked one
+    K = np.zeros((5, 5))
+    K[0, 0], K[1, 1] = 2e3, 5e5
+    K[2:, 2:] = clm.spring_blocks["wrist"]
+    G_ref = np.zeros((6, 6))
+    G_ref[kept] = np.linalg.solve(K, J[:, kept].T)
+    C_ref = J @ G_ref
+    scale = np.abs(C_ref).max()
+    np.testing.assert_allclose(res.C, C_ref, rtol=0, atol=RTOL_CLOSED_FORM * scale)
+    np.testing.assert_allclose(res.G, G_ref, rtol=0, atol=RTOL_CLOSED_FORM * np.abs(G_ref).max())
+    general = cl.compliance(clm, q, "tool", axes, path="null-space")
+    np.testing.assert_allclose(res.C, general.C, rtol=0, atol=1e-12 * scale)
+    assert res.rank == general.rank == 5  # the locked rotation is rigid
+    np.testing.assert_allclose(res.rigid_directions, general.rigid_directions, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_compliance_and_stiffness_are_exactly_symmetric(name):
+    clm, q, frame = CASES[name][0]()
+    for path in ("auto", "null-space"):
+        res = cl.compliance(clm, q, frame, path=path)
+        np.testing.assert_array_equal(res.C, res.C.T)
+        if res.is_full_rank:
+            np.testing.assert_array_equal(res.K, res.K.T)
+
+
+def test_block_serial_chain_is_exactly_symmetric():
+    clm, q, _ = serial_with_block()
+    res = cl.compliance(clm, q, "tool")
+    assert res.path == "serial"
+    np.testing.assert_array_equal(res.C, res.C.T)
+    np.testing.assert_array_equal(res.K, res.K.T)
+
+
+def test_configuration_copies_q_and_refuses_bad_values():
+    m = mech.fivebar((0.02, 0.35))
+    q = np.array(m.q, dtype=float)
+    state = Configuration(m.clm, q)
+    q[0] += 1.0  # the configuration kept its own copy
+    assert state.q[0] == m.q[0]
+    np.testing.assert_allclose(state.residual_norm, np.abs(state.residual).max(), rtol=0)
+    for bad, match in ((np.r_[m.q[:-1], np.nan], "non-finite"), (m.q[:-1], "expected nq"),
+                       (np.array(m.q, dtype=np.float32)[:-1], "expected nq"),
+                       (np.array(m.q).astype(complex), "real numbers")):  # fmt: skip
+        with pytest.raises(cl.InvalidInputError, match=match):
+            Configuration(m.clm, bad)
