@@ -287,9 +287,14 @@ def _fast_compliance(
     spring blocks): C = B B^T with B = M W, G = P B^T with P = [W; X W] s_q, the same
     factor as the null-space path's (module docstring) on the same spectrum rule.
     """
-    M = J if sc.angular else J * sc.s_q
-    if not sc.all_sprung:
-        M = M[:, sc.sprung] if X is None else M[:, sc.sprung] + M[:, sc.passive] @ X
+    p = sc.passive.size
+    if X is not None:
+        Jt = J[:, sc.order] * sc.s_order  # [J_p, J_s] scaled
+        M = Jt[:, p:] + Jt[:, :p] @ X
+    elif sc.all_sprung:
+        M = J if sc.angular else J * sc.s_q
+    else:
+        M = J[:, sc.sprung] * sc.s_q[sc.sprung]
     if sc.W is None:  # diagonal springs
         kinematic, B = M, M * sc.inv_sigma
         H = B.T * sc.inv_sigma[:, None]  # W B^T (s, 6)
@@ -300,15 +305,14 @@ def _fast_compliance(
     spectrum = spectrum_from_factor(
         B * d, state.length, kinematic * d, sc.spread, scales=(sc.d, sc.dd)
     )
-    if sc.all_sprung:
+    if X is not None:  # dq_p = s_q X y
+        G = np.zeros((sc.s_q.size, 6))
+        G[sc.order] = np.concatenate((X @ H, H)) * sc.s_order[:, None]
+    elif sc.all_sprung:
         G = H if sc.angular else H * sc.s_q[:, None]
     else:
         G = np.zeros((sc.s_q.size, 6))
-        G[sc.sprung] = H
-        if X is not None:
-            G[sc.passive] = X @ H
-        if not sc.angular:
-            G *= sc.s_q[:, None]
+        G[sc.sprung] = H * sc.s_q[sc.sprung, None]
     return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
 
 

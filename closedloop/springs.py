@@ -80,10 +80,11 @@ class _Scaling(NamedTuple):
     root: np.ndarray | None
     root_V: np.ndarray | None
     root_sigma: np.ndarray | None
-    # the closure rows' scaling split by columns: scaled J_s = Jc[:, sprung] * scale_s
-    # (m, s), scaled -J_p = Jc[:, passive] * scale_p (m, p)
-    scale_s: np.ndarray
-    scale_p: np.ndarray
+    order: np.ndarray  # (p + s,) the passive coordinates, then the sprung ones
+    s_order: np.ndarray  # (p + s,) s_q[order]
+    # (m, p + s) scale of Jc[:, order]: [-J_p, J_s] scaled (rows per L, columns per s_q)
+    scale_order: np.ndarray
+    upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
     d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
     dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
     all_sprung: bool  # every coordinate has a finite spring (sprung = arange(nv))
@@ -92,7 +93,6 @@ class _Scaling(NamedTuple):
     inv_sigma: np.ndarray  # (s,) 1 / sigma
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
-    upper: np.ndarray  # (p, p) 1 on and above the diagonal, 0 below
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
@@ -110,6 +110,8 @@ class _Scaling(NamedTuple):
             W = root_V / root_sigma
         row_scale = np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None]
         d = twist_scaling(L)
+        order = np.concatenate([passive, sprung])
+        sign = np.where(np.arange(order.size) < passive.size, -1.0, 1.0)
         return cls(
             s_q,
             row_scale,
@@ -120,8 +122,10 @@ class _Scaling(NamedTuple):
             root,
             root_V,
             root_sigma,
-            row_scale * s_q[sprung],
-            -row_scale * s_q[passive],
+            order,
+            s_q[order],
+            row_scale * (sign * s_q[order]),
+            np.triu(np.ones((row_scale.size, order.size))),
             d,
             np.outer(d, d),
             sprung.size == k.size,
@@ -130,7 +134,6 @@ class _Scaling(NamedTuple):
             1.0 / sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
-            np.triu(np.ones((passive.size, passive.size))),
         )
 
     @property
@@ -157,8 +160,9 @@ def scaling(state: Configuration) -> _Scaling:
 #: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
 #: decides, with the rank rule.
 PARTITION_RCOND = 1e-6
-#: Largest residual |J_s + J_p X| of the partitioned closure equations, relative to |J_s|,
-#: for the springs to move freely (else some spring coordinates are tied by the loops).
+#: Largest residual |J_s + J_p X|_F of the partitioned closure equations, relative to
+#: max |J_s|, for the springs to move freely (else some spring coordinates are tied by
+#: the loops).
 PARTITION_RTOL = 1e-9
 
 
@@ -166,22 +170,22 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     """X (p, s) = -J_p^+ J_s from the closure Jacobian Jc (m, nv), m >= p, or None when
     J_p is ill conditioned or J_s + J_p X does not vanish (module constants).
 
-    QR of J_p (LAPACK dgeqrf, dormqr) and the inverse of its triangle (dtrtri): unlike
-    dgels' triangular solve, none of them wakes a multi-threaded BLAS on a small matrix.
+    One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
+    -J_p = Q1 R11, X = R11^-1 R12 (dtrtri: unlike dgels' triangular solve, it does not
+    wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F.
     """
     lapack, p = scipy.linalg.lapack, sc.passive.size
-    J_s = Jc[:, sc.sprung] * sc.scale_s  # scaled
-    minus_Jp = np.multiply(Jc[:, sc.passive], sc.scale_p, order="F")
-    qr, tau, _, info = lapack.dgeqrf(minus_Jp, overwrite_a=1)
-    R = qr[:p] * sc.upper  # the triangle (Householder vectors below it)
-    if info != 0 or lapack.dtrcon(R)[0] <= PARTITION_RCOND:
+    A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
+    scale = PARTITION_RTOL * abs(A[:, p:]).max()
+    qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
+    R = qr * sc.upper  # the triangle (Householder vectors below it)
+    if info != 0 or lapack.dtrcon(R[:p, :p])[0] <= PARTITION_RCOND:
         return None
-    # Q^T J_s: its first p rows give X = R^-1 (Q^T J_s)[:p], the others the residual
-    c, _, info = lapack.dormqr("L", "T", qr, tau, J_s, lwork=64 * J_s.shape[1])
-    if info != 0 or abs(c[p:]).max(initial=0.0) > PARTITION_RTOL * abs(J_s).max():
+    residual = R[p:, p:]
+    if np.vdot(residual, residual) > scale * scale:
         return None
-    R_inv, info = lapack.dtrtri(R, overwrite_c=1)
-    return R_inv @ c[:p] if info == 0 else None
+    R_inv, info = lapack.dtrtri(R[:p, :p], overwrite_c=1)
+    return R_inv @ R[:p, p:] if info == 0 else None
 
 
 def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | None] | None:
