@@ -10,8 +10,9 @@ model, rebuilt once per run and cached per thread):
   :func:`cahyman_pin.api.generic_backend`), by :func:`closedloop.maps.assemble_points`.
   The assembly starts (``start``) from CaHyMan's closed-form geometry, computed for the
   whole run at once (``"closed_form"``: exact, so the Gauss-Newton loop only checks it),
-  or from the previous point's configuration (``"neighbour"``, the generic way; the first
-  point of a chunk and a point after a failed start start from the closed form);
+  or from the previous point's configuration (``"neighbour"``, the generic way: extrapolated
+  along the path when the last two steps are equal; the first point of a chunk and a
+  point after a failed start start from the closed form);
 * ``"consistent"``: the closed form on the whole run at once (one call, no loop over
   points); a failing batch is bisected to isolate the failing points;
 * any other registered backend: its function, point by point.
@@ -167,7 +168,9 @@ def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkRes
 
     # neighbour start: the first point of the run from the closed form (q0 None)
     per_point = [starts[i] for i in idx] if chunk.start == "closed_form" else None
-    assemble_points(model.clm, FRAME_M, out, idx, solve, starts=per_point, length=params.length)
+    inputs = np.column_stack([chunk.alpha, chunk.alpha4, chunk.s4])
+    assemble_points(model.clm, FRAME_M, out, idx, solve, starts=per_point, length=params.length,
+                    inputs=inputs)  # fmt: skip
 
 
 # ------------------------------------------------------------------ other kernels
