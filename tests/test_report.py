@@ -9,7 +9,8 @@ from cahyman_pin.cli import main
 from cahyman_pin.paper import data as paper_data
 from cahyman_pin.paper import report
 from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES
-from cahyman_pin.paper.document import Figure, Table
+from cahyman_pin.paper.document import Figure, Paragraph, Table
+from cahyman_pin.params import DEFAULT_PARAMS, SOURCES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -30,22 +31,25 @@ def _tables(doc, pattern):
     return [b for b in doc.blocks if isinstance(b, Table) and re.match(pattern, b.caption)]
 
 
+FIGURES = ("fig5_detK.png", "fig6_force.png", "fig7_torque.png", "tornado_dimensions.png")
+
+
 def test_files_written(built):
     out, doc = built
-    for name in ("report.md", "report.html", "fig5_detK.png", "fig6_force.png",
-                 "fig7_torque.png"):  # fmt: skip
+    for name in ("report.md", "report.html", *FIGURES):
         assert (out / name).is_file(), name
     figures = [b for b in doc.blocks if isinstance(b, Figure)]
-    assert len(figures) == 3
+    assert {f.path.name for f in figures} >= set(FIGURES)
     for f in figures:
         assert f.path.read_bytes()[:8] == PNG_MAGIC
         assert f.path.stat().st_size > 20_000  # a plotted figure, not an empty canvas
 
 
 def test_html_is_self_contained(built):
-    out, _ = built
+    out, doc = built
     html = (out / "report.html").read_text()
-    assert html.count('src="data:image/png;base64,') == 3
+    n_figures = sum(isinstance(b, Figure) for b in doc.blocks)
+    assert html.count('src="data:image/png;base64,') == n_figures
     assert not re.search(r"""(src|href)=["']https?://""", html)
 
 
@@ -102,3 +106,67 @@ def test_cli_report(tmp_path, capsys):
     assert main(["report", "--out", str(tmp_path / "r")]) == 0
     assert (tmp_path / "r" / "report.html").is_file()
     assert "report written" in capsys.readouterr().out
+
+
+def _text(doc):
+    return " ".join(b.text for b in doc.blocks if isinstance(b, Paragraph))
+
+
+def test_text_errors_fixed(built):
+    _, doc = built
+    text = _text(doc)
+    assert "1 to 3 deg per N m" not in text
+    # the moment column's rotations of Table 3, as printed
+    assert "Table 3: dphi, dpsi, dtheta = 0.22, -0.21, 0.43 deg" in text
+    assert "than those of the model with the printed springs" not in text
+    assert "consistent model with the report's parameters" in text
+    # the paper cited with its authors and title
+    assert 'G. Carbone, M. Ceccarelli, M. Teolis, "A Numerical Evaluation of the Stiffness' in text
+    # the K_s effect explained: the pseudo-inverse puts K_4 and K_s side by side
+    assert "(K_4 + K_s)/2" in text
+    # one explanation of the level plate, in Conventions
+    assert text.count("only their sum is defined") == 1
+
+
+def test_rotation_median_ratio_against_the_generic_backend(built):
+    # median |published| / |model| over the rotation rows, recomputed from table_values
+    _, doc = built
+    ratios = []
+    for pose in TABLE_POSES:
+        tv = report.table_values(pose, DEFAULT_PARAMS)
+        m, p = tv.values["generic"][3:], tv.values["paper"][3:]
+        keep = np.abs(m) > 0
+        ratios.append(np.abs(p[keep]) / np.abs(m[keep]))
+    median = np.median(np.concatenate(ratios))
+    assert f"about {median:.0f} times (median) larger" in _text(doc)
+
+
+def test_assumed_parameters_flagged(built):
+    _, doc = built
+    table = next(b for b in doc.blocks if isinstance(b, Table) and b.header[0] == "parameter")
+    assert table.header == ("parameter", "value (SI)", "assumed", "source")
+    flags = {r[0]: r[2] for r in table.rows}
+    for name, flag in flags.items():
+        assert flag == ("ASSUMED" if SOURCES[name].startswith("assumed") else ""), name
+    assert flags["a"] == flags["K_s"] == "ASSUMED" and flags["K_T"] == ""
+
+
+def test_one_rotation_convention(built):
+    # world rotation-vector labels appear only as coordinates of the K matrices
+    _, doc = built
+    for t in (b for b in doc.blocks if isinstance(b, Table)):
+        labels = [*t.header, *(r[0] for r in t.rows)]
+        assert not any(re.match(r"r[xyz] \[deg\]", str(x)) for x in labels), t.caption
+    assert not any("rx [deg]" in str(c) for t in doc.blocks if isinstance(t, Table)
+                   for r in t.rows for c in r)  # fmt: skip
+
+
+def test_class_table_has_every_cell(built):
+    _, doc = built
+    t = next(b for b in doc.blocks if isinstance(b, Table) and b.caption.startswith("Class of"))
+    assert len(t.rows) == 54
+    i_class = t.header.index("class")
+    assert {r[i_class] for r in t.rows} <= {"reproduced", "explained", "unexplained"}
+    printed = [float(r[t.header.index("printed")]) for r in t.rows]
+    expected = [TABLES[p.label][i, j] for p in TABLE_POSES for j in range(3) for i in range(6)]
+    np.testing.assert_allclose(printed, expected)

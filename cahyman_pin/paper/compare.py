@@ -47,15 +47,22 @@ def paper_coordinates(twist: np.ndarray, phi: float, theta: float) -> np.ndarray
     """Twist at M -> table rows (mm, deg): 6 regular rows, or 5 rows at phi = 90 deg.
 
     Args:
-        twist: (6,) (dx, dy, dz [m], rx, ry, rz [rad]) at M, world axes.
+        twist: (..., 6) (dx, dy, dz [m], rx, ry, rz [rad]) at M, world axes.
         phi, theta: plate angles at the pose [rad].
+
+    Returns:
+        (..., 6) (dx, dy, dz [mm], dphi, dpsi, dtheta [deg]), or (..., 5) (dx, dy, dz [mm],
+        tilt, yaw d(theta + psi) [deg]) where the plate is level.
     """
-    mm = np.asarray(twist[:3]) * 1e3
+    twist = np.asarray(twist, float)
+    mm = twist[..., :3] * 1e3
     if is_level(phi):
-        yaw, tilt = yaw_tilt_increments(twist[3:], phi, theta)
-        return np.concatenate([mm, np.rad2deg([tilt, yaw])])
-    d_phi, d_theta, d_psi = rotvec_to_euler_increments(twist[3:], phi, theta)
-    return np.concatenate([mm, np.rad2deg([d_phi, d_psi, d_theta])])
+        yaw, tilt = yaw_tilt_increments(twist[..., 3:], phi, theta)
+        return np.concatenate([mm, np.rad2deg(np.stack([tilt, yaw], -1))], -1)
+    d_phi, d_theta, d_psi = np.moveaxis(
+        rotvec_to_euler_increments(twist[..., 3:], phi, theta), -1, 0
+    )
+    return np.concatenate([mm, np.rad2deg(np.stack([d_phi, d_psi, d_theta], -1))], -1)
 
 
 def published_in_level_rows(table: np.ndarray) -> np.ndarray:

@@ -11,6 +11,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: The paper, as its text gives it. The text names no venue and no date; its latest
+#: reference is a paper "submitted" in 2001, so it dates from 2001 or later.
+PAPER_AUTHORS = "G. Carbone, M. Ceccarelli, M. Teolis"
+PAPER_TITLE = "A Numerical Evaluation of the Stiffness of CaHyMan (Cassino Hybrid Manipulator)"
+PAPER_AFFILIATION = (
+    "Laboratory of Robotics and Mechatronics, DiMSAT, University of Cassino, Cassino, Italy"
+)
+PAPER_LATEST_REFERENCE_YEAR = 2001
+
+
+def citation() -> str:
+    """The paper's citation, with what its text does not give said so."""
+    return (
+        f'{PAPER_AUTHORS}, "{PAPER_TITLE}", {PAPER_AFFILIATION}. The text names neither '
+        f"venue nor year; its most recent reference is dated {PAPER_LATEST_REFERENCE_YEAR} "
+        f"(submitted), so it is from {PAPER_LATEST_REFERENCE_YEAR} or later."
+    )
+
 
 @dataclass(frozen=True)
 class PaperPose:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cahyman_pin.backends.published import PublishedOptions
+from cahyman_pin.backends.published import PublishedOptions, a_s, kss
 from cahyman_pin.paper.compare import backend_compliance, paper_coordinates
 from cahyman_pin.paper.data import LOADS, TABLE_POSES, PaperPose
 from cahyman_pin.params import CaHyManParams
@@ -86,3 +86,19 @@ def effect_changes(params: CaHyManParams) -> dict[str, dict[str, np.ndarray | No
             v = cell_values(p, prm, options)
             out[effect.name][p.label] = None if v is None or base is None else v - base
     return out
+
+
+def printed_arm_axial_stiffness(params: CaHyManParams, K_s: float, alpha4: float, s4: float):
+    """Axial stiffness [N/m] along the arm of the printed arm model of eqs. (4)-(8).
+
+    The inverse of w^T pinv(Kss pinv(As)) w, w the arm direction in the in-plane arm
+    coordinates (x, z, angle). As has two equal columns (dL and ds_4 both move M along
+    the arm), so the pseudo-inverses put K_4 and K_s side by side, (K_4 + K_s) / 2,
+    instead of in series, 1 / (1/K_4 + 1/K_s): a soft K_s then hardly changes anything.
+
+    Args:
+        K_s: the value of K_s [N/m]; alpha4 [rad], s4 [m]: the arm's pose.
+    """
+    w = np.array([np.cos(alpha4), np.sin(alpha4), 0.0])
+    K = kss(alpha4, s4, params, K_s) @ np.linalg.pinv(a_s(alpha4, s4, params))
+    return float(1.0 / (w @ np.linalg.pinv(K) @ w))

@@ -1,4 +1,5 @@
-"""The paper's figures recomputed with every backend: Fig. 5 a-d (det K) and Figs. 6, 7.
+"""The paper's figures recomputed with every backend: Fig. 5 a-d (det K) and Figs. 6, 7;
+the tornado of the cells' sensitivity to the assumed dimensions.
 
 Each function writes one PNG and returns its path. Sweeps show a progress bar on stderr.
 """
@@ -12,10 +13,20 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import matplotlib.ticker
 import numpy as np
 
-from cahyman_pin.paper.compare import BACKENDS, backend_compliance
-from cahyman_pin.paper.data import FIG5A, FIG5BCD, FIG67, PaperPose
+from cahyman_pin.paper.cells import LOAD_SHORT, model_values, published_values, quantities
+from cahyman_pin.paper.compare import (
+    BACKENDS,
+    ROWS_LEVEL,
+    ROWS_REGULAR,
+    backend_compliance,
+    is_level,
+    paper_coordinates,
+)
+from cahyman_pin.paper.data import FIG5A, FIG5BCD, FIG67, TABLE_POSES, PaperPose
+from cahyman_pin.paper.fit import DIMENSIONS, dimension_sensitivity
 from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
 from closedloop.progress import progress
@@ -90,39 +101,88 @@ def figure5(out_dir: Path, params: CaHyManParams) -> Path:
 
 
 LOAD_RANGE = np.linspace(0.0, 10.0, 11)
-COMPONENTS = ("dx [mm]", "dy [mm]", "dz [mm]", "rx [deg]", "ry [deg]", "rz [deg]")
 
 
 def figure_load(out_dir: Path, params: CaHyManParams, torque: bool) -> Path:
     """Fig. 6 (force F_ex = F_ey = F_ez swept) or Fig. 7 (moment N_ex = N_ey = N_ez swept).
 
-    The six panels are the displacement of M (mm) and the small rotation vector of the arm
-    (deg, world axes): at this pose the plate is level (phi = 90 deg), where the paper's
-    dphi, dpsi, dtheta are not individually defined.
+    The panels are the table rows (:func:`cahyman_pin.paper.compare.paper_coordinates`):
+    displacement of M [mm] and, the plate being level at this pose (phi = 90 deg), the
+    tilt and yaw d(theta + psi) of the arm [deg].
     """
     unit = np.r_[0, 0, 0, 1, 1, 1] if torque else np.r_[1, 1, 1, 0, 0, 0]
     fig, axes = plt.subplots(2, 3, figsize=(12, 7))
+    rows = ROWS_REGULAR
     for b in progress(list(BACKENDS), len(BACKENDS), "Fig. 7" if torque else "Fig. 6"):
         try:
-            C, _, _ = backend_compliance(b, FIG67, params, load=unit)
+            C, phi, theta = backend_compliance(b, FIG67, params, load=unit)
         except ClosedLoopError:
             continue
-        d = np.outer(LOAD_RANGE, C @ unit)
-        d[:, :3] *= 1e3
-        d[:, 3:] = np.rad2deg(d[:, 3:])
+        d = paper_coordinates(np.outer(LOAD_RANGE, C @ unit), phi, theta)
+        rows = ROWS_LEVEL if is_level(phi) else ROWS_REGULAR
         color, ls = STYLES[b]
-        for i, ax in enumerate(axes.flat):
-            ax.plot(LOAD_RANGE, d[:, i], color=color, ls=ls, label=BACKENDS[b])
+        for i in range(len(rows)):
+            axes.flat[i].plot(LOAD_RANGE, d[:, i], color=color, ls=ls, label=BACKENDS[b])
     xlabel = "N_ex = N_ey = N_ez [N m]" if torque else "F_ex = F_ey = F_ez [N]"
-    for ax, comp in zip(axes.flat, COMPONENTS, strict=True):
+    for ax, comp in zip(axes.flat, rows, strict=False):
         ax.set_xlabel(xlabel)
         ax.set_ylabel(comp)
         ax.grid(True, alpha=0.3)
+    for ax in axes.flat[len(rows) :]:
+        ax.set_visible(False)
     axes.flat[0].legend(fontsize=8)
     name = "Fig. 7" if torque else "Fig. 6"
     fig.suptitle(f"{name}: displacement of M, {FIG67.describe()}")
     fig.tight_layout()
     path = Path(out_dir) / ("fig7_torque.png" if torque else "fig6_force.png")
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
+    """Tornado of every compared quantity against each assumed dimension at -+20 %.
+
+    One panel per table and kind (translations [mm], rotations [deg]); per quantity one
+    bar per dimension from 0 to its change at +20 % (solid) and at -20 % (light), the
+    consistent model; the label gives the published minus the model value (gap).
+    """
+    qs = quantities(params)
+    sens = dimension_sensitivity(params)
+    gap = published_values(params) - model_values(params)
+    colours = dict(zip(DIMENSIONS, plt.get_cmap("tab10").colors, strict=False))
+    n_dim = len(DIMENSIONS)
+    fig, axes = plt.subplots(len(TABLE_POSES), 2, figsize=(12, 18))
+    for row_axes, pose in zip(axes, TABLE_POSES, strict=True):
+        for ax, rotation in zip(row_axes, (False, True), strict=True):
+            idx = [k for k, q in enumerate(qs) if q.table == pose.label
+                   and q.row.endswith("[deg]") == rotation]  # fmt: skip
+            slots = np.arange(len(idx)) * (n_dim + 1)
+            for d, name in enumerate(DIMENSIONS):
+                minus, plus = sens[name][0][idx], sens[name][1][idx]
+                ax.barh(slots + d, plus, color=colours[name], height=0.9)
+                ax.barh(slots + d, minus, color=colours[name], height=0.9, alpha=0.35)
+            centres = [slot * (n_dim + 1) + (n_dim - 1) / 2 for slot in range(len(idx))]
+            ax.set_yticks(centres)
+            ax.set_yticklabels(
+                [f"{LOAD_SHORT[qs[k].load]} {qs[k].row}\ngap {gap[k]:+.3g}" for k in idx],
+                fontsize=7,
+            )
+            ax.invert_yaxis()
+            ax.axvline(0.0, color="k", lw=0.6)
+            ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+            unit = "deg" if rotation else "mm"
+            ax.set_xlabel(f"change of the cell [{unit}]")
+            ax.set_title(f"{pose.label}: {'rotations' if rotation else 'translations'}",
+                         fontsize=9)  # fmt: skip
+            ax.grid(True, axis="x", alpha=0.3)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in DIMENSIONS]
+    fig.legend(handles, [f"{n} (solid +20 %, light -20 %)" for n in DIMENSIONS],
+               loc="upper center", bbox_to_anchor=(0.5, 0.98), ncol=4, fontsize=8)  # fmt: skip
+    fig.suptitle("Sensitivity of every compared cell to each assumed dimension (+-20 %), "
+                 "consistent model", y=0.995)  # fmt: skip
+    fig.subplots_adjust(left=0.16, right=0.98, top=0.93, bottom=0.04, wspace=0.45, hspace=0.25)
+    path = Path(out_dir) / "tornado_dimensions.png"
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path

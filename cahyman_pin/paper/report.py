@@ -15,34 +15,49 @@ import numpy as np
 
 from cahyman_pin.api import stiffness
 from cahyman_pin.backends.published import CHOICES
+from cahyman_pin.geometry import plate_pose
 from cahyman_pin.paper.beams import beams_section
-from cahyman_pin.paper.compare import BACKENDS, TableValues, backend_compliance, table_values
-from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES, linearity_residual
+from cahyman_pin.paper.cells import LOAD_SHORT, model_values, quantities
+from cahyman_pin.paper.classify import classify, counts
+from cahyman_pin.paper.compare import (
+    BACKENDS,
+    ROWS_LEVEL,
+    ROWS_REGULAR,
+    TableValues,
+    backend_compliance,
+    paper_coordinates,
+    table_values,
+)
+from cahyman_pin.paper.data import (
+    LOAD_LABELS,
+    TABLE_POSES,
+    TABLES,
+    citation,
+    linearity_residual,
+)
 from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
-from cahyman_pin.paper.effects import EFFECTS, ILLUSTRATIVE_MASS, effect_changes
+from cahyman_pin.paper.effects import (
+    EFFECTS,
+    ILLUSTRATIVE_MASS,
+    effect_changes,
+    printed_arm_axial_stiffness,
+)
+from cahyman_pin.paper.explained import (
+    classes_section,
+    fit_section,
+    fit_summary_rows,
+    floor_section,
+    sensitivity_section,
+)
 from cahyman_pin.paper.figures import figure5, figure_load
+from cahyman_pin.paper.numbers import fmt, two_decimals
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import JointLimitWarning
 
-#: Table cells (mm, deg) below this magnitude are rounding noise of exact zeros.
-ZERO_CELL = 1e-9
-
-
-def fmt(v: float, digits: int = 4, sign: str = "") -> str:
-    """A number for a table cell ('n/a' for NaN, 0 for rounding noise below ZERO_CELL)."""
-    if not np.isfinite(v):
-        return "n/a"
-    return "0" if abs(v) < ZERO_CELL else f"{v:{sign}.{digits}g}"
-
 
 def _diff(v: float, ref: float) -> str:
     return fmt(v - ref, 3, "+")
-
-
-def _two_decimals(v: float) -> str:
-    """The precision of the published tables (0.01 mm or deg); no negative zero."""
-    return f"{round(v, 2) + 0.0:.2f}"
 
 
 def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
@@ -56,31 +71,36 @@ def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
 
 def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None) -> None:
     given = f"the parameter file {str(params_file)!r}" if params_file else "no parameter file"
-    assumed = [f.name for f in dataclasses.fields(params) if source(params, f.name).startswith(
-        "assumed")]  # fmt: skip
+    assumed = [f.name for f in dataclasses.fields(params) if _assumed(params, f.name)]
     doc.add(
         Paragraph(
             "This report compares the displacements published for CaHyMan (Tables 1-3, "
-            "Figs. 5-7 of the stiffness paper) with three backends: 'published' (the "
+            "Figs. 5-7 of the paper below) with three backends: 'published' (the "
             "paper's closed-form matrices as printed, with the smallest choice at each "
             "damaged place), 'consistent' (the same closed-form structure with every damaged "
             "place resolved) and 'generic' (the Pinocchio model with loop closures and "
             "joint springs, solved by the general Jacobian method). All computations are in "
             "SI; tables are in the paper's units (mm, deg)."
         ),
+        Paragraph("The paper: " + citation()),
         Heading("Parameters", 3),
         Paragraph(
             f"The parameters used, from the defaults of cahyman_pin/params.py and {given}. "
             "'paper' marks a value printed in the paper, 'given' a value of the parameter "
-            "file; the values marked 'assumed' are not in the paper "
+            "file; the values flagged ASSUMED are not in the paper "
             f"({', '.join(assumed) if assumed else 'none here'}) and shape every number below. "
             f"The published backend always takes K_s = {K_S_PRINTED:g} N/m as printed (the "
             "first of the choices below), whatever K_s is here."
         ),
         Table(
-            ("parameter", "value (SI)", "source"),
+            ("parameter", "value (SI)", "assumed", "source"),
             tuple(
-                (f.name, f"{getattr(params, f.name):g}", source(params, f.name))
+                (
+                    f.name,
+                    f"{getattr(params, f.name):g}",
+                    "ASSUMED" if _assumed(params, f.name) else "",
+                    source(params, f.name),
+                )
                 for f in dataclasses.fields(params)
             ),
         ),
@@ -89,7 +109,44 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
     )
 
 
-def _summary(doc: Document, tables: list[TableValues]) -> None:
+def _assumed(params: CaHyManParams, name: str) -> bool:
+    return source(params, name).startswith("assumed")
+
+
+def _conventions(doc: Document, tables: list[TableValues]) -> None:
+    """The one rotation convention of every table and figure, and its one exception."""
+    level = [tv.pose.label for tv in tables if tv.level]
+    rising = [
+        f"{tv.pose.label} load {LOAD_SHORT[j]} ({two_decimals(TABLES[tv.pose.label][3, j])})"
+        for tv in tables
+        if tv.level
+        for j in range(len(LOAD_LABELS))
+        if TABLES[tv.pose.label][3, j] > 0
+    ]
+    doc.add(
+        Heading("Conventions", 3),
+        Paragraph(
+            "Every table and figure gives displacements of M in world axes (dx, dy, dz [mm]) "
+            "and rotations of the arm as increments of the paper's angles (dphi, dpsi, dtheta "
+            "[deg], the paper's row order) of R = Rz(theta) Ry(pi/2 - phi) Rz(psi) at the "
+            "plate's pose. One exception: where the plate is level (phi = 90 deg: "
+            f"{', '.join(level) if level else 'none of the tables'} and Figs. 6, 7) the plate "
+            "normal is along z, theta and psi turn about the same axis and only their sum is "
+            "defined, while a tilt of the normal has no defined direction. There the rotation "
+            "is given as tilt (the angle by which the plate normal turns; for the paper, "
+            "|dphi|, since phi is at its largest value, 90 deg, and any tilt lowers it) and yaw "
+            "d(theta + psi) (for the paper, dpsi + dtheta)."
+            + (
+                f" The paper prints dphi > 0 there in {', '.join(rising)}, which no small "
+                "rotation of a level plate gives."
+                if rising
+                else ""
+            )
+        ),
+    )
+
+
+def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) -> None:
     """Findings in numbers, computed from the tables below."""
     gap = max(np.nanmax(np.abs(tv.values["consistent"] - tv.values["generic"])) for tv in tables)
     rows = []
@@ -103,12 +160,12 @@ def _summary(doc: Document, tables: list[TableValues]) -> None:
             fmt(max(np.nanmax(r) for r in rot), 3),
             fmt(np.nanmedian(np.concatenate([r.ravel() for r in ratio])), 3),
         ))  # fmt: skip
-    median_ratio = np.nanmedian(
-        np.concatenate([np.abs(tv.values["generic"][3:] / tv.values["paper"][3:]).ravel()
-                        for tv in tables])
-    )  # fmt: skip
     lin = np.concatenate([linearity_residual(TABLES[tv.pose.label]) for tv in tables])
     lin = lin.reshape(len(tables), 6)
+    ratio, ratio_printed = (rotation_ratio(p) for p in (params, params.with_ks("printed")))
+    fits = fit_summary_rows(params)
+    chi2 = {name: c for name, c, _, _ in fits}
+    n = counts(classify(params))
     doc.add(
         Heading("Summary"),
         Paragraph(
@@ -132,10 +189,32 @@ def _summary(doc: Document, tables: list[TableValues]) -> None:
             "reproduce: column 3 differs from column 1 + column 2 by up to "
             f"{np.max(np.abs(lin[:, :3])):.2g} mm in translation and "
             f"{np.max(np.abs(lin[:, 3:])):.3g} deg in rotation. The published rotations are "
-            f"also about {1 / median_ratio:.0f} times (median) larger than those of the "
-            "model with the printed springs (see 'Where the differences come from')."
+            f"also about {ratio:.0f} times (median) larger than those of the consistent model "
+            f"with the report's parameters (the printed springs, K_s = {params.K_s:g} N/m); "
+            f"with the printed K_s = {K_S_PRINTED:g} N/m the median ratio is {ratio_printed:.0f} "
+            "(K_s, an axial spring of the arm, does not turn it)."
+        ),
+        Paragraph(
+            "Could any stiffness values or dimensions of this machine produce the tables? "
+            "No. The weighted sum of squares over the 48 compared quantities is "
+            f"{chi2[fits[0][0]]:.4g} for the reference model, {chi2[fits[1][0]]:.4g} for the "
+            f"best stiffness values, {chi2[fits[2][0]]:.4g} for the best assumed dimensions, "
+            f"and {chi2[fits[3][0]]:.4g} for a machine that does not move at all; the "
+            "non-linearity of the tables alone forbids any linear model less than "
+            f"{chi2[fits[4][0]]:.4g}. Of the 54 published cells, {n['reproduced']} are "
+            f"reproduced, {n['explained']} explained by a named effect and "
+            f"{n['unexplained']} unexplained ('Every published cell')."
         ),
     )
+
+
+def rotation_ratio(params: CaHyManParams) -> float:
+    """Median over the rotation quantities of |published| / |consistent model| (model
+    values that are exactly 0 left out)."""
+    m = model_values(params)
+    p = np.array([q.published for q in quantities(params)])
+    rot = np.array([q.row.endswith("[deg]") for q in quantities(params)]) & (np.abs(m) > 0)
+    return float(np.median(np.abs(p[rot]) / np.abs(m[rot])))
 
 
 def _tables(doc: Document, tables: list[TableValues]) -> None:
@@ -147,12 +226,9 @@ def _tables(doc: Document, tables: list[TableValues]) -> None:
             p = TABLES[pose.label]
             doc.add(
                 Paragraph(
-                    "Here the plate is level (phi = 90 deg), where the angles of "
-                    "R = Rz(theta) Ry(pi/2 - phi) Rz(psi) are singular: the plate normal is "
-                    "along z, theta and psi turn about the same axis and only their sum (yaw) "
-                    "is defined, while a tilt of the normal has no defined azimuth. The "
-                    "rotations are therefore compared as tilt (for the paper, |dphi|) and yaw "
-                    "(for the paper, dpsi + dtheta). The paper's own split is dpsi = "
+                    "The plate is level here: rotations as tilt and yaw (see 'Conventions'). "
+                    "The paper's printed dphi = "
+                    f"{', '.join(fmt(x) for x in p[3])}, dpsi = "
                     f"{', '.join(fmt(x) for x in p[4])} and dtheta = "
                     f"{', '.join(fmt(x) for x in p[5])} deg for the three loads."
                 )
@@ -182,7 +258,7 @@ def _linearity(doc: Document) -> None:
         ),
     )
     rows = tuple(
-        (row, *(_two_decimals(linearity_residual(TABLES[p.label])[i]) for p in TABLE_POSES))
+        (row, *(two_decimals(linearity_residual(TABLES[p.label])[i]) for p in TABLE_POSES))
         for i, row in enumerate(("dx [mm]", "dy [mm]", "dz [mm]", "dphi [deg]", "dpsi [deg]",
                                  "dtheta [deg]"))
     )  # fmt: skip
@@ -211,20 +287,57 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
             rows += [(f"{tv.pose.label} {r}", *(fmt(x, 3, "+") for x in d[i]))
                      for i, r in enumerate(tv.rows)]  # fmt: skip
         doc.add(Table(("cell", *LOAD_LABELS), tuple(rows)))
+    _ks_note(doc, params, changes)
     k_t4 = np.rad2deg(1.0 / params.K_T4)
     k_t = np.rad2deg(1.0 / params.K_T)
+    qs = quantities(params)
+    m = model_values(params)
+    moment = [k for k, q in enumerate(qs) if q.load == 1 and q.row.endswith("[deg]")]
+    pub = np.abs([qs[k].published for k in moment])
+    t3 = [two_decimals(TABLES["Table 3"][i, 1]) for i in range(3, 6)]
     doc.add(
         Heading("Euler singularity and the size of the published rotations", 3),
         Paragraph(
-            "At Tables 1 and 2 the paper prints dpsi and dtheta separately although only their "
-            "sum is defined there; their individual values cannot be compared with any model, "
-            "so the comparison above uses yaw and tilt. Beyond the singularity, the published "
-            "rotations are 1 to 3 deg per N m while the printed torsional stiffnesses imply "
-            f"{k_t4:.3g} deg per N m for the arm motor (1/K_T4) and {k_t:.3g} deg per N m for a "
-            "leg motor (1/K_T): no model with the printed springs reproduces the rotation rows, "
+            "At the level plate (Tables 1 and 2) the paper prints dpsi and dtheta separately; "
+            "they are compared through yaw and tilt (see 'Conventions'). Under the unit "
+            "moment (load N, N_e = (1, 1, 1) N m) the published "
+            f"rotations are {two_decimals(pub.min())} to {two_decimals(pub.max())} deg in size "
+            f"(Table 3: dphi, dpsi, dtheta = {', '.join(t3)} deg), while the printed torsional "
+            f"stiffnesses imply {k_t4:.3g} deg per N m for the arm motor (1/K_T4) and "
+            f"{k_t:.3g} deg per N m for a leg motor (1/K_T), and the consistent model turns by "
+            f"{fmt(np.min(np.abs(m[moment])), 3)} to {fmt(np.max(np.abs(m[moment])), 3)} deg "
+            "under that load: no model with the printed springs reproduces the rotation rows, "
             "whereas the translation rows and the sign pattern of the rotations can be "
             "compared. The published tables are also not linear in the load (previous "
             "section), which no linear formulation can reproduce."
+        ),
+    )
+
+
+def _ks_note(doc: Document, params: CaHyManParams, changes) -> None:
+    """Why the printed K_s hardly changes the published backend, and the series arm a lot."""
+    size = {name: max(np.max(np.abs(d)) for d in changes[name].values() if d is not None)
+            for name in ("K_s value", "the arm model of eqs. (4)-(8)")}  # fmt: skip
+    pose = TABLE_POSES[0]
+    _, alpha4, s4 = pose.si
+    k_printed = printed_arm_axial_stiffness(params, K_S_PRINTED, alpha4, s4)
+    k_assumed = printed_arm_axial_stiffness(params, params.K_s, alpha4, s4)
+    doc.add(
+        Heading("Why the value of K_s hardly matters to the published backend", 3),
+        Paragraph(
+            f"Repairing the value of K_s changes the cells by at most {fmt(size['K_s value'], 2)} "
+            "mm, while repairing the arm model (with the printed K_s) moves them by up to "
+            f"{fmt(size['the arm model of eqs. (4)-(8)'], 3)} mm. In the printed arm model "
+            "(eqs. 4-8) As has two equal columns (dL and ds_4 both move M along the arm), and "
+            "its pseudo-inverse puts K_4 and K_s side by side: along the arm the stiffness is "
+            f"(K_4 + K_s)/2, {fmt(k_printed, 5)} N/m with the printed K_s = {K_S_PRINTED:g} N/m "
+            f"and {fmt(k_assumed, 5)} N/m with K_s = {params.K_s:g} N/m (computed from the "
+            f"printed matrices at the {pose.label} pose), a difference of "
+            f"{fmt(1e3 * (1 / k_printed - 1 / k_assumed), 3)} mm per N along the arm, the "
+            "size of the 'K_s value' effect. The paper's text puts K_s in series with K_4 "
+            "(the consistent arm model, As diag(1/K) As^T): there the printed value adds "
+            f"1/K_s = {fmt(1e3 / K_S_PRINTED, 4)} mm per N, the arm model's effect, which no "
+            "table shows; hence the assumed value."
         ),
     )
 
@@ -256,19 +369,24 @@ def _weight(doc: Document, params: CaHyManParams) -> None:
             f"{ILLUSTRATIVE_MASS} kg here as in the effect above, placed where eq. (11)'s "
             "lever arms put them: cahyman_pin/urdf_builder.py), and the compliance is the "
             "tangent one at that equilibrium (geometric stiffness and loop curvature "
-            "included). Below: the sag of M from the unloaded pose (mm, deg, world axes) and "
+            "included). Below: the sag of M from the unloaded pose (mm, and the paper's angles "
+            "in deg, see 'Conventions') and "
             "the relative change of C (Frobenius norm), generic backend. A linear model's "
             "answer to a load does not depend on the weight; the tangent one changes by the "
             "amount shown, which is the size of what eq. (11) could add."
         ),
     )
-    rows = [
-        (label, *(fmt(1e3 * x, 3, "+") for x in sag[:3]),
-         *(fmt(np.rad2deg(x), 3, "+") for x in sag[3:]), fmt(change, 2))
-        for label, sag, change in weight_rows(params)
-    ]  # fmt: skip
-    doc.add(Table(("pose", "dx [mm]", "dy [mm]", "dz [mm]", "rx [deg]", "ry [deg]", "rz [deg]",
-                   "|dC| / |C|"), tuple(rows)))  # fmt: skip
+    rows = []
+    for (label, sag, change), pose in zip(weight_rows(params), TABLE_POSES, strict=True):
+        plate = plate_pose(pose.si[0], params)
+        v = paper_coordinates(sag, float(plate.phi), float(plate.theta))
+        names = ROWS_LEVEL[3:] if len(v) == 5 else ROWS_REGULAR[3:]
+        rot = ", ".join(
+            f"{n.split(' [')[0]} {fmt(x, 3, '+')}" for n, x in zip(names, v[3:], strict=True)
+        )
+        rows.append((label, *(fmt(x, 3, "+") for x in v[:3]), rot, fmt(change, 2)))
+    doc.add(Table(("pose", "dx [mm]", "dy [mm]", "dz [mm]", "rotation [deg]", "|dC| / |C|"),
+                  tuple(rows)))  # fmt: skip
 
 
 def _matrices(doc: Document, params: CaHyManParams) -> None:
@@ -276,7 +394,9 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
         Heading("Stiffness matrices at the three configurations"),
         Paragraph(
             "K at M, world axes, SI (N/m, N/rad, N m/rad), order dx dy dz rx ry rz, from the "
-            "generic backend; eigenvalues and determinant for every backend (the published "
+            "generic backend (a matrix acts on small rotation vectors rx, ry, rz about the "
+            "world axes: the paper's angles, singular at the level plate, cannot be its "
+            "coordinates); eigenvalues and determinant for every backend (the published "
             "K is in its own mixed coordinates, see the choices above)."
         ),
     )
@@ -328,10 +448,15 @@ def build_report(
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
     _intro(doc, params, params_file)
-    _summary(doc, tables)
+    _conventions(doc, tables)
+    _summary(doc, params, tables)
     _tables(doc, tables)
     _linearity(doc)
+    floor_section(doc, params)
+    fit_section(doc, params)
+    classes_section(doc, params)
     _effects(doc, params, tables)
+    sensitivity_section(doc, out, params)
     _weight(doc, params)
     beams_section(doc, params)
     _matrices(doc, params)
@@ -343,9 +468,8 @@ def build_report(
             "det K of the consistent and generic models is constant there, whereas the "
             "published backend's K, in its own mixed coordinates, is not (crosses mark a negative "
             "determinant, which a symmetric positive definite K cannot have). Figs. 6 and 7 "
-            "are linear in the load for every backend; the rotations are shown as the small "
-            "rotation vector of the arm in world axes because the plate is level at this "
-            "pose (phi = 90 deg)."
+            "are linear in the load for every backend; the plate is level at their pose, so "
+            "the rotations are tilt and yaw (see 'Conventions')."
         ),
         Figure(figure5(out, params), "Fig. 5: det K versus alpha_k, b_k = d_k, alpha_4, L + s_4"),
         Figure(figure_load(out, params, torque=False), "Fig. 6: displacements versus force"),

@@ -1,0 +1,311 @@
+"""The report's sections on *could any stiffness values or dimensions produce the tables?*
+
+The linearity floor of the published tables, the stiffness and dimension fits, the class
+of every published cell and the sensitivity of every cell to the assumed dimensions
+(:mod:`cahyman_pin.paper.cells`, :mod:`~cahyman_pin.paper.fit`,
+:mod:`~cahyman_pin.paper.classify`), written into a :class:`Document`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cahyman_pin.paper.cells import (
+    LOAD_SHORT,
+    RELATIVE_ERROR,
+    linearity_floor,
+    model_values,
+    published_values,
+    quantities,
+    standard_deviations,
+    tilt_triangle_ok,
+)
+from cahyman_pin.paper.classify import classify, counts, largest_unexplained
+from cahyman_pin.paper.data import ROWS
+from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
+from cahyman_pin.paper.figures import figure_tornado
+from cahyman_pin.paper.fit import (
+    DIMENSION_RANGE,
+    STIFFNESS_GROUPS,
+    STIFFNESS_RANGE,
+    FitResult,
+    dimension_fit,
+    dimension_sensitivity,
+    linear_optimum,
+    stiffness_fit,
+)
+from cahyman_pin.paper.numbers import fmt
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, SOURCES, CaHyManParams
+
+#: Change of a cell [mm or deg] below which a dimension is said to change no cell.
+IDLE = 1e-12
+
+
+def _is_rotation(params: CaHyManParams) -> np.ndarray:
+    return np.array([q.row.endswith("[deg]") for q in quantities(params)])
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def fit_summary_rows(params: CaHyManParams) -> list[tuple[str, float, float, float]]:
+    """(model, chi^2, RMS translation residual [mm], RMS rotation residual [deg]) of the
+    reference model, both fits, a rigid machine (zero displacement) and the floor of any
+    linear model (RMS of |r|/sqrt(3) per row spread over its three cells)."""
+    p, sd, rot = published_values(params), standard_deviations(params), _is_rotation(params)
+    rows = []
+    for name, v in (("reference model (the report's parameters)", model_values(params)),
+                    ("best stiffness values", stiffness_fit(params).values),
+                    ("best assumed dimensions", dimension_fit(params).values),
+                    ("a rigid machine (every displacement 0)", np.zeros_like(p))):  # fmt: skip
+        r = v - p
+        rows.append((name, float(np.sum((r / sd) ** 2)), _rms(r[~rot]), _rms(r[rot])))
+    floor = linearity_floor(params)
+    per_cell = np.zeros(len(p))
+    for t in floor:
+        per_cell[list(t.indices)] = abs(t.residual) / 3.0  # the unweighted projection
+    chi2 = sum(t.chi2_floor for t in floor)
+    name = "floor of any linear model (the tables' non-linearity)"
+    rows.append((name, chi2, _rms(per_cell[~rot]), _rms(per_cell[rot])))
+    return rows
+
+
+def floor_section(doc: Document, params: CaHyManParams) -> None:
+    """What the published tables' own non-linearity costs any linear model."""
+    floor = linearity_floor(params)
+    ok = ", ".join(f"{k}: {'yes' if v else 'no'}" for k, v in tilt_triangle_ok(params).items())
+    doc.add(
+        Heading("The floor that the tables' non-linearity puts on any linear model", 3),
+        Paragraph(
+            "A linear model gives column 3 = column 1 + column 2 in every row (the loads add "
+            "up: F + N). With r = column 3 - column 1 - column 2 of a published row, the "
+            "nearest triple that adds up is |r|/sqrt(3) away (root sum of squares over the "
+            "three cells, each cell moved by |r|/3); with the weights of the fit it costs at "
+            "least r^2 / (sd_1^2 + sd_2^2 + sd_3^2) of chi^2. No linear model, of this "
+            "machine or any other, can do better. The tilt of the level plate is a norm, not "
+            "linear: any linear model's tilts satisfy the triangle inequality |t1 - t2| <= "
+            "t3 <= t1 + t2, and the published |dphi| do "
+            f"({ok}), so they add nothing to the floor."
+        ),
+        Table(
+            ("table", "row", "r [mm or deg]", "|r|/sqrt(3)", "chi^2 floor"),
+            tuple(
+                (t.table, t.row, fmt(t.residual, 3, "+"), fmt(t.rms_floor, 3), fmt(t.chi2_floor, 3))
+                for t in floor
+            ),
+            caption="Linearity floor per published row, from the published values",
+        ),
+        Paragraph(f"Total chi^2 floor: {sum(t.chi2_floor for t in floor):.4g}."),
+    )
+
+
+def _fit_rows(fit: FitResult, printed: dict[str, float], ratio: float) -> tuple:
+    rows = []
+    for n in fit.names:
+        note = {
+            "upper": f"at its upper bound ({ratio:g} x reference)",
+            "lower": f"at its lower bound (reference / {ratio:g})",
+            "": "",
+        }[fit.at_bound[n]]
+        if n in fit.unidentifiable:
+            note = "; ".join(x for x in (note, "not identified by the cells") if x)
+        rows.append((n, fmt(printed[n]) if n in printed else "not printed",
+                     fmt(fit.reference[n]), fmt(fit.estimates[n]),
+                     fmt(fit.estimates[n] / fit.reference[n], 3), note))  # fmt: skip
+    return tuple(rows)
+
+
+def _series_note(fit: FitResult) -> str:
+    """K_4 and K_s act in series along the arm: only their series stiffness is identified."""
+    if not {"K_s", "K_4"} <= set(fit.unidentifiable):
+        return ""
+
+    def series(k: dict[str, float]) -> float:
+        return 1.0 / (1.0 / k["K_4"] + 1.0 / k["K_s"])
+
+    return (
+        " K_4 and K_s act in series along the arm, so the cells identify only their series "
+        f"stiffness 1/(1/K_4 + 1/K_s): {fmt(series(fit.estimates))} N/m fitted, "
+        f"{fmt(series(fit.reference))} N/m in the reference."
+    )
+
+
+def fit_section(doc: Document, params: CaHyManParams) -> None:
+    """The stiffness fit, the dimension fit and what they achieve."""
+    sfit, dfit = stiffness_fit(params), dimension_fit(params)
+    k_lin, chi2_lin = linear_optimum(params)
+    linear = np.array([q.linear for q in quantities(params)])
+    sd = standard_deviations(params)
+    chi2_fit_lin = float(np.sum((sfit.residuals[linear] / sd[linear]) ** 2))
+    printed = {n: getattr(DEFAULT_PARAMS, g[0]) for n, g in STIFFNESS_GROUPS.items()
+               if SOURCES[g[0]] == "paper"}  # fmt: skip
+    printed["K_s"] = K_S_PRINTED
+    rigid = [n for n in sfit.names if sfit.at_bound[n] == "upper"]
+    doc.add(
+        Heading("Could any stiffness values or dimensions produce the tables?"),
+        Paragraph(
+            "Two weighted least-squares fits of the consistent model to the published cells, "
+            "in the paper's coordinates (48 quantities from the 54 cells: at the level plate "
+            "the tilt for dphi and the yaw for dpsi + dtheta, see 'Conventions'). Weights: "
+            "each quantity's residual is divided by sd = sqrt(n 0.01^2/12 + "
+            f"({RELATIVE_ERROR:g} p)^2), the rounding of its n printed cells (two decimals, mm "
+            f"or deg) and a relative error of {RELATIVE_ERROR:.0%} of its published value p, "
+            "so that millimetres and degrees weigh alike. Both fits run in log space (values "
+            "stay positive) within bounds, by scipy.optimize.least_squares: the five "
+            f"stiffness values between 1/{STIFFNESS_RANGE:g} and {STIFFNESS_RANGE:g} times the "
+            "reference (dimensions fixed), the assumed dimensions between "
+            f"1/{DIMENSION_RANGE:g} and {DIMENSION_RANGE:g} times the reference (springs "
+            "fixed)."
+        ),
+        Table(
+            (
+                "parameter",
+                "printed in the paper",
+                "reference",
+                "fitted",
+                "fitted / reference",
+                "note",
+            ),
+            _fit_rows(sfit, printed, STIFFNESS_RANGE),
+            caption="Stiffness fit [N/m, N m/rad]",
+        ),
+        Paragraph(
+            "The compliance at M is linear in the spring compliances 1/K (each spring adds its "
+            "own term), so on the 42 linear quantities the stiffness fit is a non-negative "
+            "least-squares problem in the compliances, which is convex: its global optimum "
+            f"(scipy.optimize.nnls) has chi^2 = {chi2_lin:.5g} over those quantities, with "
+            + ", ".join(f"{n} = {'rigid' if np.isinf(v) else fmt(v)}" for n, v in k_lin.items())
+            + f"; the fit above has {chi2_fit_lin:.5g} there. No set of positive stiffness "
+            "values does better. The fit makes "
+            f"{', '.join(rigid) if rigid else 'no spring'} rigid: the best this machine can do "
+            "with any stiffness values is to barely move, since the published signs and sizes "
+            "fit no spring (compare the rigid machine below)." + _series_note(sfit)
+        ),
+        Table(
+            (
+                "parameter",
+                "printed in the paper",
+                "reference",
+                "fitted",
+                "fitted / reference",
+                "note",
+            ),
+            _fit_rows(dfit, {}, DIMENSION_RANGE),
+            caption="Dimension fit [m] (springs at the reference values)"
+            + ("" if dfit.converged else "; stopped at its evaluation limit in a flat valley"),
+        ),
+        Table(
+            ("model", "chi^2", "RMS translation residual [mm]", "RMS rotation residual [deg]"),
+            tuple((n, fmt(c, 5), fmt(t, 3), fmt(r, 3)) for n, c, t, r in fit_summary_rows(params)),
+            caption="What each model achieves on the 48 compared quantities",
+        ),
+    )
+
+
+def classes_section(doc: Document, params: CaHyManParams) -> None:
+    """The class of every published cell."""
+    classes = classify(params)
+    n = counts(classes)
+    worst = largest_unexplained(classes)
+    tail = (
+        f" The largest unexplained residual is {fmt(worst.size, 3, '+')} "
+        f"({worst.table}, load {LOAD_SHORT[worst.load]}, {ROWS[worst.row]})."
+        if worst
+        else ""
+    )
+    doc.add(
+        Heading("Every published cell: reproduced, explained or unexplained"),
+        Paragraph(
+            "Each printed cell is compared through its quantity (at the level plate dphi as "
+            "the tilt |dphi|, dpsi and dtheta through their sum). The first rule that holds "
+            "gives its class: reproduced (the reference model is within the rounding of the "
+            "printed digits, 0.005 per printed cell); explained by the fitted stiffness values "
+            "or the fitted dimensions (the fit is within the rounding; size: what the fit "
+            "changes); explained by a damaged place of the paper's equations (leaving that one "
+            "damage in place brings the reference model within the rounding; size: that "
+            "damage's change of the cell, see 'Where the differences come from'); explained "
+            "by the non-linearity of the published row (the residual after the stiffness fit "
+            "is no larger than what the row's r forces onto this cell, plus the rounding; "
+            "size: r); otherwise unexplained, with its residual after the stiffness fit. "
+            f"Counts: {n['reproduced']} reproduced, {n['explained']} explained, "
+            f"{n['unexplained']} unexplained, of {len(classes)}." + tail
+        ),
+        Table(
+            (
+                "table",
+                "load",
+                "printed row",
+                "printed",
+                "compared as",
+                "reference",
+                "stiffness fit",
+                "dimension fit",
+                "class",
+                "reason",
+                "size",
+            ),
+            tuple(
+                (
+                    c.table,
+                    LOAD_SHORT[c.load],
+                    ROWS[c.row],
+                    fmt(c.printed),
+                    c.compared_as,
+                    fmt(c.reference, 3),
+                    fmt(c.stiffness_fit, 3),
+                    fmt(c.dimension_fit, 3),
+                    c.kind,
+                    c.reason,
+                    fmt(c.size, 3, "+"),
+                )
+                for c in classes
+            ),
+            caption="Class of every published cell (mm, deg)",
+        ),
+    )
+
+
+def sensitivity_section(doc: Document, out: Path, params: CaHyManParams) -> None:
+    """Tornado of every cell against each assumed dimension, and the largest changes."""
+    qs = quantities(params)
+    rot = _is_rotation(params)
+    sens = dimension_sensitivity(params)
+    gap = published_values(params) - model_values(params)
+    rows = []
+    for name, (minus, plus) in sens.items():
+        both = np.fmax(np.abs(minus), np.abs(plus))
+        cells = []
+        for mask, unit in ((~rot, "mm"), (rot, "deg")):
+            k = int(np.flatnonzero(mask)[np.nanargmax(both[mask])])
+            cells.append(f"{fmt(both[k], 3)} {unit} ({qs[k].label})" if both[k] >= IDLE else "0")
+        rows.append((name, fmt(getattr(params, name)), *cells))
+    largest = np.nanmax([np.fmax(np.abs(m), np.abs(p)) for m, p in sens.values()], axis=0)
+    idle = [n for n, (m, p) in sens.items() if np.nanmax(np.fmax(np.abs(m), np.abs(p))) < IDLE]
+    idle_text = ""
+    if idle:
+        why = " (the radial sliders take up any change of r_e)" if "r_e" in idle else ""
+        idle_text = (f" {', '.join(idle)}: no cell changes by {IDLE:g} or more{why}, so the "
+                     "tables cannot identify it.")  # fmt: skip
+    doc.add(
+        Heading("Sensitivity of every cell to the assumed dimensions"),
+        Paragraph(
+            "Each assumed dimension changed by -20 % and +20 % alone, the consistent model "
+            "with the report's springs. Over all cells and dimensions the largest change is "
+            f"{fmt(np.max(largest[~rot]), 3)} mm and {fmt(np.max(largest[rot]), 3)} deg, "
+            f"against gaps (published - model) of up to {fmt(np.max(np.abs(gap[~rot])), 3)} "
+            f"mm and {fmt(np.max(np.abs(gap[rot])), 3)} deg." + idle_text
+        ),
+        Table(
+            ("dimension", "reference [m]", "largest translation change", "largest rotation change"),
+            tuple(rows),
+            caption="Largest change of a cell for -+20 % of each dimension",
+        ),
+        Figure(
+            figure_tornado(out, params),
+            "Tornado: change of every compared cell (mm, deg) for -20 % (light) and +20 % "
+            "(solid) of each assumed dimension; labels give the gap, published - model",
+        ),
+    )

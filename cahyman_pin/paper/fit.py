@@ -1,0 +1,247 @@
+"""Least-squares fits of CaHyMan's stiffnesses, or of its assumed dimensions, to the tables.
+
+Both fits minimise the weighted sum of squares chi^2 = sum_q ((m_q - p_q) / sd_q)^2 over
+the 48 compared quantities of :mod:`cahyman_pin.paper.cells` (m_q: consistent model, in
+the paper's coordinates; p_q: published; sd_q: rounding and relative error), with
+``scipy.optimize.least_squares`` in log space (every value stays positive) within bounds:
+
+* stiffnesses: K_T, K_b = K_d (tied), K_T4, K_s, K_4 between 1/:data:`STIFFNESS_RANGE`
+  and :data:`STIFFNESS_RANGE` times their reference values. The compliance is linear in
+  the spring compliances 1/K, so on the linear quantities (all but the tilt) the problem
+  is a non-negative least squares in the compliances, convex: :func:`linear_optimum`
+  solves it globally, and the fit starts from that solution as well as from the
+  reference values;
+* dimensions: the lengths flagged assumed in :data:`cahyman_pin.params.SOURCES`, between
+  1/:data:`DIMENSION_RANGE` and :data:`DIMENSION_RANGE` times their reference values,
+  springs at their reference values.
+
+Fits are cached per parameter set and published values (in memory).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import scipy.optimize
+
+from cahyman_pin.paper.cells import model_values, published_values, quantities, standard_deviations
+from cahyman_pin.params import SOURCES, CaHyManParams
+from closedloop.conditioning import rule_rank
+from closedloop.exceptions import ClosedLoopError
+
+#: Fitted stiffness groups (name -> the parameters tied to one value).
+STIFFNESS_GROUPS = {
+    "K_T": ("K_T",),
+    "K_b = K_d": ("K_b", "K_d"),
+    "K_T4": ("K_T4",),
+    "K_s": ("K_s",),
+    "K_4": ("K_4",),
+}
+#: The assumed dimensions (SOURCES says the paper gives none).
+DIMENSIONS = tuple(n for n in CaHyManParams.field_names() if SOURCES[n].endswith("no dimensions"))
+#: Bounds of the stiffness fit: reference / range .. reference * range.
+STIFFNESS_RANGE = 1e6
+#: Bounds of the dimension fit: reference / range .. reference * range.
+DIMENSION_RANGE = 2.0
+#: Relative tolerance of the fits on the cost, the step and the gradient (the cells are
+#: printed to 2 or 3 digits).
+FIT_TOL = 1e-8
+#: Evaluation limit of the dimension fit: its cost has a flat valley (a and h act almost
+#: alike) along which the last percent of chi^2 would take thousands of evaluations.
+DIMENSION_EVALUATIONS = 60
+#: Singular values of the weighted sensitivity below this share of the largest: not
+#: identified (the rank rule of closedloop.conditioning, on a well-scaled matrix).
+IDENTIFIABLE_RTOL = 1e-6
+#: Weighted residual of every quantity where the machine cannot be assembled (a cost far
+#: above any assembled one, so that the trust region refuses the step).
+UNASSEMBLED = 1e4
+#: Relative share of a null vector above which a parameter takes part in it.
+NULL_SHARE = 0.1
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """One fit (values SI).
+
+    Attributes:
+        names: fitted names (stiffness groups or dimensions).
+        reference: name -> value before the fit [N/m, N m/rad or m].
+        estimates: name -> fitted value.
+        at_bound: name -> "lower", "upper" or "" (a value on its bound is not determined
+            by the data beyond "at least / at most").
+        params: the fitted parameter set.
+        values: (48,) model values at the fit [mm or deg], in :func:`quantities` order.
+        residuals: (48,) values minus published [mm or deg].
+        chi2: weighted sum of squares at the fit.
+        chi2_reference: weighted sum of squares at the reference values.
+        rank: rank of the weighted sensitivity (log space) of the free parameters.
+        unidentifiable: names in the null space of that sensitivity, or acting on no
+            quantity.
+        converged: False when the fit stopped at its evaluation limit (a flat valley).
+    """
+
+    names: tuple[str, ...]
+    reference: dict[str, float]
+    estimates: dict[str, float]
+    at_bound: dict[str, str]
+    params: CaHyManParams
+    values: np.ndarray
+    residuals: np.ndarray
+    chi2: float
+    chi2_reference: float
+    rank: int
+    unidentifiable: tuple[str, ...]
+    converged: bool
+
+
+def _apply(params: CaHyManParams, groups: dict[str, tuple[str, ...]], x) -> CaHyManParams:
+    return params.replace(
+        **{p: float(v) for g, v in zip(groups.values(), x, strict=True) for p in g}
+    )
+
+
+def _weighted(params, groups, published, sd):
+    def f(theta):
+        try:
+            return (model_values(_apply(params, groups, np.exp(theta))) - published) / sd
+        except ClosedLoopError:  # the plate cannot be assembled: a step to refuse
+            return np.full(len(published), UNASSEMBLED)
+
+    return f
+
+
+def _linear_basis(params: CaHyManParams, groups) -> tuple[np.ndarray, np.ndarray]:
+    """(B (48, n), c (n,)): model values = B c, c the group compliances 1/K [SI]. Exact
+    for a linear function: the column is the change when the compliance doubles."""
+    k = np.array([getattr(params, g[0]) for g in groups.values()])
+    base = model_values(params)
+    cols = []
+    for i in range(len(k)):
+        x = k.copy()
+        x[i] /= 2.0
+        cols.append((model_values(_apply(params, groups, x)) - base) * k[i])
+    return np.column_stack(cols), 1.0 / k
+
+
+def linear_optimum(params: CaHyManParams) -> tuple[dict[str, float], float]:
+    """Global least-squares optimum over the linear quantities of the stiffness groups.
+
+    Returns:
+        (name -> stiffness [SI], inf where the compliance is 0: rigid), its chi^2 over the
+        linear quantities.
+    """
+    qs = quantities(params)
+    lin = np.array([q.linear for q in qs])
+    sd, p = standard_deviations(params)[lin], published_values(params)[lin]
+    B, c0 = _linear_basis(params, STIFFNESS_GROUPS)
+    # columns scaled by the reference compliances: a well-conditioned NNLS
+    c, norm = scipy.optimize.nnls(B[lin] * c0 / sd[:, None], p / sd)
+    k = {n: (1.0 / (ci * c0i) if ci > 0 else np.inf) for n, ci, c0i in
+         zip(STIFFNESS_GROUPS, c, c0, strict=True)}  # fmt: skip
+    return k, float(norm**2)
+
+
+def _inactive(f, x: np.ndarray) -> np.ndarray:
+    """(n,) True for a parameter that changes no quantity (central differences in log
+    space, step 1e-3, against 1e-9 of the largest column)."""
+    cols = []
+    for i in range(len(x)):
+        e = np.zeros(len(x))
+        e[i] = 1e-3
+        cols.append(np.linalg.norm(f(x + e) - f(x - e)))
+    cols = np.array(cols)
+    return cols <= 1e-9 * cols.max()
+
+
+def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> FitResult:
+    published, sd = published_values(params), standard_deviations(params)
+    names = list(groups)
+    ref = np.array([getattr(params, g[0]) for g in groups.values()])
+    f_all = _weighted(params, groups, published, sd)
+    inactive = _inactive(f_all, np.log(ref))
+    act = [n for n, i in zip(names, inactive, strict=True) if not i]
+    sub = {n: groups[n] for n in act}
+    ref_act = ref[~inactive]
+    lo, hi = np.log(ref_act / ratio), np.log(ref_act * ratio)
+    f = _weighted(params, sub, published, sd)
+    best = None
+    for start in starts:
+        x0 = np.clip(np.log(np.asarray(start)[~inactive]), lo + 1e-9, hi - 1e-9)
+        r = scipy.optimize.least_squares(f, x0, bounds=(lo, hi), x_scale="jac", xtol=FIT_TOL,
+                                         ftol=FIT_TOL, gtol=FIT_TOL, max_nfev=max_nfev)  # fmt: skip
+        if best is None or r.cost < best.cost:
+            best = r
+    fitted = _apply(params, sub, np.exp(best.x))
+    values = model_values(fitted)
+    span = hi - lo
+    bound = dict.fromkeys(names, "")
+    bound.update({n: ("lower" if x - a < 1e-6 * s else "upper" if b - x < 1e-6 * s else "")
+                  for n, x, a, b, s in zip(act, best.x, lo, hi, span, strict=True)})  # fmt: skip
+    free = [i for i, n in enumerate(act) if not bound[n]]
+    rank, unident = 0, [n for n, i in zip(names, inactive, strict=True) if i]
+    if free:
+        _, s, Vt = np.linalg.svd(best.jac[:, free], full_matrices=False)
+        rank = rule_rank(s, IDENTIFIABLE_RTOL)
+        null = Vt[rank:]
+        unident += [
+            act[free[i]] for i in range(len(free)) if np.any(np.abs(null[:, i]) > NULL_SHARE)
+        ]
+    est = {n: float(getattr(fitted, groups[n][0])) for n in names}
+    return FitResult(
+        tuple(names), dict(zip(names, map(float, ref), strict=True)), est, bound, fitted, values,
+        values - published, float(np.sum(f(best.x) ** 2)),
+        float(np.sum(f_all(np.log(ref)) ** 2)), rank, tuple(unident), best.status > 0,
+    )  # fmt: skip
+
+
+@lru_cache(maxsize=4)
+def _stiffness_fit(params: CaHyManParams, published: tuple[float, ...]) -> FitResult:
+    k_lin, _ = linear_optimum(params)
+    ref = np.array([getattr(params, g[0]) for g in STIFFNESS_GROUPS.values()])
+    nnls = np.array([min(k, STIFFNESS_RANGE * r) for k, r in zip(k_lin.values(), ref, strict=True)])
+    return _fit(params, STIFFNESS_GROUPS, STIFFNESS_RANGE, (ref, nnls))
+
+
+@lru_cache(maxsize=4)
+def _dimension_fit(params: CaHyManParams, published: tuple[float, ...]) -> FitResult:
+    groups = {n: (n,) for n in DIMENSIONS}
+    ref = np.array([getattr(params, n) for n in DIMENSIONS])
+    return _fit(params, groups, DIMENSION_RANGE, (ref,), DIMENSION_EVALUATIONS)
+
+
+def stiffness_fit(params: CaHyManParams) -> FitResult:
+    """The best stiffness values (:data:`STIFFNESS_GROUPS`), dimensions at ``params``."""
+    return _stiffness_fit(params, tuple(published_values(params)))
+
+
+def dimension_fit(params: CaHyManParams) -> FitResult:
+    """The best assumed dimensions (:data:`DIMENSIONS`), springs at ``params``."""
+    return _dimension_fit(params, tuple(published_values(params)))
+
+
+#: Relative change of each assumed dimension in the sensitivity study.
+SENSITIVITY_STEP = 0.2
+
+
+def dimension_sensitivity(params: CaHyManParams) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Change of every quantity when one assumed dimension changes by -+20 %.
+
+    Returns:
+        ``{dimension: (change at -20 % (48,), change at +20 % (48,))}`` [mm or deg], in
+        :func:`~cahyman_pin.paper.cells.quantities` order; NaN where the machine cannot be
+        assembled.
+    """
+    base = model_values(params)
+    out = {}
+    for name in DIMENSIONS:
+        pair = []
+        for factor in (1.0 - SENSITIVITY_STEP, 1.0 + SENSITIVITY_STEP):
+            try:
+                v = model_values(params.replace(**{name: factor * getattr(params, name)}))
+            except ClosedLoopError:
+                v = np.full(len(base), np.nan)
+            pair.append(v - base)
+        out[name] = (pair[0], pair[1])
+    return out

@@ -1,0 +1,241 @@
+"""The report's fits, linearity floor, cell classes and sensitivity, checked independently."""
+
+import numpy as np
+import pytest
+import scipy.optimize
+
+from cahyman_pin.backends.consistent import consistent_compliance
+from cahyman_pin.paper import cells, classify, fit
+from cahyman_pin.paper.compare import table_values
+from cahyman_pin.paper.data import TABLE_POSES, TABLES
+from cahyman_pin.paper.effects import effect_changes, printed_arm_axial_stiffness
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED
+
+P = DEFAULT_PARAMS
+SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
+#: Groups of the fit, written here: K_b and K_d tied.
+GROUPS = (("K_T",), ("K_b", "K_d"), ("K_T4",), ("K_s",), ("K_4",))
+#: Factor that makes a spring rigid next to the others (its compliance 1e-12 of theirs).
+RIGID = 1e12
+
+
+def _rows_of_table(table, level):
+    """The compared values of a published (6, 3) table, written here: at the level plate
+    tilt = |dphi| and yaw = dpsi + dtheta."""
+    if level:
+        return np.vstack([table[:3], np.abs(table[3]), table[4] + table[5]])
+    return table
+
+
+def _published_vector():
+    out = []
+    for pose in TABLE_POSES:
+        level = np.allclose(pose.alpha_deg, pose.alpha_deg[0])  # equal cranks: a level plate
+        out.append(_rows_of_table(TABLES[pose.label], level).T.ravel())
+    return np.concatenate(out)
+
+
+def _generic_vector(params):
+    """The 48 quantities from the generic (Pinocchio) backend, through table_values."""
+    values = [table_values(p, params).values["generic"] for p in TABLE_POSES]
+    return np.concatenate([v.T.ravel() for v in values])
+
+
+def test_quantities_are_the_published_cells():
+    qs = cells.quantities(P)
+    assert len(qs) == 48  # 54 cells: 6 + 6 + 6 per load at Table 3, 5 + 5 at Tables 1, 2
+    np.testing.assert_array_equal(cells.published_values(P), _published_vector())
+    assert len(cells.printed_cells()) == 3 * 6 * 3
+    # the model values are those of the generic backend (to rounding, 1e-12 mm or deg)
+    np.testing.assert_allclose(cells.model_values(P), _generic_vector(P), atol=1e-12)
+
+
+def test_weights_state_rounding_and_relative_error():
+    sd = cells.standard_deviations(P)
+    p = _published_vector()
+    n = np.array([len(q.cells) for q in cells.quantities(P)])
+    np.testing.assert_allclose(sd, np.sqrt(n * 0.01**2 / 12 + (0.1 * p) ** 2), rtol=1e-14)
+
+
+def test_linearity_floor_from_the_published_values(monkeypatch):
+    floor = cells.linearity_floor(P)
+    split = np.cumsum([15, 15])  # 5 rows x 3 loads at the level plates, then 6 x 3
+    p = [v.reshape(3, -1) for v in np.split(_published_vector(), split)]  # (load, row)
+    sd = [v.reshape(3, -1) for v in np.split(cells.standard_deviations(P), split)]
+    expected = {}
+    for t, pose in enumerate(TABLE_POSES):
+        for i in range(p[t].shape[1]):
+            if t < 2 and i == 3:
+                continue  # the tilt, a norm
+            expected[(pose.label, i)] = (p[t][2, i] - p[t][0, i] - p[t][1, i], sd[t][:, i])
+    assert len(floor) == len(expected)
+    for triple, (r, s) in zip(floor, expected.values(), strict=True):
+        np.testing.assert_allclose(triple.residual, r, atol=1e-12)
+        # the floor is the least distance to a triple with c3 = c1 + c2: minimised here
+        pub = np.array([cells.quantities(P)[k].published for k in triple.indices])
+        A = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])  # (c1, c2) -> (c1, c2, c1 + c2)
+        x = np.linalg.lstsq(A, pub, rcond=None)[0]
+        np.testing.assert_allclose(triple.rms_floor, np.linalg.norm(A @ x - pub), atol=1e-12)
+        xw = np.linalg.lstsq(A / s[:, None], pub / s, rcond=None)[0]
+        np.testing.assert_allclose(
+            triple.chi2_floor, np.sum(((A @ xw - pub) / s) ** 2), rtol=1e-9, atol=1e-12
+        )
+        np.testing.assert_allclose(triple.shares, np.abs(A @ xw - pub), rtol=1e-9, atol=1e-12)
+    # Table 3 dtheta: 9.34 + 0.43 - (-2.54) printed, the largest residual of the tables
+    t3 = next(t for t in floor if t.table == "Table 3" and t.row.startswith("dtheta"))
+    np.testing.assert_allclose(t3.residual, -2.54 - 9.34 - 0.43, atol=1e-12)
+    # a changed published value moves the floor: computed, not typed in
+    changed = {k: v.copy() for k, v in TABLES.items()}
+    changed["Table 3"][5, 2] += 1.0
+    monkeypatch.setattr(cells, "TABLES", changed)
+    t3 = next(t for t in cells.linearity_floor(P) if t.table == "Table 3" and t.row[:6] == "dtheta")
+    np.testing.assert_allclose(t3.residual, -1.54 - 9.34 - 0.43, atol=1e-12)
+
+
+def test_tilt_triangle_from_the_published_values(monkeypatch):
+    assert cells.tilt_triangle_ok(P) == {"Table 1": True, "Table 2": True}
+    changed = {k: v.copy() for k, v in TABLES.items()}
+    changed["Table 1"][3, 2] = -5.0  # |t3| = 5 > 0.92 + 0.85
+    monkeypatch.setattr(cells, "TABLES", changed)
+    assert cells.tilt_triangle_ok(P)["Table 1"] is False
+
+
+def _single_spring_basis():
+    """(48, 5) quantities per unit compliance of each group alone (the others rigid), from
+    consistent_compliance and the test's own conversion of the linear rows."""
+    qs = cells.quantities(P)
+    cols = []
+    for group in GROUPS:
+        others = {n: RIGID * getattr(P, n) for n in SPRINGS if n not in group}
+        col = cells.model_values(P.replace(**others)) * getattr(P, group[0])
+        cols.append(col)
+    return np.column_stack(cols), np.array([q.linear for q in qs])
+
+
+def test_compliance_is_linear_in_the_spring_compliances():
+    # the premise of the convex stiffness fit: C = sum over springs of C with that spring alone
+    for pose in TABLE_POSES:
+        C = consistent_compliance(*pose.si, P)
+        parts = sum(
+            consistent_compliance(
+                *pose.si, P.replace(**{n: RIGID * getattr(P, n) for n in SPRINGS if n not in g})
+            )
+            for g in GROUPS
+        )
+        np.testing.assert_allclose(parts, C, rtol=0, atol=1e-9 * np.abs(C).max())
+
+
+def test_stiffness_fit_reaches_the_global_optimum_of_the_linear_quantities():
+    B, linear = _single_spring_basis()
+    p, sd = _published_vector(), cells.standard_deviations(P)
+    c0 = 1.0 / np.array([getattr(P, g[0]) for g in GROUPS])
+    c, norm = scipy.optimize.nnls(B[linear] * c0 / sd[linear, None], p[linear] / sd[linear])
+    k_lin, chi2_lin = fit.linear_optimum(P)
+    np.testing.assert_allclose(chi2_lin, norm**2, rtol=1e-6)
+    k_test = np.where(c > 0, 1.0 / np.where(c > 0, c * c0, 1.0), np.inf)
+    np.testing.assert_allclose(list(k_lin.values()), k_test, rtol=1e-6)
+    s = fit.stiffness_fit(P)
+    chi2_fit_linear = np.sum((s.residuals[linear] / sd[linear]) ** 2)
+    # no positive stiffnesses do better than the global optimum; the fit reaches it (to the
+    # bound 1e6 x reference on the rigid springs, which leaves 1e-6 of their compliance)
+    assert chi2_fit_linear >= norm**2 * (1 - 1e-9)
+    np.testing.assert_allclose(chi2_fit_linear, norm**2, rtol=1e-4)
+    # the fit's residuals are those of the generic backend at the fitted values
+    np.testing.assert_allclose(s.residuals, _generic_vector(s.params) - p, atol=1e-9)
+    assert s.chi2 <= s.chi2_reference
+    assert s.chi2 <= np.sum((p / sd) ** 2)  # not worse than a rigid machine
+
+
+def test_stiffness_fit_recovers_known_values(monkeypatch):
+    # synthetic tables from known stiffnesses: the fit finds them (K_4 and K_s in series
+    # along the arm: only their series stiffness, and both are named unidentifiable)
+    true = P.replace(K_T=2 * P.K_T, K_b=0.5 * P.K_b, K_d=0.5 * P.K_d, K_T4=3 * P.K_T4)
+    v = [x.reshape(3, -1) for x in np.split(cells.model_values(true), [15, 30])]
+    synthetic = {}
+    for t, pose in enumerate(TABLE_POSES):
+        table = np.zeros((6, 3))
+        for j in range(3):
+            if t < 2:  # level: dphi = -tilt, dpsi = yaw, dtheta = 0
+                table[:, j] = [*v[t][j, :3], -v[t][j, 3], v[t][j, 4], 0.0]
+            else:
+                table[:, j] = v[t][j]
+        synthetic[pose.label] = table
+    monkeypatch.setattr(cells, "TABLES", synthetic)
+    s = fit.stiffness_fit(P)
+    assert s.chi2 < 1e-12
+    for name, group in zip(fit.STIFFNESS_GROUPS, GROUPS, strict=True):
+        if name not in ("K_s", "K_4"):
+            np.testing.assert_allclose(s.estimates[name], getattr(true, group[0]), rtol=1e-6)
+    series = 1 / (1 / s.estimates["K_4"] + 1 / s.estimates["K_s"])
+    np.testing.assert_allclose(series, 1 / (1 / true.K_4 + 1 / true.K_s), rtol=1e-6)
+    assert set(s.unidentifiable) == {"K_s", "K_4"}
+
+
+def test_dimension_fit_and_sensitivity_against_the_generic_backend():
+    d = fit.dimension_fit(P)
+    p = _published_vector()
+    assert set(d.names) == {"a", "b", "h", "r_e", "r_p", "HQ", "L"}  # flagged assumed
+    assert d.chi2 <= d.chi2_reference
+    np.testing.assert_allclose(d.residuals, _generic_vector(d.params) - p, atol=1e-9)
+    assert "r_e" in d.unidentifiable and d.estimates["r_e"] == P.r_e  # acts on no cell
+    sens = fit.dimension_sensitivity(P)
+    base = _generic_vector(P)
+    for name in ("b", "L"):
+        for k, factor in enumerate((0.8, 1.2)):
+            changed = _generic_vector(P.replace(**{name: factor * getattr(P, name)}))
+            np.testing.assert_allclose(sens[name][k], changed - base, atol=1e-9)
+    assert np.max(np.abs(sens["r_e"])) < 1e-12
+
+
+def test_every_published_cell_has_one_class():
+    classes = classify.classify(P)
+    assert [(c.table, c.row, c.load) for c in classes] == [
+        (pose.label, i, j) for pose in TABLE_POSES for j in range(3) for i in range(6)
+    ]
+    for c in classes:
+        assert c.kind in ("reproduced", "explained", "unexplained")
+        assert c.printed == TABLES[c.table][c.row, c.load]
+        assert np.isfinite(c.size)
+        if c.kind == "unexplained":  # its residual after the stiffness fit
+            np.testing.assert_allclose(c.size, c.stiffness_fit - c.published, atol=1e-12)
+    assert sum(classify.counts(classes).values()) == 54
+
+
+def test_classes_follow_the_rules(monkeypatch):
+    # a published cell set to the model rounded to two decimals is reproduced; one set to
+    # the model without the lever-arm repair is explained by that damage
+    m = cells.model_values(P)
+    qs = cells.quantities(P)
+    changed = {k: v.copy() for k, v in TABLES.items()}
+    k_dx = next(k for k, q in enumerate(qs) if (q.table, q.load, q.row[:2]) == ("Table 3", 1, "dx"))
+    changed["Table 3"][0, 1] = round(m[k_dx], 2)
+    lever = effect_changes(P)["lever arm of eq. (3)"]["Table 3"]
+    k_dy = next(k for k, q in enumerate(qs) if (q.table, q.load, q.row[:2]) == ("Table 3", 1, "dy"))
+    changed["Table 3"][1, 1] = m[k_dy] - lever[1, 1]
+    monkeypatch.setattr(cells, "TABLES", changed)
+    monkeypatch.setattr(classify, "TABLES", changed)
+    by_cell = {(c.table, c.row, c.load): c for c in classify.classify(P)}
+    assert by_cell[("Table 3", 0, 1)].kind == "reproduced"
+    c = by_cell[("Table 3", 1, 1)]
+    assert c.kind == "explained"
+    if c.reason.startswith("damage"):  # unless a fit reproduces it first
+        assert c.reason == "damage: lever arm of eq. (3)"
+        np.testing.assert_allclose(c.size, -lever[1, 1], rtol=1e-12)
+
+
+@pytest.mark.parametrize("alpha4, s4", [(np.pi / 2, 0.05), (0.3, 0.0), (1.1, 0.025)])
+def test_printed_arm_puts_k4_and_ks_side_by_side(alpha4, s4):
+    for K_s in (K_S_PRINTED, P.K_s):
+        np.testing.assert_allclose(
+            printed_arm_axial_stiffness(P, K_s, alpha4, s4), (P.K_4 + K_s) / 2, rtol=1e-9
+        )
+
+
+def test_ks_effect_is_the_change_of_the_side_by_side_stiffness():
+    # Table 1: the arm is vertical (alpha_4 = 90 deg), load F has 1 N along it
+    _, alpha4, s4 = TABLE_POSES[0].si
+    dc = 1 / printed_arm_axial_stiffness(P, K_S_PRINTED, alpha4, s4) - 1 / (
+        printed_arm_axial_stiffness(P, P.K_s, alpha4, s4)
+    )
+    effect = effect_changes(P)["K_s value"]["Table 1"]
+    np.testing.assert_allclose(effect[2, 0], -1e3 * dc, rtol=1e-6)
