@@ -236,6 +236,24 @@ def test_unreachable_and_invalid_points_are_marked_not_raised(backend, start):
     assert_matches_pointwise(res, SAME_PATH_RTOL)  # the points after a failure too
 
 
+@pytest.mark.parametrize(
+    ("backend", "rtol"),
+    [("generic", CLOSED_FORM_START_RTOL), ("consistent", SAME_PATH_RTOL),
+     ("published", SAME_PATH_RTOL)],
+)  # fmt: skip
+def test_map_on_the_shared_engine_equals_api_point_by_point(backend, rtol):
+    """CaHyMan's map gives the numbers of api.stiffness, point by point, failures with
+    their reasons included, on a process pool with chunks that cut the design runs."""
+    pts = grid(
+        {"b": [0.07, 0.09], "alpha1": np.deg2rad([60.0, -80.0, 70.0]), "s4": [0.0, 0.07]},
+        alpha=np.deg2rad([90.0, 90.0, 90.0]),
+        alpha4=0.7,
+    )
+    res = sweep(pts, backend=backend, wrench=WRENCH, workers=2, chunk_size=5)
+    assert set(res.status) == {"ok", "invalid", "unreachable"}
+    assert_matches_pointwise(res, rtol)
+
+
 def test_invalid_design_values_are_marked():
     pts = grid({"b": [0.08, -0.01]}, alpha=np.deg2rad([60.0] * 3), alpha4=0.5, s4=0.0)
     res = sweep(pts, backend="consistent", executor="serial")
