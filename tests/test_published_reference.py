@@ -72,7 +72,8 @@ def ry(a):
 
 
 def plate(alpha, p):
-    """(H (3,), R (3, 3)) from the model document's closed-form direct kinematics."""
+    """(H (3,), R (3, 3), (phi, theta, psi)) from the model document's closed-form direct
+    kinematics."""
     y, z = p.b * np.cos(alpha), p.b * np.sin(alpha) + p.h
     z_H = z.sum() / 3
     psi = np.arctan2(SQ3 * (z[1] - z[2]), -(2 * z[0] - z[1] - z[2]))
@@ -81,7 +82,7 @@ def plate(alpha, p):
     x_H = (y[2] - y[1]) / SQ3 - 0.5 * p.r_p * (1 - np.sin(phi)) * np.cos(psi - theta)
     y_H = y[0] - p.r_p * (np.sin(psi) * np.cos(theta) + np.sin(phi) * np.cos(psi) * np.sin(theta))
     R = rz(theta) @ ry(np.pi / 2 - phi) @ rz(psi)
-    return np.array([x_H, y_H, z_H]), R
+    return np.array([x_H, y_H, z_H]), R, (phi, theta, psi)
 
 
 def leg_rows(R, p):
@@ -185,10 +186,10 @@ def m_fn(p):
     return np.array(cols, dtype=float).T
 
 
-def kss(alpha4, s4, p):
-    """(3, 3) eq. (7) with the printed K_s."""
+def kss(alpha4, s4, p, K_s=K_S_PAPER):
+    """(3, 3) eq. (7) (K_s as printed unless given)."""
     c, s, kt = np.cos(alpha4), np.sin(alpha4), p.K_T4 / (p.L + s4)
-    return np.array([[p.K_4 * c, K_S_PAPER * c, -kt * s], [p.K_4 * s, K_S_PAPER * s, kt * c],
+    return np.array([[p.K_4 * c, K_s * c, -kt * s], [p.K_4 * s, K_s * s, kt * c],
                      [0, 0, p.K_T4]])  # fmt: skip
 
 
@@ -198,31 +199,100 @@ def a_s(alpha4, s4, p):
     return np.array([[c, c, -ls * s], [s, s, ls * c], [0, 0, 1]])
 
 
-def reference(case, option, p=DEFAULT_PARAMS, load=None, beta_is_alpha=False):
-    """Every matrix of the as-published chain (defaults but the leg block and beta_k)."""
+def skew(r):
+    return np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+
+
+def euler_rates(phi, theta, R):
+    """(3, 3) E: rotation vector (world) = E (dphi, dtheta, dpsi) for R = Rz Ry(pi/2 - phi) Rz.
+
+    dtheta turns about z, dpsi about the plate normal z_p, dphi (= -d(pi/2 - phi)) about
+    -Rz(theta) y = (sin theta, -cos theta, 0).
+    """
+    return np.column_stack([[np.sin(theta), -np.cos(theta), 0.0], EZ, R[:, 2]])
+
+
+def a_d_printed(alpha, angles, p):
+    """(6, 6) eqs. (18, 19), Delta := pose coordinates, l := 1, Delta Delta_l := y_1 in C_x
+    and z_1 in C_psi (the closed-form psi uses 2 z_1 - z_2 - z_3), C_z unused."""
+    y, z = p.b * np.cos(alpha), p.b * np.sin(alpha) + p.h
+    phi, theta, psi = angles
+    rp, sf = p.r_p, np.sin(phi)
+    c_x = -(rp / (2 * y[0])) * (1 - sf) * np.cos(psi - theta)
+    c_y = -(rp / y[1]) * (sf * np.cos(phi) + np.cos(psi) * sf * np.sin(theta))
+    c_phi, c_psi, c_theta = 1 / y[0], 2 * z[0] - z[1] - z[2], (3 * rp / 2) * (1 + sf)
+    q = 2 / (3 * rp)
+    return np.array([
+        [c_x, 0, -1 / SQ3, 0, 1 / SQ3, 0],
+        [1, 0, c_y, 0, 0, 0],
+        [0, 1 / 3, 0, 1 / 3, 0, 1 / 3],
+        [c_phi, -q, 0, q, 0, q],
+        [0, 0, 0, -SQ3 / c_psi, 0, -SQ3 / c_psi],
+        [1 / c_theta, 0, 1 / c_theta, SQ3 / c_psi, 1 / c_theta, -SQ3 / c_psi],
+    ], dtype=float)  # fmt: skip
+
+
+#: The backend's defaults (as published), retyped.
+DEFAULTS = {
+    "ks": "printed", "arm_rotation_axis": "-y_p", "serial_form": "pinv",
+    "serial_frame": "printed", "lever_arm": False, "weights": True, "beta_gamma": "zero",
+    "leg_block": "2x2", "a_d": "jacobian", "m_fn": "printed", "m_ft": "printed",
+}  # fmt: skip
+
+
+def reference(case, p=DEFAULT_PARAMS, load=None, **switches):
+    """Every matrix of the as-published chain, by name, for the given switches."""
+    o = {**DEFAULTS, **switches}
     alpha, alpha4, s4 = si(case)
-    _, R = plate(alpha, p)
-    # Arm, eqs. (4) to (8): (x, z, angle) in the (x_p, z_p, rotation about -y_p) slots,
-    # pseudo-inverses for the singular As and Kss As^+, R_SP as a left factor.
+    _, R, angles = plate(alpha, p)
+    # Arm, eqs. (4) to (8): (x, z, angle) in the (x_p, z_p, rotation about -y_p) slots.
+    K_s = K_S_PAPER if o["ks"] == "printed" else p.K_s
+    Kss, As = kss(alpha4, s4, p, K_s), a_s(alpha4, s4, p)
     P = np.zeros((6, 3))
-    P[0, 0], P[2, 1], P[4, 2] = 1.0, 1.0, -1.0
-    R_SP = np.eye(6)
-    R_SP[:3, :3] = R
-    C_SER = P @ np.linalg.pinv(kss(alpha4, s4, p) @ np.linalg.pinv(a_s(alpha4, s4, p))) @ P.T
-    C_SER = C_SER @ R_SP.T
-    # Plate, eqs. (9) to (19), A_d as the Jacobian of the direct kinematics.
-    legs = np.array([leg_block(a, p, option, beta_is_alpha) for a in alpha])
+    P[0, 0], P[2, 1], P[4, 2] = 1.0, 1.0, -1.0 if o["arm_rotation_axis"] == "-y_p" else 1.0
+    if o["serial_form"] == "pinv":  # pseudo-inverses for the singular As and Kss As^+
+        C_plate = P @ np.linalg.pinv(Kss @ np.linalg.pinv(As)) @ P.T
+    else:
+        C_plate = P @ As @ np.diag([1 / p.K_4, 1 / K_s, 1 / p.K_T4]) @ As.T @ P.T
+    if o["serial_frame"] == "printed":  # R_SP as a left factor of K_SER
+        R_SP = np.eye(6)
+        R_SP[:3, :3] = R
+        C_SER = C_plate @ R_SP.T
+    else:
+        R6 = np.kron(np.eye(2), R)
+        C_SER = R6 @ C_plate @ R6.T
+    # Twist transport from H to M = H + HQ z_p + (L + s_4) w.
+    w = np.cos(alpha4) * R[:, 0] + np.sin(alpha4) * R[:, 2]
+    Tr = np.eye(6)
+    Tr[:3, 3:] = -skew(p.HQ * R[:, 2] + (p.L + s4) * w)
+    # Plate, eqs. (9) to (19).
+    if o["m_ft"] == "printed":
+        M_FT = m_ft(alpha4, s4, p, load if o["weights"] else None)
+    else:
+        M_FT = Tr.T
+    G = leg_rows(R, p)
+    M_FN = m_fn(p) if o["m_fn"] == "printed" else G.T
+    beta_is_alpha = o["beta_gamma"] == "alpha"
+    legs = np.array([leg_block(a, p, o["leg_block"], beta_is_alpha) for a in alpha])
     blocks = np.zeros((6, 6))
     for k in range(3):
         blocks[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = legs[k]
-    A_d = np.linalg.inv(leg_rows(R, p))
-    M_FT, M_FN = m_ft(alpha4, s4, p, load), m_fn(p)
+    E6 = np.eye(6)
+    if o["a_d"] == "printed":
+        A_d = a_d_printed(alpha, angles, p)
+    else:
+        A_d = np.linalg.inv(G)
+    if o["a_d"] != "jacobian":  # plate rotations as (dphi, dtheta, dpsi)
+        E6[3:, 3:] = euler_rates(angles[0], angles[1], R)
+        if o["a_d"] == "jacobian_euler":
+            A_d[3:] = np.linalg.solve(E6[3:, 3:], A_d[3:])
     C_PAR = A_d @ blocks @ np.linalg.inv(M_FN) @ M_FT
+    C_PAR_M = Tr @ E6 @ C_PAR if o["lever_arm"] else C_PAR
     return {
-        "R_PAR": R, "Kss": kss(alpha4, s4, p), "As": a_s(alpha4, s4, p), "M_FT": M_FT,
-        "M_FN": M_FN, "K_pkk": np.array([k_pkk(a, p, beta_is_alpha) for a in alpha]),
+        "R_PAR": R, "Kss": Kss, "As": As, "M_FT": M_FT, "M_FN": M_FN,
+        "K_pkk": np.array([k_pkk(a, p, beta_is_alpha) for a in alpha]),
         "C_pkk": np.array([c_pkk(a, p) for a in alpha]), "leg_compliance": legs, "A_d": A_d,
-        "C_SER": C_SER, "C_PAR": C_PAR, "C": C_PAR + C_SER,
+        "C_SER": C_SER, "C_PAR": C_PAR, "C_PAR_M": C_PAR_M, "C": C_PAR_M + C_SER,
     }  # fmt: skip
 
 
@@ -232,7 +302,7 @@ def test_reference_plate_puts_the_balls_on_the_legs(case):
     """The retyped direct kinematics: ball k at (y_k, z_k) of its leg plane, R a rotation."""
     p = DEFAULT_PARAMS
     alpha = si(case)[0]
-    H, R = plate(alpha, p)
+    H, R, _ = plate(alpha, p)
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-15)
     for k in range(3):
         H_k = H + R @ (p.r_p * U[k])
@@ -260,7 +330,7 @@ def test_reference_leg_jacobian_against_the_nonlinear_parallelogram(alpha_deg):
 @pytest.mark.parametrize("case", sorted(POSES))
 def test_full_C_equals_the_printed_equations(case, option):
     got = published_stiffness(*si(case), options=PublishedOptions(leg_block=option))
-    ref = reference(case, option)
+    ref = reference(case, leg_block=option)
     for name, value in ref.items():
         assert_close(getattr(got, name), value, err_msg=f"{case}, {option}: {name}")
     np.testing.assert_allclose(got.K @ ref["C"], np.eye(6), atol=1e-9)
@@ -273,7 +343,7 @@ def test_weight_terms_enter_C_as_printed():
         got = published_stiffness(
             *si("Table 3"), p, PublishedOptions(leg_block=option), load=LOAD_F
         )
-        ref = reference("Table 3", option, p, LOAD_F)
+        ref = reference("Table 3", p, LOAD_F, leg_block=option)
         assert_close(got.M_FT, ref["M_FT"], err_msg=option)
         assert_close(got.C, ref["C"], err_msg=option)
 
@@ -283,13 +353,60 @@ def test_beta_equal_alpha_with_the_3x3_block_as_printed(case):
     """beta_k = alpha_k (the other reading of eq. 15); the full K_pkk is regular here."""
     o = PublishedOptions(beta_gamma="alpha", leg_block="3x3")
     got = published_stiffness(*si(case), options=o)
-    ref = reference(case, "3x3", beta_is_alpha=True)
+    ref = reference(case, leg_block="3x3", beta_gamma="alpha")
     for name in ("K_pkk", "leg_compliance", "C"):
         assert_close(getattr(got, name), ref[name], err_msg=name)
 
 
 def test_the_leg_block_options_differ_at_table3():
     """The three readings are different machines: a test of one does not cover another."""
-    C = {o: reference("Table 3", o)["C"] for o in LEG_BLOCKS}
+    C = {o: reference("Table 3", leg_block=o)["C"] for o in LEG_BLOCKS}
     for a, b in (("2x2", "3x3"), ("2x2", "consistent"), ("3x3", "consistent")):
         assert np.abs(C[a] - C[b]).max() > 1e-3 * np.abs(C[b]).max(), (a, b)
+
+
+#: Every other switch, alone; (dphi, dtheta, dpsi) and the printed A_d need phi != 90 deg.
+SWITCHES = [
+    ({"ks": "params"}, POSES), ({"arm_rotation_axis": "+y_p"}, POSES),
+    ({"serial_form": "series"}, POSES), ({"serial_frame": "world"}, POSES),
+    ({"lever_arm": True}, POSES), ({"weights": False}, POSES),
+    ({"m_fn": "consistent"}, POSES), ({"m_ft": "transport"}, POSES),
+    ({"a_d": "jacobian_euler"}, ["Table 3"]), ({"a_d": "printed"}, ["Table 3"]),
+    ({"a_d": "jacobian_euler", "lever_arm": True}, ["Table 3"]),
+    ({"a_d": "printed", "lever_arm": True, "leg_block": "3x3"}, ["Table 3"]),
+]  # fmt: skip
+SWITCH_CASES = [(sw, case) for sw, cases in SWITCHES for case in sorted(cases)]
+
+
+@pytest.mark.parametrize(("switches", "case"), SWITCH_CASES, ids=str)
+def test_each_switch_equals_its_reading(switches, case):
+    """With masses and the load (1, ..., 1), so that the weight terms act."""
+    p = DEFAULT_PARAMS.replace(**MASSES)
+    load = np.ones(6)
+    got = published_stiffness(*si(case), p, PublishedOptions(**switches), load=load)
+    ref = reference(case, p, load, **switches)
+    for name, value in ref.items():
+        assert_close(getattr(got, name), value, err_msg=f"{case}, {switches}: {name}")
+
+
+def test_consistent_reading_equals_the_consistent_switches():
+    o = {f: getattr(PublishedOptions.consistent(), f) for f in DEFAULTS}
+    assert o == {**DEFAULTS, "ks": "params", "serial_form": "series", "serial_frame": "world",
+                 "lever_arm": True, "weights": False, "leg_block": "consistent",
+                 "m_fn": "consistent", "m_ft": "transport"}  # fmt: skip
+    for case in POSES:
+        got = published_stiffness(*si(case), options=PublishedOptions.consistent())
+        assert_close(got.C, reference(case, **o)["C"], err_msg=case)
+
+
+@pytest.mark.parametrize("case", sorted(POSES))
+def test_reference_euler_rates_by_differences(case):
+    """E of the rebuild: turning R by E (dphi, dtheta, dpsi) is moving the angles."""
+    p = DEFAULT_PARAMS
+    _, R, (phi, theta, psi) = plate(si(case)[0], p)
+    E = euler_rates(phi, theta, R)
+    for i, d in enumerate(np.eye(3) * STEP):
+        Rp = rz(theta + d[1]) @ ry(np.pi / 2 - phi - d[0]) @ rz(psi + d[2])
+        Rm = rz(theta - d[1]) @ ry(np.pi / 2 - phi + d[0]) @ rz(psi - d[2])
+        W = (Rp - Rm) @ R.T / (2 * STEP)  # = [r]x
+        np.testing.assert_allclose([W[2, 1], W[0, 2], W[1, 0]], E[:, i], atol=FD_RTOL)
