@@ -344,8 +344,8 @@ def sweep(
         start: generic backend only: where each assembly starts, ``"closed_form"``
             (default: CaHyMan's closed-form geometry, exact, computed per chunk at once;
             faster, and the same start as :func:`cahyman_pin.api.stiffness`) or
-            ``"neighbour"`` (the previous point's configuration; the first point of each
-            chunk from the closed form).
+            ``"neighbour"`` (the previous point's configuration, extrapolated along
+            equal steps; the first point of each chunk from the closed form).
         executor: ``"processes"`` (local process pool, default), ``"serial"``, or any
             ``concurrent.futures.Executor`` (e.g. ``dask.distributed.Client.get_executor()``);
             tasks are pickled, so a registered backend must be importable by the workers.
