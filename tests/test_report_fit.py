@@ -169,6 +169,13 @@ def test_stiffness_fit_recovers_known_values(monkeypatch):
     series = 1 / (1 / s.estimates["K_4"] + 1 / s.estimates["K_s"])
     np.testing.assert_allclose(series, 1 / (1 / true.K_4 + 1 / true.K_s), rtol=1e-6)
     assert set(s.unidentifiable) == {"K_s", "K_4"}
+    # every cell of such tables is reproduced, or explained by the fitted stiffness values
+    monkeypatch.setattr(classify, "TABLES", synthetic)
+    for c in classify.classify(P):
+        assert (c.kind, c.reason) in (
+            ("reproduced", "within the rounding"),
+            ("explained", "the fitted stiffness values"),
+        ), c
 
 
 def test_dimension_fit_and_sensitivity_against_the_generic_backend():

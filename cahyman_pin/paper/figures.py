@@ -152,7 +152,7 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
     gap = published_values(params) - model_values(params)
     colours = dict(zip(DIMENSIONS, plt.get_cmap("tab10").colors, strict=False))
     n_dim = len(DIMENSIONS)
-    fig, axes = plt.subplots(len(TABLE_POSES), 2, figsize=(12, 18))
+    fig, axes = plt.subplots(len(TABLE_POSES), 2, figsize=(11, 16))
     for row_axes, pose in zip(axes, TABLE_POSES, strict=True):
         for ax, rotation in zip(row_axes, (False, True), strict=True):
             idx = [k for k, q in enumerate(qs) if q.table == pose.label
@@ -183,6 +183,6 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
                  "consistent model", y=0.995)  # fmt: skip
     fig.subplots_adjust(left=0.16, right=0.98, top=0.93, bottom=0.04, wspace=0.45, hspace=0.25)
     path = Path(out_dir) / "tornado_dimensions.png"
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
