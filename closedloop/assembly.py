@@ -97,9 +97,9 @@ def assemble(
         if not np.all(np.isfinite(actuated)):
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
         q[clm.actuated_q_indices] = actuated
-    free = free_coordinates(clm)
+    free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     r = closure_residual(clm, q)
-    err = float(np.max(np.abs(r), initial=0.0))
+    err, size2 = float(abs(r).max(initial=0.0)), float(r @ r)
     it = 0
     while err > tol and it < max_iter:
         it += 1
@@ -110,13 +110,13 @@ def assemble(
         for _ in range(30):
             q_try = pin.integrate(model, q, step)
             r_try = closure_residual(clm, q_try)
-            err_try = float(np.max(np.abs(r_try)))
-            if np.linalg.norm(r_try) < np.linalg.norm(r) or err_try <= tol:
+            err_try, size2_try = float(abs(r_try).max()), float(r_try @ r_try)
+            if size2_try < size2 or err_try <= tol:
                 break
             step *= 0.5
         else:
             break
-        q, r, err = q_try, r_try, err_try
+        q, r, err, size2 = q_try, r_try, err_try, size2_try
     if not err <= tol:
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r} with actuated "
