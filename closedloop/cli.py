@@ -15,17 +15,16 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
 * ``2`` - bad input (missing file, unknown frame or joint, malformed closure file, wrong
   number of values, NaN, negative stiffness, an output path that cannot be written, a
   ``--q`` that does not close the loops): one line ``closedloop: error: <message>`` on
-  stderr. A command-line syntax error is reported by argparse (usage line, then the error).
+  stderr, a command-line syntax error included (:class:`closedloop.cli_common.UsageError`).
 * ``3`` - the computation failed on valid input (loops that cannot be closed for these
-  actuated values, no static equilibrium, a singular configuration or a mechanism): one
-  line on stderr.
+  actuated values, no static equilibrium, a singular configuration or a mechanism, a result
+  that is not finite): one line on stderr.
 * ``141`` - standard output was closed early (``| head``); nothing more is written.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 
@@ -33,11 +32,7 @@ import numpy as np
 
 from . import __version__, cli_identify, cli_map
 from .assembly import assemble
-from .blas import single_threaded_blas
-from .cli_common import (
-    Parser,
-    run_command,
-)
+from .cli_common import EXIT_HELP, Parser, finite_float, print_json, run_main
 from .compliance import (
     TWIST_LABELS,
     UNITS,
@@ -49,19 +44,12 @@ from .compliance import (
 from .conditioning import ILL_CONDITIONED
 from .configuration import Configuration
 from .data import BUNDLED_MODELS, ROBOTS, resolve
-from .exceptions import (
-    EXIT_BAD_INPUT,
-    EXIT_OK,
-    EXIT_RANK_DEFICIENT,
-    InvalidInputError,
-    OpenLoopError,
-)
+from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
 from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
 from .model import ClosedLoopModel
 
 PROG = "closedloop"
-EXIT_RIGID, EXIT_ERROR = EXIT_RANK_DEFICIENT, EXIT_BAD_INPUT
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
 
 EPILOG = """\
@@ -85,7 +73,8 @@ an eigenvalue ratio of 1e-14 C is rank deficient.
 
 Exit status: 0 K exists; 1 C is rank deficient (the rigid directions are named, K does
 not exist, JSON "K": null); 2 bad input; 3 the computation failed (loops that cannot be
-closed, no equilibrium, a singular configuration); errors are one line on stderr.
+closed, no equilibrium, a singular configuration); 141 output closed early; errors are one
+line on stderr.
 
 Examples:
   closedloop stiffness ur5 --frame tool0 --q 0 -1.0 1.5 -0.5 1.2 0.3 --joint-stiffness 1e4
@@ -97,8 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``closedloop`` command."""
     parser = Parser(
         prog=PROG,
-        description="Stiffness and compliance of robots with closed loops. Exit status: 0 "
-        "ok, 1 rank deficient (K does not exist), 2 bad input, 3 computation failed.",
+        description="Stiffness and compliance of robots with closed loops. " + EXIT_HELP,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -113,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--axes", choices=("world", "local"), default="world", help="axes of K and C")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
-        "--wrench", nargs=6, type=float, metavar="W",
+        "--wrench", nargs=6, type=finite_float, metavar="W",
         help="fx fy fz [N] nx ny nz [N m] at the frame (in --axes): print the share of the "
         "deflection energy stored in each spring and beam",
     )  # fmt: skip
@@ -142,10 +130,10 @@ def add_model_arguments(p: argparse.ArgumentParser) -> None:
     add_source_arguments(p)
     config = p.add_mutually_exclusive_group()
     config.add_argument(
-        "--q", nargs="+", type=float, metavar="Q", help="full configuration (nq values)"
+        "--q", nargs="+", type=finite_float, metavar="Q", help="full configuration (nq values)"
     )
     config.add_argument(
-        "--actuated", nargs="+", type=float, metavar="A", help="actuated joint values"
+        "--actuated", nargs="+", type=finite_float, metavar="A", help="actuated joint values"
     )
 
 
@@ -178,18 +166,18 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
 def add_preload_arguments(p: argparse.ArgumentParser) -> None:
     """--gravity [GX GY GZ], --payload MASS [X Y Z], --preload FX FY FZ NX NY NZ (SI)."""
     p.add_argument(
-        "--gravity", nargs="*", type=float, metavar="G",
+        "--gravity", nargs="*", type=finite_float, metavar="G",
         help="weigh the model's link inertias: GX GY GZ [m/s^2], world axes (no values: "
         "0 0 -9.81); q is then the springs' rest configuration and the result the tangent "
         "compliance where the mechanism settles, with its sag",
     )  # fmt: skip
     p.add_argument(
-        "--payload", nargs="+", type=float, metavar="V",
+        "--payload", nargs="+", type=finite_float, metavar="V",
         help="MASS [kg] [X Y Z]: a point mass at the loaded frame, offset in its axes [m] "
         "(needs --gravity)",
     )  # fmt: skip
     p.add_argument(
-        "--preload", nargs=6, type=float, metavar="W",
+        "--preload", nargs=6, type=finite_float, metavar="W",
         help="dead-load wrench fx fy fz [N] nx ny nz [N m] at the frame, world axes",
     )  # fmt: skip
 
@@ -224,14 +212,14 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         p.add_argument(
             name,
             nargs=3,
-            type=float,
+            type=finite_float,
             default=[0.0] * 3,
             metavar=labels,
             help=f"{name[2:]} at the frame origin, world axes [{unit}]",
         )
     p.add_argument(
         "--scale",
-        type=float,
+        type=finite_float,
         metavar="S",
         help="amplification of the deflection (default: automatic, the largest "
         "point displacement shown as 10%% of the model size)",
@@ -250,7 +238,7 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--html", metavar="FILE", help="write a self-contained HTML page")
     p.add_argument(
         "--duration",
-        type=float,
+        type=finite_float,
         metavar="SECONDS",
         help="without --html: serve for this long (default: until Ctrl-C)",
     )
@@ -382,7 +370,7 @@ def stiffness(args: argparse.Namespace) -> int:
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
-        print(json.dumps(doc | ({"energy_shares": shares} if shares else {}), allow_nan=False))
+        print_json(doc | ({"energy_shares": shares} if shares else {}))
     else:
         print(format_report(clm, res))
         if getattr(res, "equilibrium", None) is not None:
@@ -392,7 +380,7 @@ def stiffness(args: argparse.Namespace) -> int:
                   f"{res.stability_margin:.3g}")  # fmt: skip
         for name, share in (shares or {}).items():  # the per-element breakdown
             print(f"energy share {share:7.2%}  {name}")
-    return EXIT_OK if res.is_full_rank else EXIT_RIGID
+    return EXIT_OK if res.is_full_rank else EXIT_RANK_DEFICIENT
 
 
 def view(args: argparse.Namespace) -> int:
@@ -404,13 +392,7 @@ def view(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``closedloop`` command; returns the exit code (see module doc)."""
-    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # --help (0) or a usage error (2), already printed
-        return e.code if isinstance(e.code, int) else EXIT_ERROR
-    return run_command(PROG, args)
+    return run_main(PROG, lambda _: build_parser(), argv)
 
 
 if __name__ == "__main__":

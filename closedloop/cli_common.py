@@ -1,22 +1,49 @@
-"""What both command lines share: number parsing, output paths checked before any work,
-one-line errors, quiet closed pipes, and running a parsed subcommand to its exit status
-(:func:`closedloop.exceptions.exit_status`)."""
+"""What both command lines (``closedloop``, ``cahyman``) share, so that they follow one
+convention: the parser (negative numbers in e-notation are values; a usage error is one
+line, exit 2), the finite-number option type, output paths checked before any work, one
+JSON writer (never a NaN), one-line errors, quiet closed pipes, and the entry point that
+runs a parsed subcommand to its exit status (:func:`closedloop.exceptions.exit_status`)."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import os
 import re
 import sys
 import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from .exceptions import EXIT_FAILED, ClosedLoopError, InvalidInputError, exit_status
+from .blas import single_threaded_blas
+from .exceptions import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_RANK_DEFICIENT,
+    ClosedLoopError,
+    InvalidInputError,
+    NumericalError,
+    exit_status,
+)
 
 #: Exit status when standard output is closed early (128 + SIGPIPE, as a shell reports).
 EXIT_PIPE = 141
+
+#: The exit statuses, as the help of both command lines states them.
+EXIT_HELP = (
+    f"Exit status: {EXIT_OK} ok; {EXIT_RANK_DEFICIENT} rank deficient (K does not exist); "
+    f"{EXIT_BAD_INPUT} bad input; {EXIT_FAILED} computation failed (loops that cannot be "
+    f"closed, an unreachable pose, no equilibrium, a singular configuration); {EXIT_PIPE} "
+    "output closed early. Errors are one line on stderr."
+)
+
+
+class UsageError(InvalidInputError):
+    """A command-line error (unknown option, missing or malformed value): exit status 2."""
 
 
 #: A command-line value that reads as a negative number (``-1e5``, ``-.5``, ``-inf``).
@@ -25,11 +52,26 @@ NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infini
 
 class Parser(argparse.ArgumentParser):
     """An argument parser that takes ``-1e5``, ``-.5`` or ``-inf`` for values, not options
-    (argparse's own rule knows only ``-1`` and ``-1.5``); its subparsers are of this class."""
+    (argparse's own rule knows only ``-1`` and ``-1.5``), and raises :class:`UsageError`
+    instead of printing its usage block and exiting; its subparsers are of this class."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_NUMBER
+
+    def error(self, message: str):
+        raise UsageError(message)
+
+
+def finite_float(text: str) -> float:
+    """Option type: a finite number (``nan``, ``inf`` and overflowing values are refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def output_folder(path: str | Path, option: str = "--out") -> Path:
@@ -75,6 +117,34 @@ def output_file(path: str | Path, option: str) -> Path:
     return path
 
 
+def _non_finite(doc, where: str = "") -> str | None:
+    """Where the first NaN or infinity of a JSON-ready ``doc`` is (``C[1][2]``), or None."""
+    if isinstance(doc, float):
+        return None if math.isfinite(doc) else where or "the value"
+    if isinstance(doc, dict):
+        items = [(f"{where}.{k}" if where else str(k), v) for k, v in doc.items()]
+    elif isinstance(doc, list | tuple):
+        items = [(f"{where}[{i}]", v) for i, v in enumerate(doc)]
+    else:
+        return None
+    return next((found for path, v in items if (found := _non_finite(v, path))), None)
+
+
+def print_json(doc) -> None:
+    """Print ``doc`` as one JSON object (indented by 2), the one writer of both command lines.
+
+    Raises:
+        NumericalError: ``doc`` holds a NaN or an infinity (strict JSON has neither); the
+            message says where. Nothing is printed.
+    """
+    try:
+        text = json.dumps(doc, indent=2, allow_nan=False)
+    except ValueError:
+        where = _non_finite(doc)
+        raise NumericalError(f"the result is not finite at {where}; nothing written") from None
+    print(text)
+
+
 def closed_pipe() -> int:
     """After a :class:`BrokenPipeError` on stdout: send what is left to /dev/null (so that
     the interpreter's final flush stays quiet) and return :data:`EXIT_PIPE`."""
@@ -110,6 +180,29 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
+
+
+def run_main(
+    prog: str,
+    parser_of: Callable[[list[str]], argparse.ArgumentParser],
+    argv: Sequence[str] | None = None,
+) -> int:
+    """The entry point of a command line: parse ``argv`` (default ``sys.argv[1:]``) with
+    ``parser_of(argv)`` and run the subcommand; returns the exit status. A usage error is
+    one line ``prog: error: ...`` and :data:`EXIT_BAD_INPUT`; ``--help`` and ``--version``
+    return 0."""
+    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = parser_of(argv).parse_args(argv)
+    except UsageError as e:
+        print(error_line(prog, e), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:  # --help | head
+        return closed_pipe()
+    except SystemExit as e:  # --help, --version
+        return e.code if isinstance(e.code, int) else EXIT_OK
+    return run_command(prog, args)
 
 
 def dask_client(address: str | None):

@@ -11,7 +11,8 @@ of :func:`closedloop.identification.read_measurements` (``frame``, ``measurement
 from __future__ import annotations
 
 import argparse
-import json
+
+from .cli_common import print_json
 
 
 def add_parser(sub, model_arguments) -> None:
@@ -39,7 +40,7 @@ def run_identify(args) -> int:
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
     fit = identify(clm, data, frame, groups)
     if args.json:
-        print(json.dumps({"model": clm.name, "frame": frame, **fit.to_dict()}, allow_nan=False))
+        print_json({"model": clm.name, "frame": frame, **fit.to_dict()})
         return 0
     print(f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
           f"weighted residual RMS {fit.residual_rms:.3g}")  # fmt: skip

@@ -140,6 +140,10 @@ class JointLimitWarning(UserWarning):
     """An equilibrium lies outside the position limits of some joints."""
 
 
+class NumericalError(ClosedLoopError):
+    """A result is not finite (NaN or infinity) on finite input: the computation failed."""
+
+
 #: Exit status of the command lines (``closedloop``, ``cahyman``): success.
 EXIT_OK = 0
 #: The analysis succeeded but the compliance is rank deficient: the stiffness does not exist.
@@ -149,7 +153,13 @@ EXIT_BAD_INPUT = 2
 #: The computation failed on valid input: assembly, equilibrium, singular configuration.
 EXIT_FAILED = 3
 
-_FAILURES = (AssemblyError, EquilibriumError, MechanismError, SingularConfigurationError)
+_FAILURES = (
+    AssemblyError,
+    EquilibriumError,
+    MechanismError,
+    NumericalError,
+    SingularConfigurationError,
+)
 
 
 def exit_status(error: ClosedLoopError) -> int:
@@ -157,7 +167,7 @@ def exit_status(error: ClosedLoopError) -> int:
 
     :data:`EXIT_RANK_DEFICIENT` for :class:`RigidDirectionsError`, :data:`EXIT_FAILED` for
     :class:`AssemblyError`, :class:`EquilibriumError` (and :class:`JointLimitError`),
-    :class:`MechanismError` and :class:`SingularConfigurationError`,
+    :class:`MechanismError`, :class:`NumericalError` and :class:`SingularConfigurationError`,
     :data:`EXIT_BAD_INPUT` for the others (:class:`InvalidInputError`,
     :class:`ModelFileError`, :class:`NameNotFoundError`, :class:`OpenLoopError`).
     """

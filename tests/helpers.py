@@ -7,6 +7,11 @@ several modules use are in ``conftest.py``.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import scipy.linalg
@@ -14,6 +19,8 @@ import scipy.linalg
 from closedloop.assembly import assemble
 from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
 from closedloop.model import ClosedLoopModel, Closure
+
+REPO = Path(__file__).resolve().parent.parent
 
 UR5_JOINTS = (
     "shoulder_pan_joint",
@@ -142,3 +149,23 @@ def pendulum(k: float = 40.0, length: float = 0.5) -> ClosedLoopModel:
     return ClosedLoopModel(
         m, actuated=["hinge"], springs={"hinge": k}, locked=["support"], name="pendulum"
     )
+
+
+# ---------------------------------------------------------------------------- command lines
+def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
+    """``python -m MODULE ARGV`` with stdout a pipe whose reader has already gone (``| head``
+    that stopped before the first line); stderr captured as text."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        return subprocess.run(
+            [sys.executable, "-m", module, *map(str, argv)],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(REPO)},
+            timeout=120,
+            check=False,
+        )
+    finally:
+        os.close(write)

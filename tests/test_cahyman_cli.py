@@ -6,15 +6,14 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO, closed_pipe_run
 
 from cahyman_pin import api
 from cahyman_pin.cli import main
 
-REPO = Path(__file__).resolve().parent.parent
 #: Same computation through the CLI and the API: only the deg/mm -> SI conversion
 #: differs (one rounding of the inputs), amplified by cond(C) ~ 1e7 at most; K entries
 #: reach ~1e6 SI, hence the absolute part of its tolerance.
@@ -234,22 +233,9 @@ def test_published_backend_honours_ks_and_does_not_claim_world_axes(capsys):
 
 
 # ------------------------------------------------------------------ closed pipe
-def closed_pipe_run(*argv: str) -> subprocess.CompletedProcess:
-    """``python -m cahyman_pin ARGV`` with stdout a pipe whose reader has already gone."""
-    read, write = os.pipe()
-    os.close(read)
-    try:
-        env = {**os.environ, "PYTHONPATH": str(REPO)}
-        return subprocess.run([sys.executable, "-m", "cahyman_pin", *argv], stdout=write,
-                              stderr=subprocess.PIPE, text=True, env=env, timeout=120,
-                              check=False)  # fmt: skip
-    finally:
-        os.close(write)
-
-
 @pytest.mark.parametrize("argv", [["stiffness", "--json"], ["deflect", "--force", "1", "0", "0"]])
 def test_closed_pipe_ends_quietly(argv):
-    done = closed_pipe_run(*argv)
+    done = closed_pipe_run("cahyman_pin", *argv)
     assert (done.returncode, done.stderr) == (141, "")
 
 

@@ -12,11 +12,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import REPO, assert_close_in_norm, closed_pipe_run
 
 from closedloop.cli import main
 
-REPO = Path(__file__).resolve().parent.parent
 UR5_Q = [0.0, -1.0, 1.5, -0.5, 1.2, 0.3]  # the documented example [rad]
 UR5_K = 1e4  # joint stiffness of the example [N m/rad]
 # C = J K^-1 J^T is a product of O(1) numbers computed along two routes (compliance via
@@ -177,7 +176,9 @@ ERRORS = {
     "malformed-closures": ("{fourbar} --closures {tmp}/bad.yaml --frame P", "bad.yaml': type '4d'"),
     "unknown-joint": ("{ur5} --frame tool0 --springs {tmp}/k.yaml", "unknown joint 'elbow'"),
     "q-count": ("{ur5} --frame tool0 --q 0 0 0 0 0", "q has 5 values; expected nq=6"),
-    "q-nan": ("{ur5} --frame tool0 --q 0 0 nan 0 0 0", "non-finite"),
+    "q-nan": ("{ur5} --frame tool0 --q 0 0 nan 0 0 0", "--q: 'nan' is not a finite number"),
+    "wrench-inf": ("{ur5} --frame tool0 --wrench 0 0 -1e400 0 0 0", "'-1e400' is not a finite"),
+    "usage": ("{ur5} --frame tool0 --axes up", "argument --axes: invalid choice: 'up'"),
     "negative-stiffness": ("{ur5} --frame tool0 --joint-stiffness -1", "expected a number >= 0"),
     "nan-stiffness": ("{ur5} --frame tool0 --joint-stiffness nan", "expected a number >= 0"),
     "q-not-assembled": (
@@ -316,18 +317,5 @@ def test_bad_html_path_exits_2_before_any_work(tmp_path, capsys, monkeypatch, ht
 
 
 def test_closed_pipe_ends_quietly(ur5_urdf):
-    read, write = os.pipe()
-    os.close(read)  # the reader (``| head``) has gone before the first line
-    try:
-        done = subprocess.run(
-            [sys.executable, "-m", "closedloop", *map(str, stiffness_args(ur5_urdf))],
-            stdout=write,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "PYTHONPATH": str(REPO)},
-            timeout=120,
-            check=False,
-        )
-    finally:
-        os.close(write)
+    done = closed_pipe_run("closedloop", *stiffness_args(ur5_urdf))
     assert (done.returncode, done.stderr) == (141, "")

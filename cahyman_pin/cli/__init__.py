@@ -15,22 +15,19 @@ line), so that ``cahyman stiffness`` does not pay for matplotlib or the sweep ma
 Exit status (as for ``closedloop``, :func:`closedloop.exceptions.exit_status`): 0 ok; 1 the
 compliance is rank deficient (K does not exist); 2 bad input; 3 the computation failed on
 valid input (an unreachable pose, a singular configuration); 141 standard output closed
-early (``| head``). Errors are one line ``cahyman: error: ...`` on stderr.
+early (``| head``). Errors are one line ``cahyman: error: ...`` on stderr. Parser, usage
+error, number type, JSON writer and entry point are those of :mod:`closedloop.cli_common`.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import sys
 from collections.abc import Sequence
 
-from cahyman_pin.cli.options import EXIT_HELP, CahymanParser, UsageError
 from cahyman_pin.cli.stiffness import add_deflect, add_stiffness
 from closedloop import __version__
-from closedloop.blas import single_threaded_blas
-from closedloop.cli_common import error_line, run_command
-from closedloop.exceptions import EXIT_BAD_INPUT
+from closedloop.cli_common import EXIT_HELP, Parser, run_main
 
 PROG = "cahyman"
 #: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).
@@ -55,7 +52,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             modules' subcommands are placeholders that carry their help line (enough for
             ``cahyman --help`` and for the list of choices of an unknown command).
     """
-    parser = CahymanParser(
+    parser = Parser(
         prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator). " + EXIT_HELP
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -72,16 +69,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module docstring)."""
-    single_threaded_blas()  # small matrices: BLAS threads cost more than they give
-    try:
-        argv = sys.argv[1:] if argv is None else list(argv)
-        args = build_parser(command_of(argv)).parse_args(argv)
-    except UsageError as e:
-        print(error_line(PROG, e), file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except SystemExit as e:  # --help, --version
-        return e.code if isinstance(e.code, int) else 0
-    return run_command(PROG, args)
+    return run_main(PROG, lambda words: build_parser(command_of(words)), argv)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,7 @@
 """Options shared by the ``cahyman`` subcommands: the pose in the paper's units (deg, mm)
-converted once to SI, the backend and K_s choices, masses; the usage error (exit 2)."""
+converted once to SI, the backend and K_s choices, masses. The conventions both command
+lines share (parser, usage error, finite numbers, JSON, exit statuses) are
+:mod:`closedloop.cli_common`'s."""
 
 from __future__ import annotations
 
@@ -10,35 +12,11 @@ import numpy as np
 
 from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
-from closedloop.cli_common import Parser
-from closedloop.exceptions import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
-    EXIT_RANK_DEFICIENT,
-    InvalidInputError,
-)
+from closedloop.cli_common import UsageError, finite_float
 
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
 KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
-
-
-class UsageError(InvalidInputError):
-    """A command-line error (bad option or value): exit status 2."""
-
-
-#: The exit statuses, as the help states them.
-EXIT_HELP = (
-    f"Exit status: {EXIT_OK} ok; {EXIT_RANK_DEFICIENT} rank deficient (K does not exist); "
-    f"{EXIT_BAD_INPUT} bad input; {EXIT_FAILED} computation failed (unreachable pose, "
-    "singular configuration)."
-)
-
-
-class CahymanParser(Parser):
-    def error(self, message: str):  # one line, no usage block
-        raise UsageError(message)
 
 
 def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,17 +36,6 @@ def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
         "published (the paper's matrices as printed, in its own coordinates) "
         "(default: %(default)s)",
     )
-
-
-def finite_float(text: str) -> float:
-    """argparse type: a finite real number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
 
 
 def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
@@ -125,7 +92,10 @@ def _masses(args: argparse.Namespace) -> dict[str, float]:
         if name not in MASS_NAMES or not value:
             raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "
                              f"{', '.join(MASS_NAMES)}")  # fmt: skip
-        out[name] = finite_float(value)
+        try:
+            out[name] = finite_float(value)
+        except argparse.ArgumentTypeError as e:
+            raise UsageError(f"--mass {item!r}: {e}") from None
     return out
 
 

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 import numpy as np
 
 from cahyman_pin.api import CaHyManStiffness
 from cahyman_pin.cli.options import (
-    EXIT_HELP,
     add_pose_arguments,
     add_weight_arguments,
     finite_float,
     inputs_echo,
     stiffness_from_args,
 )
+from closedloop.cli_common import EXIT_HELP, print_json
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 
@@ -46,7 +45,7 @@ def _run_stiffness(args: argparse.Namespace) -> int:
     out["inputs"] = inputs_echo(args)
     status = EXIT_OK if r.is_full_rank else EXIT_RANK_DEFICIENT
     if args.json:
-        print(json.dumps(out, indent=2, allow_nan=False))
+        print_json(out)
         return status
     print(f"CaHyMan at alpha = {args.alpha} deg, alpha4 = {args.alpha4} deg, "
           f"s4 = {args.s4} mm (K_s {args.ks}, backend {args.backend})")  # fmt: skip
@@ -102,7 +101,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
     if r.axes != "world":
         out["units"] = f"SI, with _mm and _deg copies; twist of M in the {r.axes}"
     if args.json:
-        print(json.dumps(out, indent=2, allow_nan=False))
+        print_json(out)
         return 0
     print(f"force {args.force} N, torque {args.torque} N m at M")
     print("\n".join(_pose_lines(r)))

@@ -18,7 +18,6 @@ model of :mod:`cahyman_pin.model`, hence ``--backend`` must stay ``generic``. Wi
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 
@@ -29,6 +28,7 @@ from cahyman_pin.model import cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import FRAME_M
 from closedloop.cli import add_view_arguments, view_from_args
+from closedloop.cli_common import print_json
 
 
 def _stderr(line: str) -> None:
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     out = _stderr if args.json else print
     scene = view_from_args(model.clm, q, FRAME_M, args, out=out, pose=pose, prog="cahyman")
     if args.json:
-        print(json.dumps({**scene.to_dict(), "html": args.html}, allow_nan=False))
+        print_json({**scene.to_dict(), "html": args.html})
     return 0
 
 

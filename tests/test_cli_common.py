@@ -1,0 +1,130 @@
+"""One convention for both command lines (closedloop.cli_common): usage errors, finite
+numbers, the JSON writer, exit statuses, closed pipes."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+
+import pytest
+from helpers import closed_pipe_run
+
+from cahyman_pin.cli import main as cahyman_main
+from closedloop.cli import main as closedloop_main
+from closedloop.cli_common import (
+    EXIT_PIPE,
+    UsageError,
+    finite_float,
+    print_json,
+    run_command,
+)
+from closedloop.exceptions import EXIT_BAD_INPUT, EXIT_FAILED, NumericalError
+
+MAINS = {"closedloop": closedloop_main, "cahyman": cahyman_main}
+#: A valid command of each, before the option under test.
+COMMANDS = {
+    "closedloop": ["stiffness", "fourbar", "--frame", "P", "--actuated", "0.3"],
+    "cahyman": ["deflect"],
+}
+
+
+def run(capsys, prog: str, *argv: str) -> tuple[int, str, str]:
+    code = MAINS[prog](list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("prog", MAINS)
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        (["--no-such-option"], "unrecognized arguments: --no-such-option"),
+        (["--force", "0", "nan", "0"], "argument --force: 'nan' is not a finite number"),
+        (["--force", "0", "1e999", "0"], "'1e999' is not a finite number"),
+        (["--force", "0", "x", "0"], "argument --force: 'x' is not a number"),
+    ],
+)
+def test_usage_errors_are_one_line_and_exit_2(capsys, prog, extra, match):
+    command = COMMANDS[prog] if "--force" not in extra or prog == "cahyman" else ["view",
+              "fourbar", "--frame", "P", "--html", "unused.html"]  # fmt: skip
+    code, out, err = run(capsys, prog, *command, *extra)
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert err.startswith(f"{prog}: error: ") and err.count("\n") == 1, err
+    assert match in err
+
+
+@pytest.mark.parametrize("prog", MAINS)
+def test_unknown_command_is_one_line(capsys, prog):
+    code, out, err = run(capsys, prog, "stiffnes")
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert err.startswith(f"{prog}: error: argument COMMAND: invalid choice: 'stiffnes'")
+    assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize("prog", MAINS)
+def test_help_states_the_same_exit_statuses(capsys, prog):
+    code, out, _ = run(capsys, prog, "--help")
+    flat = " ".join(out.split())
+    assert code == 0
+    assert "Exit status: 0 ok; 1 rank deficient (K does not exist); 2 bad input; 3 " in flat
+    assert f"{EXIT_PIPE} output closed early" in flat
+
+
+@pytest.mark.parametrize(("module", "argv"), [("closedloop", ["--help"]),
+                                              ("cahyman_pin", ["--help"])])  # fmt: skip
+def test_help_into_a_closed_pipe_ends_quietly(module, argv):
+    done = closed_pipe_run(module, *argv)
+    # argparse ignores the failed write of its help: 0; a later flush would give 141
+    assert done.returncode in (0, EXIT_PIPE) and done.stderr == ""
+
+
+@pytest.mark.parametrize(
+    ("text", "value"), [("-1e5", -1e5), ("-.5", -0.5), ("2E-1", 0.2), ("0", 0.0), ("1e308", 1e308)]
+)
+def test_finite_float_reads_numbers(text, value):
+    assert finite_float(text) == value
+
+
+@pytest.mark.parametrize("text", ["nan", "-inf", "inf", "1e309", "", "1,5", "0x10"])
+def test_finite_float_refuses_the_rest(text):
+    with pytest.raises(argparse.ArgumentTypeError, match=repr(text)):
+        finite_float(text)
+
+
+def test_print_json_writes_strict_indented_json(capsys):
+    doc = {"K": None, "C": [[1.0, -2.5e-7], [0.0, 3.0]], "rank": 6, "name": "P"}
+    print_json(doc)
+    text = capsys.readouterr().out
+    assert json.loads(text) == doc and text.startswith('{\n  "K": null,')
+
+
+@pytest.mark.parametrize(
+    ("doc", "where"),
+    [
+        ({"C": [[1.0, 2.0], [3.0, math.nan]]}, "C[1][1]"),
+        ({"pose": {"M": [0.0, math.inf, 0.0]}}, "pose.M[1]"),
+        ([1.0, -math.inf], "[1]"),
+    ],
+)
+def test_print_json_never_writes_a_nan(capsys, doc, where):
+    with pytest.raises(NumericalError, match=rf"not finite at {re.escape(where)};"):
+        print_json(doc)
+    assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize("prog", MAINS)
+def test_a_nan_result_exits_3_with_one_line(capsys, prog):
+    args = argparse.Namespace(func=lambda _: print_json({"C": [math.nan]}))
+    assert run_command(prog, args) == EXIT_FAILED
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == f"{prog}: error: the result is not finite at C[0]; nothing written\n"
+
+
+def test_usage_error_is_bad_input():
+    from closedloop.exceptions import InvalidInputError, exit_status
+
+    assert issubclass(UsageError, InvalidInputError)
+    assert exit_status(UsageError("x")) == EXIT_BAD_INPUT
