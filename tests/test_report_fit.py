@@ -125,15 +125,27 @@ def test_compliance_is_linear_in_the_spring_compliances():
         np.testing.assert_allclose(parts, C, rtol=0, atol=1e-9 * np.abs(C).max())
 
 
-def test_stiffness_fit_reaches_the_global_optimum_of_the_linear_quantities():
+@pytest.mark.parametrize("relative_error", [cells.RELATIVE_ERROR, 0.0])
+def test_linear_optimum_is_the_nnls_of_single_spring_columns(relative_error):
     B, linear = _single_spring_basis()
-    p, sd = _published_vector(), cells.standard_deviations(P)
+    p, sd = _published_vector(), cells.standard_deviations(P, relative_error)
+    if relative_error == 0.0:  # the rounding alone: 0.01/sqrt(12) per printed cell
+        n = np.array([len(q.cells) for q in cells.quantities(P)])
+        np.testing.assert_allclose(sd, 0.01 * np.sqrt(n / 12), rtol=1e-14)
     c0 = 1.0 / np.array([getattr(P, g[0]) for g in GROUPS])
     c, norm = scipy.optimize.nnls(B[linear] * c0 / sd[linear, None], p[linear] / sd[linear])
-    k_lin, chi2_lin = fit.linear_optimum(P)
+    k_lin, chi2_lin, chi2_rigid = fit.linear_optimum(P, relative_error)
     np.testing.assert_allclose(chi2_lin, norm**2, rtol=1e-6)
+    np.testing.assert_allclose(chi2_rigid, np.sum((p[linear] / sd[linear]) ** 2), rtol=1e-12)
     k_test = np.where(c > 0, 1.0 / np.where(c > 0, c * c0, 1.0), np.inf)
     np.testing.assert_allclose(list(k_lin.values()), k_test, rtol=1e-6)
+
+
+def test_stiffness_fit_reaches_the_global_optimum_of_the_linear_quantities():
+    _, linear = _single_spring_basis()
+    p, sd = _published_vector(), cells.standard_deviations(P)
+    _, chi2_lin, _ = fit.linear_optimum(P)
+    norm = np.sqrt(chi2_lin)
     s = fit.stiffness_fit(P)
     chi2_fit_linear = np.sum((s.residuals[linear] / sd[linear]) ** 2)
     # no positive stiffnesses do better than the global optimum; the fit reaches it (to the

@@ -66,11 +66,12 @@ class Quantity:
     @property
     def sd(self) -> float:
         """Standard deviation given to the published value [mm or deg]."""
-        return float(
-            np.hypot(
-                PRINTED_STEP * np.sqrt(len(self.cells) / 12.0), RELATIVE_ERROR * self.published
-            )
-        )
+        return self.sd_with(RELATIVE_ERROR)
+
+    def sd_with(self, relative_error: float) -> float:
+        """Standard deviation with another relative error (0: the rounding alone)."""
+        rounding = PRINTED_STEP * np.sqrt(len(self.cells) / 12.0)
+        return float(np.hypot(rounding, relative_error * self.published))
 
     @property
     def label(self) -> str:
@@ -123,9 +124,12 @@ def published_values(params: CaHyManParams) -> np.ndarray:
     return np.array([q.published for q in quantities(params)])
 
 
-def standard_deviations(params: CaHyManParams) -> np.ndarray:
-    """(48,) :attr:`Quantity.sd` of every quantity [mm or deg]."""
-    return np.array([q.sd for q in quantities(params)])
+def standard_deviations(
+    params: CaHyManParams, relative_error: float = RELATIVE_ERROR
+) -> np.ndarray:
+    """(48,) standard deviation of every quantity [mm or deg] (:attr:`Quantity.sd`, or
+    with another relative error: 0 for the rounding alone)."""
+    return np.array([q.sd_with(relative_error) for q in quantities(params)])
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,13 @@ from functools import lru_cache
 import numpy as np
 import scipy.optimize
 
-from cahyman_pin.paper.cells import model_values, published_values, quantities, standard_deviations
+from cahyman_pin.paper.cells import (
+    RELATIVE_ERROR,
+    model_values,
+    published_values,
+    quantities,
+    standard_deviations,
+)
 from cahyman_pin.params import SOURCES, CaHyManParams
 from closedloop.conditioning import rule_rank
 from closedloop.exceptions import ClosedLoopError
@@ -125,22 +131,29 @@ def _linear_basis(params: CaHyManParams, groups) -> tuple[np.ndarray, np.ndarray
     return np.column_stack(cols), 1.0 / k
 
 
-def linear_optimum(params: CaHyManParams) -> tuple[dict[str, float], float]:
+def linear_optimum(
+    params: CaHyManParams, relative_error: float = RELATIVE_ERROR
+) -> tuple[dict[str, float], float, float]:
     """Global least-squares optimum over the linear quantities of the stiffness groups.
+
+    Args:
+        relative_error: of the weights (:func:`~cahyman_pin.paper.cells.standard_deviations`;
+            0: the rounding alone, millimetres and degrees taken as alike).
 
     Returns:
         (name -> stiffness [SI], inf where the compliance is 0: rigid), its chi^2 over the
-        linear quantities.
+        linear quantities, and the chi^2 there of a rigid machine (every value 0).
     """
     qs = quantities(params)
     lin = np.array([q.linear for q in qs])
-    sd, p = standard_deviations(params)[lin], published_values(params)[lin]
+    sd = standard_deviations(params, relative_error)[lin]
+    p = published_values(params)[lin]
     B, c0 = _linear_basis(params, STIFFNESS_GROUPS)
     # columns scaled by the reference compliances: a well-conditioned NNLS
     c, norm = scipy.optimize.nnls(B[lin] * c0 / sd[:, None], p / sd)
     k = {n: (1.0 / (ci * c0i) if ci > 0 else np.inf) for n, ci, c0i in
          zip(STIFFNESS_GROUPS, c, c0, strict=True)}  # fmt: skip
-    return k, float(norm**2)
+    return k, float(norm**2), float(np.sum((p / sd) ** 2))
 
 
 def _inactive(f, x: np.ndarray) -> np.ndarray:
@@ -198,7 +211,7 @@ def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> 
 
 @lru_cache(maxsize=4)
 def _stiffness_fit(params: CaHyManParams, published: tuple[float, ...]) -> FitResult:
-    k_lin, _ = linear_optimum(params)
+    k_lin, _, _ = linear_optimum(params)
     ref = np.array([getattr(params, g[0]) for g in STIFFNESS_GROUPS.values()])
     nnls = np.array([min(k, STIFFNESS_RANGE * r) for k, r in zip(k_lin.values(), ref, strict=True)])
     return _fit(params, STIFFNESS_GROUPS, STIFFNESS_RANGE, (ref, nnls))
