@@ -1,15 +1,14 @@
-"""Shared fixtures: paths of the local robot files, and the models several modules load."""
+"""Shared fixtures: paths of the local robot files, and the models several modules load
+(the four-bar, the UR5, CaHyMan)."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import UR5_JOINTS, UR5_Q
+from helpers import REPO, UR5_JOINTS, UR5_Q
 
 from closedloop.assembly import assemble
 from closedloop.io import load_urdf, robot_data_dir
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="session")
@@ -57,3 +56,13 @@ def fourbar(fourbar_urdf, fourbar_yaml):
 def ur5(ur5_urdf):
     """(model, q): the UR5 with 1e4 N m/rad on every joint, at UR5_Q (a copy)."""
     return load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4)), UR5_Q.copy()
+
+
+@pytest.fixture(scope="session")
+def cahyman():
+    """CaHyMan with the default parameters (cahyman_pin.model.cahyman_model, its cached
+    instance: shared by every test, never modified by one)."""
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    return cahyman_model(DEFAULT_PARAMS)

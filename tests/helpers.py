@@ -44,13 +44,18 @@ ATOL_CLOSURE = 1e-12
 
 
 # ---------------------------------------------------------------------------- assertions
-def assert_close_in_norm(actual, desired, rtol) -> None:
+def assert_close_in_norm(actual, desired, rtol, scale=None) -> None:
     """Entries agree to rtol of themselves, with an absolute floor rtol * max|desired|.
 
     The one scaled comparison of the tests: near-zero (or exactly zero) entries of a
-    matrix or vector are compared to rtol times its largest entry.
+    matrix or vector are compared to rtol times its largest entry. With ``scale`` (n,),
+    square matrices are compared as S A S, S = diag(scale): entries of mixed units (a
+    compliance's rotation rows times a length [m], say) then weigh alike.
     """
-    desired = np.asarray(desired, dtype=float)
+    actual, desired = np.asarray(actual, dtype=float), np.asarray(desired, dtype=float)
+    if scale is not None:
+        s = np.outer(scale, scale)
+        actual, desired = actual * s, desired * s
     np.testing.assert_allclose(actual, desired, rtol=rtol, atol=rtol * np.abs(desired).max())
 
 

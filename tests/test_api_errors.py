@@ -13,13 +13,6 @@ from closedloop import data
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 
 
-@pytest.fixture(scope="module")
-def fourbar():
-    """(model, q): the bundled four-bar, assembled at crank = 0.3 rad."""
-    clm = cl.load_model(data.path("fourbar.urdf"), data.path("fourbar.yaml"))
-    return clm, cl.assemble(clm, actuated=[0.3]).q
-
-
 @pytest.fixture(autouse=True)
 def warnings_are_errors():
     """A ComplexWarning (imaginary part dropped) would fail the test instead of passing it."""

@@ -65,9 +65,10 @@ STIFFENING = 1e6
 STIFFENING_MARGIN = 2.0
 
 
-@pytest.fixture(scope="module")
-def model() -> CaHyManModel:
-    return cahyman_model(DEFAULT_PARAMS)
+@pytest.fixture
+def model(cahyman) -> CaHyManModel:
+    """CaHyMan with the default parameters (the shared fixture, under this module's name)."""
+    return cahyman
 
 
 def scaled(C: np.ndarray, ref: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from helpers import assert_close_in_norm
 
 import closedloop as cl
 from closedloop.gravity import GravityLoad, Payload
-from closedloop.io import load_urdf, robot_data_dir
+from closedloop.io import load_urdf
 from closedloop.statics import frame_displacement
 
 G = np.array([0.0, 0.0, -9.81])  # m/s^2
@@ -30,8 +30,10 @@ RTOL_FD = 1e-5
 H_WRENCH = 1e-2  # N or N m
 
 
-def _ur5():
-    return load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=UR5_K)
+@pytest.fixture(scope="module")
+def soft_ur5(ur5_urdf):
+    """The UR5 with UR5_K on every joint."""
+    return load_urdf(ur5_urdf, joint_stiffness=UR5_K)
 
 
 def _gravity_torques(model, q):
@@ -61,8 +63,8 @@ def _ur5_reference(clm, q0):
 
 
 @pytest.mark.parametrize("pose", [0, 1])
-def test_ur5_sag_and_tangent_compliance_under_its_own_weight(pose):
-    clm, q0 = _ur5(), UR5_POSES[pose]
+def test_ur5_sag_and_tangent_compliance_under_its_own_weight(soft_ur5, pose):
+    clm, q0 = soft_ur5, UR5_POSES[pose]
     q_ref, C_ref = _ur5_reference(clm, q0)
     res = cl.compliance(clm, q0, "tool0", gravity=G)
     np.testing.assert_allclose(res.q, q_ref, rtol=0, atol=RTOL_UR5 * np.abs(q_ref - q0).max())
@@ -219,19 +221,19 @@ def test_cahyman_masses_sit_where_eq_11_puts_them(legs_deg, alpha4_deg, s4):
     np.testing.assert_allclose(torque, 9.81 * np.cos(a4) * lever, rtol=1e-12)
 
 
-def test_command_line_gravity_payload_and_preload(capsys):
+def test_command_line_gravity_payload_and_preload(capsys, ur5_urdf, soft_ur5):
     import json
 
     from closedloop.cli import main
 
     q = UR5_POSES[0]
-    args = ["stiffness", str(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"),
+    args = ["stiffness", str(ur5_urdf),
             "--frame", "tool0", "--q", *map(repr, q.tolist()), "--joint-stiffness", repr(UR5_K),
             "--gravity", "--payload", "2", "0", "0", "0.05", "--preload", "1", "0", "0", "0",
             "0", "0", "--json"]  # fmt: skip
     assert main(args) == 0
     doc = json.loads(capsys.readouterr().out)
-    ref = cl.compliance(_ur5(), q, "tool0", gravity=(0.0, 0.0, -9.81),
+    ref = cl.compliance(soft_ur5, q, "tool0", gravity=(0.0, 0.0, -9.81),
                         payloads=[Payload(2.0, "tool0", np.array([0.0, 0.0, 0.05]))],
                         preload=[1.0, 0, 0, 0, 0, 0])  # fmt: skip
     np.testing.assert_allclose(doc["sag"], ref.sag, rtol=1e-12, atol=1e-15)

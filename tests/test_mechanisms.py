@@ -60,14 +60,10 @@ ROTATIONS = [3, 4, 5]
 STEWART_L, RRR_L, FIVEBAR_L, DELTA_L = 0.5, 0.12, 0.3, 0.05  # scaling lengths [m]
 
 
-def assert_compliance_close(C, C_ref, rtol, length, labels=range(6)):
-    """C and C_ref (twist rows per wrench columns ``labels``) agree after scaling.
-
-    Rotational rows and columns are multiplied by ``length`` [m]; entries then agree to
-    rtol of themselves plus rtol times the largest entry (near-zero ones).
-    """
-    s = np.where(np.isin(list(labels), ROTATIONS), length, 1.0)
-    assert_close_in_norm(C * np.outer(s, s), C_ref * np.outer(s, s), rtol)
+def lengths(length, labels=range(6)) -> np.ndarray:
+    """The scale of a compliance block with twist rows (wrench columns) ``labels``: the
+    rotational ones times ``length`` [m], for :func:`helpers.assert_close_in_norm`."""
+    return np.where(np.isin(list(labels), ROTATIONS), length, 1.0)
 
 
 def assert_same_span(V, W):
@@ -187,14 +183,14 @@ def test_stewart_compliance_is_the_inverse_of_JT_k_J(pose):
     result = compliance(m.clm, m.q, m.frame)
     assert (result.rank, result.mobility, result.internal_mobilities) == (6, 6, 0)
     C_ref = np.linalg.inv(mech.stewart_stiffness(m.geometry))
-    assert_compliance_close(result.C, C_ref, HAND_RTOL, STEWART_L)
+    assert_close_in_norm(result.C, C_ref, HAND_RTOL, scale=lengths(STEWART_L))
 
 
 def test_stewart_ball_base_joints_add_six_leg_spins_and_change_nothing():
     universal, ball = (mech.stewart(psi=0.4, base_joint=j) for j in ("universal", "spherical"))
     a, b = (compliance(m.clm, m.q, m.frame) for m in (universal, ball))
     assert (b.mobility, b.internal_mobilities, b.rank) == (12, 6, 6)
-    assert_compliance_close(b.C, a.C, ORDER_RTOL, STEWART_L)
+    assert_close_in_norm(b.C, a.C, ORDER_RTOL, scale=lengths(STEWART_L))
 
 
 def singular_value_ratio(m):
@@ -226,7 +222,7 @@ def test_stewart_near_fichter_singularity(delta):
     result = compliance(m.clm, m.q, m.frame)
     assert result.rank == 6
     rtol = max(HAND_RTOL, NEAR_SINGULAR_FACTOR * np.finfo(float).eps * cond)
-    assert_compliance_close(result.C, np.linalg.inv(K), rtol, STEWART_L)
+    assert_close_in_norm(result.C, np.linalg.inv(K), rtol, scale=lengths(STEWART_L))
 
 
 TENSION = np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0])
@@ -293,7 +289,9 @@ def test_3rrr_planar_compliance_and_rigid_out_of_plane_directions(pose):
     m = mech.rrr3(pose)
     result = compliance(m.clm, m.q, m.frame)
     C_ref = np.linalg.inv(mech.rrr3_planar_stiffness(m.geometry))
-    assert_compliance_close(result.C[np.ix_(PLANAR, PLANAR)], C_ref, HAND_RTOL, RRR_L, PLANAR)
+    assert_close_in_norm(
+        result.C[np.ix_(PLANAR, PLANAR)], C_ref, HAND_RTOL, scale=lengths(RRR_L, PLANAR)
+    )
     # the point closures hold the platform in the plane: dz, rx, ry are rigid
     np.testing.assert_allclose(result.C[OUT_OF_PLANE], 0.0, atol=HAND_RTOL * np.abs(C_ref).max())
     assert (result.rank, result.mobility, result.internal_mobilities) == (3, 3, 0)
@@ -307,11 +305,11 @@ def test_fivebar_compliance_and_its_rigid_directions(point):
     result = compliance(m.clm, m.q, m.frame)
     C_ref = mech.fivebar_planar_compliance(m.geometry)
     block = result.C[np.ix_(PLANAR, PLANAR)]
-    assert_compliance_close(block[:2, :2], C_ref[:2, :2], HAND_RTOL, FIVEBAR_L, [0, 1])
+    assert_close_in_norm(block[:2, :2], C_ref[:2, :2], HAND_RTOL, scale=lengths(FIVEBAR_L, [0, 1]))
     # rz, the rotation of distal link 0 carrying the frame, is compliant but tied to the
     # translation, rz = grad . (dx, dy): the in-plane block has rank 2, and the wrench
     # (fx, fy, mz) = (-grad, 1), doing no work on any admissible motion, moves nothing
-    assert_compliance_close(block, C_ref, HAND_RTOL, FIVEBAR_L, PLANAR)
+    assert_close_in_norm(block, C_ref, HAND_RTOL, scale=lengths(FIVEBAR_L, PLANAR))
     np.testing.assert_allclose(result.C[OUT_OF_PLANE], 0.0, atol=HAND_RTOL * np.abs(C_ref).max())
     assert (result.rank, result.mobility, result.internal_mobilities) == (2, 2, 0)
     grad = C_ref[2, :2] @ np.linalg.inv(C_ref[:2, :2])
@@ -331,7 +329,7 @@ def test_delta_with_rigid_rods_only_translates(position, order):
     m = mech.delta(position, closure_order=order)
     result = compliance(m.clm, m.q, m.frame)
     C_ref = mech.delta_translational_compliance(m.geometry)
-    assert_compliance_close(result.C[:3, :3], C_ref, HAND_RTOL, DELTA_L, [0, 1, 2])
+    assert_close_in_norm(result.C[:3, :3], C_ref, HAND_RTOL, scale=lengths(DELTA_L, [0, 1, 2]))
     np.testing.assert_allclose(result.C[ROTATIONS], 0.0, atol=HAND_RTOL * np.abs(C_ref).max())
     # 3 platform translations + 6 rod spins, which move nothing
     assert (result.rank, result.mobility, result.internal_mobilities) == (3, 9, 6)
@@ -344,7 +342,7 @@ def test_delta_with_axial_rod_springs_matches_static_condensation(position, orde
     m = mech.delta(position, k_rod=K_ROD, closure_order=order)
     result = compliance(m.clm, m.q, m.frame)
     C_ref = mech.delta_sprung_compliance(m.geometry)
-    assert_compliance_close(result.C, C_ref, HAND_RTOL, DELTA_L)
+    assert_close_in_norm(result.C, C_ref, HAND_RTOL, scale=lengths(DELTA_L))
     assert (result.rank, result.mobility, result.internal_mobilities) == (6, 15, 6)
     # the two hand derivations agree: the translational block tends to the rigid-rod one,
     # the gap (rods in series with the arms) shrinking as 1 / k_rod
@@ -371,5 +369,5 @@ def test_delta_closure_order_does_not_change_the_compliance(k_rod):
     ]
     np.testing.assert_array_equal(built[0].q, built[1].q)
     a, b = (compliance(d.clm, d.q, d.frame) for d in built)
-    assert_compliance_close(b.C, a.C, ORDER_RTOL, DELTA_L)
+    assert_close_in_norm(b.C, a.C, ORDER_RTOL, scale=lengths(DELTA_L))
     assert a.internal_mobilities == b.internal_mobilities == 6

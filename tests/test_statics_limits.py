@@ -179,13 +179,10 @@ def test_limits_of_pinocchio_defaults_and_empty_ranges_are_ignored():
         assert abs(eq.q[1]) > 0.2  # rad: outside [-0.1, 0.1]
 
 
-def test_cahyman_telescope_below_its_stop_is_flagged_and_refused():
+def test_cahyman_telescope_below_its_stop_is_flagged_and_refused(cahyman):
     """CaHyMan at s_4 = 0 (its lower limit): a push towards the base shortens the
     telescope s_4 below 0, which the first release returned silently (-143 m at 1e8 N)."""
-    from cahyman_pin.model import cahyman_model
-    from cahyman_pin.params import DEFAULT_PARAMS
-
-    model = cahyman_model(DEFAULT_PARAMS)
+    model = cahyman
     q = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
     i = model.clm.model.joints[model.clm.joint_id("s_4")].idx_q
     w = np.array([-100.0, -100.0, -100.0, 0, 0, 0])
