@@ -350,8 +350,8 @@ def _result(
     **extra,
 ) -> ComplianceResult:
     """:func:`compliance_result` from the numbers of the spring factor."""
-    K = spectrum.K
-    total = C.sum() + G.sum() + (0.0 if K is None else K.sum())
+    K, add = spectrum.K, np.add.reduce
+    total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
     if not np.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
         raise SingularConfigurationError(
             f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "

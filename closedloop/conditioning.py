@@ -190,7 +190,8 @@ def spectrum_from_factor(
             the caller has them.
     """
     d, dd = scales if scales is not None else (twist_scaling(length), None)
-    B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
+    if not (isinstance(B_s, np.ndarray) and B_s.ndim == 2):
+        B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
     # the left singular vectors U (6, 6) are all needed (rigid directions): the thin SVD
     # has them when r >= 6
     U, beta, _ = svd(B_s, B_s.shape[1] < 6) if B_s.size else (np.eye(6), np.zeros(0), None)
