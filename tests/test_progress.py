@@ -1,6 +1,7 @@
 """closedloop.progress: log lines off a terminal, a bar on one, nothing when disabled."""
 
 import io
+import sys
 import time
 
 import pytest
@@ -104,3 +105,14 @@ def test_stopping_early_ends_quietly(monkeypatch):
     assert [next(it) for _ in range(3)] == [0, 1, 2]
     it.close()
     assert stream.getvalue().splitlines()[-1].startswith("sweep: 2/100, ")
+
+
+def test_in_a_jupyter_kernel_tqdm_auto_draws_it(monkeypatch, capsys):
+    # A kernel's stderr is no terminal; there tqdm.auto chooses (a widget with ipywidgets
+    # in a notebook front end, else its text bar): here the text bar, on stderr.
+    import types
+
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    assert list(progress(range(4), label="cells")) == [0, 1, 2, 3]
+    err = capsys.readouterr().err
+    assert "\r" in err and "cells" in err and "4/4" in err
