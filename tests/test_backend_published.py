@@ -179,7 +179,7 @@ def test_first_2x2_drops_the_leg_motors():
 
 def test_beta_equal_alpha_makes_the_printed_leg_blocks_singular():
     o = PublishedOptions(beta_gamma="alpha")
-    with pytest.raises(SingularConfigurationError, match="first 2x2"):
+    with pytest.raises(SingularConfigurationError, match=r"K_p1 \(first 2x2\)"):
         published_stiffness(*T3, options=o)
     with pytest.raises(SingularConfigurationError, match="K_p22"):  # leg 2 at 60 deg
         published_stiffness(*T3, options=dataclasses.replace(o, leg_block="3x3"))
