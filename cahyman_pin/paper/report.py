@@ -25,10 +25,12 @@ from cahyman_pin.paper.compare import (
     ROWS_REGULAR,
     TableValues,
     backend_compliance,
+    is_level,
     paper_coordinates,
     table_values,
 )
 from cahyman_pin.paper.data import (
+    FIG67,
     LOAD_LABELS,
     TABLE_POSES,
     TABLES,
@@ -113,9 +115,11 @@ def _assumed(params: CaHyManParams, name: str) -> bool:
     return source(params, name).startswith("assumed")
 
 
-def _conventions(doc: Document, tables: list[TableValues]) -> None:
+def _conventions(doc: Document, params: CaHyManParams, tables: list[TableValues]) -> None:
     """The one rotation convention of every table and figure, and its one exception."""
     level = [tv.pose.label for tv in tables if tv.level]
+    if is_level(plate_pose(FIG67.si[0], params).phi):
+        level.append("Figs. 6, 7")
     rising = [
         f"{tv.pose.label} load {LOAD_SHORT[j]} ({two_decimals(TABLES[tv.pose.label][3, j])})"
         for tv in tables
@@ -130,7 +134,7 @@ def _conventions(doc: Document, tables: list[TableValues]) -> None:
             "and rotations of the arm as increments of the paper's angles (dphi, dpsi, dtheta "
             "[deg], the paper's row order) of R = Rz(theta) Ry(pi/2 - phi) Rz(psi) at the "
             "plate's pose. One exception: where the plate is level (phi = 90 deg: "
-            f"{', '.join(level) if level else 'none of the tables'} and Figs. 6, 7) the plate "
+            f"{', '.join(level) if level else 'none of the tables'}) the plate "
             "normal is along z, theta and psi turn about the same axis and only their sum is "
             "defined, while a tilt of the normal has no defined direction. There the rotation "
             "is given as tilt (the angle by which the plate normal turns; for the paper, "
@@ -448,7 +452,7 @@ def build_report(
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
     _intro(doc, params, params_file)
-    _conventions(doc, tables)
+    _conventions(doc, params, tables)
     _summary(doc, params, tables)
     _tables(doc, tables)
     _linearity(doc)
