@@ -23,7 +23,8 @@ import numpy as np
 
 from .cli_common import dask_client, output_folder
 from .exceptions import InvalidInputError
-from .maps import CHUNK, INDICES, ModelSource, stiffness_map
+from .map_engine import CHUNK, ModelSource
+from .maps import INDICES, stiffness_map
 
 #: Points timed first for the estimate of a long map.
 PROBE = 3

@@ -9,7 +9,8 @@ from helpers import assert_close_in_norm
 
 import closedloop as cl
 from closedloop.io import reference_configuration
-from closedloop.maps import INDICES, ModelSource, grid_points, stiffness_map
+from closedloop.map_engine import ModelSource
+from closedloop.maps import INDICES, grid_points, stiffness_map
 
 #: A map point is the very computation of a direct query from the same start: equal to
 #: rounding (the assembly may start elsewhere: its result is closed to 1e-12 m).

@@ -11,7 +11,7 @@ from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, pose_list, sweep
 from cahyman_pin.sweep import execution as sweep_exec
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, SingularConfigurationError
-from closedloop.maps import STATUS, path_order, status_code
+from closedloop.map_engine import STATUS, path_order, status_code
 
 #: Sweep against point-by-point api.stiffness. Both run the same functions on the same
 #: inputs (CaHyManModel.assemble, closedloop.compliance.compliance at M, the formulas of

@@ -57,8 +57,7 @@ from cahyman_pin.sweep.points import (
 from closedloop.arrays import check_wrench, frozen, readonly
 from closedloop.exceptions import InvalidInputError
 from closedloop.indices import batch_indices
-from closedloop.maps import (
-    INDICES,
+from closedloop.map_engine import (
     OK,
     RANK_DEFICIENT,
     SINGULAR,
@@ -68,6 +67,7 @@ from closedloop.maps import (
     gather,
     run_tasks,
 )
+from closedloop.maps import INDICES
 from closedloop.progress import progress
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
@@ -101,7 +101,7 @@ class SweepResult:
         wrench: (6,) wrench at M for the deflection [N, N m], or None.
         indices: name -> (n,) value [SI] (units in :data:`INDEX_UNITS`), NaN where it does
             not exist; ``deflection`` (n, 6) when a wrench was given.
-        data: the per-point arrays (:class:`closedloop.maps.PointData`: C, rank, status
+        data: the per-point arrays (:class:`closedloop.map_engine.PointData`: C, rank, status
             and reason codes, assembly iterations).
         seconds: wall time of the computation [s].
     """
@@ -128,7 +128,7 @@ class SweepResult:
 
     @property
     def status(self) -> np.ndarray:
-        """(n,) status names (:data:`closedloop.maps.STATUS`): ``ok``, ``rank_deficient``
+        """(n,) status names (:data:`closedloop.map_engine.STATUS`): ``ok``, ``rank_deficient``
         (C exists, K does not), ``invalid``, ``unreachable``, ``singular``, ``failed``."""
         return np.asarray(STATUS)[self.data.codes]
 
@@ -301,7 +301,7 @@ def default_chunk_size(n: int, backend: str, workers: int) -> int:
 
 
 def _executor(executor, workers: int | None) -> tuple[Executor | None, int]:
-    """(executor, local processes) of :func:`closedloop.maps.run_tasks`."""
+    """(executor, local processes) of :func:`closedloop.map_engine.run_tasks`."""
     if executor == "serial":
         return None, 1
     if executor == "processes":

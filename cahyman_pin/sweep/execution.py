@@ -1,4 +1,4 @@
-"""The kernel of CaHyMan's sweeps: one chunk of points, for :func:`closedloop.maps.run_tasks`.
+"""The kernel of CaHyMan's sweeps: one chunk of points, for :func:`closedloop.map_engine.run_tasks`.
 
 A sweep is cut into chunks of points that are contiguous along its path (see
 :mod:`cahyman_pin.sweep.engine`); each chunk is one task, computed by :func:`run_chunk`
@@ -7,7 +7,7 @@ model, rebuilt once per run and cached per thread):
 
 * ``"generic"``: per point, :meth:`CaHyManModel.assemble` then
   :func:`closedloop.compliance.compliance` at M, world axes (the code path of
-  :func:`cahyman_pin.api.generic_backend`), by :func:`closedloop.maps.assemble_points`.
+  :func:`cahyman_pin.api.generic_backend`), by :func:`closedloop.map_engine.assemble_points`.
   The assembly starts (``start``) from CaHyMan's closed-form geometry, computed for the
   whole run at once (``"closed_form"``: exact, so the Gauss-Newton loop only checks it),
   or from the previous point's configuration (``"neighbour"``, the generic way: extrapolated
@@ -19,7 +19,7 @@ model, rebuilt once per run and cached per thread):
 
 A point that fails is recorded with a status and the error message; it never stops the
 sweep. The rank, the status from C and the indices are computed afterwards, for all
-points at once (:func:`closedloop.maps.classify`, :func:`closedloop.indices.batch_indices`).
+points at once (:func:`closedloop.map_engine.classify`, :func:`closedloop.indices.batch_indices`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_M
 from closedloop.exceptions import AssemblyError, InvalidInputError
-from closedloop.maps import POINT_ERRORS, ChunkResult, assemble_points
+from closedloop.map_engine import POINT_ERRORS, ChunkResult, assemble_points
 
 #: Starts of the generic assembly: the previous point's configuration, or the closed-form
 #: geometry of CaHyMan, computed for a whole run of points at once.

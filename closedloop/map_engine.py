@@ -1,0 +1,403 @@
+"""The sweep engine of the maps: a path through many points, chunks, kernels, executors.
+
+Four parts, shared by :mod:`closedloop.maps` and CaHyMan's maps (:mod:`cahyman_pin.sweep`):
+
+* a **path** through the points (:func:`path_order`: a grid is walked by unit steps, a
+  boustrophedon in two dimensions) cut into **chunks** of contiguous points;
+* a **kernel**, any picklable callable ``kernel(task) -> ChunkResult`` computing one chunk
+  (compliance, rank, status and reason per point; a point that fails is recorded, never
+  the whole map lost);
+* :func:`run_tasks`: the chunks in this process, on local processes or on any
+  ``concurrent.futures.Executor`` (e.g. Dask's ``Client.get_executor()``): the results do
+  not depend on the executor;
+* :func:`gather` and :func:`classify`: per-point arrays (no per-point Python objects:
+  statuses and reasons are small integer codes), the rank and status from C.
+
+The kernel for any :class:`~closedloop.model.ClosedLoopModel` is :func:`assemble_chunk`:
+each point is assembled by :func:`closedloop.assembly.assemble` from the previous point's
+configuration along the path (or from a per-point start provider), then
+:func:`closedloop.compliance.compliance` is queried. Every chunk carries the configuration
+its first point starts from, computed serially along the path before the chunks are sent
+(:func:`border_starts`), so that a chunk border does not restart from the reference
+configuration (which may lie on another assembly mode).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .assembly import assemble
+from .blas import single_threaded_blas
+from .compliance import compliance
+from .conditioning import batch_rank
+from .exceptions import (
+    AssemblyError,
+    ClosedLoopError,
+    InvalidInputError,
+    MechanismError,
+    RigidDirectionsError,
+    SingularConfigurationError,
+)
+from .io import load_model, reference_configuration
+from .model import ClosedLoopModel
+
+#: Indices of a map and their units (SI; ``condition_number`` is the unit-free scaled one,
+#: Status of a point, by code (its index in this tuple).
+STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
+OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED = range(len(STATUS))
+#: Exceptions recorded per point (anything else, a programming error, propagates).
+POINT_ERRORS = (ClosedLoopError, np.linalg.LinAlgError)
+#: Points per task when not given: enough to amortise a task's overhead (pickling, the
+#: model load in a fresh process), small enough for a few tasks per core.
+CHUNK = 500
+#: Points between two assemblies of the serial pass that computes the chunks' starts:
+#: a continuation step short enough to stay on one assembly mode.
+BORDER_STRIDE = 16
+#: Relative tolerance of the symmetry test of a compliance.
+SYMMETRY_RTOL = 1e-9
+#: Relative tolerance on equal steps for extrapolating a warm start.
+EQUAL_STEP_RTOL = 1e-9
+
+
+def status_code(error: Exception) -> int:
+    """Status code (index in :data:`STATUS`) of a point that raised ``error``."""
+    if isinstance(error, InvalidInputError):
+        return INVALID
+    if isinstance(error, AssemblyError):
+        return UNREACHABLE
+    if isinstance(error, SingularConfigurationError | MechanismError | RigidDirectionsError):
+        return SINGULAR
+    return FAILED
+
+
+@dataclass
+class ChunkResult:
+    """What a kernel returns for c points (SI).
+
+    Attributes:
+        C: (c, 6, 6) compliance at the frame [SI], NaN where the point failed.
+        rank: (c,) rank of C from the solver, -1 where unknown (set by :func:`classify`).
+        status: (c,) status codes (:data:`STATUS`).
+        length: (c,) characteristic length [m] of the scaled indices.
+        iterations: (c,) Gauss-Newton iterations of the assembly, -1 if none.
+        reasons: error message per failed point, by position in the chunk.
+    """
+
+    C: np.ndarray
+    rank: np.ndarray
+    status: np.ndarray
+    length: np.ndarray
+    iterations: np.ndarray
+    reasons: dict[int, str] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, n: int) -> ChunkResult:
+        """n points, all ``ok`` until recorded otherwise, C NaN."""
+        return cls(
+            C=np.full((n, 6, 6), np.nan),
+            rank=np.full(n, -1, dtype=np.int8),
+            status=np.zeros(n, dtype=np.int8),
+            length=np.full(n, np.nan),
+            iterations=np.full(n, -1, dtype=np.int16),
+        )
+
+    def fail(self, i: int, error: Exception) -> None:
+        """Record the failure of point i."""
+        self.status[i] = status_code(error)
+        self.reasons[int(i)] = " ".join(str(error).split()) or type(error).__name__
+
+
+def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
+                    length=None, inputs=None):  # fmt: skip
+    """Assemble and query the points ``rows`` of a chunk in order (warm-started).
+
+    Args:
+        clm: the :class:`ClosedLoopModel`.
+        frame: the loaded frame.
+        out: the :class:`ChunkResult` to fill.
+        rows: positions in the chunk, in path order.
+        solve: ``solve(i, q0) -> Assembly`` of the point at position i from ``q0`` (nq,).
+        first: start of the first point, passed to ``solve`` (None too).
+        starts: (len(rows), nq) start of every point (a start provider), or None: each
+            point starts from the last assembled one.
+        axes, length: as :func:`closedloop.compliance.compliance`.
+        inputs: (c, m) inputs of the chunk's points, or None. Given, a point whose step
+            from the last point repeats the step before (to :data:`EQUAL_STEP_RTOL`)
+            starts from the linear extrapolation q1 + (q1 - q0) on the configuration
+            manifold instead of q1 (fewer Gauss-Newton iterations along a grid line).
+    """
+    history: list = []  # (position, q) of the last two assembled points, in a row
+    q_prev = first
+    for k, i in enumerate(rows):
+        q0 = q_prev if starts is None else starts[k]
+        if starts is None and inputs is not None and len(history) == 2:
+            q0 = _extrapolated(clm, inputs, history, i)
+        try:
+            a = solve(i, q0)
+            c = compliance(clm, a.q, frame, axes, length=length)
+        except POINT_ERRORS as e:
+            out.fail(i, e)
+            history = []
+            continue
+        out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
+        out.iterations[i] = a.iterations
+        q_prev, history = a.q, [*history[-1:], (i, a.q)]
+
+
+def _extrapolated(clm, inputs: np.ndarray, history: list, i: int) -> np.ndarray:
+    """q1 + (q1 - q0) when the inputs took the same step twice, else q1."""
+    (i0, q0), (i1, q1) = history
+    last, step = inputs[i1] - inputs[i0], inputs[i] - inputs[i1]
+    if np.max(np.abs(step - last)) <= EQUAL_STEP_RTOL * np.max(np.abs(last)):
+        return pin.integrate(clm.model, q1, pin.difference(clm.model, q0, q1))
+    return q1
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """Where a model comes from, so that worker processes can load it themselves.
+
+    Attributes: the arguments of :func:`closedloop.io.load_model` (paths as strings).
+    """
+
+    path: str
+    closures: str | None = None
+    springs: tuple = ()
+    joint_stiffness: float | None = None
+
+    def load(self) -> ClosedLoopModel:
+        """The model (loaded once per process)."""
+        return _load(self)
+
+
+@functools.lru_cache(maxsize=8)
+def _load(source: ModelSource) -> ClosedLoopModel:
+    springs = {k: list(v) if isinstance(v, tuple) else v for k, v in source.springs}
+    return load_model(
+        source.path,
+        source.closures,
+        springs=springs or None,
+        joint_stiffness=source.joint_stiffness,
+    )
+
+
+def model_of(model: ClosedLoopModel | ModelSource) -> ClosedLoopModel:
+    return model.load() if isinstance(model, ModelSource) else model
+
+
+@dataclass(frozen=True)
+class MapChunk:
+    """One task of :func:`assemble_chunk`: points contiguous along the path.
+
+    Attributes:
+        model: the model or its :class:`ModelSource` (Pinocchio's constraint models cannot
+            be pickled: process executors need the source).
+        frame: the loaded frame.
+        points: (c, n_act) actuated values [rad, m], in path order.
+        first: (nq,) configuration the first point starts from, or None (reference).
+        start: start provider ``start(clm, points) -> (c, nq)`` or None (picklable).
+    """
+
+    model: ClosedLoopModel | ModelSource
+    frame: str
+    points: np.ndarray
+    first: np.ndarray | None = None
+    start: Callable | None = None
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def assemble_chunk(chunk: MapChunk) -> ChunkResult:
+    """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started."""
+    clm = model_of(chunk.model)
+    out = ChunkResult.empty(len(chunk))
+    starts = None if chunk.start is None else chunk.start(clm, chunk.points)
+    first = reference_configuration(clm) if chunk.first is None else chunk.first
+    assemble_points(clm, chunk.frame, out, range(len(chunk)),
+                    lambda i, q0: assemble(clm, chunk.points[i], q0), first, starts)  # fmt: skip
+    return out
+
+
+def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
+    """Start configuration of each chunk, by a serial continuation along the path.
+
+    The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
+    each from the previous one (the first from the reference configuration), and keeps
+    the configurations at the borders ``firsts``: the first point of a chunk then starts
+    on the assembly mode the path followed, as in a serial run. A point that cannot be
+    assembled is passed over (the continuation goes on from the last configuration).
+
+    Args:
+        points: (n, n_act) actuated values in path order [rad, m].
+        firsts: path positions of the chunks' first points (ascending, from 0).
+
+    Returns:
+        One (nq,) configuration, or None for the first chunk (the reference), per border.
+    """
+    q = reference_configuration(clm)
+    wanted = set(firsts[1:])
+    visit = sorted(wanted | set(range(BORDER_STRIDE, max(wanted, default=0), BORDER_STRIDE)))
+    found = {}
+    for p in visit:
+        try:
+            q = assemble(clm, points[p], q).q
+        except POINT_ERRORS:
+            pass
+        found[p] = q
+    return [found.get(p) for p in firsts]
+
+
+def run_tasks(
+    kernel: Callable,
+    tasks: Sequence,
+    executor: Executor | None = None,
+    workers: int | None = None,
+) -> Iterator[tuple[int, ChunkResult]]:
+    """Yield (task index, ``kernel(task)``) as the tasks finish.
+
+    Args:
+        kernel: picklable callable (a module-level function) for process executors.
+        tasks: the tasks (picklable for process executors).
+        executor: any ``concurrent.futures.Executor``, used as given and left open.
+        workers: without an executor, local processes (a pool shut down at the end);
+            None or 1: this process.
+
+    Raises:
+        InvalidInputError: ``workers`` not a positive integer.
+    """
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    if executor is None and (workers or 1) == 1:
+        for k, task in enumerate(tasks):
+            yield k, kernel(task)
+        return
+    pool = executor or ProcessPoolExecutor(workers, initializer=single_threaded_blas)
+    futures = {pool.submit(kernel, task): k for k, task in enumerate(tasks)}
+    try:
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    finally:
+        for future in futures:
+            future.cancel()
+        if executor is None:
+            pool.shutdown()
+
+
+@dataclass(frozen=True)
+class PointData:
+    """Per-point results of a map, in storage order (numpy arrays only).
+
+    Attributes:
+        C: (n, 6, 6) compliance [SI], NaN where the point failed.
+        rank: (n,) int8 rank of C, -1 where unknown.
+        codes: (n,) int8 status codes (:data:`STATUS`).
+        length: (n,) characteristic length [m].
+        iterations: (n,) int16 assembly iterations, -1 if none.
+        reason_codes: (n,) int32 index of each point's reason in ``reason_texts``.
+        reason_texts: distinct reasons, ``reason_texts[0] == ""`` (a failed point's
+            message usually names its own numbers: one text per failed point).
+    """
+
+    C: np.ndarray
+    rank: np.ndarray
+    codes: np.ndarray
+    length: np.ndarray
+    iterations: np.ndarray
+    reason_codes: np.ndarray
+    reason_texts: list
+    _codes: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def set_reason(self, i: int, text: str) -> None:
+        """Record the reason of point i (while the data is being completed)."""
+        if not self._codes:
+            self._codes.update((t, k) for k, t in enumerate(self.reason_texts))
+        if text not in self._codes:
+            self._codes[text] = len(self.reason_texts)
+            self.reason_texts.append(text)
+        self.reason_codes[i] = self._codes[text]
+
+
+def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData:
+    """Per-point arrays from the results of the chunks.
+
+    Args:
+        n: number of points.
+        pieces: storage indices of each chunk's points, in chunk order.
+        results: (chunk index, :class:`ChunkResult`) pairs in any order
+            (e.g. :func:`run_tasks`).
+    """
+    data = PointData(C=np.full((n, 6, 6), np.nan), rank=np.full(n, -1, dtype=np.int8),
+                     codes=np.zeros(n, dtype=np.int8), length=np.full(n, np.nan),
+                     iterations=np.full(n, -1, dtype=np.int16),
+                     reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
+    for k, r in results:
+        p = pieces[k]
+        data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
+        data.length[p], data.iterations[p] = r.length, r.iterations
+        for i, text in r.reasons.items():
+            data.set_reason(p[i], text)
+    return data
+
+
+def classify(data: PointData) -> np.ndarray:
+    """Complete the rank and status of computed points from their compliance (in place).
+
+    A symmetric C without a rank (not from the solver: a closed form) gets the rank of
+    :func:`closedloop.conditioning.batch_rank`, and becomes ``failed`` if it is not
+    positive semi-definite; a non-symmetric C counts as full rank (K = C^-1); a computed
+    point of rank < 6 becomes ``rank_deficient``; C is NaN wherever the status is neither.
+
+    Returns:
+        (n,) bool: C is symmetric (and computed).
+    """
+    C, rank, codes = data.C, data.rank, data.codes
+    computed = (codes == OK) & np.all(np.isfinite(C), axis=(1, 2))
+    Ct = C.swapaxes(1, 2)
+    symmetric = computed & np.all(np.abs(C - Ct) <= SYMMETRY_RTOL * np.abs(Ct), axis=(1, 2))
+    unknown = symmetric & (rank < 0)
+    if np.any(unknown):
+        rank[unknown], _, psd = batch_rank(C[unknown], data.length[unknown])
+        for i in np.flatnonzero(unknown)[~psd]:
+            codes[i], symmetric[i] = FAILED, False
+            data.set_reason(i, "compliance is not positive semi-definite")
+    rank[computed & ~symmetric & (codes == OK)] = 6
+    for i in np.flatnonzero((codes == OK) & (rank < 6)):
+        codes[i] = RANK_DEFICIENT
+        data.set_reason(i, f"compliance has rank {rank[i]} < 6: the stiffness does not exist")
+    C[~np.isin(codes, (OK, RANK_DEFICIENT))] = np.nan
+    return symmetric
+
+
+def path_order(shape: tuple, outer: Sequence[int] = ()) -> np.ndarray:
+    """Flat (C-order) indices of a grid along a path of unit steps.
+
+    The path is the reflected mixed-radix Gray code: each axis runs backwards when the
+    positions of the slower axes sum to an odd number, so consecutive points differ by
+    one step along one axis (a boustrophedon in two dimensions).
+
+    Args:
+        shape: grid shape.
+        outer: axes that vary slowest, slowest first (the others follow in grid order).
+
+    Returns:
+        (prod(shape),) read-only flat indices in path order.
+    """
+    perm = [*outer, *(a for a in range(len(shape)) if a not in outer)]
+    pshape = [shape[a] for a in perm]
+    idx = np.indices(pshape).reshape(len(pshape), -1)
+    path, parity = np.empty_like(idx), np.zeros(idx.shape[1], dtype=np.int64)
+    for j, size in enumerate(pshape):
+        path[j] = np.where(parity % 2 == 1, size - 1 - idx[j], idx[j])
+        parity += path[j]
+    original = np.empty_like(path)
+    original[perm] = path
+    order = np.ravel_multi_index(tuple(original), shape)
+    order.flags.writeable = False
+    return order
