@@ -386,7 +386,7 @@ def _insert(model, geometries, site: _Site, name: str):
     if moved_frames:  # their inertias move from the start to the tip
         dyn = model.inertias[site.joint].toDynamicParameters()
         dyn -= Mv.act(inertia_tip).toDynamicParameters()
-        new.inertias[index[site.joint]] = pin.Inertia.FromDynamicParameters(dyn)
+        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint].mass)
     for i, f in enumerate(model.frames):
         if i == 0:
             continue
@@ -442,6 +442,22 @@ def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
             rest = link.placement.actInv(model.jointPlacements[j])
             out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
     return out
+
+
+#: Mass left on a beam's start after its tip's share moved, relative to the link's mass,
+#: below which it is rounding of a massless remainder.
+MASSLESS_RTOL = 1e-12
+
+
+def _inertia(dyn: np.ndarray, link_mass: float) -> pin.Inertia:
+    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
+    rotational inertia about the frame's origin [kg m^2]); a massless remainder keeps its
+    rotational part and a zero lever (Pinocchio would divide the first moment by 0)."""
+    if abs(dyn[0]) > MASSLESS_RTOL * max(link_mass, 1.0):
+        return pin.Inertia.FromDynamicParameters(dyn)
+    ixx, ixy, iyy, ixz, iyz, izz = dyn[4:]
+    rotational = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    return pin.Inertia(0.0, np.zeros(3), rotational)
 
 
 def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:

@@ -163,3 +163,44 @@ def test_report_section_rows_against_the_closed_form():
     beams_section(doc, DEFAULT_PARAMS)
     table = next(b for b in doc.blocks if isinstance(b, Table))
     assert table.rows[1][:3] == ("Table 1", "beam links", f"{1e6 * rows[1][2][0]:.4g}")
+
+
+# Central differences of the potential energy with step 1e-6 (rad, m): truncation
+# ~1e-12 relative, rounding ~1e-16 V / 1e-6 over G ~ 1 N m: 1e-7 is a wide margin.
+RTOL_GRAVITY_FD = 1e-6
+
+
+def test_weight_on_beam_links_is_the_gradient_of_the_potential():
+    """Leg masses with links as beams: the beams move the far ends' inertias to the beam
+    tips; a massless remainder on the beam's start stays a valid inertia (no NaN), the
+    total mass is that of the model without beams, and the generalised gravity equals the
+    central differences of Pinocchio's potential energy."""
+    masses = {"m_HQ": 0.5, "m_QM": 0.5, "m_MM2": 0.5, "m_M4": 0.5, "m_M5": 0.5}
+    lumped = CaHyManModel(DEFAULT_PARAMS.replace(**masses)).clm.model
+    model = CaHyManModel(DEFAULT_PARAMS.replace(links_as_beams=True, **masses))
+    M = model.clm.model
+    for i, inertia in enumerate(M.inertias):
+        assert np.isfinite(inertia.toDynamicParameters()).all(), M.names[i]
+    np.testing.assert_allclose(sum(I.mass for I in M.inertias),
+                               sum(I.mass for I in lumped.inertias), rtol=1e-14)  # fmt: skip
+    q = model.assemble(ALPHA, ALPHA4, S4)
+    G = pin.computeGeneralizedGravity(M, M.createData(), q)
+    h, fd = 1e-6, np.zeros(M.nv)
+    for k in range(M.nv):
+        e = np.zeros(M.nv)
+        e[k] = h
+        up = pin.computePotentialEnergy(M, M.createData(), pin.integrate(M, q, e))
+        down = pin.computePotentialEnergy(M, M.createData(), pin.integrate(M, q, -e))
+        fd[k] = (up - down) / (2 * h)
+    assert_close_in_norm(G, fd, rtol=RTOL_GRAVITY_FD)
+
+
+def test_weight_preload_with_beam_links_is_finite_and_sags_down():
+    """The report's weight section on a machine with beam links: the sag of M under the
+    weight points down and the tangent compliance exists."""
+    masses = {"m_HQ": 0.5, "m_QM": 0.5, "m_MM2": 0.5, "m_M4": 0.5, "m_M5": 0.5}
+    params = DEFAULT_PARAMS.replace(links_as_beams=True, **masses)
+    r = stiffness(ALPHA, ALPHA4, S4, params=params, weight=True)
+    sag = r.details["compliance"].sag
+    assert np.isfinite(sag).all() and sag[2] < 0
+    assert r.is_full_rank and np.isfinite(r.C).all()
