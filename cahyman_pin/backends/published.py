@@ -61,7 +61,8 @@ CHOICES: tuple[tuple[str, str], ...] = (
     ("eqs. 18, 19, A_d (damage 6)", "Jacobian of the closed-form kinematics (the paper's "
      "alternative), plate rotation as a world rotation vector; a_d='jacobian_euler' "
      "(paper's angles, singular at phi = 90 deg) or 'printed' (Delta := pose coordinates, "
-     "l := 1, Delta Delta_l := Delta y_1, C_z unused; singular at the tables 1, 2 poses)"),
+     "l := 1, Delta Delta_l := Delta y_1 in C_x and Delta z_1 in C_psi = 2 z_1 - z_2 - z_3, "
+     "C_z unused; singular at the tables 1, 2 poses)"),
     ("eq. 12, M_FN (damage 7)", "columns read interleaved (R_x1, R_z1, R_x2, ...) as printed, "
      "matching Delta v; r_k = r_p; signs as printed; m_fn='consistent' uses G^T"),
     ("eq. 10, M_FT (damage 8)", "as printed (det -1: the reaction -[[Ra, 0], [r x Ra, Ra]], "
