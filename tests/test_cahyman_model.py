@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import REPO
 
 from cahyman_pin import api
 from cahyman_pin.model import CaHyManModel, cahyman_model
@@ -21,7 +21,6 @@ from closedloop.io import load_urdf
 from closedloop.model import ClosedLoopModel
 from closedloop.statics import frame_displacement, solve_equilibrium
 
-REPO = Path(__file__).resolve().parent.parent
 DEG = np.pi / 180.0
 #: The paper's three tables: (alpha_1..3 [rad], alpha_4 [rad], s_4 [m]).
 TABLES = {

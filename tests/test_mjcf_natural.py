@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import assert_close_in_norm
+from helpers import REPO, assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
@@ -213,7 +212,6 @@ def test_rotated_free_body_is_where_the_file_puts_it(tmp_path):
 
 
 # --------------------------------------------------------------- gallery: Stewart 6-UPS
-REPO = Path(__file__).resolve().parent.parent
 GALLERY_K = np.array([1.0, 1.4, 1.8, 2.2, 2.6, 3.0]) * 1e5  # [N/m], scripts/gallery_spatial.py
 
 

@@ -18,8 +18,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import REPO
 
-REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
 #: Commands of the README not run by this test, and why (they are the CI's: .ci/run).
 NOT_RUN_HERE = {
