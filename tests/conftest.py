@@ -44,7 +44,8 @@ def panda_urdf() -> Path:
 # ---------------------------------------------------------------------------- models
 # Module scope: one model per test module, as when each module defined its own. The
 # viewer and configuration tests define fixtures of the same names that load the model
-# another way (load_model); theirs take precedence in their modules.
+# another way (load_model; test_viewer's ``cahyman`` is a (model, q) pair); theirs take
+# precedence in their modules.
 @pytest.fixture(scope="module")
 def fourbar(fourbar_urdf, fourbar_yaml):
     """(model, q): the four-bar of urdf/ assembled at crank = 0.3 rad."""
