@@ -93,6 +93,8 @@ class _Scaling(NamedTuple):
     inv_sigma: np.ndarray  # (s,) 1 / sigma
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
+    loop_mask: np.ndarray | None  # (m, p) and the blocks of loops of _loop_blocks, with
+    loop_blocks: tuple | None  # BLOCK_PASSIVE passive coordinates or more, else None
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
@@ -112,6 +114,7 @@ class _Scaling(NamedTuple):
         d = twist_scaling(L)
         order = np.concatenate([passive, sprung])
         sign = np.where(np.arange(order.size) < passive.size, -1.0, 1.0)
+        loops = _loop_blocks(clm, passive, sprung) if passive.size >= BLOCK_PASSIVE else (None,) * 2
         return cls(
             s_q,
             row_scale,
@@ -134,6 +137,7 @@ class _Scaling(NamedTuple):
             1.0 / sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
+            *loops,
         )
 
     @property
@@ -166,17 +170,25 @@ PARTITION_RCOND = 1e-6
 PARTITION_RTOL = 1e-9
 
 
+#: From this many passive coordinates on, the passive motion is solved loop by loop
+#: (:func:`_loop_blocks`): the cost then grows with the number of loops, not its cube.
+BLOCK_PASSIVE = 48
+
+
 def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     """X (p, s) = -J_p^+ J_s from the closure Jacobian Jc (m, nv), m >= p, or None when
     J_p is ill conditioned or J_s + J_p X does not vanish (module constants).
 
     One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
     -J_p = Q1 R11, X = R11^-1 R12 (dtrtri: unlike dgels' triangular solve, it does not
-    wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F.
+    wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F. With
+    many passive coordinates, one such QR per independent block of loops.
     """
     lapack, p = scipy.linalg.lapack, sc.passive.size
     A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
     scale = PARTITION_RTOL * abs(A[:, p:]).max()
+    if sc.loop_blocks is not None:
+        return _passive_motion_by_blocks(A, sc, scale)
     qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
     R = qr * sc.upper  # the triangle (Householder vectors below it)
     if info != 0 or lapack.dtrcon(R[:p, :p])[0] <= PARTITION_RCOND:
@@ -186,6 +198,83 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
         return None
     R_inv, info = lapack.dtrtri(R[:p, :p], overwrite_c=1)
     return R_inv @ R[:p, p:] if info == 0 else None
+
+
+def _passive_motion_by_blocks(A: np.ndarray, sc: _Scaling, scale: float) -> np.ndarray | None:
+    """:func:`_passive_motion` on the blocks of :func:`_loop_blocks`, those of one shape
+    at once: the QR of a block diagonal -J_p is block diagonal, and so are R and R^-1,
+    whose 1-norms are the largest of the blocks' (the exact 1-norm condition, which
+    dtrcon estimates)."""
+    p = sc.passive.size
+    A[:, :p] *= sc.loop_mask  # the common ancestors' columns: rounding of a zero
+    X = np.empty((p, sc.sprung.size))
+    norm_R = norm_R_inv = residual2 = 0.0
+    for rows, cols, columns in sc.loop_blocks:  # (n, m_k), (n, p_k), (n, p_k + s)
+        k = cols.shape[1]
+        block = A[rows[:, :, None], columns[:, None, :]]
+        if k > rows.shape[1]:
+            return None
+        if k:
+            R = np.linalg.qr(block, mode="r")  # (n, m_k, p_k + s), upper triangular
+            try:
+                R_inv = np.linalg.inv(R[:, :k, :k])
+            except np.linalg.LinAlgError:
+                return None
+            norm_R = max(norm_R, abs(R[:, :k, :k]).sum(axis=1).max())
+            norm_R_inv = max(norm_R_inv, abs(R_inv).sum(axis=1).max())
+            X[cols] = R_inv @ R[:, :k, k:]
+            block = R[:, k:, k:]
+        residual2 += np.vdot(block, block)
+    if not norm_R * norm_R_inv * PARTITION_RCOND < 1.0 or residual2 > scale * scale:
+        return None
+    return X
+
+
+def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray):
+    """Independent blocks of loops of the passive part J_p (m, p) of the closure Jacobian.
+
+    A closure's residual, the placement of one anchor seen from the other, does not change
+    when a common ancestor of its two joints moves (both anchors move together): its
+    Jacobian vanishes on those columns (Pinocchio returns rounding there). On the other
+    columns (the joints between the anchors) rows and passive columns that share no entry
+    form separate blocks: the connected components of that pattern.
+
+    Returns:
+        mask: (m, p) 1 on the columns between each row's anchors, 0 on the rest.
+        blocks: per shape (m_k, p_k) of block, the index arrays of its n blocks: rows
+            (n, m_k), passive columns (n, p_k) and columns of [J_p, J_s] (n, p_k + s)
+            (a block may have rows and no passive column).
+    """
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    model = clm.model
+    between = []
+    for c in clm.closures:
+        a, b = (set(model.supports[j]) for j in (c.constraint.joint1_id, c.constraint.joint2_id))
+        row = np.zeros(model.nv)
+        for j in (a ^ b) - {0}:
+            row[model.joints[j].idx_v : model.joints[j].idx_v + model.joints[j].nv] = 1.0
+        between += [row] * c.size
+    mask = np.array(between).reshape(-1, model.nv)[:, passive]
+    m, p = mask.shape
+    rows, cols = np.nonzero(mask)
+    graph = scipy.sparse.coo_matrix((np.ones(rows.size), (rows, cols + m)), shape=(m + p,) * 2)
+    n, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    order = np.argsort(labels, kind="stable")
+    shapes: dict[tuple[int, int], list] = {}
+    for members in np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1]):
+        r, k = members[members < m], members[members >= m] - m
+        shapes.setdefault((r.size, k.size), []).append((r, k))
+    springs = p + np.arange(sprung.size)
+    blocks = []
+    for (m_k, p_k), members in shapes.items():
+        r = np.array([b[0] for b in members], dtype=int).reshape(-1, m_k)
+        k = np.array([b[1] for b in members], dtype=int).reshape(-1, p_k)
+        blocks.append(
+            (r, k, np.hstack([k, np.broadcast_to(springs, (len(members), springs.size))]))
+        )
+    return mask, tuple(blocks)
 
 
 def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | None] | None:

@@ -17,11 +17,14 @@ from test_spring_blocks import serial_with_block
 
 import closedloop as cl
 from closedloop.configuration import Configuration
+from closedloop.kinematics import closure_residual
 from closedloop.springs import partition, scaling
 
 #: X = -J_p^+ J_s by QR (the library) and by SVD (numpy.linalg.lstsq) on a passive part
 #: of condition ~1e2: they agree to rounding times the condition.
 RTOL_LSTSQ = 1e-12
+#: Fast paths (serial, partitioned, by blocks) against the null-space path.
+RTOL_PATHS = 1e-12
 #: C = J K^-1 J^T by an explicit inverse of the 6x6 block vs the scaled factor: rounding
 #: times cond(K_q) ~ 1e4 here.
 RTOL_CLOSED_FORM = 1e-10
@@ -87,7 +90,7 @@ def test_serial_path_with_locked_prismatic_and_block_springs(axes):
     np.testing.assert_allclose(res.C, C_ref, rtol=0, atol=RTOL_CLOSED_FORM * scale)
     np.testing.assert_allclose(res.G, G_ref, rtol=0, atol=RTOL_CLOSED_FORM * np.abs(G_ref).max())
     general = cl.compliance(clm, q, "tool", axes, path="null-space")
-    np.testing.assert_allclose(res.C, general.C, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(res.C, general.C, rtol=0, atol=RTOL_PATHS * scale)
     assert res.rank == general.rank == 5  # the locked rotation is rigid
     np.testing.assert_allclose(res.rigid_directions, general.rigid_directions, atol=1e-10)
 
@@ -122,3 +125,79 @@ def test_configuration_copies_q_and_refuses_bad_values():
                        (np.array(m.q).astype(complex), "real numbers")):  # fmt: skip
         with pytest.raises(cl.InvalidInputError, match=match):
             Configuration(m.clm, bad)
+
+
+@pytest.mark.parametrize("name", sorted(n for n, (_, path) in CASES.items() if path != "serial"))
+def test_loop_by_loop_solve_equals_the_dense_one(name, monkeypatch):
+    """The block path (for many passive joints) forced on every test mechanism with loops."""
+    import closedloop.springs as springs
+
+    build, expected_path = CASES[name]
+    dense = cl.compliance(*build())
+    monkeypatch.setattr(springs, "BLOCK_PASSIVE", 1)
+    clm, q, frame = build()
+    clm = clm.with_springs(clm.springs, clm.locked)  # a new model, scaled with the blocks
+    assert springs.scaling(Configuration(clm, q)).loop_blocks is not None
+    blocks = cl.compliance(clm, q, frame)
+    assert blocks.path == dense.path == expected_path
+    general = cl.compliance(clm, q, frame, path="null-space")
+    for res in (dense, general):
+        scale = np.abs(res.C).max()
+        np.testing.assert_allclose(blocks.C, res.C, rtol=0, atol=RTOL_PATHS * scale)
+        np.testing.assert_allclose(blocks.G, res.G, rtol=0, atol=RTOL_PATHS * np.abs(res.G).max())
+
+
+def _fourbar_chain(n: int):
+    """n planar parallelogram four-bars in series, each standing on the previous rocker
+    (as in scripts/bench_closedloop.py), springs on the cranks."""
+    model, closures, q, base = pin.Model(), [], [], 0
+    for i in range(n):
+        t = 0.8 if i % 2 == 0 else -0.8
+        place = [pin.SE3(np.eye(3), np.array([x, 0.0, 0.0])) for x in (0.0, 0.3, 0.2)]
+        crank = model.addJoint(base, pin.JointModelRZ(), place[0], f"crank{i}")
+        coupler = model.addJoint(crank, pin.JointModelRZ(), place[1], f"coupler{i}")
+        rocker = model.addJoint(base, pin.JointModelRZ(), place[2], f"rocker{i}")
+        closures.append(pin.PointAnchorConstraintModel(model, coupler, place[2], rocker, place[1]))
+        q += [t, -t, t]
+        base = rocker
+    model.addFrame(pin.Frame("tip", base, pin.SE3(np.eye(3), np.array([0.3, 0, 0])), pin.OP_FRAME))
+    cranks = [f"crank{i}" for i in range(n)]
+    springs = {c: 1e3 * (1.0 + 0.1 * i) for i, c in enumerate(cranks)}
+    return cl.ClosedLoopModel(model, closures, cranks, springs, name=f"4bar{n}"), np.array(q)
+
+
+def test_closure_jacobian_vanishes_on_common_ancestors():
+    """The premise of the block path, by central differences of the residual at a
+    configuration that does not close: moving a common ancestor of a closure's two joints
+    leaves its residual unchanged."""
+    clm, q = _fourbar_chain(4)
+    q = q + 0.05 * np.sin(np.arange(q.size) + 1.0)  # open loops
+    h = 1e-6
+    for i, c in enumerate(clm.closures):
+        j1, j2 = c.constraint.joint1_id, c.constraint.joint2_id
+        common = set(clm.model.supports[j1]) & set(clm.model.supports[j2]) - {0}
+        for j in common:
+            e = np.zeros(clm.model.nv)
+            e[clm.model.joints[j].idx_v] = h
+            rows = slice(3 * i, 3 * i + 3)
+            plus = closure_residual(clm, pin.integrate(clm.model, q, e))[rows]
+            minus = closure_residual(clm, pin.integrate(clm.model, q, -e))[rows]
+            np.testing.assert_allclose((plus - minus) / (2 * h), 0.0, atol=1e-9)
+        assert common or i == 0
+
+
+def test_chain_of_loops_by_blocks_equals_the_null_space_path():
+    clm, q = _fourbar_chain(30)  # 60 passive coordinates: the block path
+    from closedloop.springs import BLOCK_PASSIVE, scaling
+
+    state = Configuration(clm, q)
+    assert int(np.sum(clm.stiffness == 0)) >= BLOCK_PASSIVE
+    ((rows, passive, _),) = scaling(state).loop_blocks  # one shape of block: each loop
+    assert rows.shape == (30, 3) and passive.shape == (30, 2)
+    fast = cl.compliance(state, "tip")
+    general = cl.compliance(state, "tip", path="null-space")
+    assert fast.path == "partitioned"
+    scale = np.abs(general.C).max()
+    np.testing.assert_allclose(fast.C, general.C, rtol=0, atol=RTOL_PATHS * scale)
+    np.testing.assert_allclose(fast.G, general.G, rtol=0, atol=RTOL_PATHS * np.abs(general.G).max())
+    assert fast.rank == general.rank == 3  # planar
