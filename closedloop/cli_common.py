@@ -74,6 +74,32 @@ def finite_float(text: str) -> float:
     return value
 
 
+class SpecError(argparse.ArgumentTypeError):
+    """A value specification that cannot be read."""
+
+
+def parse_values(text: str) -> np.ndarray:
+    """Values of a specification ``V``, ``START:STOP:NUM`` or ``V1,V2,...`` (no unit change).
+
+    Raises:
+        SpecError: the text does not follow one of the three forms.
+    """
+    try:
+        if ":" in text:
+            start, stop, num = text.split(":")
+            count = int(num)
+            if count < 1:
+                raise SpecError(f"{text!r}: NUM must be >= 1")
+            values = np.linspace(float(start), float(stop), count)
+        else:
+            values = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise SpecError(f"{text!r} is not a value, START:STOP:NUM or V1,V2,... (numbers)") from None
+    if not np.all(np.isfinite(values)):
+        raise SpecError(f"{text!r} has non-finite values")
+    return values
+
+
 def output_folder(path: str | Path, option: str = "--out") -> Path:
     """Create the output folder ``path`` (and its parents) now, before any work.
 

@@ -21,37 +21,27 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli_common import dask_client, output_folder
+from .cli_common import SpecError, dask_client, finite_float, output_folder, parse_values
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, ModelSource
 from .maps import INDICES, stiffness_map
 
 #: Points timed first for the estimate of a long map.
 PROBE = 3
-#: Seconds between progress lines when standard error is not a terminal.
-PROGRESS_PERIOD = 5.0
 
 
 def _sweep(text: str) -> tuple[str, np.ndarray]:
-    try:
-        name, spec = text.split("=", 1)
-        start, stop, num = spec.split(":")
-        values = np.linspace(float(start), float(stop), int(num))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: expected JOINT=START:STOP:NUM (SI, NUM >= 1 points)"
-        ) from None
-    if values.size < 1 or not np.all(np.isfinite(values)):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected finite START, STOP and NUM >= 1")
-    return name, values
+    name, sep, spec = text.partition("=")
+    if not sep or not name:
+        raise SpecError(f"{text!r}: expected JOINT=START:STOP:NUM or JOINT=V1,V2,... (SI)")
+    return name, parse_values(spec)
 
 
 def _fixed(text: str) -> tuple[str, float]:
-    try:
-        name, value = text.split("=", 1)
-        return name, float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected JOINT=VALUE (SI)") from None
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise SpecError(f"{text!r}: expected JOINT=VALUE (SI)")
+    return name, finite_float(value)
 
 
 def add_parser(sub, parent_arguments) -> None:
@@ -65,12 +55,18 @@ def add_parser(sub, parent_arguments) -> None:
     )
     parent_arguments(p)
     what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--sweep", type=_sweep, action="append", metavar="JOINT=START:STOP:NUM")
+    what.add_argument(
+        "--sweep",
+        type=_sweep,
+        action="append",
+        metavar="JOINT=START:STOP:NUM",
+        help="a swept joint: NUM values from START to STOP, or V1,V2,... (SI)",
+    )
     what.add_argument("--points", metavar="FILE", help="actuated values, one point a row")
     p.add_argument("--fixed", type=_fixed, action="append", default=[], metavar="JOINT=VALUE")
     p.add_argument("--index", choices=sorted(INDICES), default="det_K", help="index to plot")
     for name, unit in (("--force", "N"), ("--torque", "N m")):
-        p.add_argument(name, nargs=3, type=float, metavar=("X", "Y", "Z"),
+        p.add_argument(name, nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                        help=f"load of the deflection indices, world axes [{unit}]")  # fmt: skip
     run = p.add_mutually_exclusive_group()
     run.add_argument("--workers", type=int, metavar="N", help="local processes")
@@ -134,7 +130,7 @@ def run_map(args) -> int:
             source if (args.workers or args.scheduler) else clm,
             workers=args.workers,
             executor=None if client is None else client.get_executor(),
-            progress=_reporter(n),
+            show_progress=True,
             **options,
             **grid,
         )
@@ -153,20 +149,3 @@ def _first(clm, grid) -> np.ndarray:
     from .maps import grid_points
 
     return grid_points(clm, grid["sweeps"], grid["fixed"])[0][:PROBE]
-
-
-def _reporter(total: int):
-    """Progress on stderr: a bar on a terminal, a line every PROGRESS_PERIOD s elsewhere."""
-    start, last = time.perf_counter(), [0.0]
-    tty = sys.stderr.isatty()
-
-    def report(done: int, n: int) -> None:
-        now = time.perf_counter() - start
-        if tty:
-            print(f"\r{done}/{n} points {now:6.1f} s", end="" if done < n else "\n",
-                  file=sys.stderr)  # fmt: skip
-        elif now - last[0] >= PROGRESS_PERIOD or done == n:
-            last[0] = now
-            print(f"{done}/{n} points, {now:.1f} s", file=sys.stderr)
-
-    return report

@@ -25,6 +25,7 @@ configuration (which may lie on another assembly mode).
 from __future__ import annotations
 
 import functools
+import itertools
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -46,6 +47,7 @@ from .exceptions import (
 )
 from .io import load_model, reference_configuration
 from .model import ClosedLoopModel
+from .progress import progress
 
 #: Indices of a map and their units (SI; ``condition_number`` is the unit-free scaled one,
 #: Status of a point, by code (its index in this tuple).
@@ -288,6 +290,28 @@ def run_tasks(
             future.cancel()
         if executor is None:
             pool.shutdown()
+
+
+def run_tasks_by_point(
+    kernel: Callable,
+    tasks: Sequence,
+    sizes: Sequence[int],
+    executor: Executor | None = None,
+    workers: int | None = None,
+    *,
+    label: str = "",
+    show_progress: bool = False,
+) -> Iterator[tuple[int, ChunkResult]]:
+    """:func:`run_tasks`, its progress shown in points (task k holds ``sizes[k]`` points)
+    by :func:`closedloop.progress.progress` on stderr when ``show_progress``."""
+
+    def by_point():
+        for k, result in run_tasks(kernel, tasks, executor, workers):
+            yield k, result
+            yield from itertools.repeat(None, sizes[k] - 1)
+
+    done = progress(by_point(), total=sum(sizes), label=label, enabled=show_progress)
+    return (item for item in done if item is not None)
 
 
 @dataclass(frozen=True)

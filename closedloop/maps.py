@@ -10,7 +10,7 @@ indices of all points at once (:func:`closedloop.indices.batch_indices`):
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +26,6 @@ from .map_engine import (
     OK,
     RANK_DEFICIENT,
     STATUS,
-    ChunkResult,
     MapChunk,
     ModelSource,
     PointData,
@@ -36,7 +35,7 @@ from .map_engine import (
     gather,
     model_of,
     path_order,
-    run_tasks,
+    run_tasks_by_point,
 )
 from .model import ClosedLoopModel
 
@@ -209,7 +208,7 @@ def stiffness_map(
     workers: int | None = None,
     executor: Executor | None = None,
     chunk: int = CHUNK,
-    progress: Callable[[int, int], None] | None = None,
+    show_progress: bool = False,
 ) -> StiffnessMap:
     """Stiffness indices at many configurations (see the module docstring).
 
@@ -227,8 +226,7 @@ def stiffness_map(
         chunk: points per task; the results depend on it only within the assembly
             tolerance (each chunk's first point starts from the serial continuation of
             :func:`border_starts`), not on the executor.
-        progress: called as ``progress(done, total)`` after each task (in the caller's
-            thread).
+        show_progress: progress on stderr (:mod:`closedloop.progress`), in points.
 
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
@@ -262,15 +260,10 @@ def stiffness_map(
     borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
     tasks = [MapChunk(model, frame, pts[p], q, start) for p, q in zip(pieces, borders, strict=True)]
 
-    def reported() -> Iterator[tuple[int, ChunkResult]]:
-        done = 0
-        for k, result in run_tasks(assemble_chunk, tasks, executor, workers):
-            done += len(pieces[k])
-            if progress is not None:
-                progress(done, n)
-            yield k, result
-
-    data = gather(n, pieces, reported())
+    sizes = [len(piece) for piece in pieces]
+    results = run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,
+                                 label="map points", show_progress=show_progress)  # fmt: skip
+    data = gather(n, pieces, results)
     symmetric = classify(data)
     values = batch_indices(data.C, data.rank, data.length, w, symmetric)
     for a in (pts, data.C, data.rank, data.codes, *values.values()):

@@ -22,7 +22,7 @@ def test_map_of_the_fourbar(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "5 points: 5 rank_deficient" in captured.out
-    assert "about" in captured.err and "5/5 points" in captured.err  # estimate, progress
+    assert "about" in captured.err and "map points: 5/5" in captured.err  # estimate, progress
     data = np.load(out / "map.npz")
     np.testing.assert_allclose(data["crank"], CRANKS, rtol=1e-15)
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
@@ -35,11 +35,27 @@ def test_map_of_the_fourbar(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     assert (out / "map.png").stat().st_size > 10_000 and (out / "map.csv").exists()
 
 
+def test_map_sweep_takes_a_list_of_values(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
+    """JOINT=V1,V2,... (the value forms of cahyman map): the same map as START:STOP:NUM."""
+    base = ["map", str(fourbar_urdf), "--closures", str(fourbar_yaml), "--frame", "P"]
+    assert main([*base, "--sweep", "crank=0.2:1.4:5", "--out", str(tmp_path / "a")]) == 0
+    listed = ",".join(repr(float(c)) for c in CRANKS)
+    assert main([*base, "--sweep", f"crank={listed}", "--out", str(tmp_path / "b")]) == 0
+    capsys.readouterr()
+    a, b = np.load(tmp_path / "a" / "map.npz"), np.load(tmp_path / "b" / "map.npz")
+    np.testing.assert_array_equal(a["crank"], b["crank"])
+    np.testing.assert_array_equal(a["det_K"], b["det_K"])
+
+
 def test_map_errors_are_one_line(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     base = ["map", str(fourbar_urdf), "--closures", str(fourbar_yaml), "--frame", "P"]
     (tmp_path / "file").write_text("")
     for extra, match in (
-        (["--sweep", "crank=0:1"], "expected JOINT=START:STOP:NUM"),
+        (["--sweep", "crank=0:1"], "is not a value, START:STOP:NUM or V1,V2,..."),
+        (["--sweep", "0:1:3"], "expected JOINT=START:STOP:NUM"),
+        (["--sweep", "crank=0:nan:3"], "has non-finite values"),
+        (["--sweep", "crank=0:1:3", "--fixed", "x=nan"], "is not a finite number"),
+        (["--sweep", "crank=0:1:3", "--force", "0", "1e999", "0"], "is not a finite number"),
         (["--sweep", "nope=0:1:3"], "'nope' is not an actuated joint"),
         (["--sweep", "crank=0:1:3", "--out", str(tmp_path / "file")], "is a file"),
         (["--sweep", "crank=0:1:3", "--scheduler", "tcp://127.0.0.1:9"],

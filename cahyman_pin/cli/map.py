@@ -38,7 +38,7 @@ from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
-from closedloop.cli_common import dask_client, output_folder
+from closedloop.cli_common import SpecError, dask_client, output_folder, parse_values
 
 DEFAULT_OUT = Path("cahyman-map")
 #: Failed points printed one by one; the others are counted ("... and N more").
@@ -62,32 +62,6 @@ DISPLAY = {"deflection_translation": ("mm", 1e3), "deflection_rotation": ("deg",
 #: Axis titles of the pose inputs.
 TITLES = {"alpha": "alpha_1 = alpha_2 = alpha_3", "alpha1": "alpha_1", "alpha2": "alpha_2",
           "alpha3": "alpha_3", "alpha4": "alpha_4", "s4": "s_4"}  # fmt: skip
-
-
-class SpecError(argparse.ArgumentTypeError):
-    """A value specification that cannot be read."""
-
-
-def parse_values(text: str) -> np.ndarray:
-    """Values of a specification ``V``, ``START:STOP:NUM`` or ``V1,V2,...`` (no unit change).
-
-    Raises:
-        SpecError: the text does not follow one of the three forms.
-    """
-    try:
-        if ":" in text:
-            start, stop, num = text.split(":")
-            count = int(num)
-            if count < 1:
-                raise SpecError(f"{text!r}: NUM must be >= 1")
-            values = np.linspace(float(start), float(stop), count)
-        else:
-            values = np.array([float(v) for v in text.split(",")])
-    except ValueError:
-        raise SpecError(f"{text!r} is not a value, START:STOP:NUM or V1,V2,... (numbers)") from None
-    if not np.all(np.isfinite(values)):
-        raise SpecError(f"{text!r} has non-finite values")
-    return values
 
 
 def parse_param(text: str) -> tuple[str, np.ndarray]:

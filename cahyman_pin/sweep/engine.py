@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import itertools
 import json
 import os
 import time
@@ -65,10 +64,9 @@ from closedloop.map_engine import (
     PointData,
     classify,
     gather,
-    run_tasks,
+    run_tasks_by_point,
 )
 from closedloop.maps import INDICES
-from closedloop.progress import progress
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
@@ -375,13 +373,9 @@ def sweep(
     pieces = [points.order[f : f + size] for f in range(0, n, size)]
     chunks = _chunks(points, backend, start, pieces)
 
-    def by_point():  # one item per point done, for the progress bar
-        for k, result in run_tasks(run_chunk, chunks, pool, n_workers):
-            yield k, result
-            yield from itertools.repeat(None, len(pieces[k]) - 1)
-
-    done = progress(by_point(), total=n, label=f"{backend} sweep", enabled=show_progress)
-    data = gather(n, pieces, (item for item in done if item is not None))
+    results = run_tasks_by_point(run_chunk, chunks, [len(p) for p in pieces], pool, n_workers,
+                                 label=f"{backend} sweep", show_progress=show_progress)  # fmt: skip
+    data = gather(n, pieces, results)
     from_C = data.rank < 0  # closed forms: the rank comes from C
     symmetric = classify(data)
     for i in np.flatnonzero(from_C & (data.codes == RANK_DEFICIENT)):
