@@ -16,8 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from helpers import REPO
 from scipy.spatial.transform import Rotation
 
+import closedloop as cl
+from closedloop.io import load_urdf, robot_data_dir
 from closedloop.model import ClosedLoopModel, closure_between_frames
 
 EZ = np.array([0.0, 0.0, 1.0])
@@ -435,3 +438,94 @@ def delta_sprung_compliance(g) -> np.ndarray:
     KrA, KrB = Kr @ A, Kr @ B
     K = A.T @ KrA - KrA.T @ B @ np.linalg.solve(B.T @ KrB + Ka, KrB.T @ A)
     return np.linalg.inv(K)
+
+
+# ------------------------------------------------------------------ path cases
+def spd_block(rng: np.random.Generator, n: int, linear: float, angular: float) -> np.ndarray:
+    """A (n, n) SPD block with strong coupling: scaled D (A A^T + n I) D, D the units."""
+    A = rng.normal(size=(n, n))
+    d = np.r_[np.full(min(n, 3), np.sqrt(linear)), np.full(max(n - 3, 0), np.sqrt(angular))]
+    if n < 6:
+        d = np.full(n, np.sqrt(angular))
+    return d[:, None] * (A @ A.T + n * np.eye(n)) * d[None, :]
+
+
+def serial_with_block(
+    seed: int = 3, wrist: str = "universal"
+) -> tuple[ClosedLoopModel, np.ndarray, dict]:
+    """A revolute base, a 6-dof free-flyer-like flexible joint, a 2-dof universal wrist
+    (or, with ``wrist="spherical"``, a 3-dof ball).
+
+    Springs: base 2e3 N m/rad, the free flyer a coupled 6x6 (linear ~1e6 N/m, angular
+    ~1e4 N m/rad), the wrist a coupled 2x2 or 3x3 (~300 N m/rad). Frame ``tool`` on the
+    wrist. Returns the model, a configuration off the neutral one and the springs.
+
+    Pinocchio's kinematic Hessians (the geometric stiffness of a preload) assume a
+    constant joint motion subspace, which the universal joint does not have (measured 6%
+    off finite differences): the preload tests use the spherical wrist.
+    """
+    rng = np.random.default_rng(seed)
+    m = pin.Model()
+    m.name = "serial_block"
+    base = m.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "base")
+    place = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), np.array([0.4, 0.05, 0.1]))
+    flex = m.addJoint(base, pin.JointModelFreeFlyer(), place, "flex")
+    joint = (
+        pin.JointModelUniversal(np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+        if wrist == "universal"
+        else pin.JointModelSpherical()
+    )
+    wrist_id = m.addJoint(flex, joint, pin.SE3(np.eye(3), np.array([0.3, 0.0, 0.0])), "wrist")
+    for j in (base, flex, wrist_id):
+        m.appendBodyToJoint(j, pin.Inertia.FromSphere(1.0, 0.05), pin.SE3.Identity())
+    tool = pin.SE3(pin.exp3(np.array([0.0, 0.4, 0.1])), np.array([0.1, 0.02, 0.15]))
+    m.addFrame(pin.Frame("tool", wrist_id, tool, pin.OP_FRAME))
+    springs = {
+        "base": 2e3,
+        "flex": spd_block(rng, 6, 1e6, 1e4),
+        "wrist": spd_block(rng, joint.nv, 0.0, 150.0),
+    }
+    q = pin.integrate(m, pin.neutral(m), rng.normal(scale=0.3, size=m.nv))
+    return ClosedLoopModel(m, springs=springs, name="serial_block"), q, springs
+
+
+def fourbar_case():
+    """The bundled four-bar at crank 0.3 rad: (model, q, "P")."""
+    m = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    return m, cl.assemble(m, actuated=[0.3]).q, "P"
+
+
+def cahyman_case():
+    """CaHyMan at Table 3's cranks, alpha_4 = 45 deg, s_4 = 10 mm: (model, q, "M")."""
+    from cahyman_pin.model import cahyman_model
+
+    m = cahyman_model()
+    return m.clm, m.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01), "M"
+
+
+def ur5_case():
+    """The UR5 with 1e4 N m/rad joint springs at a generic pose: (model, q, "tool0")."""
+    m = load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=1e4)
+    return m, np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2]), "tool0"
+
+
+def built_case(build):
+    """(model, q, frame) of a :class:`Mechanism` builder."""
+    m = build()
+    return m.clm, m.q, m.frame
+
+
+#: Test mechanisms of the compliance paths: name -> (builder returning (model, q, frame),
+#: the path the automatic choice takes).
+PATH_CASES = {
+    "fourbar": (fourbar_case, "partitioned"),
+    "cahyman": (cahyman_case, "partitioned"),
+    "ur5": (ur5_case, "serial"),
+    "stewart": (lambda: built_case(lambda: stewart(position=(0.05, -0.02, 1.1),
+                                                        psi=0.2, tilt=(0.1, -0.05))),
+                "partitioned"),
+    "rrr3": (lambda: built_case(lambda: rrr3((0.02, -0.01, 0.1))), "partitioned"),
+    "fivebar": (lambda: built_case(lambda: fivebar((0.02, 0.35))), "partitioned"),
+    # the rods spin about their axes: the passive joints are not determined
+    "delta": (lambda: built_case(lambda: delta(k_rod=2e5)), "null-space"),
+}  # fmt: skip

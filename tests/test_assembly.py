@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import REPO
 
 from closedloop.assembly import ASSEMBLY_TOL, assemble
 from closedloop.exceptions import AssemblyError, InvalidInputError
 from closedloop.io import load_urdf
-
-REPO = Path(__file__).resolve().parent.parent
 
 # Link lengths of urdf/fourbar.urdf [m]: crank AB, coupler BC, rocker DC, ground AD.
 L_CRANK, L_COUPLER, L_ROCKER, GROUND = 0.1, 0.3, 0.15, 0.3

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import REPO, assert_close_in_norm
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -22,8 +21,6 @@ from closedloop.exceptions import (
 )
 from closedloop.io import load_urdf, robot_data_dir
 from closedloop.model import ClosedLoopModel
-
-REPO = Path(__file__).resolve().parent.parent
 
 # Serial C = J K^-1 J^T: both sides are a few 6x6 products of the same Jacobian entries,
 # so they agree to a few ulps of the largest entry; 1e-10 leaves a wide margin.

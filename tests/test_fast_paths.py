@@ -12,8 +12,8 @@ import mechanisms as mech
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_compliance_paths import CASES
-from test_spring_blocks import serial_with_block
+from mechanisms import PATH_CASES as CASES
+from mechanisms import serial_with_block
 
 import closedloop as cl
 from closedloop.configuration import Configuration

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import functools
 import json
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import REPO, assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 from closedloop.assembly import assemble
@@ -17,8 +16,6 @@ from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError, RigidDirectionsError
 from closedloop.indices import BATCH_INDICES, StiffnessIndices, batch_indices
 from closedloop.io import load_urdf, robot_data_dir
-
-REPO = Path(__file__).resolve().parent.parent
 
 # Closed forms and definitions evaluated on matrices of condition ~1e5 (mixed units):
 # inverting them costs ~cond * eps ~ 1e-11 relative; 1e-9 leaves a margin.

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import REPO
 
 from closedloop.assembly import assemble
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
@@ -21,8 +21,6 @@ from closedloop.kinematics import (
     nullspace,
 )
 from closedloop.model import ClosedLoopModel
-
-REPO = Path(__file__).resolve().parent.parent
 
 # Central differences with step FD_STEP: truncation ~ FD_STEP^2 * |third derivative|
 # (~1e-12 here, lengths ~0.1-1 m) plus roundoff ~ eps / FD_STEP ~ 1e-10.

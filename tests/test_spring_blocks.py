@@ -13,6 +13,7 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 from helpers import assert_close_in_norm, frame_placement
+from mechanisms import serial_with_block, spd_block
 
 from closedloop.assembly import assemble
 from closedloop.compliance import compliance
@@ -36,54 +37,6 @@ RTOL_PRELOAD_FD = 1e-4
 # Central difference of the spring forces at rest with step 1e-6: exact for a quadratic
 # energy up to rounding eps |K| / h ~ 1e-10 relative.
 RTOL_SPRING_FD = 1e-7
-
-
-def spd_block(rng: np.random.Generator, n: int, linear: float, angular: float) -> np.ndarray:
-    """A (n, n) SPD block with strong coupling: scaled D (A A^T + n I) D, D the units."""
-    A = rng.normal(size=(n, n))
-    d = np.r_[np.full(min(n, 3), np.sqrt(linear)), np.full(max(n - 3, 0), np.sqrt(angular))]
-    if n < 6:
-        d = np.full(n, np.sqrt(angular))
-    return d[:, None] * (A @ A.T + n * np.eye(n)) * d[None, :]
-
-
-def serial_with_block(
-    seed: int = 3, wrist: str = "universal"
-) -> tuple[ClosedLoopModel, np.ndarray, dict]:
-    """A revolute base, a 6-dof free-flyer-like flexible joint, a 2-dof universal wrist
-    (or, with ``wrist="spherical"``, a 3-dof ball).
-
-    Springs: base 2e3 N m/rad, the free flyer a coupled 6x6 (linear ~1e6 N/m, angular
-    ~1e4 N m/rad), the wrist a coupled 2x2 or 3x3 (~300 N m/rad). Frame ``tool`` on the
-    wrist. Returns the model, a configuration off the neutral one and the springs.
-
-    Pinocchio's kinematic Hessians (the geometric stiffness of a preload) assume a
-    constant joint motion subspace, which the universal joint does not have (measured 6%
-    off finite differences): the preload tests use the spherical wrist.
-    """
-    rng = np.random.default_rng(seed)
-    m = pin.Model()
-    m.name = "serial_block"
-    base = m.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "base")
-    place = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), np.array([0.4, 0.05, 0.1]))
-    flex = m.addJoint(base, pin.JointModelFreeFlyer(), place, "flex")
-    joint = (
-        pin.JointModelUniversal(np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
-        if wrist == "universal"
-        else pin.JointModelSpherical()
-    )
-    wrist_id = m.addJoint(flex, joint, pin.SE3(np.eye(3), np.array([0.3, 0.0, 0.0])), "wrist")
-    for j in (base, flex, wrist_id):
-        m.appendBodyToJoint(j, pin.Inertia.FromSphere(1.0, 0.05), pin.SE3.Identity())
-    tool = pin.SE3(pin.exp3(np.array([0.0, 0.4, 0.1])), np.array([0.1, 0.02, 0.15]))
-    m.addFrame(pin.Frame("tool", wrist_id, tool, pin.OP_FRAME))
-    springs = {
-        "base": 2e3,
-        "flex": spd_block(rng, 6, 1e6, 1e4),
-        "wrist": spd_block(rng, joint.nv, 0.0, 150.0),
-    }
-    q = pin.integrate(m, pin.neutral(m), rng.normal(scale=0.3, size=m.nv))
-    return ClosedLoopModel(m, springs=springs, name="serial_block"), q, springs
 
 
 def block_stiffness(clm: ClosedLoopModel, springs: dict) -> np.ndarray:

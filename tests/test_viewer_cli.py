@@ -14,14 +14,13 @@ import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
+from helpers import REPO
 
 from cahyman_pin.cli import main as cahyman_main
 from closedloop.cli import main as closedloop_main
 
-REPO = Path(__file__).resolve().parent.parent
 #: Seconds a live view may take to print its URL, and to stop after a signal.
 START_TIMEOUT, STOP_TIMEOUT = 60.0, 10.0
 LISTEN = "0A"  # TCP state LISTEN in /proc/net/tcp
