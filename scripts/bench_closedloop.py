@@ -1,4 +1,5 @@
-"""Benchmark closedloop (issue 10): UR5 serial query, growth of the query with nv."""
+"""Benchmark closedloop (issues 10, 11): UR5 serial query, growth of the query with nv,
+UR5 with its links as beams."""
 
 from __future__ import annotations
 
@@ -20,6 +21,11 @@ LOOPS = {"smoke": (4, 8, 16), "quick": (4, 16, 33, 66, 133),
 JOINTS = {"smoke": (10, 25, 50), "quick": (10, 50, 100, 200, 400),
           "full": (10, 25, 50, 75, 100, 150, 200, 300, 400)}  # fmt: skip
 CRANK, GROUND, SPRING = 0.3, 0.2, 1e3  # [m], [m], [N m/rad]
+#: The UR5's links as aluminium tubes (d 60 mm, wall 4 mm): link -> the joint its beam ends at.
+UR5_BEAMS = {"shoulder_link": "shoulder_lift_joint", "upper_arm_link": "elbow_joint",
+             "forearm_link": "wrist_1_joint", "wrist_1_link": "wrist_2_joint",
+             "wrist_2_link": "wrist_3_joint", "wrist_3_link": "ee_fixed_joint"}  # fmt: skip
+TUBE = {"E": 7.0e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.06, "t": 0.004}}
 
 
 def _placement(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> pin.SE3:
@@ -84,6 +90,19 @@ def bench_ur5(table: Table, mode: Mode) -> None:
                     target, t)  # fmt: skip
 
 
+def bench_ur5_beams(table: Table, mode: Mode) -> None:
+    path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
+    ur5 = load_urdf(path, joint_stiffness=1e4, geometry=False)
+    beams = ur5.with_beams({link: {**TUBE, "end": end} for link, end in UR5_BEAMS.items()})
+    q = pin.neutral(beams.model)  # the beams' virtual joints at rest, the arm at UR5_Q
+    for j, value in zip(range(1, ur5.model.njoints), UR5_Q, strict=True):
+        q[beams.model.joints[beams.model.getJointId(ur5.model.names[j])].idx_q] = value
+    t = interleaved(lambda: compliance(beams, q, "tool0"), unit_of(beams, q), mode)
+    taken = compliance(beams, q, "tool0").path
+    table.units("8", f"UR5 with its 6 links as beams (nv = {beams.model.nv}), `compliance` -> "
+                f"{taken}", "<= 100 units (issue 11)", t)  # fmt: skip
+
+
 def bench_growth(table: Table, mode: Mode) -> None:
     families = (
         ("6a", "6c", "chains of four-bars", fourbar_chain, LOOPS[mode.name]),
@@ -118,6 +137,7 @@ def main() -> None:
     mode = parse_mode(__doc__)
     table = Table("closedloop benchmarks", mode)
     bench_ur5(table, mode)
+    bench_ur5_beams(table, mode)
     bench_growth(table, mode)
     table.close()
 
