@@ -53,7 +53,7 @@ from cahyman_pin.paper.explained import (
 )
 from cahyman_pin.paper.figures import figure5, figure_load
 from cahyman_pin.paper.numbers import fmt, two_decimals
-from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
+from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import JointLimitWarning
 
@@ -90,7 +90,10 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
             f"The parameters used, from the defaults of cahyman_pin/params.py and {given}. "
             "'paper' marks a value printed in the paper, 'given' a value of the parameter "
             "file; the values flagged ASSUMED are not in the paper "
-            f"({', '.join(assumed) if assumed else 'none here'}) and shape every number below. "
+            f"({', '.join(assumed) if assumed else 'none here'}); they shape every number "
+            "below, except the beam fields ("
+            f"{', '.join(BEAM_FIELDS)}), which act only where links are beams (with "
+            "links_as_beams, and in the section 'Lumped springs vs beam links'). "
             f"The published backend always takes K_s = {K_S_PRINTED:g} N/m as printed (the "
             "first of the choices below), whatever K_s is here."
         ),
