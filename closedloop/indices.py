@@ -512,7 +512,16 @@ def batch_indices(
     if wrench is None:
         del out["deflection_translation"], out["deflection_rotation"]
         return out
-    twist = C[finite] @ np.asarray(wrench, dtype=float)
-    out["deflection_translation"][finite] = np.linalg.norm(twist[:, :3], axis=1)
-    out["deflection_rotation"][finite] = np.linalg.norm(twist[:, 3:], axis=1)
+    w = np.asarray(wrench, dtype=float)
+    scale = np.max(np.abs(w))  # C (w / s) then times s: no overflow or underflow of |C w|
+    twist = C[finite] @ (w / scale) if scale > 0 else np.zeros((int(finite.sum()), 6))
+    out["deflection_translation"][finite] = scale * _norms(twist[:, :3])
+    out["deflection_rotation"][finite] = scale * _norms(twist[:, 3:])
     return out
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    """(n,) Euclidean norms of the rows of v (n, 3), without overflow or underflow."""
+    big = np.max(np.abs(v), axis=1)
+    safe = np.where(big > 0, big, 1.0)
+    return big * np.linalg.norm(v / safe[:, None], axis=1)

@@ -48,8 +48,8 @@ from .exceptions import (
 from .io import load_model, reference_configuration
 from .model import ClosedLoopModel
 from .progress import progress
+from .statics import joints_outside_limits
 
-#: Indices of a map and their units (SI; ``condition_number`` is the unit-free scaled one,
 #: Status of a point, by code (its index in this tuple).
 STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
 OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED = range(len(STATUS))
@@ -223,8 +223,27 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
     first = reference_configuration(clm) if chunk.first is None else chunk.first
     assemble_points(clm, chunk.frame, out, range(len(chunk)),
-                    lambda i, q0: assemble(clm, chunk.points[i], q0), first, starts)  # fmt: skip
+                    lambda i, q0: assemble_within_limits(clm, chunk.points[i], q0), first,
+                    starts)  # fmt: skip
     return out
+
+
+def assemble_within_limits(clm: ClosedLoopModel, actuated: np.ndarray, q0: np.ndarray):
+    """:func:`closedloop.assembly.assemble` of actuated values (n_act,) [rad, m] inside the
+    position limits of their joints (the rule of :func:`closedloop.statics.joints_outside_limits`).
+
+    Raises:
+        InvalidInputError: an actuated value outside its joint's limits (an ``invalid``
+            point of a map: the robot cannot be driven there).
+    """
+    q = np.array(q0, dtype=float)
+    q[clm.actuated_q_indices] = actuated
+    bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
+    if bad:
+        text = ", ".join(f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])"
+                         for n, (x, lo, hi) in bad.items())  # fmt: skip
+        raise InvalidInputError(f"actuated joints outside their limits: {text}")
+    return assemble(clm, actuated, q0)
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
@@ -233,8 +252,11 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
     each from the previous one (the first from the reference configuration), and keeps
     the configurations at the borders ``firsts``: the first point of a chunk then starts
-    on the assembly mode the path followed, as in a serial run. A point that cannot be
-    assembled is passed over (the continuation goes on from the last configuration).
+    on the assembly mode the path followed, as in a serial run. Where a point fails, the
+    pass walks again point by point from the last assembled one, past the failure to the
+    next point that assembles, as a serial run does: across a gap of failed points the
+    continuation jumps from the same configuration to the same point whatever the chunks
+    (a failed border keeps the last assembled configuration, as a serial run).
 
     Args:
         points: (n, n_act) actuated values in path order [rad, m].
@@ -245,14 +267,29 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     """
     q = reference_configuration(clm)
     wanted = set(firsts[1:])
-    visit = sorted(wanted | set(range(BORDER_STRIDE, max(wanted, default=0), BORDER_STRIDE)))
-    found = {}
-    for p in visit:
+    last = max(wanted, default=-1)
+    visit = sorted(wanted | set(range(0, last, BORDER_STRIDE)))
+    found: dict = {}
+    k, p, done, failed = 0, 0, -1, None  # done: position of the last assembled point
+    while p <= last:
         try:
-            q = assemble(clm, points[p], q).q
+            q, ok = assemble_within_limits(clm, points[p], q).q, True
         except POINT_ERRORS:
-            pass
+            ok = False
         found[p] = q
+        if ok:
+            done = p
+        if failed is None and not ok:  # walk again from the last assembled point
+            failed, p = p, done + 1
+            continue
+        if failed is not None:  # point by point, to the first success after the failure
+            if not (ok and p >= failed):
+                p += 1
+                continue
+            failed = None
+        while k < len(visit) and visit[k] <= p:
+            k += 1
+        p = visit[k] if k < len(visit) else last + 1
     return [found.get(p) for p in firsts]
 
 

@@ -17,9 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import (
-    InvalidInputError,
-)
+from .exceptions import InvalidInputError
 from .indices import BATCH_INDICES, batch_indices
 from .map_engine import (
     CHUNK,
@@ -39,7 +37,8 @@ from .map_engine import (
 )
 from .model import ClosedLoopModel
 
-#: ``condition_number_si`` that of the SI matrix).
+#: Indices of a map and their units (SI; ``condition_number`` is the unit-free one of the
+#: scaled K, ``condition_number_si`` that of the SI matrix).
 INDICES = BATCH_INDICES
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
@@ -143,15 +142,20 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
         fixed.append(f"wrench {np.round(smap.wrench, 4).tolist()} N, N m")
     title = "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
                         *textwrap.wrap(", ".join(fixed), 80)])  # fmt: skip
-    values = smap.grid(index)
-    axes = [np.unique(smap.inputs[:, smap.joints.index(n)]) for n in smap.swept]
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=100)
-    if len(smap.shape) == 1 or len(smap.swept) == 1:
-        ax.plot(smap.inputs[:, smap.joints.index(smap.swept[0])], smap.indices[index], "o-")
+    if len(smap.shape) == 1:  # a list or one swept joint: the curve along its first input
+        x = smap.inputs[:, smap.joints.index(smap.swept[0])]
+        order = np.argsort(x, kind="stable") if len(smap.swept) == 1 else slice(None)
+        ax.plot(x[order], smap.indices[index][order], "o-")
         ax.set_xlabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
         ax.set_ylabel(f"{index} [{INDICES[index]}]")
-    else:
-        mesh = ax.pcolormesh(axes[1], axes[0], values, shading="nearest")
+    else:  # the grid's axes sorted for the picture (a sweep may list its values in any order)
+        grid = smap.inputs.reshape(*smap.shape, -1)
+        y = grid[:, 0, smap.joints.index(smap.swept[0])]
+        x = grid[0, :, smap.joints.index(smap.swept[1])]
+        iy, ix = np.argsort(y), np.argsort(x)
+        values = smap.grid(index)[np.ix_(iy, ix)]
+        mesh = ax.pcolormesh(x[ix], y[iy], values, shading="nearest")
         fig.colorbar(mesh, ax=ax, label=f"{index} [{INDICES[index]}]")
         ax.set_xlabel(f"{smap.swept[1]} [{unit[smap.swept[1]]}]")
         ax.set_ylabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
@@ -185,6 +189,12 @@ def grid_points(
     axes = [np.asarray(v, dtype=float).reshape(-1) for v in sweeps.values()]
     if not axes or not all(a.size and np.all(np.isfinite(a)) for a in axes):
         raise InvalidInputError("every swept joint needs finite values")
+    if len(axes) > 2:
+        raise InvalidInputError(f"sweep one or two joints, got {list(sweeps)}")
+    for name, a in zip(sweeps, axes, strict=True):
+        if np.unique(a).size < a.size:
+            raise InvalidInputError(f"the values of swept joint {name!r} must be distinct, "
+                                    f"got {a.tolist()}")  # fmt: skip
     shape = tuple(a.size for a in axes)
     mesh = np.meshgrid(*axes, indexing="ij")
     points = np.empty((int(np.prod(shape)), len(act)))

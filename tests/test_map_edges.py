@@ -1,0 +1,176 @@
+"""Edges of the stiffness maps: failures everywhere, at chunk borders, outside the joint
+limits, a dead point, loads of extreme magnitude, the files of a map."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import matplotlib.image
+import numpy as np
+import pytest
+from helpers import REPO, assert_close_in_norm
+
+import closedloop as cl
+from closedloop.io import reference_configuration
+from closedloop.map_engine import ModelSource
+from closedloop.maps import INDICES, stiffness_map
+
+#: The four-bar of urdf/fourbar.urdf with its ground link 0.42 m instead of 0.3 m: crank
+#: 0.1 m, coupler 0.3 m, rocker 0.15 m; 0.1 + 0.42 > 0.3 + 0.15, so the crank cannot turn
+#: fully (not Grashof). Crank angle theta turns the crank tip to 0.1 (sin theta, 0, cos theta)
+#: about the rocker pivot D = (0.42, 0, 0); the loop closes while |tip - D| <= 0.45 m
+#: (coupler and rocker stretched in line: the dead point), i.e. sin theta >= SIN_DEAD.
+SIN_DEAD = (0.1**2 + 0.42**2 - 0.45**2) / (2 * 0.1 * 0.42)
+THETA_DEAD = float(np.arcsin(SIN_DEAD))
+WRENCH = np.array([3.0, 0.0, -2.0, 0.0, 0.4, 0.0])
+#: As tests/test_maps.py: a chunk changes where its first point starts, within the
+#: assembly tolerance (~1e-12) times the sensitivity of C.
+CHUNK_RTOL = 1e-9
+
+
+@pytest.fixture(scope="module")
+def long_ground(tmp_path_factory):
+    """(URDF path, closure file path) of the non-Grashof four-bar."""
+    folder = tmp_path_factory.mktemp("fourbar")
+    text = (REPO / "urdf" / "fourbar.urdf").read_text()
+    rocker = '<origin xyz="0.3 0 0"/><axis xyz="0 1 0"/>'
+    assert text.count(rocker) == 1
+    urdf = folder / "fourbar.urdf"
+    urdf.write_text(text.replace(rocker, rocker.replace("0.3", "0.42")))
+    closures = folder / "fourbar.yaml"
+    closures.write_text((REPO / "urdf" / "fourbar.yaml").read_text())
+    return urdf, closures
+
+
+def reachable(theta: np.ndarray) -> np.ndarray:
+    """The loop closes (the closed form above), away from the dead point by 1e-6."""
+    return np.sin(theta) >= SIN_DEAD + 1e-6
+
+
+def test_a_map_where_every_point_fails_writes_its_files(long_ground, tmp_path):
+    clm = cl.load_model(*long_ground)
+    cranks = np.array([-1.0, -1.5, -2.0])
+    assert not np.any(reachable(cranks))
+    m = stiffness_map(clm, "P", sweeps={"crank": cranks}, wrench=WRENCH)
+    assert list(m.status) == ["unreachable"] * 3 and not np.any(m.ok)
+    assert all("cannot close the loops" in r for r in m.reasons)
+    assert np.all(np.isnan(m.C)) and np.all(m.data.rank == -1)
+    npz, csv, png = m.save(tmp_path, index="deflection_translation")
+    with np.load(npz, allow_pickle=False) as f:  # every key, no pickled object
+        assert set(f.files) == {"crank", *INDICES, "C", "rank", "status", "reasons", "shape"}
+        np.testing.assert_array_equal(f["crank"], cranks)
+        for name in INDICES:
+            assert np.all(np.isnan(f[name])), name
+        assert np.all(np.isnan(f["C"])) and f["C"].shape == (3, 6, 6)
+        np.testing.assert_array_equal(f["rank"], [-1, -1, -1])
+        assert f["status"].tolist() == ["unreachable"] * 3
+        assert f["reasons"].tolist() == list(m.reasons)
+        np.testing.assert_array_equal(f["shape"], [3])
+    lines = csv.read_text().splitlines()
+    assert lines[0] == ",".join(["crank", *INDICES, "status"])
+    assert lines[1].split(",") == ["-1.0", *["nan"] * len(INDICES), "unreachable"]
+    assert png.stat().st_size > 5_000
+
+
+def test_failed_first_points_of_chunks_and_chunk_sizes(long_ground):
+    """Chunks of 1, 2 (a chunk starting on an unreachable point) and more than the map
+    give the statuses of the closed form and the compliances of one serial chunk."""
+    source = ModelSource(*map(str, long_ground))
+    cranks = np.r_[np.linspace(-3.1, -2.96, 3), np.linspace(-2.5, -0.5, 5), np.linspace(0, 1, 6)]
+    serial = stiffness_map(source, "P", sweeps={"crank": cranks}, chunk=len(cranks))
+    expected = np.where(reachable(cranks), "rank_deficient", "unreachable")
+    np.testing.assert_array_equal(serial.status, expected)
+    assert serial.status[4] == "unreachable"  # the first point of a chunk of 2 (and of 1)
+    for chunk in (1, 2, 3, 1000):
+        other = stiffness_map(source, "P", sweeps={"crank": cranks}, chunk=chunk, workers=2)
+        np.testing.assert_array_equal(other.status, serial.status)
+        assert_close_in_norm(other.C[serial.ok].reshape(-1, 36),
+                             serial.C[serial.ok].reshape(-1, 36), CHUNK_RTOL)  # fmt: skip
+
+
+def test_one_point_map_equals_a_direct_query(fourbar_urdf, fourbar_yaml, tmp_path):
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    m = stiffness_map(clm, "P", sweeps={"crank": [0.7]}, wrench=WRENCH)
+    q = cl.assemble(clm, [0.7], reference_configuration(clm)).q
+    assert_close_in_norm(m.C[0], cl.compliance(clm, q, "P").C, 1e-12)
+    assert [p.name for p in m.save(tmp_path)] == ["map.npz", "map.csv", "map.png"]
+
+
+def test_points_outside_the_joint_limits_are_invalid(fourbar_urdf, fourbar_yaml):
+    """urdf/fourbar.urdf limits the crank to [-6.3, 6.3] rad."""
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    pts = np.array([[0.5], [6.3], [7.0], [-6.4], [1e300], [0.6]])
+    m = stiffness_map(clm, "P", points=pts, chunk=2)
+    assert list(m.status) == ["rank_deficient", "rank_deficient"] + ["invalid"] * 3 + [
+        "rank_deficient"
+    ]
+    assert m.reasons[2] == "actuated joints outside their limits: crank = 7 (limits [-6.3, 6.3])"
+    assert np.all(np.isnan(m.indices["min_translational"][2:5]))
+    q = cl.assemble(clm, [0.6], reference_configuration(clm)).q  # after invalid points
+    assert_close_in_norm(m.C[5], cl.compliance(clm, q, "P").C, CHUNK_RTOL)
+
+
+def test_indices_stay_finite_up_to_the_dead_point(long_ground):
+    """Near the dead point the passive closure Jacobian has a singular value ~ sqrt(d)
+    (d: crank distance to it), so the softest stiffness vanishes like d: k_min / d is
+    constant to first order (5 %: the next order at d = 1e-4 is ~1e-4 relative, the rest
+    is the assembly tolerance at d = 1e-8)."""
+    clm = cl.load_model(*long_ground)
+    d = np.array([1e-4, 1e-5, 1e-6, 1e-7, 1e-8])
+    m = stiffness_map(clm, "P", points=(THETA_DEAD + d)[:, None], wrench=WRENCH)
+    assert np.all(m.status == "rank_deficient")  # computed (planar: rigid out of plane)
+    for name in ("condition_number", "min_translational", "min_rotational",
+                 "deflection_translation", "deflection_rotation"):  # fmt: skip
+        assert np.all(np.isfinite(m.indices[name])), name
+    ratio = m.indices["min_translational"] / d
+    np.testing.assert_allclose(ratio, ratio[0], rtol=0.05)
+    beyond = stiffness_map(clm, "P", points=[[THETA_DEAD - 1e-6]])
+    assert beyond.status[0] == "unreachable" and np.isnan(beyond.indices["condition_number"][0])
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-30, 1e30, 1e200])
+def test_deflection_is_linear_in_the_load_over_any_magnitude(fourbar_urdf, fourbar_yaml, scale):
+    """|C (s w)| = s |C w| exactly in exact arithmetic; floating point keeps it to rounding
+    (1e-14) unless |C w| under- or overflows on the way."""
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    kw = {"sweeps": {"crank": [0.3, 0.9]}}
+    unit = stiffness_map(clm, "P", wrench=WRENCH, **kw)
+    scaled = stiffness_map(clm, "P", wrench=scale * WRENCH, **kw)
+    for name in ("deflection_translation", "deflection_rotation"):
+        assert np.all(unit.indices[name] > 0)
+        np.testing.assert_allclose(scaled.indices[name], scale * unit.indices[name], rtol=1e-14)
+    zero = stiffness_map(clm, "P", wrench=np.zeros(6), **kw)
+    np.testing.assert_array_equal(zero.indices["deflection_rotation"], [0.0, 0.0])
+
+
+def test_heat_map_of_axes_in_any_order_is_the_sorted_one(tmp_path):
+    import mechanisms as mech
+
+    m = mech.stewart()
+    lengths = m.geometry["lengths"]
+    fixed = {f"leg{i}": lengths[i] for i in range(2, 6)}
+    a0, a1 = lengths[0] + np.array([-0.02, 0.0, 0.02]), lengths[1] + np.array([0.0, 0.02])
+    sorted_map = stiffness_map(m.clm, m.frame, sweeps={"leg0": a0, "leg1": a1}, fixed=fixed)
+    mixed = stiffness_map(m.clm, m.frame, sweeps={"leg0": a0[[2, 0, 1]], "leg1": a1[::-1]},
+                          fixed=fixed)  # fmt: skip
+    a = matplotlib.image.imread(sorted_map.save(tmp_path / "a")[-1])
+    b = matplotlib.image.imread(mixed.save(tmp_path / "b")[-1])
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(cl.InvalidInputError, match=r"values of swept joint 'leg1' must be dis"):
+        stiffness_map(m.clm, m.frame, sweeps={"leg0": a0, "leg1": [a1[0], a1[0]]}, fixed=fixed)
+    with pytest.raises(cl.InvalidInputError, match=r"sweep one or two joints"):
+        stiffness_map(m.clm, m.frame, sweeps={"leg0": a0, "leg1": a1, "leg2": [lengths[2]]},
+                      fixed={k: v for k, v in fixed.items() if k != "leg2"})  # fmt: skip
+
+
+def test_thread_pool_serial_and_processes_agree_with_failures(long_ground):
+    source = ModelSource(*map(str, long_ground))
+    kw = {"sweeps": {"crank": np.linspace(-3.1, 1.0, 12)}, "wrench": WRENCH, "chunk": 3}
+    serial = stiffness_map(source, "P", **kw)
+    assert {"unreachable", "rank_deficient"} <= set(serial.status)
+    with ThreadPoolExecutor(2) as pool:
+        threads = stiffness_map(source, "P", executor=pool, **kw)
+    processes = stiffness_map(source, "P", workers=2, **kw)
+    for other in (threads, processes):
+        np.testing.assert_array_equal(other.C, serial.C)
+        assert other.reasons == serial.reasons
+        for name in serial.indices:
+            np.testing.assert_array_equal(other.indices[name], serial.indices[name])
