@@ -32,6 +32,8 @@ from cahyman_pin.params import CaHyManParams
 PRINTED_STEP = 0.01
 #: Relative error assumed for every published value (see the module docstring).
 RELATIVE_ERROR = 0.10
+#: Signs of the loads F, N, F+N in the linearity residual r = c_3 - c_1 - c_2.
+LINEARITY_SIGNS = np.array([-1.0, -1.0, 1.0])
 #: Short names of the three load columns.
 LOAD_SHORT = ("F", "N", "F+N")
 
@@ -143,8 +145,9 @@ class FloorTriple:
         rms_floor: the least distance (root sum of squares over the three cells) of any
             triple with column 3 = column 1 + column 2 from the published one, |r|/sqrt(3).
         chi2_floor: the least weighted sum of squares, r^2 / (sd_1^2 + sd_2^2 + sd_3^2).
-        shares: (3,) how far the weighted nearest linear triple is from each published
-            cell, sd_k^2 |r| / sum sd^2 [mm or deg].
+        nearest: (3,) the weighted nearest triple with column 3 = column 1 + column 2
+            (the one of ``chi2_floor``): the published values moved by -s_k r sd_k^2 /
+            sum sd^2, s = (-1, -1, +1) [mm or deg].
     """
 
     table: str
@@ -153,7 +156,7 @@ class FloorTriple:
     residual: float
     rms_floor: float
     chi2_floor: float
-    shares: tuple[float, float, float]
+    nearest: tuple[float, float, float]
 
 
 def linearity_floor(params: CaHyManParams) -> tuple[FloorTriple, ...]:
@@ -172,10 +175,11 @@ def linearity_floor(params: CaHyManParams) -> tuple[FloorTriple, ...]:
             p = np.array([qs[k].published for k in idx])
             var = np.array([qs[k].sd for k in idx]) ** 2
             r = float(p[2] - p[0] - p[1])
+            nearest = p - LINEARITY_SIGNS * r * var / var.sum()
             out.append(
                 FloorTriple(
                     pose.label, row, idx, r, abs(r) / np.sqrt(3.0), r * r / var.sum(),
-                    tuple(float(x) for x in var * abs(r) / var.sum()),
+                    tuple(float(x) for x in nearest),
                 )
             )  # fmt: skip
     return tuple(out)

@@ -9,13 +9,20 @@ of the rounding of the printed digits, the first rule that holds gives the class
 2. *explained* by the fitted stiffness values, or by the fitted dimensions
    (:mod:`cahyman_pin.paper.fit`): the fit is within h of p; size: its change of the cell;
 3. *explained* by a damaged place of the paper's equations
-   (:data:`cahyman_pin.paper.effects.EFFECTS`): leaving that one damage in place,
-   m - (its repair's change), is within h of p; size: that change;
+   (:data:`cahyman_pin.paper.effects.EFFECTS`): the change d that repairing it alone makes
+   at the as-published backend matches the gap, |m - d - p| <= h (a first-order reading:
+   the damages are taken as additive); size: -d. An effect shown with illustrative
+   parameters (the masses of eq. (11)) explains nothing: the report's model has no such
+   term;
 4. *explained* by the non-linearity of the published row (a linear quantity only): the
-   residual after the stiffness fit is at most the distance the nearest linear triple
-   must keep from this cell (:attr:`cahyman_pin.paper.cells.FloorTriple.shares`) plus h;
-   size: column 3 - column 1 - column 2 of that row;
+   stiffness fit is within h of the weighted nearest triple of that row that adds up
+   (column 3 = column 1 + column 2, :attr:`cahyman_pin.paper.cells.FloorTriple.nearest`),
+   so that what separates it from the published cell is the row's non-linearity; size:
+   p minus that nearest value;
 5. *unexplained*; size: the residual after the stiffness fit.
+
+h is the half-width of the rounding of the printed digits (0.005 mm or deg per printed
+cell): the only tolerance that the printed numbers themselves justify.
 """
 
 from __future__ import annotations
@@ -79,9 +86,10 @@ def classify(params: CaHyManParams) -> tuple[CellClass, ...]:
     ref = model_values(params)
     sfit, dfit = stiffness_fit(params), dimension_fit(params)
     changes = effect_changes(params)
-    share = {}
+    nearest = {}
     for t in linearity_floor(params):
-        share.update({k: (s, t.residual) for k, s in zip(t.indices, t.shares, strict=True)})
+        nearest.update(dict(zip(t.indices, t.nearest, strict=True)))
+    effects = [e for e in EFFECTS if not e.params_change]
     out = []
     for table, row, load in printed_cells():
         k = quantity_of_cell(params, table, row, load)
@@ -96,14 +104,14 @@ def classify(params: CaHyManParams) -> tuple[CellClass, ...]:
         elif abs(dfit.values[k] - p) <= h:
             kind, reason, size = "explained", "the fitted dimensions", dfit.values[k] - m
         else:
-            for e in EFFECTS:
+            for e in effects:
                 d = _effect_at(changes, e.name, table, q.row, load, rows)
                 if d is not None and abs(m - d - p) <= h:
                     kind, reason, size = "explained", f"damage: {e.name}", -d
                     break
             else:
-                if k in share and abs(sfit.values[k] - p) <= share[k][0] + h:
-                    kind, reason, size = "explained", "non-linearity of the row", share[k][1]
+                if k in nearest and abs(sfit.values[k] - nearest[k]) <= h:
+                    kind, reason, size = "explained", "non-linearity of the row", p - nearest[k]
         out.append(
             CellClass(table, row, load, float(TABLES[table][row, load]), q.row, p, float(m),
                       float(sfit.values[k]), float(dfit.values[k]), kind, reason, float(size))
@@ -116,7 +124,9 @@ def counts(classes: tuple[CellClass, ...]) -> dict[str, int]:
     return {c: sum(x.kind == c for x in classes) for c in CLASSES}
 
 
-def largest_unexplained(classes: tuple[CellClass, ...]) -> CellClass | None:
-    """The unexplained cell with the largest residual (None if there is none)."""
-    un = [c for c in classes if c.kind == "unexplained"]
+def largest_unexplained(classes: tuple[CellClass, ...], rotation: bool) -> CellClass | None:
+    """The unexplained translation (or rotation) cell with the largest residual (None if
+    there is none): millimetres and degrees are not compared."""
+    un = [c for c in classes
+          if c.kind == "unexplained" and c.compared_as.endswith("[deg]") == rotation]  # fmt: skip
     return max(un, key=lambda c: abs(c.size)) if un else None

@@ -52,6 +52,7 @@ from cahyman_pin.paper.explained import (
     sensitivity_section,
 )
 from cahyman_pin.paper.figures import figure5, figure_load
+from cahyman_pin.paper.fit import dimension_fit
 from cahyman_pin.paper.numbers import fmt, two_decimals
 from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
@@ -172,7 +173,9 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
     ratio, ratio_printed = (rotation_ratio(p) for p in (params, params.with_ks("printed")))
     fits = fit_summary_rows(params)
     chi2 = {name: c for name, c, _, _ in fits}
-    n = counts(classify(params))
+    classes = classify(params)
+    n, n_cells, n_q = counts(classes), len(classes), len(quantities(params))
+    dim_converged = dimension_fit(params).converged
     doc.add(
         Heading("Summary"),
         Paragraph(
@@ -203,12 +206,15 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
         ),
         Paragraph(
             "Could any stiffness values or dimensions of this machine produce the tables? "
-            "No. The weighted sum of squares over the 48 compared quantities is "
+            f"No. The weighted sum of squares (chi^2) over the {n_q} compared quantities, "
+            f"which a model matching within the assumed errors would keep near {n_q}, is "
             f"{chi2[fits[0][0]]:.4g} for the reference model, {chi2[fits[1][0]]:.4g} for the "
-            f"best stiffness values, {chi2[fits[2][0]]:.4g} for the best assumed dimensions, "
+            f"best stiffness values, {chi2[fits[2][0]]:.4g} for the best assumed dimensions "
+            f"found{'' if dim_converged else ' (a search stopped at its evaluation limit)'}, "
             f"and {chi2[fits[3][0]]:.4g} for a machine that does not move at all; the "
-            "non-linearity of the tables alone forbids any linear model less than "
-            f"{chi2[fits[4][0]]:.4g}. Of the 54 published cells, {n['reproduced']} are "
+            "non-linearity of the tables alone keeps any linear model, of this machine or any "
+            f"other, at {chi2[fits[4][0]]:.4g} or more. Of the {n_cells} published cells, "
+            f"{n['reproduced']} are "
             f"reproduced, {n['explained']} explained by a named effect and "
             f"{n['unexplained']} unexplained ('Every published cell')."
         ),
