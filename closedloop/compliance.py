@@ -29,6 +29,7 @@ inv(C), which would lose cond(C) = cond(J)^2 digits.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -281,39 +282,22 @@ def _fast_compliance(
 ) -> ComplianceResult:
     """The serial and partitioned paths without forming N (nv, s).
 
-    In the scaled spring coordinates y = dq_s / s_q (dq_p = s_q X y on the passive ones,
-    :func:`closedloop.springs.partition`) the frame moves by M y, M = J_s + J_p X (6, s)
-    with scaled columns, and K_r = W^-T W^-1 (W = diag(1/sqrt_k), or V diag(1/sigma) with
-    spring blocks): C = B B^T with B = M W, G = P B^T with P = [W; X W] s_q, the same
-    factor as the null-space path's (module docstring) on the same spectrum rule.
+    In the scaled spring coordinates y = dq_s / s_q the joints move by dq = T y, with
+    T = diag(s_q) on the sprung coordinates and s_p X on the passive ones
+    (:func:`closedloop.springs.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k), or
+    V diag(1/sigma) with spring blocks). With P = T W (nv, s): C = B B^T, B = J P (6, s),
+    and G = P B^T, the same factor as the null-space path's (module docstring) on the same
+    spectrum rule; the kinematic factor of the rank rule is B diag(sigma) = J T V.
     """
-    p = sc.passive.size
-    if X is not None:
-        Jt = J[:, sc.order] * sc.s_order  # [J_p, J_s] scaled
-        M = Jt[:, p:] + Jt[:, :p] @ X
-    elif sc.all_sprung:
-        M = J if sc.angular else J * sc.s_q
-    else:
-        M = J[:, sc.sprung] * sc.s_q[sc.sprung]
-    if sc.W is None:  # diagonal springs
-        kinematic, B = M, M * sc.inv_sigma
-        H = B.T * sc.inv_sigma[:, None]  # W B^T (s, 6)
-    else:
-        kinematic, B = M @ sc.root_V, M @ sc.W
-        H = sc.W @ B.T
-    d = sc.d[:, None]
+    P = sc.P0.copy()
+    if X is not None:  # dq_p = s_p X y
+        P[sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
+    B = J @ P
+    B_s = B * sc.d[:, None]
     spectrum = spectrum_from_factor(
-        B * d, state.length, kinematic * d, sc.spread, scales=(sc.d, sc.dd)
+        B_s, state.length, lambda: B_s * sc.sigma, sc.spread, scales=(sc.d, sc.dd)
     )
-    if X is not None:  # dq_p = s_q X y
-        G = np.zeros((sc.s_q.size, 6))
-        G[sc.order] = np.concatenate((X @ H, H)) * sc.s_order[:, None]
-    elif sc.all_sprung:
-        G = H if sc.angular else H * sc.s_q[:, None]
-    else:
-        G = np.zeros((sc.s_q.size, 6))
-        G[sc.sprung] = H * sc.s_q[sc.sprung, None]
-    return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
+    return _result(state, frame, axes, B @ B.T, P @ B.T, spectrum, sc.sigma.size, 0, path)
 
 
 def compliance_result(
@@ -352,12 +336,12 @@ def _result(
     """:func:`compliance_result` from the numbers of the spring factor."""
     K, add = spectrum.K, np.add.reduce
     total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
-    if not np.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
+    if not math.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
         raise SingularConfigurationError(
             f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "
             "floating point range (springs near 1e-308, or a singular configuration)"
         )
-    return (cls or ComplianceResult)(
+    fields = dict(
         C=frozen(C),
         frame=frame,
         axes=axes,
@@ -373,8 +357,12 @@ def _result(
         condition_number=spectrum.condition_number,
         stiffness_matrix=K,
         path=path,
-        **extra,
     )
+    if cls is None:  # every field given, checked above: set without the dataclass __init__
+        result = object.__new__(ComplianceResult)
+        result.__dict__.update(fields)
+        return result
+    return cls(**fields, **extra)
 
 
 def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dict[str, float]:

@@ -34,6 +34,8 @@ ratios down to about 1e-16, a hundred times below the threshold.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,6 +68,8 @@ def characteristic_length(points: np.ndarray) -> float:
 
 def check_length(length) -> float:
     """Validated characteristic length [m] (finite, > 0)."""
+    if type(length) is float and 0.0 < length < math.inf:  # the common case, a float
+        return length
     if not (isinstance(length, int | float | np.floating) and np.isfinite(length) and length > 0):
         raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
     return float(length)
@@ -169,7 +173,7 @@ def _signed(basis: np.ndarray) -> np.ndarray:
 def spectrum_from_factor(
     B_s: np.ndarray,
     length: float,
-    range_factor: np.ndarray | None = None,
+    range_factor: np.ndarray | Callable[[], np.ndarray] | None = None,
     spread: float = 1.0,
     scales: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Spectrum:
@@ -183,6 +187,7 @@ def spectrum_from_factor(
             compliance passes the kinematic part J N V of B_s = J N V diag(1/sigma), so
             that one enormous compliance (a near-singular pose) is not mistaken for
             rigidity of the other directions; the condition number and K come from B_s.
+            A function returning A is called only when the rank is not decided without it.
         spread: cond(W). The singular values of A and B_s differ by at most this factor,
             so A is full rank without being looked at when beta_6 > RANK_RTOL spread
             beta_1.
@@ -200,7 +205,8 @@ def spectrum_from_factor(
     else:
         rank, basis = rule_rank(beta), U
         if range_factor is not None:
-            basis, s_k, _ = svd(range_factor, range_factor.shape[1] < 6)
+            A = range_factor() if callable(range_factor) else range_factor
+            basis, s_k, _ = svd(A, A.shape[1] < 6)
             rank = rule_rank(s_k)
     cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
     K = None

@@ -70,7 +70,10 @@ class Configuration:
         if self.residual.size:
             size = abs(self.residual)
             self.residual_norm = float(size.max())
-            self.closure_error = float((size * self._row_scale()).max())
+            if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
+                self.closure_error = self.residual_norm / self.length
+            else:
+                self.closure_error = float((size * self._row_scale()).max())
         else:  # a serial robot closes no loop
             self.residual_norm = self.closure_error = 0.0
         self._closure_jacobian: np.ndarray | None = None

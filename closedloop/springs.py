@@ -81,7 +81,7 @@ class _Scaling(NamedTuple):
     root_V: np.ndarray | None
     root_sigma: np.ndarray | None
     order: np.ndarray  # (p + s,) the passive coordinates, then the sprung ones
-    s_order: np.ndarray  # (p + s,) s_q[order]
+    s_p: np.ndarray  # (p, 1) s_q of the passive coordinates
     # (m, p + s) scale of Jc[:, order]: [-J_p, J_s] scaled (rows per L, columns per s_q)
     scale_order: np.ndarray
     upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
@@ -93,6 +93,10 @@ class _Scaling(NamedTuple):
     inv_sigma: np.ndarray  # (s,) 1 / sigma
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
+    # (nv, s) the factor P = T W of the fast paths (T: dq = T y, y = dq_s / s_q) on the
+    # sprung and locked rows (read-only): diag(s_q) W on the sprung ones, 0 elsewhere
+    P0: np.ndarray
+    passive_coef: np.ndarray | None  # (p, s) outer(s_p, 1 / sigma), diagonal springs only
     loop_mask: np.ndarray | None  # (m, p) and the blocks of loops of _loop_blocks, with
     loop_blocks: tuple | None  # BLOCK_PASSIVE passive coordinates or more, else None
 
@@ -115,6 +119,14 @@ class _Scaling(NamedTuple):
         order = np.concatenate([passive, sprung])
         sign = np.where(np.arange(order.size) < passive.size, -1.0, 1.0)
         loops = _loop_blocks(clm, passive, sprung) if passive.size >= BLOCK_PASSIVE else (None,) * 2
+        P0 = np.zeros((k.size, sprung.size))
+        if W is None:
+            P0[sprung, np.arange(sprung.size)] = s_q[sprung] / sigma
+            passive_coef = np.outer(s_q[passive], 1.0 / sigma)
+        else:
+            P0[sprung] = s_q[sprung, None] * W
+            passive_coef = None
+        P0.flags.writeable = False
         return cls(
             s_q,
             row_scale,
@@ -126,7 +138,7 @@ class _Scaling(NamedTuple):
             root_V,
             root_sigma,
             order,
-            s_q[order],
+            s_q[passive, None],
             row_scale * (sign * s_q[order]),
             np.triu(np.ones((row_scale.size, order.size))),
             d,
@@ -137,6 +149,8 @@ class _Scaling(NamedTuple):
             1.0 / sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
+            P0,
+            passive_coef,
             *loops,
         )
 

@@ -125,6 +125,22 @@ def test_configuration_copies_q_and_refuses_bad_values():
                        (np.array(m.q).astype(complex), "real numbers")):  # fmt: skip
         with pytest.raises(cl.InvalidInputError, match=match):
             Configuration(m.clm, bad)
+    for bad in (np.inf, -np.inf):  # an infinite entry next to finite ones of either sign
+        for other in (1e308, -1e308):
+            with pytest.raises(cl.InvalidInputError, match="non-finite"):
+                m.clm.check_configuration(np.r_[bad, np.full(m.q.size - 1, other)])
+    # finite entries whose sum overflows are finite values, accepted as they are
+    huge = np.full(m.q.size, 1e308)
+    np.testing.assert_array_equal(m.clm.check_configuration(huge), huge)
+
+
+def test_closure_error_of_metre_rows_is_the_scaled_residual_norm():
+    # point closures only (metres): closure_error = max |r| / L, the scaling of every row
+    m = mech.fivebar((0.02, 0.35))
+    state = Configuration(m.clm, m.q, length=0.7)
+    assert m.clm.linear_rows.all() and state.residual.size
+    expected = np.max(np.abs(state.residual) / 0.7)
+    np.testing.assert_allclose(state.closure_error, expected, rtol=1e-15)
 
 
 @pytest.mark.parametrize("name", sorted(n for n, (_, path) in CASES.items() if path != "serial"))
