@@ -529,3 +529,59 @@ PATH_CASES = {
     # the rods spin about their axes: the passive joints are not determined
     "delta": (lambda: built_case(lambda: delta(k_rod=2e5)), "null-space"),
 }  # fmt: skip
+
+
+# ------------------------------------------------------------------ edge cases
+def fourbar_chain(angles, k=1e3) -> tuple[ClosedLoopModel, np.ndarray, str]:
+    """Planar parallelogram four-bars in series, each standing on the previous rocker
+    (the chain of scripts/bench_closedloop.py, one crank angle per loop).
+
+    Loop i: crank ``crank{i}`` (0.3 m, actuated, spring k (1 + i / 10) [N m/rad]) and
+    rocker ``rocker{i}`` (0.3 m, passive) pivot 0.2 m apart on the previous rocker (the
+    world for loop 0); the passive coupler ``coupler{i}`` (0.2 m) on the crank tip is closed
+    to the rocker tip by a 3d point closure. At crank angle t_i (coupler -t_i, rocker t_i,
+    relative) loop i closes exactly; at t_i = 0 its bars are collinear (a change point:
+    the coupler and the rocker turn without moving the closure point to first order).
+
+    Returns (model, q (3 n,), frame ``tip`` at the last rocker's tip).
+    """
+    model, closures, q, base = pin.Model(), [], [], 0
+    place = [pin.SE3(np.eye(3), np.array([x, 0.0, 0.0])) for x in (0.0, 0.3, 0.2)]
+    for i, t in enumerate(angles):
+        crank = _joint(model, base, pin.JointModelRZ(), f"crank{i}")
+        coupler = _joint(model, crank, pin.JointModelRZ(), f"coupler{i}", (0.3, 0.0, 0.0))
+        rocker = _joint(model, base, pin.JointModelRZ(), f"rocker{i}", (0.2, 0.0, 0.0))
+        closures.append(pin.PointAnchorConstraintModel(model, coupler, place[2], rocker, place[1]))
+        q += [t, -t, t]
+        base = rocker
+    _frame(model, "tip", base, (0.3, 0.0, 0.0))
+    cranks = [f"crank{i}" for i in range(len(angles))]
+    springs = {c: k * (1.0 + 0.1 * i) for i, c in enumerate(cranks)}
+    clm = ClosedLoopModel(model, closures, cranks, springs, name=f"4bar{len(angles)}")
+    return clm, np.array(q, dtype=float), "tip"
+
+
+def scaled_fourbar(s: float, springs=None) -> tuple[ClosedLoopModel, np.ndarray, str]:
+    """The bundled four-bar with every length multiplied by ``s`` (joint and frame
+    placements, closure anchors, prismatic coordinates), at crank 0.3 rad.
+
+    Springs (default: the file's, crank 50 N m/rad, axial 1e5 and 2e5 N/m): revolute ones
+    as given, prismatic ones divided by s^2, so that the energy of a motion is that of the
+    unscaled one and C = D C_1 D, D = diag(s, s, s, 1, 1, 1) (m/N by s^2, rad/N by s,
+    rad/(N m) unchanged). Returns (model, q, "P").
+    """
+    unit, q1, _ = fourbar_case()
+    m = pin.Model(unit.model)
+    for j in range(m.njoints):
+        P = m.jointPlacements[j]
+        m.jointPlacements[j] = pin.SE3(P.rotation, P.translation * s)
+    for f in m.frames:
+        f.placement = pin.SE3(f.placement.rotation, f.placement.translation * s)
+    closure = closure_between_frames(m, "closedloop1_A", "closedloop1_B", "3d")
+    spec = dict(unit.springs if springs is None else springs)
+    linear = {n for n in spec if unit.linear_coordinates[unit.joint_v_slice(n)].all()}
+    spec = {n: v / s**2 if n in linear else v for n, v in spec.items()}
+    clm = ClosedLoopModel(m, [closure], ["crank"], spec, name="fourbar")
+    q = np.array(q1, dtype=float)
+    q[clm.linear_coordinates] *= s
+    return clm, q, "P"
