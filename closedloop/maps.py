@@ -127,6 +127,26 @@ class StiffnessMap:
         return paths
 
 
+def load_text(wrench: np.ndarray | None) -> str:
+    """The load of a map's title, e.g. ``force (3, 0, -2) N, torque (0, 0.4, 0) N m`` (4
+    significant digits, any magnitude), or "" without a wrench (6,) [N, N m]."""
+    if wrench is None:
+        return ""
+    f, n = (", ".join(f"{x:.4g}" for x in part) for part in (wrench[:3], wrench[3:]))
+    return f"force ({f}) N, torque ({n}) N m"
+
+
+def map_title(smap: StiffnessMap, index: str) -> str:
+    """Title of the picture of ``index``: the index and its unit, the frame, the fixed
+    inputs with their units and the load (lines of at most 80 characters)."""
+    fixed = [f"{n} = {smap.inputs[0, j]:.6g} {u}"
+             for j, (n, u) in enumerate(zip(smap.joints, smap.units, strict=True))
+             if n not in smap.swept]  # fmt: skip
+    parts = [*fixed, load_text(smap.wrench)] if smap.wrench is not None else fixed
+    return "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
+                      *textwrap.wrap(", ".join(parts), 80)])  # fmt: skip
+
+
 def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
     """PNG of ``index`` over the swept joints: a curve (one axis) or a heat map (two),
     with units, the fixed inputs and the load in the title; failed points left blank."""
@@ -136,12 +156,6 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     unit = dict(zip(smap.joints, smap.units, strict=True))
-    fixed = [f"{n} = {smap.inputs[0, j]:.4g} {unit[n]}" for j, n in enumerate(smap.joints)
-             if n not in smap.swept]  # fmt: skip
-    if smap.wrench is not None:
-        fixed.append(f"wrench {np.round(smap.wrench, 4).tolist()} N, N m")
-    title = "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
-                        *textwrap.wrap(", ".join(fixed), 80)])  # fmt: skip
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=100)
     if len(smap.shape) == 1:  # a list or one swept joint: the curve along its first input
         x = smap.inputs[:, smap.joints.index(smap.swept[0])]
@@ -159,7 +173,7 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
         fig.colorbar(mesh, ax=ax, label=f"{index} [{INDICES[index]}]")
         ax.set_xlabel(f"{smap.swept[1]} [{unit[smap.swept[1]]}]")
         ax.set_ylabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(map_title(smap, index), fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

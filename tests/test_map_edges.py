@@ -174,3 +174,62 @@ def test_thread_pool_serial_and_processes_agree_with_failures(long_ground):
         assert other.reasons == serial.reasons
         for name in serial.indices:
             np.testing.assert_array_equal(other.indices[name], serial.indices[name])
+
+
+def test_title_carries_units_fixed_inputs_and_a_load_of_any_magnitude():
+    import mechanisms as mech
+
+    from closedloop.maps import map_title
+
+    m = mech.stewart()
+    lengths = m.geometry["lengths"]
+    fixed = {f"leg{i}": lengths[i] for i in range(1, 6)}
+    wrench = np.array([1e-7, 0.0, -2.5e9, 0.0, 0.0, 3.0])
+    res = stiffness_map(m.clm, m.frame, sweeps={"leg0": [lengths[0]]}, fixed=fixed, wrench=wrench)
+    title = map_title(res, "det_K")
+    assert title.startswith(f"det_K [N^6/rad^3] at {m.frame}\n")
+    assert f"leg1 = {lengths[1]:.6g} m" in title and "leg0 =" not in title
+    assert "force (1e-07, 0, -2.5e+09) N, torque (0, 0, 3) N m" in title.replace("\n", " ")
+
+
+def cahyman_map(tmp_path, *argv):
+    from cahyman_pin.cli import main
+
+    assert main(["map", *argv, "--workers", "1", "--out", str(tmp_path)]) == 0
+    return tmp_path
+
+
+def test_cahyman_map_title_and_values_in_any_order(tmp_path):
+    from cahyman_pin.cli.map import map_title
+    from cahyman_pin.sweep import SweepResult
+
+    common = ["--alpha4", "0,45", "--s4", "25", "--force", "1e-9", "0", "0",
+              "--index", "deflection_translation"]  # fmt: skip
+    a = cahyman_map(tmp_path / "a", "--alpha", "40,60,50", *common)
+    b = cahyman_map(tmp_path / "b", "--alpha", "40,50,60", *common)
+    pictures = [matplotlib.image.imread(f / "map_deflection_translation.png") for f in (a, b)]
+    np.testing.assert_array_equal(*pictures)
+    res = SweepResult.load_npz(a / "map.npz")
+    title = map_title(res, "det_K", {"s4": (25.0, "mm")})
+    expected = "s_4 = 25 mm, force (1e-09, 0, 0) N, torque (0, 0, 0) N m"
+    assert title == "det_K at M, backend generic\n" + expected
+
+
+def test_cahyman_alpha1_to_zero_marks_the_singular_points(tmp_path):
+    """alpha_1 -> 0 folds leg 1 (the paper's singular pose): no 'ok' point carries a NaN
+    index, every point without values is marked, and the last ok stiffness softens."""
+    from cahyman_pin.sweep import SweepResult
+
+    folder = cahyman_map(tmp_path, "--alpha1", "0,1e-6,1e-3,1e-2,0.1,1,5,20", "--alpha2", "60",
+                         "--alpha3", "60", "--force", "1", "0", "0")  # fmt: skip
+    res = SweepResult.load_npz(folder / "map.npz")
+    ok = res.status == "ok"
+    for name, values in res.indices.items():
+        assert np.all(np.isfinite(values[ok])), name
+        assert np.all(np.isnan(values[~res.ok])), name
+    assert list(res.status) == ["singular"] * 2 + ["ok"] * 6
+    assert all("still a mechanism" in reason for _, _, reason in res.failures())
+    # leg 1 folds: its transmission ~ alpha_1, the softest stiffness ~ alpha_1^2 (2e-3
+    # covers the next order up to 0.1 deg: 4e-4 observed)
+    k = res.indices["min_translational"][2:5] / np.deg2rad([1e-3, 1e-2, 0.1]) ** 2
+    np.testing.assert_allclose(k, k[0], rtol=2e-3)

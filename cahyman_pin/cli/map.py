@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
 from closedloop.cli_common import SpecError, dask_client, output_folder, parse_values
+from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
 #: Failed points printed one by one; the others are counted ("... and N more").
@@ -161,7 +163,21 @@ def _label(name: str, unit: str) -> str:
     return f"{name} [{unit}]"
 
 
-def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
+def map_title(result: SweepResult, index: str, fixed: dict) -> str:
+    """Title of the picture: the index, the backend, the fixed inputs with their units and
+    the load (:func:`closedloop.maps.load_text`), in lines of at most 80 characters.
+
+    Args:
+        fixed: input name -> (value, unit) of the inputs not swept, in the units shown.
+    """
+    parts = [f"{TITLES.get(k, k)} = {v:.6g} {u}" for k, (v, u) in fixed.items()]
+    if result.wrench is not None:
+        parts.append(load_text(result.wrench))
+    return "\n".join([f"{index} at M, backend {result.backend}",
+                      *textwrap.wrap(", ".join(parts), 80)])  # fmt: skip
+
+
+def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: dict) -> Path:
     """Curve (one swept axis) or heat map (two) of ``index``; failed points left blank.
 
     Args:
@@ -169,6 +185,7 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
         index: name of the index to show.
         shown: axis name -> (unit shown, factor from the shown unit to SI).
         path: PNG file to write.
+        fixed: as :func:`map_title`.
     """
     import matplotlib  # lazily: a second of start-up, for the figure only
 
@@ -190,19 +207,23 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 5))
     if len(axes) == 1:
         (_, x, xlabel), y = axes[0], v.reshape(-1)
-        ax.plot(x, y, "k.-", ms=3)
+        order = np.argsort(x, kind="stable")  # a list of values may come in any order
+        ax.plot(x[order], y[order], "k.-", ms=3)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     else:
         (_, x, xlabel), (_, y, ylabel) = axes
-        mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(v).T, shading="nearest", cmap="viridis")
+        ix, iy = np.argsort(x, kind="stable"), np.argsort(y, kind="stable")
+        v = v[np.ix_(ix, iy)]
+        mesh = ax.pcolormesh(x[ix], y[iy], np.ma.masked_invalid(v).T, shading="nearest",
+                             cmap="viridis")  # fmt: skip
         fig.colorbar(mesh, ax=ax, label=label)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
     failed = int(np.count_nonzero(~np.isfinite(v)))
     note = f" ({failed} points without a value)" if failed else ""
-    ax.set_title(f"{index} at M, backend {result.backend}{note}", fontsize=9)
+    ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -286,7 +307,9 @@ def _run(args: argparse.Namespace) -> int:
             client.close()
     paths = result.save(args.out, "map")
     shown = {k: (v[1], v[2]) for k, v in swept.items()}
-    paths.append(plot_map(result, args.index, shown, args.out / f"map_{args.index}.png"))
+    fixed = {k: (float(v[0][0]), v[1]) for k, v in inputs.items() if k not in swept}
+    png = args.out / f"map_{args.index}.png"
+    paths.append(plot_map(result, args.index, shown, png, fixed))
     print(result.summary())
     values = result.indices[args.index]
     if np.any(np.isfinite(values)):
