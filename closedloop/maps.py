@@ -269,9 +269,11 @@ def stiffness_map(
     else:
         pts = np.asarray(points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != len(clm.actuated) or not np.all(np.isfinite(pts)):
+            bad = np.flatnonzero(~np.all(np.isfinite(pts), axis=-1)) if pts.ndim == 2 else []
+            got = f"row {bad[0]} is {pts[bad[0]].tolist()}" if len(bad) else f"shape {pts.shape}"
             raise InvalidInputError(
                 f"points must be (n, {len(clm.actuated)}) finite actuated values "
-                f"({list(clm.actuated)}), got shape {pts.shape}"
+                f"({list(clm.actuated)}), got {got}"
             )
         shape, order, swept = (len(pts),), np.arange(len(pts)), tuple(clm.actuated)
     if not isinstance(chunk, int) or chunk < 1:

@@ -50,7 +50,15 @@ def test_map_sweep_takes_a_list_of_values(tmp_path, fourbar_urdf, fourbar_yaml, 
 def test_map_errors_are_one_line(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     base = ["map", str(fourbar_urdf), "--closures", str(fourbar_yaml), "--frame", "P"]
     (tmp_path / "file").write_text("")
+    (tmp_path / "nan.txt").write_text("0.5\nnan\n")
+    (tmp_path / "inf.txt").write_text("0.5, 0.7\n-inf\n")
     for extra, match in (
+        (["--points", str(tmp_path / "nan.txt")], "finite actuated values (['crank']), got row 1 "
+         "is [nan]"),
+        (["--points", str(tmp_path / "inf.txt")], "expected rows of numbers"),
+        (["--sweep", "crank=0.1,0.1"], "the values of swept joint 'crank' must be distinct"),
+        (["--sweep", "crank=0:1:3", "--chunk", "0"], "chunk must be a positive integer, got 0"),
+        (["--sweep", "crank=0:1:3", "--workers", "0"], "workers must be a positive integer"),
         (["--sweep", "crank=0:1"], "is not a value, START:STOP:NUM or V1,V2,..."),
         (["--sweep", "0:1:3"], "expected JOINT=START:STOP:NUM"),
         (["--sweep", "crank=0:nan:3"], "has non-finite values"),
