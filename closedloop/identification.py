@@ -4,29 +4,44 @@ Each measurement is a configuration (full q, or the actuated values to assemble)
 wrench w (6,) applied at a frame (fx, fy, fz [N], nx, ny, nz [N m], world axes, at the
 frame origin) and the measured twist of that frame d (6,) (dx, dy, dz [m], rx, ry, rz
 [rad]) with its standard deviation sd (6,) (same units). The model predicts d = C(k) w
-(:func:`closedloop.compliance.compliance`); the fitted parameters are spring stiffnesses
+(:func:`closedloop.compliance.compliance`); the fitted parameters are spring values
 k_g, one per group of joints tied to one value, found by weighted nonlinear least squares
 
     min_theta  sum_m |(C_m(k) w_m - d_m) / sd_m|^2,   k_g = exp(theta_g)
 
 (``scipy.optimize.least_squares``, in log space: k stays positive and the problem is
-scale-free). The derivatives are analytic: at a fixed configuration the compliance
-depends on a spring coordinate i only through K_r, and
+scale-free). A joint with a number (or one value per coordinate) is fitted as one
+stiffness k [N m/rad or N/m] on every velocity coordinate of the joint. A joint with a
+block spring (an SPD matrix K_0, e.g. a beam's ``<link>_beam``, :mod:`closedloop.beams`)
+is fitted as a dimensionless factor k of its start block, K = k K_0 (start 1): for a beam
+of given E and G this is E / E_0 = G / G_0 at a fixed Poisson ratio (the tip stiffness is
+linear in E and G together); a section's dimensions are not fitted. A group ties joints of
+one kind (numbers, or blocks) to one value.
 
-    dC/dk_i = -g_i g_i^T,   g_i = (row i of G)^T,
+The derivatives are analytic: at a fixed configuration the compliance depends on the
+springs only through the joint stiffness K_q, and dC = -G^T dK_q G with G (nv, 6) the
+joint deflection per wrench (``ComplianceResult.G``), so that
 
-with G (nv, 6) the joint deflection per wrench (``ComplianceResult.G``), so that
-d(C w)/d theta_g = -k_g sum_{i in g} (g_i . w) g_i.
+    dC/dk_g = -sum_{j in g} G_j^T U_j G_j,   G_j = rows of G of joint j,
+
+U_j the identity (a number) or K_0 (a block), and d(C w)/d theta_g = k_g dC/dk_g w.
 
 Standard errors come from the covariance (S^T S)^-1 of theta at the solution (S the
 sensitivity matrix of the weighted residuals: the sd are taken as known), by the delta
-method se(k) = k se(theta). A parameter the data cannot identify (its column of S, or a
-combination of columns, below the rank rule of :mod:`closedloop.conditioning`) is named
-in ``unidentifiable`` and kept at its starting value, never given an arbitrary one.
+method se(k) = k se(theta). A parameter the data cannot identify (its column of S
+vanishes, or it takes part in a null direction of S with unit-norm columns, by the rank
+rule of :mod:`closedloop.conditioning`) is named in ``unidentifiable``, its estimate and
+standard error are None, never an arbitrary value (the fit moves it only along what the
+data see: two springs in series keep the sum of their compliances); ``confounded`` names
+the parameters of each null direction. The rank is that of S at the solution; the
+standard errors of the identified parameters are those of (S^T S)^+, exact for them as
+they lie outside every null direction. Before the fit, one common log offset brings the
+start to the scale of the data (:func:`_common_offset`).
 """
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,15 +50,26 @@ import numpy as np
 import scipy.optimize
 import yaml
 
-from .arrays import check_wrench, readonly
+from .arrays import check_wrench, readonly, real_array
 from .assembly import assemble
 from .compliance import compliance
 from .conditioning import RANK_RTOL, rule_rank
-from .exceptions import InvalidInputError, ModelFileError
+from .exceptions import (
+    InvalidInputError,
+    MechanismError,
+    ModelFileError,
+    SingularConfigurationError,
+)
 from .model import ClosedLoopModel
 
 #: Relative share of a null vector of S above which a parameter takes part in it.
 NULL_SHARE = 0.1
+#: Most steps of the common log offset that brings a start to the scale of the data.
+MAX_OFFSET_STEPS = 5
+#: Scale of the log-stiffness unknowns [-]: the first step changes k by at most e^1.
+LOG_STEP = 0.01
+#: Weighted residual returned for springs that leave a mechanism: a step there is rejected.
+REJECTED = 1e100
 
 
 @dataclass(frozen=True)
@@ -73,21 +99,20 @@ class Measurement:
         """
         if (q is None) == (actuated is None):
             raise InvalidInputError("a measurement needs exactly one of q and actuated")
-        twist_ = np.asarray(twist, dtype=float).reshape(-1)
+        twist_ = real_array(twist, "measured twist").reshape(-1)
         if twist_.shape != (6,) or not np.all(np.isfinite(twist_)):
             raise InvalidInputError(
                 f"measured twist must be 6 finite values (dx dy dz [m], rx ry rz [rad]), "
-                f"got {np.asarray(twist).tolist()}"
+                f"got {twist_.tolist()}"
             )
-        sd_ = np.broadcast_to(np.asarray(sd, dtype=float), (6,)) if np.ndim(sd) == 0 else sd
-        sd_ = np.asarray(sd_, dtype=float).reshape(-1)
+        given = real_array(sd, "sd")
+        sd_ = np.full(6, float(given)) if given.ndim == 0 else given.reshape(-1)
         if sd_.shape != (6,) or not np.all(np.isfinite(sd_)) or np.any(sd_ <= 0.0):
             raise InvalidInputError(
-                f"sd must be one or 6 finite values > 0 (units of the twist), got "
-                f"{np.asarray(sd).tolist()}"
+                f"sd must be one or 6 finite values > 0 (units of the twist), got {given.tolist()}"
             )
-        vector = None if q is None else readonly(np.asarray(q, dtype=float).reshape(-1))
-        act = None if actuated is None else readonly(np.asarray(actuated, float).reshape(-1))
+        vector = None if q is None else readonly(real_array(q, "q").reshape(-1))
+        act = None if actuated is None else readonly(real_array(actuated, "actuated").reshape(-1))
         return cls(vector, act, readonly(check_wrench(wrench)), readonly(twist_), readonly(sd_))
 
 
@@ -129,18 +154,19 @@ def _number(value):
 
 @dataclass(frozen=True)
 class Fit:
-    """Result of :func:`identify` (SI: N m/rad or N/m per parameter).
+    """Result of :func:`identify` (SI: N m/rad or N/m per stiffness, 1 per block factor).
 
     Attributes:
         names: parameter names (a group "a+b" for joints tied to one value).
-        estimates: name -> fitted stiffness, or None when unidentifiable.
+        estimates: name -> fitted value, or None when unidentifiable.
         std_errors: name -> standard error, or None when unidentifiable.
-        correlations: (p, p) correlation matrix of the identified log-stiffnesses, in the
-            order of ``names`` (NaN rows for unidentifiable ones are not kept: rows and
-            columns follow ``identified``).
+        correlations: (p, p) correlation matrix of the identified log-values, rows and
+            columns in the order of ``identified``.
         identified: names of the identified parameters, in order.
-        unidentifiable: names the data cannot identify (kept at their start values).
-        residuals: (n, 6) weighted residuals (C w - d) / sd at the solution.
+        unidentifiable: names the data cannot identify (estimate and error None).
+        confounded: the names taking part in each null direction of the sensitivities.
+        residuals: (n, 6) weighted residuals (C w - d) / sd at the solution (per
+            measurement, components dx dy dz rx ry rz).
         residual_rms: RMS of the weighted residuals (about 1 for consistent data).
         n_measurements: number of measurements.
         success: whether the optimiser reports convergence.
@@ -152,6 +178,7 @@ class Fit:
     correlations: np.ndarray
     identified: tuple[str, ...]
     unidentifiable: tuple[str, ...]
+    confounded: tuple[tuple[str, ...], ...]
     residuals: np.ndarray
     residual_rms: float
     n_measurements: int
@@ -164,6 +191,7 @@ class Fit:
             "std_errors": self.std_errors,
             "identified": list(self.identified),
             "unidentifiable": list(self.unidentifiable),
+            "confounded": [list(c) for c in self.confounded],
             "correlations": self.correlations.tolist(),
             "residual_rms": self.residual_rms,
             "residuals": self.residuals.tolist(),
@@ -172,21 +200,9 @@ class Fit:
         }
 
 
-def _spring_spec(clm: ClosedLoopModel) -> tuple[dict, list[str]]:
-    """(springs, locked) that rebuild ``clm.stiffness`` through ``with_springs``."""
-    springs, locked = {}, []
-    for j in range(1, clm.model.njoints):
-        jm = clm.model.joints[j]
-        k = clm.stiffness[jm.idx_v : jm.idx_v + jm.nv]
-        name = clm.model.names[j]
-        if k.size and np.all(np.isinf(k)):
-            locked.append(name)
-        elif np.any(k > 0.0):
-            springs[name] = k.tolist()
-    return springs, locked
-
-
 def _groups(clm: ClosedLoopModel, fit) -> list[tuple[str, ...]]:
+    if isinstance(fit, str):
+        raise InvalidInputError(f"fit must be a list of joint names or groups, got {fit!r}")
     groups = []
     for item in fit:
         group = (item,) if isinstance(item, str) else tuple(item)
@@ -194,11 +210,60 @@ def _groups(clm: ClosedLoopModel, fit) -> list[tuple[str, ...]]:
             raise InvalidInputError(f"a fitted parameter is a joint name or a group, got {item!r}")
         for name in group:
             clm.joint_id(name)  # NameNotFoundError listing the joints
+        if len({n in clm.spring_blocks for n in group}) > 1:
+            raise InvalidInputError(
+                f"group {group} mixes block springs and numbers; expected one kind"
+            )
         groups.append(group)
     seen = [n for g in groups for n in g]
     if len(set(seen)) != len(seen):
         raise InvalidInputError(f"a joint appears in two fitted parameters: {seen}")
     return groups
+
+
+def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
+    """(p,) log start values: ``start``, else the model's (1 for a block factor)."""
+    start = dict(start or {})
+    unknown = sorted(set(start) - set(names))
+    if unknown:
+        raise InvalidInputError(f"start values for {unknown}, not fitted; expected {names}")
+    theta0 = np.empty(len(groups))
+    for i, (name, group) in enumerate(zip(names, groups, strict=True)):
+        value = start.get(name)
+        if value is None and group[0] in clm.spring_blocks:
+            value = 1.0
+        elif value is None:
+            k = clm.stiffness[clm.joint_v_slice(group[0])]
+            value = float(k[0]) if k.size else 0.0
+        if not (isinstance(value, numbers.Real) and np.isfinite(value) and value > 0):
+            raise InvalidInputError(
+                f"parameter {name!r} needs a finite start value > 0 [N m/rad, N/m, or a "
+                f"block's factor], got {value!r}"
+            )
+        theta0[i] = np.log(value)
+    return theta0
+
+
+def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
+    """The configuration of each measurement (its index named in an error)."""
+    if isinstance(measurements, Measurement | str) or not isinstance(measurements, Sequence):
+        raise InvalidInputError(f"measurements must be a list of Measurement, got {measurements!r}")
+    if not measurements or not all(isinstance(m, Measurement) for m in measurements):
+        raise InvalidInputError("measurements must be a non-empty list of Measurement")
+    out = []
+    for i, m in enumerate(measurements):
+        try:
+            out.append(clm.check_configuration(m.q) if m.q is not None else None)
+            if m.q is None:
+                if m.actuated.size != len(clm.actuated):
+                    raise InvalidInputError(
+                        f"actuated has {m.actuated.size} values; expected {len(clm.actuated)} "
+                        f"({list(clm.actuated)})"
+                    )
+                out[-1] = assemble(clm, m.actuated).q
+        except InvalidInputError as e:
+            raise InvalidInputError(f"measurement {i}: {e}") from None
+    return out
 
 
 def identify(
@@ -209,98 +274,78 @@ def identify(
     *,
     start: Mapping[str, float] | None = None,
 ) -> Fit:
-    """Fit spring stiffnesses to measured deflections (see the module docstring).
+    """Fit spring values to measured deflections (see the module docstring).
 
     Args:
         clm: the model; its springs are the start values (and the values of the springs
             not fitted).
         measurements: the data (:class:`Measurement`).
         frame: the loaded and measured frame.
-        fit: joint names, or groups of names tied to one value (one spring value per
-            group, applied to every velocity coordinate of its joints).
-        start: group name ("a+b" for a group) -> start value [N m/rad or N/m], overriding
-            the model's.
+        fit: joint names, or groups of names tied to one value (a stiffness applied to
+            every velocity coordinate of its joints, or a factor of their blocks).
+        start: parameter name ("a+b" for a group) -> start value [N m/rad, N/m, or a
+            block's factor], overriding the model's.
 
     Raises:
-        InvalidInputError: no parameter, an unknown one, a parameter without a start
-            value > 0, fewer measured components than parameters.
+        InvalidInputError: no parameter, a parameter without a start value > 0, a start
+            value of a parameter not fitted, a group mixing blocks and numbers, a bad
+            measurement (its index named), fewer measured components than parameters.
         NameNotFoundError: unknown joint or frame.
     """
     groups = _groups(clm, fit)
     if not groups:
         raise InvalidInputError("nothing to fit: give at least one joint name")
     names = tuple("+".join(g) for g in groups)
-    if not measurements or not all(isinstance(m, Measurement) for m in measurements):
-        raise InvalidInputError("measurements must be a non-empty list of Measurement")
-    if 6 * len(measurements) < len(groups):
+    configs = _configurations(clm, measurements)
+    clm.frame_id(frame)  # NameNotFoundError listing the frames
+    if 6 * len(configs) < len(groups):
         raise InvalidInputError(
-            f"{6 * len(measurements)} measured components for {len(groups)} parameters"
+            f"{6 * len(configs)} measured components for {len(groups)} parameters"
         )
-    springs, locked = _spring_spec(clm)
-    theta0 = np.empty(len(groups))
-    for i, (name, group) in enumerate(zip(names, groups, strict=True)):
-        value = (start or {}).get(name)
-        if value is None:
-            k = clm.stiffness[clm.joint_v_slice(group[0])]
-            value = float(k[0]) if k.size else 0.0
-        if not (np.isfinite(value) and value > 0.0):
-            raise InvalidInputError(
-                f"parameter {name!r} needs a start value > 0 [N m/rad or N/m], got {value}"
-            )
-        theta0[i] = np.log(value)
-    configs = [m.q if m.q is not None else assemble(clm, m.actuated).q for m in measurements]
+    theta0 = _start(clm, names, groups, start)
     w = np.array([m.wrench for m in measurements])
     d = np.array([m.twist for m in measurements])
     sd = np.array([m.sd for m in measurements])
-
-    coords = [
-        np.concatenate([np.arange(clm.model.nv)[clm.joint_v_slice(n)] for n in g]) for g in groups
-    ]
+    springs, locked = clm.springs, [n for n in clm.locked if n not in set().union(*groups)]
+    coords = np.arange(clm.model.nv)
+    parts = [[(coords[clm.joint_v_slice(n)], clm.spring_blocks.get(n)) for n in g] for g in groups]
 
     def evaluate(theta):
-        values = {n: float(np.exp(t)) for g, t in zip(groups, theta, strict=True) for n in g}
-        model = clm.with_springs({**springs, **values}, [n for n in locked if n not in values])
+        k = np.exp(theta)
+        values = {
+            n: (k[c] if u is None else k[c] * u)
+            for c, g in enumerate(groups)
+            for n, (_, u) in zip(g, parts[c], strict=True)
+        }
+        model = clm.with_springs({**springs, **values}, locked)
         pred, sens = np.empty((len(configs), 6)), np.empty((len(configs), 6, len(groups)))
         for m, q in enumerate(configs):
             res = compliance(model, q, frame)
             pred[m] = res.C @ w[m]
-            for c, rows in enumerate(coords):
-                sens[m, :, c] = np.exp(theta[c]) * (compliance_derivative(res, rows) @ w[m])
-        return (pred - d) / sd, sens / sd[:, :, None]
+            for c in range(len(groups)):
+                dC = sum(compliance_derivative(res, r, u) for r, u in parts[c])
+                sens[m, :, c] = k[c] * (dC @ w[m])
+        return (pred - d) / sd, sens.reshape(-1, len(groups)) / sd.reshape(-1, 1)
 
-    _, S0 = evaluate(theta0)
-    unidentifiable = _unidentifiable(S0.reshape(-1, len(groups)), names)
-    free = [i for i, n in enumerate(names) if n not in unidentifiable]
-    theta = theta0.copy()
-    success = True
-    if free:
-        out = scipy.optimize.least_squares(
-            lambda t: evaluate(_put(theta0, free, t))[0].ravel(),
-            theta0[free],
-            jac=lambda t: evaluate(_put(theta0, free, t))[1].reshape(-1, len(groups))[:, free],
-            method="lm" if 6 * len(configs) >= len(free) else "trf",
-            xtol=1e-15,
-            ftol=1e-15,
-            gtol=1e-15,
-        )
-        theta, success = _put(theta0, free, out.x), bool(out.success)
+    everything = list(range(len(groups)))
+    theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd), everything)
     r, S = evaluate(theta)
-    Sf = S.reshape(-1, len(groups))[:, free]
-    cov = np.linalg.inv(Sf.T @ Sf) if free else np.zeros((0, 0))
+    unidentifiable, confounded = _unidentifiable(S, names)
+    free = [i for i, n in enumerate(names) if n not in unidentifiable]
+    cov = _covariance(S)[np.ix_(free, free)]
     se = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(se, se) if free else cov
     k = np.exp(theta)
-    estimates = {n: (float(k[i]) if i in free else None) for i, n in enumerate(names)}
-    ses = dict.fromkeys(names)
+    estimates, ses = dict.fromkeys(names), dict.fromkeys(names)
     for j, i in enumerate(free):
-        ses[names[i]] = float(k[i] * se[j])
+        estimates[names[i]], ses[names[i]] = float(k[i]), float(k[i] * se[j])
     return Fit(
         names=names,
         estimates=estimates,
         std_errors=ses,
-        correlations=readonly(corr),
+        correlations=readonly(cov / np.outer(se, se)),
         identified=tuple(names[i] for i in free),
         unidentifiable=tuple(unidentifiable),
+        confounded=tuple(confounded),
         residuals=readonly(r),
         residual_rms=float(np.sqrt(np.mean(r**2))),
         n_measurements=len(configs),
@@ -308,15 +353,56 @@ def identify(
     )
 
 
-def compliance_derivative(result, coordinates) -> np.ndarray:
-    """(6, 6) derivative dC/dk of a compliance with respect to one spring value k shared
-    by the velocity coordinates ``coordinates`` (indices into v) [per N m/rad or N/m].
+def compliance_derivative(result, coordinates, block=None) -> np.ndarray:
+    """(6, 6) derivative dC/dk of a compliance with respect to one spring value k of the
+    velocity coordinates ``coordinates`` (indices into v) [per N m/rad or N/m; per unit
+    factor for a block].
 
-    ``-sum_i g_i g_i^T`` with g_i the row i of ``result.G``: exact at a fixed
-    configuration, for coordinates that carry a spring (0 < k < inf).
+    ``-G_c^T U G_c`` with G_c the rows ``coordinates`` of ``result.G`` and U the identity
+    (a stiffness k on every coordinate) or ``block`` (the (n_c, n_c) K_0 of a factor k,
+    K = k K_0): exact at a fixed configuration, for coordinates that carry a spring.
     """
     G = result.G[np.asarray(coordinates, dtype=int)]
-    return -(G.T @ G)
+    return -(G.T @ G) if block is None else -(G.T @ block @ G)
+
+
+def _solve(evaluate, theta0: np.ndarray, free: list[int]) -> tuple[np.ndarray, bool]:
+    """(theta, success): the free entries of theta0 fitted by Levenberg-Marquardt
+    (``evaluate(theta)`` -> (residuals, sensitivities), computed once per theta).
+
+    The unknowns are the offsets from theta0, scaled by ``LOG_STEP``: the first trust
+    region allows a change of about ``100 * LOG_STEP`` in log k (MINPACK's initial step
+    bound is 100 times the scaled size of the start, here zero), and a step to springs
+    that leave a mechanism (a spring 1e14 times softer than another) is rejected as a
+    step that raises the cost.
+    """
+    if not free:
+        return theta0.copy(), True
+    size = evaluate(theta0)[0].size
+    rejected = (np.full(size, REJECTED), np.zeros((size, theta0.size)))
+    last = {}
+
+    def cached(u):
+        key = u.tobytes()
+        if key not in last:
+            last.clear()
+            try:
+                last[key] = evaluate(_put(theta0, free, theta0[free] + u))
+            except (MechanismError, SingularConfigurationError):
+                last[key] = rejected
+        return last[key]
+
+    out = scipy.optimize.least_squares(
+        lambda u: cached(u)[0].ravel(),
+        np.zeros(len(free)),
+        jac=lambda u: cached(u)[1][:, free],
+        method="lm",
+        x_scale=np.full(len(free), LOG_STEP),
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
+    return _put(theta0, free, theta0[free] + out.x), bool(out.success)
 
 
 def _put(base: np.ndarray, idx: list[int], values: np.ndarray) -> np.ndarray:
@@ -325,16 +411,56 @@ def _put(base: np.ndarray, idx: list[int], values: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> list[str]:
-    """Names that take part in a null direction of S (columns scaled to unit norm; the
-    rank rule), or whose column vanishes."""
+def _covariance(S: np.ndarray) -> np.ndarray:
+    """(p, p) covariance of theta, (S^T S)^+ by the rank rule on S with unit-norm columns
+    (an SVD: no squared condition). Its rows of the parameters outside every null
+    direction are their covariance; the other rows (vanishing columns: zero) are not used.
+    """
+    norms = np.linalg.norm(S, axis=0)
+    live = norms > 0.0
+    cov = np.zeros((S.shape[1], S.shape[1]))
+    if live.any():
+        _, s, Vt = np.linalg.svd(S[:, live] / norms[live], full_matrices=False)
+        root = Vt[: rule_rank(s)].T / s[: rule_rank(s)]
+        cov[np.ix_(live, live)] = (root @ root.T) / np.outer(norms[live], norms[live])
+    return cov
+
+
+def _common_offset(evaluate, theta0: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """theta0 shifted by one common log offset t that fits the scale of the data: the
+    predictions are about exp(-t) times those at theta0 (exactly when the fitted springs
+    carry all the compliance), so exp(-t) = <p, d> / <p, p> (weighted), repeated while it
+    lowers the cost. A start far off (1e6 times) then begins at the data's scale."""
+    theta, r = theta0, evaluate(theta0)[0]
+    for _ in range(MAX_OFFSET_STEPS):
+        p = r + data
+        a = float(np.sum(p * data) / max(np.sum(p * p), 1e-300))
+        if not (np.isfinite(a) and a > 0.0) or abs(np.log(a)) < 1e-12:
+            break
+        try:
+            trial = evaluate(theta - np.log(a))[0]
+        except (MechanismError, SingularConfigurationError):
+            break
+        if not np.sum(trial**2) < np.sum(r**2):
+            break
+        theta, r = theta - np.log(a), trial
+    return theta
+
+
+def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[tuple]]:
+    """(names, confounded): the names whose column of S vanishes or that take part in a
+    null direction of S (columns scaled to unit norm; the rank rule), and the names of
+    each null direction."""
     norms = np.linalg.norm(S, axis=0)
     dead = norms <= RANK_RTOL * max(norms.max(initial=0.0), 1e-300)
     out = {names[i] for i in np.flatnonzero(dead)}
     live = np.flatnonzero(~dead)
+    confounded = []
     if live.size:
         _, s, Vt = np.linalg.svd(S[:, live] / norms[live], full_matrices=True)
-        r = rule_rank(s)
-        for v in Vt[r:]:
-            out |= {names[live[i]] for i in np.flatnonzero(np.abs(v) > NULL_SHARE)}
-    return sorted(out, key=names.index)
+        for v in Vt[rule_rank(s) :]:
+            part = tuple(sorted((names[live[i]] for i in np.flatnonzero(np.abs(v) > NULL_SHARE)),
+                                key=names.index))  # fmt: skip
+            confounded.append(part)
+            out |= set(part)
+    return sorted(out, key=names.index), confounded

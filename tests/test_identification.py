@@ -2,6 +2,7 @@
 
 import mechanisms as mech
 import numpy as np
+import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm
 
@@ -152,7 +153,310 @@ def test_bad_fits_are_refused(fourbar):
     one_leg = [Measurement.of(q=stewart.q, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)]
     with pytest.raises(cl.InvalidInputError, match=r"6 measured components for 7 parameters"):
         identify(stewart.clm, one_leg, stewart.frame, [*legs, "leg0_ux"])
-    with pytest.raises(cl.InvalidInputError, match=r"'coupler' needs a start value > 0"):
+    with pytest.raises(cl.InvalidInputError, match=r"'coupler' needs a finite start value > 0"):
         identify(clm, one, "P", ["coupler"])
     with pytest.raises(cl.InvalidInputError, match=r"appears in two fitted parameters"):
         identify(clm, one, "P", ["crank", ("crank", "rocker_axial")])
+
+
+# ------------------------------------------------------------------ audit: the edges
+FOURBAR_TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
+FOURBAR_CRANKS = (0.2, 0.6, 1.0, 1.4)
+
+
+def _fourbar_data(clm, rng, sd, springs=FOURBAR_TRUE, n_wrench=3):
+    truth = clm.with_springs(springs)
+    configs = [cl.assemble(clm, actuated=[a]).q for a in FOURBAR_CRANKS]
+    return _synthetic(truth, "P", configs, rng, sd=sd, n_wrench=n_wrench)
+
+
+def test_block_springs_stay_when_other_springs_are_fitted():
+    # the flexible joint's coupled 6x6 and the wrist's 3x3 must stay blocks in the fit
+    clm, q, springs = mech.serial_with_block(wrist="spherical")
+    rng = np.random.default_rng(5)
+    data = _synthetic(clm, "tool", [q], rng, sd=0.0, n_wrench=3)
+    fit = identify(clm.with_springs({**springs, "base": 500.0}), data, "tool", ["base"])
+    np.testing.assert_allclose(fit.estimates["base"], springs["base"], rtol=RTOL_EXACT_FIT)
+    np.testing.assert_allclose(fit.residuals, 0.0, atol=1e-6)  # in sd = 1e-9 units
+
+
+def test_derivative_with_respect_to_a_block_factor_equals_central_differences():
+    clm, q, springs = mech.serial_with_block(wrist="spherical")
+    res = cl.compliance(clm, q, "tool")
+    for name in ("flex", "wrist"):
+        K0, h = springs[name], 1e-4
+        plus = cl.compliance(clm.with_springs({**springs, name: (1 + h) * K0}), q, "tool").C
+        minus = cl.compliance(clm.with_springs({**springs, name: (1 - h) * K0}), q, "tool").C
+        rows = np.arange(clm.model.nv)[clm.joint_v_slice(name)]
+        assert_close_in_norm(compliance_derivative(res, rows, K0), (plus - minus) / (2 * h),
+                             RTOL_DERIVATIVE)  # fmt: skip
+
+
+def test_beam_young_modulus_is_fitted_as_a_factor_of_the_block():
+    # the truth is built by beam theory with E and G both 1.3 times the start's (fixed
+    # Poisson ratio): the fitted factor of each block is 1.3, the joint springs recovered
+    alu = {"E": 7.0e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.06, "t": 0.004}}
+    ends = {"upper_arm_link": "elbow_joint", "forearm_link": "wrist_1_joint"}
+
+    def beams(factor):
+        spec = {**alu, "E": factor * alu["E"], "G": factor * alu["G"]}
+        return {link: {**spec, "end": end} for link, end in ends.items()}
+
+    base = _ur5(UR5_TRUE)
+    truth, start = base.with_beams(beams(1.3)), _ur5(dict.fromkeys(UR5_JOINTS, 1e4))
+    start = start.with_beams(beams(1.0))
+    rng = np.random.default_rng(6)
+    configs = [cl.beams.map_configuration(base.model, truth.model, q) for q in _ur5_configs(rng)]
+    data = _synthetic(truth, "tool0", configs, rng, sd=0.0)
+    fit = identify(start, data, "tool0", [*UR5_JOINTS, "upper_arm_link_beam",
+                                          "forearm_link_beam"])  # fmt: skip
+    assert fit.unidentifiable == ()
+    np.testing.assert_allclose(fit.estimates["upper_arm_link_beam"], 1.3, rtol=RTOL_EXACT_FIT)
+    np.testing.assert_allclose(fit.estimates["forearm_link_beam"], 1.3, rtol=RTOL_EXACT_FIT)
+    for name in UR5_JOINTS:
+        np.testing.assert_allclose(fit.estimates[name], UR5_TRUE[name], rtol=RTOL_EXACT_FIT)
+
+
+def test_cahyman_springs_are_recovered_and_its_series_arm_springs_named():
+    from cahyman_pin.model import cahyman_model
+
+    machine = cahyman_model()
+    clm = machine.clm
+    groups = {
+        "K_T": ("alpha_1", "alpha_2", "alpha_3"),
+        "K_b": tuple(f"{p}_{i}_axial" for i in (1, 2, 3) for p in ("b", "d")),
+        "K_T4": ("alpha_4",),
+        "K_s": ("s_4",),
+        "K_4": ("arm_axial",),
+    }
+    truth = {"K_T": 3000.0, "K_b": 1.5e6, "K_T4": 1200.0, "K_s": 4e5, "K_4": 4e6}
+    springs = {n: truth[g] for g, names in groups.items() for n in names}
+    rng = np.random.default_rng(7)
+    poses = [(45.0, 60.0, 75.0, 45.0, 0.01), (80.0, 70.0, 60.0, 30.0, 0.04),
+             (60.0, 85.0, 50.0, 60.0, 0.02)]  # fmt: skip
+    configs = [machine.assemble(np.deg2rad(p[:3]), np.deg2rad(p[3]), p[4]) for p in poses]
+    data = _synthetic(clm.with_springs(springs), "M", configs, rng, sd=0.0)
+    start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
+    fit = identify(start, data, "M", list(groups.values()))
+    # the telescope's spring K_s and the arm's K_4 both act along the arm, in series: the
+    # tip sees only 1/K_s + 1/K_4
+    assert fit.unidentifiable == ("s_4", "arm_axial")
+    assert fit.confounded == (("s_4", "arm_axial"),)
+    for g in ("K_T", "K_b", "K_T4"):
+        np.testing.assert_allclose(fit.estimates["+".join(groups[g])], truth[g],
+                                   rtol=RTOL_EXACT_FIT)  # fmt: skip
+    tied = identify(start, data, "M", [*list(groups.values())[:3], ("s_4", "arm_axial")])
+    np.testing.assert_allclose(
+        tied.estimates["s_4+arm_axial"],
+        2 / (1 / truth["K_s"] + 1 / truth["K_4"]),
+        rtol=RTOL_EXACT_FIT,
+    )
+    for g in ("K_T", "K_b", "K_T4"):
+        np.testing.assert_allclose(tied.estimates["+".join(groups[g])], truth[g],
+                                   rtol=RTOL_EXACT_FIT)  # fmt: skip
+
+
+@pytest.mark.parametrize("factor", [1e6, 1e-6])
+def test_a_start_a_million_times_off_converges(fourbar, factor):
+    clm, _ = fourbar
+    data = _fourbar_data(clm, np.random.default_rng(8), sd=0.0)
+    start = clm.with_springs({n: factor * v for n, v in FOURBAR_TRUE.items()})
+    fit = identify(start, data, "P", list(FOURBAR_TRUE))
+    for name, value in FOURBAR_TRUE.items():
+        np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
+
+
+@pytest.mark.parametrize("scale", [1e-5, 1e7])  # crank 5e-4 N m/rad .. rocker 2e12 N/m
+def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, scale):
+    clm, _ = fourbar
+    springs = {n: scale * v for n, v in FOURBAR_TRUE.items()}
+    data = _fourbar_data(clm, np.random.default_rng(9), sd=0.0, springs=springs)
+    start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
+    fit = identify(start, data, "P", list(FOURBAR_TRUE))
+    for name, value in springs.items():
+        np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
+
+
+def test_mixed_units_recover_within_their_errors():
+    # translations to 1 um, rotations to 50 urad: each component weighted by its own sd
+    rng = np.random.default_rng(10)
+    sd = np.array([1e-6, 1e-6, 1e-6, 5e-5, 5e-5, 5e-5])
+    truth = _ur5(UR5_TRUE)
+    data = []
+    for q in _ur5_configs(rng):
+        C = cl.compliance(truth, q, "tool0").C
+        for w in 100.0 * rng.normal(size=(3, 6)):
+            data.append(Measurement.of(q=q, wrench=w, twist=C @ w + sd * rng.normal(size=6),
+                                       sd=sd))  # fmt: skip
+    fit = identify(_ur5(dict.fromkeys(UR5_JOINTS, 1e4)), data, "tool0", list(UR5_JOINTS))
+    for name in UR5_JOINTS:
+        assert abs(fit.estimates[name] - UR5_TRUE[name]) <= SIGMAS * fit.std_errors[name]
+    assert 0.5 < fit.residual_rms < 1.5
+
+
+#: Monte Carlo of the standard errors: 100 fits; the sample standard deviation of 100
+#: normal draws is within 1/sqrt(2 * 99) = 7% of the true one (1 sigma): 25% is 3.5 sigma.
+MC_FITS = 100
+RTOL_MC = 0.25
+
+
+def test_standard_errors_match_the_scatter_of_many_noisy_fits(fourbar):
+    clm, _ = fourbar
+    rng = np.random.default_rng(11)
+    configs = [cl.assemble(clm, actuated=[a]).q for a in FOURBAR_CRANKS]
+    truth = clm.with_springs(FOURBAR_TRUE)
+    wrenches = [(q, 10.0 * rng.normal(size=(2, 6))) for q in configs]
+    exact = [(q, w, cl.compliance(truth, q, "P").C @ w) for q, ws in wrenches for w in ws]
+    estimates, errors = [], []
+    for _ in range(MC_FITS):
+        data = [Measurement.of(q=q, wrench=w, twist=d + 1e-7 * rng.normal(size=6), sd=1e-7)
+                for q, w, d in exact]  # fmt: skip
+        fit = identify(truth, data, "P", list(FOURBAR_TRUE))
+        estimates.append([fit.estimates[n] for n in FOURBAR_TRUE])
+        errors.append([fit.std_errors[n] for n in FOURBAR_TRUE])
+    np.testing.assert_allclose(np.std(estimates, axis=0, ddof=1), np.mean(errors, axis=0),
+                               rtol=RTOL_MC)  # fmt: skip
+
+
+def _series_chain():
+    """Two prismatic springs in series along x (seen only through 1/k1 + 1/k2), then a
+    revolute spring about z at 0.5 m from the tool."""
+    m = pin.Model()
+    a = m.addJoint(0, pin.JointModelPX(), pin.SE3.Identity(), "s1")
+    b = m.addJoint(a, pin.JointModelPX(), pin.SE3.Identity(), "s2")
+    c = m.addJoint(b, pin.JointModelRZ(), pin.SE3(np.eye(3), np.array([0.2, 0.0, 0.0])), "r")
+    for j in (a, b, c):
+        m.appendBodyToJoint(j, pin.Inertia.FromSphere(1.0, 0.05), pin.SE3.Identity())
+    m.addFrame(pin.Frame("tool", c, pin.SE3(np.eye(3), np.array([0.0, 0.5, 0.0])), pin.OP_FRAME))
+    return cl.ClosedLoopModel(m, springs={"s1": 1e5, "s2": 3e5, "r": 200.0})
+
+
+def test_series_springs_are_reported_confounded():
+    clm = _series_chain()
+    rng = np.random.default_rng(12)
+    data = _synthetic(clm, "tool", [np.zeros(3), np.array([0.1, 0.0, 0.7])], rng, sd=0.0)
+    fit = identify(clm.with_springs({"s1": 1e4, "s2": 1e4, "r": 50.0}), data, "tool",
+                   ["s1", "s2", "r"])  # fmt: skip
+    assert fit.unidentifiable == ("s1", "s2") and fit.confounded == (("s1", "s2"),)
+    assert fit.estimates["s1"] is None and fit.std_errors["s2"] is None
+    np.testing.assert_allclose(fit.estimates["r"], 200.0, rtol=RTOL_EXACT_FIT)
+    # tied to one value they are identified: 1/k + 1/k = 1/1e5 + 1/3e5
+    tied = identify(clm, data, "tool", [("s1", "s2"), "r"])
+    np.testing.assert_allclose(tied.estimates["s1+s2"], 2 / (1 / 1e5 + 1 / 3e5),
+                               rtol=RTOL_EXACT_FIT)  # fmt: skip
+
+
+def test_forces_alone_do_not_load_a_spring_whose_axis_passes_through_the_frame():
+    # wrist_3's axis passes through tool0: forces there have no moment about it
+    rng = np.random.default_rng(13)
+    truth = _ur5(UR5_TRUE)
+    data = []
+    for q in _ur5_configs(rng, 4):
+        C = cl.compliance(truth, q, "tool0").C
+        for f in 100.0 * rng.normal(size=(3, 3)):
+            w = np.r_[f, 0.0, 0.0, 0.0]
+            data.append(Measurement.of(q=q, wrench=w, twist=C @ w, sd=1e-9))
+    fit = identify(_ur5(dict.fromkeys(UR5_JOINTS, 1e4)), data, "tool0", list(UR5_JOINTS))
+    assert fit.unidentifiable == ("wrist_3_joint",)
+    for name in UR5_JOINTS[:5]:
+        np.testing.assert_allclose(fit.estimates[name], UR5_TRUE[name], rtol=RTOL_EXACT_FIT)
+
+
+def test_the_ur5_stretched_singular_pose_still_identifies_its_springs():
+    # q = 0: the arm stretched, the shoulder, elbow and wrist_1 axes parallel (rank J = 5);
+    # the sensitivities are checked by central differences in log k, the fit exactly
+    truth = _ur5(UR5_TRUE)
+    q0 = np.zeros(6)
+    rng = np.random.default_rng(14)
+    data = _synthetic(truth, "tool0", [q0, q0 + np.r_[0, 0, 0, 0, 0.5, 0]], rng, sd=0.0)
+    fit = identify(_ur5(dict.fromkeys(UR5_JOINTS, 1e4)), data, "tool0", list(UR5_JOINTS))
+    columns = []
+    for name in UR5_JOINTS:
+        h = 1e-5
+        plus = _ur5({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(h)})
+        minus = _ur5({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(-h)})
+        columns.append(np.concatenate([
+            (cl.compliance(plus, m.q, "tool0").C - cl.compliance(minus, m.q, "tool0").C)
+            @ m.wrench / (2 * h) for m in data]))  # fmt: skip
+    s = np.linalg.svd(np.array(columns).T / np.linalg.norm(columns, axis=1), compute_uv=False)
+    assert s[-1] > 1e-3 * s[0]  # well identifiable: the fit must name nothing
+    assert fit.unidentifiable == ()
+    for name in UR5_JOINTS:
+        np.testing.assert_allclose(fit.estimates[name], UR5_TRUE[name], rtol=RTOL_EXACT_FIT)
+
+
+def test_repeated_measurements_shrink_the_errors_by_the_square_root_of_their_number():
+    # six copies of the same data: the same estimates, errors sqrt(6) times smaller
+    clm, _ = mech.fourbar_case()[:2]
+    data = _fourbar_data(clm, np.random.default_rng(16), sd=0.0, n_wrench=2)
+    once = identify(clm, data, "P", list(FOURBAR_TRUE))
+    six = identify(clm, data * 6, "P", list(FOURBAR_TRUE))
+    assert six.n_measurements == 6 * once.n_measurements
+    for name in FOURBAR_TRUE:
+        np.testing.assert_allclose(six.std_errors[name] * np.sqrt(6), once.std_errors[name],
+                                   rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(six.correlations, once.correlations, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("sd", "match"),
+    [(-1e-6, r"sd must be .* got -1e-06"), (float("nan"), r"sd must be .* got nan"),
+     ([1e-6] * 3, r"sd must be one or 6 .* got \[1e-06, 1e-06, 1e-06\]"),
+     ("x", r"sd must be real numbers, got 'x'"), (None, r"sd must be real numbers")],
+)  # fmt: skip
+def test_bad_standard_deviations_are_refused(sd, match):
+    with pytest.raises(cl.InvalidInputError, match=match):
+        Measurement.of(q=[0.0], wrench=np.ones(6), twist=np.zeros(6), sd=sd)
+
+
+@pytest.mark.parametrize("key", ["q", "actuated", "twist", "wrench"])
+def test_values_that_are_not_numbers_are_refused(key):
+    kwargs = {"q": [0.0], "wrench": np.ones(6), "twist": np.zeros(6), "sd": 1.0}
+    if key == "actuated":
+        del kwargs["q"]
+    kwargs[key] = ["x"] * 6
+    with pytest.raises(cl.InvalidInputError, match=r"must be real numbers, got \['x'"):
+        Measurement.of(**kwargs)
+
+
+def test_measurements_that_do_not_fit_the_model_are_named(fourbar):
+    clm, q = fourbar
+    good = Measurement.of(q=q, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    short = Measurement.of(q=q[:3], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    with pytest.raises(cl.InvalidInputError, match=r"measurement 1: q has 3 values; expected nq=5"):
+        identify(clm, [good, short], "P", ["crank"])
+    nan = Measurement.of(q=np.r_[q[:4], np.nan], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    with pytest.raises(cl.InvalidInputError, match=r"measurement 0: q contains non-finite"):
+        identify(clm, [nan], "P", ["crank"])
+    two = Measurement.of(actuated=[0.3, 0.1], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    with pytest.raises(cl.InvalidInputError, match=r"measurement 0: actuated has 2 values"):
+        identify(clm, [two], "P", ["crank"])
+    with pytest.raises(cl.NameNotFoundError, match=r"nowhere"):
+        identify(clm, [good], "nowhere", ["crank"])
+    with pytest.raises(cl.InvalidInputError, match=r"start values for \['crnak'\], not fitted"):
+        identify(clm, [good], "P", ["crank"], start={"crnak": 10.0})
+    with pytest.raises(cl.InvalidInputError, match=r"list of Measurement"):
+        identify(clm, good, "P", ["crank"])
+    with pytest.raises(cl.InvalidInputError, match=r"list of joint names"):
+        identify(clm, [good], "P", "crank")
+
+
+def test_a_group_mixing_a_block_and_a_number_is_refused():
+    clm, q, _ = mech.serial_with_block()
+    one = [Measurement.of(q=q, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)]
+    with pytest.raises(cl.InvalidInputError, match=r"mixes block springs and numbers"):
+        identify(clm, one, "tool", [("base", "flex")])
+
+
+def test_measurements_given_by_actuated_values(fourbar):
+    clm, _ = fourbar
+    rng = np.random.default_rng(15)
+    data = []
+    for a in FOURBAR_CRANKS:
+        C = cl.compliance(clm, cl.assemble(clm, actuated=[a]).q, "P").C
+        for w in 10.0 * rng.normal(size=(3, 6)):
+            data.append(Measurement.of(actuated=[a], wrench=w, twist=C @ w, sd=1e-9))
+    fit = identify(clm.with_springs({"crank": 10.0, "crank_axial": 1e6, "rocker_axial": 1e4}),
+                   data, "P", list(FOURBAR_TRUE))  # fmt: skip
+    for name, value in FOURBAR_TRUE.items():
+        np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
