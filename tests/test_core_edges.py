@@ -168,6 +168,39 @@ def test_concurrent_first_use_builds_the_caches_consistently(name):
             _assert_bit_identical(a, b)
 
 
+def test_threads_mixing_frames_axes_paths_and_lengths_on_one_model():
+    """Queries that share a model's caches under different keys (frames, axes, the
+    length L of the per-model scalings, both paths), all at once on a fresh CaHyMan:
+    bit-identical to the same queries made one by one on another fresh model."""
+    clm0, poses = _cahyman_poses(2)
+    L = clm0.length
+    queries = [
+        (q, frame, axes, length, path)
+        for q in poses
+        for frame, axes, length, path in (
+            ("M", "world", None, "auto"),
+            ("H", "local", None, "auto"),
+            ("M", "local", 2.0 * L, "auto"),
+            ("Q", "world", None, "null-space"),
+            ("M", "world", 0.5 * L, "null-space"),
+            ("H", "world", 2.0 * L, "auto"),
+        )
+    ]
+
+    def query(m, item):
+        q, frame, axes, length, path = item
+        return cl.compliance(m, q, frame, axes, length=length, path=path)
+
+    reference = clm0.with_springs(clm0.springs, clm0.locked)
+    serial = [query(reference, item) for item in queries]
+    assert len({r.path for r in serial}) == 2
+    fresh = clm0.with_springs(clm0.springs, clm0.locked)
+    threaded = _threaded(lambda item: query(fresh, item), queries)
+    for a, b in zip(serial, threaded, strict=True):
+        _assert_bit_identical(a, b)
+        assert a.length == b.length
+
+
 # ---------------------------------------------------------------------- near-singular
 def test_stewart_towards_fichters_singularity():
     """psi = 90 deg - delta, delta -> 0 in geometric steps: both paths decide alike, K
@@ -363,17 +396,23 @@ def _pinocchio_jacobian(clm, q, frame):
 
 
 def test_mixed_springs_within_the_rank_rule_match_the_serial_formula():
-    """1e-6 .. 1e7 on one UR5 (a ratio of 1e13, below the 1e14 of the rank rule):
-    C = J diag(1/k) J^T on Pinocchio's Jacobian, on both paths."""
+    """1e-6 .. 2e7 on one UR5 (a ratio of 2e13, below the 1e14 of the rank rule):
+    C = J diag(1/k) J^T and K = J^-T diag(k) J^-1 on Pinocchio's Jacobian (cond(J) ~ 10,
+    so the closed forms are exact to ~1e-15), on both paths: K to eps sqrt(cond)."""
     k = np.array([1e-6, 1e7, 3e-4, 1e6, 1e-6, 2e7])
     clm, q, frame = _ur5(dict(zip(UR5_JOINTS, k, strict=True)))
     J = _pinocchio_jacobian(clm, q, frame)
+    assert np.linalg.cond(J) < 100
     C_ref = (J / k) @ J.T
+    J_inv = np.linalg.inv(J)
+    K_ref = J_inv.T @ (k[:, None] * J_inv)
     for path in ("auto", "null-space"):
         res = cl.compliance(clm, q, frame, path=path)
         _assert_finite(res)
         assert _rel(res.C, C_ref) < RTOL_SERIAL
-        assert res.ill_conditioned
+        assert res.ill_conditioned and res.rank == 6  # the rank is that of the kinematics
+        c = res.condition_number
+        assert _rel(res.K, K_ref) <= EPS_SQRT_COND * np.sqrt(c) + RTOL_FLOOR
 
 
 @pytest.mark.parametrize("low, high", [(1e-6, 1e15), (1.0, 1e15), (1e-3, 1e12)])
