@@ -30,6 +30,7 @@ from cahyman_pin.paper.figures import figure_tornado
 from cahyman_pin.paper.fit import (
     DIMENSION_EVALUATIONS,
     DIMENSION_RANGE,
+    IDLE_CHANGE,
     SENSITIVITY_STEP,
     STIFFNESS_GROUPS,
     STIFFNESS_RANGE,
@@ -42,9 +43,6 @@ from cahyman_pin.paper.fit import (
 )
 from cahyman_pin.paper.numbers import fmt
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, SOURCES, CaHyManParams
-
-#: Change of a cell [mm or deg] below which a dimension is said to change no cell.
-IDLE = 1e-12
 
 
 def _is_rotation(params: CaHyManParams) -> np.ndarray:
@@ -329,14 +327,18 @@ def sensitivity_section(doc: Document, out: Path, params: CaHyManParams) -> None
         cells = []
         for mask, unit in ((~rot, "mm"), (rot, "deg")):
             k = int(np.flatnonzero(mask)[np.nanargmax(both[mask])])
-            cells.append(f"{fmt(both[k], 3)} {unit} ({qs[k].label})" if both[k] >= IDLE else "0")
+            cells.append(
+                f"{fmt(both[k], 3)} {unit} ({qs[k].label})" if both[k] >= IDLE_CHANGE else "0"
+            )
         rows.append((name, fmt(getattr(params, name)), *cells))
     largest = np.nanmax([np.fmax(np.abs(m), np.abs(p)) for m, p in sens.values()], axis=0)
-    idle = [n for n, (m, p) in sens.items() if np.nanmax(np.fmax(np.abs(m), np.abs(p))) < IDLE]
+    idle = [
+        n for n, (m, p) in sens.items() if np.nanmax(np.fmax(np.abs(m), np.abs(p))) < IDLE_CHANGE
+    ]
     idle_text = ""
     if idle:
         why = " (the radial sliders take up any change of r_e)" if "r_e" in idle else ""
-        idle_text = (f" {', '.join(idle)}: no cell changes by {IDLE:g} or more{why}, so the "
+        idle_text = (f" {', '.join(idle)}: no cell changes by {IDLE_CHANGE:g} or more{why}, so the "
                      "tables cannot identify it.")  # fmt: skip
     doc.add(
         Heading("Sensitivity of every cell to the assumed dimensions"),

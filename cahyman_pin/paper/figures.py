@@ -26,7 +26,12 @@ from cahyman_pin.paper.compare import (
     paper_coordinates,
 )
 from cahyman_pin.paper.data import FIG5A, FIG5BCD, FIG67, TABLE_POSES, PaperPose
-from cahyman_pin.paper.fit import DIMENSIONS, dimension_sensitivity
+from cahyman_pin.paper.fit import (
+    DIMENSIONS,
+    IDLE_CHANGE,
+    SENSITIVITY_STEP,
+    dimension_sensitivity,
+)
 from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
 from closedloop.progress import progress
@@ -144,43 +149,54 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
     """Tornado of every compared quantity against each assumed dimension at -+20 %.
 
     One panel per table and kind (translations [mm], rotations [deg]); per quantity one
-    bar per dimension from 0 to its change at +20 % (solid) and at -20 % (light), the
-    consistent model; the label gives the published minus the model value (gap).
+    bar per dimension from 0 to its change when that dimension is multiplied by 1.2
+    (solid) and by 0.8 (light), the consistent model; quantities sorted by their largest
+    change, the largest on top; the label gives the published minus the model value
+    (gap). Dimensions that change no quantity are named in the title, not drawn.
     """
     qs = quantities(params)
     sens = dimension_sensitivity(params)
     gap = published_values(params) - model_values(params)
-    colours = dict(zip(DIMENSIONS, plt.get_cmap("tab10").colors, strict=False))
-    n_dim = len(DIMENSIONS)
+    largest = {n: np.nanmax(np.fmax(np.abs(m), np.abs(p))) for n, (m, p) in sens.items()}
+    drawn = [n for n in DIMENSIONS if largest[n] >= IDLE_CHANGE]
+    idle = [n for n in DIMENSIONS if n not in drawn]
+    colours = dict(zip(drawn, plt.get_cmap("tab10").colors, strict=False))
+    n_dim = len(drawn)
+    step = f"{SENSITIVITY_STEP:.0%}"
     fig, axes = plt.subplots(len(TABLE_POSES), 2, figsize=(11, 16))
     for row_axes, pose in zip(axes, TABLE_POSES, strict=True):
         for ax, rotation in zip(row_axes, (False, True), strict=True):
             idx = [k for k, q in enumerate(qs) if q.table == pose.label
                    and q.row.endswith("[deg]") == rotation]  # fmt: skip
+            size = [max(np.nanmax(np.abs([sens[n][0][k], sens[n][1][k]])) for n in drawn)
+                    for k in idx]  # fmt: skip
+            idx = [idx[i] for i in np.argsort(size, kind="stable")[::-1]]
             slots = np.arange(len(idx)) * (n_dim + 1)
-            for d, name in enumerate(DIMENSIONS):
+            unit = "deg" if rotation else "mm"
+            for d, name in enumerate(drawn):
                 minus, plus = sens[name][0][idx], sens[name][1][idx]
                 ax.barh(slots + d, plus, color=colours[name], height=0.9)
                 ax.barh(slots + d, minus, color=colours[name], height=0.9, alpha=0.35)
             centres = [slot * (n_dim + 1) + (n_dim - 1) / 2 for slot in range(len(idx))]
             ax.set_yticks(centres)
             ax.set_yticklabels(
-                [f"{LOAD_SHORT[qs[k].load]} {qs[k].row}\ngap {gap[k]:+.3g}" for k in idx],
+                [f"{LOAD_SHORT[qs[k].load]} {qs[k].row}\ngap {gap[k]:+.3g} {unit}" for k in idx],
                 fontsize=7,
             )
             ax.invert_yaxis()
             ax.axvline(0.0, color="k", lw=0.6)
             ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
-            unit = "deg" if rotation else "mm"
             ax.set_xlabel(f"change of the cell [{unit}]")
             ax.set_title(f"{pose.label}: {'rotations' if rotation else 'translations'}",
                          fontsize=9)  # fmt: skip
             ax.grid(True, axis="x", alpha=0.3)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in DIMENSIONS]
-    fig.legend(handles, [f"{n} (solid +20 %, light -20 %)" for n in DIMENSIONS],
-               loc="upper center", bbox_to_anchor=(0.5, 0.98), ncol=4, fontsize=8)  # fmt: skip
-    fig.suptitle("Sensitivity of every compared cell to each assumed dimension (+-20 %), "
-                 "consistent model", y=0.995)  # fmt: skip
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in drawn]
+    fig.legend(handles, drawn, loc="upper center", bbox_to_anchor=(0.5, 0.975), ncol=n_dim,
+               fontsize=9, title=f"solid: dimension +{step}, light: -{step}",
+               title_fontsize=8)  # fmt: skip
+    no_change = f"; {', '.join(idle)}: no change" if idle else ""
+    fig.suptitle(f"Change of every compared cell for -+{step} of each assumed dimension, "
+                 f"consistent model{no_change}", y=0.995)  # fmt: skip
     fig.subplots_adjust(left=0.16, right=0.98, top=0.93, bottom=0.04, wspace=0.45, hspace=0.25)
     path = Path(out_dir) / "tornado_dimensions.png"
     fig.savefig(path, dpi=80)

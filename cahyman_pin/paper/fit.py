@@ -252,6 +252,9 @@ def dimension_fit(params: CaHyManParams) -> FitResult:
 
 #: Relative change of each assumed dimension in the sensitivity study.
 SENSITIVITY_STEP = 0.2
+#: Change of a cell [mm or deg] below which a dimension is said to change no cell (the
+#: closed form's rounding is about 1e-15 of the cells).
+IDLE_CHANGE = 1e-12
 
 
 def dimension_sensitivity(params: CaHyManParams) -> dict[str, tuple[np.ndarray, np.ndarray]]:
