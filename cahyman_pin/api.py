@@ -112,7 +112,7 @@ def generic_backend(
     J_H = state.frame_jacobian(FRAME_H)
     return BackendResult(
         C=result.C,
-        pose=model.pose(result.q),
+        pose=model.pose_from(state.q, state.data),
         C_platform=readonly(J_H @ result.G),
         details={"q": result.q, "compliance": result},
     )
@@ -300,6 +300,15 @@ class CaHyManStiffness:
         }
 
 
+def _read_only(a) -> np.ndarray:
+    """``a`` itself when it is a read-only float array owning its data (a generic result's),
+    else a read-only copy."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.base is None:
+        if not a.flags.writeable:
+            return a
+    return readonly(a)
+
+
 def _real_or_pairs(ev: np.ndarray) -> list:
     """Eigenvalues as JSON: reals, or [real, imaginary] pairs when some are complex."""
     ev = np.real_if_close(ev)
@@ -358,8 +367,11 @@ def stiffness(
     """
     if not isinstance(params, CaHyManParams):
         raise InvalidInputError(f"params must be a CaHyManParams, got {type(params).__name__}")
-    alpha, alpha4, s4 = (real_array(v, n) for v, n in ((alpha, "alpha"), (alpha4, "alpha4"),
-                                                         (s4, "s4")))  # fmt: skip
+    # refuse what is not real numbers (strings, complex...); float arrays and floats are
+    if not (type(alpha) is np.ndarray and alpha.dtype == np.float64):
+        alpha = real_array(alpha, "alpha")
+    alpha4 = alpha4 if isinstance(alpha4, float) else real_array(alpha4, "alpha4")
+    s4 = s4 if isinstance(s4, float) else real_array(s4, "s4")
     alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, params)
     if weight and backend != "generic":
         raise InvalidInputError(
@@ -378,8 +390,8 @@ def stiffness(
         s4=s4,
         params=params,
         backend=backend,
-        C=readonly(result.C),
-        C_platform=None if result.C_platform is None else readonly(result.C_platform),
+        C=_read_only(result.C),
+        C_platform=None if result.C_platform is None else _read_only(result.C_platform),
         pose=result.pose,
         indices=_indices(result, params, backend),
         details=result.details,

@@ -11,6 +11,7 @@ elevation from x_p towards z_p) and s_4 [m] (telescope stroke, in [0, params.s4_
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,6 +94,18 @@ def paper_angles(R: np.ndarray) -> tuple[float, float, float]:
 
 def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float, float]:
     """Validated (alpha (3,) [rad], alpha_4 [rad], s_4 [m]); raises InvalidInputError."""
+    if (  # the common case, checked without conversions (a sum of Python floats is
+        # finite when its terms are; it overflows to inf, never raises)
+        type(alpha) is np.ndarray
+        and alpha.shape == (3,)
+        and alpha.dtype == np.float64
+        and isinstance(alpha4, float)
+        and isinstance(s4, float)
+        and math.isfinite(alpha4)
+        and 0.0 <= s4 <= p.s4_max
+        and math.isfinite(sum(alpha.tolist()))
+    ):
+        return alpha.copy(), float(alpha4), float(s4)
     alpha = np.array(alpha, dtype=float).reshape(-1)
     if alpha.shape != (3,) or not np.all(np.isfinite(alpha)):
         raise InvalidInputError(f"alpha must be 3 finite angles [rad], got {alpha.tolist()}")
@@ -177,6 +190,10 @@ class CaHyManModel:
             self.clm.model.names[j]: self.clm.model.joints[j].idx_q
             for j in range(1, self.clm.model.njoints)
         }
+        # what the pose reads: frames H, M, Q, H_1..3 and the strokes s_1..3 in q
+        names = (FRAME_H, FRAME_M, "Q", *(f"H_{k}" for k in LEGS))
+        self._pose_frames = tuple(self.clm.frame_id(n) for n in names)
+        self._stroke_index = np.array([self._q_index[f"s_{k}"] for k in LEGS])
 
     def __repr__(self) -> str:
         return f"CaHyManModel({self.clm!r})"
@@ -235,8 +252,8 @@ class CaHyManModel:
             InvalidInputError: non-finite input, wrong count, s_4 outside its stroke.
         """
         alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
-        if q0 is None:
-            q0 = self.initial_guess(alpha, alpha4, s4)
+        if q0 is None:  # the inputs are checked: the guess of one pose without checking again
+            q0 = self.initial_guesses(alpha[None], np.array([alpha4]), np.array([s4]))[0]
         else:
             q0 = self.clm.check_configuration(q0)
             for name in VIRTUAL_JOINTS:  # virtual springs back to rest
@@ -254,18 +271,24 @@ class CaHyManModel:
         """Plate and arm pose read from the assembled configuration q (nq,)."""
         q = self.clm.check_configuration(q)
         update_kinematics(self.clm, q)
-        oMf, fid = self.clm.data.oMf, self.clm.frame_id
-        plate, arm = oMf[fid(FRAME_H)], oMf[fid(FRAME_M)]
-        phi, theta, psi = paper_angles(plate.rotation)
+        return self.pose_from(q, self.clm.data)
+
+    def pose_from(self, q: np.ndarray, data: pin.Data) -> CaHyManPose:
+        """:meth:`pose` from the frame placements of q (nq,) already in ``data`` (e.g. a
+        :class:`closedloop.configuration.Configuration`'s), without computing them again."""
+        oMf, (plate, arm, pivot, *balls) = data.oMf, self._pose_frames
+        plate, arm = oMf[plate], oMf[arm]
+        R = readonly(plate.rotation)
+        phi, theta, psi = paper_angles(R)
         return CaHyManPose(
             H=readonly(plate.translation),
-            R=readonly(plate.rotation),
+            R=R,
             phi=phi,
             theta=theta,
             psi=psi,
-            s=readonly([q[self._q_index[f"s_{k}"]] for k in LEGS]),
-            H_k=readonly([oMf[fid(f"H_{k}")].translation for k in LEGS]),
-            Q=readonly(oMf[fid("Q")].translation),
+            s=readonly(q[self._stroke_index]),
+            H_k=readonly([oMf[k].translation for k in balls]),
+            Q=readonly(oMf[pivot].translation),
             M=readonly(arm.translation),
             R_M=readonly(arm.rotation),
         )

@@ -10,7 +10,7 @@ import scipy.linalg
 
 from .arrays import real_array
 from .exceptions import AssemblyError, InvalidInputError
-from .kinematics import closure_residual, jacobian_rows
+from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
 
 #: Default closure tolerance [m for points; m and rad for welds], infinity norm.
@@ -57,6 +57,15 @@ def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.nda
     return x[:n]
 
 
+def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray):
+    """Closure residual r (m,) at q, its infinity norm and its squared 2-norm; leaves the
+    joint placements and Jacobians of q in ``data`` (what the constraints and their
+    Jacobians read; the frame placements are not updated)."""
+    pin.computeJointJacobians(clm.model, data, q)
+    r = residual_rows(clm, data, datas)
+    return r, float(np.maximum.reduce(abs(r), initial=0.0)), float(r @ r)
+
+
 def assemble(
     clm: ClosedLoopModel,
     actuated: np.ndarray | None = None,
@@ -98,19 +107,18 @@ def assemble(
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
         q[clm.actuated_q_indices] = actuated
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
-    r = closure_residual(clm, q)
-    err, size2 = float(abs(r).max(initial=0.0)), float(r @ r)
+    data, datas = clm.data, clm.constraint_datas
+    r, err, size2 = _residual(clm, data, datas, q)
     it = 0
     while err > tol and it < max_iter:
         it += 1
         # the kinematics and constraint datas of q are those of its residual evaluation
-        J = jacobian_rows(clm, clm.data, clm.constraint_datas, calc=False)[:, free]
+        J = jacobian_rows(clm, data, datas, calc=False)[:, free]
         step = np.zeros(model.nv)
         step[free] = -min_norm_solve(J, r)
         for _ in range(30):
             q_try = pin.integrate(model, q, step)
-            r_try = closure_residual(clm, q_try)
-            err_try, size2_try = float(abs(r_try).max()), float(r_try @ r_try)
+            r_try, err_try, size2_try = _residual(clm, data, datas, q_try)
             if size2_try < size2 or err_try <= tol:
                 break
             step *= 0.5

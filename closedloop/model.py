@@ -380,13 +380,17 @@ class ClosedLoopModel:
 
     @property
     def actuated_q_indices(self) -> np.ndarray:
-        """(n_act,) indices of the actuated coordinates in q."""
-        return np.array([self.model.joints[j].idx_q for j in self.actuated_ids], dtype=int)
+        """(n_act,) read-only indices of the actuated coordinates in q."""
+        return self.memo("actuated_q", lambda: self._joint_indices("idx_q"))
 
     @property
     def actuated_v_indices(self) -> np.ndarray:
-        """(n_act,) indices of the actuated coordinates in the tangent vector."""
-        return np.array([self.model.joints[j].idx_v for j in self.actuated_ids], dtype=int)
+        """(n_act,) read-only indices of the actuated coordinates in the tangent vector."""
+        return self.memo("actuated_v", lambda: self._joint_indices("idx_v"))
+
+    def _joint_indices(self, kind: str) -> np.ndarray:
+        joints = self.model.joints
+        return frozen(np.array([getattr(joints[j], kind) for j in self.actuated_ids], dtype=int))
 
     @property
     def n_constraints(self) -> int:

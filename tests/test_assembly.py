@@ -97,3 +97,33 @@ def test_unreachable_weld():
 def test_invalid_inputs(actuated, q0, match):
     with pytest.raises(InvalidInputError, match=match):
         assemble(fourbar(), actuated, q0=q0)
+
+
+def test_cahyman_inputs_are_checked_alike_in_every_form():
+    # the float-array form has a shortcut in check_inputs: it must refuse and accept what the
+    # general form does, and return copies
+    from cahyman_pin.model import check_inputs
+    from cahyman_pin.params import DEFAULT_PARAMS as P
+
+    good = np.deg2rad([45.0, 60.0, 75.0])
+    alpha, a4, s4 = check_inputs(good, 0.5, 0.01, P)
+    assert alpha is not good and (alpha == good).all() and (a4, s4) == (0.5, 0.01)
+    assert check_inputs(list(good), np.float64(0.5), 0.01, P)[2] == 0.01
+    huge = np.full(3, 1e308)  # finite, with a sum that overflows
+    np.testing.assert_array_equal(check_inputs(huge, 0.5, 0.01, P)[0], huge)
+    for bad in (np.nan, np.inf, -np.inf):
+        for k in range(3):
+            wrong = good.copy()
+            wrong[k] = bad
+            for form in (wrong, list(wrong)):
+                with pytest.raises(InvalidInputError, match="alpha"):
+                    check_inputs(form, 0.5, 0.01, P)
+        with pytest.raises(InvalidInputError, match="alpha_4"):
+            check_inputs(good, bad, 0.01, P)
+        with pytest.raises(InvalidInputError, match="s_4"):
+            check_inputs(good, 0.5, bad, P)
+    for s4 in (-1e-9, P.s4_max * (1 + 1e-12)):
+        with pytest.raises(InvalidInputError, match="s_4"):
+            check_inputs(good, 0.5, s4, P)
+    with pytest.raises(InvalidInputError, match="alpha"):
+        check_inputs(good[:2], 0.5, 0.01, P)
