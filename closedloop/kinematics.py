@@ -28,12 +28,12 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
 
 
 def _closure_rows(clm: ClosedLoopModel) -> tuple[tuple, ...]:
-    """(constraint, first row, last row + 1, is a weld) of every closure (once per model)."""
+    """(constraint, row slice, is a weld) of every closure (once per model)."""
 
     def rows():
         out, start = [], 0
         for c in clm.closures:
-            out.append((c.constraint, start, start + c.size, c.kind == "6d"))
+            out.append((c.constraint, slice(start, start + c.size), c.kind == "6d"))
             start += c.size
         return tuple(out)
 
@@ -42,12 +42,10 @@ def _closure_rows(clm: ClosedLoopModel) -> tuple[tuple, ...]:
 
 def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
     """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
-    rows = _closure_rows(clm)
-    out = np.empty(rows[-1][2] if rows else 0)
-    model = clm.model
-    for (c, a, b, _), cd in zip(rows, constraint_datas, strict=True):
+    out, model = np.empty(clm.n_constraints), clm.model
+    for (c, rows, _), cd in zip(_closure_rows(clm), constraint_datas, strict=True):
         c.calc(model, data, cd)
-        out[a:b] = cd.constraint_position_error
+        out[rows] = cd.constraint_position_error
     return out
 
 
@@ -60,17 +58,17 @@ def jacobian_rows(
         calc: evaluate the constraints first (False when :func:`residual_rows` has just
             done it with the same datas).
     """
-    rows = _closure_rows(clm)
     model = clm.model
-    out = np.empty((rows[-1][2] if rows else 0, model.nv))
-    for (c, a, b, weld), cd in zip(rows, constraint_datas, strict=True):
+    nv = model.nv
+    out = np.empty((clm.n_constraints, nv))
+    for (c, rows, weld), cd in zip(_closure_rows(clm), constraint_datas, strict=True):
         if calc:
             c.calc(model, data, cd)
         J = c.jacobian(model, data, cd)
-        if model.nv == 1:  # a one-dof model gives a vector
+        if nv == 1:  # a one-dof model gives a vector
             J = np.reshape(J, (-1, 1))
         # for a weld, the derivative of log6 of the relative placement
-        out[a:b] = pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J
+        out[rows] = pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J
     return out
 
 

@@ -395,7 +395,7 @@ class ClosedLoopModel:
     @property
     def n_constraints(self) -> int:
         """Total number of closure residual rows (redundant ones included)."""
-        return sum(c.size for c in self.closures)
+        return self.linear_rows.size
 
     def with_springs(
         self, springs: Mapping[str, float | Sequence[float]], locked: Iterable[str] = ()
