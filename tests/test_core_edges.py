@@ -23,6 +23,7 @@ from helpers import UR5_JOINTS
 import closedloop as cl
 import closedloop.springs as springs
 from closedloop.configuration import Configuration
+from closedloop.kinematics import closure_residual
 
 N_THREADS = 6
 #: Rounding of the unit-free computation: C of a mechanism scaled by s (lengths) or by f
@@ -396,6 +397,45 @@ def test_chain_with_one_loop_towards_its_change_point(monkeypatch):
     assert paths[0.1] == "partitioned" and paths[0.0] is None
 
 
+#: Central differences of the closure residual along a unit joint motion, h = 1e-6:
+#: truncation h^2 |residual''| (~1e-12 for these sizes) plus rounding eps L / h (~1e-10).
+FD_STEP, ATOL_FD = 1e-6, 1e-8
+
+
+def _closure_drift(clm, q, dq) -> float:
+    """max |d residual / ds| along the unit motion dq / |dq|, by central differences."""
+    v = dq / np.linalg.norm(dq)
+    plus = closure_residual(clm, pin.integrate(clm.model, q, FD_STEP * v))
+    minus = closure_residual(clm, pin.integrate(clm.model, q, -FD_STEP * v))
+    return float(np.abs(plus - minus).max() / (2 * FD_STEP))
+
+
+@pytest.mark.parametrize("where", ["cahyman", "chain-by-blocks"])
+def test_near_singular_deflections_keep_the_loops_closed(where, monkeypatch):
+    """The joint deflections G w of the fast paths move along the closures, by central
+    differences of the residual at every step towards the change point (alpha_1 or one
+    loop's crank t -> 0), where the passive motion X is least determined."""
+    from cahyman_pin.model import cahyman_model
+
+    if where != "cahyman":  # a new model per step: the cached CaHyMan keeps its scaling
+        monkeypatch.setattr(springs, "BLOCK_PASSIVE", 1)
+    for t in GEOMETRIC[:5]:  # both give a MechanismError from about 1e-6 on
+        if where == "cahyman":
+            m = cahyman_model()
+            clm = m.clm
+            q = m.assemble(np.array([t, np.deg2rad(60.0), np.deg2rad(75.0)]), 0.8, 0.01)
+            frame = "M"
+        else:
+            a = np.array([0.8, -0.7, 0.9, t, -0.6, 0.7, -0.8, 0.6])
+            clm, q, frame = mech.fourbar_chain(a)
+            assert springs.scaling(Configuration(clm, q)).loop_blocks is not None
+        res = cl.compliance(clm, q, frame)
+        assert res.path in ("partitioned", "null-space")
+        for column in res.G.T:
+            if np.abs(column).max() > 0:
+                assert _closure_drift(clm, q, column) < ATOL_FD
+
+
 # ------------------------------------------------------- extreme springs and sizes
 def _scaled_projector(V, length):
     """(6, 6) orthogonal projector on the unit-free form of rigid directions V (6, r).
@@ -431,7 +471,10 @@ def test_scaled_fourbar_follows_the_law_of_units(s):
 
 @pytest.mark.parametrize("f", [1e-6, 1e-3, 1e3, 1e9, 1e15])
 def test_springs_times_f_give_compliance_over_f(f):
-    for build in (mech.fourbar_case, mech.cahyman_case):
+    """Every spring (numbers and coupled blocks) times f: C / f, the same path, rank and
+    scaled condition number (four-bar, CaHyMan, a serial chain with 6x6 and 2x2 blocks)."""
+    blocks = lambda: (*mech.serial_with_block()[:2], "tool")  # noqa: E731
+    for build in (mech.fourbar_case, mech.cahyman_case, blocks):
         clm, q, frame = build()
         ref = cl.compliance(clm, q, frame)
         scaled = clm.with_springs({n: np.asarray(v) * f for n, v in clm.springs.items()})
