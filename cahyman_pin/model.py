@@ -194,6 +194,7 @@ class CaHyManModel:
         names = (FRAME_H, FRAME_M, "Q", *(f"H_{k}" for k in LEGS))
         self._pose_frames = tuple(self.clm.frame_id(n) for n in names)
         self._stroke_index = np.array([self._q_index[f"s_{k}"] for k in LEGS])
+        self._virtual_index = np.array([self._q_index[n] for n in VIRTUAL_JOINTS])
 
     def __repr__(self) -> str:
         return f"CaHyManModel({self.clm!r})"
@@ -254,10 +255,14 @@ class CaHyManModel:
         alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
         if q0 is None:  # the inputs are checked: the guess of one pose without checking again
             q0 = self.initial_guesses(alpha[None], np.array([alpha4]), np.array([s4]))[0]
-        else:
+        elif not (  # a float start with its virtual springs at rest is used as it is
+            type(q0) is np.ndarray
+            and q0.shape == (self.clm.model.nq,)
+            and q0.dtype == np.float64
+            and not q0[self._virtual_index].any()
+        ):
             q0 = self.clm.check_configuration(q0)
-            for name in VIRTUAL_JOINTS:  # virtual springs back to rest
-                q0[self._q_index[name]] = 0.0
+            q0[self._virtual_index] = 0.0  # virtual springs back to rest
         actuated = np.concatenate([alpha, [alpha4, s4]])
         result = assemble_loops(self.clm, actuated, q0)
         return result if full_output else result.q

@@ -127,3 +127,27 @@ def test_cahyman_inputs_are_checked_alike_in_every_form():
             check_inputs(good, 0.5, s4, P)
     with pytest.raises(InvalidInputError, match="alpha"):
         check_inputs(good[:2], 0.5, 0.01, P)
+
+
+def test_cahyman_warm_start_puts_virtual_springs_back_to_rest():
+    # a warm start with deflected virtual springs assembles to the closed-form start's q
+    # (springs at rest); the caller's start is not modified; a non-finite start is refused
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.urdf_builder import VIRTUAL_JOINTS
+
+    model = cahyman_model()
+    pose = (np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01)
+    reference = model.assemble(*pose)
+    virtual = [model.clm.model.joints[model.clm.joint_id(n)].idx_q for n in VIRTUAL_JOINTS]
+    q0 = model.assemble(np.deg2rad([46.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01).copy()
+    q0[virtual] = 0.01
+    kept = q0.copy()
+    q = model.assemble(*pose, q0=q0)
+    np.testing.assert_array_equal(q0, kept)
+    np.testing.assert_array_equal(q[virtual], 0.0)
+    # the same configuration from another start of the same branch: rounding of the
+    # Gauss-Newton iterates (closure tolerance 1e-12 m on links of 0.1 m)
+    np.testing.assert_allclose(q, reference, rtol=0, atol=1e-9)
+    q0[virtual[0]] = np.nan
+    with pytest.raises(InvalidInputError, match="non-finite"):
+        model.assemble(*pose, q0=q0)
