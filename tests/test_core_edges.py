@@ -69,7 +69,8 @@ def _same_decisions(clm, q, frame):
     assert err_fast is err_general
     if fast is None:
         return None, None
-    _assert_finite(fast), _assert_finite(general)
+    _assert_finite(fast)
+    _assert_finite(general)
     assert fast.rank == general.rank
     assert fast.is_full_rank == (fast.stiffness_matrix is not None)
     c = max(general.condition_number, 1.0)
