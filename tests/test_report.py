@@ -170,3 +170,29 @@ def test_class_table_has_every_cell(built):
     printed = [float(r[t.header.index("printed")]) for r in t.rows]
     expected = [TABLES[p.label][i, j] for p in TABLE_POSES for j in range(3) for i in range(6)]
     np.testing.assert_allclose(printed, expected)
+
+
+def test_counts_in_the_text_are_those_of_the_class_table(built):
+    # the counts in the summary and in the class section, against the class table's own
+    # rows (counted here); the floor in the summary, against the floor table's rows summed
+    _, doc = built
+    t = next(b for b in doc.blocks if isinstance(b, Table) and b.caption.startswith("Class of"))
+    kinds = [r[t.header.index("class")] for r in t.rows]
+    n = {k: kinds.count(k) for k in ("reproduced", "explained", "unexplained")}
+    text = " ".join(b.text for b in doc.blocks if isinstance(b, Paragraph))
+    assert (
+        f"{n['reproduced']} are reproduced, {n['explained']} explained by a named effect and "
+        f"{n['unexplained']} unexplained"
+    ) in text
+    assert (
+        f"Counts: {n['reproduced']} reproduced, {n['explained']} explained, "
+        f"{n['unexplained']} unexplained, of 54."
+    ) in text
+    floor = _tables(doc, "Linearity floor per published row")[0]
+    total = sum(float(r[floor.header.index("chi^2 floor")]) for r in floor.rows)
+    m = re.search(r"at ([0-9.]+) or more", text)
+    np.testing.assert_allclose(float(m.group(1)), total, rtol=5e-3)  # 3 digits per row
+    # no cell is said to be explained by the non-linearity while the fit misses the row's
+    # nearest linear value; Table 3 dtheta under F (9.34 deg) is unexplained
+    row = next(r for r in t.rows if r[:3] == ("Table 3", "F", "dtheta [deg]"))
+    assert row[t.header.index("class")] == "unexplained"

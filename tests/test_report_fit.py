@@ -393,3 +393,23 @@ def test_ks_effect_is_the_change_of_the_side_by_side_stiffness():
     )
     effect = effect_changes(P)["K_s value"]["Table 1"]
     np.testing.assert_allclose(effect[2, 0], -1e3 * dc, rtol=1e-6)
+
+
+def test_coarse_translations_from_the_published_digits(monkeypatch):
+    # counted here from the printed tables: rows dx, dy, dz whose second decimal is 0
+    printed = np.concatenate([TABLES[p.label][:3].ravel() for p in TABLE_POSES])
+    zero = int(np.sum(np.round(np.abs(printed) * 100).astype(int) % 10 == 0))
+    n_trans, n_zero, gained = classify.coarse_translations(classify.classify(P))
+    assert (n_trans, n_zero) == (27, zero)
+    # a cell printed at the reference model rounded to 0.1 mm (and 0 as second decimal) but
+    # more than 0.005 mm away is gained by the coarser rounding
+    m = cells.model_values(P)
+    qs = cells.quantities(P)
+    k = next(k for k, q in enumerate(qs) if (q.table, q.load, q.row[:2]) == ("Table 3", 1, "dx"))
+    value = round(m[k], 1)
+    assert 0.005 < abs(value - m[k]) <= 0.05
+    changed = {t: v.copy() for t, v in TABLES.items()}
+    changed["Table 3"][0, 1] = value
+    monkeypatch.setattr(cells, "TABLES", changed)
+    monkeypatch.setattr(classify, "TABLES", changed)
+    assert classify.coarse_translations(classify.classify(P))[2] == gained + 1

@@ -43,6 +43,9 @@ from cahyman_pin.params import CaHyManParams
 
 #: The three classes.
 CLASSES = ("reproduced", "explained", "unexplained")
+#: A coarser rounding that many printed translations suggest (their second decimal is 0):
+#: 0.1 mm, half-width 0.05 mm.
+COARSE_STEP = 0.1
 
 
 @dataclass(frozen=True)
@@ -130,3 +133,20 @@ def largest_unexplained(classes: tuple[CellClass, ...], rotation: bool) -> CellC
     un = [c for c in classes
           if c.kind == "unexplained" and c.compared_as.endswith("[deg]") == rotation]  # fmt: skip
     return max(un, key=lambda c: abs(c.size)) if un else None
+
+
+def coarse_translations(classes: tuple[CellClass, ...]) -> tuple[int, int, int]:
+    """(printed translations, those whose second printed decimal is 0, those of the
+    latter that the reference model or a fit would reach within COARSE_STEP / 2 [mm] and
+    that are not reproduced or explained by a fit now): how much a rounding to 0.1 mm
+    would change the classes."""
+    trans = [c for c in classes if c.compared_as.endswith("[mm]")]
+    zero = [c for c in trans if round(abs(c.printed) * 100) % 10 == 0]
+    half = COARSE_STEP / 2
+    gained = [
+        c for c in zero
+        if not (c.kind == "reproduced" or c.reason.startswith("the fitted"))
+        and min(abs(v - c.published) for v in (c.reference, c.stiffness_fit, c.dimension_fit))
+        <= half
+    ]  # fmt: skip
+    return len(trans), len(zero), len(gained)

@@ -23,7 +23,13 @@ from cahyman_pin.paper.cells import (
     standard_deviations,
     tilt_triangle_ok,
 )
-from cahyman_pin.paper.classify import classify, counts, largest_unexplained
+from cahyman_pin.paper.classify import (
+    COARSE_STEP,
+    classify,
+    coarse_translations,
+    counts,
+    largest_unexplained,
+)
 from cahyman_pin.paper.data import ROWS
 from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
 from cahyman_pin.paper.figures import figure_tornado
@@ -249,6 +255,17 @@ def fit_section(doc: Document, params: CaHyManParams) -> None:
     )
 
 
+def _coarse(classes) -> str:
+    n_trans, n_zero, n_gained = coarse_translations(classes)
+    return (
+        f" Of the {n_trans} printed translations, {n_zero} have 0 as their second decimal "
+        f"(a uniform last digit would give about {n_trans / 10:.0f}): the translations may "
+        f"have been rounded to {COARSE_STEP:g} mm, which the rounding above understates; "
+        f"with a half-width of {COARSE_STEP / 2:g} mm for those cells, {n_gained} of them "
+        "would be reached by the reference model or a fit."
+    )
+
+
 def classes_section(doc: Document, params: CaHyManParams) -> None:
     """The class of every published cell."""
     classes = classify(params)
@@ -278,7 +295,7 @@ def classes_section(doc: Document, params: CaHyManParams) -> None:
             "above; size: published minus that value); otherwise unexplained, with its "
             "residual after the stiffness fit. "
             f"Counts: {n['reproduced']} reproduced, {n['explained']} explained, "
-            f"{n['unexplained']} unexplained, of {len(classes)}." + tail
+            f"{n['unexplained']} unexplained, of {len(classes)}." + tail + _coarse(classes)
         ),
         Table(
             (
