@@ -515,13 +515,15 @@ def batch_indices(
     w = np.asarray(wrench, dtype=float)
     scale = np.max(np.abs(w))  # C (w / s) then times s: no overflow or underflow of |C w|
     twist = C[finite] @ (w / scale) if scale > 0 else np.zeros((int(finite.sum()), 6))
-    out["deflection_translation"][finite] = scale * _norms(twist[:, :3])
-    out["deflection_rotation"][finite] = scale * _norms(twist[:, 3:])
+    out["deflection_translation"][finite] = scale * row_norms(twist[:, :3])
+    out["deflection_rotation"][finite] = scale * row_norms(twist[:, 3:])
     return out
 
 
-def _norms(v: np.ndarray) -> np.ndarray:
-    """(n,) Euclidean norms of the rows of v (n, 3), without overflow or underflow."""
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """(n,) Euclidean norms of the rows of v (n, k), without overflow or underflow of the
+    squares (inf only where a norm exceeds 1.8e308, NaN where a row is not finite)."""
     big = np.max(np.abs(v), axis=1)
     safe = np.where(big > 0, big, 1.0)
-    return big * np.linalg.norm(v / safe[:, None], axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return big * np.linalg.norm(v / safe[:, None], axis=1)

@@ -88,7 +88,13 @@ from .viewer_draw import (  # noqa: F401  (constants: part of this module's inte
 )
 from .viewer_mesh import ROBOTS, RobotPair
 from .viewer_page import overlay
-from .viewer_scene import LEVER_FRACTION, DeflectionScene, beam_curves, deflection_scene
+from .viewer_scene import (
+    LEVER_FRACTION,
+    DeflectionScene,
+    beam_curves,
+    deflection_scene,
+    unit_vector,
+)
 from .viewer_server import GET_CONTROL, SET_OVERLAY, insert_overlay, start_server, stop_server
 
 #: Seconds between two checks of the live page's slider while serving.
@@ -216,7 +222,7 @@ class DeflectionViewer:
         length = LEVER_FRACTION * scene.size
         for v in (scene.wrench[:3], scene.wrench[3:]):
             if np.any(v):
-                tip = scene.point_deflected + length * v / np.linalg.norm(v)
+                tip = scene.point_deflected + length * unit_vector(v)
                 boxes.append(np.array([tip, tip]))
         boxes += [ellipsoid_box(e, floor) for e in scene.ellipsoids if np.any(e.radii > 0.0)]
         boxes += [np.array([b.points.min(axis=0), b.points.max(axis=0)]) for b in scene.beams]

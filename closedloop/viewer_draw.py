@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from .model import ClosedLoopModel
-from .viewer_scene import LEVER_FRACTION, BeamCurve, DeflectionScene, Ellipsoid
+from .viewer_scene import LEVER_FRACTION, BeamCurve, DeflectionScene, Ellipsoid, unit_vector
 
 LOAD, COMPLIANCE, GRID, BEAMS = "load", "compliance", "grid", "beams"
 #: Colour and opacity (RGBA, 0..1) of the nominal pose.
@@ -168,7 +168,7 @@ def draw_load(viewer, scene: DeflectionScene) -> None:
         ("torque", scene.wrench[3:], TORQUE_COLOR, 2),
     ):
         if np.any(v):
-            draw_arrow(node[name], v / np.linalg.norm(v), length, radius, color, heads)
+            draw_arrow(node[name], unit_vector(v), length, radius, color, heads)
 
 
 def draw_arrow(node, d: np.ndarray, length: float, radius: float, color, heads: int):

@@ -34,6 +34,7 @@ from pinocchio.visualize import MeshcatVisualizer
 from pinocchio.visualize.meshcat_visualizer import loadMesh
 
 from .exceptions import InvalidInputError
+from .indices import row_norms
 
 ROBOTS, GHOST, DEFLECTED = "robots", "nominal", "deflected"
 #: meshcat path of the animated object (meshcat puts an object under ``<object>``).
@@ -156,7 +157,7 @@ class RobotPair:
             local = vertices if vertices is not None else np.zeros((1, 3))
             points = local @ M.rotation.T + M.translation
             r = points - self.data.oMi[g.parentJoint].translation
-            out.append(np.linalg.norm(v + np.cross(w, r), axis=1))
+            out.append(row_norms(v + np.cross(w, r)))
         return out
 
     def command(

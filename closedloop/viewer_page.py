@@ -25,6 +25,8 @@ import json
 
 import numpy as np
 
+from .viewer_scene import vector_norm
+
 #: three.js loop mode of the ramp (THREE.LoopPingPong: 0 -> 1 -> 0 -> ...).
 LOOP_PING_PONG = 2202
 #: Milliseconds between two checks of the page script that the scene has loaded.
@@ -168,9 +170,9 @@ def legend_rows(info: dict) -> list[str]:
         f"largest point displacement {d_mm:.4g} mm (real), drawn as {info['scale'] * d_mm:.4g} mm"
     )
     rows.append(
-        f"{frame} moves {_vector(1e3 * t[:3])} mm (norm {1e3 * np.linalg.norm(t[:3]):.4g} mm) "
+        f"{frame} moves {_vector(1e3 * t[:3])} mm (norm {1e3 * vector_norm(t[:3]):.4g} mm) "
         f"and turns {_vector(np.rad2deg(t[3:]))} deg (norm "
-        f"{np.rad2deg(np.linalg.norm(t[3:])):.4g} deg), world axes, real, first order"
+        f"{np.rad2deg(vector_norm(t[3:])):.4g} deg), world axes, real, first order"
     )
     return [html.escape(r) for r in rows]
 

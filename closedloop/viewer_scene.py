@@ -65,6 +65,7 @@ from .beams import inserted_beams
 from .compliance import ComplianceResult, compliance
 from .configuration import accepts_configuration
 from .exceptions import InvalidInputError
+from .indices import row_norms
 from .kinematics import frame_jacobian, update_kinematics
 from .model import ClosedLoopModel
 from .statics import Equilibrium, solve_equilibrium
@@ -269,8 +270,10 @@ def point_displacements(
 
 
 def largest_displacement(clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray) -> float:
-    """d_max [m]: largest norm of :func:`point_displacements`."""
-    return float(np.max(np.linalg.norm(point_displacements(clm, q, frame, dq), axis=1)))
+    """d_max [m]: largest norm of :func:`point_displacements` (without under- or overflow
+    of the squares: a load of any magnitude gives the same picture; NaN when one is
+    not finite)."""
+    return float(np.max(row_norms(point_displacements(clm, q, frame, dq))))
 
 
 def auto_scale(
@@ -311,7 +314,7 @@ def capped(e: Ellipsoid, size: float, fraction: float = ELLIPSOID_MAX_FRACTION) 
 
 
 def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rotational: bool):
-    f, n = _norm(w[:3]), _norm(w[3:])
+    f, n = vector_norm(w[:3]), vector_norm(w[3:])
     if f == 0.0 and n == 0.0:
         return ()
     force = f if f > 0.0 else n / size
@@ -323,10 +326,16 @@ def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rot
     return tuple(capped(e, size) for e in out)
 
 
-def _norm(v: np.ndarray) -> float:
-    """Euclidean norm without overflow for finite entries (inf only if it exceeds 1.8e308)."""
-    m = float(np.max(np.abs(v)))
-    return m * float(np.linalg.norm(v / m)) if m > 0.0 else 0.0
+def vector_norm(v: np.ndarray) -> float:
+    """Euclidean norm of v (k,) at any magnitude (:func:`closedloop.indices.row_norms`)."""
+    return float(row_norms(np.asarray(v, dtype=float)[None])[0])
+
+
+def unit_vector(v: np.ndarray) -> np.ndarray:
+    """v (k,) nonzero, finite, divided by its norm, at any magnitude (a load's direction)."""
+    v = np.asarray(v, dtype=float)
+    m = np.max(np.abs(v))
+    return (v / m) / np.linalg.norm(v / m)
 
 
 def _check_finite(w: np.ndarray, **values) -> None:

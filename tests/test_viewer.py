@@ -261,7 +261,7 @@ def test_model_without_geometry_is_refused(fourbar_urdf, fourbar_yaml):
 def test_overflowing_load_is_refused(fourbar):
     clm, q = fourbar
     with pytest.raises(InvalidInputError, match="too large"):
-        deflection_scene(clm, q, "P", [1e300, 0.0, 0.0, 0.0, 0.0, 0.0])
+        deflection_scene(clm, q, "P", [1.7e308, 1.7e308, 0.0, 0.0, 0.0, 0.0])  # |f| = inf
 
 
 def test_large_ellipsoids_are_shrunk_to_a_fraction_of_the_model(cahyman):
@@ -665,3 +665,71 @@ def test_page_draws_the_beam_as_segments_of_its_curve(rod, tmp_path):
     last = tracks["post_beam_11.position"][-1]["value"]
     np.testing.assert_allclose(last, 0.5 * (curve.points[-2] + curve.points[-1]), atol=1e-12)
     assert len(tracks["post_beam_0.scale"]) == len(scene.ramp)
+
+
+#: A rod along no axis of its link frame (nor of the world): direction (1, 2, 2)/3, tip
+#: frame turned by rpy (0.3, -0.5, 1.1).
+ROD_AXIS = np.array([1.0, 2.0, 2.0]) / 3.0
+
+
+@pytest.fixture(scope="module")
+def oblique_rod(tmp_path_factory):
+    path = tmp_path_factory.mktemp("oblique") / "rod.urdf"
+    inertial = (
+        '<inertial><mass value="0.5"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" '
+        'ixz="0" iyz="0"/></inertial>'
+    )
+    xyz = " ".join(map(str, ROD_L * ROD_AXIS))
+    path.write_text(
+        f'<robot name="rod"><link name="post">{inertial}</link><link name="tip">{inertial}'
+        '</link><joint name="tip_joint" type="fixed"><parent link="post"/><child link="tip"/>'
+        f'<origin xyz="{xyz}" rpy="0.3 -0.5 1.1"/></joint></robot>'
+    )
+    beam = {"end": "tip_joint", **STEEL, "section": {"shape": "circle", "d": ROD_D}}
+    clm = load_model(path, beams={"post": beam})
+    n = np.array([0.0, 1.0, -1.0]) / np.sqrt(2.0)  # across the rod
+    assert abs(n @ ROD_AXIS) < 1e-15
+    return clm, pin.neutral(clm.model), n
+
+
+def test_oblique_rod_is_the_euler_bernoulli_deflection_line(oblique_rod):
+    clm, q, n = oblique_rod
+    scene = deflection_scene(clm, q, "tip", [*(ROD_FORCE * n), 0.0, 0.0, 0.0], scale=1.0)
+    (curve,) = scene.beams
+    EI = STEEL["E"] * np.pi * ROD_D**4 / 64
+    x = np.linspace(0.0, ROD_L, 13)
+    v = ROD_FORCE * x**2 * (3 * ROD_L - x) / (6 * EI)
+    np.testing.assert_allclose(curve.points @ n, v, rtol=RTOL_FIRST_ORDER, atol=1e-20)
+    np.testing.assert_allclose(curve.points @ ROD_AXIS, x, rtol=0, atol=ATOL_PLACEMENT)
+
+
+#: The automatic amplification makes the picture of a load independent of its magnitude
+#: (linear deflection): the same to rounding of s and dq (1e-12).
+RTOL_SAME_PICTURE = 1e-12
+
+
+def test_picture_of_a_load_is_the_same_at_any_magnitude(oblique_rod):
+    clm, q, n = oblique_rod
+    scenes = [deflection_scene(clm, q, "tip", [*(f * n), 0.0, 0.0, 0.0])
+              for f in (1e-300, 1e-200, 1.0, 1e200, 1e300)]  # fmt: skip
+    for scene in scenes:
+        np.testing.assert_allclose(scene.beams[0].points, scenes[2].beams[0].points,
+                                   rtol=RTOL_SAME_PICTURE, atol=1e-15)  # fmt: skip
+        np.testing.assert_allclose(scene.scale * scene.max_displacement,
+                                   scenes[2].scale * scenes[2].max_displacement,
+                                   rtol=RTOL_SAME_PICTURE)  # fmt: skip
+    bend = scenes[2].beams[0].points @ n
+    assert bend[-1] > 1e-2 * ROD_L  # drawn visibly bent
+    zero = deflection_scene(clm, q, "tip", np.zeros(6))
+    assert zero.scale == 1.0 and zero.max_displacement == 0.0
+    x = np.linspace(0.0, ROD_L, 13)[:, None]
+    np.testing.assert_allclose(zero.beams[0].points, x * ROD_AXIS, rtol=0, atol=ATOL_PLACEMENT)
+
+
+@pytest.mark.parametrize("magnitude", [1e-300, 1.0, 1e300])
+def test_load_arrows_point_along_loads_of_any_magnitude(magnitude):
+    from closedloop.viewer_scene import unit_vector, vector_norm
+
+    v = magnitude * np.array([3.0, 0.0, -4.0])
+    np.testing.assert_allclose(unit_vector(v), [0.6, 0.0, -0.8], rtol=1e-15)
+    assert vector_norm(v) == pytest.approx(5.0 * magnitude, rel=1e-15)

@@ -47,6 +47,18 @@ def test_closedloop_view_writes_the_page(fourbar_urdf, fourbar_yaml, tmp_path, c
     assert "load at P (world axes): force (0, 0, -20) N, moment (0, 0, 0) N m" in page
 
 
+@pytest.mark.parametrize("force", ["1e-300", "1e300"])
+def test_closedloop_view_of_a_tiny_or_huge_load(fourbar_urdf, fourbar_yaml, tmp_path, capsys,
+                                                force):  # fmt: skip
+    """Finite deflections of any magnitude are drawn (coloured by displacement, amplified
+    to the same picture); only a load whose deflection is not a finite number is refused."""
+    html = tmp_path / "fourbar.html"
+    argv = ["view", *fourbar_args(fourbar_urdf, fourbar_yaml), "--force", force, 0, 0]
+    code, out, err = run(closedloop_main, capsys, *argv, "--html", html)
+    assert (code, err) == (0, ""), err
+    assert "(automatic; linear deflection)" in out and html.stat().st_size > 10_000
+
+
 def test_no_legend_option_leaves_the_legend_out(fourbar_urdf, fourbar_yaml, tmp_path, capsys):
     html = tmp_path / "fourbar.html"
     argv = ["view", *fourbar_args(fourbar_urdf, fourbar_yaml), "--force", 0, 0, -20]
@@ -95,8 +107,8 @@ def test_view_without_load_warns_in_one_line(main, fourbar_urdf, fourbar_yaml, t
         ["--frame", "nowhere"],
         ["--frame", "P", "--scale", "-2"],
         ["--frame", "P", "--force", "nan", "0", "0"],
-        ["--frame", "P", "--force", "1e300", "0", "0"],
-        ["--frame", "P", "--torque", "0", "-1e300", "0"],
+        ["--frame", "P", "--force", "1.7e308", "1.7e308", "0"],
+        ["--frame", "P", "--torque", "0", "-1.7e308", "1.7e308"],
         ["--frame", "P", "--html", "/no/such/folder/page.html"],
     ],
 )
@@ -120,7 +132,7 @@ def test_closedloop_view_bad_input_exits_2_with_one_line(
         ["--backend", "consistent"],
         ["--scale", "inf"],
         ["--s4", "999"],
-        ["--force", "1e300", "0", "0"],
+        ["--force", "1.7e308", "1.7e308", "0"],
     ],
 )
 def test_cahyman_view_bad_input_exits_2_with_one_line(capsys, tmp_path, argv):
