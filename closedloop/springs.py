@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 
+from .arrays import frozen
 from .conditioning import RANK_RTOL, split_factor, twist_scaling
 from .configuration import Configuration
 from .exceptions import InvalidInputError, MechanismError
@@ -122,11 +123,11 @@ class _Scaling(NamedTuple):
         P0 = np.zeros((k.size, sprung.size))
         if W is None:
             P0[sprung, np.arange(sprung.size)] = s_q[sprung] / sigma
-            passive_coef = np.outer(s_q[passive], 1.0 / sigma)
+            passive_coef = frozen(np.outer(s_q[passive], 1.0 / sigma))
         else:
             P0[sprung] = s_q[sprung, None] * W
             passive_coef = None
-        P0.flags.writeable = False
+        frozen(P0)
         return cls(
             s_q,
             row_scale,
