@@ -26,17 +26,18 @@ joint deflection per wrench (``ComplianceResult.G``), so that
 
 U_j the identity (a number) or K_0 (a block), and d(C w)/d theta_g = k_g dC/dk_g w.
 
-Standard errors come from the covariance (S^T S)^-1 of theta at the solution (S the
+Standard errors come from the covariance (S^T S)^+ of theta at the solution (S the
 sensitivity matrix of the weighted residuals: the sd are taken as known), by the delta
-method se(k) = k se(theta). A parameter the data cannot identify (its column of S
-vanishes, or it takes part in a null direction of S with unit-norm columns, by the rank
-rule of :mod:`closedloop.conditioning`) is named in ``unidentifiable``, its estimate and
-standard error are None, never an arbitrary value (the fit moves it only along what the
-data see: two springs in series keep the sum of their compliances); ``confounded`` names
-the parameters of each null direction. The rank is that of S at the solution; the
-standard errors of the identified parameters are those of (S^T S)^+, exact for them as
-they lie outside every null direction. Before the fit, one common log offset brings the
-start to the scale of the data (:func:`_common_offset`).
+method se(k) = k se(theta). A parameter the data cannot identify (its column of S is
+rounding, below ``DEAD_RTOL`` of the largest, or it takes part in a null direction of S
+with unit-norm columns, by the rank rule of :mod:`closedloop.conditioning`, at the
+solution) is named in ``unidentifiable``, its estimate and standard error are None, never
+an arbitrary value (the fit moves it only along what the data see: two springs in series
+keep the sum of their compliances; a small weight on the offsets from the start keeps the
+unseen directions there); ``confounded`` names the parameters of each null direction. The
+errors of the identified parameters, outside every null direction, are exact. Before the
+fit, one common log offset brings the start to the scale of the data
+(:func:`_common_offset`).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ import yaml
 from .arrays import check_wrench, readonly, real_array
 from .assembly import assemble
 from .compliance import compliance
-from .conditioning import RANK_RTOL, rule_rank
+from .conditioning import rule_rank
 from .exceptions import (
     InvalidInputError,
     MechanismError,
@@ -64,12 +65,19 @@ from .model import ClosedLoopModel
 
 #: Relative share of a null vector of S above which a parameter takes part in it.
 NULL_SHARE = 0.1
+#: A column of S below this share of the largest is rounding (the parameter is not seen):
+#: the convention of a mechanism's missing spring (1e-14 of the stiffest). Smaller but
+#: larger columns stay in the rank test: a stiff spring in series with a soft one is
+#: confounded with it, not "not seen" while the soft one is "identified".
+DEAD_RTOL = 1e-14
 #: Most steps of the common log offset that brings a start to the scale of the data.
 MAX_OFFSET_STEPS = 5
 #: Scale of the log-stiffness unknowns [-]: the first step changes k by at most e^1.
 LOG_STEP = 0.01
 #: Weighted residual returned for springs that leave a mechanism: a step there is rejected.
 REJECTED = 1e100
+#: Weight of the offsets from the start, relative to the largest sensitivity (see _solve).
+PRIOR = 1e-9
 
 
 @dataclass(frozen=True)
@@ -327,8 +335,7 @@ def identify(
                 sens[m, :, c] = k[c] * (dC @ w[m])
         return (pred - d) / sd, sens.reshape(-1, len(groups)) / sd.reshape(-1, 1)
 
-    everything = list(range(len(groups)))
-    theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd), everything)
+    theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd))
     r, S = evaluate(theta)
     unidentifiable, confounded = _unidentifiable(S, names)
     free = [i for i, n in enumerate(names) if n not in unidentifiable]
@@ -366,20 +373,22 @@ def compliance_derivative(result, coordinates, block=None) -> np.ndarray:
     return -(G.T @ G) if block is None else -(G.T @ block @ G)
 
 
-def _solve(evaluate, theta0: np.ndarray, free: list[int]) -> tuple[np.ndarray, bool]:
-    """(theta, success): the free entries of theta0 fitted by Levenberg-Marquardt
-    (``evaluate(theta)`` -> (residuals, sensitivities), computed once per theta).
+def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(theta, success): theta0 fitted by Levenberg-Marquardt (``evaluate(theta)`` ->
+    (residuals, sensitivities), computed once per theta).
 
-    The unknowns are the offsets from theta0, scaled by ``LOG_STEP``: the first trust
+    The unknowns are the offsets u from theta0, scaled by ``LOG_STEP``: the first trust
     region allows a change of about ``100 * LOG_STEP`` in log k (MINPACK's initial step
     bound is 100 times the scaled size of the start, here zero), and a step to springs
     that leave a mechanism (a spring 1e14 times softer than another) is rejected as a
-    step that raises the cost.
+    step that raises the cost. The residuals carry ``PRIOR`` times the largest singular
+    value of S at theta0 times u: the directions the data do not see stay at the start
+    (no drift that would make one of two series springs vanish beside the other), and
+    the others move by ~PRIOR^2 / (smallest identified singular value)^2, below 1e-10.
     """
-    if not free:
-        return theta0.copy(), True
-    size = evaluate(theta0)[0].size
-    rejected = (np.full(size, REJECTED), np.zeros((size, theta0.size)))
+    r0, S0 = evaluate(theta0)
+    weight = PRIOR * np.linalg.norm(S0, 2)
+    rejected = (np.full(r0.size, REJECTED), np.zeros_like(S0))
     last = {}
 
     def cached(u):
@@ -387,28 +396,22 @@ def _solve(evaluate, theta0: np.ndarray, free: list[int]) -> tuple[np.ndarray, b
         if key not in last:
             last.clear()
             try:
-                last[key] = evaluate(_put(theta0, free, theta0[free] + u))
+                last[key] = evaluate(theta0 + u)
             except (MechanismError, SingularConfigurationError):
                 last[key] = rejected
         return last[key]
 
     out = scipy.optimize.least_squares(
-        lambda u: cached(u)[0].ravel(),
-        np.zeros(len(free)),
-        jac=lambda u: cached(u)[1][:, free],
+        lambda u: np.concatenate((cached(u)[0].ravel(), weight * u)),
+        np.zeros(theta0.size),
+        jac=lambda u: np.vstack((cached(u)[1], weight * np.eye(u.size))),
         method="lm",
-        x_scale=np.full(len(free), LOG_STEP),
+        x_scale=np.full(theta0.size, LOG_STEP),
         xtol=1e-15,
         ftol=1e-15,
         gtol=1e-15,
     )
-    return _put(theta0, free, theta0[free] + out.x), bool(out.success)
-
-
-def _put(base: np.ndarray, idx: list[int], values: np.ndarray) -> np.ndarray:
-    out = base.copy()
-    out[idx] = values
-    return out
+    return theta0 + out.x, bool(out.success)
 
 
 def _covariance(S: np.ndarray) -> np.ndarray:
@@ -452,7 +455,7 @@ def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], l
     null direction of S (columns scaled to unit norm; the rank rule), and the names of
     each null direction."""
     norms = np.linalg.norm(S, axis=0)
-    dead = norms <= RANK_RTOL * max(norms.max(initial=0.0), 1e-300)
+    dead = norms <= DEAD_RTOL * max(norms.max(initial=0.0), 1e-300)
     out = {names[i] for i in np.flatnonzero(dead)}
     live = np.flatnonzero(~dead)
     confounded = []
