@@ -334,7 +334,8 @@ def _insert(model, geometries, site: _Site, name: str):
     """A copy of ``model`` (and of the geometry models) with a free-flyer ``name`` between
     the site's joint and its end; returns (model, geometries, old -> new joint index)."""
     if model.existJointName(name):
-        raise BeamError(name, f"the model already has a joint named {name!r}")
+        raise BeamError(name.removesuffix("_beam"), f"the link already has a beam (or the model "
+                        f"a joint named {name!r}): one beam a link")  # fmt: skip
     if site.end_joint is not None:
         moved_frames = set()
         moved_joints = {site.end_joint}

@@ -49,7 +49,9 @@ Euler-Bernoulli deflection line of a clamped beam loaded at its tip (a cubic: it
 tip's displacement and slope), e.g. 5 F L^3 / (48 E I) at mid-length under a tip force F;
 an unloaded beam is the straight segment from start to tip.
 
-A load whose deflection overflows (``--force 1e300``) is refused (InvalidInputError).
+Norms are taken without under- or overflow: a load of any finite magnitude gives the same
+automatic picture; one whose deflection or ellipsoid is not a finite number (``--force
+1.7e308 1.7e308 0``) is refused (InvalidInputError).
 """
 
 from __future__ import annotations
