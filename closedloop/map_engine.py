@@ -290,7 +290,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
         while k < len(visit) and visit[k] <= p:
             k += 1
         p = visit[k] if k < len(visit) else last + 1
-    return [found.get(p) for p in firsts]
+    return [None, *(found.get(p) for p in firsts[1:])][: len(firsts)]
 
 
 def run_tasks(
