@@ -399,8 +399,17 @@ def test_coarse_translations_from_the_published_digits(monkeypatch):
     # counted here from the printed tables: rows dx, dy, dz whose second decimal is 0
     printed = np.concatenate([TABLES[p.label][:3].ravel() for p in TABLE_POSES])
     zero = int(np.sum(np.round(np.abs(printed) * 100).astype(int) % 10 == 0))
-    n_trans, n_zero, gained = classify.coarse_translations(classify.classify(P))
+    classes = classify.classify(P)
+    n_trans, n_zero, gained = classify.coarse_translations(classes)
     assert (n_trans, n_zero) == (27, zero)
+    expected = sum(
+        1 for c in classes
+        if c.compared_as.endswith("[mm]") and round(abs(c.printed) * 100) % 10 == 0
+        and not (c.kind == "reproduced" or c.reason.startswith("the fitted"))
+        and min(abs(v - c.published) for v in (c.reference, c.stiffness_fit, c.dimension_fit))
+        <= 0.05
+    )  # fmt: skip
+    assert gained == expected
     # a cell printed at the reference model rounded to 0.1 mm (and 0 as second decimal) but
     # more than 0.005 mm away is gained by the coarser rounding
     m = cells.model_values(P)
@@ -413,3 +422,23 @@ def test_coarse_translations_from_the_published_digits(monkeypatch):
     monkeypatch.setattr(cells, "TABLES", changed)
     monkeypatch.setattr(classify, "TABLES", changed)
     assert classify.coarse_translations(classify.classify(P))[2] == gained + 1
+
+
+def test_a_fit_within_the_rounding_explains_a_cell(monkeypatch):
+    # stand-ins for the fits: the stiffness fit misses every cell by 1 (mm or deg), the
+    # dimension fit by 0.5; a published cell set to the dimension fit (plus 0.004, inside
+    # the rounding) is explained by it, of size 0.5; one 0.006 off is not
+    m = cells.model_values(P)
+    qs = cells.quantities(P)
+    k = next(k for k, q in enumerate(qs) if (q.table, q.load, q.row[:2]) == ("Table 3", 1, "dx"))
+    monkeypatch.setattr(classify, "stiffness_fit", lambda params: _FarFit(m))
+    monkeypatch.setattr(classify, "dimension_fit", lambda params: _FarFit(m - 0.5))
+    for offset, explained in ((0.004, True), (0.006, False)):
+        changed = {t: v.copy() for t, v in TABLES.items()}
+        changed["Table 3"][0, 1] = m[k] + 0.5 + offset
+        monkeypatch.setattr(cells, "TABLES", changed)
+        monkeypatch.setattr(classify, "TABLES", changed)
+        c = next(c for c in classify.classify(P) if (c.table, c.row, c.load) == ("Table 3", 0, 1))
+        assert (c.reason == "the fitted dimensions") is explained, c
+        if explained:
+            np.testing.assert_allclose(c.size, 0.5, rtol=1e-12)

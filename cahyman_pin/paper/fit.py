@@ -66,6 +66,9 @@ IDENTIFIABLE_RTOL = 1e-6
 #: Weighted residual of every quantity where the machine cannot be assembled (a cost far
 #: above any assembled one, so that the trust region refuses the step).
 UNASSEMBLED = 1e4
+#: Distance from a bound, as a share of the log-space range, below which a fitted value is
+#: on that bound (the fits stop at 1e-8 of the step: a value that close has met it).
+AT_BOUND = 1e-6
 #: Relative share of a null vector above which a parameter takes part in it.
 NULL_SHARE = 0.1
 
@@ -206,7 +209,7 @@ def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> 
     values = model_values(fitted)
     span = hi - lo
     bound = dict.fromkeys(names, "")
-    bound.update({n: ("lower" if x - a < 1e-6 * s else "upper" if b - x < 1e-6 * s else "")
+    bound.update({n: ("lower" if x - a < AT_BOUND * s else "upper" if b - x < AT_BOUND * s else "")
                   for n, x, a, b, s in zip(act, best.x, lo, hi, span, strict=True)})  # fmt: skip
     free = [i for i, n in enumerate(act) if not bound[n]]
     rank, unident = 0, [n for n, i in zip(names, inactive, strict=True) if i]
