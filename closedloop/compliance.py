@@ -289,15 +289,20 @@ def _fast_compliance(
     and G = P B^T, the same factor as the null-space path's (module docstring) on the same
     spectrum rule; the kinematic factor of the rank rule is B diag(sigma) = J T V.
     """
-    P = sc.P0.copy()
-    if X is not None:  # dq_p = s_p X y
-        P[sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
-    B = J @ P
+    if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
+        B = J * sc.P_diagonal
+        G = B.T * sc.P_diagonal[:, None]
+    else:
+        P = sc.P0.copy()
+        if X is not None:  # dq_p = s_p X y
+            P[sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
+        B = J @ P
+        G = P @ B.T
     B_s = B * sc.d[:, None]
     spectrum = spectrum_from_factor(
         B_s, state.length, lambda: B_s * sc.sigma, sc.spread, scales=(sc.d, sc.dd)
     )
-    return _result(state, frame, axes, B @ B.T, P @ B.T, spectrum, sc.sigma.size, 0, path)
+    return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
 
 
 def compliance_result(

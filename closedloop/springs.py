@@ -98,6 +98,8 @@ class _Scaling(NamedTuple):
     # sprung and locked rows (read-only): diag(s_q) W on the sprung ones, 0 elsewhere
     P0: np.ndarray
     passive_coef: np.ndarray | None  # (p, s) outer(s_p, 1 / sigma), diagonal springs only
+    P_diagonal: np.ndarray | None  # (nv,) P0 = diag(s_q / sigma) when every coordinate has
+    # a diagonal spring (a serial robot), else None
     loop_mask: np.ndarray | None  # (m, p) and the blocks of loops of _loop_blocks, with
     loop_blocks: tuple | None  # BLOCK_PASSIVE passive coordinates or more, else None
 
@@ -152,6 +154,7 @@ class _Scaling(NamedTuple):
             W,
             P0,
             passive_coef,
+            frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None,
             *loops,
         )
 
