@@ -3,9 +3,12 @@
     closedloop identify MODEL [--closures F] --measurements FILE --fit NAME [NAME ...]
         [--joint-stiffness K | --springs FILE] [--json]
 
-``--fit`` names joints; ``a+b`` ties joints a and b to one value. Start values come from
-the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the YAML
-of :func:`closedloop.identification.read_measurements` (``frame``, ``measurements``).
+``--fit`` names joints; ``a+b`` ties joints a and b to one value; a joint with a block
+spring (a beam's ``<link>_beam``) is fitted as a factor of its block. Start values come
+from the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the
+YAML or CSV of :func:`closedloop.identification.read_measurements`. Exit status: 0 every
+parameter identified, 1 some cannot be identified from these data (named, no value),
+2 bad input, 3 the computation failed.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import argparse
 
 from .cli_common import print_json
+from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 
 def add_parser(sub, model_arguments) -> None:
@@ -24,14 +28,15 @@ def add_parser(sub, model_arguments) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     model_arguments(p)
-    p.add_argument("--measurements", required=True, metavar="FILE", help="measurement YAML")
+    p.add_argument("--measurements", required=True, metavar="FILE", help="YAML or CSV")
     p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_identify)
 
 
 def run_identify(args) -> int:
-    """Run ``closedloop identify``; returns the exit code (0)."""
+    """Run ``closedloop identify``; returns the exit code (0, or 1 if a parameter is not
+    identifiable)."""
     from .cli_map import model_source  # MODEL, --closures and springs, as for a map
     from .identification import identify, read_measurements  # scipy.optimize: on demand
 
@@ -39,9 +44,10 @@ def run_identify(args) -> int:
     frame, data = read_measurements(args.measurements)
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
     fit = identify(clm, data, frame, groups)
+    status = EXIT_RANK_DEFICIENT if fit.unidentifiable else EXIT_OK
     if args.json:
         print_json({"model": clm.name, "frame": frame, **fit.to_dict()})
-        return 0
+        return status
     print(f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
           f"weighted residual RMS {fit.residual_rms:.3g}")  # fmt: skip
     for name in fit.names:
@@ -49,5 +55,7 @@ def run_identify(args) -> int:
             print(f"  {name}: not identifiable from these data")
         else:
             print(f"  {name} = {fit.estimates[name]:.6g} +- {fit.std_errors[name]:.2g} "
-                  "[N m/rad or N/m]")  # fmt: skip
-    return 0
+                  "[N m/rad, N/m, or a block's factor]")  # fmt: skip
+    for names in fit.confounded:
+        print(f"  seen only together: {', '.join(names)}")
+    return status

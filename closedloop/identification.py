@@ -42,6 +42,8 @@ fit, one common log offset brings the start to the scale of the data
 
 from __future__ import annotations
 
+import csv
+import io
 import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -124,37 +126,95 @@ class Measurement:
         return cls(vector, act, readonly(check_wrench(wrench)), readonly(twist_), readonly(sd_))
 
 
+#: Columns of a measurement CSV file (besides ``frame`` and q_i or actuated_i).
+CSV_WRENCH = ("fx", "fy", "fz", "nx", "ny", "nz")
+CSV_TWIST = ("dx", "dy", "dz", "rx", "ry", "rz")
+CSV_SD = tuple(f"sd_{c}" for c in CSV_TWIST)
+_KEYS = ("q", "actuated", "wrench", "twist", "sd")
+
+
 def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
-    """(frame, measurements) from a YAML file (module docstring; keys ``frame`` and
-    ``measurements``, each with ``q`` or ``actuated``, ``wrench``, ``twist``, ``sd``).
+    """(frame, measurements) from a YAML or CSV file.
+
+    YAML (module docstring): keys ``frame`` and ``measurements``, each a mapping with
+    ``q`` or ``actuated``, ``wrench``, ``twist`` and ``sd``. CSV (``.csv``): a header, one
+    measurement per row, the columns ``frame`` (the same in every row), ``q_0`` ..
+    ``q_{nq-1}`` or ``actuated_0`` .., :data:`CSV_WRENCH`, :data:`CSV_TWIST`, and ``sd``
+    or :data:`CSV_SD`.
 
     Raises:
-        ModelFileError: missing or unreadable file, wrong structure.
+        ModelFileError: missing or unreadable file, wrong structure (a missing column or
+            key, several frames).
         InvalidInputError: a bad measurement (its index is named).
     """
     try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as e:
+        text = Path(path).read_text()
+        if Path(path).suffix.lower() == ".csv":
+            frame, items = _csv_items(str(path), text)
+        else:
+            frame, items = _yaml_items(str(path), yaml.safe_load(text))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, csv.Error) as e:
         raise ModelFileError(f"cannot read measurement file {str(path)!r}: {e}") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("frame"), str):
-        raise ModelFileError(f"{str(path)!r}: expected a mapping with 'frame' and 'measurements'")
-    items = doc.get("measurements")
-    if not isinstance(items, list) or not items:
-        raise ModelFileError(f"{str(path)!r}: 'measurements' must be a non-empty list")
     out = []
     for i, item in enumerate(items):
-        keys = {"q", "actuated", "wrench", "twist", "sd"}
-        if not isinstance(item, dict) or not set(item) <= keys:
-            raise ModelFileError(f"{str(path)!r}: measurement {i} must be a mapping of {keys}")
+        missing = [k for k in ("wrench", "twist", "sd") if k not in item]
+        if missing or not set(item) <= set(_KEYS):
+            raise ModelFileError(
+                f"{str(path)!r}: measurement {i} has {sorted(item)}; expected q or actuated, "
+                "wrench, twist, sd"
+            )
         try:
             out.append(Measurement.of(**{k: _number(v) for k, v in item.items()}))
         except (InvalidInputError, TypeError, ValueError) as e:
             raise InvalidInputError(f"measurement {i} of {str(path)!r}: {e}") from None
-    return doc["frame"], out
+    return frame, out
+
+
+def _yaml_items(path: str, doc) -> tuple[str, list[dict]]:
+    if not isinstance(doc, dict) or not isinstance(doc.get("frame"), str):
+        raise ModelFileError(f"{path!r}: expected a mapping with 'frame' and 'measurements'")
+    items = doc.get("measurements")
+    if not isinstance(items, list) or not items:
+        raise ModelFileError(f"{path!r}: 'measurements' must be a non-empty list")
+    for i, item in enumerate(items):
+        if not isinstance(item, dict):
+            raise ModelFileError(f"{path!r}: measurement {i} must be a mapping of {_KEYS}")
+    return doc["frame"], items
+
+
+def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
+    reader = csv.DictReader(io.StringIO(text), skipinitialspace=True)
+    header, rows = list(reader.fieldnames or []), list(reader)
+    for i, row in enumerate(rows):
+        if None in row or None in row.values():
+            raise ModelFileError(f"{path!r}: row {i} has not one value per column")
+    sd = ["sd"] if "sd" in header else list(CSV_SD)
+    config = [c for c in header if c.startswith(("q_", "actuated_"))]
+    kind = config[0].split("_")[0] if config else "q"
+    config = [f"{kind}_{i}" for i in range(len(config))]
+    wanted = ("frame", *config, *CSV_WRENCH, *CSV_TWIST, *sd)
+    missing, unknown = [c for c in wanted if c not in header], sorted(set(header) - set(wanted))
+    if not rows or missing or unknown or not config:
+        raise ModelFileError(
+            f"{path!r}: expected a header and rows with frame, q_0.. or actuated_0.., "
+            f"{', '.join(CSV_WRENCH + CSV_TWIST)}, sd or sd_dx..sd_rz (missing {missing}, "
+            f"unknown {unknown})"
+        )
+    frames = sorted({row["frame"] for row in rows})
+    if len(frames) != 1:
+        raise ModelFileError(f"{path!r}: one frame expected in every row, got {frames}")
+    items = [
+        {kind: [row[c] for c in config], "wrench": [row[c] for c in CSV_WRENCH],
+         "twist": [row[c] for c in CSV_TWIST],
+         "sd": [row[c] for c in sd] if len(sd) > 1 else row["sd"]}
+        for row in rows
+    ]  # fmt: skip
+    return frames[0], items
 
 
 def _number(value):
-    """YAML 1.1 reads 1e-6 as a string: numbers, and lists of them, as floats."""
+    """YAML 1.1 reads 1e-6 as a string, CSV gives strings: numbers, and lists of them, as
+    floats."""
     if isinstance(value, list):
         return [_number(v) for v in value]
     return float(value) if isinstance(value, str) else value
