@@ -121,6 +121,12 @@ class CaHyManParams:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be > 0"
                 )
+        for d, t in (("d_leg", "t_leg"), ("d_arm", "t_arm"), ("d_MM2", "t_MM2")):
+            if getattr(self, t) > getattr(self, d) / 2:
+                raise InvalidInputError(
+                    f"CaHyMan parameter {t}={getattr(self, t)!r} must be at most {d}/2 = "
+                    f"{getattr(self, d) / 2!r} (a tube's wall is at most its radius)"
+                )
         for name in (*_MASSES, *LEG_MASSES, "gravity"):
             if getattr(self, name) < 0.0:
                 raise InvalidInputError(

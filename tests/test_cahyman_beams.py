@@ -23,7 +23,7 @@ from cahyman_pin.paper.data import TABLE_POSES
 from cahyman_pin.paper.document import Document, Table
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import VIRTUAL_JOINTS, build_closure_yaml, build_urdf
-from closedloop.beams import BeamError, map_configuration
+from closedloop.beams import map_configuration
 from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError
 from closedloop.io import load_model
@@ -141,8 +141,12 @@ def test_bad_beam_parameters_are_refused():
         CaHyManParams(links_as_beams=1)
     with pytest.raises(InvalidInputError, match=r"d_leg=-0.01 must be > 0"):
         CaHyManParams(d_leg=-0.01)
-    with pytest.raises(BeamError, match=r"beam 'crank_b_1': tube wall t = 0.007 m is thicker"):
-        CaHyManModel(CaHyManParams(links_as_beams=True, t_leg=0.007))
+    for d, t in (("d_leg", "t_leg"), ("d_arm", "t_arm"), ("d_MM2", "t_MM2")):
+        wall = getattr(DEFAULT_PARAMS, d) / 2  # the solid rod is allowed, one ulp more is not
+        CaHyManParams(**{t: wall})
+        with pytest.raises(InvalidInputError, match=rf"{t}=0.0\d+ must be at most {d}/2 = "
+                           rf"{wall!r} \(a tube's wall is at most its radius\)"):  # fmt: skip
+            CaHyManParams(**{t: float(np.nextafter(wall, 1.0))})
 
 
 def test_report_section_rows_against_the_closed_form():
