@@ -42,6 +42,8 @@ from .model import ClosedLoopModel
 INDICES = BATCH_INDICES
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
+#: Names that ``numpy.savez`` takes as its own arguments, not as arrays.
+NPZ_ARGUMENTS = ("file", "allow_pickle")
 
 
 @dataclass(frozen=True)
@@ -95,10 +97,11 @@ class StiffnessMap:
         return self.indices[name].reshape(self.shape)
 
     def save(self, out: str | Path, index: str = "det_K") -> list[Path]:
-        """Write ``map.npz`` (every index under its name, the inputs under the joint
-        names, C, rank, status, reasons, shape), ``map.csv`` when at most
-        :data:`CSV_MAX_POINTS` points, and ``map.png`` (curve or heat map of ``index``);
-        returns the paths.
+        """Write ``map.npz`` (every index under its name, C, rank, status, reasons, shape,
+        ``joints`` the actuated joints' names and ``inputs`` (n, n_act) their values, and
+        each joint's values under its name unless that name is one of these keys),
+        ``map.csv`` when at most :data:`CSV_MAX_POINTS` points, and ``map.png`` (curve or
+        heat map of ``index``); returns the paths.
 
         Raises:
             InvalidInputError: unknown index, or ``out`` not a writable folder.
@@ -110,11 +113,13 @@ class StiffnessMap:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
-        columns = {n: self.inputs[:, j] for j, n in enumerate(self.joints)}
+        arrays = {**self.indices, "C": self.C, "rank": self.data.rank, "status": self.status,
+                  "reasons": np.asarray(self.reasons), "shape": np.asarray(self.shape),
+                  "joints": np.asarray(self.joints), "inputs": self.inputs}  # fmt: skip
+        taken = {*arrays, *NPZ_ARGUMENTS}
+        arrays.update({n: self.inputs[:, j] for j, n in enumerate(self.joints) if n not in taken})
         paths = [out / "map.npz"]
-        np.savez(paths[0], **columns, **self.indices, C=self.C, rank=self.data.rank,
-                 status=self.status, reasons=np.asarray(self.reasons),
-                 shape=np.asarray(self.shape))  # fmt: skip
+        np.savez(paths[0], **arrays)
         if len(self.inputs) <= CSV_MAX_POINTS:
             paths.append(out / "map.csv")
             names = [*self.joints, *self.indices, "status"]

@@ -55,8 +55,11 @@ def test_a_map_where_every_point_fails_writes_its_files(long_ground, tmp_path):
     assert np.all(np.isnan(m.C)) and np.all(m.data.rank == -1)
     npz, csv, png = m.save(tmp_path, index="deflection_translation")
     with np.load(npz, allow_pickle=False) as f:  # every key, no pickled object
-        assert set(f.files) == {"crank", *INDICES, "C", "rank", "status", "reasons", "shape"}
+        assert set(f.files) == {"crank", *INDICES, "C", "rank", "status", "reasons", "shape",
+                                "joints", "inputs"}  # fmt: skip
         np.testing.assert_array_equal(f["crank"], cranks)
+        np.testing.assert_array_equal(f["inputs"], cranks[:, None])
+        assert f["joints"].tolist() == ["crank"]
         for name in INDICES:
             assert np.all(np.isnan(f[name])), name
         assert np.all(np.isnan(f["C"])) and f["C"].shape == (3, 6, 6)
@@ -233,3 +236,22 @@ def test_cahyman_alpha1_to_zero_marks_the_singular_points(tmp_path):
     # covers the next order up to 0.1 deg: 4e-4 observed)
     k = res.indices["min_translational"][2:5] / np.deg2rad([1e-3, 1e-2, 0.1]) ** 2
     np.testing.assert_allclose(k, k[0], rtol=2e-3)
+
+
+@pytest.mark.parametrize("name", ["C", "file", "status"])
+def test_a_joint_named_like_a_key_of_the_files(tmp_path, name):
+    """The crank renamed: its values are in ``inputs`` (its name in ``joints``), the key of
+    that name keeps its own meaning."""
+    text = (REPO / "urdf" / "fourbar.urdf").read_text().replace('"crank"', f'"{name}"')
+    (tmp_path / "fourbar.urdf").write_text(text)
+    closures = (REPO / "urdf" / "fourbar.yaml").read_text().replace("crank:", f"{name}:")
+    (tmp_path / "fourbar.yaml").write_text(closures.replace("[crank]", f"[{name}]"))
+    clm = cl.load_model(tmp_path / "fourbar.urdf", tmp_path / "fourbar.yaml")
+    assert clm.actuated == (name,)
+    m = stiffness_map(clm, "P", sweeps={name: [0.3, 0.6]})
+    npz = m.save(tmp_path / "out")[0]
+    with np.load(npz, allow_pickle=False) as f:
+        assert f["joints"].tolist() == [name]
+        np.testing.assert_array_equal(f["inputs"], [[0.3], [0.6]])
+        np.testing.assert_array_equal(f["C"], m.C)
+        assert f["status"].tolist() == list(m.status)
