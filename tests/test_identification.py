@@ -217,26 +217,36 @@ def test_beam_young_modulus_is_fitted_as_a_factor_of_the_block():
         np.testing.assert_allclose(fit.estimates[name], UR5_TRUE[name], rtol=RTOL_EXACT_FIT)
 
 
-def test_cahyman_springs_are_recovered_and_its_series_arm_springs_named():
+CAHYMAN_GROUPS = {
+    "K_T": ("alpha_1", "alpha_2", "alpha_3"),
+    "K_b": tuple(f"{p}_{i}_axial" for i in (1, 2, 3) for p in ("b", "d")),
+    "K_T4": ("alpha_4",),
+    "K_s": ("s_4",),
+    "K_4": ("arm_axial",),
+}
+CAHYMAN_TRUE = {"K_T": 3000.0, "K_b": 1.5e6, "K_T4": 1200.0, "K_s": 4e5, "K_4": 4e6}
+#: Poses (alpha_1..3 [deg], alpha_4 [deg], s_4 [m]).
+CAHYMAN_POSES = [(45.0, 60.0, 75.0, 45.0, 0.01), (80.0, 70.0, 60.0, 30.0, 0.04),
+                 (60.0, 85.0, 50.0, 60.0, 0.02)]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def cahyman():
+    """(model with the true springs, configurations of CAHYMAN_POSES)."""
     from cahyman_pin.model import cahyman_model
 
     machine = cahyman_model()
-    clm = machine.clm
-    groups = {
-        "K_T": ("alpha_1", "alpha_2", "alpha_3"),
-        "K_b": tuple(f"{p}_{i}_axial" for i in (1, 2, 3) for p in ("b", "d")),
-        "K_T4": ("alpha_4",),
-        "K_s": ("s_4",),
-        "K_4": ("arm_axial",),
-    }
-    truth = {"K_T": 3000.0, "K_b": 1.5e6, "K_T4": 1200.0, "K_s": 4e5, "K_4": 4e6}
-    springs = {n: truth[g] for g, names in groups.items() for n in names}
-    rng = np.random.default_rng(7)
-    poses = [(45.0, 60.0, 75.0, 45.0, 0.01), (80.0, 70.0, 60.0, 30.0, 0.04),
-             (60.0, 85.0, 50.0, 60.0, 0.02)]  # fmt: skip
-    configs = [machine.assemble(np.deg2rad(p[:3]), np.deg2rad(p[3]), p[4]) for p in poses]
-    data = _synthetic(clm.with_springs(springs), "M", configs, rng, sd=0.0)
-    start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
+    springs = {n: CAHYMAN_TRUE[g] for g, names in CAHYMAN_GROUPS.items() for n in names}
+    configs = [machine.assemble(np.deg2rad(p[:3]), np.deg2rad(p[3]), p[4])
+               for p in CAHYMAN_POSES]  # fmt: skip
+    return machine.clm.with_springs(springs), configs
+
+
+def test_cahyman_springs_are_recovered_and_its_series_arm_springs_named(cahyman):
+    truth_model, configs = cahyman
+    truth, groups = CAHYMAN_TRUE, CAHYMAN_GROUPS
+    data = _synthetic(truth_model, "M", configs, np.random.default_rng(7), sd=0.0)
+    start = truth_model.with_springs({n: 3.0 * v for n, v in truth_model.springs.items()})
     fit = identify(start, data, "M", list(groups.values()))
     # the telescope's spring K_s and the arm's K_4 both act along the arm, in series: the
     # tip sees only 1/K_s + 1/K_4
@@ -254,6 +264,28 @@ def test_cahyman_springs_are_recovered_and_its_series_arm_springs_named():
     for g in ("K_T", "K_b", "K_T4"):
         np.testing.assert_allclose(tied.estimates["+".join(groups[g])], truth[g],
                                    rtol=RTOL_EXACT_FIT)  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cahyman_noisy_data_recover_the_springs_within_their_errors(cahyman, seed):
+    # 10 um and 50 urad of noise on deflections of ~2 mm and ~10 mrad
+    truth_model, configs = cahyman
+    rng = np.random.default_rng(seed)
+    sd = np.array([1e-5, 1e-5, 1e-5, 5e-5, 5e-5, 5e-5])
+    data = []
+    for q in configs:
+        C = cl.compliance(truth_model, q, "M").C
+        for w in rng.normal(size=(4, 6)) * np.array([100.0] * 3 + [10.0] * 3):
+            data.append(Measurement.of(q=q, wrench=w, twist=C @ w + sd * rng.normal(size=6),
+                                       sd=sd))  # fmt: skip
+    start = truth_model.with_springs({n: 2.0 * v for n, v in truth_model.springs.items()})
+    groups = [*list(CAHYMAN_GROUPS.values())[:3], ("s_4", "arm_axial")]
+    fit = identify(start, data, "M", groups)
+    series = 2 / (1 / CAHYMAN_TRUE["K_s"] + 1 / CAHYMAN_TRUE["K_4"])
+    for name, value in zip(fit.names, [*list(CAHYMAN_TRUE.values())[:3], series], strict=True):
+        error = abs(fit.estimates[name] - value)
+        assert error <= SIGMAS * fit.std_errors[name], (name, error, fit.std_errors[name])
+    assert 0.5 < fit.residual_rms < 1.5
 
 
 @pytest.mark.parametrize("factor", [1e6, 1e-6])
