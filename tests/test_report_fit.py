@@ -442,3 +442,42 @@ def test_a_fit_within_the_rounding_explains_a_cell(monkeypatch):
         assert (c.reason == "the fitted dimensions") is explained, c
         if explained:
             np.testing.assert_allclose(c.size, 0.5, rtol=1e-12)
+
+
+#: Relative change of one dimension in the local-optimality check of the dimension fit.
+DIM_STEP = 1e-3
+#: What such a step may lower chi^2 by and still count as a local optimum: the fit stops
+#: at 1e-8 of chi^2 in a valley that is not smooth everywhere (measured: the best step of
+#: 1e-4 along b lowers it by 3e-7 of itself); 1e-6 of chi^2 is far below any change a
+#: dimension would have to make to matter (chi^2 is about 4400).
+DIM_CHI2_SLACK = 1e-6
+
+
+def test_dimension_fit_is_a_local_optimum_in_the_generic_backend():
+    # the fit says it converged; check it here: chi^2 of the generic backend, weights
+    # written here, at the fit and one dimension moved by -+DIM_STEP (inwards only on a
+    # bound, where the fit's bound must be the printed factor 2)
+    d = fit.dimension_fit(P)
+    assert d.converged
+    p = _published_vector()
+    n = np.array([len(q.cells) for q in cells.quantities(P)])
+    sd = np.sqrt(n * 0.01**2 / 12 + (0.1 * p) ** 2)
+
+    def chi2(params):
+        return np.sum(((_generic_vector(params) - p) / sd) ** 2)
+
+    c0 = chi2(d.params)
+    np.testing.assert_allclose(c0, d.chi2, rtol=1e-9)
+    for name in d.names:
+        if name == "r_e":
+            continue
+        value, ref = d.estimates[name], getattr(P, name)
+        on_upper = abs(value - 2 * ref) <= 1e-6 * ref
+        on_lower = abs(value - ref / 2) <= 1e-6 * ref
+        assert (d.at_bound[name] == "upper") == on_upper
+        assert (d.at_bound[name] == "lower") == on_lower
+        for sign in (-1.0, 1.0):
+            if (on_upper and sign > 0) or (on_lower and sign < 0):
+                continue  # outside the bounds
+            moved = d.params.replace(**{name: value * (1 + sign * DIM_STEP)})
+            assert chi2(moved) >= c0 * (1 - DIM_CHI2_SLACK), (name, sign)

@@ -122,7 +122,7 @@ def _fit_rows(fit: FitResult, printed: dict[str, float], ratio: float) -> tuple:
             note = "; ".join(x for x in (note, "not identified by the cells") if x)
         rows.append((n, fmt(printed[n]) if n in printed else "not printed",
                      fmt(fit.reference[n]), fmt(fit.estimates[n]),
-                     fmt(fit.estimates[n] / fit.reference[n], 3), note))  # fmt: skip
+                     fmt(fit.estimates[n] / fit.reference[n], 4), note))  # fmt: skip
     return tuple(rows)
 
 
@@ -153,6 +153,15 @@ def _optimum_row(params: CaHyManParams, relative_error: float) -> tuple[str, ...
     n_lin = sum(q.linear for q in qs)
     return (name, fmt(chi2, 5), fmt(chi2_rigid, 5), f"{1 - chi2 / chi2_rigid:.1%}",
             f"{within} of {n_lin}", values)  # fmt: skip
+
+
+def _converged(fit: FitResult) -> str:
+    on = [n for n in fit.names if fit.at_bound[n]]
+    return (
+        "a local optimum: converged, and on the bounds ("
+        + (", ".join(on) if on else "none")
+        + ") chi^2 rises inwards; the valley may hold other optima"
+    )
 
 
 def _unconverged(fit: FitResult) -> str:
@@ -244,8 +253,12 @@ def fit_section(doc: Document, params: CaHyManParams) -> None:
                 "note",
             ),
             _fit_rows(dfit, {}, DIMENSION_RANGE),
-            caption="Dimension fit [m] (springs at the reference values)"
-            + ("" if dfit.converged else f"; not converged: {_unconverged(dfit)}"),
+            caption="Dimension fit [m] (springs at the reference values"
+            + (
+                f"; {_converged(dfit)})"
+                if dfit.converged
+                else f"; not converged: {_unconverged(dfit)})"
+            ),
         ),
         Table(
             ("model", "chi^2", "RMS translation residual [mm]", "RMS rotation residual [deg]"),

@@ -54,15 +54,21 @@ DIMENSION_RANGE = 2.0
 #: Relative tolerance of the fits on the cost, the step and the gradient (the cells are
 #: printed to 2 or 3 digits).
 FIT_TOL = 1e-8
-#: Evaluation limit of the dimension fit. Its cost has a flat valley (a and h act almost
-#: alike) that runs towards the bounds: measured with scipy's trf and dogbox, 200, 1000 and
-#: 2000 evaluations lower chi^2 from 4492 (60) to 4462, 4449 and 4447 without converging,
-#: at 4 ms each, and the answer of the report (far above a rigid machine) does not change.
-#: The report states the value as an upper bound, not an optimum.
+#: Evaluation limit of each trust-region search of the dimension fit. Its cost has a flat
+#: valley (a and h act almost alike) that runs towards the bounds, where scipy's trf and
+#: dogbox crawl: measured, 200, 1000 and 2000 evaluations lower chi^2 from 4492 (60) to
+#: 4462, 4449 and 4447 without converging. The active set of :func:`_polish` converges
+#: instead (measured: 1.1 s in all at the report's parameters, to a local optimum).
 DIMENSION_EVALUATIONS = 60
 #: Singular values of the weighted sensitivity below this share of the largest: not
 #: identified (the rank rule of closedloop.conditioning, on a well-scaled matrix).
 IDENTIFIABLE_RTOL = 1e-6
+#: Distance in log space from a bound below which the active set puts a value on it.
+SNAP = 1e-3
+#: Rounds of the active set (measured: 2 suffice at the report's parameters).
+POLISH_ROUNDS = 4
+#: Inward step in log space of the optimality check at a bound.
+KKT_STEP = 1e-4
 #: Weighted residual of every quantity where the machine cannot be assembled (a cost far
 #: above any assembled one, so that the trust region refuses the step).
 UNASSEMBLED = 1e4
@@ -187,7 +193,66 @@ def _inactive(f, x: np.ndarray) -> np.ndarray:
     return cols <= 1e-9 * cols.max()
 
 
-def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> FitResult:
+def _jacobian(f, x: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    """(m, n) central differences of f in log space (step 1e-6: truncation ~1e-12)."""
+    cols = []
+    for i in range(len(x)):
+        e = np.zeros(len(x))
+        e[i] = step
+        cols.append((f(x + e) - f(x - e)) / (2 * step))
+    return np.column_stack(cols)
+
+
+def _polish(f, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Active set after a capped trust-region search: values within :data:`SNAP` of a
+    bound are put on it, the others fitted to convergence (a free value that reaches a
+    bound is put on it in the next round); up to :data:`POLISH_ROUNDS` rounds. Converged
+    when the free fit converges away from the bounds and every value on a bound
+    satisfies the optimality condition there (chi^2 rises when it moves inwards,
+    one-sided differences of :data:`KKT_STEP`); otherwise a capped search over all
+    values starts the next round. A local optimum: the valley may hold others.
+
+    Returns:
+        (x, converged).
+    """
+    for _ in range(POLISH_ROUNDS):
+        x = np.where(x - lo < SNAP, lo, np.where(hi - x < SNAP, hi, x))
+        free = (x > lo) & (x < hi)
+        ok = True
+        if free.any():
+
+            def g(y, x=x, free=free):
+                z = x.copy()
+                z[free] = y
+                return f(z)
+
+            r = scipy.optimize.least_squares(
+                g, x[free], bounds=(lo[free], hi[free]), x_scale="jac", xtol=FIT_TOL,
+                ftol=FIT_TOL, gtol=FIT_TOL, max_nfev=DIMENSION_EVALUATIONS,
+            )  # fmt: skip
+            x = x.copy()
+            x[free] = r.x
+            ok = r.status > 0
+            if np.any(free & ((x - lo < SNAP) | (hi - x < SNAP))):
+                continue  # a free value reached a bound: the next round puts it there
+        chi2 = np.sum(f(x) ** 2)
+        inward = []
+        for i in np.flatnonzero(~free):
+            y = x.copy()
+            y[i] += KKT_STEP if x[i] == lo[i] else -KKT_STEP
+            inward.append(np.sum(f(y) ** 2) >= chi2)
+        if ok and all(inward):
+            return x, True
+        x = scipy.optimize.least_squares(
+            f, x, bounds=(lo, hi), x_scale="jac", xtol=FIT_TOL, ftol=FIT_TOL, gtol=FIT_TOL,
+            max_nfev=DIMENSION_EVALUATIONS,
+        ).x  # fmt: skip
+    return x, False
+
+
+def _fit(
+    params: CaHyManParams, groups, ratio: float, starts, max_nfev=None, polish=False
+) -> FitResult:
     published, sd = published_values(params), standard_deviations(params)
     names = list(groups)
     ref = np.array([getattr(params, g[0]) for g in groups.values()])
@@ -205,16 +270,20 @@ def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> 
                                          ftol=FIT_TOL, gtol=FIT_TOL, max_nfev=max_nfev)  # fmt: skip
         if best is None or r.cost < best.cost:
             best = r
-    fitted = _apply(params, sub, np.exp(best.x))
+    x_best, jac, converged = best.x, best.jac, best.status > 0
+    if polish:
+        x_best, converged = _polish(f, best.x, lo, hi)
+        jac = _jacobian(f, x_best)
+    fitted = _apply(params, sub, np.exp(x_best))
     values = model_values(fitted)
     span = hi - lo
     bound = dict.fromkeys(names, "")
     bound.update({n: ("lower" if x - a < AT_BOUND * s else "upper" if b - x < AT_BOUND * s else "")
-                  for n, x, a, b, s in zip(act, best.x, lo, hi, span, strict=True)})  # fmt: skip
+                  for n, x, a, b, s in zip(act, x_best, lo, hi, span, strict=True)})  # fmt: skip
     free = [i for i, n in enumerate(act) if not bound[n]]
     rank, unident = 0, [n for n, i in zip(names, inactive, strict=True) if i]
     if free:
-        _, s, Vt = np.linalg.svd(best.jac[:, free], full_matrices=False)
+        _, s, Vt = np.linalg.svd(jac[:, free], full_matrices=False)
         rank = rule_rank(s, IDENTIFIABLE_RTOL)
         null = Vt[rank:]
         unident += [
@@ -223,8 +292,8 @@ def _fit(params: CaHyManParams, groups, ratio: float, starts, max_nfev=None) -> 
     est = {n: float(getattr(fitted, groups[n][0])) for n in names}
     return FitResult(
         tuple(names), dict(zip(names, map(float, ref), strict=True)), est, bound, fitted, values,
-        values - published, float(np.sum(f(best.x) ** 2)),
-        float(np.sum(f_all(np.log(ref)) ** 2)), rank, tuple(unident), best.status > 0,
+        values - published, float(np.sum(f(x_best) ** 2)),
+        float(np.sum(f_all(np.log(ref)) ** 2)), rank, tuple(unident), converged,
     )  # fmt: skip
 
 
@@ -240,7 +309,7 @@ def _stiffness_fit(params: CaHyManParams, published: tuple[float, ...]) -> FitRe
 def _dimension_fit(params: CaHyManParams, published: tuple[float, ...]) -> FitResult:
     groups = {n: (n,) for n in DIMENSIONS}
     ref = np.array([getattr(params, n) for n in DIMENSIONS])
-    return _fit(params, groups, DIMENSION_RANGE, (ref,), DIMENSION_EVALUATIONS)
+    return _fit(params, groups, DIMENSION_RANGE, (ref,), DIMENSION_EVALUATIONS, polish=True)
 
 
 def stiffness_fit(params: CaHyManParams) -> FitResult:

@@ -210,7 +210,7 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
             f"which a model matching within the assumed errors would keep near {n_q}, is "
             f"{chi2[fits[0][0]]:.4g} for the reference model, {chi2[fits[1][0]]:.4g} for the "
             f"best stiffness values, {chi2[fits[2][0]]:.4g} for the best assumed dimensions "
-            f"found{'' if dim_converged else ' (a search stopped at its evaluation limit)'}, "
+            f"found ({'a local optimum' if dim_converged else 'a search stopped at its limit'}), "
             f"and {chi2[fits[3][0]]:.4g} for a machine that does not move at all; the "
             "non-linearity of the tables alone keeps any linear model, of this machine or any "
             f"other, at {chi2[fits[4][0]]:.4g} or more. Of the {n_cells} published cells, "
