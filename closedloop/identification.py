@@ -359,6 +359,8 @@ def identify(
             value of a parameter not fitted, a group mixing blocks and numbers, a bad
             measurement (its index named), fewer measured components than parameters.
         NameNotFoundError: unknown joint or frame.
+        MechanismError, SingularConfigurationError: no compliance at a measurement's
+            configuration with the start springs (its index named).
     """
     groups = _groups(clm, fit)
     if not groups:
@@ -388,7 +390,10 @@ def identify(
         model = clm.with_springs({**springs, **values}, locked)
         pred, sens = np.empty((len(configs), 6)), np.empty((len(configs), 6, len(groups)))
         for m, q in enumerate(configs):
-            res = compliance(model, q, frame)
+            try:
+                res = compliance(model, q, frame)
+            except (MechanismError, SingularConfigurationError) as e:
+                raise type(e)(f"measurement {m}: {e}") from None
             pred[m] = res.C @ w[m]
             for c in range(len(groups)):
                 dC = sum(compliance_derivative(res, r, u) for r, u in parts[c])

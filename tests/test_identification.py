@@ -424,8 +424,8 @@ def test_the_ur5_stretched_singular_pose_still_identifies_its_springs():
     columns = []
     for name in UR5_JOINTS:
         h = 1e-5
-        plus = _ur5({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(h)})
-        minus = _ur5({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(-h)})
+        plus = truth.with_springs({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(h)})
+        minus = truth.with_springs({**UR5_TRUE, name: UR5_TRUE[name] * np.exp(-h)})
         columns.append(np.concatenate([
             (cl.compliance(plus, m.q, "tool0").C - cl.compliance(minus, m.q, "tool0").C)
             @ m.wrench / (2 * h) for m in data]))  # fmt: skip
@@ -434,6 +434,31 @@ def test_the_ur5_stretched_singular_pose_still_identifies_its_springs():
     assert fit.unidentifiable == ()
     for name in UR5_JOINTS:
         np.testing.assert_allclose(fit.estimates[name], UR5_TRUE[name], rtol=RTOL_EXACT_FIT)
+
+
+#: Stewart platforms turned to delta [rad] from Fichter's singularity: the condition
+#: number of C grows like 1/delta^2, the fit's rounding with it (4e-10 at 1e-4).
+RTOL_NEAR_SINGULAR = {1e-2: RTOL_EXACT_FIT, 1e-3: RTOL_EXACT_FIT, 1e-4: 1e-7}
+
+
+@pytest.mark.parametrize("delta", sorted(RTOL_NEAR_SINGULAR))
+def test_near_a_parallel_singularity_the_legs_are_recovered(delta):
+    m = mech.stewart_near_singular(delta)
+    legs = [f"leg{i}" for i in range(6)]
+    data = _synthetic(m.clm, m.frame, [m.q], np.random.default_rng(17), sd=0.0)
+    fit = identify(m.clm.with_springs(dict.fromkeys(legs, 1e5)), data, m.frame, legs)
+    for name in legs:
+        np.testing.assert_allclose(fit.estimates[name], m.clm.springs[name],
+                                   rtol=RTOL_NEAR_SINGULAR[delta])  # fmt: skip
+
+
+def test_a_measurement_at_a_parallel_singularity_is_named():
+    # Fichter's singularity: a platform twist leaves every leg still, no compliance exists
+    far, at = mech.stewart_near_singular(0.3), mech.stewart_near_singular(0.0)
+    data = [Measurement.of(q=m.q, wrench=np.ones(6), twist=np.zeros(6), sd=1e-6)
+            for m in (far, at)]  # fmt: skip
+    with pytest.raises(cl.MechanismError, match=r"^measurement 1: 'stewart' is still a mechanism"):
+        identify(far.clm, data, far.frame, [f"leg{i}" for i in range(6)])
 
 
 def test_repeated_measurements_shrink_the_errors_by_the_square_root_of_their_number():
