@@ -52,7 +52,7 @@ def full_query(model: CaHyManModel, q: np.ndarray, path: str):
     return (
         result,
         state.frame_jacobian(FRAME_H) @ result.G,
-        model.pose(q),
+        model.pose_from(state.q, state.data),
         StiffnessIndices.from_result(result, length=length),
     )
 

@@ -98,11 +98,38 @@ def test_cahyman_api_from_threads_gives_the_serial_results():
 
     rng = np.random.default_rng(7)
     poses = [(np.deg2rad(rng.uniform(40, 80, 3)), rng.uniform(0, 1), 0.01) for _ in range(24)]
-    serial = [stiffness(*p).C for p in poses]
+
+    def run(p):
+        r = stiffness(*p)
+        return r.C, r.pose.M, r.pose.R, r.pose.H_k
+
+    serial = [run(p) for p in poses]
     with ThreadPoolExecutor(N_THREADS) as pool:
-        threaded = list(pool.map(lambda p: stiffness(*p).C, poses))
+        threaded = list(pool.map(run, poses))
     for a, b in zip(serial, threaded, strict=True):
-        np.testing.assert_array_equal(a, b)
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+
+
+def test_cahyman_pose_from_a_configuration_is_the_closed_form_pose():
+    # the pose read from a configuration's own kinematics (what the generic backend does)
+    # equals the pose computed afresh and the closed-form geometry's (no Pinocchio); the
+    # assembly closes the loops to 1e-12 m, the pose agrees to that order
+    from cahyman_pin.model import cahyman_model, closed_form_pose
+
+    model = cahyman_model()
+    inputs = (np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01)
+    q = model.assemble(*inputs)
+    state = cl.Configuration(model.clm, q)
+    got, fresh, exact = (
+        model.pose_from(state.q, state.data),
+        model.pose(q),
+        closed_form_pose(*inputs),
+    )
+    for name in ("H", "R", "s", "H_k", "Q", "M", "R_M", "phi", "theta", "psi"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(fresh, name))
+        np.testing.assert_allclose(getattr(got, name), getattr(exact, name), rtol=0, atol=1e-10)
+    assert not got.M.flags.writeable and not got.H_k.flags.writeable
 
 
 @pytest.mark.parametrize("scale", [1e-300, 1e300])
