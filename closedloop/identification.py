@@ -61,6 +61,7 @@ from .exceptions import (
     InvalidInputError,
     MechanismError,
     ModelFileError,
+    OpenLoopError,
     SingularConfigurationError,
 )
 from .model import ClosedLoopModel
@@ -359,6 +360,7 @@ def identify(
             value of a parameter not fitted, a group mixing blocks and numbers, a bad
             measurement (its index named), fewer measured components than parameters.
         NameNotFoundError: unknown joint or frame.
+        OpenLoopError: a measurement's q does not close the loops (its index named).
         MechanismError, SingularConfigurationError: no compliance at a measurement's
             configuration with the start springs (its index named).
     """
@@ -392,6 +394,8 @@ def identify(
         for m, q in enumerate(configs):
             try:
                 res = compliance(model, q, frame)
+            except OpenLoopError as e:
+                raise OpenLoopError(f"measurement {m}: {e}", e.residual, e.tolerance) from None
             except (MechanismError, SingularConfigurationError) as e:
                 raise type(e)(f"measurement {m}: {e}") from None
             pred[m] = res.C @ w[m]

@@ -501,6 +501,9 @@ def test_measurements_that_do_not_fit_the_model_are_named(fourbar):
     short = Measurement.of(q=q[:3], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.InvalidInputError, match=r"measurement 1: q has 3 values; expected nq=5"):
         identify(clm, [good, short], "P", ["crank"])
+    open_loop = Measurement.of(q=q + 0.1, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    with pytest.raises(cl.OpenLoopError, match=r"^measurement 1: .*close"):
+        identify(clm, [good, open_loop], "P", ["crank"])
     nan = Measurement.of(q=np.r_[q[:4], np.nan], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.InvalidInputError, match=r"measurement 0: q contains non-finite"):
         identify(clm, [nan], "P", ["crank"])
