@@ -6,9 +6,10 @@ import scipy.optimize
 
 from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.backends.published import PublishedOptions
-from cahyman_pin.paper import cells, classify, fit
+from cahyman_pin.paper import cells, classify, explained, fit
 from cahyman_pin.paper.compare import backend_compliance, paper_coordinates, table_values
 from cahyman_pin.paper.data import LOADS, TABLE_POSES, TABLES
+from cahyman_pin.paper.document import Document, Table
 from cahyman_pin.paper.effects import effect_changes, printed_arm_axial_stiffness
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED
 from closedloop.exceptions import ClosedLoopError
@@ -433,14 +434,14 @@ def test_a_fit_within_the_rounding_explains_a_cell(monkeypatch):
     k = next(k for k, q in enumerate(qs) if (q.table, q.load, q.row[:2]) == ("Table 3", 1, "dx"))
     monkeypatch.setattr(classify, "stiffness_fit", lambda params: _FarFit(m))
     monkeypatch.setattr(classify, "dimension_fit", lambda params: _FarFit(m - 0.5))
-    for offset, explained in ((0.004, True), (0.006, False)):
+    for offset, expected in ((0.004, True), (0.006, False)):
         changed = {t: v.copy() for t, v in TABLES.items()}
         changed["Table 3"][0, 1] = m[k] + 0.5 + offset
         monkeypatch.setattr(cells, "TABLES", changed)
         monkeypatch.setattr(classify, "TABLES", changed)
         c = next(c for c in classify.classify(P) if (c.table, c.row, c.load) == ("Table 3", 0, 1))
-        assert (c.reason == "the fitted dimensions") is explained, c
-        if explained:
+        assert (c.reason == "the fitted dimensions") is expected, c
+        if expected:
             np.testing.assert_allclose(c.size, 0.5, rtol=1e-12)
 
 
@@ -481,3 +482,19 @@ def test_dimension_fit_is_a_local_optimum_in_the_generic_backend():
                 continue  # outside the bounds
             moved = d.params.replace(**{name: value * (1 + sign * DIM_STEP)})
             assert chi2(moved) >= c0 * (1 - DIM_CHI2_SLACK), (name, sign)
+
+
+def test_an_unconverged_dimension_fit_is_called_an_upper_bound(monkeypatch):
+    # no round of the active set: the capped search alone, which stops in the valley
+    monkeypatch.setattr(fit, "POLISH_ROUNDS", 0)
+    fit._dimension_fit.cache_clear()
+    try:
+        d = fit.dimension_fit(P)
+        assert not d.converged
+        doc = Document("t")
+        explained.fit_section(doc, P)
+        tables = [b for b in doc.blocks if isinstance(b, Table)]
+        caption = next(t.caption for t in tables if t.caption.startswith("Dimension fit"))
+        assert "not converged" in caption and f"{d.chi2:.5g}, is an upper bound" in caption
+    finally:
+        fit._dimension_fit.cache_clear()

@@ -37,6 +37,7 @@ from cahyman_pin.paper.fit import (
     DIMENSION_EVALUATIONS,
     DIMENSION_RANGE,
     IDLE_CHANGE,
+    POLISH_ROUNDS,
     SENSITIVITY_STEP,
     STIFFNESS_GROUPS,
     STIFFNESS_RANGE,
@@ -166,8 +167,8 @@ def _converged(fit: FitResult) -> str:
 
 def _unconverged(fit: FitResult) -> str:
     return (
-        f"the best values found within {DIMENSION_EVALUATIONS} evaluations of the model, "
-        f"where the search stops in a flat valley that runs towards the bounds; its chi^2, "
+        f"the best values found in {POLISH_ROUNDS} rounds of the active set, each search "
+        f"capped at {DIMENSION_EVALUATIONS} evaluations of the model; its chi^2, "
         f"{fit.chi2:.5g}, is an upper bound on what the assumed dimensions within the bounds "
         "can do, not their optimum"
     )

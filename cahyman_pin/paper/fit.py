@@ -97,7 +97,8 @@ class FitResult:
         rank: rank of the weighted sensitivity (log space) of the free parameters.
         unidentifiable: names in the null space of that sensitivity, or acting on no
             quantity.
-        converged: False when the fit stopped at its evaluation limit (a flat valley).
+        converged: False when the fit stopped at its evaluation limit (a flat valley);
+            for the dimension fit, True only at a local optimum (:func:`_polish`).
     """
 
     names: tuple[str, ...]
