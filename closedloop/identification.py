@@ -229,8 +229,8 @@ class Fit:
         names: parameter names (a group "a+b" for joints tied to one value).
         estimates: name -> fitted value, or None when unidentifiable.
         std_errors: name -> standard error, or None when unidentifiable.
-        correlations: (p, p) correlation matrix of the identified log-values, rows and
-            columns in the order of ``identified``.
+        correlations: (n_id, n_id) correlation matrix of the identified log-values
+            (n_id = len(identified)), rows and columns in the order of ``identified``.
         identified: names of the identified parameters, in order.
         unidentifiable: names the data cannot identify (estimate and error None).
         confounded: the names taking part in each null direction of the sensitivities.

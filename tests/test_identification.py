@@ -309,10 +309,20 @@ def test_starts_off_by_up_to_a_million_each_way_converge(fourbar, decades):
         np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
 
 
-@pytest.mark.parametrize("scale", [1e-5, 1e7])  # crank 5e-4 N m/rad .. rocker 2e12 N/m
-def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, scale):
+#: Springs of the four-bar: all 1e-5 times (crank 5e-4 N m/rad) or 1e7 times (rocker
+#: 2e12 N/m) the file's, and ratios of 1e9 and 1e12 in one model (1e15, 1e-3 beside
+#: 1e12, is refused by the compliance itself: a spring below 1e-14 of the stiffest).
+EXTREME_SPRINGS = [
+    {n: 1e-5 * v for n, v in FOURBAR_TRUE.items()},
+    {n: 1e7 * v for n, v in FOURBAR_TRUE.items()},
+    {"crank": 1e-3, "crank_axial": 1e6, "rocker_axial": 2e6},
+    {"crank": 1.0, "crank_axial": 1e12, "rocker_axial": 2e12},
+]
+
+
+@pytest.mark.parametrize("springs", EXTREME_SPRINGS)
+def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, springs):
     clm, _ = fourbar
-    springs = {n: scale * v for n, v in FOURBAR_TRUE.items()}
     data = _fourbar_data(clm, np.random.default_rng(9), sd=0.0, springs=springs)
     start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
     fit = identify(start, data, "P", list(FOURBAR_TRUE))
@@ -450,6 +460,21 @@ def test_near_a_parallel_singularity_the_legs_are_recovered(delta):
     for name in legs:
         np.testing.assert_allclose(fit.estimates[name], m.clm.springs[name],
                                    rtol=RTOL_NEAR_SINGULAR[delta])  # fmt: skip
+
+
+def test_start_values_by_parameter_name(fourbar):
+    clm, _ = fourbar
+    springs = {"crank": 50.0, "crank_axial": 1.5e5, "rocker_axial": 1.5e5}
+    data = _fourbar_data(clm, np.random.default_rng(18), sd=0.0, springs=springs)
+    fit = identify(clm, data, "P", ["crank", ("crank_axial", "rocker_axial")],
+                   start={"crank": 2e3, "crank_axial+rocker_axial": 3e3})  # fmt: skip
+    np.testing.assert_allclose(fit.estimates["crank"], 50.0, rtol=RTOL_EXACT_FIT)
+    np.testing.assert_allclose(fit.estimates["crank_axial+rocker_axial"], 1.5e5,
+                               rtol=RTOL_EXACT_FIT)  # fmt: skip
+    with pytest.raises(cl.InvalidInputError, match=r"'crank' needs a finite start value > 0"):
+        identify(clm, data, "P", ["crank"], start={"crank": -5.0})
+    with pytest.raises(cl.InvalidInputError, match=r"got 'big'"):
+        identify(clm, data, "P", ["crank"], start={"crank": "big"})
 
 
 def test_a_measurement_at_a_parallel_singularity_is_named():
