@@ -49,7 +49,8 @@ def run_identify(args) -> int:
         print_json({"model": clm.name, "frame": frame, **fit.to_dict()})
         return status
     print(f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
-          f"weighted residual RMS {fit.residual_rms:.3g}")  # fmt: skip
+          f"weighted residual RMS {fit.residual_rms:.3g}"
+          + ("" if fit.success else " (the optimiser did not converge)"))  # fmt: skip
     for name in fit.names:
         if fit.estimates[name] is None:
             print(f"  {name}: not identifiable from these data")
