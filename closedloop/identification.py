@@ -69,8 +69,8 @@ from .model import ClosedLoopModel
 #: Relative share of a null vector of S above which a parameter takes part in it.
 NULL_SHARE = 0.1
 #: A column of S below this share of the largest is rounding (the parameter is not seen):
-#: the convention of a mechanism's missing spring (1e-14 of the stiffest). Smaller but
-#: larger columns stay in the rank test: a stiff spring in series with a soft one is
+#: the convention of a mechanism's missing spring (1e-14 of the stiffest). A column above
+#: it, however small, stays in the rank test: a stiff spring in series with a soft one is
 #: confounded with it, not "not seen" while the soft one is "identified".
 DEAD_RTOL = 1e-14
 #: Most steps of the common log offset that brings a start to the scale of the data.
