@@ -88,10 +88,7 @@ class _Scaling(NamedTuple):
     upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
     d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
     dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
-    all_sprung: bool  # every coordinate has a finite spring (sprung = arange(nv))
-    angular: bool  # no linear coordinate (s_q = 1)
     sigma: np.ndarray  # (s,) the spring factor's singular values on y = dq_s
-    inv_sigma: np.ndarray  # (s,) 1 / sigma
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
     # (nv, s) the factor P = T W of the fast paths (T: dq = T y, y = dq_s / s_q) on the
@@ -146,10 +143,7 @@ class _Scaling(NamedTuple):
             np.triu(np.ones((row_scale.size, order.size))),
             d,
             np.outer(d, d),
-            sprung.size == k.size,
-            not np.any(clm.linear_coordinates),
             sigma,
-            1.0 / sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
             P0,
