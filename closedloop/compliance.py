@@ -42,7 +42,7 @@ from .exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
-from .model import ClosedLoopModel
+from .model import ClosedLoopModel, check_name
 from .springs import (
     PATHS,
     SpringFactor,
@@ -246,10 +246,13 @@ def compliance(
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
         SingularConfigurationError: the compliance overflows (springs near 1e-308).
     """
-    if isinstance(model, Configuration) and isinstance(q, str):  # compliance(state, frame, ...)
-        q, frame, axes = None, q, axes if frame is None else frame
+    if isinstance(model, Configuration) and q is not None and frame is None:
+        q, frame = None, q  # compliance(state, frame): a configuration carries its own q
+    elif isinstance(model, Configuration) and isinstance(q, str):  # (state, frame, axes)
+        q, frame, axes = None, q, frame
     if frame is None:
-        raise TypeError("compliance() needs the name of the loaded frame")
+        raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
+    check_name("frame", frame)
     state = as_configuration(model, q, length=length)
     state.require_closed()
     if gravity is not None or payloads or preload is not None:

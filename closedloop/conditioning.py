@@ -206,8 +206,11 @@ def spectrum_from_factor(
         rank, basis = rule_rank(beta), U
         if range_factor is not None:
             A = range_factor() if callable(range_factor) else range_factor
-            basis, s_k, _ = svd(A, A.shape[1] < 6)
-            rank = rule_rank(s_k)
+            if A.size:
+                basis, s_k, _ = svd(A, A.shape[1] < 6)
+                rank = rule_rank(s_k)
+            else:  # no compliant coordinate at all: every direction is rigid
+                basis, rank = np.eye(6), 0
     cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
     K = None
     if rank == 6:

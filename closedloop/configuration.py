@@ -23,7 +23,7 @@ from .arrays import frozen
 from .conditioning import check_length
 from .exceptions import InvalidInputError, OpenLoopError
 from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
-from .model import ClosedLoopModel
+from .model import ClosedLoopModel, check_name
 
 #: Largest scaled closure residual (infinity norm: metres / L, radians) at which a
 #: configuration counts as closed: the tolerance of the compliance, the statics and the
@@ -78,6 +78,16 @@ class Configuration:
             self.residual_norm = self.closure_error = 0.0
         self._closure_jacobian: np.ndarray | None = None
         self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
+
+    def __copy__(self) -> Configuration:
+        """A new configuration of the same model and q, with a workspace of its own (two
+        configurations never share a pinocchio Data)."""
+        return Configuration(self.model, self.q, length=self.length)
+
+    def __deepcopy__(self, memo: dict) -> Configuration:
+        """As :meth:`__copy__`: the model is shared, not copied (it is not changed by a
+        configuration), and q is copied."""
+        return self.__copy__()
 
     def __del__(self) -> None:
         # the workspace goes back to the model's pool (not shared while this one lives)
@@ -134,6 +144,7 @@ class Configuration:
             frame: frame name.
             axes: ``"world"`` (world-aligned axes) or ``"local"`` (the frame's own axes).
         """
+        check_name("frame", frame)  # before the cache, which hashes it
         key = (frame, axes)
         if key not in self._frame_jacobians:
             self._frame_jacobians[key] = frozen(

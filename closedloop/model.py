@@ -63,7 +63,8 @@ class Closure:
         return self.constraint.residualSize()
 
 
-def _check_name(kind: str, name) -> None:
+def check_name(kind: str, name) -> None:
+    """:class:`InvalidInputError` unless ``name`` (of a ``kind``: frame, joint) is a str."""
     if not isinstance(name, str):
         raise InvalidInputError(f"{kind} name must be a str, got {name!r} ({type(name).__name__})")
 
@@ -71,7 +72,7 @@ def _check_name(kind: str, name) -> None:
 def frame_id(model: pin.Model, name: str) -> int:
     """Index of frame ``name``; raises :class:`NameNotFoundError` listing the frames
     (:class:`InvalidInputError` when ``name`` is not a str)."""
-    _check_name("frame", name)
+    check_name("frame", name)
     if not model.existFrame(name):
         raise NameNotFoundError("frame", name, [f.name for f in model.frames])
     return model.getFrameId(name)
@@ -80,7 +81,7 @@ def frame_id(model: pin.Model, name: str) -> int:
 def joint_id(model: pin.Model, name: str) -> int:
     """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints
     (:class:`InvalidInputError` when ``name`` is not a str)."""
-    _check_name("joint", name)
+    check_name("joint", name)
     if not model.existJointName(name):
         raise NameNotFoundError("joint", name, list(model.names)[1:])
     return model.getJointId(name)
@@ -285,6 +286,12 @@ class ClosedLoopModel:
         if not isinstance(springs, Mapping):
             raise InvalidInputError(
                 f"springs must be a mapping joint name -> stiffness, got {type(springs).__name__}"
+            )
+        both = sorted(set(locked) & set(springs))
+        if both:
+            raise InvalidInputError(
+                f"joints {both} are both locked and given springs; expected one or the other "
+                "(a lock is an infinite stiffness)"
             )
         blocks = {}
         for name, value in springs.items():
