@@ -256,7 +256,10 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     pass walks again point by point from the last assembled one, past the failure to the
     next point that assembles, as a serial run does: across a gap of failed points the
     continuation jumps from the same configuration to the same point whatever the chunks
-    (a failed border keeps the last assembled configuration, as a serial run).
+    (a failed border keeps the last assembled configuration, as a serial run). A gap of
+    :data:`BORDER_STRIDE` failed points or more is crossed at the stride (the pass stays
+    a small share of the map, failed points being the costliest): after it, the branch
+    may depend on the chunks.
 
     Args:
         points: (n, n_act) actuated values in path order [rad, m].
@@ -279,14 +282,14 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
         found[p] = q
         if ok:
             done = p
-        if failed is None and not ok:  # walk again from the last assembled point
-            failed, p = p, done + 1
+        if failed is None and not ok and p - done <= BORDER_STRIDE:  # walk again from the
+            failed, p = p, done + 1  # last assembled point (not in a long gap: crossed)
             continue
         if failed is not None:  # point by point, to the first success after the failure
-            if not (ok and p >= failed):
+            if not (ok and p >= failed) and p - done < BORDER_STRIDE:
                 p += 1
                 continue
-            failed = None
+            failed = None  # found, or a long gap: crossed at the stride
         while k < len(visit) and visit[k] <= p:
             k += 1
         p = visit[k] if k < len(visit) else last + 1

@@ -255,3 +255,25 @@ def test_a_joint_named_like_a_key_of_the_files(tmp_path, name):
         np.testing.assert_array_equal(f["inputs"], [[0.3], [0.6]])
         np.testing.assert_array_equal(f["C"], m.C)
         assert f["status"].tolist() == list(m.status)
+
+
+def test_the_border_pass_crosses_a_long_gap_at_the_stride(long_ground, monkeypatch):
+    """300 unreachable points then 20 reachable ones, chunks of 10: the pass assembles
+    about one point in BORDER_STRIDE, not every failed point (a serial run's cost)."""
+    from closedloop import map_engine
+
+    clm = cl.load_model(*long_ground)
+    cranks = np.r_[np.linspace(-2.5, -0.5, 300), np.linspace(0.0, 1.0, 20)]
+    assert not np.any(reachable(cranks[:300])) and np.all(reachable(cranks[300:]))
+    calls = []
+    real = map_engine.assemble_within_limits
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(map_engine, "assemble_within_limits", counted)
+    firsts = list(range(0, len(cranks), 10))
+    starts = map_engine.border_starts(clm, cranks[:, None], firsts)
+    assert len(calls) <= len(cranks) // map_engine.BORDER_STRIDE + len(firsts) + 2 * 16
+    assert starts[0] is None and all(q is not None for q in starts[1:])
