@@ -29,22 +29,25 @@ EZ = np.array([0.0, 0.0, 1.0])
 _SQ3 = np.sqrt(3.0)
 
 
+def _rotation(angle: np.ndarray, i: int, j: int) -> np.ndarray:
+    """(..., 3, 3) rotation by ``angle`` [rad] in the plane of axes i -> j (the third axis
+    fixed): entries (i, i) = (j, j) = cos, (j, i) = sin, (i, j) = -sin."""
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros((*np.shape(c), 3, 3))
+    R[..., i, i] = R[..., j, j] = c
+    R[..., j, i], R[..., i, j] = s, -s
+    R[..., 3 - i - j, 3 - i - j] = 1.0
+    return R
+
+
 def rot_z(angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation about z by ``angle`` [rad]."""
-    c, s = np.cos(angle), np.sin(angle)
-    o, i = np.zeros_like(c), np.ones_like(c)
-    return np.stack(
-        [np.stack([c, -s, o], -1), np.stack([s, c, o], -1), np.stack([o, o, i], -1)], -2
-    )
+    return _rotation(angle, 0, 1)
 
 
 def rot_y(angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation about y by ``angle`` [rad]."""
-    c, s = np.cos(angle), np.sin(angle)
-    o, i = np.zeros_like(c), np.ones_like(c)
-    return np.stack(
-        [np.stack([c, o, s], -1), np.stack([o, i, o], -1), np.stack([-s, o, c], -1)], -2
-    )
+    return _rotation(angle, 2, 0)
 
 
 def plate_rotation(phi, theta, psi) -> np.ndarray:
@@ -107,8 +110,8 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     """
     alpha = _check_alpha(alpha)
     y, z = leg_plane_coordinates(alpha, p)
-    y1, y2, y3 = np.moveaxis(y, -1, 0)
-    z1, z2, z3 = np.moveaxis(z, -1, 0)
+    y1, y2, y3 = y[..., 0], y[..., 1], y[..., 2]
+    z1, z2, z3 = z[..., 0], z[..., 1], z[..., 2]
     cphi = np.sqrt((2 * z1 - z2 - z3) ** 2 + 3 * (z2 - z3) ** 2) / (3 * p.r_p)
     bad = cphi > 1.0
     if np.any(bad):
@@ -134,14 +137,14 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     z_H = (z1 + z2 + z3) / 3.0
     H = np.stack([x_H, y_H, z_H], axis=-1)
     R = plate_rotation(phi, theta, psi)
-    H_k = H[..., None, :] + np.einsum("...ij,kj->...ki", R, p.r_p * U)
-    s = np.einsum("...ki,ki->...k", H_k, U) - p.r_e
+    H_k = H[..., None, :] + (R @ (p.r_p * U.T)).swapaxes(-1, -2)
+    s = (H_k * U).sum(axis=-1) - p.r_e
     return PlatePose(H=H, R=R, phi=phi, theta=theta, psi=psi, s=s)
 
 
 def ball_centres(pose: PlatePose, p: CaHyManParams) -> np.ndarray:
     """(..., 3, 3) ball-joint centres H_k [m], world frame, one leg per row."""
-    return pose.H[..., None, :] + np.einsum("...ij,kj->...ki", pose.R, p.r_p * U)
+    return pose.H[..., None, :] + (pose.R @ (p.r_p * U.T)).swapaxes(-1, -2)
 
 
 def inverse_legs(z_H, phi, psi, p: CaHyManParams) -> np.ndarray:

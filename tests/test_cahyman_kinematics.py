@@ -202,3 +202,14 @@ def test_unreachable_inputs_from_warm_start_raise_assembly_error(model):
 def test_invalid_inputs_raise(model, alpha, alpha4, s4):
     with pytest.raises(InvalidInputError):
         model.assemble(alpha, alpha4, s4)
+
+
+def test_elementary_rotations_are_scipys():
+    """rot_z, rot_y of a batch of angles (and of one) against scipy's rotations."""
+    from scipy.spatial.transform import Rotation
+
+    angles = np.array([[0.0, 0.3], [-2.0, np.pi]])
+    for rot, axis in ((geometry.rot_z, "z"), (geometry.rot_y, "y")):
+        expected = Rotation.from_euler(axis, angles.reshape(-1, 1)).as_matrix()
+        np.testing.assert_allclose(rot(angles), expected.reshape(2, 2, 3, 3), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(rot(0.3), expected[1], rtol=0, atol=1e-15)
