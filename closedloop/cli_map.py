@@ -3,13 +3,15 @@
     closedloop map MODEL [--closures F] --frame NAME --sweep JOINT=START:STOP:NUM
         [--sweep ...] [--fixed JOINT=VALUE ...] | --points FILE
         [--index NAME] [--force FX FY FZ] [--torque NX NY NZ]
-        [--workers N | --scheduler ADDRESS] [--out DIR]
+        [--workers N | --scheduler ADDRESS [--worker-timeout S]] [--out DIR]
 
 Values are SI (rad, m). ``--points`` reads a text file of actuated values, one point a row
 (whitespace or comma separated, the model's actuated order). The files are written by
 :meth:`closedloop.maps.StiffnessMap.save`. ``--scheduler`` runs the chunks on a Dask
 distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
-``dask worker ADDRESS``).
+``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
+with too many workers or a run without any worker for ``--worker-timeout`` seconds stops
+with one line (exit 3).
 """
 
 from __future__ import annotations
@@ -21,7 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli_common import SpecError, dask_client, finite_float, output_folder, parse_values
+from .cli_common import (
+    SpecError,
+    add_worker_timeout,
+    dask_executor,
+    finite_float,
+    output_folder,
+    parse_values,
+)
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, ModelSource
 from .maps import INDICES, stiffness_map
@@ -71,6 +80,7 @@ def add_parser(sub, parent_arguments) -> None:
     run = p.add_mutually_exclusive_group()
     run.add_argument("--workers", type=int, metavar="N", help="local processes")
     run.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786")
+    add_worker_timeout(p)
     p.add_argument("--chunk", type=int, default=CHUNK, metavar="N", help="points per task")
     p.add_argument("--out", default="closedloop-map", metavar="DIR", help="output folder")
     p.set_defaults(func=run_map)
@@ -124,19 +134,15 @@ def run_map(args) -> int:
         share = max(1, args.workers or 1)
         print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
               f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
-    client = dask_client(args.scheduler)
-    try:
+    with dask_executor(args.scheduler, args.worker_timeout) as executor:
         result = stiffness_map(
             source if (args.workers or args.scheduler) else clm,
             workers=args.workers,
-            executor=None if client is None else client.get_executor(),
+            executor=executor,
             show_progress=True,
             **options,
             **grid,
         )
-    finally:
-        if client is not None:
-            client.close()
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))

@@ -39,7 +39,13 @@ from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
-from closedloop.cli_common import SpecError, dask_client, output_folder, parse_values
+from closedloop.cli_common import (
+    SpecError,
+    add_worker_timeout,
+    dask_executor,
+    output_folder,
+    parse_values,
+)
 from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
@@ -118,6 +124,7 @@ def add_parser(subparsers) -> None:
                      help="worker processes (default: all cores; 1: no pool)")  # fmt: skip
     run.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on a Dask cluster, e.g. tcp://HOST:8786")  # fmt: skip
+    add_worker_timeout(p)
     p.add_argument("--chunk-size", type=int, default=None, help="points per task")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
@@ -289,22 +296,18 @@ def _run(args: argparse.Namespace) -> int:
         s4=fixed.get("s4"),
         params=params,
     )
-    client = dask_client(args.scheduler)
-    executor = "serial" if args.workers == 1 else "processes"
-    try:
+    local = "serial" if args.workers == 1 else "processes"
+    with dask_executor(args.scheduler, args.worker_timeout) as executor:
         result = sweep(
             points,
             backend=args.backend,
             wrench=_wrench(args),
             start=args.start,
-            executor=executor if client is None else client.get_executor(),
+            executor=local if executor is None else executor,
             workers=args.workers,
             chunk_size=args.chunk_size,
             show_progress=True,
         )
-    finally:
-        if client is not None:
-            client.close()
     paths = result.save(args.out, "map")
     shown = {k: (v[1], v[2]) for k, v in swept.items()}
     fixed = {k: (float(v[0][0]), v[1]) for k, v in inputs.items() if k not in swept}

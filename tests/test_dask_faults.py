@@ -1,0 +1,120 @@
+"""``--scheduler`` under faults: a lost worker is a retried chunk (the map stays the serial
+one), a chunk lost with too many workers or a run without workers is one line, exit 3."""
+
+import logging
+import os
+import signal
+import threading
+import time
+
+import dask
+import numpy as np
+import pytest
+from dask.distributed import Client, LocalCluster
+
+from closedloop.cli import main
+
+#: Worker timeout of the tests [s]: small, so that a run without workers ends in seconds.
+TIMEOUT = 3.0
+#: Slack on the timeout [s]: the watch polls every min(1, TIMEOUT / 4) s, and a loaded
+#: 2-core machine delays threads; a hang would exceed any such bound.
+SLACK = 10.0
+#: A map of many small chunks, so that a worker dies with chunks queued on it.
+MAP = ["map", "fourbar", "--frame", "P", "--sweep", "crank=0.2:1.4:1500", "--chunk", "15"]
+
+
+def _cluster(n_workers: int):
+    return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", dashboard_address=None,
+                        silence_logs=logging.CRITICAL)  # fmt: skip
+
+
+def _kill_a_busy_worker(cluster, killed: list) -> threading.Thread:
+    """A thread that kills (SIGKILL) the first worker process seen running a task and
+    appends the worker's address to ``killed``."""
+
+    def kill():
+        with Client(cluster.scheduler_address, timeout="10s") as client:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:
+                busy = [w for w, keys in client.processing().items() if keys]
+                for nanny in cluster.workers.values():
+                    if nanny.worker_address in busy:
+                        os.kill(nanny.process.pid, signal.SIGKILL)
+                        killed.append(nanny.worker_address)
+                        return
+                time.sleep(0.005)
+
+    thread = threading.Thread(target=kill, daemon=True)
+    thread.start()
+    return thread
+
+
+def _last_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    return err.strip().splitlines()[-1]
+
+
+def test_a_killed_worker_is_a_retried_chunk(tmp_path, capsys):
+    """One of two workers killed mid-run: Dask retries its chunks on the other (and the
+    restarted one); the NPZ arrays equal the serial map's exactly."""
+    assert main([*MAP, "--out", str(tmp_path / "serial")]) == 0
+    killed: list = []
+    with _cluster(2) as cluster:
+        thread = _kill_a_busy_worker(cluster, killed)
+        status = main([*MAP, "--scheduler", cluster.scheduler_address,
+                       "--out", str(tmp_path / "dask")])  # fmt: skip
+        thread.join(60)
+    assert status == 0, capsys.readouterr().err
+    assert len(killed) == 1  # a worker died while it held chunks
+    a, b = np.load(tmp_path / "serial/map.npz"), np.load(tmp_path / "dask/map.npz")
+    for key in a.files:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_a_chunk_lost_with_its_workers_is_one_line(tmp_path, capsys):
+    """With ``allowed-failures`` 0, the first worker killed with a chunk loses it for good
+    (``KilledWorker``): one line naming the scheduler, exit 3."""
+    killed: list = []
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), _cluster(2) as cluster:
+        thread = _kill_a_busy_worker(cluster, killed)
+        status = main([*MAP, "--scheduler", cluster.scheduler_address,
+                       "--out", str(tmp_path / "dask")])  # fmt: skip
+        thread.join(60)
+        address = cluster.scheduler_address
+    line = _last_line(capsys)
+    assert killed and status == 3, line
+    assert line.startswith("closedloop: error: the Dask cluster at") and address in line
+    assert "KilledWorker" in line
+
+
+@pytest.mark.parametrize("prog", ["closedloop", "cahyman"])
+def test_a_run_without_workers_stops_after_the_timeout(prog, tmp_path, capsys):
+    """A scheduler without any worker: one line, exit 3, after the timeout, not a hang."""
+    from cahyman_pin.cli import main as cahyman_main
+
+    with _cluster(0) as cluster:
+        address = cluster.scheduler_address
+        t0 = time.monotonic()
+        if prog == "closedloop":
+            status = main([*MAP, "--scheduler", address, "--worker-timeout", str(TIMEOUT),
+                           "--out", str(tmp_path / "x")])  # fmt: skip
+        else:
+            status = cahyman_main(["map", "--alpha", "30:90:7", "--scheduler", address,
+                                   "--worker-timeout", str(TIMEOUT),
+                                   "--out", str(tmp_path / "x")])  # fmt: skip
+        elapsed = time.monotonic() - t0
+    line = _last_line(capsys)
+    assert status == 3, line
+    assert line.startswith(f"{prog}: error: no Dask worker connected to the scheduler")
+    assert address in line and f"for {TIMEOUT:g} s" in line
+    assert TIMEOUT <= elapsed < TIMEOUT + SLACK, elapsed
+
+
+def test_the_worker_timeout_must_be_positive(tmp_path, capsys):
+    with _cluster(0) as cluster:
+        status = main([*MAP, "--scheduler", cluster.scheduler_address, "--worker-timeout", "0",
+                       "--out", str(tmp_path / "x")])  # fmt: skip
+    assert status == 2
+    assert "--worker-timeout must be > 0 s, got 0.0" in _last_line(capsys)
