@@ -21,6 +21,8 @@ TIMEOUT = 3.0
 SLACK = 10.0
 #: A map of many small chunks, so that a worker dies with chunks queued on it.
 MAP = ["map", "fourbar", "--frame", "P", "--sweep", "crank=0.2:1.4:1500", "--chunk", "15"]
+#: A map that outlasts closing the workers (seconds of chunks on two workers).
+LONG_MAP = [*MAP[:-3], "crank=0.2:1.4:6000", "--chunk", "15"]
 
 
 def _cluster(n_workers: int):
@@ -118,3 +120,28 @@ def test_the_worker_timeout_must_be_positive(tmp_path, capsys):
                        "--out", str(tmp_path / "x")])  # fmt: skip
     assert status == 2
     assert "--worker-timeout must be > 0 s, got 0.0" in _last_line(capsys)
+
+
+def test_all_workers_lost_mid_run_stops_after_the_timeout(tmp_path, capsys):
+    """Both workers closed while chunks are running: one line, exit 3, after the timeout."""
+    with _cluster(2) as cluster:
+        address = cluster.scheduler_address
+
+        def close_all():
+            with Client(address, timeout="10s") as client:
+                while not any(client.processing().values()):
+                    time.sleep(0.005)
+            t_lost.append(time.monotonic())
+            cluster.scale(0)
+
+        t_lost: list = []
+        thread = threading.Thread(target=close_all, daemon=True)
+        thread.start()
+        status = main([*LONG_MAP, "--scheduler", address, "--worker-timeout", str(TIMEOUT),
+                       "--out", str(tmp_path / "x")])  # fmt: skip
+        t_end = time.monotonic()
+        thread.join(60)
+    line = _last_line(capsys)
+    assert status == 3, line
+    assert line.startswith("closedloop: error: no Dask worker connected to the scheduler")
+    assert t_lost and TIMEOUT <= t_end - t_lost[0] < TIMEOUT + SLACK, t_end - t_lost[0]
