@@ -9,17 +9,13 @@ without workers end as one line, never a hang)."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import os
 import re
 import sys
 import tempfile
-import threading
-import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import CancelledError, Executor, Future, InvalidStateError
 from pathlib import Path
 
 import numpy as np
@@ -209,7 +205,7 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
         return closed_pipe()
     except ClosedLoopError as e:
         print(error_line(prog, e), file=sys.stderr)
-        return EXIT_FAILED if isinstance(e, ClusterError) else exit_status(e)
+        return exit_status(e)
     except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
@@ -236,156 +232,3 @@ def run_main(
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else EXIT_OK
     return run_command(prog, args)
-
-
-#: Longest time [s] a Dask run waits with tasks pending and no worker connected (or the
-#: scheduler lost) before it stops with one line (``--worker-timeout``).
-WORKER_TIMEOUT = 30.0
-
-
-def add_worker_timeout(parser: argparse.ArgumentParser) -> None:
-    """Add ``--worker-timeout S`` (the bound of :class:`DaskExecutor`) to ``parser``."""
-    parser.add_argument("--worker-timeout", type=finite_float, default=WORKER_TIMEOUT,
-                        metavar="S", help="with --scheduler: stop after S s without a "
-                        f"worker (default {WORKER_TIMEOUT:g})")  # fmt: skip
-
-
-class ClusterError(ClosedLoopError):
-    """A Dask run failed: a task lost with its workers (``KilledWorker``), a closed
-    connection, or no worker connected for longer than the worker timeout (exit 3)."""
-
-
-def _is_dask_error(error: BaseException) -> bool:
-    """An error of Dask's machinery (not of the task's own code): a class of the
-    ``distributed`` package, or a cancelled task."""
-    if isinstance(error, CancelledError):
-        return True
-    module = type(error).__module__
-    return module == "distributed" or module.startswith("distributed.")
-
-
-class DaskExecutor(Executor):
-    """The executor of a Dask client that never hangs and fails in one line.
-
-    Each task's future is a future of its own, completed from Dask's: an error of Dask's
-    machinery (e.g. ``KilledWorker`` once a task has lost ``allowed-failures`` workers)
-    becomes a :class:`ClusterError` naming the scheduler. A lost worker's tasks are
-    retried by Dask on the others, so a map stays identical to the serial one. A watch
-    thread checks every ``poll`` seconds that a worker is connected while tasks are
-    pending; after ``worker_timeout`` seconds without one (or without the scheduler),
-    the pending futures fail with a :class:`ClusterError`.
-
-    Args:
-        client: a ``distributed.Client`` (closed by the caller).
-        address: the scheduler's address, for the messages.
-        worker_timeout: seconds (> 0).
-    """
-
-    def __init__(self, client, address: str, worker_timeout: float):
-        self._client, self._address, self._timeout = client, address, worker_timeout
-        self._inner = client.get_executor()
-        self._pending: set[Future] = set()
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._watch = threading.Thread(target=self._watch_workers, daemon=True)
-        self._watch.start()
-
-    def submit(self, fn, /, *args, **kwargs) -> Future:
-        inner = self._inner.submit(fn, *args, **kwargs)
-        outer: Future = Future()
-        with self._lock:
-            self._pending.add(outer)
-        outer.add_done_callback(lambda f: self._done(f, inner))
-        inner.add_done_callback(lambda f: self._forward(f, outer))
-        return outer
-
-    def _done(self, outer: Future, inner: Future) -> None:
-        with self._lock:
-            self._pending.discard(outer)
-        if outer.cancelled():
-            inner.cancel()
-
-    def _forward(self, inner: Future, outer: Future) -> None:
-        error = None if inner.cancelled() else inner.exception()
-        try:
-            if inner.cancelled() or (error is not None and _is_dask_error(error)):
-                what = "cancelled" if inner.cancelled() else f"{type(error).__name__}: {error}"
-                outer.set_exception(ClusterError(
-                    f"the Dask cluster at {self._address!r} lost a task ({what})"))  # fmt: skip
-            elif error is not None:
-                outer.set_exception(error)
-            else:
-                outer.set_result(inner.result())
-        except InvalidStateError:  # already failed by the watch, or cancelled
-            pass
-
-    def _connected(self) -> bool:
-        try:
-            return self._client.status == "running" and bool(
-                self._client.scheduler_info(n_workers=1)["workers"]
-            )
-        except Exception:  # the scheduler cannot answer: not connected
-            return False
-
-    def _watch_workers(self) -> None:
-        poll = min(1.0, self._timeout / 4)
-        since = None  # when tasks started waiting without a worker
-        while not self._stop.wait(poll):
-            with self._lock:
-                waiting = bool(self._pending)
-            if not waiting or self._connected():
-                since = None
-                continue
-            since = time.monotonic() if since is None else since
-            if time.monotonic() - since >= self._timeout:
-                self._fail_pending()
-                since = None
-
-    def _fail_pending(self) -> None:
-        error = ClusterError(
-            f"no Dask worker connected to the scheduler {self._address!r} for "
-            f"{self._timeout:g} s (--worker-timeout); stopped with tasks pending"
-        )
-        with self._lock:
-            pending = list(self._pending)
-        for future in pending:
-            try:
-                future.set_exception(error)
-            except InvalidStateError:
-                pass
-
-    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        self._stop.set()
-        self._inner.shutdown(wait=False)
-        if wait:
-            self._watch.join()
-
-
-@contextlib.contextmanager
-def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
-    """A :class:`DaskExecutor` on the scheduler at ``address`` (None for None), its client
-    closed at the end. An unreachable scheduler or a missing Dask is one typed error.
-
-    Raises:
-        InvalidInputError: Dask is not installed, the scheduler cannot be reached, or
-            ``worker_timeout`` is not a positive number.
-    """
-    if address is None:
-        yield None
-        return
-    if not worker_timeout > 0:
-        raise InvalidInputError(f"--worker-timeout must be > 0 s, got {worker_timeout!r}")
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
-    try:
-        client = Client(address, timeout="10s")
-    except (OSError, TimeoutError) as e:
-        raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None
-    executor = DaskExecutor(client, address, worker_timeout)
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        client.close()

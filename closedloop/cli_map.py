@@ -23,14 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli_common import (
-    SpecError,
-    add_worker_timeout,
-    dask_executor,
-    finite_float,
-    output_folder,
-    parse_values,
-)
+from .cli_common import SpecError, finite_float, output_folder, parse_values
+from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, ModelSource
 from .maps import INDICES, stiffness_map

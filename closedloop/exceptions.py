@@ -144,6 +144,11 @@ class NumericalError(ClosedLoopError):
     """A result is not finite (NaN or infinity) on finite input: the computation failed."""
 
 
+class ClusterError(ClosedLoopError):
+    """A Dask run failed: a task lost with its workers (``KilledWorker``), a closed
+    connection, or no worker connected for longer than the worker timeout."""
+
+
 #: Exit status of the command lines (``closedloop``, ``cahyman``): success.
 EXIT_OK = 0
 #: The analysis succeeded but the compliance is rank deficient: the stiffness does not exist.
@@ -155,6 +160,7 @@ EXIT_FAILED = 3
 
 _FAILURES = (
     AssemblyError,
+    ClusterError,
     EquilibriumError,
     MechanismError,
     NumericalError,
@@ -166,8 +172,9 @@ def exit_status(error: ClosedLoopError) -> int:
     """Exit status of a command line that stops on ``error``.
 
     :data:`EXIT_RANK_DEFICIENT` for :class:`RigidDirectionsError`, :data:`EXIT_FAILED` for
-    :class:`AssemblyError`, :class:`EquilibriumError` (and :class:`JointLimitError`),
-    :class:`MechanismError`, :class:`NumericalError` and :class:`SingularConfigurationError`,
+    :class:`AssemblyError`, :class:`ClusterError`, :class:`EquilibriumError` (and
+    :class:`JointLimitError`), :class:`MechanismError`, :class:`NumericalError` and
+    :class:`SingularConfigurationError`,
     :data:`EXIT_BAD_INPUT` for the others (:class:`InvalidInputError`,
     :class:`ModelFileError`, :class:`NameNotFoundError`, :class:`OpenLoopError`).
     """

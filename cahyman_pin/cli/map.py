@@ -39,13 +39,8 @@ from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
-from closedloop.cli_common import (
-    SpecError,
-    add_worker_timeout,
-    dask_executor,
-    output_folder,
-    parse_values,
-)
+from closedloop.cli_common import SpecError, output_folder, parse_values
+from closedloop.cluster import add_worker_timeout, dask_executor
 from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
