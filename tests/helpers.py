@@ -33,6 +33,30 @@ UR5_JOINTS = (
 #: The documented UR5 example configuration [rad].
 UR5_Q = np.array([0.0, -1.0, 1.5, -0.5, 1.2, 0.3])
 
+#: The UR5's links as beams: link -> the joint its beam ends at.
+UR5_BEAM_ENDS = {
+    "shoulder_link": "shoulder_lift_joint",
+    "upper_arm_link": "elbow_joint",
+    "forearm_link": "wrist_1_joint",
+    "wrist_1_link": "wrist_2_joint",
+    "wrist_2_link": "wrist_3_joint",
+    "wrist_3_link": "ee_fixed_joint",
+}
+
+#: CaHyMan's leg frames, written from the model document (not from cahyman_pin.geometry):
+#: delta_k = 0, 120, 240 deg, radial u_k (x towards leg 1) and tangential t_k = z x u_k,
+#: one leg per row; ball k sits at r_p u_k in the plate frame, leg base O_k at r_e u_k.
+SQ3 = np.sqrt(3.0)
+LEG_U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
+LEG_T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
+
+
+def rot_y(angle: float) -> np.ndarray:
+    """(3, 3) rotation about y by ``angle`` [rad], written out."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
 # Unbalanced virtual work on the admissible motions, relative to the applied generalised
 # load max|J^T w|: the solver stops at 1e-11 of its largest generalised force (spring or
 # load, here at most 1.3 max|J^T w|): measured 1e-16 to 1.3e-11. The iterate one Newton

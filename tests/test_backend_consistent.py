@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import assert_close_in_norm
+from helpers import LEG_T as T
+from helpers import LEG_U as U
+from helpers import assert_close_in_norm, rot_y
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
@@ -52,17 +54,6 @@ LIMIT_RTOL = 1e-5
 NEWTON_TOL = 1e-16
 # Normalising length for mixing translations and rotations in one comparison [m].
 ELL = 0.1
-
-#: The model document's leg frames: delta_k = 0, 120, 240 deg, radial u_k (x towards leg
-#: 1), tangential t_k = z x u_k; leg base O_k = r_e u_k, ball k at r_p u_k in the plate frame.
-SQ3 = np.sqrt(3.0)
-U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
-T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
-
-
-def rot_y(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def ball_centres(H: np.ndarray, R: np.ndarray, p) -> np.ndarray:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import UR5_BEAM_ENDS, assert_close_in_norm
 
 import closedloop as cl
 from closedloop.beams import BeamError, map_configuration
@@ -359,14 +359,6 @@ def test_spatial_frame_with_torsion_matches_fem(tmp_path):
 
 
 # ------------------------------------------------------------------------ UR5
-UR5_LINKS = {
-    "shoulder_link": "shoulder_lift_joint",
-    "upper_arm_link": "elbow_joint",
-    "forearm_link": "wrist_1_joint",
-    "wrist_1_link": "wrist_2_joint",
-    "wrist_2_link": "wrist_3_joint",
-    "wrist_3_link": "ee_fixed_joint",
-}
 TUBE = (0.06, 0.004)  # d, t [m]
 
 
@@ -379,7 +371,7 @@ def ur5_beams():
                           "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")], k, strict=True)),
         geometry=False)  # fmt: skip
     tube = {**ALU, "section": {"shape": "tube", "d": TUBE[0], "t": TUBE[1]}}
-    beams = {link: {**tube, "end": end} for link, end in UR5_LINKS.items()}
+    beams = {link: {**tube, "end": end} for link, end in UR5_BEAM_ENDS.items()}
     return base, base.with_beams(beams), np.array([0.3, -1.0, 1.5, -0.5, 1.2, 0.3])
 
 
@@ -395,7 +387,7 @@ def ur5_by_hand(base, q):
     r = TUBE[0] / 2
     A, I = math.pi * (r**2 - (r - TUBE[1]) ** 2), math.pi * (r**4 - (r - TUBE[1]) ** 4) / 4
     p_tool, parts = d.oMf[fid].translation, []
-    for link, end in UR5_LINKS.items():
+    for link, end in UR5_BEAM_ENDS.items():
         start = d.oMf[m.getFrameId(link)].translation
         tip = d.oMf[m.getFrameId(end)].translation
         L = np.linalg.norm(tip - start)

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import LEG_T as T
+from helpers import LEG_U as U
+from helpers import rot_y
 
 from cahyman_pin import geometry
 from cahyman_pin.model import CaHyManModel, cahyman_model, closed_form_pose
@@ -27,17 +30,6 @@ MAX_COLD_ITERATIONS = 3
 MAX_WARM_ITERATIONS = 6
 
 N_POSES = 200
-
-#: The model document's leg frames: delta_k = 0, 120, 240 deg, radial u_k (x towards leg
-#: 1), tangential t_k = z x u_k; ball k sits at r_p u_k in the plate frame.
-SQ3 = np.sqrt(3.0)
-U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
-T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
-
-
-def rot_y(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def random_inputs(rng: np.random.Generator, n: int):

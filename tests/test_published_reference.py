@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import LEG_T as T
+from helpers import LEG_U as U
+from helpers import SQ3
 from scipy.optimize import brentq
 
 from cahyman_pin.backends.published import PublishedOptions, published_stiffness
@@ -41,11 +44,8 @@ RTOL = 1e-12
 STEP = 1e-7
 FD_RTOL = 1e-7
 
-SQ3 = np.sqrt(3.0)
-#: delta_k = 0, 120, 240 deg; radial u_k and tangential t_k = z x u_k (model document).
+#: Leg angles delta_k [deg] (model document; U, T of helpers are their unit vectors).
 DELTA_DEG = (0.0, 120.0, 240.0)
-U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
-T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
 EZ = np.array([0.0, 0.0, 1.0])
 
 

@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
-from helpers import UR5_Q
+from helpers import UR5_BEAM_ENDS, UR5_Q
 from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
@@ -550,14 +550,6 @@ ROD_FORCE = 1e-2
 #: Hermite curve vs the Euler-Bernoulli deflection line at scale 1: second-order terms,
 #: ~ the tip slope (1e-6) relative.
 RTOL_FIRST_ORDER = 1e-5
-UR5_BEAMS = {
-    "shoulder_link": "shoulder_lift_joint",
-    "upper_arm_link": "elbow_joint",
-    "forearm_link": "wrist_1_joint",
-    "wrist_1_link": "wrist_2_joint",
-    "wrist_2_link": "wrist_3_joint",
-    "wrist_3_link": "ee_fixed_joint",
-}
 
 
 @pytest.fixture(scope="module")
@@ -606,7 +598,7 @@ def test_bent_rod_is_the_euler_bernoulli_deflection_line(rod):
 @pytest.fixture(scope="module")
 def ur5_flex(ur5_urdf):
     tube = {"E": 7.0e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.06, "t": 0.004}}
-    beams = {link: {**tube, "end": end} for link, end in UR5_BEAMS.items()}
+    beams = {link: {**tube, "end": end} for link, end in UR5_BEAM_ENDS.items()}
     rigid = load_model(ur5_urdf, joint_stiffness=1e4, geometry=False)
     return rigid, rigid.with_beams(beams)
 
@@ -619,8 +611,8 @@ def test_unloaded_beams_are_straight_from_start_to_tip(ur5_flex):
                              np.zeros(6))  # fmt: skip
     data = rigid.model.createData()
     pin.framesForwardKinematics(rigid.model, data, UR5_Q)
-    assert [c.name for c in scene.beams] == [f"{link}_beam" for link in UR5_BEAMS]
-    for curve, (link, end) in zip(scene.beams, UR5_BEAMS.items(), strict=True):
+    assert [c.name for c in scene.beams] == [f"{link}_beam" for link in UR5_BEAM_ENDS]
+    for curve, (link, end) in zip(scene.beams, UR5_BEAM_ENDS.items(), strict=True):
         a = data.oMf[rigid.model.getFrameId(link)].translation
         b = data.oMf[rigid.model.getFrameId(end)].translation
         u = np.linspace(0.0, 1.0, len(curve.points))[:, None]
@@ -633,7 +625,7 @@ def test_loaded_beam_tips_follow_their_end_joints(ur5_flex):
     scene = deflection_scene(flex, q, "ee_link", UR5_WRENCH)
     data = flex.model.createData()
     pin.framesForwardKinematics(flex.model, data, scene.q_deflected)
-    for curve, (link, end) in zip(scene.beams, UR5_BEAMS.items(), strict=True):
+    for curve, (link, end) in zip(scene.beams, UR5_BEAM_ENDS.items(), strict=True):
         start = data.oMf[flex.model.getFrameId(link)].translation
         tip = data.oMf[flex.model.getFrameId(end)].translation
         np.testing.assert_allclose(curve.points[0], start, rtol=0, atol=ATOL_PLACEMENT)

@@ -51,6 +51,10 @@ from cahyman_pin.paper.fit import (
 from cahyman_pin.paper.numbers import fmt
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED, SOURCES, CaHyManParams
 
+#: Columns of the two fit tables (stiffness values, dimensions).
+FIT_COLUMNS = ("parameter", "printed in the paper", "reference", "fitted",
+               "fitted / reference", "note")  # fmt: skip
+
 
 def _is_rotation(params: CaHyManParams) -> np.ndarray:
     return np.array([q.row.endswith("[deg]") for q in quantities(params)])
@@ -206,14 +210,7 @@ def fit_section(doc: Document, params: CaHyManParams) -> None:
             "fixed)."
         ),
         Table(
-            (
-                "parameter",
-                "printed in the paper",
-                "reference",
-                "fitted",
-                "fitted / reference",
-                "note",
-            ),
+            FIT_COLUMNS,
             _fit_rows(sfit, printed, STIFFNESS_RANGE),
             caption="Stiffness fit [N/m, N m/rad]",
         ),
@@ -245,14 +242,7 @@ def fit_section(doc: Document, params: CaHyManParams) -> None:
             f"{int(linear.sum())} linear quantities",
         ),
         Table(
-            (
-                "parameter",
-                "printed in the paper",
-                "reference",
-                "fitted",
-                "fitted / reference",
-                "note",
-            ),
+            FIT_COLUMNS,
             _fit_rows(dfit, {}, DIMENSION_RANGE),
             caption="Dimension fit [m] (springs at the reference values"
             + (
