@@ -8,6 +8,7 @@ The whole workflow from one import::
     state = cl.Configuration(robot, cl.assemble(robot, actuated=[0.3]).q)
     res = cl.compliance(state, "P")            # 6x6 C [SI] at the origin of frame P
     res.K, res.rank, res.condition_number, res.ill_conditioned
+    cl.compliances(robot, Q, "P").C            # (n, 6, 6) for n configurations Q (n, nq)
     cl.StiffnessIndices.from_result(res).min_translational_stiffness
 
 The modules (``closedloop.compliance``, ``closedloop.assembly``, ...) stay importable.
@@ -27,6 +28,7 @@ from typing import TYPE_CHECKING
 _EXPORTS = {
     "data": ".data",
     **dict.fromkeys(("Assembly", "assemble"), ".assembly"),
+    **dict.fromkeys(("BatchCompliance", "compliances"), ".batch"),
     **dict.fromkeys(("ComplianceResult", "compliance"), ".compliance"),
     **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".conditioning"),
     **dict.fromkeys(("CLOSURE_TOL", "Configuration"), ".configuration"),
@@ -62,6 +64,7 @@ _SUBMODULES = frozenset({"data"})
 if TYPE_CHECKING:  # the names as static analysis sees them
     from . import data
     from .assembly import Assembly, assemble
+    from .batch import BatchCompliance, compliances
     from .compliance import ComplianceResult, compliance
     from .conditioning import ILL_CONDITIONED, RANK_RTOL
     from .configuration import CLOSURE_TOL, Configuration
@@ -130,6 +133,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "Assembly",
     "AssemblyError",
+    "BatchCompliance",
     "BeamError",
     "ClosedLoopError",
     "ClosedLoopModel",
@@ -154,6 +158,7 @@ __all__ = [
     "assemble",
     "closure_curvature",
     "compliance",
+    "compliances",
     "data",
     "geometric_stiffness",
     "load_model",

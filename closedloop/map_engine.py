@@ -15,11 +15,12 @@ Four parts, shared by :mod:`closedloop.maps` and CaHyMan's maps (:mod:`cahyman_p
 
 The kernel for any :class:`~closedloop.model.ClosedLoopModel` is :func:`assemble_chunk`:
 each point is assembled by :func:`closedloop.assembly.assemble` from the previous point's
-configuration along the path (or from a per-point start provider), then
-:func:`closedloop.compliance.compliance` is queried. Every chunk carries the configuration
-its first point starts from, computed serially along the path before the chunks are sent
-(:func:`border_starts`), so that a chunk border does not restart from the reference
-configuration (which may lie on another assembly mode).
+configuration along the path (or from a per-point start provider), then the chunk's
+compliances are computed together (:mod:`closedloop.batch`, the single query
+:func:`closedloop.compliance.compliance` where the stacked path does not answer). Every
+chunk carries the configuration its first point starts from, computed serially along the
+path before the chunks are sent (:func:`border_starts`), so that a chunk border does not
+restart from the reference configuration (which may lie on another assembly mode).
 """
 
 from __future__ import annotations
@@ -34,9 +35,10 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import assemble
+from .batch import stacked_compliances
 from .blas import single_threaded_blas
 from .compliance import compliance
-from .conditioning import batch_rank
+from .conditioning import batch_rank, check_length
 from .exceptions import (
     AssemblyError,
     ClosedLoopError,
@@ -117,7 +119,12 @@ class ChunkResult:
 
 def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
                     length=None, inputs=None):  # fmt: skip
-    """Assemble and query the points ``rows`` of a chunk in order (warm-started).
+    """Assemble the points ``rows`` of a chunk in order (warm-started), then query them.
+
+    The compliances of the assembled points are computed together
+    (:func:`closedloop.batch.stacked_compliances`); a point the stacked path leaves
+    (near a singular pose, rank deficient...) gets the single query
+    :func:`closedloop.compliance.compliance`, whose error, if any, is the point's.
 
     Args:
         clm: the :class:`ClosedLoopModel`.
@@ -135,21 +142,43 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             manifold instead of q1 (fewer Gauss-Newton iterations along a grid line).
     """
     history: list = []  # (position, q) of the last two assembled points, in a row
-    q_prev = first
+    q_prev, assembled = first, []
     for k, i in enumerate(rows):
         q0 = q_prev if starts is None else starts[k]
         if starts is None and inputs is not None and len(history) == 2:
             q0 = _extrapolated(clm, inputs, history, i)
         try:
             a = solve(i, q0)
-            c = compliance(clm, a.q, frame, axes, length=length)
         except POINT_ERRORS as e:
             out.fail(i, e)
             history = []
             continue
-        out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
-        out.iterations[i] = a.iterations
+        assembled.append((i, a))
         q_prev, history = a.q, [*history[-1:], (i, a.q)]
+    _query_points(clm, frame, out, assembled, axes, length)
+
+
+def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
+    """The compliance of each assembled point ``(position, Assembly)`` into ``out``."""
+    if not assembled:
+        return
+    Q = np.array([a.q for _, a in assembled])
+    try:
+        L = clm.length if length is None else check_length(length)
+        C, _, rank = stacked_compliances(clm, Q, frame, axes, L)
+    except POINT_ERRORS:  # e.g. a bad frame or length: each point's query says it
+        C, rank = None, np.full(len(Q), -1)
+    for k, (i, a) in enumerate(assembled):
+        if rank[k] >= 0:
+            out.C[i], out.rank[i], out.length[i] = C[k], rank[k], L
+        else:
+            try:
+                c = compliance(clm, a.q, frame, axes, length=length)
+            except POINT_ERRORS as e:
+                out.fail(i, e)
+                continue
+            out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
+        out.iterations[i] = a.iterations
 
 
 def _extrapolated(clm, inputs: np.ndarray, history: list, i: int) -> np.ndarray:

@@ -167,7 +167,11 @@ class _Scaling(NamedTuple):
 
 def scaling(state: Configuration) -> _Scaling:
     """The scaling of a configuration's model at its length (computed once per model and L)."""
-    clm, L = state.model, state.length
+    return model_scaling(state.model, state.length)
+
+
+def model_scaling(clm: ClosedLoopModel, L: float) -> _Scaling:
+    """The scaling of a model at length L [m] (computed once per model and L)."""
     return clm.memo(("scaling", L), lambda: _Scaling.of(clm, L))
 
 

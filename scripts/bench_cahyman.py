@@ -19,6 +19,7 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
+from closedloop.batch import compliances
 from closedloop.compliance import compliance
 from closedloop.configuration import Configuration
 from closedloop.indices import StiffnessIndices
@@ -79,6 +80,12 @@ def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> Non
     t = interleaved(lambda: stiffness(*POSE), unit, mode)
     table.units("1e", "`cahyman_pin.api.stiffness` whole call (closed-form start, assembly, "
                 "query)", "-", t)  # fmt: skip
+    points = leg_grid((10, 10, 1))
+    Q = np.array([model.assemble(a, a4, s4)
+                  for a, a4, s4 in zip(points.alpha, points.alpha4, points.s4, strict=True)])
+    t = interleaved(lambda: compliances(model.clm, Q, FRAME_M), unit, mode, per=len(Q))
+    table.units("1f", f"CaHyMan `closedloop.compliances`, {len(Q)} assembled poses at once "
+                "(C, G, rank)", "-", t, " per pose")  # fmt: skip
 
 
 def bench_sweeps(table: Table, mode: Mode, unit) -> None:

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 from benchtools import Mode, Table, fmt_time, growth_exponent, interleaved, parse_mode
 
+from closedloop.batch import compliances
 from closedloop.compliance import compliance
 from closedloop.io import load_urdf, robot_data_dir
 from closedloop.model import ClosedLoopModel
@@ -88,6 +89,10 @@ def bench_ur5(table: Table, mode: Mode) -> None:
         taken = compliance(ur5, UR5_Q, "tool0", path=p).path
         table.units(key, f"UR5 (serial) query, `compliance(..., path={p!r})` -> {taken}",
                     target, t)  # fmt: skip
+    Q = np.random.default_rng(0).uniform(-2.5, 2.5, (100, 6))
+    t = interleaved(lambda: compliances(ur5, Q, "tool0"), unit, mode, per=len(Q))
+    table.units("2c", f"UR5 `closedloop.compliances`, {len(Q)} poses at once (C, G, rank)", "-",
+                t, " per pose")  # fmt: skip
 
 
 def bench_ur5_beams(table: Table, mode: Mode) -> None:

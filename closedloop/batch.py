@@ -1,0 +1,236 @@
+"""Compliances of many configurations of one model at once.
+
+:func:`compliance` answers one configuration; a map or a sweep asks thousands, and most
+of a single query's time is the fixed cost of its small numpy and LAPACK calls. Here the
+kinematics are evaluated configuration by configuration (Pinocchio), and the fast paths
+of :mod:`closedloop.springs` (serial, partitioned) run once on the whole stack:
+
+    A = [-J_p, J_s] scaled,  A = Q R (stacked QR),  X = -J_p^+ J_s = R11^-1 R12,
+    dq = T y (T = [I; X] scaled),  B = J T W,  C = B B^T,  G = T W B^T,
+
+the same formulas as :func:`closedloop.compliance.compliance`, with the same decisions:
+a configuration is answered here only when each test of the single query passes with a
+margin (:data:`MARGIN`): J_p well conditioned (the exact 1-norm condition, which bounds
+the estimate of the single query), the closure equations solved, no spring-free motion,
+no singular value of the rank rule near its threshold, C, G and K finite. Every other
+configuration (near a singular pose, the null-space path, open loops, a mechanism) goes
+through :func:`compliance` itself, so that the answer, or the error, is that of the single
+query. Results agree with the single query to rounding (the stacked LAPACK calls differ
+from the single ones only in their order of operations).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .arrays import frozen, real_array
+from .conditioning import RANK_RTOL, check_length
+from .configuration import CLOSURE_TOL
+from .exceptions import InvalidInputError
+from .kinematics import REFERENCE_FRAMES, jacobian_rows, residual_rows
+from .model import ClosedLoopModel, check_name
+from .springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
+
+#: Factor by which each test of the single query must pass for a configuration to be
+#: answered by the stacked computation (the two compute the tested quantities with
+#: different rounding; with this margin a configuration answered here is one the single
+#: query answers by the same path).
+MARGIN = 2.0
+#: Largest entry of K [SI] the stacked computation answers (the single query's overflow
+#: check, with room): beyond it the configuration goes through :func:`compliance`.
+K_MAX = 1e290
+
+
+@dataclass(frozen=True)
+class BatchCompliance:
+    """Compliances of n configurations (arrays read-only).
+
+    Attributes:
+        C: (n, 6, 6) compliance [SI] of the frame, twist (dx, dy, dz [m], rx, ry, rz [rad])
+            per wrench (fx, fy, fz [N], nx, ny, nz [N m]), at the frame origin, in
+            ``axes``.
+        G: (n, nv, 6) wrench to joint deflection dq (tangent of q) [rad or m per N, N m].
+        rank: (n,) rank of C (the rule of :mod:`closedloop.conditioning`).
+        stacked: (n,) True where the stacked fast path answered, False where the single
+            query did.
+        frame, axes: the loaded frame and the axes (``"world"`` or ``"local"``).
+        length: characteristic length L [m] of the unit-free rules.
+    """
+
+    C: np.ndarray
+    G: np.ndarray
+    rank: np.ndarray
+    stacked: np.ndarray
+    frame: str
+    axes: str
+    length: float
+
+
+def compliances(
+    clm: ClosedLoopModel,
+    Q,
+    frame: str,
+    axes: str = "world",
+    *,
+    length: float | None = None,
+) -> BatchCompliance:
+    """Compliance of ``frame`` at each of n assembled configurations (module docstring).
+
+    Args:
+        clm: the model.
+        Q: (n, nq) configurations, each closing the loops (:func:`closedloop.assemble`).
+        frame: name of the loaded frame; the reference point is its origin.
+        axes: ``"world"`` (world-aligned axes, default) or ``"local"``.
+        length: characteristic length [m] of the unit-free rules (default: the model's).
+
+    Returns:
+        The :class:`BatchCompliance`; each configuration's C, G and rank equal those of
+        ``compliance(clm, Q[i], frame, axes, length=length)`` to rounding.
+
+    Raises:
+        InvalidInputError: Q is not (n, nq) finite real numbers; bad axes or length.
+        NameNotFoundError: unknown frame.
+        The error of :func:`closedloop.compliance.compliance` at the first configuration
+        that has one (open loops, a mechanism, an overflow), with a note naming the
+        configuration's index.
+    """
+    from .compliance import compliance  # the single query builds on this module's callers
+
+    Q = _check_configurations(clm, Q)
+    L = clm.length if length is None else check_length(length)
+    C, G, rank = stacked_compliances(clm, Q, frame, axes, L)
+    stacked = rank >= 0
+    for i in np.flatnonzero(~stacked):
+        try:
+            r = compliance(clm, Q[i], frame, axes, length=L)
+        except Exception as e:  # the single query's typed error, with the configuration
+            e.add_note(f"at configuration {i} of Q")
+            raise
+        C[i], G[i], rank[i] = r.C, r.G, r.rank
+    return BatchCompliance(frozen(C), frozen(G), frozen(rank), frozen(stacked), frame, axes, L)
+
+
+def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
+    Q = real_array(Q, "Q")
+    nq = clm.model.nq
+    if Q.ndim != 2 or Q.shape[1] != nq:
+        raise InvalidInputError(f"Q has shape {Q.shape}; expected (n, nq={nq})")
+    bad = np.flatnonzero(~np.isfinite(Q).all(axis=1))
+    if bad.size:
+        raise InvalidInputError(f"configuration {bad[0]} of Q has non-finite values")
+    return Q
+
+
+def stacked_compliances(
+    clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The stacked fast path on checked configurations Q (n, nq) at length L [m].
+
+    Returns:
+        C: (n, 6, 6) [SI] and G: (n, nv, 6), NaN where the path did not answer;
+        rank: (n,) rank of C, -1 where the path did not answer (module docstring:
+        everything else is left to :func:`closedloop.compliance.compliance`).
+    """
+    check_name("frame", frame)
+    if axes not in REFERENCE_FRAMES:
+        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    fid, model = clm.frame_id(frame), clm.model
+    n, nv, m = len(Q), model.nv, clm.n_constraints
+    C, G = np.full((n, 6, 6), np.nan), np.full((n, nv, 6), np.nan)
+    sc = model_scaling(clm, L)
+    p, s = sc.passive.size, sc.sprung.size
+    if not n or not nv or not s or sc.loop_blocks is not None or (m < p if p else m):
+        return C, G, np.full(n, -1)  # no fast path for this model (springs.partition)
+    r, Jc, J = _kinematics(clm, Q, fid, REFERENCE_FRAMES[axes])
+    ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
+    X, norm2 = None, np.zeros(n)
+    if p:
+        X, ok_p = _passive_motions(Jc, sc)
+        ok &= ok_p
+        norm2 = np.einsum("kij,kij->k", X, X)
+    # no spring-free motion (the rule of _Scaling.spring_free, with the margin)
+    ok &= MARGIN * RANK_RTOL * sc.spread * np.sqrt(s + norm2) < 1.0
+    with np.errstate(over="ignore", invalid="ignore"):  # overflows: not finite, left
+        if sc.P_diagonal is not None:  # every coordinate with a diagonal spring
+            B = J * sc.P_diagonal
+            Gk = np.swapaxes(B, 1, 2) * sc.P_diagonal[:, None]
+        else:
+            P = np.broadcast_to(sc.P0, (n, *sc.P0.shape)).copy()
+            if X is not None:
+                P[:, sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
+            B = J @ P
+            Gk = P @ np.swapaxes(B, 1, 2)
+        Ck = B @ np.swapaxes(B, 1, 2)
+        rank = _ranks(B * sc.d[:, None], sc)
+    ok &= rank >= 0
+    ok &= np.isfinite(Ck).all(axis=(1, 2)) & np.isfinite(Gk).all(axis=(1, 2))
+    C[ok], G[ok] = Ck[ok], Gk[ok]
+    return C, G, np.where(ok, rank, -1)
+
+
+def _ranks(B_s: np.ndarray, sc) -> np.ndarray:
+    """(n,) rank of each C = D^-1 B_s B_s^T D^-1 from its scaled factor B_s (n, 6, s) by the
+    rule of :func:`closedloop.conditioning.spectrum_from_factor`, or -1 where a singular
+    value lies within :data:`MARGIN` of a threshold of the rule (or K would overflow)."""
+    B_s = np.where(np.isfinite(B_s).all(axis=(1, 2))[:, None, None], B_s, 0.0)  # 0: not decided
+    beta = np.linalg.svd(B_s, compute_uv=False)  # (n, min(6, s))
+    rank = np.full(len(B_s), -1)
+    if beta.shape[1] == 6:  # full rank by the factor's singular values
+        # B_s = 0 gives NaN (not decided), huge ones inf (decided by the comparisons)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            low = beta[:, 5] / (RANK_RTOL * sc.spread * beta[:, 0])
+            full = (low > MARGIN) & (sc.dd.max() / K_MAX < beta[:, 5] ** 2)  # K <= dd / beta_6^2
+        rank[full] = 6
+        deficient = low < 1.0 / MARGIN
+    else:
+        deficient = np.ones(len(B_s), dtype=bool)
+    if deficient.any():  # the rank of the kinematic factor J T V = B_s diag(sigma)
+        s_k = np.linalg.svd(B_s[deficient] * sc.sigma, compute_uv=False)
+        ratio = s_k / np.where(s_k[:, :1] > 0.0, RANK_RTOL * s_k[:, :1], np.nan)
+        clear = ((ratio > MARGIN) | (ratio < 1.0 / MARGIN)).all(axis=1)
+        rank[deficient] = np.where(clear, np.count_nonzero(ratio > MARGIN, axis=1), -1)
+    return rank
+
+
+def _kinematics(clm: ClosedLoopModel, Q: np.ndarray, fid: int, reference):
+    """Closure residuals (n, m), closure Jacobians (n, m, nv) and frame Jacobians
+    (n, 6, nv) of the configurations Q (n, nq), on a workspace of the model's pool."""
+    model = clm.model
+    n, nv, m = len(Q), model.nv, clm.n_constraints
+    r, Jc, J = np.empty((n, m)), np.empty((n, m, nv)), np.empty((n, 6, nv))
+    data, datas = workspace = clm.acquire_workspace()
+    try:
+        for k in range(n):
+            pin.computeJointJacobians(model, data, Q[k])
+            if m:
+                r[k] = residual_rows(clm, data, datas)
+                Jc[k] = jacobian_rows(clm, data, datas, calc=False)
+            J[k] = np.reshape(pin.getFrameJacobian(model, data, fid, reference), (6, nv))
+    finally:
+        clm.release_workspace(workspace)
+    return r, Jc, J
+
+
+def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
+    """X (n, p, s) = -J_p^+ J_s of each closure Jacobian of Jc (n, m, nv), and where it
+    holds with the margin: J_p well conditioned, J_s + J_p X = 0 (the tests of
+    :func:`closedloop.springs._passive_motion`)."""
+    p = sc.passive.size
+    A = Jc[:, :, sc.order] * sc.scale_order
+    scale = PARTITION_RTOL * np.max(abs(A[:, :, p:]), axis=(1, 2))
+    R = np.linalg.qr(A, mode="r")  # (n, m, p + s): -J_p = Q1 R11, R12, R22
+    R11, R12, R22 = R[:, :p, :p], R[:, :p, p:], R[:, p:, p:]
+    singular = (np.diagonal(R11, axis1=1, axis2=2) == 0.0).any(axis=1)
+    R11 = np.where(singular[:, None, None], np.eye(p), R11)
+    # upper triangles: the LU of the inverse pivots on the diagonal (a back substitution)
+    with np.errstate(over="ignore", invalid="ignore"):
+        R_inv = np.linalg.inv(R11)
+        norm = abs(R11).sum(axis=1).max(axis=1) * abs(R_inv).sum(axis=1).max(axis=1)
+        X = R_inv @ R12
+    ok = ~singular & (MARGIN * norm * PARTITION_RCOND < 1.0)  # exact 1-norm condition
+    ok &= MARGIN * MARGIN * np.einsum("kij,kij->k", R22, R22) <= scale * scale
+    ok &= np.isfinite(X).all(axis=(1, 2))
+    return X, ok

@@ -1,0 +1,200 @@
+"""closedloop.compliances (the stacked fast path) against the single query, point by point.
+
+The reference is :func:`closedloop.compliance`, computed here for every configuration:
+the stacked path must give its C, G and rank, answer only where the single query takes a
+fast path with a full-rank C, and leave everything else (singular poses, rank deficient
+robots, the null-space path, open loops, overflows) to it, errors included.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from helpers import assert_close_in_norm
+from mechanisms import PATH_CASES, fourbar_chain, serial_with_block
+
+import closedloop as cl
+from closedloop.batch import stacked_compliances
+from closedloop.exceptions import (
+    ClosedLoopError,
+    InvalidInputError,
+    NameNotFoundError,
+    OpenLoopError,
+    SingularConfigurationError,
+)
+
+#: Stacked vs single query: the same formulas, with LAPACK calls that differ in their
+#: order of operations (measured: 1e-16 relative on every case here); cond(J_p) ~ 1e2
+#: multiplies rounding in the passive motion.
+RTOL_STACKED = 1e-12
+
+
+def _assert_as_single(clm, Q, frame, axes="world", length=None):
+    """compliances() equals compliance() at every configuration; returns the batch."""
+    batch = cl.compliances(clm, Q, frame, axes, length=length)
+    for i, q in enumerate(Q):
+        single = cl.compliance(clm, q, frame, axes, length=length)
+        assert batch.rank[i] == single.rank
+        assert_close_in_norm(batch.C[i], single.C, RTOL_STACKED)
+        assert_close_in_norm(batch.G[i], single.G, RTOL_STACKED)
+        assert not batch.stacked[i] or single.path != "null-space"  # stacked: a fast path
+    assert batch.length == (clm.length if length is None else length)
+    for a in (batch.C, batch.G, batch.rank, batch.stacked):
+        assert not a.flags.writeable
+    return batch
+
+
+def _ur5_poses(n: int, seed: int = 1) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-2.5, 2.5, (n, 6))
+
+
+@pytest.mark.parametrize("case", sorted(PATH_CASES))
+def test_every_path_case_equals_its_single_queries(case):
+    build, path = PATH_CASES[case]
+    clm, q, frame = build()
+    Q = _ur5_poses(5) if case == "ur5" else np.array([q, q])
+    batch = _assert_as_single(clm, Q, frame)
+    assert batch.stacked.all() == (path != "null-space")  # planar ones too (rank < 6)
+
+
+@pytest.mark.parametrize("axes", ["world", "local"])
+def test_cahyman_poses_in_both_axes_and_a_length(cahyman, axes):
+    poses = [(a, b) for a in (45.0, 60.0, 75.0) for b in (50.0, 70.0)]
+    Q = np.array([cahyman.assemble(np.deg2rad([a, b, 60.0]), np.deg2rad(30.0), 0.01)
+                  for a, b in poses])  # fmt: skip
+    batch = _assert_as_single(cahyman.clm, Q, "M", axes, length=0.4)
+    assert batch.stacked.all()
+
+
+def test_serial_robot_with_spring_blocks_and_a_locked_joint():
+    clm, q, _ = serial_with_block()
+    frame = clm.model.frames[-1].name
+    Q = np.array([q, q + 0.05 * np.sin(np.arange(q.size))])
+    Q[1] = pin.normalize(clm.model, Q[1])
+    _assert_as_single(clm, Q, frame)
+
+
+def test_singular_poses_are_rank_deficient_as_in_the_single_query(ur5):
+    clm, _ = ur5
+    # elbow stretched (q3 = 0) and wrist aligned (q5 = 0), between regular poses
+    Q = np.vstack([_ur5_poses(2), [0.3, -1.2, 0.0, -0.6, 1.1, 0.2],
+                   [0.3, -1.2, 1.4, -0.6, 0.0, 0.2], _ur5_poses(2, seed=2)])  # fmt: skip
+    batch = _assert_as_single(clm, Q, "tool0")
+    assert batch.rank.tolist() == [6, 6, 5, 5, 6, 6] and batch.stacked.all()
+
+
+def test_poses_at_the_rank_threshold_go_through_the_single_query(ur5):
+    """Approaching the elbow singularity, the smallest singular value crosses the rank
+    rule's threshold: poses near it are left to the single query, which decides; every
+    pose, on either side, equals its single query."""
+    clm, q = ur5
+    Q = np.repeat(q[None], 120, axis=0)
+    Q[:, 2] = np.logspace(-10, -4, len(Q))
+    batch = _assert_as_single(clm, Q, "tool0")
+    assert {5, 6} <= set(batch.rank.tolist())
+    assert 0 < np.count_nonzero(~batch.stacked) < len(Q)
+
+
+def test_a_four_bar_chain_through_its_change_point():
+    """Loop 1 of the chain passes its collinear change point (t = 0): there the passive
+    part J_p is singular, and the stacked path leaves the pose to the single query (its
+    answer or its error)."""
+    angles = [(0.8, t, -0.6) for t in (0.5, 0.1, 1e-3, 0.0, -0.2)]
+    clm = fourbar_chain(angles[0])[0]
+    Q = np.array([fourbar_chain(a)[1] for a in angles])
+    assert stacked_compliances(clm, Q, "tip", "world", clm.length)[2][3] == -1
+    _assert_as_single(clm, Q[[0, 1, 2, 4]], "tip")
+    try:
+        single = cl.compliance(clm, Q[3], "tip")
+    except ClosedLoopError as e:
+        with pytest.raises(type(e)):
+            cl.compliances(clm, Q[3:4], "tip")
+    else:
+        assert_close_in_norm(cl.compliances(clm, Q[3:4], "tip").C[0], single.C, RTOL_STACKED)
+
+
+def test_many_passive_coordinates_take_the_single_query():
+    """From 48 passive coordinates the single query solves loop by loop: not stacked."""
+    clm, q, frame = fourbar_chain([0.8, -0.8] * 13)
+    batch = _assert_as_single(clm, np.array([q]), frame)
+    assert not batch.stacked.any()
+
+
+def test_an_open_configuration_is_the_single_query_error_naming_it(fourbar):
+    clm, q = fourbar
+    Q = np.array([q, q])
+    Q[1, 1] += 0.1  # a passive joint moved: the loop opens
+    with pytest.raises(OpenLoopError) as info:
+        cl.compliances(clm, Q, "P")
+    assert "at configuration 1 of Q" in info.value.__notes__
+
+
+@pytest.mark.parametrize("k", [1e-300, 1e300])
+def test_extreme_springs_agree_with_the_single_query(ur5_urdf, k):
+    """Springs near the floating point limits: the stacked path answers or leaves it, and
+    either way the result (or the overflow error) is the single query's."""
+    clm = cl.load_model(ur5_urdf, joint_stiffness=k)
+    Q = _ur5_poses(3)
+    try:
+        expected = [cl.compliance(clm, q, "tool0") for q in Q]
+    except SingularConfigurationError:
+        with pytest.raises(SingularConfigurationError):
+            cl.compliances(clm, Q, "tool0")
+        return
+    batch = cl.compliances(clm, Q, "tool0")
+    for i, single in enumerate(expected):
+        assert_close_in_norm(batch.C[i], single.C, RTOL_STACKED)
+
+
+@pytest.mark.parametrize(
+    ("Q", "message"),
+    [
+        (np.zeros((2, 5)), r"shape \(2, 5\); expected \(n, nq=6\)"),
+        (np.zeros(6), r"shape \(6,\)"),
+        ([[0.0] * 5 + [np.nan]] * 2, "configuration 0 of Q has non-finite values"),
+        ([["a"] * 6], "Q must be real numbers"),
+        (np.zeros((1, 6)) + 1j, "complex"),
+    ],
+)
+def test_bad_configurations_are_named(ur5, Q, message):
+    with pytest.raises(InvalidInputError, match=message):
+        cl.compliances(ur5[0], Q, "tool0")
+
+
+def test_bad_frame_axes_and_length(ur5):
+    clm, q = ur5
+    with pytest.raises(NameNotFoundError, match="nope"):
+        cl.compliances(clm, [q], "nope")
+    with pytest.raises(InvalidInputError, match="axes 'body'"):
+        cl.compliances(clm, [q], "tool0", "body")
+    with pytest.raises(InvalidInputError, match="characteristic length"):
+        cl.compliances(clm, [q], "tool0", length=-1.0)
+
+
+def test_no_configuration_gives_empty_arrays(ur5):
+    batch = cl.compliances(ur5[0], np.zeros((0, 6)), "tool0")
+    assert batch.C.shape == (0, 6, 6) and batch.G.shape == (0, 6, 6) and batch.rank.size == 0
+
+
+def test_threads_sharing_one_model_get_their_own_answers(ur5):
+    """Each call takes a workspace of the model's pool: calls from several threads at
+    once give what each gives alone."""
+    clm, _ = ur5
+    stacks = [_ur5_poses(40, seed=s) for s in range(6)]
+    alone = [cl.compliances(clm, Q, "tool0").C for Q in stacks]
+    results: dict[int, np.ndarray] = {}
+
+    def run(k: int) -> None:
+        for _ in range(5):
+            results[k] = cl.compliances(clm, stacks[k], "tool0").C
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(len(stacks))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k, C in enumerate(alone):
+        np.testing.assert_array_equal(results[k], C)
