@@ -81,8 +81,12 @@ def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> Non
     table.units("1e", "`cahyman_pin.api.stiffness` whole call (closed-form start, assembly, "
                 "query)", "-", t)  # fmt: skip
     points = leg_grid((10, 10, 1))
-    Q = np.array([model.assemble(a, a4, s4)
-                  for a, a4, s4 in zip(points.alpha, points.alpha4, points.s4, strict=True)])
+    Q = np.array(
+        [
+            model.assemble(a, a4, s4)
+            for a, a4, s4 in zip(points.alpha, points.alpha4, points.s4, strict=True)
+        ]
+    )
     t = interleaved(lambda: compliances(model.clm, Q, FRAME_M), unit, mode, per=len(Q))
     table.units("1f", f"CaHyMan `closedloop.compliances`, {len(Q)} assembled poses at once "
                 "(C, G, rank)", "-", t, " per pose")  # fmt: skip
