@@ -31,7 +31,7 @@ import numpy as np
 from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
-from closedloop.arrays import check_wrench, readonly, real_array
+from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
@@ -192,7 +192,7 @@ class Deflection:
 
 
 @dataclass(frozen=True)
-class CaHyManStiffness:
+class CaHyManStiffness(ReadOnlyArrays):
     """Stiffness of CaHyMan at one pose (arrays read-only).
 
     Attributes:

@@ -20,6 +20,18 @@ def frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+class ReadOnlyArrays:
+    """Base of the result classes whose arrays are read-only: an unpickled copy keeps
+    them read-only (numpy unpickles writable arrays), arrays in dict fields included."""
+
+    def __setstate__(self, state: dict) -> None:
+        for value in state.values():
+            for a in value.values() if isinstance(value, dict) else (value,):
+                if isinstance(a, np.ndarray):
+                    a.flags.writeable = False
+        self.__dict__.update(state)
+
+
 def real_array(value, name: str) -> np.ndarray:
     """``value`` as a float array, refusing what is not real numbers.
 

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from .arrays import real_array
+from .arrays import ReadOnlyArrays, real_array
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
@@ -18,7 +18,7 @@ ASSEMBLY_TOL = 1e-12
 
 
 @dataclass(frozen=True)
-class Assembly:
+class Assembly(ReadOnlyArrays):
     """An assembled configuration.
 
     Attributes:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .arrays import frozen, real_array
+from .arrays import ReadOnlyArrays, frozen, real_array
 from .conditioning import RANK_RTOL, check_length
 from .configuration import CLOSURE_TOL
 from .exceptions import InvalidInputError
@@ -45,7 +45,7 @@ K_MAX = 1e290
 
 
 @dataclass(frozen=True)
-class BatchCompliance:
+class BatchCompliance(ReadOnlyArrays):
     """Compliances of n configurations (arrays read-only).
 
     Attributes:

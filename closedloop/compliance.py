@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .arrays import check_wrench, frozen, readonly
+from .arrays import ReadOnlyArrays, check_wrench, frozen, readonly
 from .conditioning import ILL_CONDITIONED, Spectrum, spectrum_from_factor
 from .configuration import Configuration, as_configuration
 from .exceptions import (
@@ -82,7 +82,7 @@ UNITS = {
 
 
 @dataclass(frozen=True)
-class ComplianceResult:
+class ComplianceResult(ReadOnlyArrays):
     """Compliance of a mechanism at one frame and configuration (arrays read-only).
 
     Attributes:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .arrays import ReadOnlyArrays
 from .exceptions import InvalidInputError
 from .indices import BATCH_INDICES, batch_indices
 from .map_engine import (
@@ -47,7 +48,7 @@ NPZ_ARGUMENTS = ("file", "allow_pickle")
 
 
 @dataclass(frozen=True)
-class StiffnessMap:
+class StiffnessMap(ReadOnlyArrays):
     """A stiffness map (arrays read-only; point i is row i).
 
     Attributes:

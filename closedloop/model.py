@@ -436,7 +436,13 @@ class ClosedLoopModel:
         if type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1:
             q = q.copy()  # the common case, without the conversions of real_array
         else:
-            q = real_array(q, "q").reshape(-1)
+            q = real_array(q, "q")
+            if q.ndim > 1:  # a (1, nq) row or a stack of configurations is not one q
+                raise InvalidInputError(
+                    f"q must be one configuration, shape (nq,) = ({self.model.nq},), got shape "
+                    f"{q.shape} (many configurations: closedloop.compliances)"
+                )
+            q = q.reshape(-1)
         if q.shape != (self.model.nq,):
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
         if not np.isfinite(q).all():

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .arrays import check_wrench, readonly
+from .arrays import ReadOnlyArrays, check_wrench, readonly
 from .configuration import Configuration, accepts_configuration
 from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
 from .gravity import GravityLoad, Load, Payload
@@ -79,7 +79,7 @@ UNBOUNDED_LIMIT = 1e100
 
 
 @dataclass(frozen=True)
-class Equilibrium:
+class Equilibrium(ReadOnlyArrays):
     """A static equilibrium under a dead-load wrench (arrays read-only).
 
     Attributes:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import gc
+import pickle
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -624,6 +625,9 @@ def fourbar_q():
         (lambda q: [str(x) for x in q], "q must be real numbers"),
         (lambda q: [0.3, [0.0, 1.0], 0.0, 0.0, 0.0], "q must be real numbers.*ragged"),
         (lambda q: np.array(q, dtype=object), "q must be real numbers"),
+        (lambda q: q[None], r"one configuration, shape \(nq,\) = \(5,\), got shape \(1, 5\)"),
+        (lambda q: q[:, None], r"got shape \(5, 1\)"),
+        (lambda q: [q.tolist()], r"got shape \(1, 5\)"),
     ],
 )
 def test_bad_q_is_a_typed_error_naming_it(fourbar_q, bad, match):
@@ -745,3 +749,58 @@ def test_bad_options_are_typed_errors_naming_them(fourbar_q, kwargs, match):
     clm, q, frame = fourbar_q
     with pytest.raises(cl.InvalidInputError, match=match):
         cl.compliance(clm, q, frame, **kwargs)
+
+
+def test_a_scalar_q_is_the_configuration_of_a_one_coordinate_model():
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "hinge")
+    model.addFrame(pin.Frame("tip", 1, pin.SE3(np.eye(3), np.array([0.5, 0, 0])),
+                             pin.FrameType.OP_FRAME))  # fmt: skip
+    clm = cl.ClosedLoopModel(model, springs={"hinge": 100.0})
+    np.testing.assert_array_equal(
+        cl.compliance(clm, 0.2, "tip").C, cl.compliance(clm, [0.2], "tip").C
+    )
+
+
+def _results_with_arrays():
+    """(name, result) of each result type whose arrays are read-only."""
+    from cahyman_pin.api import stiffness
+    from closedloop.maps import stiffness_map
+
+    clm, q, frame = mech.ur5_case()
+    fourbar, _, frame_fb = mech.fourbar_case()
+    return {
+        "ComplianceResult": cl.compliance(clm, q, frame),
+        "PreloadedCompliance": cl.compliance(clm, q, frame, preload=[1.0, 0, 0, 0, 0, 0]),
+        "BatchCompliance": cl.compliances(clm, [q, q], frame),
+        "Equilibrium": cl.solve_equilibrium(clm, q, frame, [1.0, 0, 0, 0, 0, 0]),
+        "Assembly": cl.assemble(fourbar, actuated=[0.3]),
+        "StiffnessMap": stiffness_map(fourbar, frame_fb, sweeps={"crank": [0.2, 0.3]}, workers=1),
+        "CaHyManStiffness": stiffness(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0),
+    }
+
+
+def test_unpickled_results_keep_their_arrays_read_only():
+    for name, result in _results_with_arrays().items():
+        copy_ = pickle.loads(pickle.dumps(result))
+        arrays = {k: v for k, v in vars(copy_).items() if isinstance(v, np.ndarray)}
+        arrays.update(
+            {
+                f"{k}[{i}]": a
+                for k, v in vars(copy_).items()
+                if isinstance(v, dict)
+                for i, a in v.items()
+                if isinstance(a, np.ndarray)
+            }
+        )
+        assert arrays, name
+        for key, a in arrays.items():
+            assert not a.flags.writeable, (name, key)
+            np.testing.assert_array_equal(a, np.asarray(_field(result, key)))
+
+
+def _field(result, key: str):
+    if "[" in key:
+        name, item = key[:-1].split("[")
+        return getattr(result, name)[item]
+    return getattr(result, key)
