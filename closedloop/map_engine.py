@@ -141,11 +141,11 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             starts from the linear extrapolation q1 + (q1 - q0) on the configuration
             manifold instead of q1 (fewer Gauss-Newton iterations along a grid line).
     """
-    history: list = []  # (position, q) of the last two assembled points, in a row
+    history: list = []  # (position, q) of the last three assembled points, in a row
     q_prev, assembled = first, []
     for k, i in enumerate(rows):
         q0 = q_prev if starts is None else starts[k]
-        if starts is None and inputs is not None and len(history) == 2:
+        if starts is None and inputs is not None and len(history) >= 2:
             q0 = _extrapolated(clm, inputs, history, i)
         try:
             a = solve(i, q0)
@@ -154,7 +154,7 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             history = []
             continue
         assembled.append((i, a))
-        q_prev, history = a.q, [*history[-1:], (i, a.q)]
+        q_prev, history = a.q, [*history[-2:], (i, a.q)]
     _query_points(clm, frame, out, assembled, axes, length)
 
 
@@ -182,11 +182,22 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
 
 
 def _extrapolated(clm, inputs: np.ndarray, history: list, i: int) -> np.ndarray:
-    """q1 + (q1 - q0) when the inputs took the same step twice, else q1."""
-    (i0, q0), (i1, q1) = history
-    last, step = inputs[i1] - inputs[i0], inputs[i] - inputs[i1]
-    if np.max(np.abs(step - last)) <= EQUAL_STEP_RTOL * np.max(np.abs(last)):
-        return pin.integrate(clm.model, q1, pin.difference(clm.model, q0, q1))
+    """The warm start of point i from the last assembled points along the path.
+
+    With q1, q2, q3 the last three points (q1 the last): when the inputs took the same
+    step three times in a row, the quadratic extrapolation 3 q1 - 3 q2 + q3 of the
+    coordinates, normalised onto the configuration manifold (quaternions and unit complex
+    numbers), an error of third order in the step; when twice, q1 + (q1 - q2) on the
+    manifold (second order); else q1.
+    """
+    steps = np.diff(inputs[[*(j for j, _ in history), i]], axis=0)  # oldest first
+    before = steps[-2::-1]  # the steps before the last one, back from it
+    same = np.max(abs(before - steps[-1]), axis=1) <= EQUAL_STEP_RTOL * np.max(abs(before), axis=1)
+    q1 = history[-1][1]
+    if same.all() and len(same) == 2:
+        return pin.normalize(clm.model, 3.0 * q1 - 3.0 * history[-2][1] + history[-3][1])
+    if same[0]:
+        return pin.integrate(clm.model, q1, pin.difference(clm.model, history[-2][1], q1))
     return q1
 
 

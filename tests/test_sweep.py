@@ -135,6 +135,18 @@ def test_generic_sweep_equals_pointwise_queries():
     assert_matches_pointwise(res, SAME_PATH_RTOL)
 
 
+def test_warm_starts_along_a_grid_line_extrapolate():
+    """1 deg steps along alpha_1: from the third equal step on, the start is the quadratic
+    extrapolation of the last three configurations (error of third order in the step),
+    one Gauss-Newton step from closure; the second point starts from the linear one (two
+    steps). Each point still equals its own api.stiffness query."""
+    points = grid({"alpha1": np.deg2rad(np.linspace(50.0, 70.0, 21))},
+                  alpha=np.deg2rad([50.0, 65.0, 70.0]), alpha4=np.deg2rad(45.0), s4=0.025)  # fmt: skip
+    res = sweep(points, wrench=WRENCH, start="neighbour", executor="serial")
+    assert res.iterations[2] == 2 and np.all(res.iterations[3:] == 1), res.iterations
+    assert_matches_pointwise(res, SAME_PATH_RTOL)
+
+
 def test_closed_form_start_reproduces_the_api_to_rounding():
     res = sweep(small_grid(), wrench=WRENCH, start="closed_form", executor="serial")
     assert np.all(res.status == "ok") and np.all(res.iterations == 0)
