@@ -138,15 +138,16 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
         axes, length: as :func:`closedloop.compliance.compliance`.
         inputs: (c, m) inputs of the chunk's points, or None. Given, a point whose step
             from the last point repeats the step before (to :data:`EQUAL_STEP_RTOL`)
-            starts from the linear extrapolation q1 + (q1 - q0) on the configuration
-            manifold instead of q1 (fewer Gauss-Newton iterations along a grid line).
+            starts from an extrapolation of the last points (:func:`_extrapolated`)
+            instead of the last one (fewer Gauss-Newton iterations along a grid line).
     """
-    history: list = []  # (position, q) of the last three assembled points, in a row
+    history: list = []  # q of the last three assembled points, in a row
     q_prev, assembled = first, []
+    repeated = _repeated_steps(inputs, rows) if starts is None and inputs is not None else None
     for k, i in enumerate(rows):
         q0 = q_prev if starts is None else starts[k]
-        if starts is None and inputs is not None and len(history) >= 2:
-            q0 = _extrapolated(clm, inputs, history, i)
+        if repeated is not None and len(history) >= 2 and repeated[k]:
+            q0 = _extrapolated(clm, history, quadratic=len(history) == 3 and repeated[k - 1])
         try:
             a = solve(i, q0)
         except POINT_ERRORS as e:
@@ -154,7 +155,7 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             history = []
             continue
         assembled.append((i, a))
-        q_prev, history = a.q, [*history[-2:], (i, a.q)]
+        q_prev, history = a.q, [*history[-2:], a.q]
     _query_points(clm, frame, out, assembled, axes, length)
 
 
@@ -167,38 +168,47 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
         L = clm.length if length is None else check_length(length)
         C, _, rank = stacked_compliances(clm, Q, frame, axes, L)
     except POINT_ERRORS:  # e.g. a bad frame or length: each point's query says it
-        C, rank = None, np.full(len(Q), -1)
-    for k, (i, a) in enumerate(assembled):
-        if rank[k] >= 0:
-            out.C[i], out.rank[i], out.length[i] = C[k], rank[k], L
-        else:
-            try:
-                c = compliance(clm, a.q, frame, axes, length=length)
-            except POINT_ERRORS as e:
-                out.fail(i, e)
-                continue
-            out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
+        C, rank, L = np.empty((len(Q), 6, 6)), np.full(len(Q), -1), np.nan
+    positions = np.array([i for i, _ in assembled])
+    stacked = rank >= 0
+    done = positions[stacked]
+    out.C[done], out.rank[done], out.length[done] = C[stacked], rank[stacked], L
+    out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, stacked, strict=True) if s]
+    for k in np.flatnonzero(~stacked):
+        i, a = assembled[k]
+        try:
+            c = compliance(clm, a.q, frame, axes, length=length)
+        except POINT_ERRORS as e:
+            out.fail(i, e)
+            continue
+        out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
         out.iterations[i] = a.iterations
 
 
-def _extrapolated(clm, inputs: np.ndarray, history: list, i: int) -> np.ndarray:
-    """The warm start of point i from the last assembled points along the path.
+def _repeated_steps(inputs: np.ndarray, rows) -> np.ndarray:
+    """(len(rows),) bool: the step of the inputs into ``rows[k]`` repeats the step into
+    ``rows[k - 1]`` (to :data:`EQUAL_STEP_RTOL`)."""
+    steps = np.diff(inputs[np.asarray(rows, dtype=int)], axis=0)  # steps[k - 1]: into k
+    repeated = np.zeros(len(steps) + 1, dtype=bool)
+    before, step = steps[:-1], steps[1:]
+    tol = EQUAL_STEP_RTOL * np.max(abs(before), axis=1, initial=0.0)
+    repeated[2:] = np.max(abs(step - before), axis=1, initial=0.0) <= tol
+    return repeated
 
-    With q1, q2, q3 the last three points (q1 the last): when the inputs took the same
-    step three times in a row, the quadratic extrapolation 3 q1 - 3 q2 + q3 of the
-    coordinates, normalised onto the configuration manifold (quaternions and unit complex
-    numbers), an error of third order in the step; when twice, q1 + (q1 - q2) on the
-    manifold (second order); else q1.
+
+def _extrapolated(clm, history: list, quadratic: bool) -> np.ndarray:
+    """The warm start after a repeated input step, from the last assembled points.
+
+    With q1, q2, q3 the last three (q1 the last): after the same step three times in a
+    row (``quadratic``), the extrapolation 3 q1 - 3 q2 + q3 of the coordinates,
+    normalised onto the configuration manifold (quaternions and unit complex numbers), an
+    error of third order in the step; after twice, q1 + (q1 - q2) on the manifold (second
+    order).
     """
-    steps = np.diff(inputs[[*(j for j, _ in history), i]], axis=0)  # oldest first
-    before = steps[-2::-1]  # the steps before the last one, back from it
-    same = np.max(abs(before - steps[-1]), axis=1) <= EQUAL_STEP_RTOL * np.max(abs(before), axis=1)
-    q1 = history[-1][1]
-    if same.all() and len(same) == 2:
-        return pin.normalize(clm.model, 3.0 * q1 - 3.0 * history[-2][1] + history[-3][1])
-    if same[0]:
-        return pin.integrate(clm.model, q1, pin.difference(clm.model, history[-2][1], q1))
-    return q1
+    q1, q2 = history[-1], history[-2]
+    if quadratic:
+        return pin.normalize(clm.model, 3.0 * q1 - 3.0 * q2 + history[-3])
+    return pin.integrate(clm.model, q1, pin.difference(clm.model, q2, q1))
 
 
 @dataclass(frozen=True)
