@@ -21,6 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench, readonly
+from .derivatives import central_differences, pinocchio_second_order_exact
 from .exceptions import InvalidInputError
 from .model import ClosedLoopModel
 
@@ -103,6 +104,8 @@ class GravityLoad:
 
     def stiffness(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """(nv, nv) scale dG/dq [N m/rad, N/m, mixed]: the weight's part of K_t."""
+        if not pinocchio_second_order_exact(self.model):  # closedloop.derivatives
+            return scale * central_differences(self.model, q, self.forces)
         data = self.model.createData()
         return scale * pin.computeGeneralizedGravityDerivatives(self.model, data, q)
 

@@ -43,6 +43,7 @@ import pinocchio as pin
 
 from .arrays import check_wrench
 from .conditioning import rule_rank
+from .derivatives import DIFFERENCE_STEP, central_differences, pinocchio_second_order_exact
 from .exceptions import InvalidInputError
 from .gravity import Load, as_load
 from .kinematics import (
@@ -53,12 +54,11 @@ from .kinematics import (
 )
 from .model import ClosedLoopModel
 
-#: Step [rad or m] of the central differences that give the curvature of weld closures.
-#: The error of a central difference is h^2/6 |c'''| (truncation) + eps |J_c| / h (rounding),
-#: smallest near h = (3 eps)^(1/3) ~ 1e-5, where both are ~1e-10 relative to the closure
-#: Jacobian for links of metre scale; that curvature enters K_t multiplied by lambda, so
-#: its relative error in K_t stays ~1e-10.
-WELD_CURVATURE_STEP = 1e-5
+#: Step [rad or m] of the central differences that give the curvature of weld closures
+#: (and every second derivative where Pinocchio's are wrong, :mod:`closedloop.derivatives`):
+#: the error is ~1e-10 relative to the closure Jacobian for links of metre scale; that
+#: curvature enters K_t multiplied by lambda, so its relative error in K_t stays ~1e-10.
+WELD_CURVATURE_STEP = DIFFERENCE_STEP
 
 #: Smallest singular value of the scaled tangent stiffness (1 without preload), relative
 #: to max(1, its largest), below which it counts as singular (critical preload).
@@ -157,6 +157,10 @@ def geometric_stiffness(
     """
     w = check_wrench(wrench)
     fid = clm.frame_id(frame)
+    if not _exact_hessians(clm):
+        K_G = central_differences(clm.model, q, lambda x: frame_jacobian(clm, x, frame).T @ w)
+        update_kinematics(clm, q)
+        return K_G
     if update:
         update_kinematics(clm, q)
     pin.computeJointKinematicHessians(clm.model, clm.data)
@@ -189,11 +193,15 @@ def closure_curvature(
         )
     if not np.all(np.isfinite(lam)):
         raise InvalidInputError(f"multipliers must be finite, got {lam.tolist()}")
+    if not np.any(lam):
+        return np.zeros((model.nv, model.nv))
+    if not _exact_hessians(clm):
+        out = central_differences(model, q, lambda x: closure_gap(clm, x)[1].T @ lam)
+        update_kinematics(clm, q)
+        return out
     if update:
         update_kinematics(clm, q)
     out = np.zeros((model.nv, model.nv))
-    if not np.any(lam):
-        return out
     pin.computeJointKinematicHessians(model, clm.data)
     lam_w = np.zeros_like(lam)
     for cl, rows in _rows(clm):
@@ -205,15 +213,14 @@ def closure_curvature(
             _, _, H2 = _anchor_point(clm, k.joint2_id, k.joint2_placement, hessian=True)
             out += np.einsum("r,rab->ab", lam[rows], H2 - H1)
     if np.any(lam_w):
-        h = WELD_CURVATURE_STEP
-        for b in range(model.nv):
-            e = np.zeros(model.nv)
-            e[b] = h
-            plus = closure_jacobian(clm, pin.integrate(model, q, e)).T @ lam_w
-            minus = closure_jacobian(clm, pin.integrate(model, q, -e)).T @ lam_w
-            out[:, b] += (plus - minus) / (2.0 * h)
+        out += central_differences(model, q, lambda x: closure_jacobian(clm, x).T @ lam_w)
         update_kinematics(clm, q)
     return out
+
+
+def _exact_hessians(clm: ClosedLoopModel) -> bool:
+    """Whether Pinocchio's kinematic Hessians hold for the model (once per model)."""
+    return clm.memo("exact_hessians", lambda: pinocchio_second_order_exact(clm.model))
 
 
 def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
@@ -238,15 +245,10 @@ def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> n
     curved = clm.memo("lie_group_springs", lambda: _lie_group_springs(clm))
     if curved.size:
         f = clm.spring_forces(pin.difference(model, q_rest, q))
-        h = WELD_CURVATURE_STEP
-        for b in curved:
-            if not np.any(f[curved]):
-                break
-            e = np.zeros(model.nv)
-            e[b] = h
-            plus = pin.dDifference(model, q_rest, pin.integrate(model, q, e), pin.ARG1).T @ f
-            minus = pin.dDifference(model, q_rest, pin.integrate(model, q, -e), pin.ARG1).T @ f
-            H[:, b] += (plus - minus) / (2.0 * h)
+        if np.any(f[curved]):
+            H += central_differences(
+                model, q, lambda x: pin.dDifference(model, q_rest, x, pin.ARG1).T @ f, curved
+            )
     return H
 
 

@@ -461,8 +461,8 @@ def serial_with_block(
     wrist. Returns the model, a configuration off the neutral one and the springs.
 
     Pinocchio's kinematic Hessians (the geometric stiffness of a preload) assume a
-    constant joint motion subspace, which the universal joint does not have (measured 6%
-    off finite differences): the preload tests use the spherical wrist.
+    constant joint motion subspace, which the universal joint does not have: the library
+    takes its second derivatives by central differences (closedloop.derivatives).
     """
     rng = np.random.default_rng(seed)
     m = pin.Model()

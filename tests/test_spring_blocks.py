@@ -185,8 +185,12 @@ def test_small_load_statics_agree_with_compliance(build, frame):
         assert _balance(clm, eq, block_stiffness(clm, springs)) <= 1e-10
 
 
-def test_preloaded_compliance_with_block_matches_differences():
-    clm, q, _ = serial_with_block(wrist="spherical")
+@pytest.mark.parametrize("wrist", ["spherical", "universal"])
+def test_preloaded_compliance_with_block_matches_differences(wrist):
+    """Against central differences of the nonlinear statics; the universal wrist's second
+    derivatives come from closedloop.derivatives (Pinocchio's assume a constant motion
+    subspace)."""
+    clm, q, _ = serial_with_block(wrist=wrist)
     w0 = np.array([400.0, -300.0, 200.0, 0.0, 0.0, 0.0])
     pre = preloaded_compliance(clm, solve_equilibrium(clm, q, "tool", w0))
     assert pre.stability_margin < 1.0  # the preload is felt

@@ -140,8 +140,8 @@ def test_warm_starts_along_a_grid_line_extrapolate():
     extrapolation of the last three configurations (error of third order in the step),
     one Gauss-Newton step from closure; the second point starts from the linear one (two
     steps). Each point still equals its own api.stiffness query."""
-    points = grid({"alpha1": np.deg2rad(np.linspace(50.0, 70.0, 21))},
-                  alpha=np.deg2rad([50.0, 65.0, 70.0]), alpha4=np.deg2rad(45.0), s4=0.025)  # fmt: skip
+    line = {"alpha1": np.deg2rad(np.linspace(50.0, 70.0, 21))}
+    points = grid(line, alpha=np.deg2rad([50.0, 65.0, 70.0]), alpha4=np.deg2rad(45.0), s4=0.025)
     res = sweep(points, wrench=WRENCH, start="neighbour", executor="serial")
     assert res.iterations[2] == 2 and np.all(res.iterations[3:] == 1), res.iterations
     assert_matches_pointwise(res, SAME_PATH_RTOL)

@@ -303,3 +303,81 @@ def test_bad_multipliers_and_wrenches_are_rejected(fourbar):
         geometric_stiffness(clm, q0, "P", [np.nan, 0, 0, 0, 0, 0])
     with pytest.raises(InvalidInputError, match="wrench must be 6 finite values"):
         geometric_stiffness(clm, q0, "P", np.ones(3))
+
+
+# ------------------------------------------ joints whose motion subspace depends on q
+#: Joint types for which Pinocchio's kinematic Hessians and gravity derivatives are wrong
+#: (closedloop.derivatives), each on a chain RY - joint - RZ with masses.
+VARYING_JOINTS = {
+    "universal": lambda: pin.JointModelUniversal(np.array([1.0, 0, 0]), np.array([0, 1.0, 0])),
+    "spherical_zyx": pin.JointModelSphericalZYX,
+    "ellipsoid": lambda: pin.JointModelEllipsoid(0.1, 0.2, 0.3),
+}
+
+
+def _chain_with(joint: pin.JointModel) -> pin.Model:
+    """RY base, the joint, an RZ tip joint; a mass on each body; frame ``tip``."""
+    m = pin.Model()
+    j0 = m.addJoint(0, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0.1, 0.2, 0.3])), "base")
+    place = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), np.array([0.3, 0, 0.1]))
+    j1 = m.addJoint(j0, joint, place, "middle")
+    j2 = m.addJoint(
+        j1, pin.JointModelRZ(), pin.SE3(np.eye(3), np.array([0.2, 0.1, 0.0])), "tip_joint"
+    )
+    for j, c in ((j0, [0.1, 0, 0.05]), (j1, [0.1, 0.05, 0.2]), (j2, [0.1, 0.0, 0.1])):
+        m.appendBodyToJoint(j, pin.Inertia(1.5, np.array(c), 0.01 * np.eye(3)), pin.SE3.Identity())
+    tip = pin.SE3(np.eye(3), np.array([0.1, 0.05, 0.2]))
+    m.addFrame(pin.Frame("tip", j2, tip, pin.OP_FRAME))
+    return m
+
+
+def _springs(joint: pin.JointModel) -> dict:
+    return {"base": 50.0, "tip_joint": 50.0, "middle": 80.0 * np.eye(joint.nv)}
+
+
+@pytest.mark.parametrize("name", sorted(VARYING_JOINTS))
+def test_second_order_terms_of_joints_with_a_varying_subspace(name):
+    """K_G, the loop curvature and the weight's stiffness against central differences of
+    Pinocchio's first-order quantities (Jacobians, generalised gravity) in this test; the
+    library falls back to differences where Pinocchio's second-order algorithms are wrong
+    (76-100 % off for these joints)."""
+    from closedloop.gravity import GravityLoad
+
+    joint = VARYING_JOINTS[name]()
+    m = _chain_with(joint)
+    clm = ClosedLoopModel(m, springs=_springs(joint), name=name)
+    q = pin.randomConfiguration(m, -0.8 * np.ones(m.nq), 0.8 * np.ones(m.nq))
+    w = np.array([30.0, -20.0, 10.0, 2.0, -1.0, 0.5])
+    fid = m.getFrameId("tip")
+
+    def jacobian_t_w(x):
+        return pin.computeFrameJacobian(m, m.createData(), x, fid, pin.LOCAL_WORLD_ALIGNED).T @ w
+
+    K_fd = _differences(m, jacobian_t_w, q)
+    assert_close_in_norm(geometric_stiffness(clm, q, "tip", w), K_fd, RTOL_HESSIAN_FD)
+    # the curvature of a point closure of the tip body (side 1) to the world (side 2): the
+    # gap is p_world - p_anchor, so lambda . d(-J_anchor)/dq (q need not close the loop)
+    at = pin.SE3(np.eye(3), np.array([0.05, -0.02, 0.1]))
+    parent = m.frames[fid].parentJoint
+    anchor = pin.PointAnchorConstraintModel(m, parent, at, 0, pin.SE3.Identity())
+    looped = ClosedLoopModel(pin.Model(m), [anchor], springs=_springs(joint), name=name)
+    lam = np.array([4.0, -3.0, 2.0])
+    ref = pin.Model(m)
+    frame = ref.addFrame(pin.Frame("anchor", parent, at, pin.OP_FRAME))
+
+    def anchor_jacobian_t_lam(x):
+        J = pin.computeFrameJacobian(ref, ref.createData(), x, frame, pin.LOCAL_WORLD_ALIGNED)
+        return -J[:3].T @ lam
+
+    assert_close_in_norm(closure_curvature(looped, q, lam),
+                         _differences(ref, anchor_jacobian_t_lam, q), RTOL_HESSIAN_FD)  # fmt: skip
+    gravity = GravityLoad(clm, [0.0, 0.0, -9.81])
+    weight = _differences(m, lambda x: pin.computeGeneralizedGravity(m, m.createData(), x), q)
+    assert_close_in_norm(gravity.stiffness(q), weight, RTOL_HESSIAN_FD)
+    # the test sees the difference: Pinocchio's own Hessian of this joint is far off
+    data = m.createData()
+    pin.computeJointJacobians(m, data, q)
+    pin.computeJointKinematicHessians(m, data)
+    raw = pin.getFrameKinematicHessian(m, data, fid, pin.LOCAL_WORLD_ALIGNED)
+    pinocchio_K = np.einsum("r,rik->ik", w, closedloop.tangent._hessian(raw, m.nv))
+    assert np.abs(pinocchio_K - K_fd).max() > 1e-2 * np.abs(K_fd).max()
