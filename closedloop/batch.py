@@ -121,6 +121,12 @@ def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
     bad = np.flatnonzero(~np.isfinite(Q).all(axis=1))
     if bad.size:
         raise InvalidInputError(f"configuration {bad[0]} of Q has non-finite values")
+    if nq != clm.model.nv:  # quaternions or unit complex numbers: as a single q
+        for i, q in enumerate(Q):
+            try:
+                Q[i] = clm.check_configuration(q)
+            except InvalidInputError as e:
+                raise InvalidInputError(f"configuration {i} of Q: {e}") from None
     return Q
 
 

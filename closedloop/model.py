@@ -38,6 +38,10 @@ from .exceptions import InvalidInputError, NameNotFoundError
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
+#: Largest change of a coordinate when the quaternions and unit complex numbers of q are
+#: normalised: a q further from the configuration manifold is refused, a nearer one
+#: normalised (7 typed digits are within it).
+UNIT_NORM_TOL = 1e-6
 
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
 
@@ -447,7 +451,27 @@ class ClosedLoopModel:
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
         if not np.isfinite(q).all():
             raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
+        if self.memo("unit_coordinates", lambda: self.model.nq != self.model.nv):
+            q = self._unit_norms(q)
         return q
+
+    def _unit_norms(self, q: np.ndarray) -> np.ndarray:
+        """q with its quaternions and unit complex numbers (free-flyer, spherical, planar,
+        unbounded revolute joints) normalised, or :class:`InvalidInputError` naming the
+        joint of one whose norm is off 1 by more than :data:`UNIT_NORM_TOL`."""
+        model = self.model
+        if not pin.isNormalized(model, q, UNIT_NORM_TOL):
+            for j, jm in enumerate(model.joints):  # the first joint whose part is off
+                part = slice(jm.idx_q, jm.idx_q + jm.nq)
+                alone = pin.neutral(model)
+                alone[part] = q[part]
+                if jm.nq != jm.nv and not pin.isNormalized(model, alone, UNIT_NORM_TOL):
+                    raise InvalidInputError(
+                        f"q of joint {model.names[j]!r} ({jm.shortname()}) is "
+                        f"{q[part].tolist()}: its quaternion or unit complex number is not of "
+                        f"norm 1 (to {UNIT_NORM_TOL:g}); normalise it (pinocchio.normalize)"
+                    )
+        return pin.normalize(model, q)
 
     def __repr__(self) -> str:
         return (

@@ -804,3 +804,39 @@ def _field(result, key: str):
         name, item = key[:-1].split("[")
         return getattr(result, name)[item]
     return getattr(result, key)
+
+
+def _floating_arm() -> tuple[cl.ClosedLoopModel, np.ndarray]:
+    """A free-flyer base (a 6x6 spring) carrying a revolute arm; q with a unit quaternion."""
+    model = pin.Model()
+    base = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
+    arm = model.addJoint(base, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0.2, 0, 0])), "arm")
+    model.addFrame(pin.Frame("tip", arm, pin.SE3(np.eye(3), np.array([0.5, 0, 0])), pin.OP_FRAME))
+    block = np.diag([1e5, 1e5, 1e5, 1e3, 1e3, 1e3])
+    clm = cl.ClosedLoopModel(model, springs={"base": block, "arm": 200.0})
+    q = pin.integrate(model, pin.neutral(model), np.array([0.1, -0.2, 0.3, 0.4, -0.5, 0.6, 0.7]))
+    return clm, q
+
+
+@pytest.mark.parametrize("factor, message", [(2.0, r"\[.*\]: its quaternion"), (0.0, "norm 1")])
+def test_a_quaternion_off_the_unit_sphere_is_refused_naming_its_joint(factor, message):
+    clm, q = _floating_arm()
+    bad = q.copy()
+    bad[3:7] *= factor
+    for call in (lambda: cl.compliance(clm, bad, "tip"), lambda: Configuration(clm, bad)):
+        with pytest.raises(cl.InvalidInputError, match=f"joint 'base'.*{message}"):
+            call()
+    with pytest.raises(cl.InvalidInputError, match="configuration 1 of Q: q of joint 'base'"):
+        cl.compliances(clm, [q, bad], "tip")
+
+
+def test_a_quaternion_within_the_tolerance_is_normalised():
+    """A quaternion typed to 9 digits gives the compliance of the unit one, in both
+    paths (a non-unit quaternion would scale the base rotation's matrix)."""
+    clm, q = _floating_arm()
+    typed = np.round(q, 9)
+    assert abs(np.linalg.norm(typed[3:7]) - 1.0) > 1e-12
+    ref = cl.compliance(clm, q, "tip").C
+    np.testing.assert_allclose(cl.compliance(clm, typed, "tip").C, ref, rtol=1e-8)
+    np.testing.assert_allclose(cl.compliances(clm, [typed], "tip").C[0], ref, rtol=1e-8)
+    np.testing.assert_allclose(np.linalg.norm(Configuration(clm, typed).q[3:7]), 1.0, rtol=1e-15)
