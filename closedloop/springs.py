@@ -97,8 +97,9 @@ class _Scaling(NamedTuple):
     passive_coef: np.ndarray | None  # (p, s) outer(s_p, 1 / sigma), diagonal springs only
     P_diagonal: np.ndarray | None  # (nv,) P0 = diag(s_q / sigma) when every coordinate has
     # a diagonal spring (a serial robot), else None
-    loop_mask: np.ndarray | None  # (m, p) and the blocks of loops of _loop_blocks, with
-    loop_blocks: tuple | None  # BLOCK_PASSIVE passive coordinates or more, else None
+    # the blocks of loops of _loop_blocks, with BLOCK_PASSIVE passive coordinates or more,
+    # else None
+    loop_blocks: tuple | None
 
     @classmethod
     def of(cls, clm: ClosedLoopModel, L: float) -> _Scaling:
@@ -118,7 +119,11 @@ class _Scaling(NamedTuple):
         d = twist_scaling(L)
         order = np.concatenate([passive, sprung])
         sign = np.where(np.arange(order.size) < passive.size, -1.0, 1.0)
-        loops = _loop_blocks(clm, passive, sprung) if passive.size >= BLOCK_PASSIVE else (None,) * 2
+        loops = (
+            _loop_blocks(clm, passive, sprung, s_q, row_scale)
+            if passive.size >= BLOCK_PASSIVE
+            else None
+        )
         P0 = np.zeros((k.size, sprung.size))
         if W is None:
             P0[sprung, np.arange(sprung.size)] = s_q[sprung] / sigma
@@ -149,7 +154,7 @@ class _Scaling(NamedTuple):
             P0,
             passive_coef,
             frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None,
-            *loops,
+            loops,
         )
 
     @property
@@ -201,10 +206,10 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     many passive coordinates, one such QR per independent block of loops.
     """
     lapack, p = scipy.linalg.lapack, sc.passive.size
+    if sc.loop_blocks is not None:
+        return _passive_motion_by_blocks(Jc, sc)
     A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
     scale = PARTITION_RTOL * abs(A[:, p:]).max()
-    if sc.loop_blocks is not None:
-        return _passive_motion_by_blocks(A, sc, scale)
     qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
     R = qr * sc.upper  # the triangle (Householder vectors below it)
     if info != 0 or lapack.dtrcon(R[:p, :p])[0] <= PARTITION_RCOND:
@@ -216,50 +221,58 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     return R_inv @ R[:p, p:] if info == 0 else None
 
 
-def _passive_motion_by_blocks(A: np.ndarray, sc: _Scaling, scale: float) -> np.ndarray | None:
+def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     """:func:`_passive_motion` on the blocks of :func:`_loop_blocks`, those of one shape
-    at once: the QR of a block diagonal -J_p is block diagonal, and so are R and R^-1,
-    whose 1-norms are the largest of the blocks' (the exact 1-norm condition, which
-    dtrcon estimates)."""
-    p = sc.passive.size
-    A[:, :p] *= sc.loop_mask  # the common ancestors' columns: rounding of a zero
-    X = np.empty((p, sc.sprung.size))
-    norm_R = norm_R_inv = residual2 = 0.0
-    for rows, cols, columns in sc.loop_blocks:  # (n, m_k), (n, p_k), (n, p_k + s)
+    at once, each gathered from the closure Jacobian Jc (m, nv) on its own rows and
+    columns (scaled, the common ancestors' columns, rounding of a zero, set to 0). The
+    QR of a block diagonal -J_p is block diagonal, and so are R and R^-1, whose 1-norms
+    are the largest of the blocks' (the exact 1-norm condition, which dtrcon estimates);
+    the residual J_s + J_p X is checked on the blocks' spring columns, the others being
+    zero."""
+    X = np.zeros((sc.passive.size, sc.sprung.size))
+    norm_R = norm_R_inv = top = 0.0
+    solved = []  # the blocks' residuals J_s + J_p X (rotated: the R22 of their QR)
+    for rows, cols, springs, jc_rows, jc_cols, weight in sc.loop_blocks:
         k = cols.shape[1]
-        block = A[rows[:, :, None], columns[:, None, :]]
+        block = Jc[jc_rows, jc_cols] * weight  # (n, m_k, p_k + s_k), [-J_p, J_s] scaled
+        top = max(top, abs(block[:, :, k:]).max(initial=0.0))
         if k > rows.shape[1]:
             return None
         if k:
-            R = np.linalg.qr(block, mode="r")  # (n, m_k, p_k + s), upper triangular
+            R = np.linalg.qr(block, mode="r")  # (n, m_k, p_k + s_k), upper triangular
             try:
                 R_inv = np.linalg.inv(R[:, :k, :k])
             except np.linalg.LinAlgError:
                 return None
             norm_R = max(norm_R, abs(R[:, :k, :k]).sum(axis=1).max())
             norm_R_inv = max(norm_R_inv, abs(R_inv).sum(axis=1).max())
-            X[cols] = R_inv @ R[:, :k, k:]
+            X[cols[:, :, None], springs[:, None, :]] = R_inv @ R[:, :k, k:]
             block = R[:, k:, k:]
-        residual2 += np.vdot(block, block)
+        solved.append(block)
+    residual2 = sum(float(np.vdot(b, b)) for b in solved)
+    scale = PARTITION_RTOL * top
     if not norm_R * norm_R_inv * PARTITION_RCOND < 1.0 or residual2 > scale * scale:
         return None
     return X
 
 
-def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray):
+def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray, s_q, row_scale):
     """Independent blocks of loops of the passive part J_p (m, p) of the closure Jacobian.
 
     A closure's residual, the placement of one anchor seen from the other, does not change
     when a common ancestor of its two joints moves (both anchors move together): its
     Jacobian vanishes on those columns (Pinocchio returns rounding there). On the other
     columns (the joints between the anchors) rows and passive columns that share no entry
-    form separate blocks: the connected components of that pattern.
+    form separate blocks: the connected components of that pattern. A block's spring
+    columns are those between the anchors of one of its rows.
 
     Returns:
-        mask: (m, p) 1 on the columns between each row's anchors, 0 on the rest.
-        blocks: per shape (m_k, p_k) of block, the index arrays of its n blocks: rows
-            (n, m_k), passive columns (n, p_k) and columns of [J_p, J_s] (n, p_k + s)
-            (a block may have rows and no passive column).
+        per shape (m_k, p_k, s_k) of block, for its n blocks: rows (n, m_k), passive
+        columns (n, p_k) and spring columns (n, s_k) (indices into the passive and the
+        sprung coordinates), the index arrays of the block [-J_p, J_s] in Jc (n, m_k, 1)
+        and (n, 1, p_k + s_k), and its weight (n, m_k, p_k + s_k): the scaling (sign,
+        rows per L, columns per s_q) times 1 between the anchors and 0 on the common
+        ancestors (a block may have rows and no passive column).
     """
     import scipy.sparse
     import scipy.sparse.csgraph
@@ -272,25 +285,27 @@ def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray):
         for j in (a ^ b) - {0}:
             row[model.joints[j].idx_v : model.joints[j].idx_v + model.joints[j].nv] = 1.0
         between += [row] * c.size
-    mask = np.array(between).reshape(-1, model.nv)[:, passive]
+    between = np.array(between).reshape(-1, model.nv)
+    mask = between[:, passive]
     m, p = mask.shape
     rows, cols = np.nonzero(mask)
     graph = scipy.sparse.coo_matrix((np.ones(rows.size), (rows, cols + m)), shape=(m + p,) * 2)
     n, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
     order = np.argsort(labels, kind="stable")
-    shapes: dict[tuple[int, int], list] = {}
+    shapes: dict[tuple[int, int, int], list] = {}
     for members in np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1]):
         r, k = members[members < m], members[members >= m] - m
-        shapes.setdefault((r.size, k.size), []).append((r, k))
-    springs = p + np.arange(sprung.size)
+        springs = np.flatnonzero(between[np.ix_(r, sprung)].any(axis=0))
+        shapes.setdefault((r.size, k.size, springs.size), []).append((r, k, springs))
     blocks = []
-    for (m_k, p_k), members in shapes.items():
-        r = np.array([b[0] for b in members], dtype=int).reshape(-1, m_k)
-        k = np.array([b[1] for b in members], dtype=int).reshape(-1, p_k)
-        blocks.append(
-            (r, k, np.hstack([k, np.broadcast_to(springs, (len(members), springs.size))]))
-        )
-    return mask, tuple(blocks)
+    for (m_k, p_k, s_k), members in shapes.items():
+        r, k, sp = (np.array([b[i] for b in members], dtype=int).reshape(len(members), size)
+                    for i, size in enumerate((m_k, p_k, s_k)))  # fmt: skip
+        jc_cols = np.hstack([passive[k], sprung[sp]])[:, None, :]  # (n, 1, p_k + s_k)
+        sign = np.where(np.arange(p_k + s_k) < p_k, -1.0, 1.0)
+        weight = row_scale[r] * (sign * s_q[jc_cols]) * between[r[:, :, None], jc_cols]
+        blocks.append((r, k, sp, r[:, :, None], jc_cols, weight))
+    return tuple(blocks)
 
 
 def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | None] | None:

@@ -208,8 +208,9 @@ def test_chain_of_loops_by_blocks_equals_the_null_space_path():
 
     state = Configuration(clm, q)
     assert int(np.sum(clm.stiffness == 0)) >= BLOCK_PASSIVE
-    ((rows, passive, _),) = scaling(state).loop_blocks  # one shape of block: each loop
-    assert rows.shape == (30, 3) and passive.shape == (30, 2)
+    ((rows, passive, springs, *_),) = scaling(state).loop_blocks  # one shape: each loop
+    # a loop's block: its closure rows, its coupler and rocker, and its own crank only
+    assert rows.shape == (30, 3) and passive.shape == (30, 2) and springs.shape == (30, 1)
     fast = cl.compliance(state, "tip")
     general = cl.compliance(state, "tip", path="null-space")
     assert fast.path == "partitioned"
