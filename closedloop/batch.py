@@ -27,6 +27,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import ReadOnlyArrays, frozen, real_array
+from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
 from .configuration import CLOSURE_TOL
 from .exceptions import InvalidInputError
@@ -97,8 +98,6 @@ def compliances(
         that has one (open loops, a mechanism, an overflow), with a note naming the
         configuration's index.
     """
-    from .compliance import compliance  # the single query builds on this module's callers
-
     Q = _check_configurations(clm, Q)
     L = clm.length if length is None else check_length(length)
     C, G, rank = stacked_compliances(clm, Q, frame, axes, L)
