@@ -38,13 +38,15 @@ class Configuration:
 
     Args:
         model: the model with closures and springs.
-        q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints].
+        q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints,
+            of norm 1 to ``closedloop.model.UNIT_NORM_TOL`` (1e-6; InvalidInputError beyond)].
         length: characteristic length L [m] (default: ``model.length``, the diagonal of the
             bounding box of the joint origins at the neutral configuration).
 
     Attributes:
         model: the :class:`ClosedLoopModel`.
-        q: (nq,) read-only configuration.
+        q: (nq,) read-only configuration, its quaternions and unit complex numbers
+            normalised.
         data: this configuration's own :class:`pinocchio.Data` (kinematics of q), valid
             while the configuration lives (it then goes back to the model's pool).
         length: characteristic length L [m].
