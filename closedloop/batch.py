@@ -40,6 +40,10 @@ from .springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
 #: different rounding; with this margin a configuration answered here is one the single
 #: query answers by the same path).
 MARGIN = 2.0
+#: Configurations computed together at most: the stacked arrays (closure and frame
+#: Jacobians, QR factors, P, B, G) take a few tens of kB per CaHyMan configuration, so a
+#: stack stays within tens of MB.
+STACK = 1024
 #: Largest entry of K [SI] the stacked computation answers (the single query's overflow
 #: check, with room): beyond it the configuration goes through :func:`compliance`.
 K_MAX = 1e290
@@ -132,13 +136,22 @@ def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
 def stacked_compliances(
     clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The stacked fast path on checked configurations Q (n, nq) at length L [m].
+    """The stacked fast path on checked configurations Q (n, nq) at length L [m],
+    :data:`STACK` configurations at a time.
 
     Returns:
         C: (n, 6, 6) [SI] and G: (n, nv, 6), NaN where the path did not answer;
         rank: (n,) rank of C, -1 where the path did not answer (module docstring:
         everything else is left to :func:`closedloop.compliance.compliance`).
     """
+    starts = range(0, len(Q), STACK) if len(Q) else [0]  # no configuration: empty arrays
+    parts = [_stack(clm, Q[i : i + STACK], frame, axes, L) for i in starts]
+    C, G, rank = (np.concatenate(a) for a in zip(*parts, strict=True))
+    return C, G, rank
+
+
+def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float):
+    """:func:`stacked_compliances` of one stack."""
     check_name("frame", frame)
     if axes not in REFERENCE_FRAMES:
         raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")

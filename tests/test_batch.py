@@ -198,3 +198,18 @@ def test_threads_sharing_one_model_get_their_own_answers(ur5):
         t.join()
     for k, C in enumerate(alone):
         np.testing.assert_array_equal(results[k], C)
+
+
+def test_a_long_stack_is_computed_in_parts(ur5, monkeypatch):
+    """Q longer than closedloop.batch.STACK is computed STACK configurations at a time
+    (bounded memory), with the answers of one stack."""
+    import closedloop.batch
+
+    clm, _ = ur5
+    Q = _ur5_poses(25, seed=4)
+    whole = cl.compliances(clm, Q, "tool0")
+    monkeypatch.setattr(closedloop.batch, "STACK", 7)
+    parts = cl.compliances(clm, Q, "tool0")
+    np.testing.assert_array_equal(parts.rank, whole.rank)
+    assert_close_in_norm(parts.C, whole.C, RTOL_STACKED)
+    assert_close_in_norm(parts.G, whole.G, RTOL_STACKED)
