@@ -30,11 +30,14 @@ from .arrays import ReadOnlyArrays, frozen, real_array
 from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
 from .configuration import CLOSURE_TOL
-from .exceptions import InvalidInputError
-from .kinematics import REFERENCE_FRAMES, jacobian_rows, residual_rows
+from .exceptions import ClosedLoopError, InvalidInputError
+from .kinematics import jacobian_rows, reference_frame, residual_rows
 from .model import ClosedLoopModel, check_name
 from .springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
 
+#: Errors of a configuration's query: the project's typed errors and LAPACK's (anything
+#: else, a programming error, propagates).
+QUERY_ERRORS = (ClosedLoopError, np.linalg.LinAlgError)
 #: Factor by which each test of the single query must pass for a configuration to be
 #: answered by the stacked computation (the two compute the tested quantities with
 #: different rounding; with this margin a configuration answered here is one the single
@@ -103,17 +106,55 @@ def compliances(
         configuration's index.
     """
     Q = _check_configurations(clm, Q)
-    L = clm.length if length is None else check_length(length)
-    C, G, rank = stacked_compliances(clm, Q, frame, axes, L)
-    stacked = rank >= 0
+    C, G, rank, stacked, errors, L = answered(
+        clm, Q, frame, axes, length, QUERY_ERRORS, first_error=True
+    )
+    for i, e in errors.items():  # the single query's error, with the configuration
+        e.add_note(f"at configuration {i} of Q")
+        raise e
+    return BatchCompliance(frozen(C), frozen(G), frozen(rank), frozen(stacked), frame, axes, L)
+
+
+def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
+    """Every configuration of Q (n, nq) answered: by :func:`stacked_compliances`, and the
+    others by :func:`closedloop.compliance.compliance`.
+
+    Args:
+        length: characteristic length [m], or None (the model's).
+        catch: exception types recorded per configuration (others propagate). One of
+            them from the stacked path (a bad frame, axes or length) leaves every
+            configuration to the single query, which raises it again (with no
+            configuration, it propagates).
+        first_error: stop at the first recorded error.
+
+    Returns:
+        C (n, 6, 6), G (n, nv, 6), rank (n,) (NaN and -1 where an error was recorded),
+        stacked (n,) bool, the errors by configuration index, and the length L [m] (NaN
+        when invalid).
+    """
+    try:
+        L = clm.length if length is None else check_length(length)
+        C, G, rank = stacked_compliances(clm, Q, frame, axes, L)
+    except catch:
+        if not len(Q):  # no single query to raise it again
+            raise
+        n, L = len(Q), np.nan
+        C, G, rank = (
+            np.full((n, 6, 6), np.nan),
+            np.full((n, clm.model.nv, 6), np.nan),
+            np.full(n, -1),
+        )
+    stacked, errors = rank >= 0, {}
     for i in np.flatnonzero(~stacked):
         try:
-            r = compliance(clm, Q[i], frame, axes, length=L)
-        except Exception as e:  # the single query's typed error, with the configuration
-            e.add_note(f"at configuration {i} of Q")
-            raise
+            r = compliance(clm, Q[i], frame, axes, length=length)
+        except catch as e:
+            errors[int(i)] = e
+            if first_error:
+                break
+            continue
         C[i], G[i], rank[i] = r.C, r.G, r.rank
-    return BatchCompliance(frozen(C), frozen(G), frozen(rank), frozen(stacked), frame, axes, L)
+    return C, G, rank, stacked, errors, L
 
 
 def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
@@ -153,8 +194,7 @@ def stacked_compliances(
 def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float):
     """:func:`stacked_compliances` of one stack."""
     check_name("frame", frame)
-    if axes not in REFERENCE_FRAMES:
-        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    reference = reference_frame(axes)
     fid, model = clm.frame_id(frame), clm.model
     n, nv, m = len(Q), model.nv, clm.n_constraints
     C, G = np.full((n, 6, 6), np.nan), np.full((n, nv, 6), np.nan)
@@ -162,7 +202,7 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float)
     p, s = sc.passive.size, sc.sprung.size
     if not n or not nv or not s or sc.loop_blocks is not None or (m < p if p else m):
         return C, G, np.full(n, -1)  # no fast path for this model (springs.partition)
-    r, Jc, J = _kinematics(clm, Q, fid, REFERENCE_FRAMES[axes])
+    r, Jc, J = _kinematics(clm, Q, fid, reference)
     ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
     X, norm2 = None, np.zeros(n)
     if p:

@@ -17,6 +17,17 @@ RANK_RTOL = _RANK_RTOL
 REFERENCE_FRAMES = {"world": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL}
 
 
+def reference_frame(axes: str) -> pin.ReferenceFrame:
+    """Pinocchio's reference frame of the ``axes`` of a Jacobian (:data:`REFERENCE_FRAMES`).
+
+    Raises:
+        InvalidInputError: unknown ``axes``.
+    """
+    if axes not in REFERENCE_FRAMES:
+        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    return REFERENCE_FRAMES[axes]
+
+
 def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     """Forward kinematics, joint Jacobians and frame placements at q (nq,), in ``clm.data``.
 
@@ -79,15 +90,14 @@ def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: 
         InvalidInputError: unknown ``axes``, or a model without any moving joint (nv = 0).
         NameNotFoundError: unknown frame.
     """
-    if axes not in REFERENCE_FRAMES:
-        raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
+    reference = reference_frame(axes)
     fid = clm.frame_id(frame)
     if clm.model.nv == 0:  # pin.getFrameJacobian crashes the interpreter on nv = 0
         raise InvalidInputError(
             f"model {clm.name!r} has no moving joint (nv = 0): frame {frame!r} cannot move, "
             "there is no compliance to compute; give the model joints (or springs)"
         )
-    J = pin.getFrameJacobian(clm.model, data, fid, REFERENCE_FRAMES[axes])
+    J = pin.getFrameJacobian(clm.model, data, fid, reference)
     return np.asarray(J).reshape(6, clm.model.nv)  # a one-dof model gives a (6,) vector
 
 

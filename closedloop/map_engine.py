@@ -35,13 +35,11 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import assemble
-from .batch import stacked_compliances
+from .batch import QUERY_ERRORS, answered
 from .blas import single_threaded_blas
-from .compliance import compliance
-from .conditioning import batch_rank, check_length
+from .conditioning import batch_rank
 from .exceptions import (
     AssemblyError,
-    ClosedLoopError,
     InvalidInputError,
     MechanismError,
     RigidDirectionsError,
@@ -56,7 +54,7 @@ from .statics import joints_outside_limits
 STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
 OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED = range(len(STATUS))
 #: Exceptions recorded per point (anything else, a programming error, propagates).
-POINT_ERRORS = (ClosedLoopError, np.linalg.LinAlgError)
+POINT_ERRORS = QUERY_ERRORS
 #: Points per task when not given: enough to amortise a task's overhead (pickling, the
 #: model load in a fresh process), small enough for a few tasks per core.
 CHUNK = 500
@@ -164,25 +162,14 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
     if not assembled:
         return
     Q = np.array([a.q for _, a in assembled])
-    try:
-        L = clm.length if length is None else check_length(length)
-        C, _, rank = stacked_compliances(clm, Q, frame, axes, L)
-    except POINT_ERRORS:  # e.g. a bad frame or length: each point's query says it
-        C, rank, L = np.empty((len(Q), 6, 6)), np.full(len(Q), -1), np.nan
     positions = np.array([i for i, _ in assembled])
-    stacked = rank >= 0
-    done = positions[stacked]
-    out.C[done], out.rank[done], out.length[done] = C[stacked], rank[stacked], L
-    out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, stacked, strict=True) if s]
-    for k in np.flatnonzero(~stacked):
-        i, a = assembled[k]
-        try:
-            c = compliance(clm, a.q, frame, axes, length=length)
-        except POINT_ERRORS as e:
-            out.fail(i, e)
-            continue
-        out.C[i], out.rank[i], out.length[i] = c.C, c.rank, c.length
-        out.iterations[i] = a.iterations
+    C, _, rank, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS)
+    ok = rank >= 0
+    done = positions[ok]
+    out.C[done], out.rank[done], out.length[done] = C[ok], rank[ok], L
+    out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, ok, strict=True) if s]
+    for k, e in errors.items():
+        out.fail(positions[k], e)
 
 
 def _repeated_steps(inputs: np.ndarray, rows) -> np.ndarray:

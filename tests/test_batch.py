@@ -177,6 +177,8 @@ def test_bad_frame_axes_and_length(ur5):
 def test_no_configuration_gives_empty_arrays(ur5):
     batch = cl.compliances(ur5[0], np.zeros((0, 6)), "tool0")
     assert batch.C.shape == (0, 6, 6) and batch.G.shape == (0, 6, 6) and batch.rank.size == 0
+    with pytest.raises(NameNotFoundError, match="nope"):  # still checked without a query
+        cl.compliances(ur5[0], np.zeros((0, 6)), "nope")
 
 
 def test_threads_sharing_one_model_get_their_own_answers(ur5):
