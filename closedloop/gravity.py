@@ -97,6 +97,7 @@ class GravityLoad:
             model.appendBodyToJoint(f.parentJoint, point_mass, at)
         self.model = model
         self.mass = float(sum(I.mass for I in model.inertias))
+        self._exact_derivatives = pinocchio_second_order_exact(model)
 
     def forces(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """(nv,) generalised gravity scale G(q) [N m, N]: the weight's dV/dq."""
@@ -104,7 +105,7 @@ class GravityLoad:
 
     def stiffness(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """(nv, nv) scale dG/dq [N m/rad, N/m, mixed]: the weight's part of K_t."""
-        if not pinocchio_second_order_exact(self.model):  # closedloop.derivatives
+        if not self._exact_derivatives:  # closedloop.derivatives
             return scale * central_differences(self.model, q, self.forces)
         data = self.model.createData()
         return scale * pin.computeGeneralizedGravityDerivatives(self.model, data, q)

@@ -230,11 +230,10 @@ def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None
     the residual J_s + J_p X is checked on the blocks' spring columns, the others being
     zero."""
     X = np.zeros((sc.passive.size, sc.sprung.size))
-    norm_R = norm_R_inv = top = 0.0
-    solved = []  # the blocks' residuals J_s + J_p X (rotated: the R22 of their QR)
-    for rows, cols, springs, jc_rows, jc_cols, weight in sc.loop_blocks:
+    norm_R = norm_R_inv = top = residual2 = 0.0
+    for rows, cols, springs, jc_cols, weight in sc.loop_blocks:
         k = cols.shape[1]
-        block = Jc[jc_rows, jc_cols] * weight  # (n, m_k, p_k + s_k), [-J_p, J_s] scaled
+        block = Jc[rows[:, :, None], jc_cols] * weight  # (n, m_k, p_k + s_k), [-J_p, J_s]
         top = max(top, abs(block[:, :, k:]).max(initial=0.0))
         if k > rows.shape[1]:
             return None
@@ -247,9 +246,8 @@ def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None
             norm_R = max(norm_R, abs(R[:, :k, :k]).sum(axis=1).max())
             norm_R_inv = max(norm_R_inv, abs(R_inv).sum(axis=1).max())
             X[cols[:, :, None], springs[:, None, :]] = R_inv @ R[:, :k, k:]
-            block = R[:, k:, k:]
-        solved.append(block)
-    residual2 = sum(float(np.vdot(b, b)) for b in solved)
+            block = R[:, k:, k:]  # J_s + J_p X, rotated
+        residual2 += np.vdot(block, block)
     scale = PARTITION_RTOL * top
     if not norm_R * norm_R_inv * PARTITION_RCOND < 1.0 or residual2 > scale * scale:
         return None
@@ -269,8 +267,8 @@ def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray, 
     Returns:
         per shape (m_k, p_k, s_k) of block, for its n blocks: rows (n, m_k), passive
         columns (n, p_k) and spring columns (n, s_k) (indices into the passive and the
-        sprung coordinates), the index arrays of the block [-J_p, J_s] in Jc (n, m_k, 1)
-        and (n, 1, p_k + s_k), and its weight (n, m_k, p_k + s_k): the scaling (sign,
+        sprung coordinates), the columns of the block [-J_p, J_s] in Jc (n, 1, p_k + s_k)
+        and its weight (n, m_k, p_k + s_k): the scaling (sign,
         rows per L, columns per s_q) times 1 between the anchors and 0 on the common
         ancestors (a block may have rows and no passive column).
     """
@@ -304,7 +302,7 @@ def _loop_blocks(clm: ClosedLoopModel, passive: np.ndarray, sprung: np.ndarray, 
         jc_cols = np.hstack([passive[k], sprung[sp]])[:, None, :]  # (n, 1, p_k + s_k)
         sign = np.where(np.arange(p_k + s_k) < p_k, -1.0, 1.0)
         weight = row_scale[r] * (sign * s_q[jc_cols]) * between[r[:, :, None], jc_cols]
-        blocks.append((r, k, sp, r[:, :, None], jc_cols, weight))
+        blocks.append((r, k, sp, jc_cols, weight))
     return tuple(blocks)
 
 
