@@ -98,6 +98,25 @@ def test_poses_at_the_rank_threshold_go_through_the_single_query(ur5):
     assert 0 < np.count_nonzero(~batch.stacked) < len(Q)
 
 
+@pytest.mark.parametrize("start", [-10.0, -7.0])
+def test_the_eigenvalue_shortcut_decides_as_the_singular_values(ur5, monkeypatch, start):
+    """The full-rank shortcut on the eigenvalues of the formed C_s (GRAM_MARGIN) gives
+    the ranks, and leaves the same poses to the single query, as the singular values of
+    the factors alone; across the elbow singularity, where the shortcut stops deciding
+    before the rank rule does (q3 from 1e-10 or 1e-7 to 1e-4 rad), and at random poses."""
+    clm, q = ur5
+    Q = np.repeat(q[None], 80, axis=0)
+    Q[:, 2] = np.logspace(start, -4, len(Q))
+    Q = np.vstack([Q, _ur5_poses(20)])
+    batch = cl.compliances(clm, Q, "tool0")
+    monkeypatch.setattr(cl.batch, "GRAM_MARGIN", np.inf)  # never decides: SVDs only
+    by_svd = cl.compliances(clm, Q, "tool0")
+    np.testing.assert_array_equal(batch.rank, by_svd.rank)
+    np.testing.assert_array_equal(batch.stacked, by_svd.stacked)
+    assert_close_in_norm(batch.C, by_svd.C, RTOL_STACKED)
+    assert np.count_nonzero(batch.stacked & (batch.rank == 6)) > 20
+
+
 def test_a_four_bar_chain_through_its_change_point():
     """Loop 1 of the chain passes its collinear change point (t = 0): there the passive
     part J_p is singular, and the stacked path leaves the pose to the single query (its
