@@ -97,13 +97,15 @@ def assemble(
     model = clm.model
     q = clm.check_configuration(pin.neutral(model) if q0 is None else q0)
     if actuated is not None:
-        actuated = real_array(actuated, "actuated").reshape(-1)
+        if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):
+            actuated = real_array(actuated, "actuated")
+        actuated = actuated.reshape(-1)
         if actuated.shape != (len(clm.actuated),):
             raise InvalidInputError(
                 f"{actuated.size} actuated values given; expected {len(clm.actuated)} "
                 f"for joints {list(clm.actuated)}"
             )
-        if not np.all(np.isfinite(actuated)):
+        if not np.isfinite(actuated).all():
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
         q[clm.actuated_q_indices] = actuated
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))

@@ -38,26 +38,18 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
-def _closure_rows(clm: ClosedLoopModel) -> tuple[tuple, ...]:
-    """(constraint, row slice, is a weld) of every closure (once per model)."""
-
-    def rows():
-        out, start = [], 0
-        for c in clm.closures:
-            out.append((c.constraint, slice(start, start + c.size), c.kind == "6d"))
-            start += c.size
-        return tuple(out)
-
-    return clm.memo("closure_rows", rows)
+def _closures(clm: ClosedLoopModel) -> tuple[tuple, ...]:
+    """(constraint, is a weld) of every closure (once per model)."""
+    return clm.memo("closures", lambda: tuple((c.constraint, c.kind == "6d") for c in clm.closures))
 
 
 def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
     """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
-    out, model = np.empty(clm.n_constraints), clm.model
-    for (c, rows, _), cd in zip(_closure_rows(clm), constraint_datas, strict=True):
+    model, parts = clm.model, []
+    for (c, _), cd in zip(_closures(clm), constraint_datas, strict=True):
         c.calc(model, data, cd)
-        out[rows] = cd.constraint_position_error
-    return out
+        parts.append(cd.constraint_position_error)
+    return np.concatenate(parts) if parts else np.empty(0)
 
 
 def jacobian_rows(
@@ -69,18 +61,17 @@ def jacobian_rows(
         calc: evaluate the constraints first (False when :func:`residual_rows` has just
             done it with the same datas).
     """
-    model = clm.model
-    nv = model.nv
-    out = np.empty((clm.n_constraints, nv))
-    for (c, rows, weld), cd in zip(_closure_rows(clm), constraint_datas, strict=True):
+    model, parts = clm.model, []
+    for (c, weld), cd in zip(_closures(clm), constraint_datas, strict=True):
         if calc:
             c.calc(model, data, cd)
         J = c.jacobian(model, data, cd)
-        if nv == 1:  # a one-dof model gives a vector
-            J = np.reshape(J, (-1, 1))
         # for a weld, the derivative of log6 of the relative placement
-        out[rows] = pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J
-    return out
+        parts.append(pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J)
+    if not parts:
+        return np.empty((0, model.nv))
+    out = np.concatenate(parts)
+    return out.reshape(-1, 1) if model.nv == 1 else out  # a one-dof model gives vectors
 
 
 def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: str) -> np.ndarray:
