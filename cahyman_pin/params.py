@@ -213,9 +213,11 @@ def read_params_file(path: str | Path, base: CaHyManParams = DEFAULT_PARAMS) -> 
     """
     import yaml  # only when a file is read
 
+    from closedloop import strict_yaml
+
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = strict_yaml.load(path.read_text())
     except OSError as e:
         raise ModelFileError(f"parameter file {str(path)!r} cannot be read: {e.strerror}") from None
     except (yaml.YAMLError, UnicodeDecodeError) as e:

@@ -107,10 +107,16 @@ def assemble(
             )
         if not np.isfinite(actuated).all():
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
-        q[clm.actuated_q_indices] = actuated
+        clm.set_actuated(q, actuated)
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.data, clm.constraint_datas
     r, err, size2 = _residual(clm, data, datas, q)
+    if err > tol and not free.size:
+        raise AssemblyError(
+            f"cannot close the loops of {clm.name!r}: no passive coordinate to move (every "
+            "joint is actuated, sprung or locked); give the loops passive joints",
+            err,
+        )
     it = 0
     while err > tol and it < max_iter:
         it += 1
@@ -130,7 +136,7 @@ def assemble(
     if not err <= tol:
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r} with actuated "
-            f"{dict(zip(clm.actuated, q[clm.actuated_q_indices].tolist(), strict=True))}",
+            f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}",
             err,
         )
     q.flags.writeable = False

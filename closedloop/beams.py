@@ -71,7 +71,8 @@ ALIGN_TOLERANCE = 1e-3
 
 def _positive(beam: str, what: str, value) -> float:
     try:
-        x = float(value)  # "2.1e11" from a YAML 1.1 file is a number
+        # "2.1e11" from a YAML 1.1 file is a number; a bool is not
+        x = math.nan if isinstance(value, bool | np.bool_) else float(value)
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected a number > 0") from None
     if not (math.isfinite(x) and x > 0):
@@ -513,6 +514,12 @@ def beam_stiffness(
     if missing:
         raise BeamError(beam, f"missing {missing}; expected E, G, section (or stiffness_6x6)")
     E, G = _positive(beam, "E [Pa]", spec["E"]), _positive(beam, "G [Pa]", spec["G"])
+    if not -1.0 < E / (2.0 * G) - 1.0 <= 0.5:  # an isotropic material (G in GPa, not Pa?)
+        raise BeamError(
+            beam,
+            f"E = {E:.4g} Pa and G = {G:.4g} Pa give the Poisson ratio E / (2 G) - 1 = "
+            f"{E / (2.0 * G) - 1.0:.4g}; expected one in (-1, 0.5] (both in Pa)",
+        )
     theory = spec.get("theory", "euler-bernoulli")
     if theory not in THEORIES:
         raise BeamError(beam, f"theory {theory!r}; expected one of {list(THEORIES)}")

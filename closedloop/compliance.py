@@ -264,6 +264,12 @@ def compliance(
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
         return preloaded_compliance(state.model, eq, axes)
     check_path(path)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error of _result
+        return _compliance(state, frame, axes, path)
+
+
+def _compliance(state: Configuration, frame: str, axes: str, path: str) -> ComplianceResult:
+    """:func:`compliance` of a closed configuration without preload."""
     J = state.frame_jacobian(frame, axes)
     sc = scaling(state)
     fast = partition(state, sc) if path == "auto" else None
@@ -345,9 +351,13 @@ def _result(
     K, add = spectrum.K, np.add.reduce
     total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
     if not math.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
+        k = state.model.stiffness
+        k = k[(k > 0) & np.isfinite(k)]
+        springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"
         raise SingularConfigurationError(
-            f"the compliance at frame {frame!r} of {state.model.name!r} overflows the "
-            "floating point range (springs near 1e-308, or a singular configuration)"
+            f"the compliance or stiffness at frame {frame!r} of {state.model.name!r} overflows "
+            f"the floating point range ({springs}; expected springs well within 1e-300..1e300, "
+            "away from a singular configuration)"
         )
     fields = dict(
         C=frozen(C),
@@ -393,6 +403,10 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
         the model's order; empty when the wrench does no work (w^T C w = 0).
     """
     w = check_wrench(wrench)
+    size = float(np.max(np.abs(w)))
+    if size == 0.0:
+        return {}
+    w = w / size  # the shares do not depend on the size of the load: no overflow
     dq = result.G @ w
     f = clm.spring_forces(dq)
     total = float(w @ result.C @ w)

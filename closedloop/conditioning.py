@@ -70,9 +70,18 @@ def check_length(length) -> float:
     """Validated characteristic length [m] (finite, > 0)."""
     if type(length) is float and 0.0 < length < math.inf:  # the common case, a float
         return length
-    if not (isinstance(length, int | float | np.floating) and np.isfinite(length) and length > 0):
+    if isinstance(length, bool) or not isinstance(length, int | float | np.integer | np.floating):
+        raise InvalidInputError(
+            f"characteristic length must be a real number [m], got {length!r} "
+            f"({type(length).__name__})"
+        )
+    try:
+        value = float(length)
+    except OverflowError:  # an int beyond the float range
+        value = math.inf
+    if not (math.isfinite(value) and value > 0):
         raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
-    return float(length)
+    return value
 
 
 def twist_scaling(length: float) -> np.ndarray:

@@ -22,9 +22,10 @@ def _choices(names: Iterable[str], limit: int = 12) -> str:
 class NameNotFoundError(ClosedLoopError, KeyError):
     """A joint or frame name that the model does not have."""
 
-    def __init__(self, kind: str, name: str, valid: Iterable[str]):
+    def __init__(self, kind: str, name: str, valid: Iterable[str], hint: str = ""):
         self.kind, self.name = kind, name
-        super().__init__(f"unknown {kind} {name!r}; expected one of: {_choices(valid)}")
+        hint = f" ({hint})" if hint else ""
+        super().__init__(f"unknown {kind} {name!r}{hint}; expected one of: {_choices(valid)}")
 
     def __str__(self) -> str:  # KeyError would quote the message
         return self.args[0]

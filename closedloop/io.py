@@ -45,11 +45,12 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from . import strict_yaml
 from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError
-from .mjcf import place_free_joints, read_mjcf_extras, single_root_copy
-from .model import ClosedLoopModel, Closure, closure_between_frames
+from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
+from .model import ClosedLoopModel, Closure, closure_between_frames, joint_names
 from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
@@ -88,7 +89,7 @@ def _existing(path: str | Path, what: str) -> Path:
 def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
     path = _existing(path, what)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = strict_yaml.load(path.read_text())
     except (OSError, UnicodeDecodeError) as e:
         raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e}") from None
     except yaml.YAMLError as e:
@@ -103,6 +104,11 @@ def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
 
 def _number(value, where: str, name: str) -> float:
     if isinstance(value, str):
+        if strict_yaml.overflowing(value):
+            raise ModelFileError(
+                f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
+                "range (about 1.8e308); expected a number, or .inf to lock the joint"
+            )
         try:
             value = float(value)
         except ValueError:
@@ -259,7 +265,7 @@ def _serial_defaults(model: pin.Model, path: Path) -> tuple[tuple[str, ...], tup
             f"robot file {str(path)!r} branches at its root: give a closure file that lists "
             "the actuated joints (name_mot)"
         )
-    one_dof = [k for k in range(1, model.njoints) if model.joints[k].nq == model.joints[k].nv == 1]
+    one_dof = [k for k in range(1, model.njoints) if model.joints[k].nv == 1]  # continuous too
     actuated = tuple(model.names[k] for k in one_dof if k in chain)
     locked = tuple(model.names[k] for k in one_dof if k not in chain)
     return actuated, locked
@@ -290,7 +296,10 @@ def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=No
 
 
 def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=None) -> _Tree:
-    model = _parse(lambda: pin.buildModelFromUrdf(str(path)), shown or path, "robot file")
+    # mimic joints follow their leader (nq = nv = 0), as the file says
+    build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
+    model = _parse(build, shown or path, "robot file")
+    _check_limits(model, shown or path)
     visual = _geometry(
         geometry,
         lambda: pin.buildGeomFromUrdf(
@@ -313,30 +322,43 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual)
 
 
+def _check_limits(model: pin.Model, path: Path) -> None:
+    """:class:`ModelFileError` for a joint whose lower position limit exceeds its upper one."""
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        q = slice(jm.idx_q, jm.idx_q + jm.nq)
+        if np.any(lower[q] > upper[q]):
+            raise ModelFileError(
+                f"robot file {str(path)!r}: joint {model.names[j]!r} has lower limit "
+                f"{lower[q].tolist()} above its upper limit {upper[q].tolist()}; expected "
+                "lower <= upper"
+            )
+
+
 def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
-    with tempfile.TemporaryDirectory() as folder:  # several root bodies: Pinocchio reads a copy
-        parsed = str(single_root_copy(path, Path(folder)) or path)
+    extras = read_mjcf_extras(path)  # the file checked before Pinocchio reads it
+    with tempfile.TemporaryDirectory() as folder:  # Pinocchio reads a copy (closedloop.mjcf)
+        parsed = str(pinocchio_copy(path, Path(folder)))
         model, points, welds = _parse(
             lambda: pin.buildModelAndConstraintsFromMJCF(parsed), path, "robot file"
         )
+        match_parsed(model, len(points) + len(welds), extras, path)
         constraints = place_free_joints(model, [*points, *welds])
         visual = _geometry(
             geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
         )
-    actuated, stiffness, names, undriven = read_mjcf_extras(path)
     where = f"robot file {str(path)!r}"
-    springs = {n: k for n, v in stiffness.items() if (k := _number(v, where, n)) > 0}
+    springs = {n: k for n, v in extras.stiffness.items() if (k := _number(v, where, n)) > 0}
     spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
-    if len(names) != len(constraints):
-        names = [f"closure{i}" for i in range(len(constraints))]
     return _Tree(
         model,
-        [Closure(c, n) for c, n in zip(constraints, names, strict=True)],
-        actuated if spec.actuated is None else spec.actuated,
+        [Closure(c, n) for c, n in zip(constraints, extras.closures, strict=True)],
+        extras.actuated if spec.actuated is None else spec.actuated,
         {**springs, **spec.springs},
         spec.locked,
         visual,
-        tuple(undriven) if spec.actuated is None else (),
+        extras.undriven if spec.actuated is None else (),
     )
 
 
@@ -399,11 +421,12 @@ def load_model(
             raise InvalidInputError(
                 f"load_model: {name} must be a file path (str or os.PathLike), got {value!r}"
             )
-    if springs is not None and not isinstance(springs, Mapping):
-        raise InvalidInputError(
-            f"load_model: springs must be a mapping joint name -> stiffness, got "
-            f"{type(springs).__name__}"
-        )
+    for name, value, what in (("springs", springs, "joint name -> stiffness"),
+                              ("beams", beams, "link name -> beam")):  # fmt: skip
+        if value is not None and not isinstance(value, Mapping):
+            raise InvalidInputError(
+                f"load_model: {name} must be a mapping {what}, got {type(value).__name__}"
+            )
     kind = file_format or MODEL_SUFFIXES.get(Path(path).suffix.lower())
     if kind not in ("urdf", "mjcf", "sdf") or (free_base and kind != "sdf"):
         raise ModelFileError(
@@ -425,11 +448,11 @@ def load_model(
             f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
             "directly; list the actuated joints (name_mot in a side file, or actuated=)"
         )
-    actuated = tree.actuated if actuated is None else tuple(actuated)
+    actuated = tree.actuated if actuated is None else joint_names("actuated", actuated)
     springs = {**tree.springs, **(springs or {})}
     if joint_stiffness is not None:
         try:
-            k = float(joint_stiffness)
+            k = math.nan if isinstance(joint_stiffness, bool) else float(joint_stiffness)
         except (TypeError, ValueError):
             k = math.nan
         if math.isnan(k) or k < 0:

@@ -274,7 +274,7 @@ def assemble_within_limits(clm: ClosedLoopModel, actuated: np.ndarray, q0: np.nd
             point of a map: the robot cannot be driven there).
     """
     q = np.array(q0, dtype=float)
-    q[clm.actuated_q_indices] = actuated
+    clm.set_actuated(q, actuated)
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
     if bad:
         text = ", ".join(f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])"

@@ -1,8 +1,18 @@
-"""What Pinocchio's MJCF parser leaves out: actuators, joint stiffness, closure names."""
+"""What Pinocchio's MJCF parser leaves out or reads wrong, read from the XML here.
+
+Pinocchio 4.1 keeps neither actuators nor joint stiffness, shifts hinge and slide limits by
+``ref`` and converts slide ranges as angles, ignores ``active`` on equalities, orders the
+equalities by name (keeping one of each name), and reads only the first ``<compiler>``,
+``<equality>`` and root body. :func:`read_mjcf_extras` reads the file as MuJoCo does and
+refuses what Pinocchio would silently get wrong; Pinocchio reads :func:`pinocchio_copy`;
+:func:`match_parsed` and :func:`place_free_joints` correct what it built.
+"""
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,81 +22,208 @@ from .exceptions import ModelFileError
 
 #: MJCF equality constraints and the closure type each gives.
 MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
-#: Name of the body that holds several root bodies for Pinocchio (:func:`single_root_copy`).
+#: Name of the body that holds several root bodies for Pinocchio (:func:`pinocchio_copy`).
 WORLD_BODY = "worldbody_bodies"
+#: Configuration coordinates of each MJCF joint type (ball and free: quaternions).
+JOINT_NQ = {"hinge": 1, "slide": 1, "ball": 4, "free": 7}
+#: Shortest hinge or slide axis (norm, the axis is normalised) that MuJoCo accepts: below
+#: it MuJoCo refuses the file ("axis too small in joint"; checked with MuJoCo 4.0).
+MIN_AXIS_NORM = 1e-7
 
 
-def read_mjcf_extras(path: Path) -> tuple[tuple[str, ...], dict[str, str], list[str], list[str]]:
-    """(actuated joints, joint stiffness texts, closure names, actuators driving no joint).
+@dataclass(frozen=True)
+class MjcfExtras:
+    """What :func:`read_mjcf_extras` reads from an MJCF file.
 
-    Pinocchio's MJCF parser keeps neither actuators nor joint stiffness: they are read
-    from the XML here (``<default>`` classes and ``childclass`` resolved).
+    Attributes:
+        actuated: joints an actuator drives, each once, in order of first appearance.
+        stiffness: joint name -> its ``stiffness`` text [N m/rad or N/m].
+        closures: names of the active ``<connect>``, then ``<weld>`` equalities, each kind
+            in file order (Pinocchio's order when it reads :func:`pinocchio_copy`); an
+            unnamed one is ``<tag><i>``, the i-th of its kind in the file.
+        undriven: actuators that drive no joint (name, else tag).
+        limits: (configuration index, lower, upper) of every hinge and slide with a range,
+            as MuJoCo reads it: hinge [rad] (from the compiler's angle unit), slide [m];
+            ``ref`` does not shift it.
+        nq: configuration size of the file's joints.
+    """
+
+    actuated: tuple[str, ...]
+    stiffness: dict[str, str]
+    closures: tuple[str, ...]
+    undriven: tuple[str, ...]
+    limits: tuple[tuple[int, float, float], ...]
+    nq: int
+
+
+def read_mjcf_extras(path: Path) -> MjcfExtras:
+    """Actuators, joint stiffness, joint limits and closure names of an MJCF file.
+
+    ``<default>`` classes and ``childclass`` are resolved as MuJoCo does.
 
     Raises:
-        ModelFileError: ``<include>``, an equality other than connect/weld, a stiffness
-            that is not >= 0.
+        ModelFileError: invalid XML, ``<include>``, a ``<frame>`` or ``<replicate>`` holding
+            bodies or joints, an equality other than connect/weld or without body1, an
+            ``active`` other than true/false, a repeated joint, body or equality name, an
+            unknown joint type, a hinge or slide whose axis is the zero vector, a range or
+            axis that is not numbers, a range whose lower bound is above its upper one, a
+            joint with a nonzero stiffness but no name. The message names the file.
     """
     where = f"robot file {str(path)!r}"
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ModelFileError(f"{where} is not valid XML: {e}") from None
+    root = _parse_xml(path, where)
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
-    equalities = [e for eq in root.findall("equality") for e in eq]
-    other = sorted({e.tag for e in equalities} - set(MJCF_EQUALITIES))
-    if other:
-        raise ModelFileError(f"{where}: equality <{other[0]}> is not supported (connect, weld)")
-    names = []
-    for tag in MJCF_EQUALITIES:  # Pinocchio returns the connects, then the welds
-        same = [e for e in equalities if e.tag == tag]
-        names += [e.get("name") or f"{tag}{i}" for i, e in enumerate(same)]
-    stiffness = dict(_joint_attribute(root, "stiffness"))
+    for tag in ("frame", "replicate"):  # Pinocchio drops what they hold
+        if root.find(f".//{tag}//body") is not None or root.find(f".//{tag}//joint") is not None:
+            raise ModelFileError(
+                f"{where}: <{tag}> holding bodies or joints is not supported (Pinocchio's "
+                f"parser drops them); write the bodies without <{tag}>"
+            )
+    equalities = _equalities(root, where)
+    joints = _joints(root)
+    explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
+    for kind, names in (
+        ("body", [b.get("name") for w in root.findall("worldbody") for b in w.iter("body")]),
+        ("joint", [attrs.get("name") for _, attrs in joints]),
+        ("equality", explicit),
+    ):
+        seen: set[str] = set()
+        for name in filter(None, names):
+            if name in seen:
+                raise ModelFileError(
+                    f"{where}: repeated {kind} name {name!r} (MuJoCo refuses it); expected "
+                    f"one {kind} of each name"
+                )
+            seen.add(name)
+    to_rad = 1.0 if _compiler(root).get("angle", "degree") == "radian" else math.pi / 180
+    stiffness, limits, nq = {}, [], 0
+    for body, attrs in joints:
+        kind, name = attrs.get("type", "hinge"), attrs.get("name")
+        what = f"joint {name!r}" if name else f"an unnamed {kind} joint of body {body!r}"
+        if kind not in JOINT_NQ:
+            raise ModelFileError(
+                f"{where}: {what} has type {kind!r}; expected one of {', '.join(JOINT_NQ)}"
+            )
+        if kind in ("hinge", "slide"):
+            axis = attrs.get("axis", "0 0 1")
+            if not np.linalg.norm(_numbers(axis, 3, where, f"axis of {what}")) >= MIN_AXIS_NORM:
+                raise ModelFileError(
+                    f"{where}: {what}: axis {axis!r} is the zero vector; expected a direction "
+                    f"(norm >= {MIN_AXIS_NORM:g}, as MuJoCo requires)"
+                )
+            if "range" in attrs:
+                lo, hi = _numbers(attrs["range"], 2, where, f"range of {what}")
+                if lo > hi:  # MuJoCo refuses it (limited) or ignores it (autolimits)
+                    raise ModelFileError(
+                        f"{where}: range of {what} is {attrs['range']!r}: lower above upper; "
+                        "expected lower <= upper"
+                    )
+                scale = to_rad if kind == "hinge" else 1.0  # slides: metres, never converted
+                limits.append((nq, lo * scale, hi * scale))
+        if "stiffness" in attrs:
+            text = attrs["stiffness"]
+            if name is None and _numbers(text, 1, where, f"stiffness of {what}")[0] != 0:
+                raise ModelFileError(
+                    f"{where}: {what} has stiffness {text!r} but no name; name the joint "
+                    "(its spring needs a name)"
+                )
+            if name is not None:
+                stiffness[name] = text
+        nq += JOINT_NQ[kind]
     actuators = [a for act in root.findall("actuator") for a in act]
-    return (
-        tuple(a.get("joint") for a in actuators if a.get("joint")),
+    return MjcfExtras(
+        tuple(dict.fromkeys(a.get("joint") for a in actuators if a.get("joint"))),
         stiffness,
-        names,
-        [a.get("name") or a.tag for a in actuators if not a.get("joint")],
+        tuple(name for name, _ in equalities),
+        tuple(a.get("name") or a.tag for a in actuators if not a.get("joint")),
+        tuple(limits),
+        nq,
     )
 
 
-def single_root_copy(path: Path, folder: Path) -> Path | None:
-    """A copy of the MJCF file in ``folder`` with its root bodies in one body, or None.
+def pinocchio_copy(path: Path, folder: Path) -> Path:
+    """The copy of the MJCF file that Pinocchio reads, written in ``folder``.
 
-    Pinocchio's parser keeps only the first body under ``<worldbody>``; files written
-    for MuJoCo put every leg and a free-jointed platform there (MuJoCo accepts a free
-    joint only on such a top-level body). The copy, read by Pinocchio only, moves them
-    into one body ``WORLD_BODY`` without joint at the world origin: no pose changes and
-    the free joint's ``qpos0`` stays the body's pose in the world. Relative ``meshdir``,
-    ``texturedir`` and ``assetdir`` are made absolute so that the copy finds the assets.
-    None when the file has at most one root body (read it as it is).
+    MuJoCo never sees it. It differs from the file where Pinocchio would misread it:
+
+    * Pinocchio keeps only the first body under the first ``<worldbody>``; files written
+      for MuJoCo put every leg and a free-jointed platform there (MuJoCo accepts a free
+      joint only on such a top-level body). The copy moves the root bodies of every
+      ``<worldbody>`` into one body ``WORLD_BODY`` without joint at the world origin: no
+      pose changes and the free joint's ``qpos0`` stays the body's pose in the world.
+    * Pinocchio reads only the first ``<compiler>``, and the assets before it with the
+      default directories: the copy has one, first, that merges them in order (MuJoCo's
+      rule, later attributes winning); a relative ``meshdir``, ``texturedir`` or
+      ``assetdir`` is made absolute so that the copy finds the assets.
+    * Pinocchio reads only the first ``<equality>``, ignores ``active``, and orders the
+      equalities by name keeping one of each name: the copy has the active ones only, in
+      one ``<equality>``, named by their rank, so that Pinocchio returns the connects, then
+      the welds, each in file order (:attr:`MjcfExtras.closures`).
+
+    Call it after :func:`read_mjcf_extras` has checked the file.
 
     Raises:
         ModelFileError: the file is not valid XML.
     """
-    try:
-        tree = ET.parse(path)
-    except (ET.ParseError, OSError) as e:
-        raise ModelFileError(f"robot file {str(path)!r} is not valid XML: {e}") from None
-    world = tree.getroot().find("worldbody")
-    roots = world.findall("body") if world is not None else []
-    if len(roots) < 2 or tree.getroot().find(".//include") is not None:
-        return None  # one root, or <include>, refused by read_mjcf_extras
-    wrapper = ET.Element("body", name=WORLD_BODY)
-    for body in roots:
-        world.remove(body)
-        wrapper.append(body)
-    world.append(wrapper)
-    compilers = tree.getroot().findall("compiler") or [ET.SubElement(tree.getroot(), "compiler")]
-    for compiler in compilers:
-        for key in ("meshdir", "texturedir", "assetdir"):
-            default = key == "meshdir" and "assetdir" not in compiler.attrib
-            if key in compiler.attrib or default:
-                compiler.set(key, str(path.parent.resolve() / compiler.get(key, "")))
+    where = f"robot file {str(path)!r}"
+    tree = ET.ElementTree(_parse_xml(path, where))
+    root = tree.getroot()
+    worlds = root.findall("worldbody")
+    for extra in worlds[1:]:
+        worlds[0].extend(list(extra))
+        root.remove(extra)
+    roots = worlds[0].findall("body") if worlds else []
+    if len(roots) > 1:
+        wrapper = ET.SubElement(worlds[0], "body", name=WORLD_BODY)
+        for body in roots:
+            worlds[0].remove(body)
+            wrapper.append(body)
+    compiler = ET.Element("compiler", _compiler(root))
+    for key in ("meshdir", "texturedir", "assetdir"):
+        if key in compiler.attrib or (key != "assetdir" and "assetdir" not in compiler.attrib):
+            compiler.set(key, str(path.parent.resolve() / compiler.get(key, "")))
+    active = _equalities(root, where)
+    for element in root.findall("compiler") + root.findall("equality"):
+        root.remove(element)
+    root.insert(0, compiler)
+    equality = ET.SubElement(root, "equality")
+    for rank, (_, element) in enumerate(active):
+        element.set("name", f"{rank:09d}")
+        equality.append(element)
     copy = folder / path.name
     tree.write(copy)
     return copy
+
+
+def match_parsed(model: pin.Model, n_constraints: int, extras: MjcfExtras, path: Path) -> None:
+    """Check that Pinocchio read the file's joints and closures; put in the joint limits.
+
+    Pinocchio 4.1 shifts hinge and slide limits by ``ref`` (``ref="0.5" range="-1 1"``
+    gives [-1.5, 0.5], while q is MuJoCo's qpos) and converts slide ranges with the angle
+    unit (``range="-0.01 0.02"`` in degrees gives about [-1.7e-4, 3.5e-4] m): the limits of
+    every hinge and slide with a range become the file's (:attr:`MjcfExtras.limits`).
+    Pinocchio decides which joints are limited (those with a range).
+
+    Args:
+        model: Pinocchio's model of :func:`pinocchio_copy`, corrected in place.
+        n_constraints: number of anchor constraints Pinocchio returned.
+        extras: what :func:`read_mjcf_extras` read from the file.
+        path: the robot file (for messages).
+
+    Raises:
+        ModelFileError: Pinocchio's configuration size or closure count differs from the
+            file's.
+    """
+    if (model.nq, n_constraints) != (extras.nq, len(extras.closures)):
+        raise ModelFileError(
+            f"robot file {str(path)!r}: Pinocchio read {model.nq} joint coordinates and "
+            f"{n_constraints} closures, the file has {extras.nq} and {len(extras.closures)} "
+            f"({list(extras.closures)}); expected the same"
+        )
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    for q, lo, hi in extras.limits:
+        lower[q], upper[q] = lo, hi
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
 
 
 def place_free_joints(model: pin.Model, constraints: list) -> list:
@@ -133,31 +270,93 @@ def place_free_joints(model: pin.Model, constraints: list) -> list:
     return out
 
 
-def _joint_attribute(root: ET.Element, attribute: str) -> list[tuple[str, str]]:
-    """(joint name, value of ``attribute``), ``<default>`` classes and childclass resolved."""
+def _parse_xml(path: Path, where: str) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as e:
+        raise ModelFileError(f"{where} is not valid XML: {e}") from None
+
+
+def _numbers(text: str, count: int, where: str, what: str) -> np.ndarray:
+    """``count`` finite numbers written in ``text``, or :class:`ModelFileError`."""
+    try:
+        values = np.array(text.split(), dtype=float)
+    except ValueError:
+        values = np.array([])
+    if values.shape != (count,) or not np.isfinite(values).all():
+        raise ModelFileError(f"{where}: {what} is {text!r}; expected {count} finite numbers")
+    return values
+
+
+def _compiler(root: ET.Element) -> dict[str, str]:
+    """Attributes of the ``<compiler>`` elements, merged in order (later ones win)."""
+    return {k: v for c in root.findall("compiler") for k, v in c.attrib.items()}
+
+
+def _defaults(root: ET.Element, tag: str) -> dict[str, dict[str, str]]:
+    """Default class -> attributes it gives ``tag`` elements (inherited ones included)."""
     defaults: dict[str, dict[str, str]] = {}
 
-    def visit_default(elem: ET.Element, inherited: dict[str, str]) -> None:
-        joint = elem.find("joint")
+    def visit(elem: ET.Element, inherited: dict[str, str]) -> None:
+        own = elem.find(tag)
         defaults[elem.get("class", "main")] = attrs = {
             **inherited,
-            **(joint.attrib if joint is not None else {}),
+            **(own.attrib if own is not None else {}),
         }
         for child in elem.findall("default"):
-            visit_default(child, attrs)
+            visit(child, attrs)
 
-    def visit_body(elem: ET.Element, cls: str) -> None:
-        cls = elem.get("childclass", cls)
-        for joint in elem.findall("joint"):
-            attrs = {**defaults.get(joint.get("class", cls), {}), **joint.attrib}
-            if "name" in attrs and attribute in attrs:
-                values.append((attrs["name"], attrs[attribute]))
-        for body in elem.findall("body"):
-            visit_body(body, cls)
-
-    values: list[tuple[str, str]] = []
     for d in root.findall("default"):
-        visit_default(d, {})
+        visit(d, {})
+    return defaults
+
+
+def _joints(root: ET.Element) -> list[tuple[str | None, dict[str, str]]]:
+    """(body name, attributes) of every joint, in Pinocchio's order (depth first, a body's
+    joints before its children); classes and childclass resolved, ``<freejoint>`` of type
+    free."""
+    defaults = _defaults(root, "joint")
+    joints: list[tuple[str | None, dict[str, str]]] = []
+
+    def visit(body: ET.Element, cls: str) -> None:
+        cls = body.get("childclass", cls)
+        for j in body:
+            if j.tag == "joint":
+                joints.append(
+                    (body.get("name"), {**defaults.get(j.get("class", cls), {}), **j.attrib})
+                )
+            elif j.tag == "freejoint":
+                joints.append((body.get("name"), {**j.attrib, "type": "free"}))
+        for child in body.findall("body"):
+            visit(child, cls)
+
     for world in root.findall("worldbody"):
-        visit_body(world, "main")
-    return values
+        visit(world, "main")
+    return joints
+
+
+def _equalities(root: ET.Element, where: str) -> list[tuple[str, ET.Element]]:
+    """(closure name, element) of the active equalities, in :attr:`MjcfExtras.closures`
+    order, from every ``<equality>`` section; classes resolved for ``active``."""
+    found = [e for eq in root.findall("equality") for e in eq]
+    other = sorted({e.tag for e in found} - set(MJCF_EQUALITIES))
+    if other:
+        raise ModelFileError(f"{where}: equality <{other[0]}> is not supported (connect, weld)")
+    defaults = _defaults(root, "equality")
+    active = []
+    for tag in MJCF_EQUALITIES:  # Pinocchio returns the connects, then the welds
+        for i, e in enumerate([f for f in found if f.tag == tag]):
+            name = e.get("name") or f"{tag}{i}"
+            if e.get("body1") is None:
+                raise ModelFileError(
+                    f"{where}: <{tag}> {name!r} names no body1 (site equalities are not "
+                    "supported); expected body1 and optionally body2"
+                )
+            state = {**defaults.get(e.get("class", "main"), {}), **e.attrib}.get("active", "true")
+            if state not in ("true", "false"):
+                raise ModelFileError(
+                    f"{where}: <{tag}> {name!r} has active={state!r}; expected 'true' or 'false'"
+                )
+            if state == "true":
+                active.append((name, e))
+    return active

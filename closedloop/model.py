@@ -86,8 +86,13 @@ def joint_id(model: pin.Model, name: str) -> int:
     """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints
     (:class:`InvalidInputError` when ``name`` is not a str)."""
     check_name("joint", name)
-    if not model.existJointName(name):
-        raise NameNotFoundError("joint", name, list(model.names)[1:])
+    if not model.existJointName(name) or model.getJointId(name) == 0:  # 0: the universe
+        hint = ""
+        if model.existJointName(name):
+            hint = "joint 0, the world: it does not move"
+        elif model.existFrame(name, pin.FrameType.FIXED_JOINT):
+            hint = "a fixed joint: it does not move"
+        raise NameNotFoundError("joint", name, list(model.names)[1:], hint)
     return model.getJointId(name)
 
 
@@ -125,6 +130,11 @@ def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
         jm = model.joints[j]
         if jm.nv:
             S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
+            if not np.all(np.any(S != 0.0, axis=0)):
+                raise InvalidInputError(
+                    f"joint {model.names[j]!r} ({jm.shortname()}) has a coordinate that moves "
+                    "nothing (a zero axis in the robot file?); expected an axis of non-zero length"
+                )
             mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
     return frozen(mask), characteristic_length([M.translation for M in data.oMi])
 
@@ -159,6 +169,49 @@ def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
             f"{np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive definite matrix"
         ) from None
     return frozen(K)
+
+
+def joint_names(what: str, names) -> tuple[str, ...]:
+    """``names`` (an iterable of str, not a str) as a tuple; repeated names refused."""
+    if isinstance(names, str) or not isinstance(names, Iterable):
+        raise InvalidInputError(
+            f"{what} joints must be a list of joint names, got {names!r} ({type(names).__name__})"
+        )
+    names = tuple(names)
+    repeated = sorted({n for n in names if isinstance(n, str) and names.count(n) > 1})
+    if repeated:
+        raise InvalidInputError(f"{what} joints {repeated} are listed more than once")
+    return names
+
+
+def _checked_closures(model: pin.Model, closures) -> tuple[Closure, ...]:
+    """The closures as :class:`Closure` objects, each joining two bodies of ``model``."""
+    if isinstance(closures, str) or not isinstance(closures, Iterable):
+        raise InvalidInputError(
+            f"closures must be a list of Closure or anchor constraints, got {closures!r}"
+        )
+    out = []
+    for i, c in enumerate(closures):
+        c = c if isinstance(c, Closure) else Closure(c, f"closure{i}")
+        if not isinstance(c.constraint, AnchorConstraint):
+            raise InvalidInputError(
+                f"closure {i} is a {type(c.constraint).__name__}; expected a Closure, a "
+                "pinocchio.PointAnchorConstraintModel or a pinocchio.FrameAnchorConstraintModel"
+            )
+        j1, j2 = c.constraint.joint1_id, c.constraint.joint2_id
+        if not (0 <= j1 < model.njoints and 0 <= j2 < model.njoints):
+            raise InvalidInputError(
+                f"closure {c.name!r} joins joints {j1} and {j2}, but the model has joints "
+                f"0..{model.njoints - 1}: it was built for another model"
+            )
+        if j1 == j2:
+            raise InvalidInputError(
+                f"closure {c.name!r} has both ends on the body of joint {model.names[j1]!r}: "
+                "a closure must join two different bodies (it would hold nothing, or never "
+                "close)"
+            )
+        out.append(c)
+    return tuple(out)
 
 
 class ClosedLoopModel:
@@ -200,27 +253,29 @@ class ClosedLoopModel:
         *,
         _neutral: tuple[np.ndarray, float] | None = None,  # with_springs: the same model
     ):
+        if not isinstance(model, pin.Model):
+            raise InvalidInputError(
+                f"ClosedLoopModel: model must be a pinocchio.Model, got {type(model).__name__}"
+            )
         self.model = model
         self._local = threading.local()
         self._pool: list[tuple[pin.Data, list]] = []
         self._memo: dict = {}
         self._frame_ids: dict[str, int] = {}
-        self.closures = tuple(
-            c if isinstance(c, Closure) else Closure(c, f"closure{i}")
-            for i, c in enumerate(closures)
-        )
+        self.closures = _checked_closures(model, closures)
         self.visual_model = visual_model
         self.collision_model = collision_model
         self.name = name or model.name
-        self.actuated = tuple(actuated)
+        self.actuated = joint_names("actuated", actuated)
         self.actuated_ids = tuple(joint_id(model, n) for n in self.actuated)
         for n, j in zip(self.actuated, self.actuated_ids, strict=True):
-            if model.joints[j].nv != 1 or model.joints[j].nq != 1:
+            if model.joints[j].nv != 1 or model.joints[j].nq not in (1, 2):
                 raise InvalidInputError(
-                    f"actuated joint {n!r} must have one coordinate (revolute or prismatic), "
-                    f"it has nq={model.joints[j].nq}, nv={model.joints[j].nv}"
+                    f"actuated joint {n!r} must have one coordinate (revolute, continuous or "
+                    f"prismatic), it has nq={model.joints[j].nq}, nv={model.joints[j].nv}"
                 )
-        self._spec = (dict(springs or {}), tuple(locked))
+        locked = joint_names("locked", locked)
+        self._spec = (dict(springs or {}), locked)
         self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
         self.stiffness = self._stiffness_vector(springs or {}, locked)
         self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
@@ -300,6 +355,16 @@ class ClosedLoopModel:
         blocks = {}
         for name, value in springs.items():
             jm = self.model.joints[joint_id(self.model, name)]
+            if not jm.nv:
+                raise InvalidInputError(
+                    f"joint {name!r} ({jm.shortname()}) has no coordinate of its own (a mimic "
+                    "joint follows its leader): give the spring to the joint it follows"
+                )
+            if isinstance(value, bool | np.bool_) or np.asarray(value).dtype == bool:
+                raise InvalidInputError(
+                    f"stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
+                    "[N m/rad or N/m], not a bool"
+                )
             value = real_array(value, f"stiffness of joint {name!r}")
             if value.ndim == 2 and value.size > 1:
                 blocks[name] = _spd_block(name, value, jm.nv)
@@ -310,7 +375,8 @@ class ClosedLoopModel:
             values = np.broadcast_to(value, (jm.nv,)) if value.ndim == 0 else value
             if values.shape != (jm.nv,):
                 raise InvalidInputError(
-                    f"stiffness of joint {name!r} has {values.size} values; expected 1 or {jm.nv}"
+                    f"stiffness of joint {name!r} has {values.size} values; expected "
+                    + ("1" if jm.nv == 1 else f"1 or {jm.nv}")
                 )
             if np.any(np.isnan(values)) or np.any(values < 0):
                 raise InvalidInputError(
@@ -398,6 +464,36 @@ class ClosedLoopModel:
     def actuated_v_indices(self) -> np.ndarray:
         """(n_act,) read-only indices of the actuated coordinates in the tangent vector."""
         return self.memo("actuated_v", lambda: self._joint_indices("idx_v"))
+
+    def set_actuated(self, q: np.ndarray, values: np.ndarray) -> None:
+        """Write the actuated joints' values (n_act,) [rad or m] into q (nq,) in place: the
+        coordinate, or (cos, sin) for a continuous (unbounded revolute) joint."""
+        unbounded, idx = self._unbounded_actuated(), self.actuated_q_indices
+        if not unbounded.any():
+            q[idx] = values
+            return
+        values = np.asarray(values, dtype=float)
+        q[idx[~unbounded]] = values[~unbounded]
+        q[idx[unbounded]], q[idx[unbounded] + 1] = (
+            np.cos(values[unbounded]),
+            np.sin(values[unbounded]),
+        )
+
+    def actuated_values(self, q: np.ndarray) -> np.ndarray:
+        """(n_act,) the actuated joints' values [rad or m] in q (nq,) (the angle of a
+        continuous joint from its (cos, sin))."""
+        unbounded, idx = self._unbounded_actuated(), self.actuated_q_indices
+        values = np.array(q[idx], dtype=float)
+        values[unbounded] = np.arctan2(q[idx[unbounded] + 1], q[idx[unbounded]])
+        return values
+
+    def _unbounded_actuated(self) -> np.ndarray:
+        """(n_act,) bool: the actuated joint is continuous (nq = 2: cos, sin)."""
+        joints = self.model.joints
+        return self.memo(
+            "unbounded_actuated",
+            lambda: frozen(np.array([joints[j].nq == 2 for j in self.actuated_ids], dtype=bool)),
+        )
 
     def _joint_indices(self, kind: str) -> np.ndarray:
         joints = self.model.joints

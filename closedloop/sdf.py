@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,7 +86,11 @@ class _Reader:
             raise ModelFileError(f"{self.where} is not valid XML: {e}") from None
         if root.tag != "sdf":
             self.fail(f"root element is <{root.tag}>; expected <sdf>")
-        self.version = tuple(int(v) for v in (root.get("version") or "1.6").split(".")[:2])
+        version = root.get("version") or "1.6"
+        try:
+            self.version = tuple(int(v) for v in version.split(".")[:2])
+        except ValueError:
+            self.fail(f"version {version!r}; expected numbers such as '1.6'")
         models = root.findall("model")
         if len(models) != 1 or root.find(".//include") is not None:
             self.fail(
@@ -453,7 +458,14 @@ def load_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
     and their rest configuration, which it does not read, are read from the XML here.
     """
     if not getattr(pin, "WITH_SDFORMAT", False):
-        return read_sdf(path, free_base=free_base, geometry=geometry)
+        try:
+            return read_sdf(path, free_base=free_base, geometry=geometry)
+        except RecursionError:  # the reader follows the tree and the poses recursively
+            raise ModelFileError(
+                f"SDF file {str(path)!r}: its links (or its poses relative_to one another) are "
+                "nested too deep for the reader (Python's recursion limit, "
+                f"{sys.getrecursionlimit()}); expected a shallower tree"
+            ) from None
     r = _Reader(Path(path))
     root = pin.JointModelFreeFlyer() if free_base else None
     types = [pin.GeometryType.VISUAL] if geometry else None

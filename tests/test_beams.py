@@ -427,6 +427,19 @@ def test_ur5_energy_shares_by_hand(ur5_beams):
     assert sum(shares.values()) == pytest.approx(1.0, rel=1e-12)
 
 
+@pytest.mark.parametrize("size", [1e-300, 1e200, 1e308])
+def test_energy_shares_do_not_depend_on_the_size_of_the_load(ur5_beams, size):
+    """Shares are ratios of energies, quadratic in the load: the same for a load of any
+    size, tiny ones (energies below the smallest double) and huge ones (above the largest)."""
+    base, flex, q = ur5_beams
+    w = np.array([30.0, -10.0, 20.0, 1.0, -2.0, 0.5])
+    res = cl.compliance(flex, map_configuration(base.model, flex.model, q), "ee_link")
+    reference = energy_shares(flex, res, w)
+    shares = energy_shares(flex, res, w * (size / 30.0))
+    assert shares.keys() == reference.keys()
+    np.testing.assert_allclose(list(shares.values()), list(reference.values()), rtol=1e-14)
+
+
 def test_ur5_beams_keep_kinematics_and_weight(ur5_beams):
     base, flex, q = ur5_beams
     qb = map_configuration(base.model, flex.model, q)
@@ -464,6 +477,8 @@ def _tip_file(tmp_path):
     [
         ({"E": -2.1e11}, r"beam 'arm': E \[Pa\] is -210000000000.0; expected a finite number > 0"),
         ({"G": 0}, r"beam 'arm': G \[Pa\] is 0; expected a finite number > 0"),
+        ({"E": True}, r"beam 'arm': E \[Pa\] is True; expected a finite number > 0"),
+        ({"G": 80.0}, r"Poisson ratio E / \(2 G\) - 1 = 1\.312e\+09; expected one in \(-1, 0.5\]"),
         ({"section": {"shape": "circle", "d": -0.01}}, r"beam 'arm': section d is -0.01"),
         ({"section": {"shape": "tube", "d": 0.02, "t": 0.015}},
          r"beam 'arm': tube wall t = 0.015 m is thicker than its radius 0.01 m"),

@@ -283,7 +283,7 @@ def test_models_by_name_from_an_empty_folder(ur5_urdf, tmp_path):
     assert fourbar.returncode == files.returncode == 1  # planar: rank 3, K does not exist
     assert json.loads(fourbar.stdout)["C"] == json.loads(files.stdout)["C"]
     panda = python_m("stiffness", "panda", "--frame", "panda_hand", "--joint-stiffness", 1e4,
-                     "--q", 0, -0.5, 0, -2, 0, 1.5, 0.8, 0, 0, "--json", cwd=tmp_path)  # fmt: skip
+                     "--q", 0, -0.5, 0, -2, 0, 1.5, 0.8, 0, "--json", cwd=tmp_path)  # fmt: skip
     assert panda.returncode == 0 and json.loads(panda.stdout)["rank"] == 6
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import gc
 import pickle
+import re
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -743,12 +744,26 @@ def test_bad_configuration_arguments_are_typed_errors(fourbar_q):
         ({"length": -1.0}, "characteristic length must be finite and > 0"),
         ({"length": np.nan}, "characteristic length must be finite and > 0 .* nan"),
         ({"length": np.inf}, "characteristic length must be finite and > 0 .* inf"),
+        ({"length": 10**400}, "characteristic length must be finite and > 0 .* 1000"),
+        ({"length": True}, r"characteristic length must be a real number \[m\], got True"),
+        ({"length": 1j}, r"must be a real number \[m\], got 1j \(complex\)"),
+        ({"length": "0.5"}, r"must be a real number \[m\], got '0.5' \(str\)"),
     ],
 )
 def test_bad_options_are_typed_errors_naming_them(fourbar_q, kwargs, match):
     clm, q, frame = fourbar_q
     with pytest.raises(cl.InvalidInputError, match=match):
         cl.compliance(clm, q, frame, **kwargs)
+
+
+@pytest.mark.parametrize("length", [np.int64(2), np.int32(2), np.float32(2.0), 2])
+def test_a_length_of_any_real_number_type_is_that_length(fourbar_q, length):
+    clm, q, frame = fourbar_q
+    expected = cl.compliance(clm, q, frame, length=2.0)
+    for result in (cl.compliance(clm, q, frame, length=length),
+                   cl.compliances(clm, q[None], frame, length=length)):  # fmt: skip
+        assert result.length == 2.0
+        np.testing.assert_array_equal(np.reshape(result.C, (6, 6)), expected.C)
 
 
 def test_a_scalar_q_is_the_configuration_of_a_one_coordinate_model():
@@ -840,3 +855,21 @@ def test_a_quaternion_within_the_tolerance_is_normalised():
     np.testing.assert_allclose(cl.compliance(clm, typed, "tip").C, ref, rtol=1e-8)
     np.testing.assert_allclose(cl.compliances(clm, [typed], "tip").C[0], ref, rtol=1e-8)
     np.testing.assert_allclose(np.linalg.norm(Configuration(clm, typed).q[3:7]), 1.0, rtol=1e-15)
+
+
+@pytest.mark.parametrize("k", [1e-310, 1e308])
+def test_overflowing_springs_are_the_typed_error_even_with_warnings_as_errors(ur5_urdf, k):
+    """Springs at the ends of the double range overflow C or K: the typed error naming the
+    springs, and no numpy warning on the way (a warning filter set to "error" must not
+    turn it into a RuntimeWarning)."""
+    import warnings
+
+    clm = cl.load_model(ur5_urdf, joint_stiffness=k, geometry=False)
+    q = np.array([0.0, -1.0, 1.5, -0.5, 1.2, 0.3])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        named = re.escape(f"springs from {k:.3g} to")
+        with pytest.raises(cl.SingularConfigurationError, match=named):
+            cl.compliance(clm, q, "tool0")
+        with pytest.raises(cl.SingularConfigurationError, match="at configuration 0 of Q"):
+            cl.compliances(clm, q[None], "tool0")

@@ -194,8 +194,39 @@ def test_panda_arm_actuated_fingers_locked(panda_urdf):
     assert sorted(clm.actuated) == sorted(arm)
     for n in arm:
         assert stiffness_of(clm, n) == 1e4
-    for n in fingers:
-        assert stiffness_of(clm, n) == math.inf
+    leader, follower = fingers  # the second finger mimics the first: no coordinate of its own
+    assert stiffness_of(clm, leader) == math.inf
+    assert clm.model.joints[clm.joint_id(follower)].nv == 0
+
+
+MIMIC_URDF = """<robot name="mimic">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.5 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+    <mimic joint="j1" multiplier="2" offset="0.1"/></joint>
+  <joint name="jt" type="fixed"><parent link="l2"/><child link="tip"/>
+    <origin xyz="0.5 0 0"/></joint>
+</robot>"""
+
+
+def test_a_mimic_joint_follows_its_leader(tmp_path):
+    """j2 = 2 j1 + 0.1: one coordinate t, the tip at 0.5 (cos t, sin t) + 0.5 (cos a,
+    sin a), a = 3 t + 0.1, and C = J J^T / k with J = d(tip, rotation)/dt by hand."""
+    path = tmp_path / "mimic.urdf"
+    path.write_text(MIMIC_URDF)
+    clm = load_model(path, joint_stiffness=100.0, geometry=False)
+    assert clm.actuated == ("j1",) and clm.model.nv == 1
+    t = 0.3
+    a = 3.0 * t + 0.1
+    J = np.array([-0.5 * np.sin(t) - 1.5 * np.sin(a), 0.5 * np.cos(t) + 1.5 * np.cos(a),
+                  0.0, 0.0, 0.0, 3.0])  # fmt: skip
+    C = compliance(clm, np.array([t]), "tip").C
+    np.testing.assert_allclose(C, np.outer(J, J) / 100.0, rtol=0, atol=1e-16)
+    with pytest.raises(InvalidInputError, match=r"'j2' .* no coordinate of its own"):
+        load_model(path, springs={"j2": 5.0}, geometry=False)
 
 
 def test_tree_branching_at_root_needs_a_closure_file(tmp_path):

@@ -62,7 +62,7 @@ ATOL_PLACEMENT = 1e-12
 OPEN_GAP = 1e-3
 FOURBAR_WRENCH = [3.0, 0.0, -20.0, 0.0, 0.0, 0.0]  # [N, N m] at P
 UR5_WRENCH = [10.0, -5.0, -40.0, 0.0, 0.0, 2.0]
-PANDA_Q = [0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8, 0.02, 0.02]
+PANDA_Q = [0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8, 0.02]  # the second finger mimics the first
 #: The issue's bound for the UR5 page (18.7 MB with every mesh twice as Collada text).
 UR5_MAX_PAGE_BYTES = 10_000_000
 BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")

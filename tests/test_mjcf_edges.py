@@ -1,0 +1,340 @@
+"""MJCF files that Pinocchio's parser reads silently wrong: repeated names, unnamed springs,
+zero axes, several actuators on one joint, joint limits (``ref``, degrees), inactive or
+scattered equalities. Each file is read as MuJoCo reads it, or refused with a message that
+names the value and the file."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import closedloop as cl
+from closedloop.exceptions import ModelFileError
+from closedloop.io import load_model, reference_configuration
+
+INERTIAL = '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
+RADIAN = '<compiler angle="radian"/>'
+
+
+def body(name: str, joints: str, children: str = "", attributes: str = "") -> str:
+    return f'<body name="{name}" {attributes}>{joints}{INERTIAL}{children}</body>'
+
+
+def mujoco(bodies: str, head: str = RADIAN, tail: str = "") -> str:
+    return f'<mujoco model="t">{head}<worldbody>{bodies}</worldbody>{tail}</mujoco>'
+
+
+def write(tmp_path: Path, text: str, name: str = "t.xml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def refused(path: Path, match: str) -> str:
+    """The message of the ModelFileError that loading ``path`` raises; it names the file."""
+    with pytest.raises(ModelFileError, match=match) as info:
+        load_model(path, geometry=False)
+    assert str(path) in str(info.value)
+    return str(info.value)
+
+
+def limits(robot, joint: str) -> tuple[float, float]:
+    """(lower, upper) position limit of a one-coordinate joint [rad or m]."""
+    q = robot.model.joints[robot.joint_id(joint)].idx_q
+    return robot.model.lowerPositionLimit[q], robot.model.upperPositionLimit[q]
+
+
+def fourbar_with(fourbar_mjcf: Path, tmp_path: Path, old: str, new: str) -> Path:
+    text = fourbar_mjcf.read_text()
+    assert old in text
+    return write(tmp_path, text.replace(old, new, 1))
+
+
+# --------------------------------------------------------------------- repeated names
+@pytest.mark.parametrize(
+    ("bodies", "tail", "kind", "name"),
+    [  # another joint is lost; a joint is renamed; a closure is lost
+        (body("a", '<joint name="j"/>', body("b", '<joint name="j"/>')), "", "joint", "j"),
+        (body("a", '<joint name="j"/>', body("a", '<joint name="k"/>')), "", "body", "a"),
+        (
+            body("a", '<joint name="j"/>', body("b", '<freejoint name="j"/>')),
+            "",
+            "joint",
+            "j",
+        ),
+        (
+            body("a", '<joint name="j"/>', body("b", '<joint name="k"/>')),
+            '<equality><connect name="c" body1="b" anchor="0 0 1"/>'
+            '<weld name="c" body1="a" body2="b"/></equality>',
+            "equality",
+            "c",
+        ),
+    ],
+)
+def test_repeated_names_are_refused(tmp_path, bodies, tail, kind, name):
+    refused(write(tmp_path, mujoco(bodies, tail=tail)), f"repeated {kind} name '{name}'")
+
+
+def test_a_joint_may_share_its_body_name(tmp_path):
+    """MuJoCo's names are unique per kind only."""
+    robot = load_model(write(tmp_path, mujoco(body("a", '<joint name="a"/>'))), geometry=False)
+    assert robot.model.names[1] == "a"
+
+
+# --------------------------------------------------------------- springs without name
+@pytest.mark.parametrize(
+    ("head", "joint"),
+    [
+        (RADIAN, '<joint type="slide" stiffness="1e4"/>'),
+        (RADIAN + '<default><joint stiffness="20"/></default>', "<joint/>"),
+        (
+            RADIAN + '<default><default class="k"><joint stiffness="20"/></default></default>',
+            '<joint class="k"/>',
+        ),
+    ],
+)
+def test_unnamed_joint_with_a_spring_is_refused(tmp_path, head, joint):
+    text = mujoco(body("arm", joint), head=head)
+    refused(write(tmp_path, text), r"joint of body 'arm' has stiffness '(1e4|20)' but no name")
+
+
+def test_unnamed_joint_with_zero_stiffness_loads(tmp_path):
+    head = RADIAN + '<default><joint stiffness="0"/></default>'
+    text = mujoco(body("arm", "<joint/>", body("b", '<joint name="j" stiffness="5"/>')), head)
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    np.testing.assert_array_equal(robot.stiffness, [0.0, 5.0])
+
+
+# ------------------------------------------------------------------------- zero axis
+@pytest.mark.parametrize(
+    ("head", "joint", "shown"),
+    [
+        (RADIAN, '<joint name="j" axis="0 0 0"/>', "joint 'j'"),
+        (RADIAN, '<joint name="j" type="slide" axis="0 0 0"/>', "joint 'j'"),
+        (RADIAN, '<joint type="slide" axis="0 0 0"/>', "slide joint of body 'arm'"),
+        (RADIAN + '<default><joint axis="0 0 0"/></default>', '<joint name="j"/>', "joint 'j'"),
+    ],
+)
+def test_zero_axis_is_refused(tmp_path, head, joint, shown):
+    text = mujoco(body("arm", joint), head=head)
+    refused(write(tmp_path, text), f"{shown}: axis '0 0 0' is the zero vector; expected a")
+
+
+def test_ball_joint_ignores_its_axis(tmp_path):
+    text = mujoco(body("arm", '<joint name="b" type="ball" axis="0 0 0"/>'))
+    assert load_model(write(tmp_path, text), actuated=[], geometry=False).model.nq == 4
+
+
+# -------------------------------------------------------------- actuators on one joint
+def test_each_driven_joint_is_actuated_once(fourbar_mjcf, tmp_path):
+    path = fourbar_with(
+        fourbar_mjcf,
+        tmp_path,
+        '<motor name="crank_motor" joint="crank"/>',
+        '<position joint="crank"/><velocity joint="rocker"/><velocity joint="crank"/>',
+    )
+    robot = load_model(path, geometry=False)
+    assert robot.actuated == ("crank", "rocker")
+    single = load_model(
+        fourbar_with(fourbar_mjcf, tmp_path, "</actuator>", '<velocity joint="crank"/></actuator>'),
+        geometry=False,
+    )
+    assert single.actuated == ("crank",)
+    assert cl.assemble(single, [0.5]).q.shape == (single.model.nq,)
+
+
+# ---------------------------------------------------------------------- joint limits
+def written_range(path: Path, joint: str) -> np.ndarray:
+    """The range the file writes for ``joint``, as numbers (file units)."""
+    element = ET.parse(path).getroot().find(f".//joint[@name='{joint}']")
+    return np.array(element.get("range").split(), dtype=float)
+
+
+def test_fourbar_limits_are_the_ranges_of_the_file(fourbar_mjcf, fourbar_urdf, fourbar_yaml):
+    """fourbar.xml (radian) writes ref next to every hinge range: q is MuJoCo's qpos, the
+    range is not shifted. The URDF twin has the same limits."""
+    mj = load_model(fourbar_mjcf, geometry=False)
+    urdf = load_model(fourbar_urdf, fourbar_yaml, geometry=False)
+    for joint in ("crank", "crank_axial", "coupler", "rocker", "rocker_axial"):
+        np.testing.assert_array_equal(limits(mj, joint), written_range(fourbar_mjcf, joint))
+        np.testing.assert_array_equal(limits(mj, joint), limits(urdf, joint))
+
+
+@pytest.mark.parametrize(
+    ("head", "to_rad"),
+    [(RADIAN, 1.0), ('<compiler angle="degree"/>', np.pi / 180), ("", np.pi / 180)],
+)
+def test_hinge_range_in_the_angle_unit_slide_range_in_metres(tmp_path, head, to_rad):
+    hinge, slide = ("-10", "20"), ("-0.01", "0.02")
+    joints = (
+        f'<joint name="h" ref="5" range="{" ".join(hinge)}"/>'
+        f'<joint name="s" type="slide" ref="0.005" range="{" ".join(slide)}"/>'
+    )  # two joints on one body: a Pinocchio composite joint
+    text = mujoco(
+        body("arm", '<joint range="-1 2"/>', body("b", joints)), head=head
+    )  # an unnamed hinge first
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    np.testing.assert_array_equal([lower[0], upper[0]], np.array([-1.0, 2.0]) * to_rad)
+    np.testing.assert_array_equal([lower[1], upper[1]], np.array(hinge, dtype=float) * to_rad)
+    np.testing.assert_array_equal([lower[2], upper[2]], np.array(slide, dtype=float))
+    q0 = reference_configuration(robot)
+    np.testing.assert_array_equal(q0, [0.0, 5.0 * to_rad, 0.005])  # q = MuJoCo's qpos
+
+
+def test_ranges_of_default_classes(tmp_path):
+    head = (
+        RADIAN + '<default><joint range="-1 1" ref="0.2"/>'
+        '<default class="wide"><joint range="-2 3"/></default></default>'
+    )
+    text = mujoco(
+        body(
+            "a", '<joint name="h"/>', body("b", '<joint name="g"/>', attributes='childclass="wide"')
+        ),
+        head=head,
+    )
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    assert limits(robot, "h") == (-1.0, 1.0)
+    assert limits(robot, "g") == (-2.0, 3.0)
+
+
+def test_joint_without_range_stays_unlimited(tmp_path):
+    text = mujoco(body("a", '<joint name="h" ref="0.3"/>'))
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    assert limits(robot, "h") == (-np.inf, np.inf)
+
+
+def test_compiler_elements_merge_in_order(tmp_path):
+    """MuJoCo merges the <compiler> elements, later attributes winning; Pinocchio reads only
+    the first (here: degrees for ref and range)."""
+    head = '<compiler autolimits="true"/><compiler angle="radian"/>'
+    text = mujoco(body("a", '<joint name="h" ref="0.5" range="-1 1"/>'), head=head)
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    assert limits(robot, "h") == (-1.0, 1.0)
+    assert reference_configuration(robot)[0] == 0.5
+
+
+@pytest.mark.parametrize(
+    ("joint_range", "match"),
+    [
+        ("-1 one", "range of joint 'h' is '-1 one'; expected 2 finite numbers"),
+        ("1 -1", r"range of joint 'h' is '1 -1': lower above upper; expected lower <= upper"),
+    ],
+)
+def test_bad_range_is_refused(tmp_path, joint_range, match):
+    text = mujoco(body("a", f'<joint name="h" range="{joint_range}"/>'))
+    refused(write(tmp_path, text), match)
+
+
+# ------------------------------------------------------------------------ equalities
+INACTIVE = (
+    '<connect name="off" active="false" body1="crank_end" body2="rocker_end" anchor="0 0 0"/>'
+)
+
+
+@pytest.mark.parametrize(
+    ("head", "equality"),
+    [
+        ("", INACTIVE),
+        (
+            '<default><default class="off"><equality active="false"/></default></default>',
+            INACTIVE.replace('active="false"', 'class="off"'),
+        ),
+    ],
+)
+def test_inactive_equality_is_no_closure(fourbar_mjcf, tmp_path, head, equality):
+    """An inactive connect that would pin the crank end to the rocker end (and so stiffen
+    the four-bar) is not a closure: the compliance is the four-bar's."""
+    path = fourbar_with(fourbar_mjcf, tmp_path, "<equality>", "<equality>" + equality)
+    path.write_text(path.read_text().replace("<worldbody>", head + "<worldbody>", 1))
+    robot, fourbar = load_model(path, geometry=False), load_model(fourbar_mjcf, geometry=False)
+    assert [c.name for c in robot.closures] == [c.name for c in fourbar.closures]
+    C = [cl.compliance(r, reference_configuration(r), "P").C for r in (robot, fourbar)]
+    np.testing.assert_array_equal(C[0], C[1])
+
+
+def test_bad_active_value_is_refused(fourbar_mjcf, tmp_path):
+    path = fourbar_with(
+        fourbar_mjcf, tmp_path, "<equality>", "<equality>" + INACTIVE.replace('"false"', '"0"')
+    )
+    refused(path, r"<connect> 'off' has active='0'; expected 'true' or 'false'")
+
+
+def pendulums(equalities: str) -> str:
+    """Two 1 m pendulums side by side (x = 0 and x = 0.5 m), closed by ``equalities``."""
+    left = body("a", '<joint name="ja" axis="0 1 0"/>', body("a_tip", "", attributes='pos="0 0 1"'))
+    right = body("b", '<joint name="jb" axis="0 1 0"/>', attributes='pos="0.5 0 0"')
+    return mujoco(body("ground", "", left + right), tail=equalities)
+
+
+def anchor_of(closure) -> np.ndarray:
+    return closure.constraint.joint1_placement.translation
+
+
+@pytest.mark.parametrize(
+    "tail",
+    [  # names out of alphabetical order; no names; two <equality> sections
+        '<equality><connect name="z" body1="a" body2="b" anchor="0.1 0 0"/>'
+        '<connect name="a" body1="a" body2="b" anchor="0.2 0 0"/></equality>',
+        '<equality><connect body1="a" body2="b" anchor="0.1 0 0"/>'
+        '<connect body1="a" body2="b" anchor="0.2 0 0"/></equality>',
+        '<equality><connect name="z" body1="a" body2="b" anchor="0.1 0 0"/></equality>'
+        '<equality><connect name="a" body1="a" body2="b" anchor="0.2 0 0"/></equality>',
+    ],
+)
+def test_every_equality_is_a_closure_with_its_own_name(tmp_path, tail):
+    """Pinocchio orders equalities by name, keeps one of each name and reads only the first
+    <equality> section: every closure is kept, named as in the file."""
+    robot = load_model(write(tmp_path, pendulums(tail)), actuated=[], geometry=False)
+    element = [e for e in ET.fromstring(pendulums(tail)).iter() if e.tag == "connect"]
+    names = [e.get("name") or f"connect{i}" for i, e in enumerate(element)]
+    assert [c.name for c in robot.closures] == names
+    for closure, e in zip(robot.closures, element, strict=True):
+        np.testing.assert_array_equal(anchor_of(closure), np.array(e.get("anchor").split(), float))
+
+
+def test_site_equality_is_refused(tmp_path):
+    tail = '<equality><connect site1="s" site2="t"/></equality>'
+    refused(write(tmp_path, pendulums(tail)), "<connect> 'connect0' names no body1")
+
+
+# ------------------------------------------------------------------ file structure
+def test_several_worldbody_sections_are_one(tmp_path):
+    text = pendulums("").replace(
+        "</worldbody>",
+        "</worldbody><worldbody>" + body("c", '<joint name="jc"/>') + "</worldbody>",
+        1,
+    )
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    assert {"ja", "jb", "jc"} <= set(robot.model.names)
+
+
+def test_bodies_in_a_frame_are_refused(tmp_path):
+    text = mujoco(
+        body(
+            "a",
+            '<joint name="h"/>',
+            '<frame pos="0 0 1">' + body("b", '<joint name="g"/>') + "</frame>",
+        )
+    )
+    refused(write(tmp_path, text), "<frame> holding bodies or joints is not supported")
+
+
+def test_meshes_of_a_file_without_compiler(tmp_path):
+    """Several root bodies, no <compiler>: the copy Pinocchio reads still finds the meshes
+    (the compiler it adds comes before the assets)."""
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.stl").write_text(
+        "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 0.1 0 0\n"
+        "vertex 0 0.1 0\nendloop\nendfacet\nendsolid t\n"
+    )
+    asset = '<asset><mesh name="tri" file="meshes/tri.stl"/></asset>'
+    bodies = body("a", '<joint name="h"/><geom type="mesh" mesh="tri"/>') + body(
+        "b", '<joint name="g"/>'
+    )
+    robot = load_model(write(tmp_path, mujoco(bodies, head=asset)), actuated=["h"])
+    meshes = [g.meshPath for g in robot.visual_model.geometryObjects]
+    assert meshes == [str(tmp_path / "meshes" / "tri.stl")]
