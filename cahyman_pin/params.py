@@ -31,6 +31,11 @@ LEG_MASSES = ("m_b", "m_c", "m_d", "m_h")
 BEAM_FIELDS = ("E_beam", "G_beam", "d_leg", "t_leg", "d_arm", "t_arm", "d_MM2", "t_MM2", "L_MM2")
 
 
+#: Magnitudes of a non-zero parameter (SI) accepted: the backends multiply several of
+#: them (stiffness x length^2, mass x gravity x length), and squares of squares stay finite.
+PARAM_RANGE = (1e-60, 1e60)
+
+
 @dataclass(frozen=True)
 class CaHyManParams:
     """Dimensions [m], springs [N/m or N m/rad] and masses [kg] of CaHyMan.
@@ -116,6 +121,12 @@ class CaHyManParams:
                 )
             if not math.isfinite(value):
                 raise InvalidInputError(f"CaHyMan parameter {f.name}={value!r} must be finite")
+            if value and not PARAM_RANGE[0] <= abs(value) <= PARAM_RANGE[1]:
+                raise InvalidInputError(
+                    f"CaHyMan parameter {f.name}={value!r} is outside the range "
+                    f"{PARAM_RANGE[0]:g}..{PARAM_RANGE[1]:g} (SI) in which the closed forms and "
+                    "the model stay within the floating point range"
+                )
         for name in (*_LENGTHS, *_SPRINGS, "s4_max", *BEAM_FIELDS):
             if getattr(self, name) <= 0.0:
                 raise InvalidInputError(

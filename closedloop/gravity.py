@@ -65,6 +65,11 @@ class Payload:
         return {"mass_kg": float(self.mass), "frame": self.frame, "offset_m": self.offset.tolist()}
 
 
+#: Largest weight moment m max|g_i| max(L, 1 m) [N m] of a gravity load: its derivatives and the
+#: equilibrium solver multiply it by the joint Jacobians and their squares.
+WEIGHT_MAX = 1e150
+
+
 class GravityLoad:
     """Weight of a model's links and payloads under the acceleration ``gravity``.
 
@@ -97,6 +102,13 @@ class GravityLoad:
             model.appendBodyToJoint(f.parentJoint, point_mass, at)
         self.model = model
         self.mass = float(sum(I.mass for I in model.inertias))
+        weight = self.mass * float(np.max(np.abs(self.gravity))) * max(clm.length, 1.0)
+        if not weight < WEIGHT_MAX:  # its moments, derivatives and the solver would overflow
+            raise InvalidInputError(
+                f"the weight under gravity {self.gravity.tolist()} m/s^2 of {self.mass:.6g} kg "
+                f"(links and payloads) overflows the computation (about {weight:.3g} N m); "
+                f"expected mass x |gravity| x size well below {WEIGHT_MAX:.0e}"
+            )
         self._exact_derivatives = pinocchio_second_order_exact(model)
 
     def forces(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:

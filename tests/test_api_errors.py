@@ -128,3 +128,13 @@ def test_public_face_reaches_the_bundled_files():
     assert cl.data is data and "data" in cl.__all__
     robot = cl.load_model(cl.data.path("fourbar.xml"))  # the MJCF twin, loops from the file
     assert len(robot.closures) == 1 and robot.actuated == ("crank",)
+
+
+@pytest.mark.parametrize("name, value", [("K_s", 1e-308), ("b", 1e308), ("m_M4", 1e300)])
+def test_parameters_that_would_overflow_are_refused_by_name(name, value):
+    """Huge or tiny parameters overflow products of several of them (K x length^2,
+    mass x gravity x length): refused naming the parameter, not an internal quantity."""
+    from cahyman_pin.params import CaHyManParams
+
+    with pytest.raises(InvalidInputError, match=rf"CaHyMan parameter {name}=.* outside the range"):
+        CaHyManParams().replace(**{name: value})

@@ -307,3 +307,14 @@ def test_cahyman_leg_masses_sit_at_the_middle_of_their_links():
         torque = G_q[model.clm.joint_v_slice(f"alpha_{k}")][0]
         np.testing.assert_allclose(torque, 0.3 * 9.81 * model.params.b / 2 * np.cos(a),
                                    rtol=1e-12)  # fmt: skip
+
+
+@pytest.mark.parametrize("gravity, mass", [((0, 0, -1e308), 0.0), ((0, 0, -9.81), 1e300)])
+def test_an_overflowing_weight_is_refused_naming_gravity_and_mass(ur5, gravity, mass):
+    """A weight beyond the double range would reach the solver as inf or NaN (LAPACK then
+    prints to stdout and fails): refused at once, naming the gravity and the mass."""
+    clm, _ = ur5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(cl.InvalidInputError, match=r"the weight under gravity \[0.0, 0.0, "):
+            GravityLoad(clm, gravity, [Payload(mass, "tool0")])
