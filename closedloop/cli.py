@@ -32,7 +32,7 @@ import numpy as np
 
 from . import __version__, cli_identify, cli_map
 from .assembly import assemble
-from .cli_common import EXIT_HELP, Parser, finite_float, print_json, run_main
+from .cli_common import EXIT_HELP, Parser, finite_float, needs_gravity, print_json, run_main
 from .compliance import (
     TWIST_LABELS,
     UNITS,
@@ -194,8 +194,8 @@ def preload_from_args(args: argparse.Namespace) -> dict:
             raise InvalidInputError(
                 f"--payload takes MASS or MASS X Y Z, got {len(args.payload)} values"
             )
-        if args.gravity is None:
-            raise InvalidInputError("--payload weighs nothing without --gravity")
+        needs_gravity(f"--payload {' '.join(f'{v:g}' for v in args.payload)}",
+                      args.gravity is not None)  # fmt: skip
         offset = args.payload[1:] or [0.0, 0.0, 0.0]
         out["payloads"] = [Payload(args.payload[0], args.frame, offset)]
     if args.preload is not None:
@@ -303,9 +303,10 @@ def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
 
 
 def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
-    head = " " * 4 + "".join(f"{c:>13}" for c in cols)
+    """Columns of 14 characters, each value after a space (-1.23457e+300 has 13)."""
+    head = " " * 4 + "".join(f"{c:>14}" for c in cols)
     body = [
-        f"  {r:<2}" + "".join(f"{v:13.5e}" for v in row) for r, row in zip(rows, M, strict=True)
+        f"  {r:<2}" + "".join(f" {v:13.5e}" for v in row) for r, row in zip(rows, M, strict=True)
     ]
     return "\n".join([head, *body])
 

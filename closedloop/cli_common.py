@@ -1,14 +1,17 @@
 """What both command lines (``closedloop``, ``cahyman``) share, so that they follow one
 convention: the parser (negative numbers in e-notation are values; a usage error is one
-line, exit 2), the finite-number option type, output paths checked before any work, one
-JSON writer (never a NaN), one-line errors, quiet closed pipes, the entry point that
-runs a parsed subcommand to its exit status (:func:`closedloop.exceptions.exit_status`),
-and the Dask executor of ``--scheduler`` (:func:`dask_executor`: lost workers and a run
-without workers end as one line, never a hang)."""
+line, exit 2), the finite-number and positive-integer option types, output paths checked
+before any work, the checks and summaries of a map (its size, its load, the range of its
+index), one JSON writer (never a NaN), one-line errors, quiet closed pipes, a full stdout
+as one line, the entry point that runs a parsed subcommand to its exit status
+(:func:`closedloop.exceptions.exit_status`). The Dask executor of ``--scheduler`` is
+:func:`closedloop.cluster.dask_executor` (lost workers and a run without workers end as
+one line, never a hang)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -64,6 +67,12 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):
         raise UsageError(message)
 
+    def _print_message(self, message: str, file=None) -> None:
+        """argparse's writer of help and version, without swallowing an :class:`OSError`
+        (``--help > /dev/full`` fails, as any other output)."""
+        if message:
+            (file or sys.stderr).write(message)
+
 
 def finite_float(text: str) -> float:
     """Option type: a finite number (``nan``, ``inf`` and overflowing values are refused)."""
@@ -74,6 +83,69 @@ def finite_float(text: str) -> float:
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
     return value
+
+
+def positive_int(text: str) -> int:
+    """Option type: an integer >= 1 (a count of points, tasks or processes)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
+    return value
+
+
+def needs_gravity(option: str, gravity: bool) -> None:
+    """Refuse a mass given without gravity (``option`` as typed, e.g. ``--mass m_M4=2``).
+
+    Raises:
+        UsageError: ``gravity`` is false.
+    """
+    if not gravity:
+        raise UsageError(f"{option} weighs nothing without --gravity; give --gravity too")
+
+
+#: Most points a map may have (a guard against typing one zero too many), both commands.
+MAX_MAP_POINTS = 2_000_000
+
+
+def check_map_size(n: int) -> None:
+    """Refuse a map of more than :data:`MAX_MAP_POINTS` points, before any work.
+
+    Raises:
+        UsageError: too many points.
+    """
+    if n > MAX_MAP_POINTS:
+        raise UsageError(f"{n} points is more than the {MAX_MAP_POINTS} a map may have")
+
+
+def map_wrench(index: str, force, torque) -> np.ndarray | None:
+    """(6,) wrench of a map's ``--force``/``--torque`` (a missing one is zero), or None.
+
+    Raises:
+        UsageError: a deflection index (``--index deflection_...``) without a load.
+    """
+    if force is None and torque is None:
+        if index.startswith("deflection"):
+            raise UsageError(f"--index {index} needs --force and/or --torque")
+        return None
+    return np.r_[force or (0.0, 0.0, 0.0), torque or (0.0, 0.0, 0.0)]
+
+
+def index_line(name: str, values: np.ndarray, unit: str) -> str:
+    """The summary of a map's plotted index: its range and the points without a value
+    (``det_K: min 1, max 2 [N^6/rad^3] (3 points without a value)``)."""
+    values = np.asarray(values, dtype=float).reshape(len(values), -1)
+    finite = np.all(np.isfinite(values), axis=1)
+    missing = int(np.count_nonzero(~finite))
+    if not finite.any():
+        return f"{name}: no value at any of the {len(values)} points (the plot is empty)"
+    note = f" ({missing} points without a value)" if missing else ""
+    if values.shape[1] != 1:  # a vector index: its range is not one number
+        return f"{name}: values at {int(finite.sum())} points [{unit}]{note}"
+    v = values[finite, 0]
+    return f"{name}: min {v.min():.6g}, max {v.max():.6g} [{unit}]{note}"
 
 
 class SpecError(argparse.ArgumentTypeError):
@@ -173,16 +245,49 @@ def print_json(doc) -> None:
     print(text)
 
 
-def closed_pipe() -> int:
-    """After a :class:`BrokenPipeError` on stdout: send what is left to /dev/null (so that
-    the interpreter's final flush stays quiet) and return :data:`EXIT_PIPE`."""
+def _discard_stdout() -> None:
+    """Send what is left of stdout to /dev/null, so that the interpreter's final flush of
+    a closed or full stdout stays quiet."""
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
     except (OSError, ValueError):  # stdout without a file descriptor (captured in a test)
-        return EXIT_PIPE
+        return
     os.close(devnull)
+
+
+def closed_pipe() -> int:
+    """After a :class:`BrokenPipeError` on stdout: discard what is left and return
+    :data:`EXIT_PIPE`."""
+    _discard_stdout()
     return EXIT_PIPE
+
+
+def output_failed(prog: str, error: OSError) -> int:
+    """After an :class:`OSError` while writing (a full disk, ``> /dev/full``): one line on
+    stderr, what is left of stdout discarded; returns :data:`EXIT_FAILED`."""
+    what = f"{error.strerror or error}" + (f": {error.filename!r}" if error.filename else "")
+    _discard_stdout()
+    with contextlib.suppress(OSError):  # stderr full too: the exit status still says it
+        print(error_line(prog, f"cannot write the output ({what})"), file=sys.stderr)
+    return EXIT_FAILED
+
+
+def check_html_options(args: argparse.Namespace) -> None:
+    """With ``--html FILE``: the file can be written, and no ``--duration`` (which serves
+    the live page; a page written to a file is not served). Checked before any work.
+
+    Raises:
+        InvalidInputError: the file cannot be written; ``--duration`` with ``--html``.
+    """
+    if not getattr(args, "html", None):
+        return
+    output_file(args.html, "--html")
+    if getattr(args, "duration", None) is not None:
+        raise UsageError(
+            f"--duration {args.duration:g} serves the live page; with --html {args.html!r} "
+            "the page is written and nothing is served (give one of them)"
+        )
 
 
 def error_line(prog: str, error: BaseException) -> str:
@@ -194,15 +299,17 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     """Run a parsed subcommand ``args.func(args)`` and return its exit status; a closed
     pipe, a typed error or a LAPACK failure end as one line and the documented status
     (:func:`closedloop.exceptions.exit_status`; a :class:`ClusterError` is a failed
-    computation, :data:`EXIT_FAILED`). Shared by both command lines."""
+    computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``).
+    Shared by both command lines."""
     try:
-        if getattr(args, "html", None):
-            output_file(args.html, "--html")  # before any work
+        check_html_options(args)  # before any work
         status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
         return status
     except BrokenPipeError:
         return closed_pipe()
+    except OSError as e:  # a full device; the typed errors name their own files
+        return output_failed(prog, e)
     except ClosedLoopError as e:
         print(error_line(prog, e), file=sys.stderr)
         return exit_status(e)
@@ -223,12 +330,16 @@ def run_main(
     single_threaded_blas()  # small matrices: BLAS threads cost more than they give
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        args = parser_of(argv).parse_args(argv)
+        try:
+            args = parser_of(argv).parse_args(argv)
+        except SystemExit as e:  # --help, --version
+            sys.stdout.flush()  # a closed or full stdout shows here
+            return e.code if isinstance(e.code, int) else EXIT_OK
     except UsageError as e:
         print(error_line(prog, e), file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # --help | head
         return closed_pipe()
-    except SystemExit as e:  # --help, --version
-        return e.code if isinstance(e.code, int) else EXIT_OK
+    except OSError as e:  # --help > /dev/full
+        return output_failed(prog, e)
     return run_command(prog, args)

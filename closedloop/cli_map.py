@@ -17,20 +17,32 @@ with one line (exit 3).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .cli_common import SpecError, finite_float, output_folder, parse_values
+from .cli_common import (
+    SpecError,
+    UsageError,
+    check_map_size,
+    finite_float,
+    index_line,
+    map_wrench,
+    output_folder,
+    parse_values,
+    positive_int,
+)
 from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, ModelSource
 from .maps import INDICES, stiffness_map
 
-#: Points timed first for the estimate of a long map.
-PROBE = 3
+#: Points timed first for the estimate of a long map, and the time [s] the probe aims at
+#: (ten times more points while it takes less; see _time_per_point).
+PROBE, PROBE_SECONDS = 3, 0.1
 
 
 def _sweep(text: str) -> tuple[str, np.ndarray]:
@@ -72,24 +84,54 @@ def add_parser(sub, parent_arguments) -> None:
         p.add_argument(name, nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                        help=f"load of the deflection indices, world axes [{unit}]")  # fmt: skip
     run = p.add_mutually_exclusive_group()
-    run.add_argument("--workers", type=int, metavar="N", help="local processes")
+    run.add_argument("--workers", type=positive_int, metavar="N", help="local processes")
     run.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786")
     add_worker_timeout(p)
-    p.add_argument("--chunk", type=int, default=CHUNK, metavar="N", help="points per task")
+    p.add_argument("--chunk", type=positive_int, default=CHUNK, metavar="N", help="points per task")
     p.add_argument("--out", default="closedloop-map", metavar="DIR", help="output folder")
     p.set_defaults(func=run_map)
 
 
 def _points(path: str) -> np.ndarray:
     try:
-        text = Path(path).read_text().replace(",", " ")
+        text = Path(path).read_text(encoding="utf-8").replace(",", " ")
     except OSError as e:
         raise InvalidInputError(f"--points {path!r}: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise InvalidInputError(f"--points {path!r}: not a text file (UTF-8); expected rows "
+                                "of numbers") from None  # fmt: skip
     try:
         rows = [[float(x) for x in line.split()] for line in text.splitlines() if line.strip()]
-        return np.array(rows, dtype=float)
+        points = np.array(rows, dtype=float)
     except ValueError:
         raise InvalidInputError(f"--points {path!r}: expected rows of numbers") from None
+    if not rows:
+        raise InvalidInputError(f"--points {path!r} has no points; expected rows of numbers")
+    return points
+
+
+def _grid(args) -> dict:
+    """The grid of ``--sweep``/``--fixed`` or the points of ``--points``, checked: one
+    ``--sweep`` and at most one ``--fixed`` a joint, no ``--fixed`` of a swept joint or
+    with ``--points``."""
+    fixed = [f"{name}={value:g}" for name, value in args.fixed]
+    if args.points is not None:
+        if fixed:
+            raise UsageError(f"--fixed {fixed[0]} with --points: the file gives every actuated "
+                             "value; give one of them")  # fmt: skip
+        return {"points": _points(args.points)}
+    swept = [name for name, _ in args.sweep]
+    for name in swept:
+        if swept.count(name) > 1:
+            raise UsageError(f"--sweep {name}=... given {swept.count(name)} times; expected "
+                             "one --sweep a joint")  # fmt: skip
+    for (name, _), text in zip(args.fixed, fixed, strict=True):
+        if name in swept:
+            raise UsageError(f"--fixed {text}: joint {name!r} is swept (--sweep {name}=...); "
+                             "give one of them")  # fmt: skip
+        if [n for n, _ in args.fixed].count(name) > 1:
+            raise UsageError(f"--fixed {name}=... given more than once; expected one a joint")
+    return {"sweeps": dict(args.sweep), "fixed": dict(args.fixed)}
 
 
 def model_source(args) -> ModelSource:
@@ -106,29 +148,22 @@ def model_source(args) -> ModelSource:
 
 def run_map(args) -> int:
     """Run ``closedloop map``; returns the exit code (0)."""
-    out = output_folder(args.out)  # before any work
+    wrench = map_wrench(args.index, args.force, args.torque)
+    grid = _grid(args)
+    sizes = [len(grid["points"])] if "points" in grid else [v.size for v in grid["sweeps"].values()]
+    n = math.prod(sizes)
+    check_map_size(n)
     source = model_source(args)
     clm = source.load()
     clm.frame_id(args.frame)
-    wrench = None
-    if args.force is not None or args.torque is not None:
-        wrench = np.r_[args.force or (0.0, 0.0, 0.0), args.torque or (0.0, 0.0, 0.0)]
-    if args.sweep:
-        grid = {"sweeps": dict(args.sweep), "fixed": dict(args.fixed)}
-        n = int(np.prod([v.size for _, v in args.sweep]))
-    else:
-        grid = {"points": _points(args.points)}
-        n = len(grid["points"])
+    out = output_folder(args.out)  # before any computation
     options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk}
-    if n > PROBE:  # an estimate before a long run, from a few points computed here
-        t0 = time.perf_counter()
-        probe = {"points": _first(clm, grid)} if args.sweep else {"points": grid["points"][:PROBE]}
-        stiffness_map(clm, **options, **probe)
-        per_point = (time.perf_counter() - t0) / PROBE
-        share = max(1, args.workers or 1)
-        print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
-              f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
     with dask_executor(args.scheduler, args.worker_timeout) as executor:
+        if n > PROBE:  # an estimate before a long run, from a few points computed here
+            per_point = _time_per_point(clm, grid, n, options)
+            share = max(1, args.workers or 1)
+            print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
+                  f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
         result = stiffness_map(
             source if (args.workers or args.scheduler) else clm,
             workers=args.workers,
@@ -140,12 +175,35 @@ def run_map(args) -> int:
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))
+    print(index_line(args.index, result.indices[args.index], INDICES[args.index]))
     for path in paths:
         print(f"wrote {path}")
     return 0
 
 
-def _first(clm, grid) -> np.ndarray:
+def _first(clm, grid, k: int) -> np.ndarray:
+    """The first ``k`` points of the grid or the points (storage order), without building
+    the whole grid: its leading axis cut to the rows that hold them."""
     from .maps import grid_points
 
-    return grid_points(clm, grid["sweeps"], grid["fixed"])[0][:PROBE]
+    if "points" in grid:
+        return grid["points"][:k]
+    sweeps = dict(grid["sweeps"])
+    lead = next(iter(sweeps))
+    rest = math.prod(v.size for v in sweeps.values()) // sweeps[lead].size
+    sweeps[lead] = sweeps[lead][: -(-k // rest)]
+    return grid_points(clm, sweeps, grid["fixed"])[0][:k]
+
+
+def _time_per_point(clm, grid, n: int, options: dict) -> float:
+    """Seconds a point, timed on the first points: PROBE of them, ten times more while
+    they take less than PROBE_SECONDS in all (a map call's fixed cost, about a
+    millisecond, then weighs little) and stay at most a tenth of the map."""
+    k = PROBE
+    while True:
+        t0 = time.perf_counter()
+        stiffness_map(clm, **options, points=_first(clm, grid, k))
+        elapsed = time.perf_counter() - t0
+        if elapsed >= PROBE_SECONDS or 10 * k > n // 10:
+            return elapsed / k
+        k *= 10

@@ -142,8 +142,9 @@ def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
     closed at the end. An unreachable scheduler or a missing Dask is one typed error.
 
     Raises:
-        InvalidInputError: Dask is not installed, the scheduler cannot be reached, or
-            ``worker_timeout`` is not a positive number.
+        InvalidInputError: Dask is not installed, ``address`` is not an address (a
+            missing port), the scheduler cannot be reached, or ``worker_timeout`` is not a
+            positive number.
     """
     if address is None:
         yield None
@@ -156,6 +157,10 @@ def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
         raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
     try:
         client = Client(address, timeout="10s")
+    except ValueError as e:  # Dask's parser of addresses: e.g. a missing port
+        raise InvalidInputError(
+            f"--scheduler {address!r} is not a Dask address ({e}); expected e.g. tcp://HOST:8786"
+        ) from None
     except (OSError, TimeoutError) as e:
         raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None
     executor = DaskExecutor(client, address, worker_timeout)

@@ -81,6 +81,10 @@ LOG_STEP = 0.01
 REJECTED = 1e100
 #: Weight of the offsets from the start, relative to the largest sensitivity (see _solve).
 PRIOR = 1e-9
+#: Largest weighted residual, weighted twist d / sd or weighted sensitivity at the start:
+#: their sums of squares stay finite (1e200 a term); beyond, a wrench or an sd is out of
+#: scale (a unit slip), not data.
+LARGEST_WEIGHTED = 1e100
 
 
 @dataclass(frozen=True)
@@ -195,12 +199,15 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     config = [f"{kind}_{i}" for i in range(len(config))]
     wanted = ("frame", *config, *CSV_WRENCH, *CSV_TWIST, *sd)
     missing, unknown = [c for c in wanted if c not in header], sorted(set(header) - set(wanted))
-    if not rows or missing or unknown or not config:
+    if missing or unknown or not config:
         raise ModelFileError(
             f"{path!r}: expected a header and rows with frame, q_0.. or actuated_0.., "
             f"{', '.join(CSV_WRENCH + CSV_TWIST)}, sd or sd_dx..sd_rz (missing {missing}, "
             f"unknown {unknown})"
         )
+    if not rows:
+        raise ModelFileError(f"{path!r} has a header and no measurement rows; expected one "
+                             "row a measurement")  # fmt: skip
     frames = sorted({row["frame"] for row in rows})
     if len(frames) != 1:
         raise ModelFileError(f"{path!r}: one frame expected in every row, got {frames}")
@@ -358,7 +365,9 @@ def identify(
     Raises:
         InvalidInputError: no parameter, a parameter without a start value > 0, a start
             value of a parameter not fitted, a group mixing blocks and numbers, a bad
-            measurement (its index named), fewer measured components than parameters.
+            measurement (its index named), fewer measured components than parameters, a
+            measurement whose weighted deflection overflows (a wrench or an sd out of
+            scale, its index named).
         NameNotFoundError: unknown joint or frame.
         OpenLoopError: a measurement's q does not close the loops (its index named).
         MechanismError, SingularConfigurationError: no compliance at a measurement's
@@ -404,6 +413,8 @@ def identify(
                 sens[m, :, c] = k[c] * (dC @ w[m])
         return (pred - d) / sd, sens.reshape(-1, len(groups)) / sd.reshape(-1, 1)
 
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named below
+        _check_scale(*evaluate(theta0), d / sd, w, sd)
     theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd))
     r, S = evaluate(theta)
     unidentifiable, confounded = _unidentifiable(S, names)
@@ -427,6 +438,27 @@ def identify(
         n_measurements=len(configs),
         success=success,
     )
+
+
+def _check_scale(r, S, data, w, sd) -> None:
+    """Refuse a measurement whose weighted values at the start overflow or exceed
+    :data:`LARGEST_WEIGHTED` (r, data (n, 6); S (6 n, p); w, sd (n, 6)).
+
+    Raises:
+        InvalidInputError: naming the first such measurement, its value, wrench and sd.
+    """
+    rows = np.abs(np.concatenate([r, data, S.reshape(len(r), -1)], axis=1))
+    largest = np.where(np.isnan(rows), np.inf, rows).max(axis=1)
+    bad = np.flatnonzero(~(largest <= LARGEST_WEIGHTED))
+    if bad.size:
+        m = int(bad[0])
+        value = "overflows" if not np.isfinite(largest[m]) else f"reaches {largest[m]:.3g}"
+        wrench, sds = (", ".join(f"{x:.6g}" for x in v) for v in (w[m], sd[m]))
+        raise InvalidInputError(
+            f"measurement {m}: its weighted deflection (C w - d) / sd {value} (wrench "
+            f"[{wrench}], sd [{sds}]); expected at most {LARGEST_WEIGHTED:g}: a wrench or an "
+            "sd out of scale (SI units)"
+        )
 
 
 def compliance_derivative(result, coordinates, block=None) -> np.ndarray:

@@ -51,7 +51,8 @@ an unloaded beam is the straight segment from start to tip.
 
 Norms are taken without under- or overflow: a load of any finite magnitude gives the same
 automatic picture; one whose deflection or ellipsoid is not a finite number (``--force
-1.7e308 1.7e308 0``) is refused (InvalidInputError).
+1.7e308 1.7e308 0``) is refused (InvalidInputError), and so is a given scale s that draws
+s d_max larger than ``MAX_SHOWN_FRACTION`` L (``--scale 1e200``).
 """
 
 from __future__ import annotations
@@ -80,6 +81,10 @@ LEVER_FRACTION = 0.25
 ANIMATION_FRAMES = 25
 #: Largest drawn ellipsoid semi-axis, per model size L.
 ELLIPSOID_MAX_FRACTION = 0.25
+#: Largest amplified point displacement s d_max a given scale may draw, per model size L
+#: (the automatic one draws AUTO_FRACTION): beyond, the picture is of nothing, and the
+#: drawing (float32 in the page) overflows.
+MAX_SHOWN_FRACTION = 100.0
 #: Points of each drawn beam curve, start and tip included (evenly spaced parameter).
 BEAM_POINTS = 13
 
@@ -378,7 +383,8 @@ def deflection_scene(
 
     Raises:
         InvalidInputError: bad wrench, scale or frame count; a wrench whose deflection
-            overflows.
+            overflows; a scale that draws the deflection larger than
+            ``MAX_SHOWN_FRACTION`` model sizes.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame.
         EquilibriumError: (nonlinear) no equilibrium on the branch of q.
@@ -407,6 +413,13 @@ def deflection_scene(
         d_max = largest_displacement(clm, q, frame, dq)
     _check_finite(w, joint_deflection=dq, frame_displacement=twist, largest_displacement=d_max)
     s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
+    if s * d_max > MAX_SHOWN_FRACTION * size:
+        raise InvalidInputError(
+            f"--scale {s:g} draws the largest point displacement {d_max:.3g} m as "
+            f"{s * d_max:.3g} m, more than {MAX_SHOWN_FRACTION:g} model sizes ({size:.3g} m); "
+            f"expected a scale of at most {MAX_SHOWN_FRACTION * size / d_max:.3g} (or none: "
+            "automatic)"
+        )
     ramp_q = [pin.integrate(clm.model, q, s * v) for v in steps]
     if close_loops and clm.closures:
         ramp_q = [assemble(clm, None, q_s).q for q_s in ramp_q]

@@ -39,15 +39,21 @@ from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
-from closedloop.cli_common import SpecError, output_folder, parse_values
+from closedloop.cli_common import (
+    SpecError,
+    check_map_size,
+    index_line,
+    map_wrench,
+    output_folder,
+    parse_values,
+    positive_int,
+)
 from closedloop.cluster import add_worker_timeout, dask_executor
 from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
 #: Failed points printed one by one; the others are counted ("... and N more").
 SHOWN_FAILURES = 3
-#: Most points a map may have (a guard against typing one zero too many).
-MAX_POINTS = 2_000_000
 #: Pose inputs: grid axis -> (option, unit shown, factor from the shown unit to SI).
 POSE_OPTIONS = {
     "alpha": ("alpha", "deg", math.pi / 180.0),
@@ -115,12 +121,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--torque", nargs=3, type=finite_float, metavar=("NX", "NY", "NZ"),
                    help="torque at M [N m], world axes, for the deflection indices")  # fmt: skip
     run = p.add_mutually_exclusive_group()
-    run.add_argument("--workers", type=int, default=None,
+    run.add_argument("--workers", type=positive_int, default=None,
                      help="worker processes (default: all cores; 1: no pool)")  # fmt: skip
     run.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on a Dask cluster, e.g. tcp://HOST:8786")  # fmt: skip
     add_worker_timeout(p)
-    p.add_argument("--chunk-size", type=int, default=None, help="points per task")
+    p.add_argument("--chunk-size", type=positive_int, default=None, help="points per task")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
     p.set_defaults(func=_run)
@@ -151,14 +157,6 @@ def _inputs(args: argparse.Namespace) -> dict[str, tuple[np.ndarray, str, float]
             raise UsageError(f"--param {name} given twice")
         out[name] = (values, param_unit(name), 1.0)
     return out
-
-
-def _wrench(args: argparse.Namespace) -> np.ndarray | None:
-    if args.force is None and args.torque is None:
-        if args.index.startswith("deflection"):
-            raise UsageError(f"--index {args.index} needs --force and/or --torque")
-        return None
-    return np.r_[args.force or [0.0, 0.0, 0.0], args.torque or [0.0, 0.0, 0.0]]
 
 
 def _label(name: str, unit: str) -> str:
@@ -274,9 +272,8 @@ def _run(args: argparse.Namespace) -> int:
             f"a map sweeps one or two inputs, got {len(swept)} ({', '.join(swept)}); "
             "use cahyman_pin.sweep.engine from Python for more"
         )
-    n = math.prod(v[0].size for v in swept.values())
-    if n > MAX_POINTS:
-        raise UsageError(f"{n} points is more than the {MAX_POINTS} a map may have")
+    check_map_size(math.prod(v[0].size for v in swept.values()))
+    wrench = map_wrench(args.index, args.force, args.torque)
     params = DEFAULT_PARAMS.with_ks(args.ks)
     fixed = {k: float(v[0][0] * v[2]) for k, v in inputs.items() if k not in swept}
     design = {k: fixed.pop(k) for k in list(fixed) if k in CaHyManParams.field_names()}
@@ -296,7 +293,7 @@ def _run(args: argparse.Namespace) -> int:
         result = sweep(
             points,
             backend=args.backend,
-            wrench=_wrench(args),
+            wrench=wrench,
             start=args.start,
             executor=local if executor is None else executor,
             workers=args.workers,
@@ -309,10 +306,7 @@ def _run(args: argparse.Namespace) -> int:
     png = args.out / f"map_{args.index}.png"
     paths.append(plot_map(result, args.index, shown, png, fixed))
     print(result.summary())
-    values = result.indices[args.index]
-    if np.any(np.isfinite(values)):
-        unit = INDEX_UNITS[args.index]
-        print(f"{args.index}: min {np.nanmin(values):.6g}, max {np.nanmax(values):.6g} [{unit}]")
+    print(index_line(args.index, result.indices[args.index], INDEX_UNITS[args.index]))
     failures = result.failures()
     for i, status, reason in failures[:SHOWN_FAILURES]:
         print(f"point {i} ({describe_point(result, i, shown)}) {status}: {reason}")

@@ -12,7 +12,7 @@ import numpy as np
 
 from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
-from closedloop.cli_common import UsageError, finite_float
+from closedloop.cli_common import UsageError, finite_float, needs_gravity
 
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
@@ -88,6 +88,7 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
 def _masses(args: argparse.Namespace) -> dict[str, float]:
     out = {}
     for item in getattr(args, "mass", []):
+        needs_gravity(f"--mass {item}", args.gravity)
         name, _, value = item.partition("=")
         if name not in MASS_NAMES or not value:
             raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "

@@ -365,7 +365,7 @@ def sweep(
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
     pool, n_workers = _executor(executor, workers)
-    size = chunk_size or default_chunk_size(len(points), backend, n_workers)
+    size = default_chunk_size(len(points), backend, n_workers) if chunk_size is None else chunk_size
     if not isinstance(size, int) or size < 1:
         raise InvalidInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     t0 = time.perf_counter()
