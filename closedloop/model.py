@@ -86,14 +86,16 @@ def joint_id(model: pin.Model, name: str) -> int:
     """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints
     (:class:`InvalidInputError` when ``name`` is not a str)."""
     check_name("joint", name)
-    if not model.existJointName(name) or model.getJointId(name) == 0:  # 0: the universe
+    known = model.existJointName(name)
+    if known and (j := model.getJointId(name)) != 0:  # joint 0 is the universe
+        return j
+    if known:
+        hint = "joint 0, the world: it does not move"
+    elif model.existFrame(name, pin.FrameType.FIXED_JOINT):
+        hint = "a fixed joint: it does not move"
+    else:
         hint = ""
-        if model.existJointName(name):
-            hint = "joint 0, the world: it does not move"
-        elif model.existFrame(name, pin.FrameType.FIXED_JOINT):
-            hint = "a fixed joint: it does not move"
-        raise NameNotFoundError("joint", name, list(model.names)[1:], hint)
-    return model.getJointId(name)
+    raise NameNotFoundError("joint", name, list(model.names)[1:], hint)
 
 
 def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: str) -> Closure:
