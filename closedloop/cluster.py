@@ -136,6 +136,35 @@ class DaskExecutor(Executor):
             self._watch.join()
 
 
+#: Dask's address schemes whose location is HOST:PORT.
+HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
+def check_address(address: str) -> None:
+    """Check a scheduler address with Dask's own parser, before any client exists.
+
+    A ``Client`` whose constructor fails on a malformed address is left half started,
+    and its clean-up when it is garbage collected can block (20 s, or for ever inside
+    the start of the next client, with distributed 2026.8): so no client is built for
+    an address that cannot be one.
+
+    Raises:
+        InvalidInputError: an unknown scheme, or a missing or non-numeric port.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(address)
+        get_backend(scheme)
+        if scheme in HOST_PORT_SCHEMES:
+            parse_host_port(location)
+    except ValueError as e:
+        raise InvalidInputError(
+            f"--scheduler {address!r} is not a Dask address ({e}); expected e.g. tcp://HOST:8786"
+        ) from None
+
+
 @contextlib.contextmanager
 def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
     """A :class:`DaskExecutor` on the scheduler at ``address`` (None for None), its client
@@ -155,12 +184,9 @@ def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
         from dask.distributed import Client
     except ImportError:
         raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
+    check_address(address)
     try:
         client = Client(address, timeout="10s")
-    except ValueError as e:  # Dask's parser of addresses: e.g. a missing port
-        raise InvalidInputError(
-            f"--scheduler {address!r} is not a Dask address ({e}); expected e.g. tcp://HOST:8786"
-        ) from None
     except (OSError, TimeoutError) as e:
         raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None
     executor = DaskExecutor(client, address, worker_timeout)

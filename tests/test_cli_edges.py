@@ -49,8 +49,10 @@ def fourbar_map(tmp_path, *extra) -> list:
 
 
 # ------------------------------------------------------------------ maps
-@pytest.mark.parametrize("address", ["notanaddress", "tcp://host:x"])
+@pytest.mark.parametrize("address", ["notanaddress", "tcp://host:x", "tls://host:", "foo://host:1"])
 def test_a_scheduler_address_without_port_is_one_line(tmp_path, capsys, address):
+    """Refused before any Dask client exists (a client left half started by a malformed
+    address blocked the next one's start)."""
     code, _, err = run(main, capsys, *fourbar_map(tmp_path, "--sweep", "crank=0:1:3",
                                                   "--scheduler", address))  # fmt: skip
     assert code == 2 and f"--scheduler {address!r} is not a Dask address" in one_line(err)
