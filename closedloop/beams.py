@@ -334,9 +334,6 @@ _NV_ATTRIBUTES = (
 def _insert(model, geometries, site: _Site, name: str):
     """A copy of ``model`` (and of the geometry models) with a free-flyer ``name`` between
     the site's joint and its end; returns (model, geometries, old -> new joint index)."""
-    if model.existJointName(name):
-        raise BeamError(name.removesuffix("_beam"), f"the link already has a beam (or the model "
-                        f"a joint named {name!r}): one beam a link")  # fmt: skip
     if site.end_joint is not None:
         moved_frames = set()
         moved_joints = {site.end_joint}
@@ -565,9 +562,13 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
     wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
     for beam, spec in beams.items():
+        name = f"{beam}_beam"
+        if model.existJointName(name):  # before the stiffness, which would measure the link
+            # from the existing beam's joint (a length of 0)
+            raise BeamError(beam, f"the link already has a beam (or the model a joint named "
+                            f"{name!r}): one beam a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(beam, [])
         end, K = beam_stiffness(model, beam, spec, link_shapes)
-        name = f"{beam}_beam"
         model, geometries, step = _insert(model, geometries, _site(model, beam, end), name)
         index = {j: step[i] for j, i in index.items()}
         springs[name] = K

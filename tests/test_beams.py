@@ -683,11 +683,14 @@ def test_undeflected_beams_keep_weight_and_gravity_torques(tmp_path, masses, bea
                                    pin.centerOfMass(rigid.model, d0, q), atol=1e-12)  # fmt: skip
 
 
-def test_two_beams_on_one_link_are_refused_by_link_name(tmp_path):
+@pytest.mark.parametrize("end", ["side_joint", "tip_joint"])
+def test_two_beams_on_one_link_are_refused_by_link_name(tmp_path, end):
+    """Also the same beam again, whose end now lies at the first beam's joint (it was
+    refused as a beam of length 0)."""
     path = massive_urdf(tmp_path, {"arm": 1.0})
     once = load_model(path, beams={"arm": {**SECTION, "end": "tip_joint"}}, geometry=False)
     with pytest.raises(BeamError, match=r"beam 'arm': the link already has a beam"):
-        once.with_beams({"arm": {**SECTION, "end": "side_joint"}})
+        once.with_beams({"arm": {**SECTION, "end": end}})
 
 
 @pytest.mark.xfail(
