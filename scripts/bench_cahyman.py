@@ -19,10 +19,12 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
+from closedloop.assembly import ASSEMBLY_TOL, free_coordinates, min_norm_solve
 from closedloop.batch import compliances
 from closedloop.compliance import compliance
 from closedloop.configuration import Configuration
 from closedloop.indices import StiffnessIndices
+from closedloop.kinematics import jacobian_rows, residual_rows
 
 #: Table 3's pose (alpha [rad], alpha_4 [rad], s_4 [m]), where single queries are timed.
 POSE = (np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
@@ -107,6 +109,65 @@ def bench_sweeps(table: Table, mode: Mode, unit) -> None:
                    f"{iterations}")  # fmt: skip
 
 
+def warm_starts(model: CaHyManModel, side: int) -> list[tuple]:
+    """(alpha, alpha_4, s_4, q0) of every point of the side x side grid of row 3a after
+    the first three of its row: the start of its assembly there (the quadratic
+    extrapolation of the last three assembled configurations,
+    :func:`closedloop.map_engine.assemble_points`)."""
+    clm, points = model.clm, leg_grid((side, side, 1))
+    inputs = list(zip(points.alpha, points.alpha4, points.s4, strict=True))
+    out = []
+    for row in range(side):
+        line = inputs[row * side : (row + 1) * side]
+        Q = [model.assemble(*p) for p in line]
+        for k in range(3, len(line)):
+            q0 = pin.normalize(clm.model, 3.0 * Q[k - 1] - 3.0 * Q[k - 2] + Q[k - 3])
+            out.append((*line[k], q0))
+    return out
+
+
+def lean_assembly(clm, actuated: np.ndarray, q0: np.ndarray, free: np.ndarray) -> int:
+    """The floor of :func:`closedloop.assembly.assemble`: its Gauss-Newton loop on the
+    same pieces (closure rows, minimum-norm solve) without any check, copy or result
+    object; returns the iterations."""
+    model, data, datas = clm.model, clm.data, clm.constraint_datas
+    q = q0.copy()
+    q[clm.actuated_q_indices] = actuated
+    pin.computeJointJacobians(model, data, q)
+    r, it = residual_rows(clm, data, datas), 0
+    while abs(r).max() > ASSEMBLY_TOL:
+        step = np.zeros(model.nv)
+        step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
+        q = pin.integrate(model, q, step)
+        pin.computeJointJacobians(model, data, q)
+        r, it = residual_rows(clm, data, datas), it + 1
+    return it
+
+
+def bench_assembly_floor(table: Table, mode: Mode, model: CaHyManModel, unit) -> None:
+    """Row 3c: the assembly of row 3a alone, on its own warm starts, against its floor."""
+    starts = warm_starts(model, max(SWEEP_SIDE[mode.name], 5))  # smoke: 2 starts a row
+    free, clm = free_coordinates(model.clm), model.clm
+    actuated = [np.concatenate([a, [a4, s4]]) for a, a4, s4, _ in starts]
+
+    def library() -> list[int]:
+        return [model.assemble(a, a4, s4, q0=q0, full_output=True).iterations
+                for a, a4, s4, q0 in starts]  # fmt: skip
+
+    def lean() -> list[int]:
+        return [lean_assembly(clm, x, s[3], free) for x, s in zip(actuated, starts, strict=True)]
+
+    n = len(starts)
+    t_lib = interleaved(library, unit, mode, per=n)
+    t_lean = interleaved(lean, unit, mode, per=n)
+    table.units("3c", f"assembly of row 3a alone, `CaHyManModel.assemble` from the same warm "
+                f"starts ({n} poses)", "-", t_lib, " per pose")  # fmt: skip
+    table.note(f"3c: a Gauss-Newton loop on the same pieces without any check (scripts/"
+               f"bench_cahyman.py lean_assembly) {t_lean.ratio:.1f} units = "
+               f"{fmt_time(t_lean.seconds)} per pose; iterations per pose, library "
+               f"{np.mean(library()):.2f}, lean {np.mean(lean()):.2f}")  # fmt: skip
+
+
 def cpu_seconds() -> float:
     """CPU time [s] of this process and of its reaped children (the sweep workers)."""
     me, children = (resource.getrusage(w) for w in (resource.RUSAGE_SELF,
@@ -174,6 +235,7 @@ def main() -> None:
     unit = partial(pin.computeJointJacobians, model.clm.model, model.clm.model.createData(), q)
     bench_queries(table, mode, model, q, unit)
     bench_sweeps(table, mode, unit)
+    bench_assembly_floor(table, mode, model, unit)
     bench_map(table, mode, unit)
     bench_closed_form(table, mode, unit)
     bench_cli(table, mode)
