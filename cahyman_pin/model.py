@@ -29,7 +29,7 @@ from cahyman_pin.urdf_builder import (
     closure_spec,
 )
 from closedloop.arrays import readonly
-from closedloop.assembly import assemble as assemble_loops
+from closedloop.assembly import close_loops
 from closedloop.beams import apply_beams
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics import closure_residual, update_kinematics
@@ -255,16 +255,10 @@ class CaHyManModel:
         alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
         if q0 is None:  # the inputs are checked: the guess of one pose without checking again
             q0 = self.initial_guesses(alpha[None], np.array([alpha4]), np.array([s4]))[0]
-        elif not (  # a float start with its virtual springs at rest is used as it is
-            type(q0) is np.ndarray
-            and q0.shape == (self.clm.model.nq,)
-            and q0.dtype == np.float64
-            and not q0[self._virtual_index].any()
-        ):
-            q0 = self.clm.check_configuration(q0)
-            q0[self._virtual_index] = 0.0  # virtual springs back to rest
-        actuated = np.concatenate([alpha, [alpha4, s4]])
-        result = assemble_loops(self.clm, actuated, q0)
+        q = self.clm.check_configuration(q0)  # a copy: the start is the caller's
+        q[self._virtual_index] = 0.0  # virtual springs at rest
+        self.clm.set_actuated(q, np.concatenate([alpha, [alpha4, s4]]))
+        result = close_loops(self.clm, q)
         return result if full_output else result.q
 
     def residual(self, q) -> float:

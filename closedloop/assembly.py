@@ -78,9 +78,7 @@ def assemble(
 
     Actuated coordinates are set to ``actuated``; spring and locked coordinates keep the
     values they have in ``q0`` (their rest values). The passive coordinates are found by
-    Gauss-Newton on the stacked closure residual, each step a minimum-norm least-squares
-    solve (:func:`min_norm_solve`, rank revealing: redundant closure rows are harmless),
-    with backtracking when a step does not reduce the residual.
+    :func:`close_loops`.
 
     Args:
         clm: the model.
@@ -94,8 +92,7 @@ def assemble(
         AssemblyError: the closures cannot be satisfied from this start (unreachable
             input); the message gives the residual reached.
     """
-    model = clm.model
-    q = clm.check_configuration(pin.neutral(model) if q0 is None else q0)
+    q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     if actuated is not None:
         if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):
             actuated = real_array(actuated, "actuated")
@@ -108,6 +105,30 @@ def assemble(
         if not np.isfinite(actuated).all():
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
         clm.set_actuated(q, actuated)
+    return close_loops(clm, q, tol=tol, max_iter=max_iter)
+
+
+def close_loops(
+    clm: ClosedLoopModel, q: np.ndarray, *, tol: float = ASSEMBLY_TOL, max_iter: int = 50
+) -> Assembly:
+    """The loop of :func:`assemble` from a start that its caller has validated.
+
+    Gauss-Newton on the stacked closure residual, moving the passive coordinates only,
+    each step a minimum-norm least-squares solve (:func:`min_norm_solve`, rank revealing:
+    redundant closure rows are harmless), with backtracking when a step does not reduce
+    the residual.
+
+    Args:
+        clm: the model.
+        q: (nq,) start: a float array of the model's size, finite, quaternions normalised
+            (:meth:`ClosedLoopModel.check_configuration`), the actuated values written; the
+            caller hands it over (it may be modified, and is made read-only when returned).
+        tol, max_iter: as :func:`assemble`.
+
+    Raises:
+        AssemblyError: as :func:`assemble`.
+    """
+    model = clm.model
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.data, clm.constraint_datas
     r, err, size2 = _residual(clm, data, datas, q)
