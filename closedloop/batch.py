@@ -21,6 +21,7 @@ from the single ones only in their order of operations).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -300,6 +301,12 @@ def _kinematics(clm: ClosedLoopModel, Q: np.ndarray, fid: int, reference):
     return r, Jc, J
 
 
+@functools.cache
+def _upper(rows: int, columns: int) -> np.ndarray:
+    """(rows, columns) bool mask of the upper triangle (diagonal included)."""
+    return frozen(np.triu(np.ones((rows, columns), dtype=bool)))
+
+
 def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     """X (n, p, s) = -J_p^+ J_s of each closure Jacobian of Jc (n, m, nv), and where it
     holds with the margin: J_p well conditioned, J_s + J_p X = 0 (the tests of
@@ -307,8 +314,12 @@ def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     p = sc.passive.size
     A = Jc[:, :, sc.order] * sc.scale_order
     scale = PARTITION_RTOL * np.max(abs(A[:, :, p:]), axis=(1, 2))
-    R = np.linalg.qr(A, mode="r")  # (n, m, p + s): -J_p = Q1 R11, R12, R22
-    R11, R12, R22 = R[:, :p, :p], R[:, :p, p:], R[:, p:, p:]
+    # -J_p = Q1 R11, R12, R22 from the Householder form (mode "r" would copy the whole
+    # triangle out of it): R (n, m, p + s) is the upper trapezoid of h^T
+    Rt = np.swapaxes(np.linalg.qr(A, mode="raw")[0], 1, 2)
+    R11 = np.where(_upper(p, p), Rt[:, :p, :p], 0.0)
+    R12 = Rt[:, :p, p:]  # above the diagonal: all of it
+    R22 = np.where(_upper(Rt.shape[1] - p, Rt.shape[2] - p), Rt[:, p:, p:], 0.0)
     singular = (np.diagonal(R11, axis1=1, axis2=2) == 0.0).any(axis=1)
     R11 = np.where(singular[:, None, None], np.eye(p), R11)
     # upper triangles: the LU of the inverse pivots on the diagonal (a back substitution)
