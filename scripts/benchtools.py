@@ -64,6 +64,10 @@ def parse_mode(doc: str, argv: Sequence[str] | None = None) -> Mode:
 
 #: Shortest batch of unit calls [s] (also in a smoke run: a single call is too noisy).
 UNIT_BATCH_SECONDS = 0.002
+#: Shortest unit batch as a share of the row's batch: the speed of a machine whose load
+#: changes drifts within a long row (a sweep of 0.3 s), which 2 ms of unit calls on one
+#: side of it do not sample (units 1.7 and 2.7 us within one run were seen so).
+UNIT_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -101,23 +105,30 @@ def interleaved(
 ) -> Timing:
     """Time ``func`` against ``unit`` in alternating batches (unit, func, unit, func...).
 
-    Each repeat's ratio uses the unit batch timed just before it; ``per`` divides the
-    time of one ``func`` call (e.g. the number of poses of a sweep); ``once``: one call
-    of ``func`` per repeat and no warm-up (long runs), and no new repeat once the repeats
-    have taken ``budget`` seconds.
+    Each batch of ``func`` is bracketed by two unit batches, each lasting at least
+    :data:`UNIT_SHARE` of it, and its ratio uses their mean; ``per`` divides the time of
+    one ``func`` call (e.g. the number of poses of a sweep); ``once``: one call of ``func``
+    per repeat and no warm-up (long runs), and no new repeat once the repeats have taken
+    ``budget`` seconds.
     """
     n_func = 1 if once else _calls(func, mode.batch_seconds)
     n_unit = _calls(unit, max(mode.batch_seconds, UNIT_BATCH_SECONDS))
     times, units, ratios = [], [], []
     start = time.perf_counter()
+    after = _batch(unit, n_unit)
     for _ in range(mode.repeats):
         if times and time.perf_counter() - start > budget:
             break
-        u = _batch(unit, n_unit)
-        f = _batch(func, n_func) / per
+        before = after
+        batch = _batch(func, n_func) * n_func  # [s]
+        after = _batch(unit, n_unit)
+        u, f = 0.5 * (before + after), batch / n_func / per
         times.append(f)
         units.append(u)
         ratios.append(f / u)
+        if UNIT_SHARE * batch > n_unit * u:  # longer unit batches from the next repeat on
+            n_unit = int(UNIT_SHARE * batch / u) + 1
+            after = _batch(unit, n_unit)
     return Timing(
         statistics.median(times), statistics.median(units), statistics.median(ratios), len(times)
     )
