@@ -120,14 +120,14 @@ def interleaved(
         if times and time.perf_counter() - start > budget:
             break
         before = after
-        batch = _batch(func, n_func) * n_func  # [s]
+        call = _batch(func, n_func)
         after = _batch(unit, n_unit)
-        u, f = 0.5 * (before + after), batch / n_func / per
-        times.append(f)
+        u = 0.5 * (before + after)
+        times.append(call / per)
         units.append(u)
-        ratios.append(f / u)
-        if UNIT_SHARE * batch > n_unit * u:  # longer unit batches from the next repeat on
-            n_unit = int(UNIT_SHARE * batch / u) + 1
+        ratios.append(call / per / u)
+        if UNIT_SHARE * call * n_func > n_unit * u:  # longer unit batches from now on
+            n_unit = int(UNIT_SHARE * call * n_func / u) + 1
             after = _batch(unit, n_unit)
     return Timing(
         statistics.median(times), statistics.median(units), statistics.median(ratios), len(times)
