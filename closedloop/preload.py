@@ -26,7 +26,7 @@ import scipy.linalg
 
 from .arrays import check_wrench, readonly
 from .compliance import ComplianceResult, compliance, compliance_result
-from .conditioning import spectrum_from_factor, spectrum_of_matrix, twist_scaling
+from .conditioning import RANK_RTOL, spectrum_from_factor, spectrum_of_matrix, twist_scaling
 from .configuration import Configuration
 from .exceptions import SingularConfigurationError
 from .model import ClosedLoopModel
@@ -146,10 +146,16 @@ def preloaded_compliance(
             **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
         )
     s_M = np.linalg.svd(M, compute_uv=False)
-    if s_M.size and s_M[-1] <= CRITICAL_RTOL * max(1.0, s_M[0]):
+    if s_M.size and s_M[-1] <= CRITICAL_RTOL:  # on the scale of the springs (1 unloaded)
         raise SingularConfigurationError(
             f"the tangent stiffness at frame {frame!r} is singular under preload "
             f"{w0.tolist()} (critical load: buckling or limit point)"
+        )
+    if s_M.size and s_M[-1] <= RANK_RTOL**2 * s_M[0]:  # a stiffening preload, too large
+        raise SingularConfigurationError(
+            f"the preload {w0.tolist()} at frame {frame!r} stiffens the mechanism "
+            f"{s_M[0]:.3g} times beyond its springs: the tangent stiffness spans more than "
+            f"{1 / RANK_RTOL**2:.0e} (the rank rule's resolution); give a smaller preload"
         )
     margin = stability_margin(M)
     B = J @ f.N @ T

@@ -229,8 +229,12 @@ def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_s
         st = eqs.evaluate(q, w)
         if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
             break
-        if st["closure"] <= tol and size <= STEP_TOL * max(1.0, np.max(np.abs(q))):
-            return q, st, it + 1  # Newton converges quadratically: q is at rounding level
+        if (
+            st["closure"] <= tol
+            and size <= STEP_TOL * max(1.0, np.max(np.abs(q)))
+            and not eqs.dropped  # a step that resolved every direction: q is at rounding
+        ):  # level (Newton converges quadratically); else the force test decides
+            return q, st, it + 1
     return None, st, max_iter
 
 

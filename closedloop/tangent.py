@@ -42,7 +42,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench
-from .conditioning import rule_rank
+from .conditioning import RANK_RTOL, rule_rank
 from .derivatives import DIFFERENCE_STEP, central_differences, pinocchio_second_order_exact
 from .exceptions import InvalidInputError
 from .gravity import Load, as_load
@@ -60,8 +60,10 @@ from .model import ClosedLoopModel
 #: curvature enters K_t multiplied by lambda, so its relative error in K_t stays ~1e-10.
 WELD_CURVATURE_STEP = DIFFERENCE_STEP
 
-#: Smallest singular value of the scaled tangent stiffness (1 without preload), relative
-#: to max(1, its largest), below which it counts as singular (critical preload).
+#: Smallest singular value of the scaled tangent stiffness (1 without preload: the scale
+#: of the springs) below which it counts as singular (critical preload). A stiffening
+#: preload that makes it span more than the rank rule resolves (1 / RANK_RTOL^2) is
+#: refused as such, not as a critical load.
 CRITICAL_RTOL = 1e-12
 
 
@@ -325,8 +327,12 @@ def scaled_tangent(
 
 
 def stability_margin(M: np.ndarray) -> float:
-    """Smallest eigenvalue of the symmetric part of M (:func:`scaled_tangent`); 1 if empty."""
-    return float(np.min(np.linalg.eigvalsh(0.5 * (M + M.T)), initial=1.0))
+    """Smallest eigenvalue of the symmetric part of M (:func:`scaled_tangent`); 1 if empty
+    (no sprung motion: the unloaded value). Above 1 when the preload stiffens every motion
+    (a hanging weight, tension)."""
+    if not M.size:
+        return 1.0
+    return float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
 
 
 class EquilibriumEquations:
@@ -338,6 +344,9 @@ class EquilibriumEquations:
 
     def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
         self.clm, self.q_rest, self.frame = clm, q_rest, frame
+        #: admissible directions that the last :meth:`step` left out (a stiffness below
+        #: RANK_RTOL^2 of the largest: spring-free, or beyond the resolution of the solve)
+        self.dropped = 0
         self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
         # square root of the springs on the free coordinates, K_ff = R_f^T R_f
         self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
@@ -415,9 +424,14 @@ class EquilibriumEquations:
         else:
             J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
             dx, rhs = np.zeros(free.size), N.T @ self.generalised_load(q, load, J)[free]
-        dx += N @ np.linalg.lstsq(N.T @ H @ N, rhs, rcond=1e-12)[0]
+        # the rule of the compliance on this stiffness scale: a motion resisted less than
+        # RANK_RTOL^2 of the stiffest is spring-free (a looser cutoff dropped the soft
+        # springs of a model whose springs span 1e12, and Newton stopped at no motion)
+        x, _, rank, _ = np.linalg.lstsq(N.T @ H @ N, rhs, rcond=RANK_RTOL**2)
+        dx += N @ x
         v = np.zeros(self.clm.model.nv)
         v[free] = dx
+        self.dropped = N.shape[1] - rank  # directions the step left out
         return v
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:

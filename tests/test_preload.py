@@ -108,11 +108,12 @@ def test_tiny_preload_tends_to_linear_compliance(fourbar):
 
 
 def test_pendulum_buckling_matches_closed_form():
-    """Hinge k under a compressive tip force F: K_t = k - F L, critical load F = k / L."""
+    """Hinge k under a compressive tip force F: K_t = k - F L, critical load F = k / L; a
+    pulling force (F < 0) stiffens it (margin above 1)."""
     k, L = 40.0, 0.5
     clm = pendulum(k, L)
     q0 = np.array([0.2, 0.0])
-    for F in (20.0, 60.0, 120.0):
+    for F in (-1e3, -20.0, 20.0, 60.0, 120.0):
         eq = solve_equilibrium(clm, q0, "tip", [0, 0, -F, 0, 0, 0])
         np.testing.assert_array_equal(eq.q, q0)  # the force passes through the hinge
         pre = preloaded_compliance(clm, eq)
@@ -178,3 +179,13 @@ def test_limit_load_margin_is_the_preloaded_stability_margin(fourbar):
     pre = preloaded_compliance(clm, eq)
     assert err.value.stability_margin == pytest.approx(pre.stability_margin, rel=RTOL_MARGIN)
     assert 0.0 < pre.stability_margin < 0.1
+
+
+def test_a_large_pulling_preload_is_stable_not_critical(ur5):
+    """A tension of 1e16 N stiffens the arm along it about 1e13 times beyond its springs
+    while the other motions keep their springs: the scaled tangent stiffness spans 1e13,
+    within the rank rule, and its smallest value stays that of the springs (was refused as
+    a critical load, its condition number taken for singularity)."""
+    clm, q = ur5
+    pre = compliance(clm, q, "tool0", preload=[1e16, 0, 0, 0, 0, 0])
+    assert pre.is_stable and pre.stability_margin >= 1.0 - RTOL_MARGIN

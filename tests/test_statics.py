@@ -25,7 +25,9 @@ from helpers import (
 )
 from scipy.optimize import brentq, minimize
 
+from closedloop.assembly import assemble
 from closedloop.compliance import compliance
+from closedloop.exceptions import EquilibriumError
 from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
 from closedloop.statics import potential_energy, solve_equilibrium
 
@@ -294,3 +296,20 @@ def test_delta_equilibrium_does_not_depend_on_the_closure_order():
         moment += np.cross(end - platform, -lam[j])
     np.testing.assert_allclose(force, 0.0, atol=RTOL_BALANCE * np.abs(w).max())
     np.testing.assert_allclose(moment, 0.0, atol=RTOL_BALANCE * np.abs(w).max())
+
+
+def test_springs_twelve_orders_apart_still_deflect(fourbar):
+    """A soft crank spring (1e-3 N m/rad) beside axial springs of 2e9 N/m: the Newton step
+    resolves the soft direction (its solve cut stiffnesses below 1e-12 of the largest,
+    and the solver returned no motion, the load unbalanced); 1e14 apart it is refused."""
+    clm, _ = fourbar
+    soft = clm.with_springs({"crank": 1e-3, "crank_axial": 2e9, "rocker_axial": 2e9})
+    q0 = assemble(soft, actuated=[0.3]).q
+    w = np.array([0, 0, -2e-8, 0, 0, 0])  # |w| lever / k ~ 6e-6: within RTOL_SMALL_LOAD
+    Cw = compliance(soft, q0, "P").C @ w
+    eq = solve_equilibrium(soft, q0, "P", w)
+    np.testing.assert_allclose(eq.displacement, Cw, rtol=0, atol=RTOL_SMALL_LOAD * np.abs(Cw).max())
+    apart = clm.with_springs({"crank": 1.0, "crank_axial": 1e14, "rocker_axial": 1e14})
+    q0 = assemble(apart, actuated=[0.3]).q
+    with pytest.raises(EquilibriumError):
+        solve_equilibrium(apart, q0, "P", [0, 0, -1e-3, 0, 0, 0])
