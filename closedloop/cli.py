@@ -368,6 +368,10 @@ def stiffness(args: argparse.Namespace) -> int:
     """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
     clm, state = model_from_args(args)
     res = compliance(state, args.frame, axes=args.axes, **preload_from_args(args))
+    if getattr(res, "equilibrium", None) is not None:
+        from .preload import require_stable  # only with a preload
+
+        require_stable(res)
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}

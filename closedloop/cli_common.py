@@ -18,6 +18,7 @@ import os
 import re
 import sys
 import tempfile
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -295,6 +296,26 @@ def error_line(prog: str, error: BaseException) -> str:
     return f"{prog}: error: {' '.join(str(error).split())}"
 
 
+@contextlib.contextmanager
+def one_line_warnings(prog: str):
+    """Python warnings raised inside, printed as ``prog: warning: message`` (one line on
+    stderr) instead of Python's two lines with the source file and line; filtered as
+    Python does by default for code outside ``__main__`` (once per place; deprecations of
+    the libraries underneath, import and resource warnings not shown), whatever the
+    filters of the caller (a test runner shows them all)."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"{prog}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        for category in (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                         ResourceWarning):  # fmt: skip
+            warnings.simplefilter("ignore", category)
+        warnings.showwarning = show
+        yield
+
+
 def run_command(prog: str, args: argparse.Namespace) -> int:
     """Run a parsed subcommand ``args.func(args)`` and return its exit status; a closed
     pipe, a typed error or a LAPACK failure end as one line and the documented status
@@ -303,7 +324,8 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     Shared by both command lines."""
     try:
         check_html_options(args)  # before any work
-        status = int(args.func(args) or 0)
+        with one_line_warnings(prog):
+            status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
         return status
     except BrokenPipeError:

@@ -291,9 +291,11 @@ class StiffnessIndices:
 
     @property
     def condition_number(self) -> float:
-        """cond(K) = cond(C) of the SI matrix: depends on the length unit and the point."""
-        lam = self.eigenvalues
-        return float(lam[-1] / lam[0])
+        """cond(K) = cond(C) of the SI matrix, max |lambda| / min |lambda| (positive also for
+        an indefinite K, at an unstable preloaded equilibrium): depends on the length unit
+        and the point."""
+        lam = np.abs(self.eigenvalues)
+        return float(lam.max() / lam.min())
 
     def homogenised_stiffness(self, length: float | None = None) -> np.ndarray:
         """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]."""
@@ -501,7 +503,8 @@ def batch_indices(
     if np.any(both):
         c = np.linalg.eigvalsh(C[both])
         out["det_K"][both] = 1.0 / np.linalg.det(C[both])
-        out["condition_number_si"][both] = c[:, -1] / c[:, 0]
+        c = np.abs(c)  # an indefinite C (an unstable preloaded equilibrium) included
+        out["condition_number_si"][both] = c.max(axis=1) / c.min(axis=1)
     other = ~sym & full
     if np.any(other):
         K = np.linalg.inv(C[other])

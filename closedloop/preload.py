@@ -28,7 +28,7 @@ from .arrays import check_wrench, readonly
 from .compliance import ComplianceResult, compliance, compliance_result
 from .conditioning import RANK_RTOL, spectrum_from_factor, spectrum_of_matrix, twist_scaling
 from .configuration import Configuration
-from .exceptions import SingularConfigurationError
+from .exceptions import EquilibriumError, SingularConfigurationError
 from .model import ClosedLoopModel
 from .springs import spring_factor
 from .statics import Equilibrium
@@ -50,6 +50,7 @@ __all__ = [
     "closure_curvature",
     "geometric_stiffness",
     "preloaded_compliance",
+    "require_stable",
     "spring_hessian",
     "tangent_stiffness",
 ]
@@ -107,6 +108,33 @@ class PreloadedCompliance(ComplianceResult):
             out["weight"] = None if eq.gravity is None else eq.gravity.to_dict()
             out["spring_forces"] = self.spring_forces.tolist()
         return out
+
+
+def require_stable(result: ComplianceResult) -> ComplianceResult:
+    """``result``, unless it is a :class:`PreloadedCompliance` at an unstable equilibrium.
+
+    There the tangent stiffness is indefinite: the mechanism does not stay on the
+    equilibrium the load continuation followed (a bifurcation), and no deflection answers
+    "how far does it deflect". The API returns such a result (``is_stable`` False, for a
+    study of the instability); the command lines refuse it with this error.
+
+    Raises:
+        EquilibriumError: the stability margin is <= 0 (exit status 3 of the command lines).
+    """
+    if not isinstance(result, PreloadedCompliance) or result.is_stable:
+        return result
+    eq = result.equilibrium
+    raise EquilibriumError(
+        f"the equilibrium under the preload at frame {result.frame!r} is unstable (stability "
+        f"margin {result.stability_margin:.3g} <= 0: the load or the weight exceeds what the "
+        "springs hold there, and the tangent stiffness is indefinite); give a smaller load or "
+        "mass, or stiffer springs",
+        eq.closure_residual if eq is not None else 0.0,
+        eq.force_residual if eq is not None else 0.0,
+        1.0,
+        limit_load=False,
+        stability_margin=result.stability_margin,
+    )
 
 
 def preloaded_compliance(

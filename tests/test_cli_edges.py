@@ -15,6 +15,7 @@ from helpers import REPO, UR5_JOINTS, UR5_Q
 
 import closedloop as cl
 import closedloop.cli_map as cli_map
+from cahyman_pin.api import stiffness
 from cahyman_pin.cli import main as cahyman_main
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import grid, sweep
@@ -220,6 +221,38 @@ def test_cahyman_masses_without_gravity_are_refused(capsys, command):
     code, out, err = run(cahyman_main, capsys, command, "--mass", "m_M4=100", "--json")
     assert code == 2 and out == ""
     assert "--mass m_M4=100 weighs nothing without --gravity" in one_line(err, "cahyman")
+
+
+@pytest.mark.parametrize("command", ["stiffness", "deflect"])
+def test_cahyman_weight_beyond_what_the_springs_hold_is_refused(capsys, command):
+    """The arm upright is an inverted pendulum: 3000 kg at M (m g 0.2 m > K_T4) leaves the
+    symmetric equilibrium unstable; it was printed with exit 0 and a negative condition
+    number of K."""
+    code, out, err = run(cahyman_main, capsys, command, "--gravity", "--mass", "m_M4=3000")
+    assert code == 3 and out == ""
+    assert "is unstable (stability margin -1.55 <= 0" in one_line(err, "cahyman")
+    api = cl_api_stiffness(3000.0)
+    lam = np.abs(np.linalg.eigvalsh(api.K))
+    assert api.condition_number == pytest.approx(lam.max() / lam.min(), rel=1e-12)
+
+
+def test_cahyman_warnings_are_one_line_each(capsys):
+    """The joint-limit warning of a huge weight, before the error: one line each, no
+    Python source line."""
+    code, _, err = run(cahyman_main, capsys, "stiffness", "--gravity", "--mass", "m_M4=1e6")
+    lines = err.strip().splitlines()
+    assert code == 3 and len(lines) == 2, err
+    assert lines[0].startswith("cahyman: warning: the equilibrium") and "outside the joint" in err
+    assert lines[1].startswith("cahyman: error: ")
+
+
+def cl_api_stiffness(mass: float):
+    """CaHyMan's stiffness at the default pose of the command line under the weight of
+    ``mass`` [kg] at M (the API returns an unstable equilibrium, flagged)."""
+
+    params = DEFAULT_PARAMS.replace(m_M4=mass)
+    return stiffness(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(90.0), 0.05, params=params,
+                     weight=True)  # fmt: skip
 
 
 # ------------------------------------------------------------------ views

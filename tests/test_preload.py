@@ -21,7 +21,7 @@ from helpers import (
 
 from closedloop.compliance import compliance
 from closedloop.exceptions import EquilibriumError, SingularConfigurationError
-from closedloop.preload import preloaded_compliance
+from closedloop.preload import preloaded_compliance, require_stable
 from closedloop.statics import JointLimitWarning, solve_equilibrium
 
 # Preloaded compliance vs central differences of the solver: the brief's bound. Measured
@@ -189,3 +189,16 @@ def test_a_large_pulling_preload_is_stable_not_critical(ur5):
     clm, q = ur5
     pre = compliance(clm, q, "tool0", preload=[1e16, 0, 0, 0, 0, 0])
     assert pre.is_stable and pre.stability_margin >= 1.0 - RTOL_MARGIN
+
+
+def test_require_stable_refuses_an_unstable_equilibrium():
+    """The pendulum past its critical force F = k / L: the API's result (flagged unstable)
+    is refused by require_stable, which the command lines apply; a stable one passes."""
+    k, L = 40.0, 0.5
+    clm = pendulum(k, L)
+    q0 = np.array([0.2, 0.0])
+    stable = preloaded_compliance(clm, solve_equilibrium(clm, q0, "tip", [0, 0, -20.0, 0, 0, 0]))
+    assert require_stable(stable) is stable
+    beyond = preloaded_compliance(clm, solve_equilibrium(clm, q0, "tip", [0, 0, -120.0, 0, 0, 0]))
+    with pytest.raises(EquilibriumError, match=r"unstable \(stability margin -0.5 <= 0"):
+        require_stable(beyond)

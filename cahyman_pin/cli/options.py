@@ -101,17 +101,28 @@ def _masses(args: argparse.Namespace) -> dict[str, float]:
 
 
 def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
-    """Stiffness at the pose given by :func:`add_pose_arguments`' options (converted to SI)."""
+    """Stiffness at the pose given by :func:`add_pose_arguments`' options (converted to SI).
+
+    Raises:
+        EquilibriumError: with ``--gravity``, an unstable equilibrium
+            (:func:`closedloop.preload.require_stable`).
+    """
     params = DEFAULT_PARAMS.with_ks(args.ks)
     masses = _masses(args)
-    return stiffness(
+    weight = getattr(args, "gravity", False)
+    result = stiffness(
         np.deg2rad(args.alpha),
         math.radians(args.alpha4),
         args.s4 / 1000.0,
         params=params.replace(**masses) if masses else params,
         backend=args.backend,
-        weight=getattr(args, "gravity", False),
+        weight=weight,
     )
+    if weight:  # a command line answers at stable equilibria only
+        from closedloop.preload import require_stable
+
+        require_stable(result.details["compliance"])
+    return result
 
 
 def inputs_echo(args: argparse.Namespace) -> dict:
