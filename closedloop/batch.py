@@ -278,7 +278,11 @@ def _factor_ranks(B_s: np.ndarray, sc) -> np.ndarray:
         s_k = np.linalg.svd(B_s[deficient] * sc.sigma, compute_uv=False)
         ratio = s_k / np.where(s_k[:, :1] > 0.0, RANK_RTOL * s_k[:, :1], np.nan)
         clear = ((ratio > MARGIN) | (ratio < 1.0 / MARGIN)).all(axis=1)
-        rank[deficient] = np.where(clear, np.count_nonzero(ratio > MARGIN, axis=1), -1)
+        r = np.where(clear, np.count_nonzero(ratio > MARGIN, axis=1), -1)
+        if beta.shape[1] == 6:  # full rank from the kinematic factor: K must not overflow
+            with np.errstate(over="ignore"):
+                r[(r == 6) & ~(sc.dd.max() / K_MAX < beta[deficient, 5] ** 2)] = -1
+        rank[deficient] = r
     return rank
 
 

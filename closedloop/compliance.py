@@ -350,7 +350,9 @@ def _result(
     """:func:`compliance_result` from the numbers of the spring factor."""
     K, add = spectrum.K, np.add.reduce
     total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
-    if not math.isfinite(total):  # a NaN or inf anywhere (or entries near 1e308)
+    if not math.isfinite(total) and not (  # a NaN or inf anywhere; or a sum that overflows
+        np.isfinite(C).all() and np.isfinite(G).all() and (K is None or np.isfinite(K).all())
+    ):
         k = state.model.stiffness
         k = k[(k > 0) & np.isfinite(k)]
         springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"

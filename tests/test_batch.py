@@ -168,6 +168,30 @@ def test_extreme_springs_agree_with_the_single_query(ur5_urdf, k):
         assert_close_in_norm(batch.C[i], single.C, RTOL_STACKED)
 
 
+def test_near_singular_pose_with_huge_springs_overflows_in_both(ur5_urdf):
+    """Springs of 1e300 (one of 1e290) with the elbow nearly straight: K overflows. The
+    stacked path decided rank 6 from the kinematic factor without the overflow test, and
+    answered (a map showed det K = -inf) where the single query raises."""
+    names = [f"{j}_joint" for j in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1",
+                                     "wrist_2", "wrist_3")]  # fmt: skip
+    clm = cl.load_model(ur5_urdf, springs=dict(zip(names, [1e300] * 5 + [1e290], strict=True)))
+    q = np.array([0.3, -1.2, 1e-4, -0.6, 1.1, 0.2])
+    with pytest.raises(SingularConfigurationError, match="overflows"):
+        cl.compliance(clm, q, "tool0")
+    with pytest.raises(SingularConfigurationError, match="overflows"):
+        cl.compliances(clm, q[None], "tool0")
+
+
+def test_tiny_springs_whose_entries_are_finite_are_answered_by_both(ur5_urdf):
+    """Springs of 5e-308: every entry of C and G is finite (up to 5e307) but their sum
+    overflows, which the single query took for an overflow; both answer alike now."""
+    clm = cl.load_model(ur5_urdf, joint_stiffness=5e-308)
+    q = _ur5_poses(5, seed=0)[3]
+    single = cl.compliance(clm, q, "tool0")
+    assert np.isfinite(single.C).all() and np.abs(single.C).max() > 1e307
+    _assert_as_single(clm, q[None], "tool0")
+
+
 @pytest.mark.parametrize(
     ("Q", "message"),
     [
