@@ -70,6 +70,9 @@ class BatchCompliance(ReadOnlyArrays):
             ``axes``.
         G: (n, nv, 6) wrench to joint deflection dq (tangent of q) [rad or m per N, N m].
         rank: (n,) rank of C (the rule of :mod:`closedloop.conditioning`).
+        condition_number: (n,) cond(K_s) of the scaled stiffness over the rank, as
+            :attr:`closedloop.compliance.ComplianceResult.condition_number` (from the
+            square-root factor: it resolves near-singular poses that the formed C does not).
         stacked: (n,) True where the stacked fast path answered, False where the single
             query did.
         frame, axes: the loaded frame and the axes (``"world"`` or ``"local"``).
@@ -79,6 +82,7 @@ class BatchCompliance(ReadOnlyArrays):
     C: np.ndarray
     G: np.ndarray
     rank: np.ndarray
+    condition_number: np.ndarray
     stacked: np.ndarray
     frame: str
     axes: str
@@ -114,13 +118,14 @@ def compliances(
         configuration's index.
     """
     Q = _check_configurations(clm, Q)
-    C, G, rank, stacked, errors, L = answered(
+    C, G, rank, cond, stacked, errors, L = answered(
         clm, Q, frame, axes, length, QUERY_ERRORS, first_error=True
     )
     for i, e in errors.items():  # the single query's error, with the configuration
         e.add_note(f"at configuration {i} of Q")
         raise e
-    return BatchCompliance(frozen(C), frozen(G), frozen(rank), frozen(stacked), frame, axes, L)
+    arrays = (frozen(a) for a in (C, G, rank, cond, stacked))
+    return BatchCompliance(*arrays, frame, axes, L)
 
 
 def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
@@ -136,21 +141,22 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
         first_error: stop at the first recorded error.
 
     Returns:
-        C (n, 6, 6), G (n, nv, 6), rank (n,) (NaN and -1 where an error was recorded),
-        stacked (n,) bool, the errors by configuration index, and the length L [m] (NaN
-        when invalid).
+        C (n, 6, 6), G (n, nv, 6), rank (n,), the scaled condition number cond(K_s) (n,)
+        (NaN, -1 and NaN where an error was recorded), stacked (n,) bool, the errors by
+        configuration index, and the length L [m] (NaN when invalid).
     """
     try:
         L = clm.length if length is None else check_length(length)
-        C, G, rank = stacked_compliances(clm, Q, frame, axes, L)
+        C, G, rank, cond = stacked_compliances(clm, Q, frame, axes, L)
     except catch:
         if not len(Q):  # no single query to raise it again
             raise
         n, L = len(Q), np.nan
-        C, G, rank = (
+        C, G, rank, cond = (
             np.full((n, 6, 6), np.nan),
             np.full((n, clm.model.nv, 6), np.nan),
             np.full(n, -1),
+            np.full(n, np.nan),
         )
     stacked, errors = rank >= 0, {}
     for i in np.flatnonzero(~stacked):
@@ -161,8 +167,8 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
             if first_error:
                 break
             continue
-        C[i], G[i], rank[i] = r.C, r.G, r.rank
-    return C, G, rank, stacked, errors, L
+        C[i], G[i], rank[i], cond[i] = r.C, r.G, r.rank, r.condition_number
+    return C, G, rank, cond, stacked, errors, L
 
 
 def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
@@ -191,12 +197,13 @@ def stacked_compliances(
     Returns:
         C: (n, 6, 6) [SI] and G: (n, nv, 6), NaN where the path did not answer;
         rank: (n,) rank of C, -1 where the path did not answer (module docstring:
-        everything else is left to :func:`closedloop.compliance.compliance`).
+        everything else is left to :func:`closedloop.compliance.compliance`);
+        cond: (n,) cond(K_s) over the rank, NaN where the path did not answer.
     """
     starts = range(0, len(Q), STACK) if len(Q) else [0]  # no configuration: empty arrays
     parts = [_stack(clm, Q[i : i + STACK], frame, axes, L) for i in starts]
-    C, G, rank = (np.concatenate(a) for a in zip(*parts, strict=True))
-    return C, G, rank
+    C, G, rank, cond = (np.concatenate(a) for a in zip(*parts, strict=True))
+    return C, G, rank, cond
 
 
 def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float):
@@ -209,7 +216,7 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float)
     sc = model_scaling(clm, L)
     p, s = sc.passive.size, sc.sprung.size
     if not n or not nv or not s or sc.loop_blocks is not None or (m < p if p else m):
-        return C, G, np.full(n, -1)  # no fast path for this model (springs.partition)
+        return C, G, np.full(n, -1), np.full(n, np.nan)  # no fast path (springs.partition)
     r, Jc, J = _kinematics(clm, Q, fid, reference)
     ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
     X, norm2 = None, np.zeros(n)
@@ -230,17 +237,18 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float)
             B = J @ P
             Gk = P @ np.swapaxes(B, 1, 2)
         Ck = B @ np.swapaxes(B, 1, 2)
-        rank = _ranks(B * sc.d[:, None], Ck * sc.dd, sc)
+        rank, cond = _ranks(B * sc.d[:, None], Ck * sc.dd, sc)
     ok &= rank >= 0
     ok &= np.isfinite(Ck).all(axis=(1, 2)) & np.isfinite(Gk).all(axis=(1, 2))
     C[ok], G[ok] = Ck[ok], Gk[ok]
-    return C, G, np.where(ok, rank, -1)
+    return C, G, np.where(ok, rank, -1), np.where(ok, cond, np.nan)
 
 
-def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> np.ndarray:
+def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     """(n,) rank of each C = D^-1 B_s B_s^T D^-1 from its scaled factor B_s (n, 6, s) by the
     rule of :func:`closedloop.conditioning.spectrum_from_factor`, or -1 where a singular
-    value lies within :data:`MARGIN` of a threshold of the rule (or K would overflow).
+    value lies within :data:`MARGIN` of a threshold of the rule (or K would overflow); and
+    (n,) the condition number cond(K_s) over the rank, as that function's.
 
     Most configurations are clearly full rank: the eigenvalues of C_s = B_s B_s^T (n, 6, 6)
     (formed, a third of the cost of the SVDs) tell them within :data:`GRAM_MARGIN`; the
@@ -254,13 +262,15 @@ def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> np.ndarray:
             finite & (mu[:, 0] > threshold * mu[:, 5]) & (MARGIN * sc.dd.max() / K_MAX < mu[:, 0])
         )
     rank = np.where(full, 6, -1)
+    with np.errstate(divide="ignore", invalid="ignore"):  # within GRAM_MARGIN: accurate
+        cond = np.where(full, mu[:, 5] / mu[:, 0], np.nan)
     rest = np.flatnonzero(~full)
     if rest.size:
-        rank[rest] = _factor_ranks(B_s[rest], sc)
-    return rank
+        rank[rest], cond[rest] = _factor_ranks(B_s[rest], sc)
+    return rank, cond
 
 
-def _factor_ranks(B_s: np.ndarray, sc) -> np.ndarray:
+def _factor_ranks(B_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_ranks` from the singular values of the factors B_s (n, 6, s)."""
     B_s = np.where(np.isfinite(B_s).all(axis=(1, 2))[:, None, None], B_s, 0.0)  # 0: not decided
     beta = np.linalg.svd(B_s, compute_uv=False)  # (n, min(6, s))
@@ -283,7 +293,10 @@ def _factor_ranks(B_s: np.ndarray, sc) -> np.ndarray:
             with np.errstate(over="ignore"):
                 r[(r == 6) & ~(sc.dd.max() / K_MAX < beta[deficient, 5] ** 2)] = -1
         rank[deficient] = r
-    return rank
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # (beta_1 / beta_r)^2
+        last = beta[np.arange(len(B_s)), np.clip(rank - 1, 0, None)]
+        cond = np.where(rank > 0, (beta[:, 0] / last) ** 2, 1.0)
+    return rank, np.where(rank >= 0, cond, np.nan)
 
 
 def _kinematics(clm: ClosedLoopModel, Q: np.ndarray, fid: int, reference):

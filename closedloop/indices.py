@@ -454,22 +454,33 @@ def _block_extremes(C: np.ndarray, block: slice) -> tuple[np.ndarray, np.ndarray
     return low, high
 
 
+#: Largest SI condition number taken from the eigenvalues of a formed C (n, 6, 6): they
+#: err by about 1e-16 of the largest, so the smallest is known to 1e-4 relative at 1e12,
+#: and not at all towards 1e16 (a map showed 1.5e17 where K's own was 3.8e16).
+SI_RESOLVED = 1e12
+
+
 def batch_indices(
     C: np.ndarray,
     rank: np.ndarray,
     length,
     wrench: np.ndarray | None = None,
     symmetric: np.ndarray | None = None,
+    condition: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """The indices of :data:`BATCH_INDICES` for n compliances at once (NaN where one does
     not exist), by the definitions of :class:`StiffnessIndices`.
 
     * ``det_K``: det K = 1 / det C, full rank only.
     * ``condition_number``: cond(K_s) of the scaled stiffness over the rank, at the
-      characteristic length L (:func:`closedloop.conditioning.batch_rank`; as
-      :attr:`StiffnessIndices.scaled_condition_number`): unit-free, the one to compare.
+      characteristic length L (as :attr:`StiffnessIndices.scaled_condition_number`):
+      unit-free, the one to compare. ``condition`` where given (the solver's, from the
+      square-root factor), else from the eigenvalues of C
+      (:func:`closedloop.conditioning.batch_rank`), which resolve it up to about 1e12.
     * ``condition_number_si``: cond(K) of the SI matrix, full rank only (as
-      :attr:`StiffnessIndices.condition_number`): changes with the length unit.
+      :attr:`StiffnessIndices.condition_number`): changes with the length unit. From the
+      eigenvalues of C: NaN above :data:`SI_RESOLVED`, where they do not resolve it (nor
+      ``det_K``).
     * ``min/max_translational``, ``min/max_rotational``: extreme principal stiffnesses of
       the 3x3 blocks of C [N/m, N m/rad].
     * ``deflection_translation``, ``deflection_rotation``: |d| [m], |r| [rad] of the twist
@@ -485,6 +496,7 @@ def batch_indices(
         length: characteristic length L [m], one or (n,).
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]) at the same point, or None.
         symmetric: (n,) bool, which C are symmetric (default: all).
+        condition: (n,) cond(K_s) from the solver, NaN where unknown (or None).
 
     Returns:
         name -> (n,) array (units in :data:`BATCH_INDICES`; no deflections without wrench).
@@ -499,12 +511,18 @@ def batch_indices(
         _, out["condition_number"][sym], _ = batch_rank(C[sym], L[sym])
         for kind, block in (("translational", T), ("rotational", R)):
             out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(C[sym], block)
+    if condition is not None:
+        known = finite & np.isfinite(condition)
+        out["condition_number"][known] = condition[known]
     both = sym & full
     if np.any(both):
-        c = np.linalg.eigvalsh(C[both])
-        out["det_K"][both] = 1.0 / np.linalg.det(C[both])
-        c = np.abs(c)  # an indefinite C (an unstable preloaded equilibrium) included
-        out["condition_number_si"][both] = c.max(axis=1) / c.min(axis=1)
+        c = np.abs(np.linalg.eigvalsh(C[both]))  # an indefinite C (unstable preload) too
+        with np.errstate(divide="ignore", over="ignore"):
+            cond_si = c.max(axis=1) / c.min(axis=1)
+        resolved = cond_si <= SI_RESOLVED
+        cond_si[~resolved] = np.nan
+        out["condition_number_si"][both] = cond_si
+        out["det_K"][both] = np.where(resolved, 1.0 / np.linalg.det(C[both]), np.nan)
     other = ~sym & full
     if np.any(other):
         K = np.linalg.inv(C[other])

@@ -85,6 +85,8 @@ class ChunkResult:
     Attributes:
         C: (c, 6, 6) compliance at the frame [SI], NaN where the point failed.
         rank: (c,) rank of C from the solver, -1 where unknown (set by :func:`classify`).
+        condition: (c,) scaled condition number cond(K_s) from the solver's factor, NaN
+            where unknown (a closed form: then computed from C).
         status: (c,) status codes (:data:`STATUS`).
         length: (c,) characteristic length [m] of the scaled indices.
         iterations: (c,) Gauss-Newton iterations of the assembly, -1 if none.
@@ -93,6 +95,7 @@ class ChunkResult:
 
     C: np.ndarray
     rank: np.ndarray
+    condition: np.ndarray
     status: np.ndarray
     length: np.ndarray
     iterations: np.ndarray
@@ -104,6 +107,7 @@ class ChunkResult:
         return cls(
             C=np.full((n, 6, 6), np.nan),
             rank=np.full(n, -1, dtype=np.int8),
+            condition=np.full(n, np.nan),
             status=np.zeros(n, dtype=np.int8),
             length=np.full(n, np.nan),
             iterations=np.full(n, -1, dtype=np.int16),
@@ -163,10 +167,15 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
         return
     Q = np.array([a.q for _, a in assembled])
     positions = np.array([i for i, _ in assembled])
-    C, _, rank, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS)
+    C, _, rank, cond, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS)
     ok = rank >= 0
     done = positions[ok]
-    out.C[done], out.rank[done], out.length[done] = C[ok], rank[ok], L
+    out.C[done], out.rank[done], out.condition[done], out.length[done] = (
+        C[ok],
+        rank[ok],
+        cond[ok],
+        L,
+    )
     out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, ok, strict=True) if s]
     for k, e in errors.items():
         out.fail(positions[k], e)
@@ -398,6 +407,7 @@ class PointData:
     Attributes:
         C: (n, 6, 6) compliance [SI], NaN where the point failed.
         rank: (n,) int8 rank of C, -1 where unknown.
+        condition: (n,) scaled condition number from the solver, NaN where unknown.
         codes: (n,) int8 status codes (:data:`STATUS`).
         length: (n,) characteristic length [m].
         iterations: (n,) int16 assembly iterations, -1 if none.
@@ -408,6 +418,7 @@ class PointData:
 
     C: np.ndarray
     rank: np.ndarray
+    condition: np.ndarray
     codes: np.ndarray
     length: np.ndarray
     iterations: np.ndarray
@@ -435,12 +446,14 @@ def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData
             (e.g. :func:`run_tasks`).
     """
     data = PointData(C=np.full((n, 6, 6), np.nan), rank=np.full(n, -1, dtype=np.int8),
-                     codes=np.zeros(n, dtype=np.int8), length=np.full(n, np.nan),
+                     condition=np.full(n, np.nan), codes=np.zeros(n, dtype=np.int8),
+                     length=np.full(n, np.nan),
                      iterations=np.full(n, -1, dtype=np.int16),
                      reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
     for k, r in results:
         p = pieces[k]
         data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
+        data.condition[p] = r.condition
         data.length[p], data.iterations[p] = r.length, r.iterations
         for i, text in r.reasons.items():
             data.set_reason(p[i], text)

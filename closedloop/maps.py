@@ -297,7 +297,7 @@ def stiffness_map(
                                  label="map points", show_progress=show_progress)  # fmt: skip
     data = gather(n, pieces, results)
     symmetric = classify(data)
-    values = batch_indices(data.C, data.rank, data.length, w, symmetric)
+    values = batch_indices(data.C, data.rank, data.length, w, symmetric, data.condition)
     for a in (pts, data.C, data.rank, data.codes, *values.values()):
         a.flags.writeable = False
     return StiffnessMap(

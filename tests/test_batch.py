@@ -30,6 +30,10 @@ from closedloop.exceptions import (
 #: order of operations (measured: 1e-16 relative on every case here); cond(J_p) ~ 1e2
 #: multiplies rounding in the passive motion.
 RTOL_STACKED = 1e-12
+#: Condition numbers of the stacked and single paths: eigenvalues of the formed C_s
+#: against squared singular values of its factor, which differ by ~1e-16 cond (cond up to
+#: 1e10 on that path), or the singular values of one factor in two LAPACK calls.
+RTOL_COND = 1e-6
 
 
 def _assert_as_single(clm, Q, frame, axes="world", length=None):
@@ -38,6 +42,9 @@ def _assert_as_single(clm, Q, frame, axes="world", length=None):
     for i, q in enumerate(Q):
         single = cl.compliance(clm, q, frame, axes, length=length)
         assert batch.rank[i] == single.rank
+        # the condition number: the same factor's singular values, or the eigenvalues of
+        # C_s where they are within GRAM_MARGIN (cond <= 1e10: rounding ~1e-16 cond)
+        assert batch.condition_number[i] == pytest.approx(single.condition_number, rel=RTOL_COND)
         assert_close_in_norm(batch.C[i], single.C, RTOL_STACKED)
         assert_close_in_norm(batch.G[i], single.G, RTOL_STACKED)
         assert not batch.stacked[i] or single.path != "null-space"  # stacked: a fast path

@@ -171,3 +171,25 @@ def test_start_provider_sets_every_start(fourbar_urdf, fourbar_yaml):
     for i, crank in enumerate(cranks):
         q = cl.assemble(clm, [crank], reference_configuration(clm)).q
         assert_close_in_norm(m.C[i], cl.compliance(clm, q, "P").C, RTOL_SAME)
+
+
+def test_condition_numbers_of_a_near_singular_map_are_the_single_query_s(ur5_urdf):
+    """The UR5 with its elbow almost straight and one soft wrist spring: full rank, cond
+    ~1e13-1e16 (as 1/q_elbow^2). The map's condition_number is the solver's (it was taken
+    from the eigenvalues of the formed C over their own rank: stuck at 5.7e4); the SI one
+    and det K, which only the formed C gives, are NaN where it does not resolve them."""
+    names = [f"{j}_joint" for j in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1",
+                                     "wrist_2", "wrist_3")]  # fmt: skip
+    q0 = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])
+    clm = cl.load_model(ur5_urdf, springs=dict(zip(names, [1e4] * 5 + [1.0], strict=True)))
+    fixed = {n: v for n, v in zip(names, q0, strict=True) if n != "elbow_joint"}
+    elbow = np.array([1e-3, 1e-4, 1e-5])
+    m = stiffness_map(clm, "tool0", sweeps={"elbow_joint": elbow}, fixed=fixed)
+    for i, e in enumerate(elbow):
+        single = cl.compliance(clm, np.r_[q0[:2], e, q0[3:]], "tool0")
+        assert m.status[i] == "ok" and single.rank == 6
+        assert m.indices["condition_number"][i] == pytest.approx(single.condition_number,
+                                                                 rel=1e-6)  # fmt: skip
+    assert m.indices["condition_number"][-1] > 1e15
+    si = m.indices["condition_number_si"]
+    assert np.isnan(si[-1]) and np.isnan(m.indices["det_K"][-1])

@@ -248,6 +248,7 @@ class SweepResult:
             codes = np.array([STATUS.index(name) for name in names], dtype=np.int8)[inverse]
             data = PointData(
                 C=readonly(f["C"]), rank=frozen(f["rank"]), codes=frozen(codes.reshape(-1)),
+                condition=readonly(f["index_condition_number"]),
                 length=readonly(f["length"]), iterations=frozen(f["iterations"]),
                 reason_codes=frozen(f["reason_codes"]),
                 reason_texts=f["reason_texts"].tolist(),
@@ -384,7 +385,7 @@ def sweep(
                         f"{data.rank[i]} < 6: a singular pose, where one direction is "
                         "almost free")  # fmt: skip
         data.C[i] = np.nan
-    indices = batch_indices(data.C, data.rank, data.length, w, symmetric)
+    indices = batch_indices(data.C, data.rank, data.length, w, symmetric, data.condition)
     if w is not None:
         indices["deflection"] = data.C @ w
     for a in (data.C, data.rank, data.codes, data.iterations, data.length, data.reason_codes):
