@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .arrays import check_wrench, readonly
+from .arrays import check_wrench, readonly, real_array
 from .derivatives import central_differences, pinocchio_second_order_exact
 from .exceptions import InvalidInputError
 from .model import ClosedLoopModel
@@ -30,7 +30,7 @@ STANDARD_GRAVITY = (0.0, 0.0, -9.80665)
 
 
 def _vector3(value, what: str) -> np.ndarray:
-    v = np.asarray(value, dtype=float).reshape(-1)
+    v = real_array(value, what).reshape(-1)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         shown = np.asarray(value).tolist()
         raise InvalidInputError(f"{what} must be 3 finite numbers, got {shown}")
@@ -52,7 +52,10 @@ class Payload:
     offset: np.ndarray = field(default_factory=lambda: readonly(np.zeros(3)))
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.mass, int | float | np.floating) and np.isfinite(self.mass)):
+        if isinstance(self.mass, bool | np.bool_) or not (
+            isinstance(self.mass, int | float | np.integer | np.floating)
+            and np.isfinite(float(self.mass))
+        ):
             raise InvalidInputError(f"payload mass must be a finite number [kg], got {self.mass!r}")
         if self.mass < 0.0:
             raise InvalidInputError(f"payload mass must be >= 0 [kg], got {self.mass}")
@@ -65,8 +68,9 @@ class Payload:
         return {"mass_kg": float(self.mass), "frame": self.frame, "offset_m": self.offset.tolist()}
 
 
-#: Largest weight moment m max|g_i| max(L, 1 m) [N m] of a gravity load: its derivatives and the
-#: equilibrium solver multiply it by the joint Jacobians and their squares.
+#: Largest weight moment m max|g_i| max(L, 1 m, the payloads' offsets) [N m] of a gravity
+#: load: its derivatives and the equilibrium solver multiply it by the joint Jacobians and
+#: their squares.
 WEIGHT_MAX = 1e150
 
 
@@ -90,7 +94,12 @@ class GravityLoad:
         payloads: Sequence[Payload] = (),
     ):
         self.gravity = readonly(_vector3(gravity, "gravity [m/s^2]"))
-        self.payloads = tuple(payloads)
+        try:
+            self.payloads = tuple(payloads)
+        except TypeError:  # one Payload, or not a sequence
+            raise InvalidInputError(
+                f"payloads must be a sequence of Payload objects, got {payloads!r}"
+            ) from None
         model = pin.Model(clm.model)  # a copy: the payloads become bodies of its own
         model.gravity = pin.Motion(np.r_[self.gravity, np.zeros(3)])
         for p in self.payloads:
@@ -98,16 +107,18 @@ class GravityLoad:
                 raise InvalidInputError(f"payloads must be Payload objects, got {p!r}")
             f = model.frames[clm.frame_id(p.frame)]
             at = f.placement * pin.SE3(np.eye(3), p.offset)
-            point_mass = pin.Inertia(p.mass, np.zeros(3), np.zeros((3, 3)))
+            point_mass = pin.Inertia(float(p.mass), np.zeros(3), np.zeros((3, 3)))
             model.appendBodyToJoint(f.parentJoint, point_mass, at)
         self.model = model
         self.mass = float(sum(I.mass for I in model.inertias))
-        weight = self.mass * float(np.max(np.abs(self.gravity))) * max(clm.length, 1.0)
+        lever = max(clm.length, 1.0, *(float(np.max(np.abs(p.offset))) for p in self.payloads))
+        weight = self.mass * float(np.max(np.abs(self.gravity))) * lever
         if not weight < WEIGHT_MAX:  # its moments, derivatives and the solver would overflow
             raise InvalidInputError(
                 f"the weight under gravity {self.gravity.tolist()} m/s^2 of {self.mass:.6g} kg "
                 f"(links and payloads) overflows the computation (about {weight:.3g} N m); "
-                f"expected mass x |gravity| x size well below {WEIGHT_MAX:.0e}"
+                f"expected mass x |gravity| x size (or payload offset) well below "
+                f"{WEIGHT_MAX:.0e}"
             )
         self._exact_derivatives = pinocchio_second_order_exact(model)
 

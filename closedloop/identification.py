@@ -165,8 +165,8 @@ def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
         missing = [k for k in ("wrench", "twist", "sd") if k not in item]
         if missing or not set(item) <= set(_KEYS):
             raise ModelFileError(
-                f"{str(path)!r}: measurement {i} has {sorted(item)}; expected q or actuated, "
-                "wrench, twist, sd"
+                f"{str(path)!r}: measurement {i} has {sorted(map(str, item))}; expected q or "
+                "actuated, wrench, twist, sd"
             )
         try:
             out.append(Measurement.of(**{k: _number(v) for k, v in item.items()}))

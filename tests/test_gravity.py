@@ -309,12 +309,30 @@ def test_cahyman_leg_masses_sit_at_the_middle_of_their_links():
                                    rtol=1e-12)  # fmt: skip
 
 
-@pytest.mark.parametrize("gravity, mass", [((0, 0, -1e308), 0.0), ((0, 0, -9.81), 1e300)])
-def test_an_overflowing_weight_is_refused_naming_gravity_and_mass(ur5, gravity, mass):
+@pytest.mark.parametrize(
+    ("gravity", "mass", "offset"),
+    [((0, 0, -1e308), 0.0, 0.0), ((0, 0, -9.81), 1e300, 0.0), ((0, 0, -9.81), 1.0, 1e160)],
+)
+def test_an_overflowing_weight_is_refused_naming_gravity_and_mass(ur5, gravity, mass, offset):
     """A weight beyond the double range would reach the solver as inf or NaN (LAPACK then
-    prints to stdout and fails): refused at once, naming the gravity and the mass."""
+    prints to stdout and fails): refused at once, naming the gravity and the mass; a
+    payload's offset is its lever (1 kg at 1e160 m reached LAPACK)."""
     clm, _ = ur5
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(cl.InvalidInputError, match=r"the weight under gravity \[0.0, 0.0, "):
-            GravityLoad(clm, gravity, [Payload(mass, "tool0")])
+            GravityLoad(clm, gravity, [Payload(mass, "tool0", [offset, 0.0, 0.0])])
+
+
+def test_gravity_and_payloads_of_the_wrong_type_are_typed_errors(ur5):
+    """A string for gravity and one Payload for the sequence raised ValueError and
+    TypeError; a mass of numpy integer type was refused, and True taken for 1 kg."""
+    clm, q = ur5
+    with pytest.raises(cl.InvalidInputError, match=r"gravity \[m/s\^2\] must be real numbers"):
+        cl.solve_equilibrium(clm, q, "tool0", np.zeros(6), gravity="down")
+    with pytest.raises(cl.InvalidInputError, match=r"payloads must be a sequence of Payload"):
+        GravityLoad(clm, G, Payload(1.0, "tool0"))
+    with pytest.raises(cl.InvalidInputError, match=r"payload mass must be a finite number"):
+        Payload(True, "tool0")
+    as_int, as_float = (GravityLoad(clm, G, [Payload(m, "tool0")]) for m in (np.int64(2), 2.0))
+    np.testing.assert_array_equal(as_int.forces(q), as_float.forces(q))

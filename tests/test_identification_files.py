@@ -86,6 +86,16 @@ def test_a_yaml_measurement_without_sd_is_refused(tmp_path):
         read_measurements(tmp_path / "m.yaml")
 
 
+def test_a_yaml_measurement_with_a_number_for_a_key_is_refused(tmp_path):
+    """The keys are named in the message even when one is not a string (sorting them
+    raised a TypeError, a traceback from the command line)."""
+    (tmp_path / "m.yaml").write_text("frame: P\nmeasurements:\n  - {actuated: [0.2], wrench: "
+                                     "[1, 0, 0, 0, 0, 0], twist: [0, 0, 0, 0, 0, 0], sd: 1e-7, "
+                                     "1: 2}\n")  # fmt: skip
+    with pytest.raises(cl.ModelFileError, match=r"measurement 0 has \['1', 'actuated', 'sd'"):
+        read_measurements(tmp_path / "m.yaml")
+
+
 def _yaml(path, rows, sd="1e-7"):
     lines = ["frame: P", "measurements:"]
     for q, _, w, d in rows:
