@@ -175,8 +175,14 @@ def parse_values(text: str) -> np.ndarray:
     return values
 
 
+#: Output folders created by :func:`output_folder` for the running command: a command
+#: that fails removes them again while they are empty (:func:`run_command`).
+_CREATED: list[Path] = []
+
+
 def output_folder(path: str | Path, option: str = "--out") -> Path:
-    """Create the output folder ``path`` (and its parents) now, before any work.
+    """Create the output folder ``path`` (and its parents) now, before any work; a
+    command that fails afterwards leaves no empty folder of its own behind.
 
     Raises:
         InvalidInputError: ``path`` is a file, lies under a file, or cannot be created or
@@ -186,7 +192,9 @@ def output_folder(path: str | Path, option: str = "--out") -> Path:
     if path.exists() and not path.is_dir():
         raise InvalidInputError(f"{option} {str(path)!r} is a file; expected a folder")
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        if not path.exists():
+            path.mkdir(parents=True)
+            _CREATED.append(path)
         tempfile.TemporaryFile(dir=path).close()
     except OSError as e:
         raise InvalidInputError(
@@ -322,6 +330,7 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     (:func:`closedloop.exceptions.exit_status`; a :class:`ClusterError` is a failed
     computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``).
     Shared by both command lines."""
+    _CREATED.clear()
     try:
         check_html_options(args)  # before any work
         with one_line_warnings(prog):
@@ -331,13 +340,24 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     except BrokenPipeError:
         return closed_pipe()
     except OSError as e:  # a full device; the typed errors name their own files
+        _remove_empty_outputs()
         return output_failed(prog, e)
     except ClosedLoopError as e:
+        _remove_empty_outputs()
         print(error_line(prog, e), file=sys.stderr)
         return exit_status(e)
     except np.linalg.LinAlgError as e:  # a LAPACK failure on valid input
+        _remove_empty_outputs()
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
+
+
+def _remove_empty_outputs() -> None:
+    """Remove the folders :func:`output_folder` created for a command that failed, where
+    they are still empty."""
+    while _CREATED:
+        with contextlib.suppress(OSError):  # not empty: kept
+            _CREATED.pop().rmdir()
 
 
 def run_main(

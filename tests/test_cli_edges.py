@@ -223,6 +223,28 @@ def test_cahyman_masses_without_gravity_are_refused(capsys, command):
     assert "--mass m_M4=100 weighs nothing without --gravity" in one_line(err, "cahyman")
 
 
+@pytest.mark.parametrize(
+    ("text", "code", "match"),
+    [("s4_max: 0.01\n", 2, "s4_max = 0.01 m: the paper's poses"),
+     ("K_T: 1.0e60\n", 3, "is still a mechanism at frame 'M'")],
+)  # fmt: skip
+def test_report_parameters_it_cannot_use_leave_no_output(tmp_path, capsys, text, code, match):
+    """A stroke too short for the paper's poses is refused before any work; torsion springs
+    that make a pose a mechanism fail: one line each (the NaN cells printed numpy's
+    warnings), and no folder or figure of the run is left (a tornado figure was)."""
+    (tmp_path / "p.yaml").write_text(text)
+    status, _, err = run(cahyman_main, capsys, "report", "--params", tmp_path / "p.yaml",
+                         "--out", tmp_path / "out")  # fmt: skip
+    assert status == code and match in one_line(err, "cahyman")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_map_refused_after_its_folder_was_made_leaves_none(tmp_path, capsys):
+    code, _, err = run(main, capsys, *fourbar_map(tmp_path, "--sweep", "nojoint=0.2:2.8:5"))
+    assert code == 2 and "'nojoint' is not an actuated joint" in one_line(err)
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("command", ["stiffness", "deflect"])
 def test_cahyman_weight_beyond_what_the_springs_hold_is_refused(capsys, command):
     """The arm upright is an inverted pendulum: 3000 kg at M (m g 0.2 m > K_T4) leaves the

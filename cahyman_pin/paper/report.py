@@ -8,6 +8,7 @@ The report lists every parameter with its source (paper, assumed, or given).
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import warnings
 from pathlib import Path
 
@@ -56,7 +57,7 @@ from cahyman_pin.paper.fit import dimension_fit
 from cahyman_pin.paper.numbers import fmt, two_decimals
 from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
 from closedloop.compliance import TWIST_LABELS
-from closedloop.exceptions import JointLimitWarning
+from closedloop.exceptions import InvalidInputError, JointLimitWarning
 
 
 def _diff(v: float, ref: float) -> str:
@@ -455,8 +456,35 @@ def build_report(
         out: output folder (created).
         params: the parameters of every backend.
         params_file: the file ``params`` were read from, named in the report (None: none).
+
+    Raises:
+        InvalidInputError: parameters whose stroke cannot reach the paper's poses. Any
+            error (a pose the parameters make singular) leaves no file of this run behind.
     """
+    needed = max(pose.s4_mm for pose in TABLE_POSES) * 1e-3
+    if params.s4_max < needed:
+        raise InvalidInputError(
+            f"s4_max = {params.s4_max:g} m: the paper's poses (Table 1, Figs. 5b, 5c) need a "
+            f"stroke s_4 of {needed:g} m; give s4_max >= {needed:g}"
+        )
     out = Path(out)
+    existed = out.exists()
+    before = set(out.iterdir()) if existed else set()
+    try:
+        with warnings.catch_warnings():  # NaN cells of a backend that fails at a pose
+            warnings.filterwarnings("ignore", "All-NaN slice", RuntimeWarning)
+            warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
+            return _write_report(out, params, params_file)
+    except BaseException:  # no half report: what this run wrote goes
+        for path in set(out.iterdir()) - before if out.exists() else ():
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        if not existed and out.exists():
+            out.rmdir()
+        raise
+
+
+def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) -> Document:
+    """:func:`build_report` once its inputs are checked."""
     out.mkdir(parents=True, exist_ok=True)
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
