@@ -270,17 +270,21 @@ def test_cahyman_weight_from_the_api_and_the_command_line(capsys):
     assert "needs the generic backend" in capsys.readouterr().err
 
 
-def test_report_weight_section_is_the_preloaded_compliance():
-    # the report's numbers recomputed here: the equilibrium under the weight, directly
+@pytest.mark.parametrize("given", [{}, {"m_M4": 2.0}])
+def test_report_weight_section_is_the_preloaded_compliance(given):
+    """The report's numbers recomputed here: the equilibrium under the weight, directly;
+    with the illustrative masses, or with those the parameters give (a --params file's
+    masses were replaced by the illustrative ones)."""
     from cahyman_pin.model import CaHyManModel
     from cahyman_pin.paper.data import TABLE_POSES
-    from cahyman_pin.paper.effects import ILLUSTRATIVE_MASS
+    from cahyman_pin.paper.effects import ILLUSTRATIVE_MASS, NAMED_MASSES
     from cahyman_pin.paper.report import weight_rows
     from cahyman_pin.params import DEFAULT_PARAMS
 
-    masses = dict.fromkeys(("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5"), ILLUSTRATIVE_MASS)
+    params = DEFAULT_PARAMS.replace(**given)
+    masses = given or dict.fromkeys(NAMED_MASSES, ILLUSTRATIVE_MASS)
     model = CaHyManModel(DEFAULT_PARAMS.replace(**masses))
-    rows = weight_rows(DEFAULT_PARAMS)
+    rows = weight_rows(params)
     assert [r[0] for r in rows] == [p.label for p in TABLE_POSES]
     for (_, sag, change), pose in zip(rows, TABLE_POSES, strict=True):
         q = model.assemble(*pose.si)

@@ -9,6 +9,7 @@ each table cell, in the paper's units, is its contribution.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,23 +27,53 @@ class Effect:
 
     name: str
     change: dict
-    note: str
-    params_change: dict = dataclasses.field(default_factory=dict)
+    note: str | Callable[[CaHyManParams], str]
+    params_change: dict | Callable[[CaHyManParams], dict] = dataclasses.field(default_factory=dict)
+
+    def text(self, params: CaHyManParams) -> str:
+        """The note, for ``params``."""
+        return self.note(params) if callable(self.note) else self.note
+
+    def params(self, params: CaHyManParams) -> CaHyManParams:
+        """``params`` with the effect's parameter change (a mapping, or one made from them)."""
+        change = self.params_change(params) if callable(self.params_change) else self.params_change
+        return params.replace(**change) if change else params
 
 
-#: Mass [kg] given to each of the five named parts to show the weight terms of eq. (11).
+#: Mass [kg] given to each of the five named parts to show the weight terms of eq. (11)
+#: when the parameters give none of them.
 ILLUSTRATIVE_MASS = 0.5
+#: The five masses that eq. (11) names.
+NAMED_MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
+
+
+def eq11_masses(params: CaHyManParams) -> dict[str, float]:
+    """The five named masses [kg] of the weight terms: those of ``params`` when any is
+    given (non-zero), else :data:`ILLUSTRATIVE_MASS` each."""
+    given = {m: getattr(params, m) for m in NAMED_MASSES}
+    return given if any(given.values()) else dict.fromkeys(NAMED_MASSES, ILLUSTRATIVE_MASS)
+
+
+def eq11_masses_text(params: CaHyManParams) -> str:
+    """How :func:`eq11_masses` chose the masses, for the report's text."""
+    if any(getattr(params, m) for m in NAMED_MASSES):
+        listed = ", ".join(f"{m} = {getattr(params, m):g} kg" for m in NAMED_MASSES)
+        return f"the masses of the parameters ({listed})"
+    return (f"an illustrative {ILLUSTRATIVE_MASS} kg for each of the five masses (the paper "
+            "gives no masses, nor do the parameters)")  # fmt: skip
+
+
+def _weights_note(params: CaHyManParams) -> str:
+    return ("weight terms dropped (gravity belongs to a separate preload); shown with "
+            + eq11_masses_text(params))  # fmt: skip
+
 
 EFFECTS = (
     Effect("lever arm of eq. (3)", {"lever_arm": True},
            "plate twist at H transported to M (rotation x lever arm) before the sum"),
     Effect("K_s value", {"ks": "params"},
            "0.697 N/m as printed -> the assumed 0.697e6 N/m"),
-    Effect("weights of eq. (11)", {"weights": False},
-           "weight terms dropped (gravity belongs to a separate preload); the paper gives no "
-           "masses and the model has none, so the terms are shown here with an illustrative "
-           f"{ILLUSTRATIVE_MASS} kg for each of the five masses",
-           {m: ILLUSTRATIVE_MASS for m in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")}),
+    Effect("weights of eq. (11)", {"weights": False}, _weights_note, eq11_masses),
     Effect("A_d damage, eqs. (18)-(19)", {"a_d": "printed"},
            "A_d as printed (secant form, singular where y_1 = 0 or C_psi = 0) instead of "
            "the Jacobian of the closed-form kinematics"),
@@ -78,7 +109,7 @@ def effect_changes(params: CaHyManParams) -> dict[str, dict[str, np.ndarray | No
     """
     out: dict[str, dict[str, np.ndarray | None]] = {}
     for effect in EFFECTS:
-        prm = params.replace(**effect.params_change)
+        prm = effect.params(params)
         options = dataclasses.replace(PublishedOptions(), **effect.change)
         out[effect.name] = {}
         for p in TABLE_POSES:

@@ -293,7 +293,7 @@ def classes_section(doc: Document, params: CaHyManParams) -> None:
             "paper's equations (the change its repair alone makes at the published backend, "
             "'Where the differences come from', matches the gap published - reference within "
             "the rounding, the damages taken as additive; size: minus that change; the weight "
-            "terms, shown with illustrative masses, explain nothing); explained by the "
+            "terms, shown with masses the paper does not give, explain nothing); explained by the "
             "non-linearity of the published row (the stiffness fit is within the rounding of "
             "the weighted nearest triple of that row that adds up, the one of the floor "
             "above; size: published minus that value); otherwise unexplained, with its "

@@ -41,8 +41,9 @@ from cahyman_pin.paper.data import (
 from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
 from cahyman_pin.paper.effects import (
     EFFECTS,
-    ILLUSTRATIVE_MASS,
     effect_changes,
+    eq11_masses,
+    eq11_masses_text,
     printed_arm_axial_stiffness,
 )
 from cahyman_pin.paper.explained import (
@@ -291,7 +292,7 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
     )
     changes = effect_changes(params)
     for effect in EFFECTS:
-        doc.add(Heading(effect.name, 3), Paragraph(effect.note + "."))
+        doc.add(Heading(effect.name, 3), Paragraph(effect.text(params) + "."))
         rows = []
         for tv in tables:
             d = changes[effect.name][tv.pose.label]
@@ -358,9 +359,8 @@ def _ks_note(doc: Document, params: CaHyManParams, changes) -> None:
 
 def weight_rows(params: CaHyManParams) -> list[tuple[str, np.ndarray, float]]:
     """(pose label, sag of M (6,) [m, rad], relative change of C) under the weight of the
-    illustrative masses of the eq. (11) effect, as a preload (generic backend)."""
-    masses = {m: ILLUSTRATIVE_MASS for m in ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")}
-    heavy = params.replace(**masses)
+    masses of the eq. (11) effect (:func:`eq11_masses`), as a preload (generic backend)."""
+    heavy = params.replace(**eq11_masses(params))
     out = []
     for pose in TABLE_POSES:
         alpha, alpha4, s4 = pose.si
@@ -379,9 +379,9 @@ def _weight(doc: Document, params: CaHyManParams) -> None:
         Paragraph(
             "Eq. (11) puts the weights into the load matrix, divided by load components that "
             "are zero in the tables' columns. The consistent way is a preload: the machine "
-            "settles under its weight (the five named masses, each "
-            f"{ILLUSTRATIVE_MASS} kg here as in the effect above, placed where eq. (11)'s "
-            "lever arms put them: cahyman_pin/urdf_builder.py), and the compliance is the "
+            f"settles under its weight ({eq11_masses_text(params)}, as in the effect above, "
+            "placed where eq. (11)'s lever arms put them: cahyman_pin/urdf_builder.py), and "
+            "the compliance is the "
             "tangent one at that equilibrium (geometric stiffness and loop curvature "
             "included). Below: the sag of M from the unloaded pose (mm, and the paper's angles "
             "in deg, see 'Conventions') and "
