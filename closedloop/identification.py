@@ -31,7 +31,8 @@ sensitivity matrix of the weighted residuals: the sd are taken as known), by the
 method se(k) = k se(theta). A parameter the data cannot identify (its column of S is
 rounding, below ``DEAD_RTOL`` of the largest, or it takes part in a null direction of S
 with unit-norm columns, by the rank rule of :mod:`closedloop.conditioning`, at the
-solution) is named in ``unidentifiable``, its estimate and standard error are None, never
+solution), or whose log has a standard error above ``LOG_SE_MAX`` (the data do not bound
+it), is named in ``unidentifiable``, its estimate and standard error are None, never
 an arbitrary value (the fit moves it only along what the data see: two springs in series
 keep the sum of their compliances; a small weight on the offsets from the start keeps the
 unseen directions there); ``confounded`` names the parameters of each null direction. The
@@ -66,6 +67,10 @@ from .exceptions import (
 )
 from .model import ClosedLoopModel
 
+#: Largest standard error of log k (the 1-sigma interval of k spans a factor e^2) of an
+#: identified parameter: beyond it the data do not bound k (e.g. twists that a rigid spring
+#: explains best: the optimiser stops at an arbitrary large k, its error 1e3-1e5 times k).
+LOG_SE_MAX = 1.0
 #: Relative share of a null vector of S above which a parameter takes part in it.
 NULL_SHARE = 0.1
 #: A column of S below this share of the largest is rounding (the parameter is not seen):
@@ -421,6 +426,12 @@ def identify(
     free = [i for i, n in enumerate(names) if n not in unidentifiable]
     cov = _covariance(S)[np.ix_(free, free)]
     se = np.sqrt(np.diag(cov))
+    vague = se > LOG_SE_MAX  # the data do not bound it: the fit stopped anywhere
+    if vague.any():
+        unidentifiable = sorted({*unidentifiable, *(names[free[j]] for j in np.flatnonzero(vague))},
+                                key=names.index)  # fmt: skip
+        keep = np.flatnonzero(~vague)
+        free, cov, se = [free[j] for j in keep], cov[np.ix_(keep, keep)], se[keep]
     k = np.exp(theta)
     estimates, ses = dict.fromkeys(names), dict.fromkeys(names)
     for j, i in enumerate(free):

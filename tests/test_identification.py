@@ -31,13 +31,14 @@ def _ur5(springs):
     return load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", springs=springs)
 
 
-def _synthetic(clm, frame, configs, rng, sd, n_wrench=3, scale=100.0):
+def _synthetic(clm, frame, configs, rng, sd, n_wrench=3, scale=100.0, exact_sd=1e-9):
+    """Measurements of ``clm``; noise-free (``sd`` 0) data are stated at ``exact_sd``."""
     out = []
     for q in configs:
         C = cl.compliance(clm, q, frame).C
         for w in scale * rng.normal(size=(n_wrench, 6)):
             d = C @ w + (sd * rng.normal(size=6) if sd else 0.0)
-            out.append(Measurement.of(q=q, wrench=w, twist=d, sd=sd or 1e-9))
+            out.append(Measurement.of(q=q, wrench=w, twist=d, sd=sd or exact_sd))
     return out
 
 
@@ -164,10 +165,10 @@ FOURBAR_TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
 FOURBAR_CRANKS = (0.2, 0.6, 1.0, 1.4)
 
 
-def _fourbar_data(clm, rng, sd, springs=FOURBAR_TRUE, n_wrench=3):
+def _fourbar_data(clm, rng, sd, springs=FOURBAR_TRUE, n_wrench=3, exact_sd=1e-9):
     truth = clm.with_springs(springs)
     configs = [cl.assemble(clm, actuated=[a]).q for a in FOURBAR_CRANKS]
-    return _synthetic(truth, "P", configs, rng, sd=sd, n_wrench=n_wrench)
+    return _synthetic(truth, "P", configs, rng, sd=sd, n_wrench=n_wrench, exact_sd=exact_sd)
 
 
 def test_block_springs_stay_when_other_springs_are_fitted():
@@ -322,12 +323,33 @@ EXTREME_SPRINGS = [
 
 @pytest.mark.parametrize("springs", EXTREME_SPRINGS)
 def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, springs):
+    """Noise-free data stated at a precision that resolves the stiffest spring's share of
+    the twists (at 1e-9 the axial springs of 1e12 N/m move the point by 1e-10 m: below the
+    stated precision, they are rightly not identified)."""
     clm, _ = fourbar
-    data = _fourbar_data(clm, np.random.default_rng(9), sd=0.0, springs=springs)
+    exact_sd = 1e-9 * min(FOURBAR_TRUE[n] / v for n, v in springs.items())
+    data = _fourbar_data(clm, np.random.default_rng(9), sd=0.0, springs=springs,
+                         exact_sd=exact_sd)  # fmt: skip
     start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
     fit = identify(start, data, "P", list(FOURBAR_TRUE))
     for name, value in springs.items():
         np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
+
+
+def test_twists_that_a_rigid_spring_explains_best_are_unidentifiable(fourbar):
+    """Zero twists under every load: the best fit is at infinite stiffness, where the
+    optimiser stops anywhere (it reported 6.6e9 or 6.6e11 by the start, errors 1e3-1e5
+    times the estimate, as identified); the data do not bound k: unidentifiable."""
+    clm, _ = fourbar
+    rng = np.random.default_rng(0)
+    data = [Measurement.of(q=cl.assemble(clm, actuated=[a]).q, wrench=w, twist=np.zeros(6),
+                           sd=1e-7)
+            for a in (0.2, 0.6, 1.0) for w in 10.0 * rng.normal(size=(3, 6))]  # fmt: skip
+    for factor in (1.0, 100.0):
+        start = clm.with_springs({n: factor * v for n, v in FOURBAR_TRUE.items()})
+        fit = identify(start, data, "P", list(FOURBAR_TRUE))
+        assert fit.unidentifiable == tuple(FOURBAR_TRUE) and fit.identified == ()
+        assert all(v is None for v in fit.estimates.values())
 
 
 def test_mixed_units_recover_within_their_errors():
