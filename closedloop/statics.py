@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .arrays import ReadOnlyArrays, check_wrench, readonly
+from .arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from .configuration import Configuration, accepts_configuration
 from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
 from .gravity import GravityLoad, Load, Payload
@@ -202,9 +202,9 @@ def potential_energy(
         force: (3,) force [N], world axes, at the origin of ``frame``.
         gravity: the weight (:class:`closedloop.gravity.GravityLoad`), or None.
     """
-    f = np.asarray(force, dtype=float).reshape(-1)
-    if f.shape != (3,):
-        raise InvalidInputError(f"force must be 3 values (fx fy fz), got {f.size}")
+    f = real_array(force, "force").reshape(-1)
+    if f.shape != (3,) or not np.isfinite(f).all():
+        raise InvalidInputError(f"force must be 3 finite values (fx fy fz) [N], got {f.tolist()}")
     dq = pin.difference(clm.model, q_rest, q)
     dp = frame_displacement(clm, q, q_rest, frame)[:3]
     weight = 0.0 if gravity is None else gravity.potential(q) - gravity.potential(q_rest)

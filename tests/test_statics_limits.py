@@ -47,8 +47,10 @@ def test_bad_rest_configuration_is_rejected(fourbar):
         solve_equilibrium(clm, q0[:4], "P", np.ones(6))
     with pytest.raises(NameNotFoundError, match="unknown frame 'Q'"):
         solve_equilibrium(clm, q0, "Q", np.ones(6))
-    with pytest.raises(InvalidInputError, match="force must be 3 values"):
+    with pytest.raises(InvalidInputError, match="force must be 3 finite values"):
         potential_energy(clm, q0, q0, "P", np.ones(6))
+    with pytest.raises(InvalidInputError, match=r"force must be 3 finite values .* \[nan, 0.0"):
+        potential_energy(clm, q0, q0, "P", [np.nan, 0.0, 0.0])  # was a NaN energy
 
 
 def test_mechanism_has_no_equilibrium(fourbar):
