@@ -298,7 +298,11 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
     each from the previous one (the first from the reference configuration), and keeps
     the configurations at the borders ``firsts``: the first point of a chunk then starts
-    on the assembly mode the path followed, as in a serial run. Where a point fails, the
+    on the assembly mode the path followed, as in a serial run. A jump of several points
+    is checked against two half jumps (:func:`_halves_agree`): where they disagree the
+    jump left the assembly mode, and the pass walks that stretch point by point instead
+    (as a serial run; a coarse grid over a four-bar's whole crank turn switched mode at
+    the stride). Where a point fails, the
     pass walks again point by point from the last assembled one, past the failure to the
     next point that assembles, as a serial run does: across a gap of failed points the
     continuation jumps from the same configuration to the same point whatever the chunks
@@ -325,6 +329,15 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
             q, ok = assemble_within_limits(clm, points[p], q).q, True
         except POINT_ERRORS:
             ok = False
+        if (
+            ok
+            and failed is None
+            and done >= 0
+            and p - done > 1
+            and not _halves_agree(clm, points, done, p, q, found[done])
+        ):
+            failed, p, q = p, done + 1, found[done]  # the jump left the mode: walk to p
+            continue
         found[p] = q
         if ok:
             done = p
@@ -340,6 +353,27 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
             k += 1
         p = visit[k] if k < len(visit) else last + 1
     return [None, *(found.get(p) for p in firsts[1:])][: len(firsts)]
+
+
+#: Largest difference [rad, m] between the configurations of one point reached by one
+#: jump and by two half jumps of the border pass: on one assembly mode both converge to the
+#: closure tolerance (1e-10 and closer), another mode is a finite distance away.
+SAME_MODE_TOL = 1e-6
+
+
+def _halves_agree(clm, points, start: int, end: int, q: np.ndarray, q_start: np.ndarray) -> bool:
+    """Whether the configuration q at path position ``end``, reached by one jump from
+    ``q_start`` at ``start``, is also reached in two half jumps (through the middle point):
+    the step control of a continuation. A jump that left the assembly mode lands elsewhere
+    than the shorter steps (measured: assembling back from it does not tell, it returned)."""
+    try:
+        middle = assemble_within_limits(clm, points[(start + end) // 2], q_start).q
+        again = assemble_within_limits(clm, points[end], middle).q
+    except POINT_ERRORS:
+        return False
+    return float(np.max(np.abs(pin.difference(clm.model, q, again)), initial=0.0)) <= (
+        SAME_MODE_TOL
+    )
 
 
 def run_tasks(

@@ -193,3 +193,16 @@ def test_condition_numbers_of_a_near_singular_map_are_the_single_query_s(ur5_urd
     assert m.indices["condition_number"][-1] > 1e15
     si = m.indices["condition_number_si"]
     assert np.isnan(si[-1]) and np.isnan(m.indices["det_K"][-1])
+
+
+def test_coarse_grid_chunks_stay_on_the_serial_mode(fourbar_urdf, fourbar_yaml):
+    """The four-bar over a whole crank turn in 40 points, chunks of 8: the border pass's
+    jump of BORDER_STRIDE points switched assembly mode, and 24 points differed from the
+    one-chunk map (C up to 9.6 times). A jump that two half jumps do not confirm is walked
+    (assembling back from the jump did not tell: it returned)."""
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    cranks = {"crank": np.linspace(-3.0, 3.0, 40)}
+    serial = stiffness_map(clm, "P", sweeps=cranks, chunk=40)
+    chunked = stiffness_map(clm, "P", sweeps=cranks, chunk=8)
+    np.testing.assert_array_equal(chunked.status, serial.status)
+    assert_close_in_norm(chunked.C.reshape(-1, 36), serial.C.reshape(-1, 36), CHUNK_RTOL)
