@@ -507,13 +507,16 @@ def batch_indices(
     finite = np.all(np.isfinite(C), axis=(1, 2))
     sym = finite if symmetric is None else finite & symmetric
     full = finite & (np.asarray(rank) == 6)
-    if np.any(sym):
-        _, out["condition_number"][sym], _ = batch_rank(C[sym], L[sym])
-        for kind, block in (("translational", T), ("rotational", R)):
-            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(C[sym], block)
+    known = np.zeros(n, dtype=bool)
     if condition is not None:
         known = finite & np.isfinite(condition)
         out["condition_number"][known] = condition[known]
+    rest = sym & ~known  # from the eigenvalues of C only where the solver's is not known
+    if np.any(rest):
+        _, out["condition_number"][rest], _ = batch_rank(C[rest], L[rest])
+    if np.any(sym):
+        for kind, block in (("translational", T), ("rotational", R)):
+            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(C[sym], block)
     both = sym & full
     if np.any(both):
         c = np.abs(np.linalg.eigvalsh(C[both]))  # an indefinite C (unstable preload) too

@@ -219,7 +219,7 @@ def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_s
             return q, st, it
         if it == max_iter:
             break
-        v = eqs.step(q, w, st)
+        v, dropped = eqs.step(q, w, st)
         size = np.max(np.abs(v), initial=0.0)
         if not np.isfinite(size):
             break
@@ -232,7 +232,7 @@ def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_s
         if (
             st["closure"] <= tol
             and size <= STEP_TOL * max(1.0, np.max(np.abs(q)))
-            and not eqs.dropped  # a step that resolved every direction: q is at rounding
+            and not dropped  # a step that resolved every direction: q is at rounding
         ):  # level (Newton converges quadratically); else the force test decides
             return q, st, it + 1
     return None, st, max_iter
@@ -340,7 +340,7 @@ def solve_equilibrium(
         _enforce_limits(clm, q, eqs.evaluate(q, 0.0 * w), 0.0, where)
     while t < 1.0:
         st = eqs.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
-        rate = eqs.step(q, t * w, st, load=w) if w.any() else np.zeros(clm.model.nv)
+        rate = eqs.step(q, t * w, st, load=w)[0] if w.any() else np.zeros(clm.model.nv)
         ds = min(dt, 1.0 - t)
         speed = float(np.max(np.abs(rate), initial=0.0))
         if speed * ds > max_increment:

@@ -344,9 +344,6 @@ class EquilibriumEquations:
 
     def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
         self.clm, self.q_rest, self.frame = clm, q_rest, frame
-        #: admissible directions that the last :meth:`step` left out (a stiffness below
-        #: RANK_RTOL^2 of the largest: spring-free, or beyond the resolution of the solve)
-        self.dropped = 0
         self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
         # square root of the springs on the free coordinates, K_ff = R_f^T R_f
         self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
@@ -408,8 +405,10 @@ class EquilibriumEquations:
         )
         return H[np.ix_(self.free, self.free)]
 
-    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> np.ndarray:
-        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w).
+    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w), and the number
+        of admissible directions it left out (a stiffness below RANK_RTOL^2 of the largest:
+        spring-free, or beyond the resolution of the solve).
 
         Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
         closures plus the Newton step of N^T F on the admissible motions. With ``load``
@@ -431,8 +430,7 @@ class EquilibriumEquations:
         dx += N @ x
         v = np.zeros(self.clm.model.nv)
         v[free] = dx
-        self.dropped = N.shape[1] - rank  # directions the step left out
-        return v
+        return v, N.shape[1] - rank
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
         """Stability margin at an equilibrium q (nq,) under the load w.
