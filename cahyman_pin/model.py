@@ -233,7 +233,8 @@ class CaHyManModel:
         q[:, ix["alpha_4"]], q[:, ix["s_4"]] = alpha4, s4
         return q
 
-    def assemble(self, alpha, alpha4, s4, *, q0=None, full_output: bool = False):
+    def assemble(self, alpha, alpha4, s4, *, q0=None, full_output: bool = False,
+                 jacobian: bool = False):  # fmt: skip
         """Assembled configuration for the inputs, springs at rest.
 
         Args:
@@ -244,6 +245,8 @@ class CaHyManModel:
                 guess, which picks the branch of the closed-form geometry.
             full_output: return the :class:`closedloop.assembly.Assembly` (q, residual,
                 iterations) instead of q.
+            jacobian: with ``full_output``, the Assembly also holds the closure residuals
+                and Jacobian at q (:attr:`closedloop.assembly.Assembly.closure`).
 
         Returns:
             (nq,) read-only configuration q, or the Assembly.
@@ -258,7 +261,7 @@ class CaHyManModel:
         q = self.clm.check_configuration(q0)  # a copy: the start is the caller's
         q[self._virtual_index] = 0.0  # virtual springs at rest
         self.clm.set_actuated(q, np.concatenate([alpha, [alpha4, s4]]))
-        result = close_loops(self.clm, q)
+        result = close_loops(self.clm, q, jacobian=jacobian)
         return result if full_output else result.q
 
     def residual(self, q) -> float:

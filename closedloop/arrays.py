@@ -64,3 +64,24 @@ def check_wrench(w) -> np.ndarray:
             f"wrench must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"
         )
     return w
+
+
+def upper_triangular_inverses(R: np.ndarray) -> np.ndarray:
+    """(n, p, p) inverses of the upper triangular matrices R (n, p, p) (the entries below
+    the diagonal are not read).
+
+    Back substitution a row at a time for the whole stack, X[i, i] = 1 / R[i, i] and
+    X[i, j] = -R[i, i+1:] X[i+1:, j] / R[i, i] (j > i): about half the time of
+    ``numpy.linalg.inv``'s LU of each matrix on CaHyMan's 16 x 16 blocks, to rounding the
+    same (both are backward stable). A zero on a diagonal gives inf or NaN, never an
+    error: callers test the diagonal.
+    """
+    p = R.shape[1]
+    X = np.zeros(R.shape)
+    d = 1.0 / np.diagonal(R, axis1=1, axis2=2)  # (n, p)
+    for i in range(p - 1, -1, -1):
+        X[:, i, i] = d[:, i]
+        if i + 1 < p:
+            X[:, i, i + 1 :] = (R[:, None, i, i + 1 :] @ X[:, i + 1 :, i + 1 :])[:, 0]
+            X[:, i, i + 1 :] *= -d[:, i, None]
+    return X

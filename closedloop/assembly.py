@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from .arrays import ReadOnlyArrays, real_array
+from .arrays import ReadOnlyArrays, frozen, real_array
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
@@ -25,11 +26,18 @@ class Assembly(ReadOnlyArrays):
         q: (nq,) configuration (read-only) satisfying every closure.
         residual: infinity norm of the closure residual [m, rad].
         iterations: Gauss-Newton iterations used.
+        closure: when asked for (``jacobian=True``), the closure residuals (m,) [m; m, rad]
+            and their Jacobian (m, nv) at q (:func:`closedloop.kinematics.closure_residual`
+            and :func:`closedloop.kinematics.closure_jacobian`), read-only, computed from
+            the kinematics of the last iteration: a stacked query of many assembled
+            configurations takes them instead of evaluating the constraints again;
+            otherwise None.
     """
 
     q: np.ndarray
     residual: float
     iterations: int
+    closure: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def free_coordinates(clm: ClosedLoopModel) -> np.ndarray:
@@ -46,24 +54,34 @@ def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.nda
     to rounding when the rank decision agrees, and several times faster on small matrices.
     """
     m, n = A.shape
-    rhs = np.zeros(max(m, n))
-    rhs[:m] = b
-    lwork = max(min(m, n) + 3 * n + 1, 2 * min(m, n) + 1)
+    if m >= n:
+        rhs = b  # dgelsy works on a copy
+    else:
+        rhs = np.zeros(n)
+        rhs[:m] = b
+    a = np.array(A, dtype=float, order="F")  # overwritten by dgelsy
     _, x, _, _, info = scipy.linalg.lapack.dgelsy(
-        np.array(A, dtype=float, order="F"), rhs, np.zeros(n, dtype=np.int32), rcond, lwork=lwork
-    )
+        a, rhs, np.zeros(n, dtype=np.int32), rcond, overwrite_a=1,
+        lwork=max(min(m, n) + 3 * n + 1, 2 * min(m, n) + 1),
+    )  # fmt: skip
     if info != 0:
         raise np.linalg.LinAlgError(f"dgelsy failed (info={info})")
     return x[:n]
 
 
-def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray):
-    """Closure residual r (m,) at q, its infinity norm and its squared 2-norm; leaves the
-    joint placements and Jacobians of q in ``data`` (what the constraints and their
-    Jacobians read; the frame placements are not updated)."""
+def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray, tol: float):
+    """Closure residual r (m,) at q, its squared 2-norm and whether its infinity norm is
+    within ``tol``; leaves the joint placements and Jacobians of q in ``data`` (what the
+    constraints and their Jacobians read; the frame placements are not updated)."""
     pin.computeJointJacobians(clm.model, data, q)
     r = residual_rows(clm, data, datas)
-    return r, float(np.maximum.reduce(abs(r), initial=0.0)), float(r @ r)
+    size2 = float(r.dot(r))
+    # |r|_inf <= |r|_2 <= sqrt(m) |r|_inf: the infinity norm only when these leave it open
+    if size2 <= tol * tol:
+        return r, size2, True
+    if size2 > r.size * tol * tol or size2 != size2:  # NaN: not closed
+        return r, size2, False
+    return r, size2, bool(abs(r).max() <= tol)
 
 
 def assemble(
@@ -73,6 +91,7 @@ def assemble(
     *,
     tol: float = ASSEMBLY_TOL,
     max_iter: int = 50,
+    jacobian: bool = False,
 ) -> Assembly:
     """Close every loop by moving the passive coordinates only.
 
@@ -85,13 +104,20 @@ def assemble(
         actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
             ``clm.actuated``; ``None`` keeps those of ``q0``.
         q0: (nq,) start configuration, which picks the assembly branch (default: neutral).
-        tol: closure tolerance (infinity norm) [m, rad].
-        max_iter: iteration limit.
+        tol: closure tolerance (infinity norm) [m, rad], > 0.
+        max_iter: iteration limit (an integer >= 0; 0 only checks the start).
+        jacobian: also return the closure residuals and Jacobian at the solution
+            (:attr:`Assembly.closure`).
 
     Raises:
         AssemblyError: the closures cannot be satisfied from this start (unreachable
             input); the message gives the residual reached.
+        InvalidInputError: bad ``actuated``, ``q0``, ``tol`` or ``max_iter``.
     """
+    if isinstance(tol, bool) or not isinstance(tol, int | float) or not 0 < tol < math.inf:
+        raise InvalidInputError(f"tol must be a number > 0 and finite [m, rad], got {tol!r}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int | np.integer) or max_iter < 0:
+        raise InvalidInputError(f"max_iter must be an integer >= 0, got {max_iter!r}")
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     if actuated is not None:
         if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):
@@ -105,11 +131,16 @@ def assemble(
         if not np.isfinite(actuated).all():
             raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
         clm.set_actuated(q, actuated)
-    return close_loops(clm, q, tol=tol, max_iter=max_iter)
+    return close_loops(clm, q, tol=tol, max_iter=max_iter, jacobian=jacobian)
 
 
 def close_loops(
-    clm: ClosedLoopModel, q: np.ndarray, *, tol: float = ASSEMBLY_TOL, max_iter: int = 50
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    *,
+    tol: float = ASSEMBLY_TOL,
+    max_iter: int = 50,
+    jacobian: bool = False,
 ) -> Assembly:
     """The loop of :func:`assemble` from a start that its caller has validated.
 
@@ -124,6 +155,8 @@ def close_loops(
             (:meth:`ClosedLoopModel.check_configuration`), the actuated values written; the
             caller hands it over (it may be modified, and is made read-only when returned).
         tol, max_iter: as :func:`assemble`.
+        jacobian: also return the closure residuals and Jacobian at the solution
+            (:attr:`Assembly.closure`).
 
     Raises:
         AssemblyError: as :func:`assemble`.
@@ -131,34 +164,42 @@ def close_loops(
     model = clm.model
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.data, clm.constraint_datas
-    r, err, size2 = _residual(clm, data, datas, q)
-    if err > tol and not free.size:
+    r, size2, closed = _residual(clm, data, datas, q, tol)
+    if not closed and not free.size:
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r}: no passive coordinate to move (every "
             "joint is actuated, sprung or locked); give the loops passive joints",
-            err,
+            _inf_norm(r),
         )
     it = 0
-    while err > tol and it < max_iter:
+    while not closed and it < max_iter and size2 == size2:
         it += 1
         # the kinematics and constraint datas of q are those of its residual evaluation
-        J = jacobian_rows(clm, data, datas, calc=False)[:, free]
         step = np.zeros(model.nv)
-        step[free] = -min_norm_solve(J, r)
+        step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
         for _ in range(30):
             q_try = pin.integrate(model, q, step)
-            r_try, err_try, size2_try = _residual(clm, data, datas, q_try)
-            if size2_try < size2 or err_try <= tol:
+            r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tol)
+            if size2_try < size2 or closed_try:
                 break
             step *= 0.5
         else:
             break
-        q, r, err, size2 = q_try, r_try, err_try, size2_try
-    if not err <= tol:
+        q, r, size2, closed = q_try, r_try, size2_try, closed_try
+    err = _inf_norm(r)
+    if not closed:
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r} with actuated "
             f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}",
             err,
         )
     q.flags.writeable = False
-    return Assembly(q=q, residual=err, iterations=it)
+    closure = None
+    if jacobian:  # the datas are those of q's residual evaluation, the last one
+        closure = (frozen(r), frozen(jacobian_rows(clm, data, datas, calc=False)))
+    return Assembly(q=q, residual=err, iterations=it, closure=closure)
+
+
+def _inf_norm(r: np.ndarray) -> float:
+    """Infinity norm of r (m,) (0 for no row; NaN propagates)."""
+    return float(abs(r).max()) if r.size else 0.0

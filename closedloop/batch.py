@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .arrays import ReadOnlyArrays, frozen, real_array
+from .arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverses
 from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
 from .configuration import CLOSURE_TOL
@@ -128,11 +128,12 @@ def compliances(
     return BatchCompliance(*arrays, frame, axes, L)
 
 
-def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
+def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False, closure=None):
     """Every configuration of Q (n, nq) answered: by :func:`stacked_compliances`, and the
     others by :func:`closedloop.compliance.compliance`.
 
     Args:
+        closure: as :func:`stacked_compliances`.
         length: characteristic length [m], or None (the model's).
         catch: exception types recorded per configuration (others propagate). One of
             them from the stacked path (a bad frame, axes or length) leaves every
@@ -147,7 +148,7 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False):
     """
     try:
         L = clm.length if length is None else check_length(length)
-        C, G, rank, cond = stacked_compliances(clm, Q, frame, axes, L)
+        C, G, rank, cond = stacked_compliances(clm, Q, frame, axes, L, closure)
     except catch:
         if not len(Q):  # no single query to raise it again
             raise
@@ -189,10 +190,15 @@ def _check_configurations(clm: ClosedLoopModel, Q) -> np.ndarray:
 
 
 def stacked_compliances(
-    clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float
+    clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float, closure=None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The stacked fast path on checked configurations Q (n, nq) at length L [m],
     :data:`STACK` configurations at a time.
+
+    Args:
+        closure: the closure residuals (n, m) and Jacobians (n, m, nv) at Q when the
+            caller has them (:attr:`closedloop.assembly.Assembly.closure`), or None:
+            evaluated here.
 
     Returns:
         C: (n, 6, 6) [SI] and G: (n, nv, 6), NaN where the path did not answer;
@@ -201,12 +207,16 @@ def stacked_compliances(
         cond: (n,) cond(K_s) over the rank, NaN where the path did not answer.
     """
     starts = range(0, len(Q), STACK) if len(Q) else [0]  # no configuration: empty arrays
-    parts = [_stack(clm, Q[i : i + STACK], frame, axes, L) for i in starts]
+    parts = [
+        _stack(clm, Q[i : i + STACK], frame, axes, L,
+               None if closure is None else (closure[0][i : i + STACK], closure[1][i : i + STACK]))
+        for i in starts
+    ]  # fmt: skip
     C, G, rank, cond = (np.concatenate(a) for a in zip(*parts, strict=True))
     return C, G, rank, cond
 
 
-def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float):
+def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float, closure):
     """:func:`stacked_compliances` of one stack."""
     check_name("frame", frame)
     reference = reference_frame(axes)
@@ -217,7 +227,7 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float)
     p, s = sc.passive.size, sc.sprung.size
     if not n or not nv or not s or sc.loop_blocks is not None or (m < p if p else m):
         return C, G, np.full(n, -1), np.full(n, np.nan)  # no fast path (springs.partition)
-    r, Jc, J = _kinematics(clm, Q, fid, reference)
+    r, Jc, J = _kinematics(clm, Q, fid, reference, closure)
     ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
     X, norm2 = None, np.zeros(n)
     if p:
@@ -299,14 +309,20 @@ def _factor_ranks(B_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     return rank, np.where(rank >= 0, cond, np.nan)
 
 
-def _kinematics(clm: ClosedLoopModel, Q: np.ndarray, fid: int, reference):
+def _kinematics(clm: ClosedLoopModel, Q: np.ndarray, fid: int, reference, closure=None):
     """Closure residuals (n, m), closure Jacobians (n, m, nv) and frame Jacobians
-    (n, 6, nv) of the configurations Q (n, nq), on a workspace of the model's pool."""
+    (n, 6, nv) of the configurations Q (n, nq), on a workspace of the model's pool; the
+    closure ones are ``closure`` when given (only the frame Jacobians are computed)."""
     model = clm.model
     n, nv, m = len(Q), model.nv, clm.n_constraints
-    r, Jc, J = np.empty((n, m)), np.empty((n, m, nv)), np.empty((n, 6, nv))
+    J = np.empty((n, 6, nv))
     data, datas = workspace = clm.acquire_workspace()
     try:
+        if closure is not None:
+            for k in range(n):
+                J[k] = pin.computeFrameJacobian(model, data, Q[k], fid, reference).reshape(6, nv)
+            return *closure, J
+        r, Jc = np.empty((n, m)), np.empty((n, m, nv))
         for k in range(n):
             pin.computeJointJacobians(model, data, Q[k])
             if m:
@@ -329,7 +345,8 @@ def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     holds with the margin: J_p well conditioned, J_s + J_p X = 0 (the tests of
     :func:`closedloop.springs._passive_motion`)."""
     p = sc.passive.size
-    A = Jc[:, :, sc.order] * sc.scale_order
+    A = np.take(Jc, sc.order, axis=2)
+    A *= sc.scale_order
     scale = PARTITION_RTOL * np.max(abs(A[:, :, p:]), axis=(1, 2))
     # -J_p = Q1 R11, R12, R22 from the Householder form (mode "r" would copy the whole
     # triangle out of it): R (n, m, p + s) is the upper trapezoid of h^T
@@ -339,9 +356,8 @@ def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     R22 = np.where(_upper(Rt.shape[1] - p, Rt.shape[2] - p), Rt[:, p:, p:], 0.0)
     singular = (np.diagonal(R11, axis1=1, axis2=2) == 0.0).any(axis=1)
     R11 = np.where(singular[:, None, None], np.eye(p), R11)
-    # upper triangles: the LU of the inverse pivots on the diagonal (a back substitution)
-    with np.errstate(over="ignore", invalid="ignore"):
-        R_inv = np.linalg.inv(R11)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        R_inv = upper_triangular_inverses(R11)
         norm = abs(R11).sum(axis=1).max(axis=1) * abs(R_inv).sum(axis=1).max(axis=1)
         X = R_inv @ R12
     ok = ~singular & (MARGIN * norm * PARTITION_RCOND < 1.0)  # exact 1-norm condition

@@ -38,18 +38,23 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
-def _closures(clm: ClosedLoopModel) -> tuple[tuple, ...]:
-    """(constraint, is a weld) of every closure (once per model)."""
-    return clm.memo("closures", lambda: tuple((c.constraint, c.kind == "6d") for c in clm.closures))
+def _closures(clm: ClosedLoopModel) -> tuple[tuple, bool]:
+    """(the constraints of the closures, whether one of them is a weld), once per model."""
+    closures = clm.closures
+    return clm.memo(
+        "closures",
+        lambda: (tuple(c.constraint for c in closures), any(c.kind == "6d" for c in closures)),
+    )
 
 
 def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
     """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
-    model, parts = clm.model, []
-    for (c, _), cd in zip(_closures(clm), constraint_datas, strict=True):
+    model = clm.model
+    for c, cd in zip(_closures(clm)[0], constraint_datas, strict=True):
         c.calc(model, data, cd)
-        parts.append(cd.constraint_position_error)
-    return np.concatenate(parts) if parts else np.empty(0)
+    if not constraint_datas:
+        return np.empty(0)
+    return np.concatenate([cd.constraint_position_error for cd in constraint_datas])
 
 
 def jacobian_rows(
@@ -61,15 +66,18 @@ def jacobian_rows(
         calc: evaluate the constraints first (False when :func:`residual_rows` has just
             done it with the same datas).
     """
-    model, parts = clm.model, []
-    for (c, weld), cd in zip(_closures(clm), constraint_datas, strict=True):
-        if calc:
-            c.calc(model, data, cd)
-        J = c.jacobian(model, data, cd)
-        # for a weld, the derivative of log6 of the relative placement
-        parts.append(pin.Jlog6(cd.c1Mc2.inverse()) @ J if weld else J)
-    if not parts:
+    model = clm.model
+    constraints, welds = _closures(clm)
+    if not constraints:
         return np.empty((0, model.nv))
+    if calc:
+        residual_rows(clm, data, constraint_datas)
+    pairs = zip(constraints, constraint_datas, strict=True)
+    parts = [c.jacobian(model, data, cd) for c, cd in pairs]
+    if welds:  # for a weld, the derivative of log6 of the relative placement
+        for k, (c, cd) in enumerate(zip(clm.closures, constraint_datas, strict=True)):
+            if c.kind == "6d":
+                parts[k] = pin.Jlog6(cd.c1Mc2.inverse()) @ parts[k]
     out = np.concatenate(parts)
     return out.reshape(-1, 1) if model.nv == 1 else out  # a one-dof model gives vectors
 

@@ -167,7 +167,11 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
         return
     Q = np.array([a.q for _, a in assembled])
     positions = np.array([i for i, _ in assembled])
-    C, _, rank, cond, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS)
+    closure = None
+    if all(a.closure is not None for _, a in assembled):  # evaluated by the assemblies
+        closure = tuple(np.array(c) for c in zip(*(a.closure for _, a in assembled), strict=True))
+    C, _, rank, cond, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS,
+                                              closure=closure)  # fmt: skip
     ok = rank >= 0
     done = positions[ok]
     out.C[done], out.rank[done], out.condition[done], out.length[done] = (
@@ -203,7 +207,10 @@ def _extrapolated(clm, history: list, quadratic: bool) -> np.ndarray:
     """
     q1, q2 = history[-1], history[-2]
     if quadratic:
-        return pin.normalize(clm.model, 3.0 * q1 - 3.0 * q2 + history[-3])
+        q = q1 - q2
+        q *= 3.0
+        q += history[-3]
+        return pin.normalize(clm.model, q)
     return pin.integrate(clm.model, q1, pin.difference(clm.model, q2, q1))
 
 
@@ -289,7 +296,7 @@ def assemble_within_limits(clm: ClosedLoopModel, actuated: np.ndarray, q0: np.nd
         text = ", ".join(f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])"
                          for n, (x, lo, hi) in bad.items())  # fmt: skip
         raise InvalidInputError(f"actuated joints outside their limits: {text}")
-    return assemble(clm, actuated, q0)
+    return assemble(clm, actuated, q0, jacobian=True)
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:

@@ -24,6 +24,7 @@ without a spring is a rigid actuator (locked).
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -470,10 +471,11 @@ class ClosedLoopModel:
     def set_actuated(self, q: np.ndarray, values: np.ndarray) -> None:
         """Write the actuated joints' values (n_act,) [rad or m] into q (nq,) in place: the
         coordinate, or (cos, sin) for a continuous (unbounded revolute) joint."""
-        unbounded, idx = self._unbounded_actuated(), self.actuated_q_indices
-        if not unbounded.any():
+        idx = self.actuated_q_indices
+        if not self.memo("any_unbounded_actuated", lambda: bool(self._unbounded_actuated().any())):
             q[idx] = values
             return
+        unbounded = self._unbounded_actuated()
         values = np.asarray(values, dtype=float)
         q[idx[~unbounded]] = values[~unbounded]
         q[idx[unbounded]], q[idx[unbounded] + 1] = (
@@ -547,7 +549,8 @@ class ClosedLoopModel:
             q = q.reshape(-1)
         if q.shape != (self.model.nq,):
             raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
-        if not np.isfinite(q).all():
+        # a sum of floats is finite when every one is (it may overflow: then look at each)
+        if not math.isfinite(sum(q.tolist())) and not np.isfinite(q).all():
             raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
         if self.memo("unit_coordinates", lambda: self.model.nq != self.model.nv):
             q = self._unit_norms(q)

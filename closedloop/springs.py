@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 
-from .arrays import frozen
+from .arrays import frozen, upper_triangular_inverses
 from .conditioning import RANK_RTOL, split_factor, twist_scaling
 from .configuration import Configuration
 from .exceptions import InvalidInputError, MechanismError
@@ -239,9 +239,9 @@ def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None
             return None
         if k:
             R = np.linalg.qr(block, mode="r")  # (n, m_k, p_k + s_k), upper triangular
-            try:
-                R_inv = np.linalg.inv(R[:, :k, :k])
-            except np.linalg.LinAlgError:
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                R_inv = upper_triangular_inverses(R[:, :k, :k])
+            if not np.isfinite(R_inv).all():  # a zero pivot: singular
                 return None
             norm_R = max(norm_R, abs(R[:, :k, :k]).sum(axis=1).max())
             norm_R_inv = max(norm_R_inv, abs(R_inv).sum(axis=1).max())

@@ -127,9 +127,10 @@ def warm_starts(model: CaHyManModel, side: int) -> list[tuple]:
 
 
 def lean_assembly(clm, actuated: np.ndarray, q0: np.ndarray, free: np.ndarray) -> int:
-    """The floor of :func:`closedloop.assembly.assemble`: its Gauss-Newton loop on the
-    same pieces (closure rows, minimum-norm solve) without any check, copy or result
-    object; returns the iterations."""
+    """The floor of :func:`closedloop.assembly.assemble` as row 3a calls it: its
+    Gauss-Newton loop on the same pieces (closure rows, minimum-norm solve), and the
+    closure Jacobian at the solution handed to the query, without any check, copy or
+    result object; returns the iterations."""
     model, data, datas = clm.model, clm.data, clm.constraint_datas
     q = q0.copy()
     q[clm.actuated_q_indices] = actuated
@@ -141,6 +142,7 @@ def lean_assembly(clm, actuated: np.ndarray, q0: np.ndarray, free: np.ndarray) -
         q = pin.integrate(model, q, step)
         pin.computeJointJacobians(model, data, q)
         r, it = residual_rows(clm, data, datas), it + 1
+    jacobian_rows(clm, data, datas, calc=False)
     return it
 
 
@@ -151,7 +153,7 @@ def bench_assembly_floor(table: Table, mode: Mode, model: CaHyManModel, unit) ->
     actuated = [np.concatenate([a, [a4, s4]]) for a, a4, s4, _ in starts]
 
     def library() -> list[int]:
-        return [model.assemble(a, a4, s4, q0=q0, full_output=True).iterations
+        return [model.assemble(a, a4, s4, q0=q0, full_output=True, jacobian=True).iterations
                 for a, a4, s4, q0 in starts]  # fmt: skip
 
     def lean() -> list[int]:

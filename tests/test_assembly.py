@@ -99,6 +99,42 @@ def test_invalid_inputs(actuated, q0, match):
         assemble(fourbar(), actuated, q0=q0)
 
 
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"tol": 0.0}, r"tol must be a number > 0 and finite \[m, rad\], got 0\.0"),
+        ({"tol": -1e-12}, r"got -1e-12"),
+        ({"tol": np.inf}, r"got inf"),
+        ({"tol": np.nan}, r"got nan"),
+        ({"tol": "1e-9"}, r"got '1e-9'"),
+        ({"tol": True}, r"got True"),
+        ({"max_iter": -1}, r"max_iter must be an integer >= 0, got -1"),
+        ({"max_iter": 2.5}, r"got 2\.5"),
+    ],
+)
+def test_invalid_tolerance_and_iteration_limit(options, match):
+    with pytest.raises(InvalidInputError, match=match):
+        assemble(fourbar(), [0.3], **options)
+
+
+def test_closure_at_the_solution_is_that_of_a_fresh_evaluation():
+    """Assembly.closure (jacobian=True) against the residuals and Jacobian evaluated anew
+    from the returned q; absent unless asked for."""
+    from closedloop.kinematics import closure_jacobian, closure_residual
+
+    clm = fourbar()
+    a = assemble(clm, [0.7], jacobian=True)
+    assert a.iterations > 0
+    r, Jc = a.closure
+    np.testing.assert_array_equal(r, closure_residual(clm, a.q))
+    np.testing.assert_array_equal(Jc, closure_jacobian(clm, a.q))
+    assert not r.flags.writeable and not Jc.flags.writeable
+    assert assemble(clm, [0.7]).closure is None
+    again = assemble(clm, [0.7], q0=a.q, jacobian=True)  # no iteration: the start's own
+    assert again.iterations == 0
+    np.testing.assert_array_equal(again.closure[1], Jc)
+
+
 def test_cahyman_inputs_are_checked_alike_in_every_form():
     # the float-array form has a shortcut in check_inputs: it must refuse and accept what the
     # general form does, and return copies
@@ -151,3 +187,18 @@ def test_cahyman_warm_start_puts_virtual_springs_back_to_rest():
     q0[virtual[0]] = np.nan
     with pytest.raises(InvalidInputError, match="non-finite"):
         model.assemble(*pose, q0=q0)
+
+
+@pytest.mark.parametrize(("m", "n"), [(5, 3), (3, 5), (4, 4)])
+def test_min_norm_solve_is_lstsq_and_leaves_its_inputs(m, n):
+    """dgelsy's minimum-norm solution against numpy's SVD lstsq (rounding of two
+    backward-stable solvers on well-conditioned matrices); A and b are not modified."""
+    from closedloop.assembly import min_norm_solve
+
+    rng = np.random.default_rng(m * 10 + n)
+    A, b = rng.normal(size=(m, n)), rng.normal(size=m)
+    A0, b0 = A.copy(), b.copy()
+    x = min_norm_solve(A, b)
+    np.testing.assert_allclose(x, np.linalg.lstsq(A, b, rcond=None)[0], rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(b, b0)

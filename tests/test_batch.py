@@ -265,3 +265,23 @@ def test_a_long_stack_is_computed_in_parts(ur5, monkeypatch):
     np.testing.assert_array_equal(parts.rank, whole.rank)
     assert_close_in_norm(parts.C, whole.C, RTOL_STACKED)
     assert_close_in_norm(parts.G, whole.G, RTOL_STACKED)
+
+
+@pytest.mark.parametrize("p", [1, 2, 7, 16])
+def test_stacked_triangular_inverses_solve_each_triangle(p):
+    """upper_triangular_inverses against LAPACK's triangular solve of R X = I, matrix by
+    matrix; the entries below the diagonal are not read."""
+    import scipy.linalg
+
+    from closedloop.arrays import upper_triangular_inverses
+
+    rng = np.random.default_rng(p)
+    R = rng.normal(size=(5, p, p)) + 4.0 * np.eye(p)  # junk below the diagonal
+    X = upper_triangular_inverses(R)
+    for R_k, X_k in zip(R, X, strict=True):
+        expected = scipy.linalg.solve_triangular(np.triu(R_k), np.eye(p))
+        # both backward stable: rounding times cond(R) (~10 here)
+        np.testing.assert_allclose(X_k, expected, rtol=0, atol=1e-13 * abs(expected).max())
+    R[2, p - 1, p - 1] = 0.0  # a zero pivot: not finite, no error
+    with np.errstate(divide="ignore", invalid="ignore"):
+        assert not np.isfinite(upper_triangular_inverses(R)[2]).all()

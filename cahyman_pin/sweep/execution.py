@@ -160,11 +160,12 @@ def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkRes
         from the closed form."""
         try:
             return model.assemble(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], q0=q0,
-                                  full_output=True)  # fmt: skip
+                                  full_output=True, jacobian=True)  # fmt: skip
         except AssemblyError:
             if q0 is None:
                 raise
-            return model.assemble(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], full_output=True)
+            return model.assemble(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i],
+                                  full_output=True, jacobian=True)  # fmt: skip
 
     # neighbour start: the first point of the run from the closed form (q0 None)
     per_point = [starts[i] for i in idx] if chunk.start == "closed_form" else None
