@@ -278,6 +278,37 @@ def test_ur5_determinant_from_joint_stiffness_and_jacobian():
         assert s.is_full_rank == result.is_full_rank
 
 
+#: Relative error of det K per unit of sqrt(cond(K_s)): the eigenvalues of the formed C_s
+#: and K_s that it multiplies are each known to about eps sqrt(cond) relative (the
+#: determinant's docstring); 1e-14 leaves a factor of 50 for the six of them and the
+#: reference's det(J) (cond(J) = sqrt(cond(K_s)) / spread at most).
+DET_RTOL_PER_SQRT_COND = 1e-14
+
+
+@pytest.mark.parametrize("axes", ["local", "world"])
+@pytest.mark.parametrize(
+    ("k_arm", "k_wrist", "elbow"),
+    [(1e4, 1e4, 1e-5), (1e9, 1e2, 1e-3), (1e9, 1e2, 1e-5), (1e12, 10.0, 1e-5), (10.0, 1e12, 1e-3)],
+)
+def test_ur5_determinant_near_singular_poses_and_across_springs(k_arm, k_wrist, elbow, axes):
+    """det K against prod(k) / det(J)^2 at scaled condition numbers from 1e12 to 3e22
+    (springs 1e1..1e12 and the arm near stretched): accurate to about eps sqrt(cond); an
+    LU determinant of K was off by a factor of 2 to 1e11 from cond 3e18."""
+    ur5 = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
+    names = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
+    k = [k_arm] * 3 + [k_wrist] * 3
+    clm = load_urdf(ur5, springs={f"{n}_joint": v for n, v in zip(names, k, strict=True)})
+    q = np.array([0.3, -1.2, elbow, -0.6, 1.1, 0.2])
+    result = compliance(clm, q, "tool0", axes=axes)
+    assert result.rank == 6
+    J = pin.computeJointJacobian(clm.model, clm.model.createData(), q, 6)
+    expected = np.prod(k) / np.linalg.det(J) ** 2
+    rtol = DET_RTOL_PER_SQRT_COND * np.sqrt(result.condition_number)
+    np.testing.assert_allclose(
+        StiffnessIndices.from_result(result).determinant, expected, rtol=rtol, atol=0
+    )
+
+
 def test_fourbar_indices_from_result():
     clm = load_urdf(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
     result = compliance(clm, assemble(clm, [0.4]).q, "P")
