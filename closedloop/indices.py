@@ -276,33 +276,29 @@ class StiffnessIndices:
     def determinant(self) -> float:
         """det K [N^6/rad^3], invariant under length unit, reference point and axes.
 
-        det K = det(D)^2 det K_s, the product of the eigenvalues of the scaled K_s, each
-        read from whichever of the formed C_s and K_s resolves it: an eigenvalue mu of C_s
-        is known to eps mu_max, so 1/mu is taken from C_s above sqrt(mu_min mu_max) and
-        from K_s below. The determinant is then accurate to about eps sqrt(cond(K_s))
-        relative; an LU determinant of K errs by eps cond(K_s) (at cond 3e18 it is off by
-        a factor of two or has the wrong sign). A C that is not symmetric positive definite
-        (a preloaded equilibrium) has the LU determinant of its K.
+        det K = det(D)^2 det K_s, the product of the eigenvalues of the scaled K_s
+        (:func:`inverse_pair_eigenvalues` of C_s and K_s): accurate to about
+        eps sqrt(cond(K_s)) relative, where an LU determinant of K errs by eps cond(K_s) (at
+        cond 3e18 it is off by a factor of two or has the wrong sign). A K that is not
+        positive definite (an unstable preloaded equilibrium) has its LU determinant.
         """
         self._require_full_rank("det K")
         K = self.K
         d = twist_scaling(self._spectrum.length)
         dd = np.outer(d, d)
-        C_s, K_s = self.C * dd, K / dd
-        if np.max(np.abs(C_s - C_s.T)) <= SCALED_TOL * np.max(np.abs(C_s)):
-            # ascending; kappa[::-1] are the 1 / mu; mu_min = 1 / kappa_max, from K_s
-            mu, kappa = np.linalg.eigvalsh(0.5 * (C_s + C_s.T)), np.linalg.eigvalsh(K_s)
-            with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-                lam = np.where(mu >= np.sqrt(mu[-1] / kappa[-1]), 1.0 / mu, kappa[::-1])
-                if np.all(lam > 0.0):  # else not positive definite
-                    return float(np.prod(lam) * np.prod(d) ** 2)
-        return float(np.linalg.det(K))
+        lam = inverse_pair_eigenvalues(self.C * dd, K / dd)
+        if lam is None:
+            return float(np.linalg.det(K))
+        with np.errstate(over="ignore", under="ignore"):
+            return float(np.prod(lam) * np.prod(d) ** 2)
 
     @property
     def eigenvalues(self) -> np.ndarray:
-        """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring)."""
+        """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring),
+        each from whichever of C and K resolves it (:func:`inverse_pair_eigenvalues`)."""
         self._require_full_rank("the eigenvalues of K")
-        return readonly(np.linalg.eigvalsh(self.K))
+        lam = inverse_pair_eigenvalues(self.C, self.K)
+        return readonly(np.linalg.eigvalsh(self.K) if lam is None else lam)
 
     @property
     def compliance_eigenvalues(self) -> np.ndarray:
@@ -562,6 +558,23 @@ def batch_indices(
     out["deflection_translation"][finite] = scale * row_norms(twist[:, :3])
     out["deflection_rotation"][finite] = scale * row_norms(twist[:, 3:])
     return out
+
+
+def inverse_pair_eigenvalues(C: np.ndarray, K: np.ndarray) -> np.ndarray | None:
+    """(6,) eigenvalues of K = C^-1 ascending, from C and K (6, 6) both formed, or None
+    when C is not symmetric (to SCALED_TOL) or K not positive definite.
+
+    An eigenvalue of a formed symmetric matrix is known to about eps times its largest
+    one; so 1/mu, mu an eigenvalue of C, is taken from C where mu >= sqrt(mu_min mu_max)
+    and from K below (mu_min = 1 / kappa_max, from K): each to about eps sqrt(cond)
+    relative, where the eigenvalues of K alone lose its smallest ones at eps cond.
+    """
+    if np.max(np.abs(C - C.T)) > SCALED_TOL * np.max(np.abs(C)):
+        return None
+    mu, kappa = np.linalg.eigvalsh(0.5 * (C + C.T)), np.linalg.eigvalsh(K)  # ascending
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        lam = np.where(mu >= np.sqrt(mu[-1] / kappa[-1]), 1.0 / mu, kappa[::-1])
+    return np.sort(lam) if np.all(lam > 0.0) else None
 
 
 def row_norms(v: np.ndarray) -> np.ndarray:

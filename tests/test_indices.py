@@ -293,7 +293,8 @@ DET_RTOL_PER_SQRT_COND = 1e-14
 def test_ur5_determinant_near_singular_poses_and_across_springs(k_arm, k_wrist, elbow, axes):
     """det K against prod(k) / det(J)^2 at scaled condition numbers from 1e12 to 3e22
     (springs 1e1..1e12 and the arm near stretched): accurate to about eps sqrt(cond); an
-    LU determinant of K was off by a factor of 2 to 1e11 from cond 3e18."""
+    LU determinant of K was off by a factor of 2 to 1e11 from cond 3e18. The eigenvalues
+    of K and its SI condition number likewise (those of the formed K lost the smallest)."""
     ur5 = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
     names = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
     k = [k_arm] * 3 + [k_wrist] * 3
@@ -304,8 +305,20 @@ def test_ur5_determinant_near_singular_poses_and_across_springs(k_arm, k_wrist, 
     J = pin.computeJointJacobian(clm.model, clm.model.createData(), q, 6)
     expected = np.prod(k) / np.linalg.det(J) ** 2
     rtol = DET_RTOL_PER_SQRT_COND * np.sqrt(result.condition_number)
+    s = StiffnessIndices.from_result(result)
+    np.testing.assert_allclose(s.determinant, expected, rtol=rtol, atol=0)
+    # the SI eigenvalues of K: 1 / sigma^2 of the factor J_tool0 diag(k)^-1/2 of C (SVD:
+    # each sigma to eps sigma_max, i.e. eps sqrt(cond_SI) relative), same point and axes
+    frame = {"local": pin.LOCAL, "world": pin.LOCAL_WORLD_ALIGNED}[axes]
+    J_tool = pin.computeFrameJacobian(
+        clm.model, clm.model.createData(), q, clm.model.getFrameId("tool0"), frame
+    )
+    sigma = np.linalg.svd(J_tool / np.sqrt(k), compute_uv=False)
+    reference = np.sort(1.0 / sigma**2)
+    rtol_si = DET_RTOL_PER_SQRT_COND * (sigma[0] / sigma[-1])
+    np.testing.assert_allclose(s.eigenvalues, reference, rtol=rtol_si, atol=0)
     np.testing.assert_allclose(
-        StiffnessIndices.from_result(result).determinant, expected, rtol=rtol, atol=0
+        s.condition_number, (sigma[0] / sigma[-1]) ** 2, rtol=2 * rtol_si, atol=0
     )
 
 
