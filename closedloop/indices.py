@@ -560,6 +560,11 @@ def batch_indices(
     return out
 
 
+#: Largest negative eigenvalue, relative to the largest, that rounding gives a formed
+#: symmetric positive definite 6x6 matrix (a few eps; 1e-13 leaves a factor of 100).
+ROUNDING_RTOL = 1e-13
+
+
 def inverse_pair_eigenvalues(C: np.ndarray, K: np.ndarray) -> np.ndarray | None:
     """(6,) eigenvalues of K = C^-1 ascending, from C and K (6, 6) both formed, or None
     when C is not symmetric (to SCALED_TOL) or K not positive definite.
@@ -572,6 +577,10 @@ def inverse_pair_eigenvalues(C: np.ndarray, K: np.ndarray) -> np.ndarray | None:
     if np.max(np.abs(C - C.T)) > SCALED_TOL * np.max(np.abs(C)):
         return None
     mu, kappa = np.linalg.eigvalsh(0.5 * (C + C.T)), np.linalg.eigvalsh(K)  # ascending
+    # indefinite (an unstable preloaded equilibrium): an eigenvalue negative beyond the
+    # rounding of a formed matrix (a positive definite one may show -eps times its largest)
+    if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
+        return None
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         lam = np.where(mu >= np.sqrt(mu[-1] / kappa[-1]), 1.0 / mu, kappa[::-1])
     return np.sort(lam) if np.all(lam > 0.0) else None

@@ -57,12 +57,19 @@ from .model import ClosedLoopModel
 from .springs import spring_factor
 from .tangent import EquilibriumEquations
 
-#: Closure tolerance of the equilibrium (infinity norm) [m for points; m, rad for welds].
+#: Closure tolerance of the equilibrium (infinity norm) [rad, and lengths in units of the
+#: characteristic length L: 1e-12 L for point rows].
 CLOSURE_TOL = 1e-12
 #: Relative tolerance on the unbalanced generalised force (see :func:`solve_equilibrium`).
 FORCE_RTOL = 1e-11
-#: Newton step [rad or m], relative to max(1, |q|), after which q counts as converged.
+#: Newton step [rad, and lengths in units of L], relative to max(1, |q|) (q in the same
+#: units), after which q counts as converged.
 STEP_TOL = 1e-12
+#: Default largest Newton step and largest predicted motion per load increment (infinity
+#: norm) [rad, and lengths in units of L].
+MAX_STEP, MAX_INCREMENT = 0.5, 0.1
+
+
 #: Stability margin (smallest eigenvalue of the symmetric part of the spring-scaled tangent
 #: stiffness, 1 unloaded) at the last equilibrium below which a failed continuation is a
 #: limit load. Near a limit point the margin falls like the square root of the remaining
@@ -211,31 +218,53 @@ def potential_energy(
     return float(0.5 * dq @ clm.spring_forces(dq) - f @ dp + weight)
 
 
-def _newton(eqs: EquilibriumEquations, q, w, *, tol: float, max_iter: int, max_step: float):
-    """Newton iterations at a fixed wrench; returns (q or None, state, iterations)."""
+def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_limit):
+    """Newton iterations at a fixed wrench; returns (q or None, state, iterations).
+
+    Args:
+        row_tol: (m,) closure tolerance of each row [m, rad]; step_limit: (nv,) largest
+            step of each coordinate [rad, m].
+    """
+    free, units = eqs.free, eqs.units
     st = eqs.evaluate(q, w)
     for it in range(max_iter + 1):
-        if st["closure"] <= tol and st["force"] <= FORCE_RTOL * st["scale"]:
+        if _closed(st, row_tol) and _balanced(st, units.coords[free]):
             return q, st, it
         if it == max_iter:
             break
         v, dropped = eqs.step(q, w, st)
-        size = np.max(np.abs(v), initial=0.0)
-        if not np.isfinite(size):
+        ratio = np.max(np.abs(v) / step_limit, initial=0.0)
+        if not np.isfinite(ratio):
             break
-        if size > max_step:
-            v *= max_step / size
+        if ratio > 1.0:
+            v /= ratio
         q = pin.integrate(eqs.clm.model, q, v)
         st = eqs.evaluate(q, w)
         if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
             break
+        size = np.max(np.abs(v) / units.coords, initial=0.0)
         if (
-            st["closure"] <= tol
-            and size <= STEP_TOL * max(1.0, np.max(np.abs(q)))
+            _closed(st, row_tol)
+            and size <= STEP_TOL * max(1.0, np.max(np.abs(q) / units.q))
             and not dropped  # a step that resolved every direction: q is at rounding
         ):  # level (Newton converges quadratically); else the force test decides
             return q, st, it + 1
     return None, st, max_iter
+
+
+def _closed(st: dict, row_tol: np.ndarray) -> bool:
+    """Every closure row within its tolerance."""
+    return bool(np.all(np.abs(st["c"]) <= row_tol))
+
+
+def _balanced(st: dict, coords: np.ndarray) -> bool:
+    """The unbalanced generalised force below FORCE_RTOL times the largest spring or load
+    one, each a force times the scale of its coordinate (N m, N L)."""
+    scale = max(
+        np.max(np.abs(st["spring"]) * coords, initial=0.0),
+        np.max(np.abs(st["load"]) * coords, initial=0.0),
+    )
+    return bool(np.max(np.abs(st["unbalanced"]) * coords, initial=0.0) <= FORCE_RTOL * scale)
 
 
 def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None:
@@ -249,6 +278,8 @@ def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None
         ("max_step", max_step, "rad or m", True),
         ("max_increment", max_increment, "rad or m", True),
     ):
+        if (value is None and name != "tol") or (value is None and tol is None):  # defaults
+            continue
         ok = isinstance(value, int | float | np.number) and not isinstance(value, bool)
         if not (ok and value > 0 and (allow_inf or np.isfinite(value))):
             kind = "> 0 (inf allowed)" if allow_inf else "finite and > 0"
@@ -266,11 +297,11 @@ def solve_equilibrium(
     frame: str,
     wrench: np.ndarray,
     *,
-    tol: float = CLOSURE_TOL,
+    tol: float | None = None,
     max_iter: int = 30,
     max_halvings: int = 12,
-    max_step: float = 0.5,
-    max_increment: float = 0.1,
+    max_step: float | None = None,
+    max_increment: float | None = None,
     enforce_limits: bool = False,
     gravity=None,
     payloads: Sequence[Payload] = (),
@@ -281,7 +312,9 @@ def solve_equilibrium(
     force on the admissible motions is below ``FORCE_RTOL`` times the largest spring or
     load generalised force, or (when rounding in the spring forces prevents that) after a
     Newton step below ``STEP_TOL`` max(1, |q|_inf); Newton converging quadratically, q is
-    then exact to rounding.
+    then exact to rounding. The tests are unit-free: lengths count in units of the
+    mechanism's characteristic length L (``clm.length``), forces on translations as N L,
+    so that a mechanism scaled from micrometres to kilometres converges alike.
 
     Args:
         clm: model with closures and springs (or a :class:`Configuration`, then no q_rest:
@@ -291,12 +324,15 @@ def solve_equilibrium(
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin,
             fixed in world axes while the frame moves.
-        tol: closure tolerance (infinity norm) [m, rad], finite and > 0.
+        tol: closure tolerance (infinity norm) [m, rad], finite and > 0; default
+            :data:`CLOSURE_TOL` rad and CLOSURE_TOL L for the rows in metres.
         max_iter: Newton iterations per load increment (>= 1).
         max_halvings: how many times in all a failed load increment may be halved (>= 0).
-        max_step: largest Newton step (infinity norm) [rad or m], > 0.
+        max_step: largest Newton step (infinity norm) [rad or m], > 0; default 0.5 rad
+            and 0.5 L (:data:`MAX_STEP`).
         max_increment: largest predicted joint motion per load increment (infinity
-            norm) [rad or m], > 0; larger deflections are followed in several increments.
+            norm) [rad or m], > 0; larger deflections are followed in several increments;
+            default 0.1 rad and 0.1 L (:data:`MAX_INCREMENT`).
         enforce_limits: refuse the load as soon as an equilibrium along the way leaves
             the joint limits (:class:`JointLimitError`) instead of flagging the result.
         gravity: (3,) acceleration [m/s^2], world axes, that weighs the model's link
@@ -332,8 +368,12 @@ def solve_equilibrium(
     q_rest = np.array(rest.q)
     spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
     eqs = EquilibriumEquations(clm, q_rest, frame)
+    units = eqs.units
     weighed = "" if weight is None else f" and the weight under gravity {weight.gravity.tolist()}"
     where = f"for wrench {w.wrench.tolist()}{weighed} at frame {frame!r} of {clm.name!r}"
+    row_tol = units.rows * CLOSURE_TOL if tol is None else np.full(units.rows.size, tol)
+    step_limit = units.limit(max_step, MAX_STEP)
+    increment_limit = units.limit(max_increment, MAX_INCREMENT)
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
     margin = 1.0  # stability margin of the last equilibrium (1 at rest)
     if enforce_limits:
@@ -342,16 +382,16 @@ def solve_equilibrium(
         st = eqs.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
         rate = eqs.step(q, t * w, st, load=w)[0] if w.any() else np.zeros(clm.model.nv)
         ds = min(dt, 1.0 - t)
-        speed = float(np.max(np.abs(rate), initial=0.0))
-        if speed * ds > max_increment:
-            ds = max_increment / speed
+        speed = float(np.max(np.abs(rate) / increment_limit, initial=0.0))
+        if speed * ds > 1.0:
+            ds = 1.0 / speed
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not s_try > t:  # also a NaN rate
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
             raise _failure(eqs, q, t, w, where, detail, iterations, st)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
         q_new, st_try, it = _newton(
-            eqs, guess, s_try * w, tol=tol, max_iter=max_iter, max_step=max_step
+            eqs, guess, s_try * w, row_tol=row_tol, max_iter=max_iter, step_limit=step_limit
         )
         iterations += it
         # An increment whose equilibrium turns unstable far from the predicted point has
@@ -362,8 +402,12 @@ def solve_equilibrium(
         if q_new is not None and margin > 0.0:
             margin_new = eqs.margin(q_new, s_try * w)
             if margin_new <= 0.0:
-                predicted = np.max(np.abs(pin.difference(clm.model, q, guess)), initial=0.0)
-                corrected = np.max(np.abs(pin.difference(clm.model, guess, q_new)), initial=0.0)
+                predicted = np.max(
+                    np.abs(pin.difference(clm.model, q, guess)) / units.coords, initial=0.0
+                )
+                corrected = np.max(
+                    np.abs(pin.difference(clm.model, guess, q_new)) / units.coords, initial=0.0
+                )
                 unstable = corrected > 0.5 * max(predicted, STEP_TOL)
         if q_new is None or unstable:
             halvings += 1

@@ -38,6 +38,8 @@ then not symmetric.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pinocchio as pin
 
@@ -335,6 +337,42 @@ def stability_margin(M: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
 
 
+@dataclass(frozen=True)
+class SolverUnits:
+    """Per-entry scales that make the equilibrium solver unit-free: L [m] (the model's
+    characteristic length) for the closure rows in metres and the translational
+    coordinates, 1 for the others (rad). The solver's rank decisions, tolerances and step
+    limits then do not depend on the length unit or the size of the mechanism.
+
+    Attributes:
+        rows: (m,) scale of each closure row; coords: (nv,) of each tangent coordinate;
+        q: (nq,) of each configuration entry (the translations of a free flyer or planar
+        joint, the coordinate of a prismatic one).
+    """
+
+    rows: np.ndarray
+    coords: np.ndarray
+    q: np.ndarray
+
+    @classmethod
+    def of(cls, clm: ClosedLoopModel) -> SolverUnits:
+        L, model = clm.length, clm.model
+        coords = np.where(clm.linear_coordinates, L, 1.0)
+        q = np.ones(model.nq)
+        for jm in model.joints[1:]:
+            if jm.nq == jm.nv:
+                q[jm.idx_q : jm.idx_q + jm.nq] = coords[jm.idx_v : jm.idx_v + jm.nv]
+            else:  # free flyer, planar: translations first, alike in q and v
+                t = int(clm.linear_coordinates[jm.idx_v : jm.idx_v + jm.nv].sum())
+                q[jm.idx_q : jm.idx_q + t] = L
+        return cls(np.where(clm.linear_rows, L, 1.0), coords, q)
+
+    def limit(self, value: float | None, default: float) -> np.ndarray:
+        """(nv,) per-coordinate bound: ``value`` [rad or m] as given, or ``default`` in
+        rad and units of L."""
+        return self.coords * default if value is None else np.full(self.coords.size, value)
+
+
 class EquilibriumEquations:
     """The equilibrium equations F = 0, c = 0 of one model, loaded frame and rest q.
 
@@ -348,6 +386,8 @@ class EquilibriumEquations:
         # square root of the springs on the free coordinates, K_ff = R_f^T R_f
         self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
+        self.units = SolverUnits.of(clm)
+        self._cols = self.units.coords[self.free]  # free coordinate = scale * y
 
     def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
         """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
@@ -356,9 +396,12 @@ class EquilibriumEquations:
         Keys: ``c`` (m,) closure residual; ``closure`` its infinity norm [m, rad]; ``F``
         the generalised force g + G - J^T w on the free coordinates [N m, N] (G: the
         weight, if any); ``force`` the
-        infinity norm of its unbalanced part F + J_c^T lambda; ``scale`` the largest
-        spring or load generalised force; ``lam`` (m,) least-squares multipliers; ``Ur``,
-        ``sr``, ``R``, ``N``: the SVD of J_c on the free coordinates (row space, null space).
+        infinity norm of its unbalanced part F + J_c^T lambda (the vector: ``unbalanced``);
+        ``scale`` the largest spring or load generalised force (the vectors on the free
+        coordinates: ``spring``, ``load``); ``lam`` (m,) least-squares multipliers; ``Ur``,
+        ``sr``, ``R``, ``N``: the SVD of the unit-free J_c on the free coordinates (row
+        space, null space), rows in metres over L and translational coordinates y = x / L
+        (:class:`SolverUnits`), so that its rank rule does not depend on the size.
         Leaves the kinematics of q in ``clm.data``.
         """
         clm, free = self.clm, self.free
@@ -370,14 +413,16 @@ class EquilibriumEquations:
         g = Jd.T @ (self.k * dq if self.root is None else clm.spring_forces(dq))
         load = self.generalised_load(q, w, J)
         F = (g - load)[free]
-        if A.size:
-            U, s, Vt = np.linalg.svd(A, full_matrices=True)
+        rows, cols = self.units.rows, self._cols
+        if A.size:  # unit-free: A_s = diag(1 / rows) A diag(cols), F_y = diag(cols) F
+            U, s, Vt = np.linalg.svd(A / rows[:, None] * cols, full_matrices=True)
             r = rule_rank(s)
         else:
             U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0
         Ur, sr, R, N = U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
-        lam = -Ur @ ((R.T @ F) / sr)
-        unbalanced = F - R @ (R.T @ F)  # F + A^T lam: its component along N
+        F_y = cols * F
+        lam = -Ur @ ((R.T @ F_y) / sr) / rows
+        unbalanced = (F_y - R @ (R.T @ F_y)) / cols  # F + A^T lam, its component along N
         return {
             "c": c,
             "closure": float(np.max(np.abs(c), initial=0.0)),
@@ -386,6 +431,9 @@ class EquilibriumEquations:
             "scale": max(
                 np.max(np.abs(g[free]), initial=0.0), np.max(np.abs(load[free]), initial=0.0)
             ),
+            "unbalanced": unbalanced,
+            "spring": g[free],
+            "load": load[free],
             "lam": lam,
             "Ur": Ur,
             "sr": sr,
@@ -415,21 +463,22 @@ class EquilibriumEquations:
         (a :class:`Load` or a wrench (6,)): the rate dq/ds of the equilibrium when the
         load grows by s ``load``.
         """
-        free, H = self.free, self._restricted(q, w, st)
+        free, cols = self.free, self._cols
+        H = cols[:, None] * self._restricted(q, w, st) * cols  # on y = x / cols
         R, N = st["R"], st["N"]
-        if load is None:
-            dx = -R @ ((st["Ur"].T @ st["c"]) / st["sr"])  # restores the closures
-            rhs = -N.T @ (st["F"] + H @ dx)
+        if load is None:  # restores the closures
+            dy = -R @ ((st["Ur"].T @ (st["c"] / self.units.rows)) / st["sr"])
+            rhs = -N.T @ (cols * st["F"] + H @ dy)
         else:
             J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
-            dx, rhs = np.zeros(free.size), N.T @ self.generalised_load(q, load, J)[free]
+            dy, rhs = np.zeros(free.size), N.T @ (cols * self.generalised_load(q, load, J)[free])
         # the rule of the compliance on this stiffness scale: a motion resisted less than
         # RANK_RTOL^2 of the stiffest is spring-free (a looser cutoff dropped the soft
         # springs of a model whose springs span 1e12, and Newton stopped at no motion)
         x, _, rank, _ = np.linalg.lstsq(N.T @ H @ N, rhs, rcond=RANK_RTOL**2)
-        dx += N @ x
+        dy += N @ x
         v = np.zeros(self.clm.model.nv)
-        v[free] = dx
+        v[free] = cols * dy
         return v, N.shape[1] - rank
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
@@ -442,7 +491,7 @@ class EquilibriumEquations:
         are the right singular vectors of R N (K_q = R^T R) above ``RANK_RTOL`` times the largest.
         """
         st = self.evaluate(q, w)
-        N = st["N"]
+        N = self._cols[:, None] * st["N"]  # the admissible motions of the free coordinates
         S = np.sqrt(self.k[self.free])[:, None] * N if self.root is None else self.root @ N
         _, sig, Vt = np.linalg.svd(S, full_matrices=False)
         r = rule_rank(sig)

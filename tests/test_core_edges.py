@@ -464,6 +464,27 @@ def test_scaled_fourbar_follows_the_law_of_units(s):
         )
 
 
+@pytest.mark.filterwarnings("ignore::closedloop.exceptions.JointLimitWarning")  # unscaled limits
+@pytest.mark.parametrize("s", [1e-8, 1e-3, 1e3, 1e6])
+def test_scaled_fourbar_equilibrium_follows_the_law_of_units(s):
+    """The nonlinear equilibrium under a large load (the crank turns by 0.63 rad, the axial
+    springs stretch by 1 % of L, 21 Newton iterations) of the four-bar scaled by s, forces
+    over s:
+    the same joint deflection, lengths times s, in as many iterations. The solver's rank
+    rule, tolerances and step limits count lengths in units of the mechanism's size (with
+    absolute ones, s = 1e-8 ended 8e-5 off, 1e-3 1e-8 off, and 1e6 did not converge)."""
+    from closedloop.statics import solve_equilibrium
+
+    unit, q1, frame = mech.fourbar_case()
+    w1 = np.array([300.0, 0.0, -300.0, 0.0, 0.0, 0.0])
+    ref = solve_equilibrium(unit, q1, frame, w1)
+    clm, q, frame = mech.scaled_fourbar(s)
+    eq = solve_equilibrium(clm, q, frame, np.r_[w1[:3] / s, w1[3:]])
+    D = np.where(unit.linear_coordinates, s, 1.0)
+    assert _rel(eq.joint_deflection / D, ref.joint_deflection) < RTOL_UNITS
+    assert eq.iterations == ref.iterations
+
+
 @pytest.mark.parametrize("f", [1e-6, 1e-3, 1e3, 1e9, 1e15])
 def test_springs_times_f_give_compliance_over_f(f):
     """Every spring (numbers and coupled blocks) times f: C / f, the same path, rank and

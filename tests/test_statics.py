@@ -27,7 +27,7 @@ from scipy.optimize import brentq, minimize
 
 from closedloop.assembly import assemble
 from closedloop.compliance import compliance
-from closedloop.exceptions import EquilibriumError
+from closedloop.exceptions import MechanismError
 from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
 from closedloop.statics import potential_energy, solve_equilibrium
 
@@ -301,7 +301,10 @@ def test_delta_equilibrium_does_not_depend_on_the_closure_order():
 def test_springs_twelve_orders_apart_still_deflect(fourbar):
     """A soft crank spring (1e-3 N m/rad) beside axial springs of 2e9 N/m: the Newton step
     resolves the soft direction (its solve cut stiffnesses below 1e-12 of the largest,
-    and the solver returned no motion, the load unbalanced); 1e14 apart it is refused."""
+    and the solver returned no motion, the load unbalanced). Its rank rule is that of the
+    compliance, unit-free: axial springs of 1e14 N/m beside 1 N m/rad (1.1e13 apart in
+    units of the four-bar's length L = 0.34 m) deflect as C w (the solver refused them when
+    it compared N/m with N m/rad); at 1e15 N/m both refuse the mechanism."""
     clm, _ = fourbar
     soft = clm.with_springs({"crank": 1e-3, "crank_axial": 2e9, "rocker_axial": 2e9})
     q0 = assemble(soft, actuated=[0.3]).q
@@ -311,5 +314,13 @@ def test_springs_twelve_orders_apart_still_deflect(fourbar):
     np.testing.assert_allclose(eq.displacement, Cw, rtol=0, atol=RTOL_SMALL_LOAD * np.abs(Cw).max())
     apart = clm.with_springs({"crank": 1.0, "crank_axial": 1e14, "rocker_axial": 1e14})
     q0 = assemble(apart, actuated=[0.3]).q
-    with pytest.raises(EquilibriumError):
-        solve_equilibrium(apart, q0, "P", [0, 0, -1e-3, 0, 0, 0])
+    w = np.array([0, 0, -1e-6, 0, 0, 0])  # a small load: the linear response
+    Cw = compliance(apart, q0, "P").C @ w
+    eq = solve_equilibrium(apart, q0, "P", w)
+    np.testing.assert_allclose(eq.displacement, Cw, rtol=0, atol=RTOL_SMALL_LOAD * np.abs(Cw).max())
+    beyond = clm.with_springs({"crank": 1.0, "crank_axial": 1e15, "rocker_axial": 1e15})
+    q0 = assemble(beyond, actuated=[0.3]).q
+    with pytest.raises(MechanismError):
+        compliance(beyond, q0, "P")
+    with pytest.raises(MechanismError):
+        solve_equilibrium(beyond, q0, "P", w)
