@@ -201,12 +201,13 @@ SOURCES: dict[str, str] = {
 }
 
 
-def source(params: CaHyManParams, name: str) -> str:
-    """Where the value of field ``name`` of ``params`` comes from: :data:`SOURCES` for a
-    default value, ``"given"`` for a value that differs from the default (``"given (the
-    paper's printed value)"`` for K_s = 0.697 N/m)."""
+def source(params: CaHyManParams, name: str, given: frozenset[str] = frozenset()) -> str:
+    """Where the value of field ``name`` of ``params`` comes from: ``"given"`` for a field
+    of ``given`` (those of a parameter file, :func:`params_file_fields`) or a value that
+    differs from the default (``"given (the paper's printed value)"`` for K_s = 0.697
+    N/m), else :data:`SOURCES`."""
     value = getattr(params, name)
-    if value == getattr(DEFAULT_PARAMS, name):
+    if name not in given and value == getattr(DEFAULT_PARAMS, name):
         return SOURCES[name]
     if name == "K_s" and value == K_S_PRINTED:
         return "given (the paper's printed value)"
@@ -222,6 +223,19 @@ def read_params_file(path: str | Path, base: CaHyManParams = DEFAULT_PARAMS) -> 
         InvalidInputError: an unknown field or a value that is not a valid number (the
             message names the file, the field and the value).
     """
+    try:
+        return base.replace(**_params_file_values(path))
+    except InvalidInputError as e:
+        raise InvalidInputError(f"parameter file {str(path)!r}: {e}") from None
+
+
+def params_file_fields(path: str | Path) -> frozenset[str]:
+    """The fields a parameter file sets (raises as :func:`read_params_file`)."""
+    return frozenset(_params_file_values(path))
+
+
+def _params_file_values(path: str | Path) -> dict:
+    """field -> value of a parameter file, numbers written as YAML 1.1 strings converted."""
     import yaml  # only when a file is read
 
     from closedloop import strict_yaml
@@ -249,7 +263,4 @@ def read_params_file(path: str | Path, base: CaHyManParams = DEFAULT_PARAMS) -> 
             except ValueError:
                 pass
         values[str(name)] = value
-    try:
-        return base.replace(**values)
-    except InvalidInputError as e:
-        raise InvalidInputError(f"parameter file {str(path)!r}: {e}") from None
+    return values

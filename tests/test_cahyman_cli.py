@@ -327,7 +327,8 @@ def parameter_rows(markdown: str) -> dict[str, tuple[str, str]]:
 def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
     from cahyman_pin.params import DEFAULT_PARAMS
 
-    (tmp_path / "p.yaml").write_text("K_s: 0.697\nb: 0.09\nL: 1.6e-1\n")  # 1.6e-1: a YAML str
+    # 1.6e-1: a YAML string; a: the default value, given: not "assumed"
+    (tmp_path / "p.yaml").write_text("K_s: 0.697\nb: 0.09\nL: 1.6e-1\na: 0.2\n")
     out = tmp_path / "report"
     status, stdout, err = run(capsys, "report", "--params", str(tmp_path / "p.yaml"),
                               "--out", str(out))  # fmt: skip
@@ -336,8 +337,10 @@ def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
     rows = parameter_rows(text)
     assert rows["b"] == ("0.09", "given") and rows["L"] == ("0.16", "given")
     assert rows["K_s"] == ("0.697", "given (the paper's printed value)")
-    assert rows["a"] == ("0.2", "assumed: the paper gives no dimensions")
+    assert rows["a"] == ("0.2", "given")  # the default value, from the file
+    assert rows["h"] == ("0.05", "assumed: the paper gives no dimensions")
     assert rows["K_T"] == ("4672", "paper")
+    assert "ASSUMED" not in text.split("| a |")[1].split("\n")[0]
     assert f"the parameter file {str(tmp_path / 'p.yaml')!r}" in text
     default = tmp_path / "default"
     assert run(capsys, "report", "--out", str(default))[0] == 0

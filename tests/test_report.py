@@ -196,3 +196,15 @@ def test_counts_in_the_text_are_those_of_the_class_table(built):
     # nearest linear value; Table 3 dtheta under F (9.34 deg) is unexplained
     row = next(r for r in t.rows if r[:3] == ("Table 3", "F", "dtheta [deg]"))
     assert row[t.header.index("class")] == "unexplained"
+
+
+def test_printed_k_s_given_has_no_k_s_effect(tmp_path):
+    """With K_s = 0.697 N/m given, the 'K_s value' effect changes nothing: its note and the
+    K_s section say so (they read "0.697 -> 0.697e6" with changes of 0)."""
+    from cahyman_pin.params import K_S_PRINTED
+
+    doc = report.build_report(tmp_path, DEFAULT_PARAMS.replace(K_s=K_S_PRINTED))
+    text = _text(doc)
+    assert "none here: the parameters take K_s as printed, 0.697 N/m." in text
+    assert "'K_s value' effect is zero here" in text
+    assert "-> the assumed" not in text

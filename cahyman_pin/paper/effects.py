@@ -17,7 +17,7 @@ import numpy as np
 from cahyman_pin.backends.published import PublishedOptions, a_s, kss
 from cahyman_pin.paper.compare import backend_compliance, paper_coordinates
 from cahyman_pin.paper.data import LOADS, TABLE_POSES, PaperPose
-from cahyman_pin.params import CaHyManParams
+from cahyman_pin.params import K_S_ASSUMED, K_S_PRINTED, CaHyManParams
 from closedloop.exceptions import ClosedLoopError
 
 
@@ -68,11 +68,17 @@ def _weights_note(params: CaHyManParams) -> str:
             + eq11_masses_text(params))  # fmt: skip
 
 
+def _ks_effect_note(K_s: float) -> str:
+    if K_s == K_S_PRINTED:
+        return f"none here: the parameters take K_s as printed, {K_S_PRINTED:g} N/m"
+    which = "the assumed" if K_s == K_S_ASSUMED else "the parameters'"
+    return f"{K_S_PRINTED:g} N/m as printed -> {which} {K_s:g} N/m"
+
+
 EFFECTS = (
     Effect("lever arm of eq. (3)", {"lever_arm": True},
            "plate twist at H transported to M (rotation x lever arm) before the sum"),
-    Effect("K_s value", {"ks": "params"},
-           "0.697 N/m as printed -> the assumed 0.697e6 N/m"),
+    Effect("K_s value", {"ks": "params"}, lambda p: _ks_effect_note(p.K_s)),
     Effect("weights of eq. (11)", {"weights": False}, _weights_note, eq11_masses),
     Effect("A_d damage, eqs. (18)-(19)", {"a_d": "printed"},
            "A_d as printed (secant form, singular where y_1 = 0 or C_psi = 0) instead of "

@@ -56,7 +56,15 @@ from cahyman_pin.paper.explained import (
 from cahyman_pin.paper.figures import figure5, figure_load
 from cahyman_pin.paper.fit import dimension_fit
 from cahyman_pin.paper.numbers import fmt, two_decimals
-from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, K_S_PRINTED, CaHyManParams, source
+from cahyman_pin.params import (
+    BEAM_FIELDS,
+    DEFAULT_PARAMS,
+    K_S_ASSUMED,
+    K_S_PRINTED,
+    CaHyManParams,
+    params_file_fields,
+    source,
+)
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import InvalidInputError, JointLimitWarning
 
@@ -76,7 +84,8 @@ def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
 
 def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None) -> None:
     given = f"the parameter file {str(params_file)!r}" if params_file else "no parameter file"
-    assumed = [f.name for f in dataclasses.fields(params) if _assumed(params, f.name)]
+    fields = params_file_fields(params_file) if params_file else frozenset()
+    assumed = [f.name for f in dataclasses.fields(params) if _assumed(params, f.name, fields)]
     doc.add(
         Paragraph(
             "This report compares the displacements published for CaHyMan (Tables 1-3, "
@@ -106,8 +115,8 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
                 (
                     f.name,
                     f"{getattr(params, f.name):g}",
-                    "ASSUMED" if _assumed(params, f.name) else "",
-                    source(params, f.name),
+                    "ASSUMED" if _assumed(params, f.name, fields) else "",
+                    source(params, f.name, fields),
                 )
                 for f in dataclasses.fields(params)
             ),
@@ -117,8 +126,8 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
     )
 
 
-def _assumed(params: CaHyManParams, name: str) -> bool:
-    return source(params, name).startswith("assumed")
+def _assumed(params: CaHyManParams, name: str, given: frozenset[str] = frozenset()) -> bool:
+    return source(params, name, given).startswith("assumed")
 
 
 def _conventions(doc: Document, params: CaHyManParams, tables: list[TableValues]) -> None:
@@ -335,21 +344,32 @@ def _ks_note(doc: Document, params: CaHyManParams, changes) -> None:
             for name in ("K_s value", "the arm model of eqs. (4)-(8)")}  # fmt: skip
     pose = TABLE_POSES[0]
     _, alpha4, s4 = pose.si
+    printed = params.K_s == K_S_PRINTED  # then the effect is 0: explained with the assumed
+    K_s = K_S_ASSUMED if printed else params.K_s
     k_printed = printed_arm_axial_stiffness(params, K_S_PRINTED, alpha4, s4)
-    k_assumed = printed_arm_axial_stiffness(params, params.K_s, alpha4, s4)
+    k_assumed = printed_arm_axial_stiffness(params, K_s, alpha4, s4)
     doc.add(
         Heading("Why the value of K_s hardly matters to the published backend", 3),
         Paragraph(
-            f"Repairing the value of K_s changes the cells by at most {fmt(size['K_s value'], 2)} "
-            "mm, while repairing the arm model (with the printed K_s) moves them by up to "
-            f"{fmt(size['the arm model of eqs. (4)-(8)'], 3)} mm. In the printed arm model "
+            (
+                f"The parameters take K_s as printed, {K_S_PRINTED:g} N/m: the 'K_s value' "
+                f"effect is zero here (the figures below take the assumed {K_S_ASSUMED:g} N/m "
+                "for it). Repairing the arm model moves the cells "
+                if printed
+                else f"Repairing the value of K_s changes the cells by at most "
+                f"{fmt(size['K_s value'], 2)} mm, while repairing the arm model (with the "
+                "printed K_s) moves them "
+            )
+            + f"by up to {fmt(size['the arm model of eqs. (4)-(8)'], 3)} mm. In "
+            "the printed arm model "
             "(eqs. 4-8) As has two equal columns (dL and ds_4 both move M along the arm), and "
             "its pseudo-inverse puts K_4 and K_s side by side: along the arm the stiffness is "
             f"(K_4 + K_s)/2, {fmt(k_printed, 5)} N/m with the printed K_s = {K_S_PRINTED:g} N/m "
-            f"and {fmt(k_assumed, 5)} N/m with K_s = {params.K_s:g} N/m (computed from the "
+            f"and {fmt(k_assumed, 5)} N/m with K_s = {K_s:g} N/m (computed from the "
             f"printed matrices at the {pose.label} pose), a difference of "
             f"{fmt(1e3 * (1 / k_printed - 1 / k_assumed), 3)} mm per N along the arm, the "
-            "size of the 'K_s value' effect. The paper's text puts K_s in series with K_4 "
+            f"size of the 'K_s value' effect{' with that value' if printed else ''}. The "
+            "paper's text puts K_s in series with K_4 "
             "(the consistent arm model, As diag(1/K) As^T): there the printed value adds "
             f"1/K_s = {fmt(1e3 / K_S_PRINTED, 4)} mm per N, the arm model's effect, which no "
             "table shows; hence the assumed value."
