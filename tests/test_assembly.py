@@ -202,3 +202,14 @@ def test_min_norm_solve_is_lstsq_and_leaves_its_inputs(m, n):
     np.testing.assert_allclose(x, np.linalg.lstsq(A, b, rcond=None)[0], rtol=0, atol=1e-13)
     np.testing.assert_array_equal(A, A0)
     np.testing.assert_array_equal(b, b0)
+
+
+def test_no_iteration_only_checks_the_start():
+    """max_iter = 0: an assembled start is returned as it is, any other one refused."""
+    clm = fourbar()
+    a = assemble(clm, [0.7])
+    again = assemble(clm, [0.7], q0=a.q, max_iter=0)
+    assert again.iterations == 0 and again.residual <= ASSEMBLY_TOL
+    np.testing.assert_array_equal(again.q, a.q)
+    with pytest.raises(AssemblyError, match="closure residual reached"):
+        assemble(clm, [0.8], q0=a.q, max_iter=0)
