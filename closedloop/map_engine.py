@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import assemble
-from .batch import QUERY_ERRORS, answered
+from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
 from .conditioning import batch_rank
 from .exceptions import (
@@ -123,8 +123,8 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
                     length=None, inputs=None):  # fmt: skip
     """Assemble the points ``rows`` of a chunk in order (warm-started), then query them.
 
-    The compliances of the assembled points are computed together
-    (:func:`closedloop.batch.stacked_compliances`); a point the stacked path leaves
+    The compliances of the assembled points are computed together, :data:`STACK` at a
+    time (:func:`closedloop.batch.stacked_compliances`); a point the stacked path leaves
     (near a singular pose, rank deficient...) gets the single query
     :func:`closedloop.compliance.compliance`, whose error, if any, is the point's.
 
@@ -158,6 +158,9 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             continue
         assembled.append((i, a))
         q_prev, history = a.q, [*history[-2:], a.q]
+        if len(assembled) == STACK:  # queried a stack at a time: the closure Jacobians
+            _query_points(clm, frame, out, assembled, axes, length)  # they hold are let go
+            assembled = []
     _query_points(clm, frame, out, assembled, axes, length)
 
 

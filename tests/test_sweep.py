@@ -135,6 +135,21 @@ def test_generic_sweep_equals_pointwise_queries():
     assert_matches_pointwise(res, SAME_PATH_RTOL)
 
 
+def test_a_chunk_is_queried_a_stack_at_a_time(monkeypatch):
+    """The assembled points of a chunk are queried STACK at a time (the closure Jacobians
+    the assemblies hand over are let go): with stacks of 4 the results are those of one
+    stack, bit for bit (each configuration's computation does not depend on the others)."""
+    import closedloop.map_engine as engine
+
+    one = sweep(small_grid(), wrench=WRENCH, start="neighbour", executor="serial")
+    monkeypatch.setattr(engine, "STACK", 4)
+    parts = sweep(small_grid(), wrench=WRENCH, start="neighbour", executor="serial")
+    assert len(one.C) > 4
+    np.testing.assert_array_equal(parts.C, one.C)
+    np.testing.assert_array_equal(parts.iterations, one.iterations)
+    np.testing.assert_array_equal(parts.status, one.status)
+
+
 def test_warm_starts_along_a_grid_line_extrapolate():
     """1 deg steps along alpha_1: from the third equal step on, the start is the quadratic
     extrapolation of the last three configurations (error of third order in the step),
