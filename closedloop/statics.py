@@ -278,7 +278,7 @@ def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None
         ("max_step", max_step, "rad or m", True),
         ("max_increment", max_increment, "rad or m", True),
     ):
-        if (value is None and name != "tol") or (value is None and tol is None):  # defaults
+        if value is None:  # the default, relative to the size of the mechanism
             continue
         ok = isinstance(value, int | float | np.number) and not isinstance(value, bool)
         if not (ok and value > 0 and (allow_inf or np.isfinite(value))):
