@@ -133,13 +133,13 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False, c
     others by :func:`closedloop.compliance.compliance`.
 
     Args:
-        closure: as :func:`stacked_compliances`.
         length: characteristic length [m], or None (the model's).
         catch: exception types recorded per configuration (others propagate). One of
             them from the stacked path (a bad frame, axes or length) leaves every
             configuration to the single query, which raises it again (with no
             configuration, it propagates).
         first_error: stop at the first recorded error.
+        closure: as :func:`stacked_compliances`.
 
     Returns:
         C (n, 6, 6), G (n, nv, 6), rank (n,), the scaled condition number cond(K_s) (n,)

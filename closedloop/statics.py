@@ -18,17 +18,19 @@ frame Jacobian (world-aligned axes, at the frame origin), c (m,) the closure res
 :func:`closedloop.tangent.closure_gap` (world gap p2 - p1 of each point closure, log6 of
 each weld: the iterates do not depend on the order in which a pair is written), J_c their
 Jacobian and lambda (m,) the multipliers. Each Newton step splits the free coordinates by
-an SVD of J_c into its row space (a minimum-norm Gauss-Newton step that restores the
-closures; redundant closure rows only lower the rank) and its null space N (a Newton step
-on N^T F with the tangent stiffness of :func:`closedloop.tangent.tangent_stiffness`). The
-multipliers are the least-squares ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the
-part of the closure forces that redundant rows leave statically indeterminate is set to
-zero (minimum norm). The load is followed from zero (continuation): each increment starts
-from the tangent prediction dq = N K_t^-1 N^T J^T dw, is sized so that this prediction
-stays small, and is halved when Newton fails, so that the solution stays on the branch
-that starts at q_rest. When even the smallest increment fails, the tangent stiffness at
-the last equilibrium tells a limit load (near-singular: no equilibrium further on this
-branch) from a plain failure of the iterations.
+an SVD of J_c, unit-free (lengths in units of the mechanism's size L in its rows and
+coordinates, :class:`closedloop.tangent.SolverUnits`), into its row space (a minimum-norm
+Gauss-Newton step that restores the closures; redundant closure rows only lower the rank)
+and its null space N (a Newton step on N^T F with the tangent stiffness of
+:func:`closedloop.tangent.tangent_stiffness`). The multipliers are the least-squares
+ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the part of the closure forces that
+redundant rows leave statically indeterminate is set to zero (minimum norm, rows in
+metres counted in units of L). The load is followed from zero (continuation): each
+increment starts from the tangent prediction dq = N K_t^-1 N^T J^T dw, is sized so that
+this prediction stays small, and is halved when Newton fails, so that the solution stays
+on the branch that starts at q_rest. When even the smallest increment fails, the tangent
+stiffness at the last equilibrium tells a limit load (near-singular: no equilibrium
+further on this branch) from a plain failure of the iterations.
 
 Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and
 prismatic joints) are not part of the equations: an equilibrium outside them is flagged
