@@ -213,3 +213,19 @@ def test_no_iteration_only_checks_the_start():
     np.testing.assert_array_equal(again.q, a.q)
     with pytest.raises(AssemblyError, match="closure residual reached"):
         assemble(clm, [0.8], q0=a.q, max_iter=0)
+
+
+def test_threads_sharing_a_model_get_the_closures_of_their_own_assemblies():
+    """The closure residuals and Jacobian an assembly hands over are values of its own
+    q (each thread works on a Data of its own): threads give the serial ones bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    clm = fourbar()
+    cranks = np.linspace(-3.0, 3.0, 24)
+    serial = [assemble(clm, [c], jacobian=True) for c in cranks]
+    with ThreadPoolExecutor(4) as pool:
+        threaded = list(pool.map(lambda c: assemble(clm, [c], jacobian=True), cranks))
+    for a, b in zip(serial, threaded, strict=True):
+        np.testing.assert_array_equal(a.q, b.q)
+        np.testing.assert_array_equal(a.closure[0], b.closure[0])
+        np.testing.assert_array_equal(a.closure[1], b.closure[1])
