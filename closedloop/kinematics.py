@@ -38,12 +38,15 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
-def _closures(clm: ClosedLoopModel) -> tuple[tuple, bool]:
-    """(the constraints of the closures, whether one of them is a weld), once per model."""
+def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[int, ...]]:
+    """(the constraints of the closures, the positions of the welds), once per model."""
     closures = clm.closures
     return clm.memo(
         "closures",
-        lambda: (tuple(c.constraint for c in closures), any(c.kind == "6d" for c in closures)),
+        lambda: (
+            tuple(c.constraint for c in closures),
+            tuple(k for k, c in enumerate(closures) if c.kind == "6d"),
+        ),
     )
 
 
@@ -74,10 +77,8 @@ def jacobian_rows(
         residual_rows(clm, data, constraint_datas)
     pairs = zip(constraints, constraint_datas, strict=True)
     parts = [c.jacobian(model, data, cd) for c, cd in pairs]
-    if welds:  # for a weld, the derivative of log6 of the relative placement
-        for k, (c, cd) in enumerate(zip(clm.closures, constraint_datas, strict=True)):
-            if c.kind == "6d":
-                parts[k] = pin.Jlog6(cd.c1Mc2.inverse()) @ parts[k]
+    for k in welds:  # for a weld, the derivative of log6 of the relative placement
+        parts[k] = pin.Jlog6(constraint_datas[k].c1Mc2.inverse()) @ parts[k]
     out = np.concatenate(parts)
     return out.reshape(-1, 1) if model.nv == 1 else out  # a one-dof model gives vectors
 

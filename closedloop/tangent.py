@@ -397,8 +397,8 @@ class EquilibriumEquations:
         the generalised force g + G - J^T w on the free coordinates [N m, N] (G: the
         weight, if any); ``force`` the
         infinity norm of its unbalanced part F + J_c^T lambda (the vector: ``unbalanced``);
-        ``scale`` the largest spring or load generalised force (the vectors on the free
-        coordinates: ``spring``, ``load``); ``lam`` (m,) least-squares multipliers; ``Ur``,
+        ``spring``, ``load`` the spring and load generalised forces on the free
+        coordinates; ``lam`` (m,) least-squares multipliers; ``Ur``,
         ``sr``, ``R``, ``N``: the SVD of the unit-free J_c on the free coordinates (row
         space, null space), rows in metres over L and translational coordinates y = x / L
         (:class:`SolverUnits`), so that its rank rule does not depend on the size.
@@ -428,9 +428,6 @@ class EquilibriumEquations:
             "closure": float(np.max(np.abs(c), initial=0.0)),
             "F": F,
             "force": float(np.max(np.abs(unbalanced), initial=0.0)),
-            "scale": max(
-                np.max(np.abs(g[free]), initial=0.0), np.max(np.abs(load[free]), initial=0.0)
-            ),
             "unbalanced": unbalanced,
             "spring": g[free],
             "load": load[free],
