@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .exceptions import InvalidInputError
@@ -54,6 +56,31 @@ def real_array(value, name: str) -> np.ndarray:
         kind = f"ragged {kind}" if a is None else kind
         raise InvalidInputError(f"{name} must be real numbers, got {text} ({kind})")
     return a.astype(float)
+
+
+def _shown(value) -> str:
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
+def check_positive(name: str, value, unit: str, *, allow_inf: bool = False) -> None:
+    """Refuse a solver option that is not a real number > 0 (finite unless ``allow_inf``;
+    NaN and bools refused) with an InvalidInputError naming it, its unit and the value."""
+    ok = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+    if ok:
+        try:
+            x = float(value)
+        except OverflowError:  # an int beyond the float range
+            x = math.inf
+    if not (ok and x > 0 and (allow_inf or math.isfinite(x))):
+        kind = "> 0 (inf allowed)" if allow_inf else "finite and > 0"
+        raise InvalidInputError(f"{name} must be a number {kind} [{unit}], got {_shown(value)}")
+
+
+def check_count(name: str, value, least: int) -> None:
+    """Refuse an option that is not an integer >= ``least`` (InvalidInputError)."""
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    if not (ok and value >= least):
+        raise InvalidInputError(f"{name} must be an integer >= {least}, got {_shown(value)}")
 
 
 def check_wrench(w) -> np.ndarray:

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from .arrays import ReadOnlyArrays, frozen, real_array
+from .arrays import ReadOnlyArrays, check_count, check_positive, frozen, real_array
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
@@ -114,10 +113,8 @@ def assemble(
             input); the message gives the residual reached.
         InvalidInputError: bad ``actuated``, ``q0``, ``tol`` or ``max_iter``.
     """
-    if isinstance(tol, bool) or not isinstance(tol, int | float) or not 0 < tol < math.inf:
-        raise InvalidInputError(f"tol must be a number > 0 and finite [m, rad], got {tol!r}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, int | np.integer) or max_iter < 0:
-        raise InvalidInputError(f"max_iter must be an integer >= 0, got {max_iter!r}")
+    check_positive("tol", tol, "m, rad")
+    check_count("max_iter", max_iter, 0)
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     if actuated is not None:
         if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .arrays import ReadOnlyArrays, check_wrench, readonly, real_array
+from .arrays import ReadOnlyArrays, check_count, check_positive, check_wrench, readonly, real_array
 from .configuration import Configuration, accepts_configuration
 from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
 from .gravity import GravityLoad, Load, Payload
@@ -271,25 +271,15 @@ def _balanced(st: dict, coords: np.ndarray) -> bool:
 
 def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None:
     """Raise InvalidInputError for a solver argument outside its range (NaN included)."""
-
-    def shown(v) -> str:
-        return repr(v.item() if isinstance(v, np.generic) else v)
-
     for name, value, unit, allow_inf in (
         ("tol", tol, "m, rad", False),
         ("max_step", max_step, "rad or m", True),
         ("max_increment", max_increment, "rad or m", True),
     ):
-        if value is None:  # the default, relative to the size of the mechanism
-            continue
-        ok = isinstance(value, int | float | np.number) and not isinstance(value, bool)
-        if not (ok and value > 0 and (allow_inf or np.isfinite(value))):
-            kind = "> 0 (inf allowed)" if allow_inf else "finite and > 0"
-            raise InvalidInputError(f"{name} must be a number {kind} [{unit}], got {shown(value)}")
-    for name, value, least in (("max_iter", max_iter, 1), ("max_halvings", max_halvings, 0)):
-        ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
-        if not (ok and value >= least):
-            raise InvalidInputError(f"{name} must be an integer >= {least}, got {shown(value)}")
+        if value is not None:  # None: the default, relative to the size of the mechanism
+            check_positive(name, value, unit, allow_inf=allow_inf)
+    check_count("max_iter", max_iter, 1)
+    check_count("max_halvings", max_halvings, 0)
 
 
 @accepts_configuration

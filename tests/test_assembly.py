@@ -102,7 +102,7 @@ def test_invalid_inputs(actuated, q0, match):
 @pytest.mark.parametrize(
     ("options", "match"),
     [
-        ({"tol": 0.0}, r"tol must be a number > 0 and finite \[m, rad\], got 0\.0"),
+        ({"tol": 0.0}, r"tol must be a number finite and > 0 \[m, rad\], got 0\.0"),
         ({"tol": -1e-12}, r"got -1e-12"),
         ({"tol": np.inf}, r"got inf"),
         ({"tol": np.nan}, r"got nan"),
@@ -115,6 +115,13 @@ def test_invalid_inputs(actuated, q0, match):
 def test_invalid_tolerance_and_iteration_limit(options, match):
     with pytest.raises(InvalidInputError, match=match):
         assemble(fourbar(), [0.3], **options)
+
+
+def test_numpy_scalars_are_valid_options():
+    """The options take numpy scalars as the statics' do (one check for both)."""
+    a = assemble(fourbar(), [0.3], tol=np.float32(1e-10), max_iter=np.int64(50))
+    b = assemble(fourbar(), [0.3], tol=1e-10, max_iter=50)
+    np.testing.assert_array_equal(a.q, b.q)
 
 
 def test_closure_at_the_solution_is_that_of_a_fresh_evaluation():
