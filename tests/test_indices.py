@@ -367,6 +367,33 @@ def test_homogenised_index_needs_a_length():
 
 
 # ---------------------------------------------------------------- batched
+@pytest.mark.parametrize("length", [1e-7, 1e-4, 1.0, 1e3])
+def test_batched_determinant_follows_the_scaled_condition(length):
+    """det K of a map from the scaled eigenvalues: a mechanism of 0.1 um has an SI
+    condition number of 1e14 for a scaled one of 10; 1 / det(C) lost it to a NaN (or
+    eps cond_SI of it). Reference: det(D)^2 / det(C_s), C_s = U diag(mu) U^T built with
+    known eigenvalues mu, and the single query's determinant."""
+    rng = np.random.default_rng(5)
+    U = np.linalg.qr(rng.normal(size=(6, 6)))[0]
+    mu = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 10.0]) * 1e-4  # rad/(N m), scaled
+    d = np.r_[np.full(3, 1.0 / length), np.ones(3)]
+    C = (U * mu) @ U.T / np.outer(d, d)
+    expected = np.prod(d) ** 2 / np.prod(mu)
+    got = batch_indices(C[None], np.array([6]), length)
+    # the eigenvalues of a formed C_s of condition 10: a few eps each
+    np.testing.assert_allclose(got["det_K"][0], expected, rtol=1e-13)
+    single = StiffnessIndices.from_compliance(C, length=length).determinant
+    np.testing.assert_allclose(got["det_K"][0], single, rtol=1e-13)
+
+
+def test_batched_determinant_without_overflow_of_the_product():
+    """Six scaled eigenvalues of 1e-60 (det C_s = 1e-360 underflows): det K = 1e360
+    overflows honestly to inf; of 1e-50, 1e300 is returned."""
+    for mu, expected in ((1e-60, np.inf), (1e-50, 1e300)):
+        got = batch_indices(np.eye(6)[None] * mu, np.array([6]), 1.0)["det_K"][0]
+        np.testing.assert_allclose(got, expected, rtol=1e-12)
+
+
 def test_batched_indices_equal_the_single_ones():
     """batch_indices on a stack (full rank, rank 3, rotations rigid, a NaN row) equals
     StiffnessIndices point by point; a non-symmetric C follows its own definitions."""
