@@ -43,6 +43,7 @@ closure manifold, an independent check.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -149,23 +150,33 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
 
     A bound counts when it is finite and below :data:`UNBOUNDED_LIMIT` in magnitude;
     a joint whose lower limit is not below its upper one (URDF ``<limit>`` without
-    ``lower``/``upper`` reads as [0, 0]) has none. Returns name -> (value, lower, upper)
-    [rad or m] for every coordinate more than :data:`LIMIT_TOL` outside, in joint order.
+    ``lower``/``upper`` reads as [0, 0]) has none. The angle of a revolute joint that is
+    not actuated comes from the assembly, which may wind it by whole turns (11.13 rad for
+    limits [-6.3, 6.3], the placement of 11.13 - 2 pi = 4.85 rad): it counts as inside
+    when an angle that differs from it by whole turns is. An actuated angle is the value
+    the robot is driven to, and counts as it is. Returns name ->
+    (value, lower, upper) [rad or m] for every coordinate more than :data:`LIMIT_TOL`
+    outside, in joint order.
     """
     model, out = clm.model, {}
     lower, upper = model.lowerPositionLimit, model.upperPositionLimit
     for j in range(1, model.njoints):
         jm = model.joints[j]
-        if jm.nq != 1 or not jm.shortname().startswith(("JointModelR", "JointModelP")):
+        kind = jm.shortname()
+        if jm.nq != 1 or not kind.startswith(("JointModelR", "JointModelP")):
             continue
         i = jm.idx_q
         lo, hi, x = lower[i], upper[i], q[i]
         if not lo < hi:
             continue
-        below = abs(lo) < UNBOUNDED_LIMIT and x < lo - LIMIT_TOL
-        above = abs(hi) < UNBOUNDED_LIMIT and x > hi + LIMIT_TOL
-        if below or above:
-            out[model.names[j]] = (float(x), float(lo), float(hi))
+        low, high = abs(lo) < UNBOUNDED_LIMIT, abs(hi) < UNBOUNDED_LIMIT
+        wound = kind.startswith("JointModelR") and model.names[j] not in clm.actuated
+        if wound and low and high:
+            x = lo + (x - lo) % (2.0 * math.pi)  # the turn that starts at the lower limit
+            if x > lo + 2.0 * math.pi - LIMIT_TOL:  # within the tolerance below lo
+                x -= 2.0 * math.pi
+        if (low and x < lo - LIMIT_TOL) or (high and x > hi + LIMIT_TOL):
+            out[model.names[j]] = (float(q[i]), float(lo), float(hi))
     return out
 
 

@@ -165,6 +165,32 @@ def test_enforced_limits_refuse_the_load_where_a_joint_leaves_them(fourbar):
         assert solve_equilibrium(clm, q0, "P", t * w).limits_violated == ()
 
 
+def test_a_passive_angle_wound_by_turns_is_within_its_limits(fourbar):
+    """The coupler (passive, limits [-6.3, 6.3] rad) wound by two turns is the same
+    placement, and the same equilibrium: not flagged, where the first release warned of
+    a joint outside its limits. The crank (actuated) is driven to its value: wound by a
+    turn, 6.58 rad, it is outside."""
+    clm, q0 = fourbar
+    coupler = clm.model.joints[clm.joint_id("coupler")].idx_q
+    crank = clm.model.joints[clm.joint_id("crank")].idx_q
+    wound = q0.copy()
+    wound[coupler] += 4.0 * np.pi
+    assert abs(wound[coupler]) > 6.3
+    w = [1.0, 0, 2.0, 0, 0, 0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", JointLimitWarning)
+        eq = solve_equilibrium(clm, wound, "P", w)
+        ref = solve_equilibrium(clm, q0, "P", w)
+    assert eq.limits_violated == ()
+    # the two solves differ by the rounding of the wound angle's sine and cosine (1e-15),
+    # within the solver's tolerance (1e-10 relative): the same deflection to 1e-9
+    np.testing.assert_allclose(eq.displacement, ref.displacement, rtol=1e-9, atol=1e-15)
+    turned = q0.copy()
+    turned[crank] += 2.0 * np.pi
+    with pytest.warns(JointLimitWarning, match=r"crank = 6\.58"):
+        assert solve_equilibrium(clm, turned, "P", w).limits_violated == ("crank",)
+
+
 def test_limits_of_pinocchio_defaults_and_empty_ranges_are_ignored():
     """A hinge built without limits (+-1.8e308) and one with [0, 0] (a URDF <limit>
     without lower/upper) have none; a real range [-0.1, 0.1] rad is checked."""
