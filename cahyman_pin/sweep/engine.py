@@ -344,7 +344,10 @@ def sweep(
             (default: CaHyMan's closed-form geometry, exact, computed per chunk at once;
             faster, and the same start as :func:`cahyman_pin.api.stiffness`) or
             ``"neighbour"`` (the previous point's configuration, extrapolated along
-            equal steps; the first point of each chunk from the closed form).
+            equal steps; the first point of each chunk from the closed form). The two
+            starts reach configurations within the assembly tolerance of each other; a
+            point so near a singular pose that the rank rule decides on differences of
+            that size may be answered from one start and refused from the other.
         executor: ``"processes"`` (local process pool, default), ``"serial"``, or any
             ``concurrent.futures.Executor`` (e.g. ``dask.distributed.Client.get_executor()``);
             tasks are pickled, so a registered backend must be importable by the workers.
