@@ -205,3 +205,22 @@ def test_elementary_rotations_are_scipys():
         expected = Rotation.from_euler(axis, angles.reshape(-1, 1)).as_matrix()
         np.testing.assert_allclose(rot(angles), expected.reshape(2, 2, 3, 3), rtol=0, atol=1e-15)
         np.testing.assert_allclose(rot(0.3), expected[1], rtol=0, atol=1e-15)
+
+
+def test_plate_rotation_is_the_product_of_eq_6():
+    """plate_rotation (multiplied out) against Rz(theta) Ry(pi/2 - phi) Rz(psi) by scipy's
+    intrinsic z-y-z Euler angles, batched (broadcast shapes) and for one pose; rounding of
+    a product of three rotations: a few eps."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    phi, theta = rng.uniform(-4, 4, size=(2, 5, 1))
+    psi = rng.uniform(-4, 4, size=4)
+    got = geometry.plate_rotation(phi, theta, psi)
+    assert got.shape == (5, 4, 3, 3)
+    angles = np.stack(np.broadcast_arrays(theta, np.pi / 2 - phi, psi), axis=-1)
+    expected = Rotation.from_euler("ZYZ", angles.reshape(-1, 3)).as_matrix().reshape(5, 4, 3, 3)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(geometry.plate_rotation(0.2, -1.0, 2.5),
+                               Rotation.from_euler("ZYZ", [-1.0, np.pi / 2 - 0.2, 2.5]).as_matrix(),
+                               rtol=0, atol=1e-15)  # fmt: skip
