@@ -158,26 +158,43 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
     (value, lower, upper) [rad or m] for every coordinate more than :data:`LIMIT_TOL`
     outside, in joint order.
     """
-    model, out = clm.model, {}
-    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
-    for j in range(1, model.njoints):
-        jm = model.joints[j]
-        kind = jm.shortname()
-        if jm.nq != 1 or not kind.startswith(("JointModelR", "JointModelP")):
-            continue
-        i = jm.idx_q
-        lo, hi, x = lower[i], upper[i], q[i]
+    model, (names, i, wound) = clm.model, _limited_coordinates(clm)
+    # the limits are read each time (a model's may be set after loading); a loop over
+    # Python floats: a few joints, where numpy's calls cost more than the arithmetic
+    lower, upper = model.lowerPositionLimit[i].tolist(), model.upperPositionLimit[i].tolist()
+    out = {}
+    for name, lo, hi, x, turns in zip(names, lower, upper, q[i].tolist(), wound, strict=True):
         if not lo < hi:
             continue
-        low, high = abs(lo) < UNBOUNDED_LIMIT, abs(hi) < UNBOUNDED_LIMIT
-        wound = kind.startswith("JointModelR") and model.names[j] not in clm.actuated
-        if wound and low and high:
-            x = lo + (x - lo) % (2.0 * math.pi)  # the turn that starts at the lower limit
-            if x > lo + 2.0 * math.pi - LIMIT_TOL:  # within the tolerance below lo
-                x -= 2.0 * math.pi
-        if (low and x < lo - LIMIT_TOL) or (high and x > hi + LIMIT_TOL):
-            out[model.names[j]] = (float(q[i]), float(lo), float(hi))
+        low, high, y = abs(lo) < UNBOUNDED_LIMIT, abs(hi) < UNBOUNDED_LIMIT, x
+        if turns and low and high:
+            y = lo + (x - lo) % _TURN  # the angle in the turn that starts at the lower limit
+            if y > lo + _TURN - LIMIT_TOL:  # within the tolerance below it
+                y -= _TURN
+        if (low and y < lo - LIMIT_TOL) or (high and y > hi + LIMIT_TOL):
+            out[name] = (x, lo, hi)
     return out
+
+
+_TURN = 2.0 * math.pi
+
+
+def _limited_coordinates(clm: ClosedLoopModel) -> tuple[list[str], np.ndarray, list[bool]]:
+    """(names, q indices (k,), wound) of the one-coordinate revolute and prismatic joints,
+    in joint order; ``wound``: revolute and not actuated. Once per model."""
+
+    def build():
+        model, rows = clm.model, []
+        for j in range(1, model.njoints):
+            jm = model.joints[j]
+            kind = jm.shortname()
+            if jm.nq == 1 and kind.startswith(("JointModelR", "JointModelP")):
+                turns = kind.startswith("JointModelR") and model.names[j] not in clm.actuated
+                rows.append((model.names[j], jm.idx_q, turns))
+        names, idx, wound = zip(*rows, strict=True) if rows else ((), (), ())
+        return list(names), np.array(idx, dtype=int), list(wound)
+
+    return clm.memo("limited_coordinates", build)
 
 
 def _describe_limits(bad: dict[str, tuple]) -> str:

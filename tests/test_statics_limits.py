@@ -24,6 +24,7 @@ from closedloop.statics import (
     EquilibriumError,
     JointLimitError,
     JointLimitWarning,
+    joints_outside_limits,
     potential_energy,
     solve_equilibrium,
 )
@@ -189,6 +190,15 @@ def test_a_passive_angle_wound_by_turns_is_within_its_limits(fourbar):
     turned[crank] += 2.0 * np.pi
     with pytest.warns(JointLimitWarning, match=r"crank = 6\.58"):
         assert solve_equilibrium(clm, turned, "P", w).limits_violated == ("crank",)
+
+
+def test_limits_set_after_a_first_check_are_read():
+    """The joints to check are found once per model, their limits read at each check."""
+    clm = pendulum(40.0, 0.5)
+    q = np.array([0.2, 0.3])
+    assert joints_outside_limits(clm, q) == {}
+    clm.model.lowerPositionLimit[1], clm.model.upperPositionLimit[1] = -0.1, 0.1
+    assert joints_outside_limits(clm, q) == {"hinge": (0.3, -0.1, 0.1)}
 
 
 def test_limits_of_pinocchio_defaults_and_empty_ranges_are_ignored():
