@@ -470,8 +470,8 @@ def _block_extremes(C: np.ndarray, block: slice) -> tuple[np.ndarray, np.ndarray
     return low, high
 
 
-#: Largest eigenvalue ratio of a formed C or C_s (n, 6, 6) taken from its eigenvalues (the
-#: SI condition number; det K from the scaled ones): they
+#: Largest condition number of a formed C or C_s (n, 6, 6) whose eigenvalues (the SI
+#: condition number) or determinant (det K, from C_s) are taken: they
 #: err by about 1e-16 of the largest, so the smallest is known to 1e-4 relative at 1e12,
 #: and not at all towards 1e16 (a map showed 1.5e17 where K's own was 3.8e16).
 SI_RESOLVED = 1e12
@@ -488,8 +488,8 @@ def batch_indices(
     """The indices of :data:`BATCH_INDICES` for n compliances at once (NaN where one does
     not exist), by the definitions of :class:`StiffnessIndices`.
 
-    * ``det_K``: det K = 1 / det C, full rank only, from the eigenvalues of the scaled
-      C_s: NaN where their ratio exceeds :data:`SI_RESOLVED`.
+    * ``det_K``: det K = 1 / det C, full rank only, from the scaled C_s: NaN where its
+      condition number exceeds :data:`SI_RESOLVED`.
     * ``condition_number``: cond(K_s) of the scaled stiffness over the rank, at the
       characteristic length L (as :attr:`StiffnessIndices.scaled_condition_number`):
       unit-free, the one to compare. ``condition`` where given (the solver's, from the
@@ -541,7 +541,8 @@ def batch_indices(
             cond_si = c.max(axis=1) / c.min(axis=1)
         cond_si[~(cond_si <= SI_RESOLVED)] = np.nan
         out["condition_number_si"][both] = cond_si
-        out["det_K"][both] = _scaled_determinants(C[both], L[both])
+        cond_s = out["condition_number"][both]
+        out["det_K"][both] = _scaled_determinants(C[both], L[both], cond_s)
     other = ~sym & full
     if np.any(other):
         K = np.linalg.inv(C[other])
@@ -560,22 +561,18 @@ def batch_indices(
     return out
 
 
-def _scaled_determinants(C: np.ndarray, L: np.ndarray) -> np.ndarray:
+def _scaled_determinants(C: np.ndarray, L: np.ndarray, condition: np.ndarray) -> np.ndarray:
     """(n,) det K = det(D)^2 / det(C_s) [N^6/rad^3] of symmetric compliances C (n, 6, 6)
-    from the eigenvalues of the scaled C_s = D C D (D = diag(1/L, 1/L, 1/L, 1, 1, 1), L
-    (n,) [m]); NaN where their ratio exceeds :data:`SI_RESOLVED` (the smallest then errs
-    by more than 1e-4 relative). Unlike 1 / det(C), the error follows the scaled
-    condition, not the SI one, which a length unit alone makes large (a mechanism of
-    1e-4 m has an SI condition number 1e8 times its scaled one)."""
+    from the LU factors of the scaled C_s = D C D (D = diag(1/L, 1/L, 1/L, 1, 1, 1), L
+    (n,) [m]), logarithms against under- and overflow; NaN where ``condition`` (n,)
+    (cond(K_s)) exceeds :data:`SI_RESOLVED`. Unlike 1 / det(C), the error follows the
+    scaled condition, not the SI one, which a length unit alone makes large (a mechanism
+    of 1e-4 m has an SI condition number 1e8 times its scaled one)."""
     d = np.where(np.arange(6) < 3, 1.0 / L[:, None], 1.0)
-    mu = np.linalg.eigvalsh(C * d[:, :, None] * d[:, None, :])
-    size = np.abs(mu)
-    with np.errstate(divide="ignore", over="ignore", under="ignore", invalid="ignore"):
-        resolved = size.max(axis=1) <= SI_RESOLVED * size.min(axis=1)
-        # logarithms: six eigenvalues of 1e-60 do not underflow before the division
-        logs = -np.log(size).sum(axis=1) - 6.0 * np.log(L)
-        det = np.prod(np.sign(mu), axis=1) * np.exp(logs)
-    return np.where(resolved, det, np.nan)
+    sign, log_det = np.linalg.slogdet(C * d[:, :, None] * d[:, None, :])
+    with np.errstate(over="ignore", invalid="ignore"):
+        det = sign * np.exp(-log_det - 6.0 * np.log(L))
+    return np.where(condition <= SI_RESOLVED, det, np.nan)
 
 
 #: Largest negative eigenvalue, relative to the largest, that rounding gives a formed
