@@ -10,8 +10,10 @@ Four parts, shared by :mod:`closedloop.maps` and CaHyMan's maps (:mod:`cahyman_p
 * :func:`run_tasks`: the chunks in this process, on local processes or on any
   ``concurrent.futures.Executor`` (e.g. Dask's ``Client.get_executor()``): the results do
   not depend on the executor;
-* :func:`gather` and :func:`classify`: per-point arrays (no per-point Python objects:
-  statuses and reasons are small integer codes), the rank and status from C.
+* :func:`complete` (in each kernel, so in the workers): the rank and status from C
+  (:func:`classify`) and the stiffness indices of the chunk's points at once;
+* :func:`gather`: per-point arrays (no per-point Python objects: statuses and reasons
+  are small integer codes).
 
 The kernel for any :class:`~closedloop.model.ClosedLoopModel` is :func:`assemble_chunk`:
 each point is assembled by :func:`closedloop.assembly.assemble` from the previous point's
@@ -45,6 +47,7 @@ from .exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
+from .indices import batch_indices
 from .io import load_model, reference_configuration
 from .model import ClosedLoopModel
 from .progress import progress
@@ -91,6 +94,7 @@ class ChunkResult:
         length: (c,) characteristic length [m] of the scaled indices.
         iterations: (c,) Gauss-Newton iterations of the assembly, -1 if none.
         reasons: error message per failed point, by position in the chunk.
+        indices: name -> (c,) stiffness indices (:func:`complete`; empty until then).
     """
 
     C: np.ndarray
@@ -100,6 +104,7 @@ class ChunkResult:
     length: np.ndarray
     iterations: np.ndarray
     reasons: dict[int, str] = field(default_factory=dict)
+    indices: dict[str, np.ndarray] = field(default_factory=dict)
 
     @classmethod
     def empty(cls, n: int) -> ChunkResult:
@@ -116,7 +121,24 @@ class ChunkResult:
     def fail(self, i: int, error: Exception) -> None:
         """Record the failure of point i."""
         self.status[i] = status_code(error)
-        self.reasons[int(i)] = " ".join(str(error).split()) or type(error).__name__
+        self.set_reason(i, " ".join(str(error).split()) or type(error).__name__)
+
+    def set_reason(self, i: int, text: str) -> None:
+        """Record the reason of point i's status."""
+        self.reasons[int(i)] = text
+
+
+def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
+    """Rank, status and stiffness indices of a chunk's points, in place (in the kernel, so
+    that the workers of a map compute them in parallel): :func:`classify`, then
+    ``relabel(out, from_C)`` if given (a caller's own statuses; from_C (c,) bool: the
+    rank came from C, not from the solver), then
+    :func:`closedloop.indices.batch_indices` into ``out.indices``."""
+    from_C = out.rank < 0
+    symmetric = classify(out)
+    if relabel is not None:
+        relabel(out, from_C)
+    out.indices = batch_indices(out.C, out.rank, out.length, wrench, symmetric, out.condition)
 
 
 def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
@@ -260,6 +282,7 @@ class MapChunk:
         points: (c, n_act) actuated values [rad, m], in path order.
         first: (nq,) configuration the first point starts from, or None (reference).
         start: start provider ``start(clm, points) -> (c, nq)`` or None (picklable).
+        wrench: (6,) wrench of the deflection indices [N, N m] at the frame, or None.
     """
 
     model: ClosedLoopModel | ModelSource
@@ -267,13 +290,15 @@ class MapChunk:
     points: np.ndarray
     first: np.ndarray | None = None
     start: Callable | None = None
+    wrench: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
 
 
 def assemble_chunk(chunk: MapChunk) -> ChunkResult:
-    """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started."""
+    """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started, and
+    their indices."""
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
@@ -281,6 +306,7 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     assemble_points(clm, chunk.frame, out, range(len(chunk)),
                     lambda i, q0: assemble_within_limits(clm, chunk.points[i], q0), first,
                     starts)  # fmt: skip
+    complete(out, chunk.wrench)
     return out
 
 
@@ -458,6 +484,7 @@ class PointData:
         reason_codes: (n,) int32 index of each point's reason in ``reason_texts``.
         reason_texts: distinct reasons, ``reason_texts[0] == ""`` (a failed point's
             message usually names its own numbers: one text per failed point).
+        indices: name -> (n,) stiffness indices of the chunks (:func:`complete`).
     """
 
     C: np.ndarray
@@ -468,6 +495,7 @@ class PointData:
     iterations: np.ndarray
     reason_codes: np.ndarray
     reason_texts: list
+    indices: dict = field(default_factory=dict)
     _codes: dict = field(default_factory=dict, repr=False, compare=False)
 
     def set_reason(self, i: int, text: str) -> None:
@@ -496,6 +524,8 @@ def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData
                      reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
     for k, r in results:
         p = pieces[k]
+        for name, values in r.indices.items():
+            data.indices.setdefault(name, np.full(n, np.nan))[p] = values
         data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
         data.condition[p] = r.condition
         data.length[p], data.iterations[p] = r.length, r.iterations
@@ -504,7 +534,7 @@ def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData
     return data
 
 
-def classify(data: PointData) -> np.ndarray:
+def classify(data: ChunkResult) -> np.ndarray:
     """Complete the rank and status of computed points from their compliance (in place).
 
     A symmetric C without a rank (not from the solver: a closed form) gets the rank of
@@ -515,7 +545,7 @@ def classify(data: PointData) -> np.ndarray:
     Returns:
         (n,) bool: C is symmetric (and computed).
     """
-    C, rank, codes = data.C, data.rank, data.codes
+    C, rank, codes = data.C, data.rank, data.status
     computed = (codes == OK) & np.all(np.isfinite(C), axis=(1, 2))
     Ct = C.swapaxes(1, 2)
     symmetric = computed & np.all(np.abs(C - Ct) <= SYMMETRY_RTOL * np.abs(Ct), axis=(1, 2))

@@ -1,8 +1,8 @@
 """Stiffness maps of any robot over its workspace.
 
 A map computes the compliance at a frame for many inputs (actuated values, SI), on the
-sweep engine of :mod:`closedloop.map_engine` (path, chunks, kernels, executors), and the
-indices of all points at once (:func:`closedloop.indices.batch_indices`):
+sweep engine of :mod:`closedloop.map_engine` (path, chunks, kernels, executors), with the
+indices of each chunk's points at once (:func:`closedloop.indices.batch_indices`):
 :func:`grid_points` makes the inputs, :func:`stiffness_map` runs the map,
 :class:`StiffnessMap` holds it and writes its files (NPZ, CSV, PNG).
 """
@@ -19,7 +19,7 @@ import numpy as np
 
 from .arrays import ReadOnlyArrays
 from .exceptions import InvalidInputError
-from .indices import BATCH_INDICES, batch_indices
+from .indices import BATCH_INDICES
 from .map_engine import (
     CHUNK,
     OK,
@@ -30,7 +30,6 @@ from .map_engine import (
     PointData,
     assemble_chunk,
     border_starts,
-    classify,
     gather,
     model_of,
     path_order,
@@ -290,14 +289,14 @@ def stiffness_map(
     firsts = list(range(0, n, chunk))
     pieces = [order[f : f + chunk] for f in firsts]
     borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
-    tasks = [MapChunk(model, frame, pts[p], q, start) for p, q in zip(pieces, borders, strict=True)]
+    tasks = [MapChunk(model, frame, pts[p], q, start, w)
+             for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
 
     sizes = [len(piece) for piece in pieces]
     results = run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,
                                  label="map points", show_progress=show_progress)  # fmt: skip
     data = gather(n, pieces, results)
-    symmetric = classify(data)
-    values = batch_indices(data.C, data.rank, data.length, w, symmetric, data.condition)
+    values = data.indices
     for a in (pts, data.C, data.rank, data.codes, *values.values()):
         a.flags.writeable = False
     return StiffnessMap(

@@ -55,14 +55,11 @@ from cahyman_pin.sweep.points import (
 )
 from closedloop.arrays import check_wrench, frozen, readonly
 from closedloop.exceptions import InvalidInputError
-from closedloop.indices import batch_indices
 from closedloop.map_engine import (
     OK,
     RANK_DEFICIENT,
-    SINGULAR,
     STATUS,
     PointData,
-    classify,
     gather,
     run_tasks_by_point,
 )
@@ -269,7 +266,7 @@ class SweepResult:
         return paths
 
 
-def _chunks(points: SweepPoints, backend: str, start: str, pieces: list) -> list[Chunk]:
+def _chunks(points: SweepPoints, backend: str, start: str, pieces: list, wrench) -> list[Chunk]:
     func = get_backend(backend)
     names = tuple(points.design)
     design = np.column_stack([points.design[k] for k in names]) if names else None
@@ -284,6 +281,7 @@ def _chunks(points: SweepPoints, backend: str, start: str, pieces: list) -> list
             alpha4=points.alpha4[idx],
             s4=points.s4[idx],
             design=np.zeros((idx.size, 0)) if design is None else design[idx],
+            wrench=wrench,
         )
         for idx in pieces
     ]
@@ -375,20 +373,12 @@ def sweep(
     t0 = time.perf_counter()
     n = len(points)
     pieces = [points.order[f : f + size] for f in range(0, n, size)]
-    chunks = _chunks(points, backend, start, pieces)
+    chunks = _chunks(points, backend, start, pieces, w)
 
     results = run_tasks_by_point(run_chunk, chunks, [len(p) for p in pieces], pool, n_workers,
                                  label=f"{backend} sweep", show_progress=show_progress)  # fmt: skip
     data = gather(n, pieces, results)
-    from_C = data.rank < 0  # closed forms: the rank comes from C
-    symmetric = classify(data)
-    for i in np.flatnonzero(from_C & (data.codes == RANK_DEFICIENT)):
-        data.codes[i] = SINGULAR  # as api.stiffness: a singular pose, not rigidity
-        data.set_reason(i, f"the {backend} compliance at M has numerical rank "
-                        f"{data.rank[i]} < 6: a singular pose, where one direction is "
-                        "almost free")  # fmt: skip
-        data.C[i] = np.nan
-    indices = batch_indices(data.C, data.rank, data.length, w, symmetric, data.condition)
+    indices = data.indices
     if w is not None:
         indices["deflection"] = data.C @ w
     for a in (data.C, data.rank, data.codes, data.iterations, data.length, data.reason_codes):

@@ -18,12 +18,13 @@ model, rebuilt once per run and cached per thread):
 * any other registered backend: its function, point by point.
 
 A point that fails is recorded with a status and the error message; it never stops the
-sweep. The rank, the status from C and the indices are computed afterwards, for all
-points at once (:func:`closedloop.map_engine.classify`, :func:`closedloop.indices.batch_indices`).
+sweep. The rank, the status from C and the indices are computed at the end of the chunk,
+for all its points at once (:func:`closedloop.map_engine.complete`).
 """
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
@@ -36,7 +37,14 @@ from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_M
 from closedloop.exceptions import AssemblyError, InvalidInputError
-from closedloop.map_engine import POINT_ERRORS, ChunkResult, assemble_points
+from closedloop.map_engine import (
+    POINT_ERRORS,
+    RANK_DEFICIENT,
+    SINGULAR,
+    ChunkResult,
+    assemble_points,
+    complete,
+)
 
 #: Starts of the generic assembly: the previous point's configuration, or the closed-form
 #: geometry of CaHyMan, computed for a whole run of points at once.
@@ -59,6 +67,7 @@ class Chunk:
         design_names: names of the varying CaHyManParams fields.
         alpha: (c, 3) crank angles [rad]; alpha4: (c,) arm angle [rad]; s4: (c,) stroke [m].
         design: (c, len(design_names)) values of the design fields [SI].
+        wrench: (6,) wrench at M of the deflection indices [N, N m], world axes, or None.
     """
 
     backend: str
@@ -70,6 +79,7 @@ class Chunk:
     alpha4: np.ndarray
     s4: np.ndarray
     design: np.ndarray
+    wrench: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.alpha4)
@@ -195,13 +205,25 @@ _KERNELS = {"generic": _generic, "consistent": _consistent}
 
 
 def run_chunk(chunk: Chunk) -> ChunkResult:
-    """Compliance of every point of ``chunk`` (the task sent to an executor)."""
+    """Compliance of every point of ``chunk`` and their indices (the task sent to an
+    executor)."""
     out = ChunkResult.empty(len(chunk))
     kernel = _KERNELS.get(chunk.backend, _pointwise)
     for idx, params in _runs(chunk, out):
         out.length[idx] = params.length
         kernel(chunk, _prevalidate(chunk, idx, params, out), params, out)
+    complete(out, chunk.wrench, functools.partial(_singular_poses, chunk.backend))
     return out
+
+
+def _singular_poses(backend: str, out: ChunkResult, from_C: np.ndarray) -> None:
+    """As :func:`cahyman_pin.api.stiffness`: a closed form's compliance of rank < 6 (the
+    rank from C) is a singular pose, where one direction is almost free, not rigidity."""
+    for i in np.flatnonzero(from_C & (out.status == RANK_DEFICIENT)):
+        out.status[i] = SINGULAR
+        out.set_reason(i, f"the {backend} compliance at M has numerical rank {out.rank[i]} "
+                       "< 6: a singular pose, where one direction is almost free")  # fmt: skip
+        out.C[i] = np.nan
 
 
 __all__ = ["STARTS", "Chunk", "run_chunk"]
