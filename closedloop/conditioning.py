@@ -90,6 +90,11 @@ def twist_scaling(length: float) -> np.ndarray:
     return np.array((s, s, s, 1.0, 1.0, 1.0))
 
 
+def twist_scalings(lengths: np.ndarray) -> np.ndarray:
+    """(n, 6) diagonals of D (:func:`twist_scaling`) for the lengths L (n,) [m]."""
+    return np.where(np.arange(6) < 3, 1.0 / np.asarray(lengths, dtype=float)[:, None], 1.0)
+
+
 def svd(A: np.ndarray, full_matrices: bool = True):
     """SVD A = U diag(s) Vt of a small matrix (m, n), straight from LAPACK.
 
@@ -289,7 +294,7 @@ def batch_rank(C: np.ndarray, length) -> tuple[np.ndarray, np.ndarray, np.ndarra
         rank: (n,) int; condition: (n,) cond(K_s) over the rank; psd: (n,) bool.
     """
     L = np.broadcast_to(np.asarray(length, dtype=float), (len(C),))
-    d = np.where(np.arange(6) < 3, 1.0 / L[:, None], 1.0)
+    d = twist_scalings(L)
     Cs = C * d[:, :, None] * d[:, None, :]
     mu = np.linalg.eigvalsh(0.5 * (Cs + np.swapaxes(Cs, 1, 2)))
     top = mu[:, -1:]

@@ -62,6 +62,7 @@ from .conditioning import (
     spectrum_from_compliance,
     spectrum_from_factor,
     twist_scaling,
+    twist_scalings,
 )
 from .exceptions import InvalidInputError, RigidDirectionsError
 
@@ -546,7 +547,7 @@ def batch_indices(
     other = ~sym & full
     if np.any(other):
         K = np.linalg.inv(C[other])
-        d = np.where(np.arange(6) < 3, 1.0 / L[other, None], 1.0)
+        d = twist_scalings(L[other])
         out["det_K"][other] = np.linalg.det(K)
         out["condition_number_si"][other] = np.linalg.cond(K)
         out["condition_number"][other] = np.linalg.cond(K / d[:, :, None] / d[:, None, :])
@@ -568,7 +569,7 @@ def _scaled_determinants(C: np.ndarray, L: np.ndarray, condition: np.ndarray) ->
     (cond(K_s)) exceeds :data:`SI_RESOLVED`. Unlike 1 / det(C), the error follows the
     scaled condition, not the SI one, which a length unit alone makes large (a mechanism
     of 1e-4 m has an SI condition number 1e8 times its scaled one)."""
-    d = np.where(np.arange(6) < 3, 1.0 / L[:, None], 1.0)
+    d = twist_scalings(L)
     sign, log_det = np.linalg.slogdet(C * d[:, :, None] * d[:, None, :])
     with np.errstate(over="ignore", invalid="ignore"):
         det = sign * np.exp(-log_det - 6.0 * np.log(L))

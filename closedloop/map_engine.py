@@ -51,7 +51,7 @@ from .indices import batch_indices
 from .io import load_model, reference_configuration
 from .model import ClosedLoopModel
 from .progress import progress
-from .statics import joints_outside_limits
+from .statics import describe_limits, joints_outside_limits
 
 #: Status of a point, by code (its index in this tuple).
 STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
@@ -322,9 +322,7 @@ def assemble_within_limits(clm: ClosedLoopModel, actuated: np.ndarray, q0: np.nd
     clm.set_actuated(q, actuated)
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
     if bad:
-        text = ", ".join(f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])"
-                         for n, (x, lo, hi) in bad.items())  # fmt: skip
-        raise InvalidInputError(f"actuated joints outside their limits: {text}")
+        raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
     return assemble(clm, actuated, q0, jacobian=True)
 
 

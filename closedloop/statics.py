@@ -197,7 +197,8 @@ def _limited_coordinates(clm: ClosedLoopModel) -> tuple[list[str], np.ndarray, l
     return clm.memo("limited_coordinates", build)
 
 
-def _describe_limits(bad: dict[str, tuple]) -> str:
+def describe_limits(bad: dict[str, tuple]) -> str:
+    """``name = value (limits [lower, upper])`` of each joint of :func:`joints_outside_limits`."""
     return ", ".join(
         f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])" for n, (x, lo, hi) in bad.items()
     )
@@ -446,7 +447,7 @@ def solve_equilibrium(
     bad = joints_outside_limits(clm, q)
     if bad:
         warnings.warn(
-            f"the equilibrium {where} is outside the joint limits: {_describe_limits(bad)}",
+            f"the equilibrium {where} is outside the joint limits: {describe_limits(bad)}",
             JointLimitWarning,
             stacklevel=3,  # the caller of the accepts_configuration wrapper
         )
@@ -474,7 +475,7 @@ def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:
     bad = joints_outside_limits(clm, q)
     if bad:
         raise JointLimitError(
-            f"the load drives joints beyond their limits {where}: {_describe_limits(bad)}",
+            f"the load drives joints beyond their limits {where}: {describe_limits(bad)}",
             st["closure"],
             st["force"],
             t_within,

@@ -381,13 +381,14 @@ def sweep(
     indices = data.indices
     if w is not None:
         indices["deflection"] = data.C @ w
-    for a in (data.C, data.rank, data.codes, data.iterations, data.length, data.reason_codes):
+    arrays = (data.C, data.rank, data.codes, data.iterations, data.length, data.reason_codes)
+    for a in (*arrays, *indices.values()):  # the indices are the data's, not copies
         a.flags.writeable = False
     return SweepResult(
         points=points,
         backend=backend,
         wrench=w,
-        indices={k: readonly(v) for k, v in indices.items()},
+        indices=indices,
         data=data,
         seconds=time.perf_counter() - t0,
     )
