@@ -247,18 +247,23 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float,
             B = J @ P
             Gk = P @ np.swapaxes(B, 1, 2)
         Ck = B @ np.swapaxes(B, 1, 2)
-        rank, cond = _ranks(B * sc.d[:, None], Ck * sc.dd, sc)
+        rank, cond = _ranks(B * sc.d[:, None], Ck * sc.dd, sc, np.sqrt(1.0 + norm2))
     ok &= rank >= 0
     ok &= np.isfinite(Ck).all(axis=(1, 2)) & np.isfinite(Gk).all(axis=(1, 2))
     C[ok], G[ok] = Ck[ok], Gk[ok]
     return C, G, np.where(ok, rank, -1), np.where(ok, cond, np.nan)
 
 
-def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
+def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc, cond_T: np.ndarray):
     """(n,) rank of each C = D^-1 B_s B_s^T D^-1 from its scaled factor B_s (n, 6, s) by the
     rule of :func:`closedloop.conditioning.spectrum_from_factor`, or -1 where a singular
     value lies within :data:`MARGIN` of a threshold of the rule (or K would overflow); and
     (n,) the condition number cond(K_s) over the rank, as that function's.
+
+    The rule reads the kinematic factor on an orthonormal basis of the admissible motions
+    (:func:`closedloop.springs.kinematic_factor`); the factors here are on T = [I; X], whose
+    condition numbers, at most ``cond_T`` (n,) (sqrt(1 + |X|_F^2), 1 for a serial robot),
+    widen the thresholds: a decision taken here is the rule's.
 
     Most configurations are clearly full rank: the eigenvalues of C_s = B_s B_s^T (n, 6, 6)
     (formed, a third of the cost of the SVDs) tell them within :data:`GRAM_MARGIN`; the
@@ -267,7 +272,7 @@ def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray
     finite = np.isfinite(C_s).all(axis=(1, 2)) & np.isfinite(B_s).all(axis=(1, 2))
     mu = np.linalg.eigvalsh(np.where(finite[:, None, None], C_s, 0.0))  # ascending
     with np.errstate(over="ignore", invalid="ignore"):
-        threshold = GRAM_MARGIN * (RANK_RTOL * sc.spread) ** 2
+        threshold = GRAM_MARGIN * (RANK_RTOL * sc.spread * cond_T) ** 2  # (n,); inf: not full
         full = (
             finite & (mu[:, 0] > threshold * mu[:, 5]) & (MARGIN * sc.dd.max() / K_MAX < mu[:, 0])
         )
@@ -276,11 +281,11 @@ def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray
         cond = np.where(full, mu[:, 5] / mu[:, 0], np.nan)
     rest = np.flatnonzero(~full)
     if rest.size:
-        rank[rest], cond[rest] = _factor_ranks(B_s[rest], sc)
+        rank[rest], cond[rest] = _factor_ranks(B_s[rest], sc, cond_T[rest])
     return rank, cond
 
 
-def _factor_ranks(B_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
+def _factor_ranks(B_s: np.ndarray, sc, cond_T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_ranks` from the singular values of the factors B_s (n, 6, s)."""
     B_s = np.where(np.isfinite(B_s).all(axis=(1, 2))[:, None, None], B_s, 0.0)  # 0: not decided
     beta = np.linalg.svd(B_s, compute_uv=False)  # (n, min(6, s))
@@ -288,7 +293,7 @@ def _factor_ranks(B_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     if beta.shape[1] == 6:  # full rank by the factor's singular values
         # B_s = 0 gives NaN (not decided), huge ones inf (decided by the comparisons)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            low = beta[:, 5] / (RANK_RTOL * sc.spread * beta[:, 0])
+            low = beta[:, 5] / (RANK_RTOL * sc.spread * cond_T * beta[:, 0])
             full = (low > MARGIN) & (sc.dd.max() / K_MAX < beta[:, 5] ** 2)  # K <= dd / beta_6^2
         rank[full] = 6
         deficient = low < 1.0 / MARGIN
@@ -297,8 +302,9 @@ def _factor_ranks(B_s: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     if deficient.any():  # the rank of the kinematic factor J T V = B_s diag(sigma)
         s_k = np.linalg.svd(B_s[deficient] * sc.sigma, compute_uv=False)
         ratio = s_k / np.where(s_k[:, :1] > 0.0, RANK_RTOL * s_k[:, :1], np.nan)
-        clear = ((ratio > MARGIN) | (ratio < 1.0 / MARGIN)).all(axis=1)
-        r = np.where(clear, np.count_nonzero(ratio > MARGIN, axis=1), -1)
+        band = MARGIN * cond_T[deficient, None]  # J T V: within cond(T) of the rule's factor
+        clear = ((ratio > band) | (ratio < 1.0 / band)).all(axis=1)
+        r = np.where(clear, np.count_nonzero(ratio > band, axis=1), -1)
         if beta.shape[1] == 6:  # full rank from the kinematic factor: K must not overflow
             with np.errstate(over="ignore"):
                 r[(r == 6) & ~(sc.dd.max() / K_MAX < beta[deficient, 5] ** 2)] = -1

@@ -47,6 +47,7 @@ from .springs import (
     PATHS,
     SpringFactor,
     check_path,
+    kinematic_factor,
     partition,
     scaling,
     spring_factor,
@@ -275,7 +276,7 @@ def _compliance(state: Configuration, frame: str, axes: str, path: str) -> Compl
     fast = partition(state, sc) if path == "auto" else None
     if fast is not None:
         return _fast_compliance(state, frame, axes, J, sc, *fast)
-    f = spring_factor(state, J, frame, path)
+    f = spring_factor(state, J, frame)
     NV = f.NV
     JNV = (J @ NV) * sc.d[:, None]  # scaled, kinematic
     B_s = JNV / f.sigma  # C_s = B_s B_s^T
@@ -296,7 +297,12 @@ def _fast_compliance(
     (:func:`closedloop.springs.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k), or
     V diag(1/sigma) with spring blocks). With P = T W (nv, s): C = B B^T, B = J P (6, s),
     and G = P B^T, the same factor as the null-space path's (module docstring) on the same
-    spectrum rule; the kinematic factor of the rank rule is B diag(sigma) = J T V.
+    spectrum rule. The rank rule reads J on an orthonormal basis of the admissible
+    motions, as the null-space path's J N V does: B diag(sigma) = J T V when T selects
+    the sprung coordinates (serial), else :func:`closedloop.springs.kinematic_factor`
+    (the singular values of J T differ from those by up to cond(T), which would move the
+    rank decision of a pose near the threshold; the spread of the full-rank test widens
+    by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
     """
     if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
         B = J * sc.P_diagonal
@@ -308,9 +314,12 @@ def _fast_compliance(
         B = J @ P
         G = P @ B.T
     B_s = B * sc.d[:, None]
-    spectrum = spectrum_from_factor(
-        B_s, state.length, lambda: B_s * sc.sigma, sc.spread, scales=(sc.d, sc.dd)
-    )
+    if X is None:  # T selects the sprung coordinates: J T V is the orthonormal-basis factor
+        kinematic, spread = (lambda: B_s * sc.sigma), sc.spread
+    else:  # T = [I; X] is not orthonormal: cond(T) <= sqrt(1 + |X|_F^2) widens the spread
+        kinematic = lambda: kinematic_factor(J, sc, X)  # noqa: E731
+        spread = sc.spread * math.sqrt(1.0 + float(np.vdot(X, X)))
+    spectrum = spectrum_from_factor(B_s, state.length, kinematic, spread, scales=(sc.d, sc.dd))
     return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
 
 

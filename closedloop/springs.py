@@ -42,9 +42,8 @@ class SpringFactor(NamedTuple):
         sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
             [sqrt(N m)].
         n_internal: number of spring-free motions that do not move the frame (left out).
-        path: how N was found: ``"serial"`` (no closure, no passive joint: N selects the
-            spring coordinates), ``"partitioned"`` (the passive joints follow the springs
-            through the closures, dq_p = X dq_s) or ``"null-space"`` (the general path).
+        path: how N was found: ``"null-space"`` (the general path; the fast paths of
+            :func:`closedloop.compliance` name theirs in its result).
     """
 
     N: np.ndarray
@@ -52,12 +51,11 @@ class SpringFactor(NamedTuple):
     sigma: np.ndarray
     n_internal: int
     path: str = "null-space"
-    identity_V: bool = False  # V is the identity (the fast paths without block springs)
 
     @property
     def NV(self) -> np.ndarray:
         """(nv, s) N V: the sprung admissible motions."""
-        return self.N if self.identity_V else self.N @ self.V
+        return self.N @ self.V
 
     @property
     def P(self) -> np.ndarray:
@@ -76,11 +74,9 @@ class _Scaling(NamedTuple):
     sqrt_k: np.ndarray  # (s,) sqrt of their scaled stiffness k s_q^2 [sqrt(N m)]
     passive: np.ndarray  # (p,) indices of the coordinates without spring (k = 0)
     # With spring blocks (else None): the scaled square root R_s (s, s) of the sprung
-    # stiffness, diag(s_q) K_ss diag(s_q) = R_s^T R_s, and its SVD R_s = U diag(sigma) V^T,
-    # which is the spring factor of the fast paths on y = dq_s: K_r = V diag(sigma^2) V^T.
+    # stiffness, diag(s_q) K_ss diag(s_q) = R_s^T R_s; its SVD R_s = U diag(sigma) V^T is
+    # the spring factor of the fast paths on y = dq_s: K_r = V diag(sigma^2) V^T (W, sigma)
     root: np.ndarray | None
-    root_V: np.ndarray | None
-    root_sigma: np.ndarray | None
     order: np.ndarray  # (p + s,) the passive coordinates, then the sprung ones
     s_p: np.ndarray  # (p, 1) s_q of the passive coordinates
     # (m, p + s) scale of Jc[:, order]: [-J_p, J_s] scaled (rows per L, columns per s_q)
@@ -108,13 +104,12 @@ class _Scaling(NamedTuple):
         sprung = np.flatnonzero((k > 0.0) & np.isfinite(k))
         passive = np.flatnonzero(k == 0.0)
         sqrt_k = np.sqrt(k[sprung]) * s_q[sprung]
-        root = root_V = root_sigma = W = None
+        root = W = None
         sigma = sqrt_k
         if clm.spring_blocks:
             root = clm.spring_root[np.ix_(sprung, sprung)] * s_q[sprung]
-            _, root_sigma, Vt = np.linalg.svd(root)
-            root_V, sigma = Vt.T, root_sigma
-            W = root_V / root_sigma
+            _, sigma, Vt = np.linalg.svd(root)
+            W = Vt.T / sigma
         row_scale = np.where(clm.linear_rows, 1.0 / L, 1.0)[:, None]
         d = twist_scaling(L)
         order = np.concatenate([passive, sprung])
@@ -140,8 +135,6 @@ class _Scaling(NamedTuple):
             sqrt_k,
             passive,
             root,
-            root_V,
-            root_sigma,
             order,
             s_q[passive, None],
             row_scale * (sign * s_q[order]),
@@ -156,11 +149,6 @@ class _Scaling(NamedTuple):
             frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None,
             loops,
         )
-
-    @property
-    def fast_factor(self) -> tuple[np.ndarray | None, np.ndarray]:
-        """(V (s, s) or None for the identity, sigma (s,)): the spring factor on y = dq_s."""
-        return (None, self.sqrt_k) if self.root is None else (self.root_V, self.root_sigma)
 
     def spring_free(self, norm_T2: float) -> bool:
         """The null-space path's spring-free rule on the fast paths' factor: that path
@@ -333,20 +321,20 @@ def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | Non
     return ("partitioned", X) if m else ("serial", None)
 
 
-def _partitioned_factor(state: Configuration, sc: _Scaling) -> SpringFactor | None:
-    """The spring factor of the fast path (:func:`partition`), or None."""
-    fast = partition(state, sc)
-    if fast is None:
-        return None
-    path, X = fast
-    T = np.zeros((state.model.model.nv, sc.sprung.size))
+def kinematic_factor(J: np.ndarray, sc: _Scaling, X: np.ndarray) -> np.ndarray:
+    """(6, s) scaled frame Jacobian on an orthonormal basis of the admissible motions of
+    the partitioned path: D J diag(s_q) Q with T = [I; X] = Q R (thin QR), the factor
+    whose singular values the rank rule reads (those of the null-space path's D J N V).
+
+    Args:
+        J: (6, nv) frame Jacobian [m/rad, 1]; X: (p, s) passive motion per scaled spring
+            motion (:func:`partition`).
+    """
+    T = np.zeros((sc.s_q.size, sc.sprung.size))
     T[sc.sprung, np.arange(sc.sprung.size)] = 1.0
-    if X is not None:
-        T[sc.passive] = X
-    V, sigma = sc.fast_factor
-    if V is None:  # diagonal springs: y = dq_s already diagonalises K_r
-        return SpringFactor(T * sc.s_q[:, None], np.eye(sigma.size), sigma, 0, path, True)
-    return SpringFactor(T * sc.s_q[:, None], V, sigma, 0, path)
+    T[sc.passive] = X
+    Q = np.linalg.qr(T)[0]
+    return ((J * sc.s_q) @ Q) * sc.d[:, None]
 
 
 #: Values of the ``path`` argument of :func:`compliance`.
@@ -359,28 +347,23 @@ def check_path(path: str) -> None:
         raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
 
 
-def spring_factor(
-    state: Configuration, J: np.ndarray, frame: str, path: str = "auto"
-) -> SpringFactor:
-    """Admissible motions and spring factor at a configuration (module docstring).
+def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:
+    """Admissible motions and spring factor at a configuration (module docstring), on the
+    general (null-space) path: N orthonormal in the scaled coordinates, what the rank rule
+    of a preloaded compliance reads (the fast paths of :func:`closedloop.compliance` do
+    not form N).
 
     Args:
         state: the configuration.
         J: (6, nv) Jacobian of the loaded frame (any reference axes) [m/rad, 1].
         frame: name of the loaded frame (for messages).
-        path: ``"auto"`` (the serial or partitioned path where it applies, else the null
-            space) or ``"null-space"`` (always the general path).
 
     Raises:
         MechanismError: a spring-free motion moves the frame (no static equilibrium):
             a joint without spring, or a singular configuration where the springs resist
             a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
     """
-    check_path(path)
     clm, L, sc = state.model, state.length, scaling(state)
-    fast = _partitioned_factor(state, sc) if path == "auto" else None
-    if fast is not None:
-        return fast
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)

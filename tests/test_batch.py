@@ -25,6 +25,7 @@ from closedloop.exceptions import (
     OpenLoopError,
     SingularConfigurationError,
 )
+from closedloop.model import ClosedLoopModel
 
 #: Stacked vs single query: the same formulas, with LAPACK calls that differ in their
 #: order of operations (measured: 1e-16 relative on every case here); cond(J_p) ~ 1e2
@@ -34,6 +35,9 @@ RTOL_STACKED = 1e-12
 #: against squared singular values of its factor, which differ by ~1e-16 cond (cond up to
 #: 1e10 on that path), or the singular values of one factor in two LAPACK calls.
 RTOL_COND = 1e-6
+#: Projectors onto the rigid directions of two paths: the left singular vectors of two
+#: factors of one matrix, at a gap of 1e7 between the kept and the rigid values.
+RTOL_DIRECTIONS = 1e-8
 
 
 def _assert_as_single(clm, Q, frame, axes="world", length=None):
@@ -187,6 +191,64 @@ def test_near_singular_pose_with_huge_springs_overflows_in_both(ur5_urdf):
         cl.compliance(clm, q, "tool0")
     with pytest.raises(SingularConfigurationError, match="overflows"):
         cl.compliances(clm, q[None], "tool0")
+
+
+def test_springs_spanning_more_than_the_float_range_are_answered_as_the_single_query(ur5_urdf):
+    """Springs of 1e200 and 1e-130 (a spread of 1e330): the single query answers on the
+    null-space path (the wrist joints do not move the forearm); the stacked path raised
+    Python's OverflowError squaring the spread, which stopped a whole map."""
+    names = [f"{j}_joint" for j in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1",
+                                     "wrist_2", "wrist_3")]  # fmt: skip
+    clm = cl.load_model(ur5_urdf, springs=dict(zip(names, [1e200] * 3 + [1e-130] * 3, strict=True)))
+    q = _ur5_poses(2)
+    batch = _assert_as_single(clm, q, "forearm_link")
+    assert list(batch.rank) == [3, 3]
+
+
+def _parallelogram_with_arm() -> ClosedLoopModel:
+    """A parallelogram four-bar (crank sprung) carrying a sprung planar 2R arm on its
+    rocker; at arm1 = 0 the rocker pivot, the arm's base and its elbow are aligned, and
+    the tip loses a direction (rank 2 of the planar twists below arm1 ~ 1.73e-6 rad)."""
+    model = pin.Model()
+
+    def joint(parent, name, x):
+        place = pin.SE3(np.eye(3), np.array([x, 0.0, 0.0]))
+        return model.addJoint(parent, pin.JointModelRZ(), place, name)
+
+    crank = joint(0, "crank", 0.0)
+    coupler = joint(crank, "coupler", 0.3)
+    rocker = joint(0, "rocker", 0.5)
+    closure = pin.PointAnchorConstraintModel(
+        model, coupler, pin.SE3(np.eye(3), np.array([0.5, 0, 0])),
+        rocker, pin.SE3(np.eye(3), np.array([0.3, 0, 0])),
+    )  # fmt: skip
+    arm2 = joint(joint(rocker, "arm1", 0.3), "arm2", 0.3)
+    model.addFrame(pin.Frame("tip", arm2, pin.SE3(np.eye(3), np.array([0.25, 0, 0])),
+                             pin.FrameType.OP_FRAME))  # fmt: skip
+    springs = {"crank": 1e3, "arm1": 50.0, "arm2": 80.0}
+    return ClosedLoopModel(model, [closure], ["crank", "arm1", "arm2"], springs, name="arm")
+
+
+def test_the_rank_threshold_does_not_depend_on_the_path():
+    """Across the rank threshold of the arm on a parallelogram, the partitioned path, the
+    null-space path and the stacked path decide the same rank (and condition number) at
+    every pose. The fast paths read the rank on J T, T = [I; X] not orthonormal, and put
+    the threshold about 1 % further out (arm1 = 1.7431e-6 against 1.7257e-6 rad): between
+    them, rank 2 (cond 61) against rank 3 (cond 2e14)."""
+    clm = _parallelogram_with_arm()
+    arm1 = np.linspace(1.70e-6, 1.78e-6, 17)
+    Q = np.array([[0.9, -0.9, 0.9, a, 0.7] for a in arm1])  # the parallelogram closes exactly
+    batch = _assert_as_single(clm, Q, "tip")
+    assert set(batch.rank) == {2, 3}
+    for q in Q:
+        fast = cl.compliance(clm, q, "tip")
+        general = cl.compliance(clm, q, "tip", path="null-space")
+        assert fast.path == "partitioned"
+        assert fast.rank == general.rank
+        assert fast.condition_number == pytest.approx(general.condition_number, rel=RTOL_COND)
+        # the same rigid directions: equal projectors onto them
+        R_f, R_g = fast.rigid_directions, general.rigid_directions
+        np.testing.assert_allclose(R_f @ R_f.T, R_g @ R_g.T, atol=RTOL_DIRECTIONS)
 
 
 def test_tiny_springs_whose_entries_are_finite_are_answered_by_both(ur5_urdf):

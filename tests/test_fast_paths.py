@@ -218,3 +218,21 @@ def test_chain_of_loops_by_blocks_equals_the_null_space_path():
     np.testing.assert_allclose(fast.C, general.C, rtol=0, atol=RTOL_PATHS * scale)
     np.testing.assert_allclose(fast.G, general.G, rtol=0, atol=RTOL_PATHS * np.abs(general.G).max())
     assert fast.rank == general.rank == 3  # planar
+
+
+def test_the_spring_factor_basis_is_orthonormal_where_the_fast_path_applies():
+    """spring_factor (what a preloaded compliance's rank rule reads) returns N orthonormal
+    in the scaled coordinates, as documented, also where the partitioned path applies:
+    it returned the fast path's N = [I; X], whose singular values (1 to 9.2 at this pose)
+    moved that rule's threshold."""
+    from cahyman_pin.model import cahyman_model
+
+    from closedloop.springs import spring_factor
+
+    m = cahyman_model()
+    q = m.assemble(np.deg2rad([50.0, 65.0, 70.0]), np.deg2rad(30.0), 0.02)
+    state = Configuration(m.clm, q)
+    assert cl.compliance(state, "M").path == "partitioned"
+    f = spring_factor(state, state.frame_jacobian("M"), "M")
+    N_s = f.N / np.where(m.clm.linear_coordinates, state.length, 1.0)[:, None]
+    np.testing.assert_allclose(N_s.T @ N_s, np.eye(N_s.shape[1]), atol=RTOL_PATHS)
