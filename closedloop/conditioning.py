@@ -66,9 +66,13 @@ def characteristic_length(points: np.ndarray) -> float:
     return size if size > 0.0 and np.isfinite(size) else 1.0
 
 
+#: Smallest characteristic length [m]: the twist scaling 1 / L must be a finite float.
+MIN_LENGTH = 1.0 / np.finfo(float).max
+
+
 def check_length(length) -> float:
-    """Validated characteristic length [m] (finite, > 0)."""
-    if type(length) is float and 0.0 < length < math.inf:  # the common case, a float
+    """Validated characteristic length [m] (finite, >= :data:`MIN_LENGTH` = 5.6e-309)."""
+    if type(length) is float and MIN_LENGTH <= length < math.inf:  # the common case
         return length
     if isinstance(length, bool) or not isinstance(length, int | float | np.integer | np.floating):
         raise InvalidInputError(
@@ -81,6 +85,11 @@ def check_length(length) -> float:
         value = math.inf
     if not (math.isfinite(value) and value > 0):
         raise InvalidInputError(f"characteristic length must be finite and > 0 [m], got {length}")
+    if value < MIN_LENGTH:  # 1 / L would be inf
+        raise InvalidInputError(
+            f"characteristic length {length} m is below {MIN_LENGTH:.3g} m, where the twist "
+            "scaling 1 / L leaves the float range; give a larger length"
+        )
     return value
 
 

@@ -290,8 +290,11 @@ class StiffnessIndices:
         lam = inverse_pair_eigenvalues(self.C * dd, K / dd)
         if lam is None:
             return float(np.linalg.det(K))
+        # mantissas and exponents apart: det K_s = det K L^6 may leave the float range
+        # where det K does not
+        mantissa, exponent = np.frexp(np.concatenate([lam, d, d]))
         with np.errstate(over="ignore", under="ignore"):
-            return float(np.prod(lam) * np.prod(d) ** 2)
+            return float(np.ldexp(np.prod(mantissa), int(np.sum(exponent))))
 
     @property
     def eigenvalues(self) -> np.ndarray:

@@ -338,3 +338,19 @@ def test_bad_params_raise():
 def test_singular_parallelogram_raises():
     with pytest.raises(SingularConfigurationError, match="alpha"):
         leg_compliance(np.array([0.0, 1.0, 1.0]))
+
+
+@pytest.mark.parametrize("x", [3.1622776601683795e-09, *np.logspace(-9.0, -8.0, 9)])
+def test_a_leg_within_rounding_of_singular_is_a_typed_error(x):
+    """A crank at pi - x rad (x of 1e-9 .. 1e-8, sin alpha just above SIN_ALPHA_MIN): its
+    leg compliance may be exactly singular in floating point (x = 3.16e-9 here), where
+    the plate stiffness leaked numpy's LinAlgError; a typed error either way."""
+    alpha = np.array([np.pi - x, np.deg2rad(60.0), np.deg2rad(75.0)])
+    for call in (lambda: plate_stiffness(alpha), lambda: consistent_breakdown(alpha, 0.8, 0.01)):
+        try:
+            K = call()
+        except SingularConfigurationError as e:
+            assert "alpha" in str(e)
+        else:
+            K = getattr(K, "K_H", K)
+            assert np.all(np.isfinite(K))

@@ -766,6 +766,7 @@ def test_bad_configuration_arguments_are_typed_errors(fourbar_q):
         ({"length": np.nan}, "characteristic length must be finite and > 0 .* nan"),
         ({"length": np.inf}, "characteristic length must be finite and > 0 .* inf"),
         ({"length": 10**400}, "characteristic length must be finite and > 0 .* 1000"),
+        ({"length": 5e-324}, r"length 5e-324 m is below 5\.56e-309 m, where the twist scaling"),
         ({"length": True}, r"characteristic length must be a real number \[m\], got True"),
         ({"length": 1j}, r"must be a real number \[m\], got 1j \(complex\)"),
         ({"length": "0.5"}, r"must be a real number \[m\], got '0.5' \(str\)"),

@@ -278,6 +278,26 @@ def test_ur5_determinant_from_joint_stiffness_and_jacobian():
         assert s.is_full_rank == result.is_full_rank
 
 
+@pytest.mark.parametrize(("k", "length"), [(1e49, 1e5), (1e-51, 1e-2)])
+def test_determinant_near_the_float_limits_from_joint_stiffness_and_jacobian(k, length):
+    """det K = prod(k) / det(J)^2 of 1.4e296 and 1.4e-304, resolved (scaled condition
+    1e4..1e12), while det K_s = det K L^6 leaves the float range: the single indices gave
+    inf and 0 (the product of the scaled eigenvalues first), the batched ones the value."""
+    clm = load_urdf(robot_data_dir() / "ur_description/urdf/ur5_robot.urdf", joint_stiffness=k)
+    q = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])
+    result = compliance(clm, q, "tool0", axes="local", length=length)
+    J = pin.computeJointJacobian(clm.model, clm.model.createData(), q, 6)
+    expected = k**6 / np.linalg.det(J) ** 2
+    assert 1e-305 < expected < 1e297
+    s = StiffnessIndices.from_result(result)
+    np.testing.assert_allclose(s.determinant, expected, rtol=DET_RTOL_PER_SQRT_COND * 1e6)
+    batched = batch_indices(result.C[None], np.array([6]), length)["det_K"][0]
+    np.testing.assert_allclose(s.determinant, batched, rtol=DET_RTOL_PER_SQRT_COND * 1e6)
+    # a diagonal K of determinant 1e300, scaled (L = 1e5) to 1e330
+    big = StiffnessIndices.from_stiffness(1e50 * np.eye(6), length=1e5)
+    np.testing.assert_allclose(big.determinant, 1e300, rtol=1e-14)
+
+
 #: Relative error of det K per unit of sqrt(cond(K_s)): the eigenvalues of the formed C_s
 #: and K_s that it multiplies are each known to about eps sqrt(cond) relative (the
 #: determinant's docstring); 1e-14 leaves a factor of 50 for the six of them and the

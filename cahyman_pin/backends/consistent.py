@@ -285,8 +285,20 @@ def consistent_breakdown(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARA
     """
     parts = _compliance_parts(alpha, alpha4, s4, params)
     C_leg, G = parts[2], parts[3]
-    K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(np.linalg.inv(C_leg)) @ G)
+    K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(_leg_stiffness(C_leg, alpha)) @ G)
     return ConsistentCompliance(*parts[:6], K_H, *parts[6:])
+
+
+def _leg_stiffness(C_leg: np.ndarray, alpha) -> np.ndarray:
+    """(..., 3, 2, 2) inverses of the leg compliances, or SingularConfigurationError where
+    one is singular (a crank within rounding of its coupler, alpha (..., 3) [rad])."""
+    try:
+        return np.linalg.inv(C_leg)
+    except np.linalg.LinAlgError:
+        raise SingularConfigurationError(
+            f"alpha={np.rad2deg(alpha).tolist()} deg: a leg's compliance is singular (a crank "
+            "nearly along its coupler); the plate stiffness K_H does not exist"
+        ) from None
 
 
 def _compliance_parts(alpha, alpha4, s4, params: CaHyManParams):
@@ -335,7 +347,7 @@ def plate_stiffness(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray
     """
     alpha = _check_alpha(alpha, params)
     G = twist_H_to_leg_displacements(plate_pose(alpha, params).R, params)
-    K_leg = np.linalg.inv(leg_compliance(alpha, params))
+    K_leg = _leg_stiffness(leg_compliance(alpha, params), alpha)
     return _sym(G.swapaxes(-1, -2) @ _block_diag3(K_leg) @ G)
 
 
