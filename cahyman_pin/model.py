@@ -256,13 +256,34 @@ class CaHyManModel:
             InvalidInputError: non-finite input, wrong count, s_4 outside its stroke.
         """
         alpha, alpha4, s4 = check_inputs(alpha, alpha4, s4, self.params)
-        if q0 is None:  # the inputs are checked: the guess of one pose without checking again
-            q0 = self.initial_guesses(alpha[None], np.array([alpha4]), np.array([s4]))[0]
-        q = self.clm.check_configuration(q0)  # a copy: the start is the caller's
-        q[self._virtual_index] = 0.0  # virtual springs at rest
-        self.clm.set_actuated(q, np.concatenate([alpha, [alpha4, s4]]))
-        result = close_loops(self.clm, q, jacobian=jacobian)
+        q0 = None if q0 is None else self.clm.check_configuration(q0)
+        result = self.assemble_validated(np.array([*alpha.tolist(), alpha4, s4]), q0,
+                                         jacobian=jacobian)  # fmt: skip
         return result if full_output else result.q
+
+    def assemble_validated(self, inputs: np.ndarray, q0: np.ndarray | None = None, *,
+                           jacobian: bool = False):  # fmt: skip
+        """:meth:`assemble` (its :class:`closedloop.assembly.Assembly`) of inputs and a start
+        that the caller has checked: the sweeps validate a chunk's inputs at once.
+
+        Args:
+            inputs: (5,) alpha_1..3 [rad], alpha_4 [rad], s_4 [m], as :func:`check_inputs`
+                accepts them.
+            q0: (nq,) start, as :meth:`closedloop.model.ClosedLoopModel.check_configuration`
+                returns it (finite, quaternion normalised; not modified), or None: the
+                closed-form guess.
+            jacobian: as :meth:`assemble`.
+
+        Raises:
+            AssemblyError: unreachable inputs.
+        """
+        if q0 is None:  # the guess of one pose, its inputs checked
+            q = self.initial_guesses(inputs[None, :3], inputs[3:4], inputs[4:])[0]
+        else:
+            q = q0.copy()  # the start is the caller's
+        q[self._virtual_index] = 0.0  # virtual springs at rest
+        self.clm.set_actuated(q, inputs)
+        return close_loops(self.clm, q, jacobian=jacobian)
 
     def residual(self, q) -> float:
         """Infinity norm of the closure residual at q (nq,) [m]."""

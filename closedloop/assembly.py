@@ -160,7 +160,7 @@ def close_loops(
     """
     model = clm.model
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
-    data, datas = clm.data, clm.constraint_datas
+    data, datas = clm.workspace()
     r, size2, closed = _residual(clm, data, datas, q, tol)
     if not closed and not free.size:
         raise AssemblyError(
@@ -194,7 +194,9 @@ def close_loops(
     closure = None
     if jacobian:  # the datas are those of q's residual evaluation, the last one
         closure = (frozen(r), frozen(jacobian_rows(clm, data, datas, calc=False)))
-    return Assembly(q=q, residual=err, iterations=it, closure=closure)
+    result = object.__new__(Assembly)  # every field checked here: without the frozen __init__
+    result.__dict__.update(q=q, residual=err, iterations=it, closure=closure)
+    return result
 
 
 def _inf_norm(r: np.ndarray) -> float:

@@ -105,7 +105,7 @@ def closure_residual(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
     """Stacked closure residuals (m,) at q [m for points, log6 (m, rad) for welds]."""
     if update:
         update_kinematics(clm, q)
-    return residual_rows(clm, clm.data, clm.constraint_datas)
+    return residual_rows(clm, *clm.workspace())
 
 
 def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
@@ -117,7 +117,7 @@ def closure_jacobian(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
     """
     if update:
         update_kinematics(clm, q)
-    return jacobian_rows(clm, clm.data, clm.constraint_datas)
+    return jacobian_rows(clm, *clm.workspace())
 
 
 def frame_jacobian(

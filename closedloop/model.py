@@ -293,17 +293,21 @@ class ClosedLoopModel:
         Functions that take ``(model, q)`` compute their kinematics here; a
         :class:`closedloop.configuration.Configuration` owns a Data of its own.
         """
-        local = self._local
-        if not hasattr(local, "data"):
-            local.data = self.model.createData()
-            local.constraint_datas = [c.constraint.createData() for c in self.closures]
-        return local.data
+        return self.workspace()[0]
 
     @property
     def constraint_datas(self) -> list:
         """This thread's constraint datas of the closures (see :attr:`data`)."""
-        self.data  # noqa: B018  (creates this thread's workspace)
-        return self._local.constraint_datas
+        return self.workspace()[1]
+
+    def workspace(self) -> tuple[pin.Data, list]:
+        """This thread's (:attr:`data`, :attr:`constraint_datas`), created on first use."""
+        try:
+            return self._local.workspace
+        except AttributeError:
+            pair = self.model.createData(), [c.constraint.createData() for c in self.closures]
+            self._local.workspace = pair
+            return pair
 
     def acquire_workspace(self) -> tuple[pin.Data, list]:
         """A (Data, constraint datas) pair for the exclusive use of one owner.

@@ -153,7 +153,8 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
     ``lower``/``upper`` reads as [0, 0]) has none. The angle of a revolute joint that is
     not actuated comes from the assembly, which may wind it by whole turns (11.13 rad for
     limits [-6.3, 6.3], the placement of 11.13 - 2 pi = 4.85 rad): it counts as inside
-    when an angle that differs from it by whole turns is. An actuated angle is the value
+    when an angle that differs from it by whole turns is (so one bound alone never holds
+    it: some whole turn brings it within). An actuated angle is the value
     the robot is driven to, and counts as it is. Returns name ->
     (value, lower, upper) [rad or m] for every coordinate more than :data:`LIMIT_TOL`
     outside, in joint order.
@@ -167,7 +168,9 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
         if not lo < hi:
             continue
         low, high, y = abs(lo) < UNBOUNDED_LIMIT, abs(hi) < UNBOUNDED_LIMIT, x
-        if turns and low and high:
+        if turns and not (low and high):  # whole turns reach within one bound: never out
+            continue
+        if turns:
             y = lo + (x - lo) % _TURN  # the angle in the turn that starts at the lower limit
             if y > lo + _TURN - LIMIT_TOL:  # within the tolerance below it
                 y -= _TURN
@@ -256,10 +259,10 @@ def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_lim
         row_tol: (m,) closure tolerance of each row [m, rad]; step_limit: (nv,) largest
             step of each coordinate [rad, m].
     """
-    free, units = eqs.free, eqs.units
+    units = eqs.units
     st = eqs.evaluate(q, w)
     for it in range(max_iter + 1):
-        if _closed(st, row_tol) and _balanced(st, units.coords[free]):
+        if _closed(st, row_tol) and _balanced(st, eqs.free_scales):
             return q, st, it
         if it == max_iter:
             break

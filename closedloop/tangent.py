@@ -387,7 +387,8 @@ class EquilibriumEquations:
         self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
         self.units = SolverUnits.of(clm)
-        self._cols = self.units.coords[self.free]  # free coordinate = scale * y
+        #: (n_free,) scale of each free coordinate [m or rad per unit]: dq_free = free_scales * y
+        self.free_scales = self.units.coords[self.free]
 
     def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
         """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
@@ -413,7 +414,7 @@ class EquilibriumEquations:
         g = Jd.T @ (self.k * dq if self.root is None else clm.spring_forces(dq))
         load = self.generalised_load(q, w, J)
         F = (g - load)[free]
-        rows, cols = self.units.rows, self._cols
+        rows, cols = self.units.rows, self.free_scales
         if A.size:  # unit-free: A_s = diag(1 / rows) A diag(cols), F_y = diag(cols) F
             U, s, Vt = np.linalg.svd(A / rows[:, None] * cols, full_matrices=True)
             r = rule_rank(s)
@@ -460,7 +461,7 @@ class EquilibriumEquations:
         (a :class:`Load` or a wrench (6,)): the rate dq/ds of the equilibrium when the
         load grows by s ``load``.
         """
-        free, cols = self.free, self._cols
+        free, cols = self.free, self.free_scales
         H = cols[:, None] * self._restricted(q, w, st) * cols  # on y = x / cols
         R, N = st["R"], st["N"]
         if load is None:  # restores the closures
@@ -488,7 +489,7 @@ class EquilibriumEquations:
         are the right singular vectors of R N (K_q = R^T R) above ``RANK_RTOL`` times the largest.
         """
         st = self.evaluate(q, w)
-        N = self._cols[:, None] * st["N"]  # the admissible motions of the free coordinates
+        N = self.free_scales[:, None] * st["N"]  # the admissible motions of the free coordinates
         S = np.sqrt(self.k[self.free])[:, None] * N if self.root is None else self.root @ N
         _, sig, Vt = np.linalg.svd(S, full_matrices=False)
         r = rule_rank(sig)

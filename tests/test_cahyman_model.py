@@ -336,3 +336,22 @@ def test_models_are_cached_per_parameter_set():
     other = DEFAULT_PARAMS.replace(b=0.09)
     assert cahyman_model(other) is not cahyman_model(DEFAULT_PARAMS)
     assert cahyman_model(other).params.b == 0.09
+
+
+def test_the_sweeps_assembly_of_checked_inputs_is_assemble():
+    """assemble_validated (the sweeps' assembly, inputs checked a chunk at a time) gives
+    assemble's configuration, from the closed form and from a warm start, and leaves the
+    start as it was."""
+    m = cahyman_model()
+    alpha, alpha4, s4 = np.deg2rad([50.0, 65.0, 70.0]), np.deg2rad(30.0), 0.02
+    inputs = np.array([*alpha, alpha4, s4])
+    ref = m.assemble(alpha, alpha4, s4, full_output=True, jacobian=True)
+    got = m.assemble_validated(inputs, jacobian=True)
+    np.testing.assert_array_equal(got.q, ref.q)
+    np.testing.assert_array_equal(got.closure[1], ref.closure[1])
+    start = m.assemble(alpha + 0.01, alpha4, s4)
+    kept = start.copy()
+    warm = m.assemble_validated(inputs, start)
+    np.testing.assert_array_equal(warm.q, m.assemble(alpha, alpha4, s4, q0=start))
+    np.testing.assert_array_equal(start, kept)
+    assert warm.residual <= 1e-12 and warm.iterations >= 1

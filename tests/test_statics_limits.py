@@ -192,6 +192,30 @@ def test_a_passive_angle_wound_by_turns_is_within_its_limits(fourbar):
         assert solve_equilibrium(clm, turned, "P", w).limits_violated == ("crank",)
 
 
+def test_a_passive_angle_with_one_bound_is_never_outside(fourbar):
+    """With one finite bound, some whole turn brings any passive angle within it: the
+    coupler (passive) is not flagged however far past its one bound; the crank (actuated)
+    with the same one bound is."""
+    clm, q0 = fourbar
+    model = clm.model
+    coupler = model.joints[clm.joint_id("coupler")].idx_q
+    crank = model.joints[clm.joint_id("crank")].idx_q
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    try:
+        for i in (coupler, crank):  # only an upper bound, 0.5 rad below the angle
+            model.lowerPositionLimit[i] = -np.finfo(float).max
+            model.upperPositionLimit[i] = q0[i] - 0.5
+        out = joints_outside_limits(clm, q0)
+        assert list(out) == ["crank"]
+        assert out["crank"] == (q0[crank], -np.finfo(float).max, q0[crank] - 0.5)
+        for i in (coupler, crank):  # only a lower bound, 10 rad above the angle
+            model.lowerPositionLimit[i] = q0[i] + 10.0
+            model.upperPositionLimit[i] = np.finfo(float).max
+        assert list(joints_outside_limits(clm, q0)) == ["crank"]
+    finally:
+        model.lowerPositionLimit[:], model.upperPositionLimit[:] = lower, upper
+
+
 def test_limits_set_after_a_first_check_are_read():
     """The joints to check are found once per model, their limits read at each check."""
     clm = pendulum(40.0, 0.5)

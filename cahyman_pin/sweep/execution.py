@@ -165,21 +165,20 @@ def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkRes
         _bisect(idx, guesses, out)
         idx = np.array(sorted(starts), dtype=int)
 
+    inputs = np.column_stack([chunk.alpha, chunk.alpha4, chunk.s4])  # validated above
+
     def solve(i: int, q0):
         """Assembly from ``q0`` (None: the closed form); a failed warm start once more
         from the closed form."""
         try:
-            return model.assemble(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], q0=q0,
-                                  full_output=True, jacobian=True)  # fmt: skip
+            return model.assemble_validated(inputs[i], q0, jacobian=True)
         except AssemblyError:
             if q0 is None:
                 raise
-            return model.assemble(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i],
-                                  full_output=True, jacobian=True)  # fmt: skip
+            return model.assemble_validated(inputs[i], jacobian=True)
 
     # neighbour start: the first point of the run from the closed form (q0 None)
     per_point = [starts[i] for i in idx] if chunk.start == "closed_form" else None
-    inputs = np.column_stack([chunk.alpha, chunk.alpha4, chunk.s4])
     assemble_points(model.clm, FRAME_M, out, idx, solve, starts=per_point, length=params.length,
                     inputs=inputs)  # fmt: skip
 
