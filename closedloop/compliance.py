@@ -300,9 +300,9 @@ def _fast_compliance(
     spectrum rule. The rank rule reads J on an orthonormal basis of the admissible
     motions, as the null-space path's J N V does: B diag(sigma) = J T V when T selects
     the sprung coordinates (serial), else :func:`closedloop.springs.kinematic_factor`
-    (the singular values of J T differ from those by up to cond(T), which would move the
-    rank decision of a pose near the threshold; the spread of the full-rank test widens
-    by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
+    (the singular values of J T V differ from those by up to cond(T), which would move
+    the rank decision of a pose near the threshold; the spread of the full-rank test
+    widens by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
     """
     if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
         B = J * sc.P_diagonal
@@ -317,8 +317,9 @@ def _fast_compliance(
     if X is None:  # T selects the sprung coordinates: J T V is the orthonormal-basis factor
         kinematic, spread = (lambda: B_s * sc.sigma), sc.spread
     else:  # T = [I; X] is not orthonormal: cond(T) <= sqrt(1 + |X|_F^2) widens the spread
-        kinematic = lambda: kinematic_factor(J, sc, X)  # noqa: E731
-        spread = sc.spread * math.sqrt(1.0 + float(np.vdot(X, X)))
+        cond_T = math.sqrt(1.0 + float(np.vdot(X, X)))
+        kinematic = lambda: kinematic_factor(J, sc, X, B_s * sc.sigma, cond_T)  # noqa: E731
+        spread = sc.spread * cond_T
     spectrum = spectrum_from_factor(B_s, state.length, kinematic, spread, scales=(sc.d, sc.dd))
     return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
 

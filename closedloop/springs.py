@@ -25,7 +25,7 @@ import numpy as np
 import scipy.linalg
 
 from .arrays import frozen, upper_triangular_inverses
-from .conditioning import RANK_RTOL, split_factor, twist_scaling
+from .conditioning import RANK_RTOL, split_factor, svd, twist_scaling
 from .configuration import Configuration
 from .exceptions import InvalidInputError, MechanismError
 from .kinematics import nullspace, rigid_rows
@@ -321,15 +321,30 @@ def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | Non
     return ("partitioned", X) if m else ("serial", None)
 
 
-def kinematic_factor(J: np.ndarray, sc: _Scaling, X: np.ndarray) -> np.ndarray:
-    """(6, s) scaled frame Jacobian on an orthonormal basis of the admissible motions of
-    the partitioned path: D J diag(s_q) Q with T = [I; X] = Q R (thin QR), the factor
-    whose singular values the rank rule reads (those of the null-space path's D J N V).
+def kinematic_factor(
+    J: np.ndarray, sc: _Scaling, X: np.ndarray, JT: np.ndarray, cond_T: float
+) -> np.ndarray:
+    """(6, s) the factor whose singular values the rank rule reads on the partitioned path:
+    the scaled frame Jacobian on an orthonormal basis of the admissible motions, as the
+    null-space path's D J N V.
+
+    On T = [I; X] = Q R (thin QR) that is D J diag(s_q) Q, whose singular values are
+    those of ``JT`` = D J diag(s_q) T V (V orthogonal) to within cond(T): ``JT`` is
+    returned when no singular value of it lies within that factor of the rule's
+    threshold (the same rank; a planar mechanism's rigid directions lie far below it),
+    else the QR is computed (near the threshold only).
 
     Args:
         J: (6, nv) frame Jacobian [m/rad, 1]; X: (p, s) passive motion per scaled spring
-            motion (:func:`partition`).
+            motion (:func:`partition`); JT: (6, s) the factor on T; cond_T: an upper
+            bound of cond(T), >= 1.
     """
+    s_k = svd(JT, False)[1]
+    if not s_k.size or s_k[0] == 0.0:  # nothing moves the frame: rank 0 on every basis
+        return JT
+    ratio = s_k / (RANK_RTOL * s_k[0])
+    if np.all((ratio > cond_T) | (ratio < 1.0 / cond_T)):
+        return JT
     T = np.zeros((sc.s_q.size, sc.sprung.size))
     T[sc.sprung, np.arange(sc.sprung.size)] = 1.0
     T[sc.passive] = X

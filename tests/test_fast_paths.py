@@ -226,7 +226,6 @@ def test_the_spring_factor_basis_is_orthonormal_where_the_fast_path_applies():
     it returned the fast path's N = [I; X], whose singular values (1 to 9.2 at this pose)
     moved that rule's threshold."""
     from cahyman_pin.model import cahyman_model
-
     from closedloop.springs import spring_factor
 
     m = cahyman_model()
