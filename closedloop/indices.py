@@ -189,15 +189,21 @@ class StiffnessIndices:
         K = _check_matrix(K, "stiffness")
         if not np.allclose(K, K.T, rtol=SCALED_TOL, atol=0.0):
             raise InvalidInputError("stiffness is not symmetric")
-        try:
-            L = np.linalg.cholesky(0.5 * (K + K.T))
-        except np.linalg.LinAlgError:
-            raise InvalidInputError("stiffness is not positive definite") from None
-        B = scipy.linalg.solve_triangular(L, np.eye(6), lower=True).T  # C = B B^T
         length = _check_length(length)
         scale = 1.0 if length is None else length
-        spectrum = spectrum_from_factor(B * twist_scaling(scale)[:, None], scale)
-        return cls._of(B @ B.T, spectrum, length)
+        d = twist_scaling(scale)
+        # positive definite by the eigenvalues of the scaled K_s = D^-1 K D^-1, not by
+        # whether a Cholesky factorisation happens to fail on an unresolved one
+        kappa, U = np.linalg.eigh(0.5 * (K + K.T) / np.outer(d, d))
+        if not kappa[-1] > 0.0 or kappa[0] <= RESOLVED_RTOL * kappa[-1]:
+            raise InvalidInputError(
+                f"stiffness is not positive definite to working precision: the eigenvalues "
+                f"of the scaled K run from {kappa[0]:.3g} to {kappa[-1]:.3g} (the smallest "
+                f"must exceed {RESOLVED_RTOL:g} times the largest)"
+            )
+        B_s = U / np.sqrt(kappa)  # C_s = K_s^-1 = B_s B_s^T
+        B = B_s / d[:, None]
+        return cls._of(B @ B.T, spectrum_from_factor(B_s, scale), length)
 
     @classmethod
     def from_result(cls, result, *, length: float | None = None) -> StiffnessIndices:
@@ -579,6 +585,9 @@ def _scaled_determinants(C: np.ndarray, L: np.ndarray, condition: np.ndarray) ->
     return np.where(condition <= SI_RESOLVED, det, np.nan)
 
 
+#: Smallest eigenvalue of a formed scaled stiffness, relative to its largest, that it
+#: resolves (a few eps): below, rounding decides whether it is positive.
+RESOLVED_RTOL = 1e-15
 #: Largest negative eigenvalue, relative to the largest, that rounding gives a formed
 #: symmetric positive definite 6x6 matrix (a few eps; 1e-13 leaves a factor of 100).
 ROUNDING_RTOL = 1e-13

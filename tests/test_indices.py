@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 
 import numpy as np
@@ -373,6 +374,27 @@ def test_fourbar_indices_from_result():
 def test_invalid_matrices(matrix, constructor, match):
     with pytest.raises(InvalidInputError, match=match):
         getattr(StiffnessIndices, constructor)(matrix)
+
+
+def test_a_stiffness_beyond_the_float_resolution_is_refused_whatever_the_rounding():
+    """K = Q diag(1 .. 1e17) Q^T (positive definite in exact arithmetic; its smallest
+    eigenvalue below the rounding of its largest): from two random Q, one was refused as
+    not positive definite and the other accepted (rank 5), as a Cholesky factorisation
+    failed or not. Both are refused now, naming the eigenvalues; at 1 .. 1e13 both are
+    taken, and K comes back to the rounding of its condition number."""
+    for seed, (top, refused) in itertools.product((17, 117), ((17.0, True), (13.0, False))):
+        rng = np.random.default_rng(seed)
+        Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        K = (Q * np.logspace(0.0, top, 6)) @ Q.T
+        K = 0.5 * (K + K.T)
+        if refused:
+            with pytest.raises(InvalidInputError, match=r"not positive definite to working pre"):
+                StiffnessIndices.from_stiffness(K)
+        else:
+            s = StiffnessIndices.from_stiffness(K)
+            assert s.rank == 6
+            # K from the factor: each entry to about eps cond(K) = 1e-3 of the largest
+            np.testing.assert_allclose(s.K, K, rtol=0, atol=1e-3 * np.abs(K).max())
 
 
 @pytest.mark.parametrize("length", [0.0, -1.0, np.nan, np.inf])
