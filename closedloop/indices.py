@@ -194,7 +194,15 @@ class StiffnessIndices:
         d = twist_scaling(scale)
         # positive definite by the eigenvalues of the scaled K_s = D^-1 K D^-1, not by
         # whether a Cholesky factorisation happens to fail on an unresolved one
-        kappa, U = np.linalg.eigh(0.5 * (K + K.T) / np.outer(d, d))
+        with np.errstate(over="ignore"):
+            K_s = 0.5 * (K + K.T) / np.outer(d, d)
+        if not np.isfinite(K_s).all():
+            raise InvalidInputError(
+                f"stiffness scaled to the length L = {scale:g} m (K L^2 for translations) "
+                f"leaves the float range (largest entry {np.abs(K).max():.3g}); give a "
+                "smaller length or a smaller stiffness"
+            )
+        kappa, U = np.linalg.eigh(K_s)
         if not kappa[-1] > 0.0 or kappa[0] <= RESOLVED_RTOL * kappa[-1]:
             raise InvalidInputError(
                 f"stiffness is not positive definite to working precision: the eigenvalues "

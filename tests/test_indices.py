@@ -397,6 +397,15 @@ def test_a_stiffness_beyond_the_float_resolution_is_refused_whatever_the_roundin
             np.testing.assert_allclose(s.K, K, rtol=0, atol=1e-3 * np.abs(K).max())
 
 
+def test_a_stiffness_whose_scaled_form_overflows_is_refused():
+    """K = 1e300 I at L = 1e5 m: K L^2 = 1e310 for the translations. The stiffness came
+    back with inf on its diagonal; now a typed error says why. At L = 1 it is taken."""
+    K = 1e300 * np.eye(6)
+    with pytest.raises(InvalidInputError, match=r"L = 100000 m .* leaves the float range"):
+        StiffnessIndices.from_stiffness(K, length=1e5)
+    np.testing.assert_allclose(StiffnessIndices.from_stiffness(K).K, K, rtol=1e-14)
+
+
 @pytest.mark.parametrize("length", [0.0, -1.0, np.nan, np.inf])
 def test_invalid_length(length):
     with pytest.raises(InvalidInputError, match=r"characteristic length must be finite and > 0"):
