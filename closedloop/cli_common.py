@@ -53,7 +53,10 @@ class UsageError(InvalidInputError):
 
 
 #: A command-line value that reads as a negative number (``-1e5``, ``-.5``, ``-inf``).
-NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|infinity|nan"
+#: A value that starts with a minus sign: a number, or a specification whose first number
+#: is negative (``-90:90:3``, ``-1,0,1``), not an option.
+NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})([:,][-+.\w]*)*$", re.I)
 
 
 class Parser(argparse.ArgumentParser):
@@ -163,9 +166,12 @@ def parse_values(text: str) -> np.ndarray:
         if ":" in text:
             start, stop, num = text.split(":")
             count = int(num)
-            if count < 1:
-                raise SpecError(f"{text!r}: NUM must be >= 1")
-            values = np.linspace(float(start), float(stop), count)
+            if not 1 <= count <= MAX_MAP_POINTS:  # checked before any array is made
+                raise SpecError(f"{text!r}: NUM must be from 1 to {MAX_MAP_POINTS}")
+            first, last = float(start), float(stop)
+            if not (math.isfinite(first) and math.isfinite(last)):
+                raise SpecError(f"{text!r} has non-finite values")
+            values = np.linspace(first, last, count)
         else:
             values = np.array([float(v) for v in text.split(",")])
     except ValueError:

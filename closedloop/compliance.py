@@ -263,7 +263,7 @@ def compliance(
 
         w0 = np.zeros(6) if preload is None else preload
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
-        return preloaded_compliance(state.model, eq, axes)
+        return preloaded_compliance(state.model, eq, axes, length=state.length)
     check_path(path)
     with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error of _result
         return _compliance(state, frame, axes, path)

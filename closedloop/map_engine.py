@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -422,14 +423,17 @@ def run_tasks(
         kernel: picklable callable (a module-level function) for process executors.
         tasks: the tasks (picklable for process executors).
         executor: any ``concurrent.futures.Executor``, used as given and left open.
-        workers: without an executor, local processes (a pool shut down at the end);
-            None or 1: this process.
+        workers: without an executor, local processes (a pool shut down at the end),
+            at most one per task and per core (more would only wait); None or 1: this
+            process.
 
     Raises:
         InvalidInputError: ``workers`` not a positive integer.
     """
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    if executor is None and workers is not None:
+        workers = min(workers, len(tasks), os.cpu_count() or 1)
     if executor is None and (workers or 1) == 1:
         for k, task in enumerate(tasks):
             yield k, kernel(task)

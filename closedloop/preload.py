@@ -138,7 +138,11 @@ def require_stable(result: ComplianceResult) -> ComplianceResult:
 
 
 def preloaded_compliance(
-    clm: ClosedLoopModel, equilibrium: Equilibrium, axes: str = "world"
+    clm: ClosedLoopModel,
+    equilibrium: Equilibrium,
+    axes: str = "world",
+    *,
+    length: float | None = None,
 ) -> PreloadedCompliance:
     """Cartesian compliance at the loaded frame about a preloaded equilibrium.
 
@@ -148,6 +152,8 @@ def preloaded_compliance(
             preload wrench, configuration q, rest configuration and multipliers).
         axes: ``"world"`` (world-aligned, default) or ``"local"`` (the frame's own axes at
             the preloaded pose) for the increments dw and the twist.
+        length: characteristic length L [m] of the unit-free rules and of the scaled
+            condition number (default: the model's, as :class:`Configuration`).
 
     Returns:
         The compliance; when the preload terms vanish (zero wrench) it is exactly
@@ -162,7 +168,7 @@ def preloaded_compliance(
     """
     eq = equilibrium
     frame, w0 = eq.frame, check_wrench(eq.wrench)
-    state = Configuration(clm, eq.q)
+    state = Configuration(clm, eq.q, length=length)
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
     Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers, gravity=eq.load)

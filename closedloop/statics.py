@@ -71,6 +71,9 @@ STEP_TOL = 1e-12
 #: Default largest Newton step and largest predicted motion per load increment (infinity
 #: norm) [rad, and lengths in units of L].
 MAX_STEP, MAX_INCREMENT = 0.5, 0.1
+#: Most load increments of one solve: at the default MAX_INCREMENT a motion of 100 rad or
+#: 100 L, seconds of work; a load that needs more deflects far beyond the mechanism.
+MAX_LOAD_STEPS = 1000
 
 
 #: Stability margin (smallest eigenvalue of the symmetric part of the spring-scaled tangent
@@ -412,6 +415,13 @@ def solve_equilibrium(
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not s_try > t:  # also a NaN rate
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
+            raise _failure(eqs, q, t, w, where, detail, iterations, st)
+        if steps >= MAX_LOAD_STEPS:  # a deflection of thousands of increments: hours
+            detail = (
+                f"{steps} load increments reached only {t:.3g} of the load (each moving the "
+                f"joints by at most max_increment, now {ds:.3g} of the load): a deflection "
+                "far beyond the mechanism's size; give a smaller load or a larger max_increment"
+            )
             raise _failure(eqs, q, t, w, where, detail, iterations, st)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
         q_new, st_try, it = _newton(

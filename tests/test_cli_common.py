@@ -128,3 +128,35 @@ def test_usage_error_is_bad_input():
 
     assert issubclass(UsageError, InvalidInputError)
     assert exit_status(UsageError("x")) == EXIT_BAD_INPUT
+
+
+@pytest.mark.parametrize(
+    ("prog", "argv", "match"),
+    [
+        ("cahyman", ["map", "--alpha4", "0:90:100000000000"], r"NUM must be from 1 to 2000000"),
+        (
+            "closedloop",
+            ["map", "fourbar", "--frame", "P", "--sweep", "crank=0:1:100000000000"],
+            r"NUM must be from 1 to 2000000",
+        ),
+        ("cahyman", ["map", "--alpha4", "0:inf:3"], r"'0:inf:3' has non-finite values"),
+    ],
+)
+def test_a_sweep_too_long_or_not_finite_is_refused_before_any_array(capsys, tmp_path, prog,
+                                                                    argv, match):  # fmt: skip
+    """NUM = 1e11 built the array first (a numpy MemoryError traceback, exit 1); an inf
+    bound printed numpy's warning before the error. One line, exit 2, nothing written."""
+    code, _out, err = run(capsys, prog, *argv, "--out", str(tmp_path / "m"))
+    assert code == EXIT_BAD_INPUT
+    assert len(err.strip().splitlines()) == 1 and re.search(match, err)
+    assert not (tmp_path / "m").exists()
+
+
+def test_sweep_specifications_may_start_with_a_negative_number(capsys, tmp_path):
+    """``--alpha4 -90:90:3`` and ``-90,0,90`` (the README: numbers may be negative in any
+    notation) were taken for options by argparse."""
+    for spec in ("-90:90:3", "-90,0,90"):
+        code, _out, err = run(capsys, "cahyman", "map", "--alpha4", spec, "--out",
+                             str(tmp_path / spec))  # fmt: skip
+        assert code == 0, err
+        assert (tmp_path / spec / "map.npz").exists()

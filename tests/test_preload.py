@@ -20,6 +20,7 @@ from helpers import (
 )
 
 from closedloop.compliance import compliance
+from closedloop.configuration import Configuration
 from closedloop.exceptions import EquilibriumError, SingularConfigurationError
 from closedloop.preload import preloaded_compliance, require_stable
 from closedloop.statics import JointLimitWarning, solve_equilibrium
@@ -97,6 +98,22 @@ def test_zero_preload_equals_linear_compliance_exactly(fourbar, ur5):
             for name in ("C", "G", "point", "q", "rigid_directions"):
                 np.testing.assert_array_equal(getattr(pre, name), getattr(lin, name))
             assert (pre.rank, pre.mobility, pre.stability_margin) == (lin.rank, lin.mobility, 1.0)
+
+
+def test_a_preloaded_compliance_keeps_the_configurations_length(ur5):
+    """compliance(state, frame, preload=...) of a Configuration with its own length L:
+    the preloaded result (a zero preload: the linear one) is scaled with that L, as the
+    unloaded one. It was scaled with the model's length (the scaled condition number of
+    `cahyman stiffness --gravity` was that of L = 0.51 m, labelled L = 0.78 m)."""
+    clm, q0 = ur5
+    state = Configuration(clm, q0, length=7.0 * clm.length)
+    for preload in (np.zeros(6), np.array([5.0, 0, -3.0, 0, 0.5, 0])):
+        pre = compliance(state, "tool0", preload=preload)
+        assert pre.length == state.length
+        if not preload.any():
+            lin = compliance(state, "tool0")
+            assert pre.condition_number == lin.condition_number
+    assert compliance(clm, q0, "tool0").condition_number != lin.condition_number
 
 
 def test_tiny_preload_tends_to_linear_compliance(fourbar):

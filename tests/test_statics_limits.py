@@ -254,3 +254,12 @@ def test_cahyman_telescope_below_its_stop_is_flagged_and_refused(cahyman):
     with pytest.raises(JointLimitError, match="s_4") as err:
         solve_equilibrium(model.clm, q, "M", 1e6 * w, enforce_limits=True)
     assert err.value.load_fraction == 0.0 and err.value.joints == ("s_4",)
+
+
+def test_a_load_needing_thousands_of_increments_is_refused_in_seconds(fourbar):
+    """A deflection of a million increments (max_increment 1e-7 rad against a motion of
+    about 0.1 rad): the continuation stops after MAX_LOAD_STEPS increments with a typed
+    error, where a 1e10 kg payload on CaHyMan's telescope ran for about ten minutes."""
+    clm, q0 = fourbar
+    with pytest.raises(EquilibriumError, match=r"1000 load increments reached only"):
+        solve_equilibrium(clm, q0, "P", [1.0, 0, 2.0, 0, 0, 0], max_increment=1e-7)
