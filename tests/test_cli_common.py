@@ -140,6 +140,11 @@ def test_usage_error_is_bad_input():
             r"NUM must be from 1 to 2000000",
         ),
         ("cahyman", ["map", "--alpha4", "0:inf:3"], r"'0:inf:3' has non-finite values"),
+        (
+            "cahyman",
+            ["map", "--alpha4", "0:90:2000", "--s4", "0:50:2000"],
+            r"4000000 points is more than the 2000000 a map may have",
+        ),
     ],
 )
 def test_a_sweep_too_long_or_not_finite_is_refused_before_any_array(capsys, tmp_path, prog,

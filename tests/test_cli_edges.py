@@ -80,7 +80,7 @@ def test_a_points_file_that_is_not_text_or_empty_is_one_line(tmp_path, capsys, c
      (["--sweep", "crank=0:1:3", "--index", "deflection_translation"],
       "--index deflection_translation needs --force and/or --torque"),
      (["--sweep", f"crank=0:1:{MAX_MAP_POINTS + 1}"],
-      f"{MAX_MAP_POINTS + 1} points is more than the {MAX_MAP_POINTS} a map may have")],
+      f"NUM must be from 1 to {MAX_MAP_POINTS}")],
 )  # fmt: skip
 def test_map_options_that_would_be_ignored_are_refused_before_any_work(
     tmp_path, capsys, monkeypatch, extra, match
