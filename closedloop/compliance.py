@@ -335,13 +335,16 @@ def compliance_result(
     cls: type[ComplianceResult] | None = None,
     **extra,
 ) -> ComplianceResult:
-    """A checked :class:`ComplianceResult` (or subclass, with ``extra`` fields).
+    """A checked :class:`ComplianceResult` (or subclass, with ``extra`` fields) of the
+    general path's factor ``f`` (:func:`closedloop.springs.spring_factor`).
 
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
     mobility, internal = f.N.shape[1], f.n_internal
-    return _result(state, frame, axes, C, G, spectrum, mobility, internal, f.path, cls, **extra)
+    return _result(
+        state, frame, axes, C, G, spectrum, mobility, internal, "null-space", cls, **extra
+    )
 
 
 def _result(

@@ -42,15 +42,12 @@ class SpringFactor(NamedTuple):
         sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
             [sqrt(N m)].
         n_internal: number of spring-free motions that do not move the frame (left out).
-        path: how N was found: ``"null-space"`` (the general path; the fast paths of
-            :func:`closedloop.compliance` name theirs in its result).
     """
 
     N: np.ndarray
     V: np.ndarray
     sigma: np.ndarray
     n_internal: int
-    path: str = "null-space"
 
     @property
     def NV(self) -> np.ndarray:
