@@ -254,6 +254,14 @@ class CaHyManStiffness(ReadOnlyArrays):
         )
 
     @property
+    def sag_M(self) -> np.ndarray | None:
+        """(6,) sag of M under the weight (``weight=True``): the twist from the rest pose to
+        the sagged one, (translation [m], rotation vector [rad]), at M, world axes; None
+        without weight."""
+        result = self.details.get("compliance")
+        return result.sag if hasattr(result, "sag") else None
+
+    @property
     def is_full_rank(self) -> bool:
         """True when K exists."""
         return True if self.indices is None else self.indices.is_full_rank
@@ -291,11 +299,7 @@ class CaHyManStiffness(ReadOnlyArrays):
                 "K_s_N_per_m": self.params.K_s,
             },
             "backend": self.backend,
-            "sag_M": (
-                self.details["compliance"].sag.tolist()
-                if hasattr(self.details.get("compliance"), "sag")
-                else None
-            ),
+            "sag_M": None if self.sag_M is None else self.sag_M.tolist(),
             "units": {**UNITS, "det_K": "N^6/rad^3"},
         }
 

@@ -266,8 +266,33 @@ def test_cahyman_weight_from_the_api_and_the_command_line(capsys):
     doc = json.loads(capsys.readouterr().out)
     assert code == 0
     np.testing.assert_allclose(doc["sag_M"], model.sag, rtol=1e-12, atol=1e-18)
+    np.testing.assert_array_equal(r.sag_M, model.sag)
     assert main(["stiffness", "--gravity", "--backend", "consistent"]) == 2
     assert "needs the generic backend" in capsys.readouterr().err
+
+
+def test_cahyman_text_and_deflect_print_the_sag_of_m(capsys):
+    """The sag that --gravity promises is in the text of ``stiffness`` and ``deflect`` (mm,
+    the JSON's number) and in ``deflect --json``; without --gravity it is null."""
+    import json
+
+    from cahyman_pin.api import stiffness
+    from cahyman_pin.cli import main
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    p = DEFAULT_PARAMS.replace(m_M5=10.0)
+    sag = stiffness(np.deg2rad([90.0] * 3), np.deg2rad(90.0), 0.05, params=p, weight=True).sag_M
+    assert sag[2] < -1e-5  # m: 5 kg at M and 5 kg at M2 press M down
+    weight = ["--gravity", "--mass", "m_M5=10"]
+    for command in ("stiffness", "deflect"):
+        assert main([command, *weight]) == 0
+        line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("sag of M"))
+        assert f"{sag[2] * 1e3: .6g}) mm" in line
+    assert main(["deflect", *weight, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(doc["sag_M"]["displacement_m"], sag[:3], rtol=1e-12, atol=1e-18)
+    assert main(["deflect", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["sag_M"] is None
 
 
 @pytest.mark.parametrize("given", [{}, {"m_M4": 2.0}])

@@ -29,13 +29,24 @@ def _vec(v, scale: float = 1.0, fmt: str = "{: .6g}") -> str:
     return "(" + ", ".join(fmt.format(x * scale) for x in v) + ")"
 
 
-def _pose_lines(r: CaHyManStiffness) -> list[str]:
-    p = r.pose
+def _twist_lines(name: str, t: np.ndarray) -> list[str]:
     return [
+        f"{name}: displacement {_vec(t[:3], 1e3)} mm = {_vec(t[:3])} m",
+        f"{' ' * len(name)}  rotation {_vec(t[3:], 180 / math.pi)} deg = {_vec(t[3:])} rad",
+    ]
+
+
+def _pose_lines(r: CaHyManStiffness) -> list[str]:
+    """The pose (the sagged one with --gravity) and, with --gravity, the sag of M."""
+    p = r.pose
+    lines = [
         f"platform H = {_vec(p.H, 1e3)} mm; phi, theta, psi = "
         f"{_vec([p.phi, p.theta, p.psi], 180 / math.pi)} deg",
         f"extremity M = {_vec(p.M, 1e3)} mm",
     ]
+    if r.sag_M is not None:
+        lines += _twist_lines("sag of M under the weight (world axes)", r.sag_M)
+    return lines
 
 
 # ------------------------------------------------------------------ stiffness
@@ -93,9 +104,11 @@ def _run_deflect(args: argparse.Namespace) -> int:
         "M": _twist_dict(d.M),
         "platform": None if d.H is None else _twist_dict(d.H),
         "pose": r.pose.to_dict(),
+        "sag_M": None if r.sag_M is None else _twist_dict(r.sag_M),
         "inputs": inputs_echo(args),
-        "units": "SI, with _mm and _deg copies; twists at M (arm link) and at H (plate), "
-        "world axes; rotations are small rotation vectors",
+        "units": "SI, with _mm and _deg copies; twists at M (arm link) and at H (plate) "
+        "under the wrench, and sag_M of M under the weight (--gravity, else null), world "
+        "axes; rotations are small rotation vectors",
         "axes": r.axes,
     }
     if r.axes != "world":
@@ -107,8 +120,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
     print("\n".join(_pose_lines(r)))
     rows = [("M (arm extremity)", d.M)] + ([] if d.H is None else [("H (platform)", d.H)])
     for name, t in rows:
-        print(f"{name}: displacement {_vec(t[:3], 1e3)} mm = {_vec(t[:3])} m")
-        print(f"{' ' * len(name)}  rotation {_vec(t[3:], 180 / math.pi)} deg = {_vec(t[3:])} rad")
+        print("\n".join(_twist_lines(name, t)))
     return 0
 
 
