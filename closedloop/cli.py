@@ -103,7 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--wrench", nargs=6, type=finite_float, metavar="W",
         help="fx fy fz [N] nx ny nz [N m] at the frame (in --axes): print the share of the "
-        "deflection energy stored in each spring and beam",
+        "deflection energy stored in each spring and beam (none when the wrench does no "
+        "work)",
     )  # fmt: skip
     add_preload_arguments(p)
     p.set_defaults(func=stiffness)
@@ -375,7 +376,7 @@ def stiffness(args: argparse.Namespace) -> int:
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
-        print_json(doc | ({"energy_shares": shares} if shares else {}))
+        print_json(doc | ({} if shares is None else {"energy_shares": shares}))
     else:
         print(format_report(clm, res))
         if getattr(res, "equilibrium", None) is not None:
@@ -385,6 +386,9 @@ def stiffness(args: argparse.Namespace) -> int:
                   f"{res.stability_margin:.3g}")  # fmt: skip
         for name, share in (shares or {}).items():  # the per-element breakdown
             print(f"energy share {share:7.2%}  {name}")
+        if shares == {}:
+            print("energy shares: none, the wrench stores no deflection energy (w^T C w = 0: "
+                  "a zero wrench, or one that only the rigid directions take)")  # fmt: skip
     return EXIT_OK if res.is_full_rank else EXIT_RANK_DEFICIENT
 
 

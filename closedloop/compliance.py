@@ -35,7 +35,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .arrays import ReadOnlyArrays, check_wrench, frozen, readonly
-from .conditioning import ILL_CONDITIONED, Spectrum, spectrum_from_factor
+from .conditioning import (
+    ILL_CONDITIONED,
+    RANK_RTOL,
+    Spectrum,
+    spectrum_from_factor,
+    twist_scaling,
+)
 from .configuration import Configuration, as_configuration
 from .exceptions import (
     InvalidInputError,
@@ -415,16 +421,25 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
 
     Returns:
         joint name -> share (dimensionless, >= 0), every joint with a finite spring, in
-        the model's order; empty when the wrench does no work (w^T C w = 0).
+        the model's order; empty when the wrench does no work: a zero wrench, or one along
+        the rigid directions, whose work w^T C w is rounding (in the scaled coordinates of
+        the rank rule, at most ``RANK_RTOL``^2 |C_s|_F |w_s|^2, about the most that a wrench along
+        a direction the rank leaves out could do).
     """
     w = check_wrench(wrench)
     size = float(np.max(np.abs(w)))
     if size == 0.0:
         return {}
     w = w / size  # the shares do not depend on the size of the load: no overflow
+    total = float(w @ result.C @ w)
+    d = twist_scaling(result.length)  # scaled twists D t, scaled wrenches D^-1 w
+    with np.errstate(over="ignore", invalid="ignore"):
+        C_s, w_s = result.C * d[:, None] * d, w / d
+        rounding = RANK_RTOL**2 * np.linalg.norm(C_s) * float(w_s @ w_s)  # |C_s|_F >= |C_s|_2
+    if total <= (rounding if math.isfinite(rounding) else 0.0):  # C_s may overflow: then w^T C w
+        return {}
     dq = result.G @ w
     f = clm.spring_forces(dq)
-    total = float(w @ result.C @ w)
     out = {}
     k = clm.stiffness
     for j in range(1, clm.model.njoints):
@@ -432,6 +447,4 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
         v = slice(jm.idx_v, jm.idx_v + jm.nv)
         if jm.nv and np.any((k[v] > 0) & np.isfinite(k[v])):
             out[clm.model.names[j]] = float(dq[v] @ f[v])
-    if total <= 0.0:
-        return {}
     return {n: e / total for n, e in out.items()}

@@ -3,6 +3,7 @@ non-zero exit, no traceback, checked before any work; never exit 0 with a wrong 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -21,6 +22,7 @@ from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import grid, sweep
 from closedloop.cli import main
 from closedloop.cli_common import MAX_MAP_POINTS, index_line
+from closedloop.compliance import energy_shares
 from closedloop.exceptions import InvalidInputError
 from closedloop.identification import read_measurements
 from closedloop.maps import grid_points
@@ -214,6 +216,27 @@ def test_energy_shares_of_a_huge_wrench_are_finite(capsys):
     shares = [float(m) for m in re.findall(r"energy share\s+(\S+)%", out)]
     assert code == 0 and len(shares) == 6, (out, err)
     assert np.all(np.isfinite(shares)) and sum(shares) == pytest.approx(100.0, abs=0.05)
+
+
+def test_a_wrench_along_the_rigid_directions_has_no_energy_shares(capsys, ur5):
+    """At q = 0 the UR5's tool0 cannot roll about x (rank 5). A moment along that rigid
+    direction does work of rounding only (w^T C w ~ 1e-26 against 1e-4): its shares were
+    rounding split by joint (100 % in wrist_2); now none, and the command says why. A
+    small part off the rigid direction has shares again, summing to 1."""
+    clm = ur5[0]
+    res = cl.compliance(clm, np.zeros(6), "tool0")
+    assert res.rank == 5
+    rigid = res.rigid_directions[:, 0]
+    assert energy_shares(clm, res, 3.0 * rigid) == {}
+    off = np.array([0.0, 0.0, 1e-3, 0.0, 0.0, 0.0])  # N, along a compliant direction
+    shares = energy_shares(clm, res, rigid + off)
+    assert shares and sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
+    argv = ["stiffness", "ur5", "--frame", "tool0", "--joint-stiffness", "1e4", "--wrench"]
+    code, out, err = run(main, capsys, *argv, *map(str, rigid))
+    assert code == 1, err  # rank deficient
+    assert "energy share " not in out and "energy shares: none" in out
+    code, out, _ = run(main, capsys, *argv, *map(str, rigid), "--json")
+    assert json.loads(out)["energy_shares"] == {}
 
 
 @pytest.mark.parametrize("command", ["stiffness", "deflect"])
