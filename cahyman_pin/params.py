@@ -27,6 +27,8 @@ _SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
 _MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
 #: Masses of each leg's links (the same in the three legs); the paper names none.
 LEG_MASSES = ("m_b", "m_c", "m_d", "m_h")
+#: Fields that only the weight reads (``weight=True``, ``--gravity``): masses [kg] and g [m/s^2].
+WEIGHT_FIELDS = (*_MASSES, *LEG_MASSES, "gravity")
 #: Material [Pa] and tube sizes [m] of the links as beams (``links_as_beams``).
 BEAM_FIELDS = ("E_beam", "G_beam", "d_leg", "t_leg", "d_arm", "t_arm", "d_MM2", "t_MM2", "L_MM2")
 
@@ -138,7 +140,7 @@ class CaHyManParams:
                     f"CaHyMan parameter {t}={getattr(self, t)!r} must be at most {d}/2 = "
                     f"{getattr(self, d) / 2!r} (a tube's wall is at most its radius)"
                 )
-        for name in (*_MASSES, *LEG_MASSES, "gravity"):
+        for name in WEIGHT_FIELDS:
             if getattr(self, name) < 0.0:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be >= 0"

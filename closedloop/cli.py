@@ -32,7 +32,15 @@ import numpy as np
 
 from . import __version__, cli_identify, cli_map
 from .assembly import assemble
-from .cli_common import EXIT_HELP, Parser, finite_float, needs_gravity, print_json, run_main
+from .cli_common import (
+    EXIT_HELP,
+    Parser,
+    finite_float,
+    needs_gravity,
+    path_text,
+    print_json,
+    run_main,
+)
 from .compliance import (
     TWIST_LABELS,
     UNITS,
@@ -142,6 +150,7 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
     """MODEL, --closures, --frame (if ``frame``), --joint-stiffness | --springs."""
     p.add_argument(
         "model",
+        type=path_text,
         metavar="MODEL",
         help="robot file (.urdf, .xml/.mjcf MJCF, .sdf), a bundled model by name "
         f"({', '.join(BUNDLED_MODELS)}) or an example-robot-data robot by name "
@@ -149,6 +158,7 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
     )
     p.add_argument(
         "--closures",
+        type=path_text,
         metavar="FILE",
         help="closure file (URDF) or side file with name_mot/springs/locked (MJCF, SDF)",
     )
@@ -161,7 +171,9 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
         metavar="VALUE",
         help="stiffness of every actuated joint without spring [N m/rad or N/m]",
     )
-    springs.add_argument("--springs", metavar="FILE", help="YAML mapping joint -> stiffness")
+    springs.add_argument(
+        "--springs", type=path_text, metavar="FILE", help="YAML mapping joint -> stiffness"
+    )
 
 
 def add_preload_arguments(p: argparse.ArgumentParser) -> None:
@@ -236,7 +248,9 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rotational", action="store_true", help="also the rotational compliance ellipsoid"
     )
-    p.add_argument("--html", metavar="FILE", help="write a self-contained HTML page")
+    p.add_argument(
+        "--html", type=path_text, metavar="FILE", help="write a self-contained HTML page"
+    )
     p.add_argument(
         "--duration",
         type=finite_float,

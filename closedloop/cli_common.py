@@ -89,6 +89,14 @@ def finite_float(text: str) -> float:
     return value
 
 
+def path_text(text: str) -> str:
+    """Option type: a file or folder path, as typed (an empty one, which would name the
+    current folder or no file at all, is refused)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is an empty path; expected a file or folder")
+    return text
+
+
 def positive_int(text: str) -> int:
     """Option type: an integer >= 1 (a count of points, tasks or processes)."""
     try:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cli_common import print_json
+from .cli_common import path_text, print_json
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 
@@ -28,7 +28,8 @@ def add_parser(sub, model_arguments) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     model_arguments(p)
-    p.add_argument("--measurements", required=True, metavar="FILE", help="YAML or CSV")
+    p.add_argument("--measurements", required=True, type=path_text, metavar="FILE",
+                   help="YAML or CSV")  # fmt: skip
     p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_identify)

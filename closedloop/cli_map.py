@@ -33,6 +33,7 @@ from .cli_common import (
     map_wrench,
     output_folder,
     parse_values,
+    path_text,
     positive_int,
 )
 from .cluster import add_worker_timeout, dask_executor
@@ -88,7 +89,7 @@ def add_parser(sub, parent_arguments) -> None:
     run.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786")
     add_worker_timeout(p)
     p.add_argument("--chunk", type=positive_int, default=CHUNK, metavar="N", help="points per task")
-    p.add_argument("--out", default="closedloop-map", metavar="DIR",
+    p.add_argument("--out", type=path_text, default="closedloop-map", metavar="DIR",
                    help="output folder (default: ./%(default)s)")  # fmt: skip
     p.set_defaults(func=run_map)
 

@@ -25,7 +25,7 @@ WORKER_TIMEOUT = 30.0
 
 def add_worker_timeout(parser: argparse.ArgumentParser) -> None:
     """Add ``--worker-timeout S`` (the bound of :class:`DaskExecutor`) to ``parser``."""
-    parser.add_argument("--worker-timeout", type=finite_float, default=WORKER_TIMEOUT,
+    parser.add_argument("--worker-timeout", type=finite_float, default=None,
                         metavar="S", help="with --scheduler: stop after S s without a "
                         f"worker (default {WORKER_TIMEOUT:g})")  # fmt: skip
 
@@ -166,18 +166,24 @@ def check_address(address: str) -> None:
 
 
 @contextlib.contextmanager
-def dask_executor(address: str | None, worker_timeout: float = WORKER_TIMEOUT):
+def dask_executor(address: str | None, worker_timeout: float | None = None):
     """A :class:`DaskExecutor` on the scheduler at ``address`` (None for None), its client
     closed at the end. An unreachable scheduler or a missing Dask is one typed error.
 
     Raises:
         InvalidInputError: Dask is not installed, ``address`` is not an address (a
             missing port), the scheduler cannot be reached, or ``worker_timeout`` is not a
-            positive number.
+            positive number (None: ``WORKER_TIMEOUT``) or is given without ``address``.
     """
     if address is None:
+        if worker_timeout is not None:
+            raise InvalidInputError(
+                f"--worker-timeout {worker_timeout:g} bounds a Dask run only; give --scheduler "
+                "ADDRESS too, or leave it out"
+            )
         yield None
         return
+    worker_timeout = WORKER_TIMEOUT if worker_timeout is None else worker_timeout
     if not worker_timeout > 0:
         raise InvalidInputError(f"--worker-timeout must be > 0 s, got {worker_timeout!r}")
     try:

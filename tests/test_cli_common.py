@@ -165,3 +165,35 @@ def test_sweep_specifications_may_start_with_a_negative_number(capsys, tmp_path)
                              str(tmp_path / spec))  # fmt: skip
         assert code == 0, err
         assert (tmp_path / spec / "map.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("prog", "argv"),
+    [
+        ("closedloop", ["stiffness", "ur5", "--frame", "tool0", "--springs", ""]),
+        ("closedloop", ["stiffness", "fourbar", "--frame", "P", "--closures", " "]),
+        ("closedloop", ["stiffness", "", "--frame", "P"]),
+        ("closedloop", ["view", "fourbar", "--frame", "P", "--html", ""]),
+        ("closedloop", ["map", "fourbar", "--frame", "P", "--sweep", "crank=0:1:3", "--out", ""]),
+        ("closedloop", ["identify", "fourbar", "--measurements", "", "--fit", "crank"]),
+        ("cahyman", ["map", "--alpha", "60,70", "--out", ""]),
+        ("cahyman", ["report", "--out", ""]),
+        ("cahyman", ["report", "--params", ""]),
+    ],
+)
+def test_an_empty_path_is_refused(capsys, tmp_path, monkeypatch, prog, argv):
+    """An empty path named the current folder (--out: a map written into it) or no file
+    (``--springs ''``: the UR5 without springs, a rank-0 answer with exit 1)."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, prog, *argv)
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert err.count("\n") == 1 and "is an empty path; expected a file or folder" in err, err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_worker_timeout_without_a_scheduler_is_refused(capsys, tmp_path):
+    argv = ["map", "fourbar", "--frame", "P", "--sweep", "crank=0:1:3", "--worker-timeout", "5"]
+    code, out, err = run(capsys, "closedloop", *argv, "--out", str(tmp_path / "m"))
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert "--worker-timeout 5 bounds a Dask run only; give --scheduler ADDRESS too" in err
+    assert not (tmp_path / "m").exists()

@@ -93,6 +93,10 @@ def test_failed_points_are_reported_not_fatal(capsys, tmp_path):
         (["--alpha", "30:90:3", "--workers", "0"], "workers"),
         (["--alpha", "30:90:3", "--index", "stiffness"], "invalid choice"),
         (["--alpha", "30:90:3", "--start", "cold"], "invalid choice"),
+        (["--alpha", "60", "--param", "m_M4=1:5:3"], "--param m_M4: a map has no weight"),
+        (["--alpha", "30:90:3", "--param", "gravity=1.6"], "--param gravity: a map has no"),
+        (["--alpha", "30:90:3", "--param", "E_beam=1e9"], "E_beam: a map's links are rigid"),
+        (["--alpha", "30:90:3", "--worker-timeout", "5"], "give --scheduler ADDRESS too"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):

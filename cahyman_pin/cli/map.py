@@ -2,7 +2,8 @@
 
 Pose inputs are in the paper's units (deg, mm), like the other ``cahyman`` subcommands;
 design parameters (``--param``) are CaHyManParams fields in their SI units (m, N/m,
-N m/rad, kg). A value is one of
+N m/rad); not the masses, g or the beams' fields, which a map (weightless, rigid links)
+does not read. A value is one of
 
 * ``V``: a single value (fixed);
 * ``START:STOP:NUM``: NUM evenly spaced values, both ends included (swept);
@@ -35,7 +36,7 @@ import numpy as np
 
 from cahyman_pin.cli.options import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
 from cahyman_pin.model import check_inputs
-from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, WEIGHT_FIELDS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
@@ -46,6 +47,7 @@ from closedloop.cli_common import (
     map_wrench,
     output_folder,
     parse_values,
+    path_text,
     positive_int,
 )
 from closedloop.cluster import add_worker_timeout, dask_executor
@@ -108,7 +110,8 @@ def add_parser(subparsers) -> None:
                    help=f"telescope stroke s_4 [mm] (default {d['s4']:g})")  # fmt: skip
     p.add_argument("--param", type=parse_param, action="append", default=[],
                    metavar="NAME=SPEC", help="design parameter in SI, e.g. b=0.04:0.12:9 "
-                   "(repeatable)")  # fmt: skip
+                   "(repeatable; not the masses, gravity or the beams' fields: a map is "
+                   "weightless, with rigid links)")  # fmt: skip
     add_backend_arguments(p)
     p.add_argument("--start", choices=STARTS, default="closed_form",
                    help="generic backend: assembly from the closed-form geometry "
@@ -127,7 +130,7 @@ def add_parser(subparsers) -> None:
                      help="run on a Dask cluster, e.g. tcp://HOST:8786")  # fmt: skip
     add_worker_timeout(p)
     p.add_argument("--chunk-size", type=positive_int, default=None, help="points per task")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
+    p.add_argument("--out", type=path_text, default=DEFAULT_OUT,
                    help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
     p.set_defaults(func=_run)
 
@@ -156,7 +159,28 @@ def _inputs(args: argparse.Namespace) -> dict[str, tuple[np.ndarray, str, float]
         if name in out:
             raise UsageError(f"--param {name} given twice")
         out[name] = (values, param_unit(name), 1.0)
+    _check_read(out)
     return out
+
+
+def _check_read(inputs: dict) -> None:
+    """Refuse a design parameter that no point of the map reads: a mass or g (a map has no
+    weight), the beams' material and sections (a map's links are rigid, as by default).
+
+    Raises:
+        UsageError: names the parameter and why it is not read.
+    """
+    for name in inputs:
+        if name in WEIGHT_FIELDS:
+            raise UsageError(
+                f"--param {name}: a map has no weight, so {name} changes no point; the "
+                "weight is in cahyman stiffness --gravity --mass NAME=KG, at one pose"
+            )
+        if name in BEAM_FIELDS or name == "links_as_beams":
+            raise UsageError(
+                f"--param {name}: a map's links are rigid, so {name} changes no point; the "
+                "links as beams are in Python, CaHyManParams(links_as_beams=True)"
+            )
 
 
 def _label(name: str, unit: str) -> str:
@@ -280,7 +304,7 @@ def _run(args: argparse.Namespace) -> int:
     params = params.replace(**design) if design else params
     alpha = [fixed.pop(f"alpha{k}", 0.0) for k in (1, 2, 3)]
     _check_values(inputs, params)
-    output_folder(args.out)  # a bad --out stops here, before the sweep
+    out = output_folder(args.out)  # a bad --out stops here, before the sweep
     points = grid(
         {k: v[0] * v[2] for k, v in swept.items()},
         alpha=alpha,
@@ -300,10 +324,10 @@ def _run(args: argparse.Namespace) -> int:
             chunk_size=args.chunk_size,
             show_progress=True,
         )
-    paths = result.save(args.out, "map")
+    paths = result.save(out, "map")
     shown = {k: (v[1], v[2]) for k, v in swept.items()}
     fixed = {k: (float(v[0][0]), v[1]) for k, v in inputs.items() if k not in swept}
-    png = args.out / f"map_{args.index}.png"
+    png = out / f"map_{args.index}.png"
     paths.append(plot_map(result, args.index, shown, png, fixed))
     print(result.summary())
     print(index_line(args.index, result.indices[args.index], INDEX_UNITS[args.index]))
@@ -312,6 +336,6 @@ def _run(args: argparse.Namespace) -> int:
         print(f"point {i} ({describe_point(result, i, shown)}) {status}: {reason}")
     if len(failures) > SHOWN_FAILURES:
         print(f"... and {len(failures) - SHOWN_FAILURES} more (status and reason of every point "
-              f"in {args.out / 'map.npz'})")  # fmt: skip
+              f"in {out / 'map.npz'})")  # fmt: skip
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

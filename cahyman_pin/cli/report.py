@@ -13,7 +13,7 @@ from pathlib import Path
 
 from cahyman_pin.paper.report import build_report
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams, read_params_file
-from closedloop.cli_common import output_folder
+from closedloop.cli_common import output_folder, path_text
 
 DEFAULT_OUT = Path("cahyman-report")
 
@@ -26,9 +26,9 @@ def add_parser(subparsers) -> None:
         description="The comparison report against the paper: report.md, report.html and "
         "the figures in --out.",
     )
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
+    p.add_argument("--out", type=path_text, default=DEFAULT_OUT,
                    help=f"output folder (default: ./{DEFAULT_OUT})")  # fmt: skip
-    p.add_argument("--params", type=Path, metavar="FILE",
+    p.add_argument("--params", type=path_text, metavar="FILE",
                    help="YAML mapping of CaHyMan parameters (SI) replacing the defaults, e.g. "
                    "'K_s: 0.697' or 'b: 0.09'; fields: " + ", ".join(CaHyManParams.field_names())
                    )  # fmt: skip
@@ -37,9 +37,9 @@ def add_parser(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     params = DEFAULT_PARAMS if args.params is None else read_params_file(args.params)
-    output_folder(args.out)  # a bad --out stops here, before the computations
+    out = output_folder(args.out)  # a bad --out stops here, before the computations
     start = time.perf_counter()
-    build_report(args.out, params, args.params)
-    print(f"report written to {args.out / 'report.md'} and {args.out / 'report.html'} "
+    build_report(out, params, args.params)
+    print(f"report written to {out / 'report.md'} and {out / 'report.html'} "
           f"in {time.perf_counter() - start:.1f} s")  # fmt: skip
     return 0
