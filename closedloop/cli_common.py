@@ -164,27 +164,62 @@ class SpecError(argparse.ArgumentTypeError):
     """A value specification that cannot be read."""
 
 
+#: Longest specification echoed whole in an error; a longer one is cut (its length said).
+SHOWN_SPEC = 60
+
+
+def _shown(text: str) -> str:
+    """``text`` quoted for an error message, cut after :data:`SHOWN_SPEC` characters."""
+    if len(text) <= SHOWN_SPEC:
+        return repr(text)
+    return f"{text[:SHOWN_SPEC]!r}... ({len(text)} characters)"
+
+
 def parse_values(text: str) -> np.ndarray:
     """Values of a specification ``V``, ``START:STOP:NUM`` or ``V1,V2,...`` (no unit change).
 
     Raises:
-        SpecError: the text does not follow one of the three forms.
+        SpecError: the text does not follow one of the three forms (the message names the
+            first value that is not a number, and cuts a long text).
     """
-    try:
-        if ":" in text:
-            start, stop, num = text.split(":")
+    if ":" in text:
+        parts = text.split(":")
+        try:
+            start, stop, num = parts
             count = int(num)
-            if not 1 <= count <= MAX_MAP_POINTS:  # checked before any array is made
-                raise SpecError(f"{text!r}: NUM must be from 1 to {MAX_MAP_POINTS}")
-            with np.errstate(invalid="ignore", over="ignore"):  # refused below
-                values = np.linspace(float(start), float(stop), count)
-        else:
-            values = np.array([float(v) for v in text.split(",")])
+        except ValueError:
+            raise SpecError(
+                f"{_shown(text)} is not START:STOP:NUM (numbers, NUM an integer)"
+            ) from None
+        if not 1 <= count <= MAX_MAP_POINTS:  # checked before any array is made
+            raise SpecError(f"{_shown(text)}: NUM must be from 1 to {MAX_MAP_POINTS}")
+        items = [start, stop]
+    else:
+        items = text.split(",")
+    try:
+        numbers = [float(v) for v in items]
     except ValueError:
-        raise SpecError(f"{text!r} is not a value, START:STOP:NUM or V1,V2,... (numbers)") from None
+        bad = next(v for v in items if not _is_number(v))
+        where = "" if bad == text else f"{_shown(text)}: "
+        raise SpecError(
+            f"{where}{_shown(bad)} is not a number; expected a value, START:STOP:NUM or V1,V2,..."
+        ) from None
+    if ":" in text:
+        with np.errstate(invalid="ignore", over="ignore"):  # refused below
+            values = np.linspace(numbers[0], numbers[1], count)
+    else:
+        values = np.array(numbers)
     if not np.all(np.isfinite(values)):
-        raise SpecError(f"{text!r} has non-finite values")
+        raise SpecError(f"{_shown(text)} has non-finite values")
     return values
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 #: Output folders created by :func:`output_folder` for the running command: a command

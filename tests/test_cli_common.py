@@ -15,8 +15,10 @@ from cahyman_pin.cli import main as cahyman_main
 from closedloop.cli import main as closedloop_main
 from closedloop.cli_common import (
     EXIT_PIPE,
+    SpecError,
     UsageError,
     finite_float,
+    parse_values,
     print_json,
     run_command,
 )
@@ -197,3 +199,28 @@ def test_a_worker_timeout_without_a_scheduler_is_refused(capsys, tmp_path):
     assert (code, out) == (EXIT_BAD_INPUT, "")
     assert "--worker-timeout 5 bounds a Dask run only; give --scheduler ADDRESS too" in err
     assert not (tmp_path / "m").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("1,2,x", "'1,2,x': 'x' is not a number; expected a value, START:STOP:NUM or V1,V2,..."),
+        ("a:1:3", "'a:1:3': 'a' is not a number"),
+        ("0:1", "'0:1' is not START:STOP:NUM (numbers, NUM an integer)"),
+        ("0:1:2.5", "'0:1:2.5' is not START:STOP:NUM"),
+        ("z", "'z' is not a number"),
+    ],
+)
+def test_a_malformed_specification_names_its_bad_value(text, message):
+    with pytest.raises(SpecError) as info:
+        parse_values(text)
+    assert str(info.value) == message or str(info.value).startswith(message)
+
+
+def test_a_long_malformed_list_is_cut_in_the_message(capsys, tmp_path):
+    """A 20,000-value list with one bad value was echoed whole (40 kB on one line)."""
+    text = ",".join(["1"] * 20_000 + ["q"])
+    code, out, err = run(capsys, "cahyman", "map", "--alpha4", text, "--out", str(tmp_path / "m"))
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert len(err) < 300 and err.count("\n") == 1, err
+    assert f"... ({len(text)} characters): 'q' is not a number" in err

@@ -59,7 +59,7 @@ def test_map_errors_are_one_line(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
         (["--sweep", "crank=0.1,0.1"], "the values of swept joint 'crank' must be distinct"),
         (["--sweep", "crank=0:1:3", "--chunk", "0"], "--chunk: '0': expected an integer >= 1"),
         (["--sweep", "crank=0:1:3", "--workers", "0"], "--workers: '0': expected an integer"),
-        (["--sweep", "crank=0:1"], "is not a value, START:STOP:NUM or V1,V2,..."),
+        (["--sweep", "crank=0:1"], "'0:1' is not START:STOP:NUM (numbers, NUM an integer)"),
         (["--sweep", "0:1:3"], "expected JOINT=START:STOP:NUM"),
         (["--sweep", "crank=0:nan:3"], "has non-finite values"),
         (["--sweep", "crank=0:1:3", "--fixed", "x=nan"], "is not a finite number"),
