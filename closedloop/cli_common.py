@@ -168,7 +168,7 @@ class SpecError(argparse.ArgumentTypeError):
 SHOWN_SPEC = 60
 
 
-def _shown(text: str) -> str:
+def quoted(text: str) -> str:
     """``text`` quoted for an error message, cut after :data:`SHOWN_SPEC` characters."""
     if len(text) <= SHOWN_SPEC:
         return repr(text)
@@ -189,10 +189,10 @@ def parse_values(text: str) -> np.ndarray:
             count = int(num)
         except ValueError:
             raise SpecError(
-                f"{_shown(text)} is not START:STOP:NUM (numbers, NUM an integer)"
+                f"{quoted(text)} is not START:STOP:NUM (numbers, NUM an integer)"
             ) from None
         if not 1 <= count <= MAX_MAP_POINTS:  # checked before any array is made
-            raise SpecError(f"{_shown(text)}: NUM must be from 1 to {MAX_MAP_POINTS}")
+            raise SpecError(f"{quoted(text)}: NUM must be from 1 to {MAX_MAP_POINTS}")
         items = [start, stop]
     else:
         items = text.split(",")
@@ -200,9 +200,9 @@ def parse_values(text: str) -> np.ndarray:
         numbers = [float(v) for v in items]
     except ValueError:
         bad = next(v for v in items if not _is_number(v))
-        where = "" if bad == text else f"{_shown(text)}: "
+        where = "" if bad == text else f"{quoted(text)}: "
         raise SpecError(
-            f"{where}{_shown(bad)} is not a number; expected a value, START:STOP:NUM or V1,V2,..."
+            f"{where}{quoted(bad)} is not a number; expected a value, START:STOP:NUM or V1,V2,..."
         ) from None
     if ":" in text:
         with np.errstate(invalid="ignore", over="ignore"):  # refused below
@@ -210,7 +210,7 @@ def parse_values(text: str) -> np.ndarray:
     else:
         values = np.array(numbers)
     if not np.all(np.isfinite(values)):
-        raise SpecError(f"{_shown(text)} has non-finite values")
+        raise SpecError(f"{quoted(text)} has non-finite values")
     return values
 
 

@@ -35,6 +35,7 @@ from .cli_common import (
     parse_values,
     path_text,
     positive_int,
+    quoted,
 )
 from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
@@ -49,14 +50,14 @@ PROBE, PROBE_SECONDS = 3, 0.1
 def _sweep(text: str) -> tuple[str, np.ndarray]:
     name, sep, spec = text.partition("=")
     if not sep or not name:
-        raise SpecError(f"{text!r}: expected JOINT=START:STOP:NUM or JOINT=V1,V2,... (SI)")
+        raise SpecError(f"{quoted(text)}: expected JOINT=START:STOP:NUM or JOINT=V1,V2,... (SI)")
     return name, parse_values(spec)
 
 
 def _fixed(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep or not name:
-        raise SpecError(f"{text!r}: expected JOINT=VALUE (SI)")
+        raise SpecError(f"{quoted(text)}: expected JOINT=VALUE (SI)")
     return name, finite_float(value)
 
 

@@ -49,6 +49,7 @@ from closedloop.cli_common import (
     parse_values,
     path_text,
     positive_int,
+    quoted,
 )
 from closedloop.cluster import add_worker_timeout, dask_executor
 from closedloop.maps import load_text
@@ -80,7 +81,9 @@ def parse_param(text: str) -> tuple[str, np.ndarray]:
     name, sep, spec = text.partition("=")
     fields = CaHyManParams.field_names()
     if not sep or name not in fields:
-        raise SpecError(f"{text!r}: expected NAME=VALUES with NAME one of {', '.join(fields)}")
+        raise SpecError(
+            f"{quoted(text)}: expected NAME=VALUES with NAME one of {', '.join(fields)}"
+        )
     return name, parse_values(spec)
 
 
