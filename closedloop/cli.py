@@ -31,7 +31,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import __version__, cli_identify, cli_map
-from .assembly import assemble
 from .cli_common import (
     EXIT_HELP,
     Parser,
@@ -55,6 +54,7 @@ from .data import BUNDLED_MODELS, ROBOTS, resolve
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
 from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
+from .limits import assemble_within_limits
 from .model import ClosedLoopModel
 
 PROG = "closedloop"
@@ -301,13 +301,15 @@ def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
     """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
     Raises:
-        InvalidInputError: wrong count, non-finite values.
+        InvalidInputError: wrong count, non-finite values, actuated values outside their
+            joints' limits (a map's ``invalid`` point: the robot is not driven there).
         OpenLoopError: a ``--q`` that does not close the loops (the one closure tolerance,
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
     if q is None:
-        q = assemble(clm, actuated, reference_configuration(clm)).q
+        start = reference_configuration(clm)
+        q = assemble_within_limits(clm, actuated, start, jacobian=False).q
     state = Configuration(clm, q)
     try:
         return state.require_closed()

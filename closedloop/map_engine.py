@@ -37,7 +37,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .assembly import assemble
 from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
 from .conditioning import batch_rank
@@ -50,9 +49,9 @@ from .exceptions import (
 )
 from .indices import batch_indices
 from .io import load_model, reference_configuration
+from .limits import assemble_within_limits
 from .model import ClosedLoopModel
 from .progress import progress
-from .statics import describe_limits, joints_outside_limits
 
 #: Status of a point, by code (its index in this tuple).
 STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
@@ -309,22 +308,6 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
                     starts)  # fmt: skip
     complete(out, chunk.wrench)
     return out
-
-
-def assemble_within_limits(clm: ClosedLoopModel, actuated: np.ndarray, q0: np.ndarray):
-    """:func:`closedloop.assembly.assemble` of actuated values (n_act,) [rad, m] inside the
-    position limits of their joints (the rule of :func:`closedloop.statics.joints_outside_limits`).
-
-    Raises:
-        InvalidInputError: an actuated value outside its joint's limits (an ``invalid``
-            point of a map: the robot cannot be driven there).
-    """
-    q = np.array(q0, dtype=float)
-    clm.set_actuated(q, actuated)
-    bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
-    if bad:
-        raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
-    return assemble(clm, actuated, q0, jacobian=True)
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:

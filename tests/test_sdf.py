@@ -21,7 +21,7 @@ from closedloop.conditioning import RANK_RTOL
 from closedloop.exceptions import ModelFileError
 from closedloop.io import load_model, reference_configuration, robot_data_dir
 from closedloop.kinematics import nullspace
-from closedloop.statics import joints_outside_limits
+from closedloop.limits import joints_outside_limits
 
 # The SDF and URDF four-bars are one mechanism written twice: the SDF is drawn at the
 # assembled pose (closed-form angles, 17 digits), the URDF assembled by Newton to 1e-12.

@@ -20,11 +20,11 @@ from closedloop.exceptions import (
     NameNotFoundError,
     OpenLoopError,
 )
+from closedloop.limits import joints_outside_limits
 from closedloop.statics import (
     EquilibriumError,
     JointLimitError,
     JointLimitWarning,
-    joints_outside_limits,
     potential_energy,
     solve_equilibrium,
 )
