@@ -142,6 +142,14 @@ def test_cahyman_view_bad_input_exits_2_with_one_line(capsys, tmp_path, argv):
     assert not (tmp_path / "x.html").exists()
 
 
+def test_cahyman_view_offers_only_the_backend_it_draws(capsys):
+    """Its help listed consistent and published, which always exited 2."""
+    assert cahyman_main(["view", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "[--backend {generic}]" in text and "consistent" not in text
+    assert "published" not in text
+
+
 # ------------------------------------------------------------------ the live server
 def listening(port: int) -> list[str]:
     """Local addresses (hex, as in /proc/net/tcp*) listening on ``port``."""

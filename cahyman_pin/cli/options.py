@@ -19,8 +19,20 @@ DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
 KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
 
 
-def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options --ks and --backend (choices and defaults in the help)."""
+#: What each backend is, for the help of --backend.
+BACKEND_HELP = {
+    "generic": "generic (Pinocchio model)",
+    "consistent": "consistent (closed form)",
+    "published": "published (the paper's matrices as printed, in its own coordinates)",
+}
+
+
+def add_backend_arguments(
+    parser: argparse.ArgumentParser, backends: tuple[str, ...] | None = None
+) -> None:
+    """Options --ks and --backend (choices and defaults in the help); ``backends``: the
+    choices (default: every registered backend)."""
+    choices = backend_names() if backends is None else backends
     parser.add_argument(
         "--ks",
         choices=sorted(KS_PRESETS),
@@ -30,16 +42,19 @@ def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--backend",
-        choices=backend_names(),
+        choices=choices,
         default="generic",
-        help="stiffness backend: generic (Pinocchio model), consistent (closed form), "
-        "published (the paper's matrices as printed, in its own coordinates) "
-        "(default: %(default)s)",
+        help="stiffness backend: "
+        + ", ".join(BACKEND_HELP.get(name, name) for name in choices)
+        + " (default: %(default)s)",
     )
 
 
-def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options --alpha, --alpha4, --s4 (paper units), --ks, --backend, --json."""
+def add_pose_arguments(
+    parser: argparse.ArgumentParser, backends: tuple[str, ...] | None = None
+) -> None:
+    """Options --alpha, --alpha4, --s4 (paper units), --ks, --backend (``backends``, as
+    for :func:`add_backend_arguments`), --json."""
     d = DEFAULT_POSE
     parser.add_argument(
         "--alpha",
@@ -63,7 +78,7 @@ def add_pose_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S4",
         help="telescope stroke s_4 [mm] (default: %(default)s)",
     )
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, backends)
     parser.add_argument("--json", action="store_true", help="print SI JSON")  # fmt: skip
 
 

@@ -11,7 +11,7 @@ Examples::
 The drawing (ghost of the nominal pose, amplified deflected pose, arrows, compliance
 ellipsoids, grid, HTML legend with the pose below, load-ramp animation) is
 :mod:`closedloop.viewer`'s; the model is the Pinocchio
-model of :mod:`cahyman_pin.model`, hence ``--backend`` must stay ``generic``. With
+model of :mod:`cahyman_pin.model`, hence ``--backend`` has the one choice ``generic``. With
 ``--json`` the summary is printed as one JSON object and the other lines go to stderr.
 """
 
@@ -23,7 +23,7 @@ import sys
 
 import numpy as np
 
-from cahyman_pin.cli.options import UsageError, add_pose_arguments
+from cahyman_pin.cli.options import add_pose_arguments
 from cahyman_pin.model import cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import FRAME_M
@@ -37,10 +37,6 @@ def _stderr(line: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``cahyman view``; returns the exit status (0)."""
-    if args.backend != "generic":
-        raise UsageError(
-            f"view draws the Pinocchio model: --backend must be 'generic', got {args.backend!r}"
-        )
     model = cahyman_model(DEFAULT_PARAMS.with_ks(args.ks))
     q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
     pose = (
@@ -63,6 +59,6 @@ def add_parser(subparsers) -> None:
         "viewer: --html writes a self-contained page, else the viewer is served on "
         "127.0.0.1 until Ctrl-C.",
     )
-    add_pose_arguments(p)
+    add_pose_arguments(p, backends=("generic",))  # the model it draws
     add_view_arguments(p)
     p.set_defaults(func=run)
