@@ -331,14 +331,20 @@ def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
 def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
     """Readable report of a compliance result: configuration, C, then K or rigid directions."""
     axes = "world-aligned axes" if res.axes == "world" else f"axes of frame {res.frame!r}"
+    condition = (
+        f"condition number of the scaled K {res.condition_number:.3e}"
+        + (" over the rank of C" if res.rank < 6 else "")
+        + f" (lengths per L = {res.length:.4g} m)"
+        if res.rank
+        else "condition number of the scaled K: none (C = 0: no wrench moves the frame)"
+    )
     lines = [
         f"model {clm.name!r}, frame {res.frame!r}",
         f"q = {np.array2string(res.q, precision=6, separator=', ')} [rad, m]",
         f"reference point (frame origin, world) = "
         f"{np.array2string(res.point, precision=6, separator=', ')} m; {axes}",
         f"closure residual {res.closure_residual:.1e} [m, rad]; rank of C {res.rank}/6",
-        f"condition number of the scaled K {res.condition_number:.3e} (lengths per "
-        f"L = {res.length:.4g} m)"
+        condition
         + (
             f"; ILL-CONDITIONED (> {ILL_CONDITIONED:.0e}): near a singular configuration"
             if res.ill_conditioned

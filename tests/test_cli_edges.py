@@ -346,3 +346,14 @@ def test_actuated_values_outside_their_limits_are_refused_as_a_map_marks_them(
     assert code == 0, err
     reasons = np.load(tmp_path / "m" / "map.npz")["reasons"]
     assert any(reason in str(r) for r in reasons), reasons
+
+
+def test_a_frame_that_no_wrench_moves_reports_no_condition_number(capsys):
+    """At the UR5's base C = 0 (rank 0): the text read 'condition number of the scaled K
+    1.000e+00', a perfectly conditioned K that does not exist."""
+    code, out, _ = run(main, capsys, "stiffness", "ur5", "--frame", "base_link",
+                       "--joint-stiffness", "1e4")  # fmt: skip
+    assert code == 1 and "rank of C 0/6" in out
+    assert "condition number of the scaled K: none (C = 0: no wrench moves the frame)" in out
+    code, out, _ = run(main, capsys, "stiffness", "fourbar", "--frame", "P", "--actuated", "0.3")
+    assert code == 1 and re.search(r"scaled K \S+ over the rank of C \(lengths per L", out)
