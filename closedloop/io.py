@@ -80,9 +80,15 @@ class ClosureSpec:
 
 # ---------------------------------------------------------------------------- YAML files
 def _existing(path: str | Path, what: str) -> Path:
+    """``path`` as a Path, once it is a file that can be opened (Pinocchio's readers say
+    "does not exist" of a file they cannot read)."""
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{what} {str(path)!r} does not exist or is not a file")
+    try:
+        path.open("rb").close()
+    except OSError as e:
+        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e.strerror}") from None
     return path
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -321,6 +322,25 @@ def test_unparsable_urdf_gives_one_message_and_no_native_output(tmp_path, capfd)
     assert capfd.readouterr().err == ""
     with pytest.raises(ModelFileError, match="cannot be parsed"):
         load_model(write(tmp_path, "cut.urdf", '<robot name="x"><link name="a"/>'))
+
+
+def test_an_unreadable_robot_file_is_named_as_unreadable(tmp_path, monkeypatch):
+    """Pinocchio says "does not exist" of a URDF it cannot read. The file is made
+    unreadable by its mode where that holds (not for root, who reads it anyway: there the
+    open itself is made to fail as it would)."""
+    path = write(tmp_path, "arm.urdf", '<robot name="x"><link name="a"/></robot>')
+    path.chmod(0)
+    if os.access(path, os.R_OK):
+        real = Path.open
+
+        def denied(self, *args, **kwargs):
+            if self == path:
+                raise PermissionError(13, "Permission denied", str(self))
+            return real(self, *args, **kwargs)
+
+        monkeypatch.setattr(Path, "open", denied)
+    with pytest.raises(ModelFileError, match=r"arm\.urdf' cannot be read: Permission denied"):
+        load_model(path)
 
 
 @pytest.mark.parametrize(
