@@ -79,6 +79,20 @@ class ClosureSpec:
 
 
 # ---------------------------------------------------------------------------- YAML files
+def _by_name_hint(path: str | os.PathLike) -> str:
+    """Where a robot named like the command line's MODEL (``"ur5"``, ``"fourbar"``) is
+    found from Python, for the message of a path without a suffix; else ""."""
+    from .data import BUNDLED_MODELS, ROBOTS
+
+    name = os.fspath(path)
+    if name in ROBOTS:
+        return f"; the robot {name!r} by name is cl.load_model(cl.data.robot_file({name!r}))"
+    if name in BUNDLED_MODELS:
+        files = ", ".join(f"cl.data.path({f!r})" for f in BUNDLED_MODELS[name] if f)
+        return f"; the bundled model {name!r} is cl.load_model({files})"
+    return ""
+
+
 def _existing(path: str | Path, what: str) -> Path:
     """``path`` as a Path, once it is a file that can be opened (Pinocchio's readers say
     "does not exist" of a file they cannot read)."""
@@ -438,7 +452,7 @@ def load_model(
         raise ModelFileError(
             f"robot file {str(path)!r}: unknown format {kind or Path(path).suffix!r}; expected "
             f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf' or 'sdf' "
-            "(free_base: SDF only)"
+            "(free_base: SDF only)" + _by_name_hint(path)
         )
     path = _existing(path, "robot file")
     if kind == "sdf":

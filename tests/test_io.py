@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -322,6 +323,18 @@ def test_unparsable_urdf_gives_one_message_and_no_native_output(tmp_path, capfd)
     assert capfd.readouterr().err == ""
     with pytest.raises(ModelFileError, match="cannot be parsed"):
         load_model(write(tmp_path, "cut.urdf", '<robot name="x"><link name="a"/>'))
+
+
+@pytest.mark.parametrize(
+    ("name", "hint"),
+    [("ur5", "cl.load_model(cl.data.robot_file('ur5'))"),
+     ("fourbar", "cl.load_model(cl.data.path('fourbar.urdf'), cl.data.path('fourbar.yaml'))")],
+)  # fmt: skip
+def test_a_robot_name_given_as_a_path_says_how_to_load_it_by_name(name, hint):
+    """The command line takes ``ur5``; from Python ``load_model("ur5")`` said only that the
+    format '' is unknown."""
+    with pytest.raises(ModelFileError, match=re.escape(hint)):
+        load_model(name)
 
 
 def test_an_unreadable_robot_file_is_named_as_unreadable(tmp_path, monkeypatch):
