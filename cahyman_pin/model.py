@@ -11,7 +11,6 @@ elevation from x_p towards z_p) and s_4 [m] (telescope stroke, in [0, params.s4_
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +23,7 @@ from cahyman_pin.urdf_builder import (
     FRAME_M,
     LEGS,
     PLATE_JOINT,
+    REVOLUTE_LIMIT,
     VIRTUAL_JOINTS,
     build_urdf,
     closure_spec,
@@ -93,7 +93,13 @@ def paper_angles(R: np.ndarray) -> tuple[float, float, float]:
 
 
 def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float, float]:
-    """Validated (alpha (3,) [rad], alpha_4 [rad], s_4 [m]); raises InvalidInputError."""
+    """Validated (alpha (3,) [rad], alpha_4 [rad], s_4 [m]): finite, the angles within the
+    joints' limits (+-``REVOLUTE_LIMIT``, one turn), the stroke within [0, s4_max].
+
+    Raises:
+        InvalidInputError: names the value and what was expected (an angle beyond one turn
+            is most likely in degrees).
+    """
     if (  # the common case, checked without conversions (a sum of Python floats is
         # finite when its terms are; it overflows to inf, never raises)
         type(alpha) is np.ndarray
@@ -101,9 +107,9 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
         and alpha.dtype == np.float64
         and isinstance(alpha4, float)
         and isinstance(s4, float)
-        and math.isfinite(alpha4)
+        and abs(alpha4) <= REVOLUTE_LIMIT
         and 0.0 <= s4 <= p.s4_max
-        and math.isfinite(sum(alpha.tolist()))
+        and all(abs(a) <= REVOLUTE_LIMIT for a in alpha.tolist())  # False for NaN
     ):
         return alpha.copy(), float(alpha4), float(s4)
     alpha = np.array(alpha, dtype=float).reshape(-1)
@@ -112,6 +118,16 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
     alpha4, s4 = np.asarray(alpha4, dtype=float), np.asarray(s4, dtype=float)
     if alpha4.size != 1 or not np.isfinite(alpha4):
         raise InvalidInputError(f"alpha_4 must be one finite angle [rad], got {alpha4.tolist()}")
+    for name, value in (("alpha", alpha), ("alpha_4", alpha4)):
+        if np.any(np.abs(value) > REVOLUTE_LIMIT):
+            with np.errstate(over="ignore"):
+                rad, deg = (
+                    ", ".join(f"{v:.7g}" for v in np.ravel(x)) for x in (value, np.degrees(value))
+                )
+            raise InvalidInputError(
+                f"{name} = ({rad}) rad = ({deg}) deg is beyond the joints' limits of one turn "
+                "(+-2 pi rad, +-360 deg); the Python API takes radians"
+            )
     if s4.size != 1 or not np.isfinite(s4) or not 0.0 <= float(s4) <= p.s4_max:
         raise InvalidInputError(
             f"s_4 = {s4.tolist()} m is outside the stroke [0, {p.s4_max}] m "

@@ -231,7 +231,9 @@ class _Sizes:
         self.mobile_radius = p.r_p + 2.0 * self.ball
 
 
-_REVOLUTE = (-2 * math.pi, 2 * math.pi, 1e3)
+#: Position limit [rad] of the revolute joints (cranks, arm): one turn either way.
+REVOLUTE_LIMIT = 2 * math.pi
+_REVOLUTE = (-REVOLUTE_LIMIT, REVOLUTE_LIMIT, 1e3)
 _VIRTUAL = (-0.01, 0.01, 1e4)
 
 

@@ -152,8 +152,10 @@ def test_cahyman_inputs_are_checked_alike_in_every_form():
     alpha, a4, s4 = check_inputs(good, 0.5, 0.01, P)
     assert alpha is not good and (alpha == good).all() and (a4, s4) == (0.5, 0.01)
     assert check_inputs(list(good), np.float64(0.5), 0.01, P)[2] == 0.01
-    huge = np.full(3, 1e308)  # finite, with a sum that overflows
-    np.testing.assert_array_equal(check_inputs(huge, 0.5, 0.01, P)[0], huge)
+    huge = np.full(3, 1e308)  # finite, beyond the joints' limits in every form
+    for form in (huge, list(huge)):
+        with pytest.raises(InvalidInputError, match=r"alpha = \(1e\+308, 1e\+308, 1e\+308\) rad"):
+            check_inputs(form, 0.5, 0.01, P)
     for bad in (np.nan, np.inf, -np.inf):
         for k in range(3):
             wrong = good.copy()

@@ -354,3 +354,21 @@ def test_results_keep_no_python_object_per_point():
     assert all(isinstance(a, np.ndarray) and a.dtype != object for a in arrays)
     assert res.data.reason_texts == [""]  # every point ok: one shared empty reason
     assert res.data.codes.dtype == np.int8 and res.data.reason_codes.dtype == np.int32
+
+
+@pytest.mark.parametrize("backend", ["generic", "consistent"])
+def test_angles_beyond_one_turn_are_invalid_points_and_refused_alone(backend):
+    """The cranks and the arm turn within +-2 pi (the URDF's limits). 45 "rad" (degrees
+    passed to the radian API) was answered at 45 - 14 pi; now it is refused by name, and
+    a sweep marks such a point invalid, as it marks a stroke beyond s4_max."""
+    message = r"alpha = \(45, 45, 45\) rad = \(2578.31, 2578.31, 2578.31\) deg is beyond"
+    with pytest.raises(InvalidInputError, match=message):
+        api.stiffness([45.0] * 3, 0.5, 0.01, backend=backend)
+    with pytest.raises(InvalidInputError, match=r"alpha_4 = \(-7\) rad"):
+        api.stiffness(np.deg2rad([60.0] * 3), -7.0, 0.01, backend=backend)
+    edge = api.stiffness(np.deg2rad([60.0] * 3), 2 * np.pi, 0.01, backend=backend)  # on the limit
+    assert np.all(np.isfinite(edge.C))
+    pts = grid({"alpha1": [1.0, 7.0]}, alpha=np.deg2rad([60.0] * 3), alpha4=0.7, s4=0.01)
+    res = sweep(pts, backend=backend, executor="serial")
+    assert list(res.status) == ["ok", "invalid"]
+    assert "beyond the joints' limits of one turn" in res.reasons[1]

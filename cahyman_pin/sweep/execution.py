@@ -35,7 +35,7 @@ import numpy as np
 from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
-from cahyman_pin.urdf_builder import FRAME_M
+from cahyman_pin.urdf_builder import FRAME_M, REVOLUTE_LIMIT
 from closedloop.exceptions import AssemblyError, InvalidInputError
 from closedloop.map_engine import (
     POINT_ERRORS,
@@ -111,8 +111,8 @@ def _prevalidate(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: Chun
     """Points of ``idx`` whose inputs pass :func:`check_inputs` (others recorded)."""
     s4 = chunk.s4[idx]
     good = (
-        np.all(np.isfinite(chunk.alpha[idx]), axis=1)
-        & np.isfinite(chunk.alpha4[idx])
+        np.all(np.abs(chunk.alpha[idx]) <= REVOLUTE_LIMIT, axis=1)  # False for NaN
+        & (np.abs(chunk.alpha4[idx]) <= REVOLUTE_LIMIT)
         & (s4 >= 0.0)
         & (s4 <= params.s4_max)
     )
