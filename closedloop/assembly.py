@@ -117,18 +117,27 @@ def assemble(
     check_count("max_iter", max_iter, 0)
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     if actuated is not None:
-        if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):
-            actuated = real_array(actuated, "actuated")
-        actuated = actuated.reshape(-1)
-        if actuated.shape != (len(clm.actuated),):
-            raise InvalidInputError(
-                f"{actuated.size} actuated values given; expected {len(clm.actuated)} "
-                f"for joints {list(clm.actuated)}"
-            )
-        if not np.isfinite(actuated).all():
-            raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
-        clm.set_actuated(q, actuated)
+        clm.set_actuated(q, check_actuated(clm, actuated))
     return close_loops(clm, q, tol=tol, max_iter=max_iter, jacobian=jacobian)
+
+
+def check_actuated(clm: ClosedLoopModel, actuated) -> np.ndarray:
+    """Validated actuated values (n_act,) [rad, m] of ``clm``'s actuated joints.
+
+    Raises:
+        InvalidInputError: not real numbers, a wrong count, or not finite.
+    """
+    if not (type(actuated) is np.ndarray and actuated.dtype == np.float64):
+        actuated = real_array(actuated, "actuated")
+    actuated = actuated.reshape(-1)
+    if actuated.shape != (len(clm.actuated),):
+        raise InvalidInputError(
+            f"{actuated.size} actuated values given; expected {len(clm.actuated)} "
+            f"for joints {list(clm.actuated)}"
+        )
+    if not np.isfinite(actuated).all():
+        raise InvalidInputError(f"actuated values must be finite, got {actuated.tolist()}")
+    return actuated
 
 
 def close_loops(

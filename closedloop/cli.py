@@ -31,6 +31,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import __version__, cli_identify, cli_map
+from .assembly import assemble
 from .cli_common import (
     EXIT_HELP,
     Parser,
@@ -301,13 +302,16 @@ def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
     """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
     Raises:
-        InvalidInputError: wrong count, non-finite values, actuated values outside their
-            joints' limits (a map's ``invalid`` point: the robot is not driven there).
+        InvalidInputError: wrong count, non-finite values, given actuated values outside
+            their joints' limits (a map's ``invalid`` point: the robot is not driven there;
+            without values, those of the file's configuration are taken as they are).
         OpenLoopError: a ``--q`` that does not close the loops (the one closure tolerance,
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
-    if q is None:
+    if q is None and actuated is None:  # the file's own configuration, as drawn
+        q = assemble(clm, None, reference_configuration(clm)).q
+    elif q is None:
         start = reference_configuration(clm)
         q = assemble_within_limits(clm, actuated, start, jacobian=False).q
     state = Configuration(clm, q)

@@ -55,7 +55,6 @@ import scipy.optimize
 import yaml
 
 from .arrays import check_wrench, readonly, real_array
-from .assembly import assemble
 from .compliance import compliance
 from .conditioning import rule_rank
 from .exceptions import (
@@ -65,6 +64,7 @@ from .exceptions import (
     OpenLoopError,
     SingularConfigurationError,
 )
+from .limits import assemble_within_limits
 from .model import ClosedLoopModel
 
 #: Largest standard error of log k (the 1-sigma interval of k spans a factor e^2) of an
@@ -341,7 +341,7 @@ def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
                         f"actuated has {m.actuated.size} values; expected {len(clm.actuated)} "
                         f"({list(clm.actuated)})"
                     )
-                out[-1] = assemble(clm, m.actuated).q
+                out[-1] = assemble_within_limits(clm, m.actuated, jacobian=False).q
         except InvalidInputError as e:
             raise InvalidInputError(f"measurement {i}: {e}") from None
     return out

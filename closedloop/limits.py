@@ -12,8 +12,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 
-from .assembly import Assembly, assemble
+from .assembly import Assembly, check_actuated, close_loops
 from .exceptions import InvalidInputError
 from .model import ClosedLoopModel
 
@@ -88,19 +89,25 @@ def describe_limits(bad: dict[str, tuple]) -> str:
 
 
 def assemble_within_limits(
-    clm: ClosedLoopModel, actuated: np.ndarray, q0: np.ndarray, *, jacobian: bool = True
+    clm: ClosedLoopModel,
+    actuated: np.ndarray,
+    q0: np.ndarray | None = None,
+    *,
+    jacobian: bool = True,
 ) -> Assembly:
     """:func:`closedloop.assembly.assemble` of actuated values (n_act,) [rad, m] inside the
     position limits of their joints (the rule of :func:`joints_outside_limits`), from q0
-    (nq,); ``jacobian`` as for ``assemble``.
+    (nq,; default: neutral, as ``assemble``); ``jacobian`` as for ``assemble``.
 
     Raises:
-        InvalidInputError: an actuated value outside its joint's limits (an ``invalid``
-            point of a map: the robot cannot be driven there).
+        InvalidInputError: bad ``actuated`` or ``q0`` (as for ``assemble``), or an
+            actuated value outside its joint's limits (an ``invalid`` point of a map: the
+            robot cannot be driven there).
+        AssemblyError: the loops cannot be closed.
     """
-    q = np.array(q0, dtype=float)
-    clm.set_actuated(q, actuated)
+    q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
+    clm.set_actuated(q, check_actuated(clm, actuated))
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
     if bad:
         raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
-    return assemble(clm, actuated, q0, jacobian=jacobian)
+    return close_loops(clm, q, jacobian=jacobian)

@@ -346,6 +346,10 @@ def test_actuated_values_outside_their_limits_are_refused_as_a_map_marks_them(
     assert code == 0, err
     reasons = np.load(tmp_path / "m" / "map.npz")["reasons"]
     assert any(reason in str(r) for r in reasons), reasons
+    code, out, err = run(main, capsys, command, "fourbar", "--frame", "P", "--actuated", "1", "2",
+                         *extra)  # fmt: skip
+    assert (code, out) == (2, "")
+    assert "2 actuated values given; expected 1 for joints ['crank']" in one_line(err)
 
 
 def test_a_frame_that_no_wrench_moves_reports_no_condition_number(capsys):

@@ -586,3 +586,21 @@ def test_measurements_given_by_actuated_values(fourbar):
                    data, "P", list(FOURBAR_TRUE))  # fmt: skip
     for name, value in FOURBAR_TRUE.items():
         np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
+
+
+def test_a_measurement_beyond_the_actuated_limits_is_named(fourbar):
+    """crank = 7 rad lies beyond the four-bar's limits (+-6.3): the measurement was assembled
+    (at 7 - 2 pi) and fitted; now it is refused, naming the measurement and the limit, as a
+    map marks the same point invalid and the stiffness command refuses it."""
+    clm, _ = fourbar
+    C = cl.compliance(clm, cl.assemble(clm, actuated=[0.3]).q, "P").C
+    w = np.array([1.0, 0.0, 2.0, 0.0, 0.3, 0.0])
+    data = [Measurement.of(actuated=[a], wrench=w, twist=C @ w, sd=1e-9) for a in (0.3, 7.0)]
+    with pytest.raises(cl.InvalidInputError, match=r"measurement 1: actuated joints outside "
+                       r"their limits: crank = 7 \(limits \[-6.3, 6.3\]\)"):  # fmt: skip
+        identify(clm, data, "P", ["crank"])
+    with pytest.raises(
+        cl.InvalidInputError, match=r"measurement 0: actuated has 2 values; expected 1"
+    ):
+        identify(clm, [Measurement.of(actuated=[0.3, 0.1], wrench=w, twist=w, sd=1.0)], "P",
+                 ["crank"])  # fmt: skip
