@@ -100,8 +100,8 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
         InvalidInputError: names the value and what was expected (an angle beyond one turn
             is most likely in degrees).
     """
-    if (  # the common case, checked without conversions (a sum of Python floats is
-        # finite when its terms are; it overflows to inf, never raises)
+    if (  # the common case, checked on Python floats without conversions (a comparison
+        # with NaN is False, so NaN takes the general path, which names it)
         type(alpha) is np.ndarray
         and alpha.shape == (3,)
         and alpha.dtype == np.float64
