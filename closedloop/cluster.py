@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import threading
 import time
 from concurrent.futures import CancelledError, Executor, Future, InvalidStateError
@@ -84,7 +85,11 @@ class DaskExecutor(Executor):
         error = None if inner.cancelled() else inner.exception()
         try:
             if inner.cancelled() or (error is not None and _is_dask_error(error)):
-                what = "cancelled" if inner.cancelled() else f"{type(error).__name__}: {error}"
+                what = (
+                    "cancelled: the scheduler was lost, or the client closed"
+                    if inner.cancelled()
+                    else f"{type(error).__name__}: {error}"
+                )
                 outer.set_exception(ClusterError(
                     f"the Dask cluster at {self._address!r} lost a task ({what})"))  # fmt: skip
             elif error is not None:
@@ -191,13 +196,34 @@ def dask_executor(address: str | None, worker_timeout: float | None = None):
     except ImportError:
         raise InvalidInputError("--scheduler needs Dask: pip install '.[dask]'") from None
     check_address(address)
+    with _quiet_dask_logs():
+        try:
+            client = Client(address, timeout="10s")
+        except (OSError, TimeoutError) as e:
+            raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None
+        executor = DaskExecutor(client, address, worker_timeout)
+        try:
+            yield executor
+        finally:
+            executor.shutdown()
+            client.close()
+
+
+@contextlib.contextmanager
+def _quiet_dask_logs():
+    """Dask's own log records dropped while a run lasts, then the levels restored.
+
+    A lost scheduler makes the client log its reconnection failures with their
+    tracebacks on stderr; the run's outcome is already one :class:`ClusterError`.
+    """
+    manager = logging.Logger.manager
+    names = ["distributed", *(n for n in list(manager.loggerDict) if n.startswith("distributed."))]
+    loggers = [logging.getLogger(n) for n in names]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL + 1)
     try:
-        client = Client(address, timeout="10s")
-    except (OSError, TimeoutError) as e:
-        raise InvalidInputError(f"cannot reach the Dask scheduler {address!r}: {e}") from None
-    executor = DaskExecutor(client, address, worker_timeout)
-    try:
-        yield executor
+        yield
     finally:
-        executor.shutdown()
-        client.close()
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)

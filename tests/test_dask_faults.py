@@ -1,9 +1,13 @@
 """``--scheduler`` under faults: a lost worker is a retried chunk (the map stays the serial
 one), a chunk lost with too many workers or a run without workers is one line, exit 3."""
 
+import contextlib
 import logging
 import os
 import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -11,6 +15,7 @@ import dask
 import numpy as np
 import pytest
 from dask.distributed import Client, LocalCluster
+from helpers import REPO
 
 from closedloop.cli import main
 
@@ -145,3 +150,53 @@ def test_all_workers_lost_mid_run_stops_after_the_timeout(tmp_path, capsys):
     assert status == 3, line
     assert line.startswith("closedloop: error: no Dask worker connected to the scheduler")
     assert t_lost and TIMEOUT <= t_end - t_lost[0] < TIMEOUT + SLACK, t_end - t_lost[0]
+
+
+@contextlib.contextmanager
+def _external_cluster(n_workers: int):
+    """A scheduler and workers in processes of their own (as on a real cluster, and unlike
+    LocalCluster, whose silenced logs live in the test's process); yields the scheduler's
+    process and address, and kills what is left at the end."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
+                                  "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 **quiet)  # fmt: skip
+    workers = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                "--nworkers", str(n_workers), "--nthreads", "1",
+                                "--no-dashboard"], **quiet)  # fmt: skip
+    try:
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(n_workers, timeout=60)
+        yield scheduler, address
+    finally:
+        for process in (workers, scheduler):
+            process.kill()
+            process.wait(30)
+
+
+def test_a_scheduler_lost_mid_run_is_one_line(tmp_path):
+    """The scheduler killed (SIGKILL) while chunks run: one line naming it, exit 3, soon.
+    The client logged its failed reconnections with tracebacks on stderr before the line.
+    The command runs in a process of its own, as a user runs it (Dask's log handler holds
+    the stderr of the process that imported it)."""
+    argv = [*LONG_MAP, "--worker-timeout", str(TIMEOUT), "--out", str(tmp_path / "x")]
+    with _external_cluster(2) as (scheduler, address):
+        env = {**os.environ, "PYTHONPATH": str(REPO)}
+        command = subprocess.Popen([sys.executable, "-m", "closedloop", *argv, "--scheduler",
+                                    address], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                   text=True, cwd=REPO, env=env)  # fmt: skip
+        with Client(address, timeout="10s") as client:
+            while not any(client.processing().values()) and command.poll() is None:
+                time.sleep(0.005)
+        t_lost = time.monotonic()
+        os.kill(scheduler.pid, signal.SIGKILL)
+        _, err = command.communicate(timeout=TIMEOUT + SLACK + 60)
+        t_end = time.monotonic()
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("closedloop map: ")]
+    assert command.returncode == 3 and len(lines) == 1, err
+    assert lines[0].startswith(f"closedloop: error: the Dask cluster at {address!r} lost a task")
+    assert t_end - t_lost < TIMEOUT + SLACK, t_end - t_lost
