@@ -61,13 +61,20 @@ def plate_rotation(phi, theta, psi) -> np.ndarray:
     (ct, st), (cp, sp) = (np.cos(theta), np.sin(theta)), (np.cos(psi), np.sin(psi))
     cb, sb = np.sin(phi), np.cos(phi)  # the middle angle beta = pi/2 - phi
     a, b = cb * cp, cb * sp
-    R = np.stack(
+    return _last_axis(
         (ct * a - st * sp, -ct * b - st * cp, ct * sb,
          st * a + ct * sp, -st * b + ct * cp, st * sb,
          -sb * cp, sb * sp, cb),
-        axis=-1,
-    )  # fmt: skip
-    return R.reshape((*phi.shape, 3, 3))
+    ).reshape((*phi.shape, 3, 3))  # fmt: skip
+
+
+def _last_axis(parts) -> np.ndarray:
+    """``np.stack(parts, axis=-1)`` for arrays of one shape, filled into one new array
+    (np.stack's own checks cost more than the arithmetic on one pose)."""
+    out = np.empty((*np.shape(parts[0]), len(parts)))
+    for k, part in enumerate(parts):
+        out[..., k] = part
+    return out
 
 
 @dataclass(frozen=True)
@@ -99,7 +106,7 @@ def _check_alpha(alpha: np.ndarray) -> np.ndarray:
     alpha = np.asarray(alpha, float)
     if alpha.shape[-1:] != (3,):
         raise InvalidInputError(f"alpha must have shape (..., 3), got {alpha.shape}")
-    if not np.all(np.isfinite(alpha)):
+    if not np.isfinite(alpha).all():
         raise InvalidInputError(f"alpha must be finite, got {alpha}")
     return alpha
 
@@ -128,7 +135,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     z1, z2, z3 = z[..., 0], z[..., 1], z[..., 2]
     cphi = np.sqrt((2 * z1 - z2 - z3) ** 2 + 3 * (z2 - z3) ** 2) / (3 * p.r_p)
     bad = cphi > 1.0
-    if np.any(bad):
+    if bad.any():
         raise AssemblyError(
             f"plate cannot be assembled at alpha={_degrees(alpha[bad])} deg: "
             "height differences between legs exceed the plate radius",
@@ -139,7 +146,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     psi = np.arctan2(_SQ3 * (z2 - z3), -(2 * z1 - z2 - z3))
     s_tp = (y1 + y2 + y3) / (1.5 * p.r_p * (1.0 + sphi))
     bad = np.abs(s_tp) > 1.0
-    if np.any(bad):
+    if bad.any():
         raise AssemblyError(
             f"plate cannot be assembled at alpha={_degrees(alpha[bad])} deg: "
             "in-plane leg offsets exceed the plate radius",
@@ -149,7 +156,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
     x_H = (y3 - y2) / _SQ3 - 0.5 * p.r_p * (1.0 - sphi) * np.cos(psi - theta)
     y_H = y1 - p.r_p * (np.sin(psi) * np.cos(theta) + sphi * np.cos(psi) * np.sin(theta))
     z_H = (z1 + z2 + z3) / 3.0
-    H = np.stack([x_H, y_H, z_H], axis=-1)
+    H = _last_axis((x_H, y_H, z_H))
     R = plate_rotation(phi, theta, psi)
     H_k = H[..., None, :] + (R @ (p.r_p * U.T)).swapaxes(-1, -2)
     s = (H_k * U).sum(axis=-1) - p.r_e
