@@ -309,11 +309,13 @@ def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
-    if q is None and actuated is None:  # the file's own configuration, as drawn
-        q = assemble(clm, None, reference_configuration(clm)).q
-    elif q is None:
+    if q is None:
         start = reference_configuration(clm)
-        q = assemble_within_limits(clm, actuated, start, jacobian=False).q
+        q = (
+            assemble(clm, None, start)  # the file's own configuration, as drawn
+            if actuated is None
+            else assemble_within_limits(clm, actuated, start, jacobian=False)
+        ).q
     state = Configuration(clm, q)
     try:
         return state.require_closed()
