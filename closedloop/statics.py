@@ -205,7 +205,8 @@ def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_lim
         ratio = np.max(np.abs(v) / step_limit, initial=0.0)
         if not np.isfinite(ratio):
             break
-        if ratio > 1.0:
+        capped = ratio > 1.0  # a cut step says nothing of the distance to the solution
+        if capped:
             v /= ratio
         q = pin.integrate(eqs.clm.model, q, v)
         st = eqs.evaluate(q, w)
@@ -213,7 +214,8 @@ def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_lim
             break
         size = np.max(np.abs(v) / units.coords, initial=0.0)
         if (
-            _closed(st, row_tol)
+            not capped
+            and _closed(st, row_tol)
             and size <= STEP_TOL * max(1.0, np.max(np.abs(q) / units.q))
             and not dropped  # a step that resolved every direction: q is at rounding
         ):  # level (Newton converges quadratically); else the force test decides

@@ -14,12 +14,14 @@ import numpy as np
 import pytest
 from helpers import assert_balanced, pendulum
 
+from closedloop import data
 from closedloop.exceptions import (
     InvalidInputError,
     MechanismError,
     NameNotFoundError,
     OpenLoopError,
 )
+from closedloop.io import load_model
 from closedloop.limits import joints_outside_limits
 from closedloop.statics import (
     EquilibriumError,
@@ -263,3 +265,20 @@ def test_a_load_needing_thousands_of_increments_is_refused_in_seconds(fourbar):
     clm, q0 = fourbar
     with pytest.raises(EquilibriumError, match=r"1000 load increments reached only"):
         solve_equilibrium(clm, q0, "P", [1.0, 0, 2.0, 0, 0, 0], max_increment=1e-7)
+
+
+@pytest.mark.parametrize("max_step", [1e-13, 1e-9])
+def test_steps_cut_to_a_tiny_max_step_are_not_taken_for_convergence(max_step):
+    """A Newton step cut to max_step is small whatever the distance to the solution: with
+    max_step = 1e-13 the UR5 came back 'converged' after one iteration, 2.9e-3 rad off,
+    with 28 N m unbalanced. Now the solver stops with an EquilibriumError, or finds the
+    equilibrium (the default's, to its tolerance)."""
+    ur5 = load_model(data.robot_file("ur5"), joint_stiffness=1e4, geometry=False)
+    q0 = np.array([0.0, -1.0, 1.5, -0.5, 1.2, 0.3])
+    w = [0.0, 0.0, 1e3, 0.0, 0.0, 0.0]
+    reference = solve_equilibrium(ur5, q0, "tool0", w)
+    try:
+        eq = solve_equilibrium(ur5, q0, "tool0", w, max_step=max_step)
+    except EquilibriumError:
+        return
+    np.testing.assert_allclose(eq.q, reference.q, atol=1e-9)  # rad: both converged to 1e-12
