@@ -314,9 +314,16 @@ def _site(model: pin.Model, beam: str, end: str | None) -> _Site:
 
 
 def _descendant_frames(model: pin.Model, root: int) -> set[int]:
+    """``root`` and the frames after it in the frame tree that are on its joint: those the
+    beam's tip carries. A moving joint after it (its JOINT frame, on that joint) ends the
+    walk: the frames after that joint are placed in it and move with it."""
+    joint = model.frames[root].parentJoint
     out, grew = {root}, True
     while grew:
-        new = {i for i, f in enumerate(model.frames) if f.parentFrame in out and i not in out}
+        new = {
+            i for i, f in enumerate(model.frames)
+            if f.parentFrame in out and i not in out and f.parentJoint == joint
+        }  # fmt: skip
         new.discard(0)
         out |= new
         grew = bool(new)

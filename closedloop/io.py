@@ -20,7 +20,8 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
 * URDF without closure file (serial robot): the 1-dof joints of the main chain, from
   the root to the first joint with several child joints, are actuated; the 1-dof joints
   beyond that branching (the Panda's fingers) are locked, so that a gripper neither adds
-  inputs nor takes a joint spring. A tree that branches at its root needs a closure file.
+  inputs nor takes a joint spring, unless the keyword ``springs`` or ``actuated`` names
+  them. A tree that branches at its root needs a closure file.
 * MJCF: every ``<actuator>`` child with a ``joint`` attribute makes that joint actuated;
   a joint ``stiffness`` attribute > 0 (``<default>`` classes resolved) is a spring.
   Pinocchio's model does not keep either, so they are read from the XML here. A side
@@ -302,6 +303,7 @@ class _Tree:
     locked: tuple[str, ...]
     visual: pin.GeometryModel | None
     undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
+    by_default: bool = False  # locked by the serial robot's default, not by a file
 
 
 def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
@@ -333,7 +335,7 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
         model, (visual,), blocks, _ = apply_beams(model, [visual], both, urdf=path)
     if closures is None:
         actuated, locked = _serial_defaults(tree, path)
-        return _Tree(model, [], actuated, blocks, locked, visual)
+        return _Tree(model, [], actuated, blocks, locked, visual, by_default=True)
     loops = [
         closure_between_frames(model, a, b, t)
         for (a, b), t in zip(spec.pairs, spec.types, strict=True)
@@ -468,6 +470,10 @@ def load_model(
             f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
             "directly; list the actuated joints (name_mot in a side file, or actuated=)"
         )
+    locked = tree.locked
+    if tree.by_default:  # a joint named by a keyword is no longer locked by the default
+        named = {*(springs or {}), *(() if actuated is None else actuated)}
+        locked = tuple(n for n in locked if n not in named)
     actuated = tree.actuated if actuated is None else joint_names("actuated", actuated)
     springs = {**tree.springs, **(springs or {})}
     if joint_stiffness is not None:
@@ -483,7 +489,7 @@ def load_model(
         for name in actuated:
             springs.setdefault(name, k)
     clm = ClosedLoopModel(
-        tree.model, tree.loops, actuated, springs, tree.locked, visual_model=tree.visual
+        tree.model, tree.loops, actuated, springs, locked, visual_model=tree.visual
     )
     if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}

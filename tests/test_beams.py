@@ -20,6 +20,7 @@ from helpers import UR5_BEAM_ENDS, assert_close_in_norm
 import closedloop as cl
 from closedloop.beams import BeamError, map_configuration
 from closedloop.compliance import energy_shares
+from closedloop.exceptions import MechanismError
 from closedloop.io import load_model, reference_configuration, robot_data_dir
 from closedloop.statics import solve_equilibrium
 
@@ -660,9 +661,11 @@ def massive_urdf(tmp_path, masses: dict) -> str:
         ({"arm": 1.0, "tip": 1.5, "hand": 1.0, "side": 0.7}, {"tip": "wrist"}),  # merged link
     ],
 )
-def test_undeflected_beams_keep_weight_and_gravity_torques(tmp_path, masses, beams):
-    """The rigid robot's generalized gravity on its own joints, total mass and centre of
-    mass (Pinocchio's RNEA on the model without beams), finite everywhere."""
+def test_undeflected_beams_keep_frames_weight_and_gravity_torques(tmp_path, masses, beams):
+    """The rigid robot's frame placements, generalized gravity on its own joints, total
+    mass and centre of mass (Pinocchio's RNEA on the model without beams), finite
+    everywhere. (With a beam ending at the fixed tip_joint, the frames after the moving
+    wrist were moved onto the beam's joint: 'hand' sat 0.1 m off, at the tip.)"""
     path = massive_urdf(tmp_path, masses)
     rigid = load_model(path, geometry=False)
     flex = load_model(path, beams={k: {**SECTION, "end": e} for k, e in beams.items()},
@@ -670,6 +673,16 @@ def test_undeflected_beams_keep_weight_and_gravity_torques(tmp_path, masses, bea
     q = np.array([0.3, -0.4, 0.8])
     qb = map_configuration(rigid.model, flex.model, q)
     d0, d1 = rigid.model.createData(), flex.model.createData()
+    pin.framesForwardKinematics(rigid.model, d0, q)
+    pin.framesForwardKinematics(flex.model, d1, qb)
+    for f in rigid.model.frames:
+        placed = d1.oMf[flex.model.getFrameId(f.name, f.type)]
+        np.testing.assert_allclose(
+            placed.homogeneous,
+            d0.oMf[rigid.model.getFrameId(f.name, f.type)].homogeneous,
+            atol=1e-12,
+            err_msg=f.name,
+        )
     g0 = pin.computeGeneralizedGravity(rigid.model, d0, q)
     g1 = pin.computeGeneralizedGravity(flex.model, d1, qb)
     assert np.all(np.isfinite(g1))
@@ -693,8 +706,31 @@ def test_two_beams_on_one_link_are_refused_by_link_name(tmp_path, end):
         once.with_beams({"arm": {**SECTION, "end": end}})
 
 
+@pytest.mark.parametrize("frame", ["hand", "tip"])
+def test_stiffer_beams_tend_to_the_rigid_link_as_one_over_e(tmp_path, frame):
+    """The beam's share of C falls as 1/E, towards the rigid robot's C, at the beam's
+    fixed tip and beyond the moving wrist after it. (The frames after the wrist sat on the
+    beam's tip: C at 'hand' stayed 66 % off the rigid one whatever E.) The springs on the
+    branch joints wrist and side_joint, locked by the serial default, are named by the
+    keyword, which unlocks them."""
+    path = massive_urdf(tmp_path, {"arm": 1.0})
+    rigid = load_model(path, springs={"hinge": 100.0, "wrist": 50.0, "side_joint": 80.0},
+                       geometry=False)  # fmt: skip
+    q = np.array([0.3, -0.4, 0.8])
+    expected = cl.compliance(rigid, q, frame).C
+    shares = []
+    for E in (2.1e13, 2.1e15):
+        flex = rigid.with_beams({"arm": {"E": E, "G": E / 2.6, "section": {"shape": "circle",
+                                 "d": 0.03}, "end": "tip_joint"}})  # fmt: skip
+        C = cl.compliance(flex, map_configuration(rigid.model, flex.model, q), frame).C
+        shares.append(np.abs(C - expected).max() / np.abs(expected).max())
+    assert shares[0] < 1e-3  # the beam is 100 times steel: a small share
+    np.testing.assert_allclose(shares[0] / shares[1], 100.0, rtol=1e-3)  # 1/E, to rounding
+
+
 @pytest.mark.xfail(
     strict=True,
+    raises=MechanismError,
     reason="closedloop/springs.py: a spring below 1e-14 of the stiffest counts as no spring, "
     "so a joint spring of 100 N m/rad next to a beam of E = 1e20 Pa (E A / L ~ 1e17 N/m) "
     "makes a MechanismError instead of the rigid-beam limit (the rule compares N/m with "
