@@ -35,6 +35,7 @@ from .assembly import assemble
 from .cli_common import (
     EXIT_HELP,
     Parser,
+    UsageError,
     finite_float,
     needs_gravity,
     path_text,
@@ -395,8 +396,15 @@ def _vector(v) -> str:
 
 def stiffness(args: argparse.Namespace) -> int:
     """Run ``closedloop stiffness``; returns the exit code (0 or 1)."""
+    preload = preload_from_args(args)
+    if args.wrench and preload:
+        raise UsageError(
+            "--wrench splits the deflection energy of the unloaded compliance among the "
+            "springs; under --gravity, --payload or --preload the preload's own energy terms "
+            "are not split: give --wrench without them"
+        )
     clm, state = model_from_args(args)
-    res = compliance(state, args.frame, axes=args.axes, **preload_from_args(args))
+    res = compliance(state, args.frame, axes=args.axes, **preload)
     if getattr(res, "equilibrium", None) is not None:
         from .preload import require_stable  # only with a preload
 

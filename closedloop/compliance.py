@@ -260,6 +260,7 @@ def compliance(
     if frame is None:
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)
+    check_path(path)
     state = as_configuration(model, q, length=length)
     state.require_closed()
     if gravity is not None or payloads or preload is not None:
@@ -270,7 +271,6 @@ def compliance(
         w0 = np.zeros(6) if preload is None else preload
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
         return preloaded_compliance(state.model, eq, axes, length=state.length)
-    check_path(path)
     with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error of _result
         return _compliance(state, frame, axes, path)
 
@@ -411,8 +411,8 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
     The joint deflection dq = G w stores 1/2 dq_j^T K_j dq_j in the spring of joint j (a
     number per coordinate or a block; a beam's is its virtual joint ``<link>_beam``,
     :mod:`closedloop.beams`); at equilibrium the energies sum to the work 1/2 w^T C w, so
-    the shares sum to 1. For the unloaded compliance (a preloaded one adds the preload's
-    own energy terms, which are not split).
+    the shares sum to 1. For the unloaded compliance only: a preloaded one adds the
+    preload's own energy terms, which are not split (InvalidInputError).
 
     Args:
         clm: the model of ``result``.
@@ -426,6 +426,11 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
         the rank rule, at most ``RANK_RTOL``^2 |C_s|_F |w_s|^2, about the most that a wrench along
         a direction the rank leaves out could do).
     """
+    if hasattr(result, "equilibrium"):  # a PreloadedCompliance
+        raise InvalidInputError(
+            "energy_shares splits the energy of an unloaded compliance; this one is under a "
+            "preload, whose own energy terms are not split (compute the shares without it)"
+        )
     w = check_wrench(wrench)
     size = float(np.max(np.abs(w)))
     if size == 0.0:

@@ -14,6 +14,7 @@ spring forces and dG/dq to the tangent stiffness.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -52,10 +53,12 @@ class Payload:
     offset: np.ndarray = field(default_factory=lambda: readonly(np.zeros(3)))
 
     def __post_init__(self) -> None:
-        if isinstance(self.mass, bool | np.bool_) or not (
-            isinstance(self.mass, int | float | np.integer | np.floating)
-            and np.isfinite(float(self.mass))
-        ):
+        number = isinstance(self.mass, int | float | np.integer | np.floating)
+        try:  # an int beyond the float range (10**400) does not convert
+            finite = number and math.isfinite(float(self.mass))
+        except OverflowError:
+            finite = False
+        if isinstance(self.mass, bool | np.bool_) or not finite:
             raise InvalidInputError(f"payload mass must be a finite number [kg], got {self.mass!r}")
         if self.mass < 0.0:
             raise InvalidInputError(f"payload mass must be >= 0 [kg], got {self.mass}")

@@ -239,6 +239,36 @@ def test_a_wrench_along_the_rigid_directions_has_no_energy_shares(capsys, ur5):
     assert json.loads(out)["energy_shares"] == {}
 
 
+def test_a_mass_given_twice_is_refused(capsys):
+    """The last value was taken silently."""
+    code, out, err = run(cahyman_main, capsys, "stiffness", "--gravity", "--mass", "m_M4=2",
+                         "--mass", "m_M4=3")  # fmt: skip
+    assert (code, out) == (2, "")
+    assert "--mass m_M4 given twice (2 and 3 kg)" in one_line(err, "cahyman")
+
+
+def test_energy_shares_are_refused_under_a_preload(capsys, ur5):
+    """Under a preload the shares of the springs summed to 0.297 (the preload's own energy
+    terms are not split), printed as if they were the whole; now refused, from the API
+    and from the command line (before any computation)."""
+    clm = ur5[0]
+    res = cl.compliance(clm, UR5_Q, "tool0", preload=[0.0, 0.0, 3e4, 0.0, 0.0, 0.0])
+    with pytest.raises(InvalidInputError, match="energy of an unloaded compliance"):
+        energy_shares(clm, res, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    for extra in (["--preload", "0", "0", "3e4", "0", "0", "0"], ["--gravity"]):
+        code, out, err = run(main, capsys, *UR5, "1e4", "--wrench", "1", "0", "0", "0", "0",
+                             "0", *extra)  # fmt: skip
+        assert (code, out) == (2, "")
+        assert "--wrench splits the deflection energy of the unloaded compliance" in err
+
+
+def test_an_unknown_path_is_refused_with_a_preload_too(ur5):
+    clm = ur5[0]
+    for kwargs in ({"gravity": (0.0, 0.0, -9.81)}, {"preload": [1.0, 0, 0, 0, 0, 0]}):
+        with pytest.raises(InvalidInputError, match=r"path 'bogus'; expected one of"):
+            cl.compliance(clm, UR5_Q, "tool0", path="bogus", **kwargs)
+
+
 @pytest.mark.parametrize("command", ["stiffness", "deflect"])
 def test_cahyman_masses_without_gravity_are_refused(capsys, command):
     code, out, err = run(cahyman_main, capsys, command, "--mass", "m_M4=100", "--json")

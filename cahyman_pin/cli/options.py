@@ -108,6 +108,8 @@ def _masses(args: argparse.Namespace) -> dict[str, float]:
         if name not in MASS_NAMES or not value:
             raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "
                              f"{', '.join(MASS_NAMES)}")  # fmt: skip
+        if name in out:
+            raise UsageError(f"--mass {name} given twice ({out[name]:g} and {value} kg)")
         try:
             out[name] = finite_float(value)
         except argparse.ArgumentTypeError as e:
