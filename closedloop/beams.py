@@ -118,7 +118,10 @@ def section_from_spec(beam: str, spec) -> Section:
     spec = dict(spec)
     y_axis = spec.pop("y_axis", None)
     if y_axis is not None:
-        y = np.asarray([float(v) for v in y_axis]) if isinstance(y_axis, list | tuple) else None
+        try:
+            y = np.asarray([float(v) for v in y_axis]) if isinstance(y_axis, list | tuple) else None
+        except (TypeError, ValueError):
+            y = None
         if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
             raise BeamError(beam, f"section y_axis is {y_axis!r}; expected 3 numbers, not all 0")
         y_axis = tuple(y)
@@ -491,6 +494,30 @@ def _matrix(beam: str, what: str, value) -> np.ndarray:
     return 0.5 * (K + K.T)
 
 
+def _tip_stiffness(beam: str, stiffness, what: str) -> np.ndarray:
+    """(6, 6) symmetric tip stiffness ``stiffness()``, once it is finite and positive
+    definite in floating point.
+
+    Raises:
+        BeamError: ``what`` (the values the stiffness came from) gives a compliance or a
+            stiffness beyond the float range, or one that rounding leaves indefinite.
+    """
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        try:
+            K = stiffness()
+            K = 0.5 * (K + K.T)
+            np.linalg.cholesky(K)  # also refuses NaN
+        except (ZeroDivisionError, OverflowError, np.linalg.LinAlgError):
+            K = None
+    if K is None or not np.isfinite(K).all():
+        raise BeamError(
+            beam,
+            f"{what} give a tip compliance or stiffness beyond the floating point range or "
+            "singular to rounding; expected a material and sizes of a real link",
+        )
+    return K
+
+
 def beam_stiffness(
     model: pin.Model, beam: str, spec: Mapping, shapes: list[Shape] | None = None
 ) -> tuple[str | None, np.ndarray]:
@@ -513,7 +540,11 @@ def beam_stiffness(
         if len(given) == 2 or any(k in spec for k in ("E", "G", "section", "theory")):
             raise BeamError(beam, f"give either {given[0]} or E, G and section, not both")
         M = _matrix(beam, given[0], spec[given[0]])
-        return site.end, M if given[0] == "stiffness_6x6" else np.linalg.inv(M)
+        if given[0] == "stiffness_6x6":
+            return site.end, M
+        return site.end, _tip_stiffness(
+            beam, lambda: np.linalg.inv(M), f"compliance_6x6 {M.tolist()}"
+        )
     missing = [k for k in ("E", "G", "section") if k not in spec]
     if missing:
         raise BeamError(beam, f"missing {missing}; expected E, G, section (or stiffness_6x6)")
@@ -539,9 +570,17 @@ def beam_stiffness(
     if theory == "timoshenko" and None in section.kappa(E / (2 * G) - 1):
         raise BeamError(beam, "an explicit section needs kappa_y and kappa_z for timoshenko")
     R_LB = beam_axes(beam, M_LE.translation, section.y_axis)
-    K_b = np.linalg.inv(clamped_compliance(length, E, G, section, theory))
-    K = transport_stiffness(K_b, R_LB.T @ M_LE.rotation)
-    return site.end, 0.5 * (K + K.T)
+    K = _tip_stiffness(
+        beam,
+        lambda: transport_stiffness(
+            np.linalg.inv(clamped_compliance(length, E, G, section, theory)),
+            R_LB.T @ M_LE.rotation,
+        ),
+        f"E = {E:.4g} Pa, G = {G:.4g} Pa, length {length:.4g} m and the section (A = "
+        f"{section.A:.4g} m^2, Iy = {section.Iy:.4g}, Iz = {section.Iz:.4g}, "
+        f"J = {section.J:.4g} m^4)",
+    )
+    return site.end, K
 
 
 def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None):

@@ -466,6 +466,10 @@ def test_ur5_beams_small_load_statics(ur5_beams):
 
 
 # ------------------------------------------------------------------------ bad input
+#: The message of a beam whose tip compliance or stiffness leaves the float range.
+BEYOND = r"beam 'arm': E = .* Pa, .* give a tip compliance or stiffness beyond the floating"
+
+
 def _tip_file(tmp_path):
     return urdf_of(tmp_path, "bad", ["ground", "arm", "tip"], [
         ("hinge", "ground", "arm", (0, 0, 0.1), (0, 0, 0), "revolute", (0, 0, 1)),
@@ -491,10 +495,20 @@ def _tip_file(tmp_path):
          r"beam 'arm': section y_axis \[2.0, 0.0, 0.0\] is parallel to the beam"),
         ({"section": {"A": 1e-4, "Iy": 1e-9, "Iz": 1e-9, "J": 2e-9}, "theory": "timoshenko"},
          r"beam 'arm': an explicit section needs kappa_y and kappa_z"),
+        ({"section": {"shape": "rectangle", "b": 0.01, "h": 0.02, "y_axis": ["a", 0, 1]}},
+         r"beam 'arm': section y_axis is \['a', 0, 1\]; expected 3 numbers"),  # ValueError
+        # sizes and materials beyond the float range: ZeroDivisionError, LinAlgError, a NaN
+        # stiffness block (an indefinite one, after transport, by rounding)
+        ({"E": 1e-300, "G": 4e-301, "section": {"shape": "circle", "d": 1e-10}}, BEYOND),
+        ({"E": 1e300, "G": 4e299, "section": {"shape": "circle", "d": 1e10}}, BEYOND),
+        ({"E": 1e-300, "G": 4e-301, "section": {"shape": "circle", "d": 0.01}}, BEYOND),
+        ({"E": None, "G": None, "section": None, "compliance_6x6": 1e-320 * np.eye(6)},
+         r"beam 'arm': compliance_6x6 .* give a tip compliance or stiffness beyond"),
     ],
 )  # fmt: skip
 def test_bad_beams_are_refused(tmp_path, beam, match):
     spec = {"end": "tip_joint", **STEEL, "section": {"shape": "circle", "d": 0.02}, **beam}
+    spec = {k: v for k, v in spec.items() if v is not None}
     with pytest.raises(BeamError, match=match):
         load_model(_tip_file(tmp_path), beams={"arm": spec}, geometry=False)
 
