@@ -249,7 +249,7 @@ def _parse(build: Callable, path: Path, what: str):
         os.dup2(tmp.fileno(), 2)
         try:
             result = build()
-        except (RuntimeError, ValueError) as e:
+        except (RuntimeError, ValueError, IndexError) as e:  # IndexError: a missing map key
             failure = e
         finally:
             os.dup2(saved, 2)
@@ -359,6 +359,17 @@ def _check_limits(model: pin.Model, path: Path) -> None:
 
 
 def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+    try:
+        return _read_mjcf_tree(path, side_file, geometry)
+    except RecursionError:  # the readers follow the bodies and defaults recursively
+        raise ModelFileError(
+            f"MJCF file {str(path)!r}: its elements (bodies, default classes) are nested too "
+            f"deep for the reader (Python's recursion limit, {sys.getrecursionlimit()}); "
+            "expected a shallower tree"
+        ) from None
+
+
+def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
     extras = read_mjcf_extras(path)  # the file checked before Pinocchio reads it
     with tempfile.TemporaryDirectory() as folder:  # Pinocchio reads a copy (closedloop.mjcf)
         parsed = str(pinocchio_copy(path, Path(folder)))

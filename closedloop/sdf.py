@@ -432,7 +432,10 @@ def _visuals(r: _Reader, model: pin.Model, body) -> pin.GeometryModel:
                 mesh = _mesh_file(r, r.text(shape, "uri", what), what)
                 if shape.find("scale") is not None:
                     scale = r.floats(shape.find("scale"), f"{what} scale", (3,))
-                geom = coal.MeshLoader().load(mesh, scale)
+                try:
+                    geom = coal.MeshLoader().load(mesh, scale)
+                except ValueError as e:  # a file that is not a mesh, a zero scale
+                    r.fail(f"{what}: mesh {mesh!r} cannot be loaded ({' '.join(str(e).split())})")
             elif shape.tag == "box":
                 geom = coal.Box(*r.floats(shape.find("size"), f"{what} size", (3,)))
             elif shape.tag == "cylinder":

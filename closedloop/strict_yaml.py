@@ -9,6 +9,8 @@ joint. Here both are errors; ``.inf`` (YAML's infinity) stays infinity.
 from __future__ import annotations
 
 import math
+import sys
+from collections.abc import Hashable
 
 import yaml
 
@@ -21,6 +23,11 @@ def _mapping(loader: _Loader, node: yaml.MappingNode) -> dict:
     seen = set()
     for key_node, _ in node.value:
         key = loader.construct_object(key_node, deep=True)
+        if not isinstance(key, Hashable):
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key {key!r} is a {type(key).__name__}; expected a name or a number",
+                key_node.start_mark,
+            )  # fmt: skip
         if key in seen:
             raise yaml.constructor.ConstructorError(
                 None, None, f"key {key!r} is given twice", key_node.start_mark
@@ -42,18 +49,43 @@ def _float(loader: _Loader, node: yaml.ScalarNode) -> float:
     return value
 
 
+def _int(loader: _Loader, node: yaml.ScalarNode) -> int:
+    try:  # Python refuses to read an int of more than 4300 digits (ValueError)
+        value = loader.construct_yaml_int(node)
+        beyond = abs(value) > sys.float_info.max
+    except ValueError:
+        beyond = True
+    if beyond:
+        raise yaml.constructor.ConstructorError(
+            None,
+            None,
+            f"number {node.value[:40]}{'...' if len(node.value) > 40 else ''} is beyond the "
+            "floating point range (about 1.8e308)",
+            node.start_mark,
+        )
+    return value
+
+
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
 _Loader.add_constructor("tag:yaml.org,2002:float", _float)
+_Loader.add_constructor("tag:yaml.org,2002:int", _int)
 
 
 def load(text: str):
     """The document of ``text`` (YAML), with the checks of the module docstring.
 
     Raises:
-        yaml.YAMLError: invalid YAML, a repeated key, an overflowing number; the message
-            gives the line.
+        yaml.YAMLError: invalid YAML, a repeated key, a key that is a list or a mapping,
+            an overflowing number, nesting too deep for the reader; the message gives the
+            line where it can.
     """
-    return yaml.load(text, Loader=_Loader)
+    try:
+        return yaml.load(text, Loader=_Loader)
+    except RecursionError:
+        raise yaml.YAMLError(
+            f"nested too deep for the reader (Python's recursion limit, "
+            f"{sys.getrecursionlimit()}); expected a shallower document"
+        ) from None
 
 
 def overflowing(text: str) -> bool:

@@ -146,6 +146,12 @@ def test_assembly_without_passive_coordinates_is_an_assembly_error(fourbar_urdf,
         ("crank: 5\ncrank: 7\n", "key 'crank' is given twice"),
         ("crank: 1.0e+400\n", "number 1.0e[+]400 is beyond the floating point range"),
         ("crank: 1e400\n", "'1e400', beyond the floating point range"),
+        # each of the next was a Python traceback (TypeError, OverflowError, ValueError,
+        # RecursionError) from the command line, exit 1
+        ("crank: 50\n? [a, b]\n: 3\n", r"key \['a', 'b'\] is a list; expected a name"),
+        ("crank: " + "9" * 400 + "\n", "number 9999.*... is beyond the floating point range"),
+        ("crank: " + "9" * 5000 + "\n", "number 9999.*... is beyond the floating point range"),
+        ("other: " + "[" * 3000 + "]" * 3000 + "\n", "nested too deep for the reader"),
     ],
 )
 def test_springs_files_refuse_repeated_joints_and_overflowing_numbers(tmp_path, text, match):

@@ -509,6 +509,19 @@ def test_missing_mesh_is_named(tmp_path):
     assert load_model(write(tmp_path, text), geometry=False).visual_model is None
 
 
+def test_a_mesh_that_cannot_be_loaded_is_named(tmp_path):
+    """A file that exists but is no mesh: coal's ValueError was a traceback."""
+    (tmp_path / "junk.stl").write_bytes(np.random.default_rng(0).bytes(3000))
+    text = fourbar_sdf().replace(
+        '<link name="ground">',
+        '<link name="ground"><visual name="v"><geometry><mesh><uri>junk.stl</uri>'
+        "</mesh></geometry></visual>",
+    )
+    with pytest.raises(ModelFileError, match=r"visual 0 of link 'ground': mesh '.*junk.stl' "
+                       r"cannot be loaded"):  # fmt: skip
+        load_model(write(tmp_path, text))
+
+
 # ----------------------------------------------------------------- pose and axis forms
 PENDULUM = (
     '<sdf version="{v}"><model name="m"><link name="g"/>{frame}'
