@@ -67,7 +67,9 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             ``active`` other than true/false, a repeated joint, body or equality name, an
             unknown joint type, a hinge or slide whose axis is the zero vector, a range or
             axis that is not numbers, a range whose lower bound is above its upper one, a
-            joint with a nonzero stiffness but no name. The message names the file.
+            joint with a nonzero stiffness but no name, a malformed position or orientation
+            (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor. The message names the
+            file.
     """
     where = f"robot file {str(path)!r}"
     root = _parse_xml(path, where)
@@ -80,6 +82,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 f"parser drops them); write the bodies without <{tag}>"
             )
     equalities = _equalities(root, where)
+    _check_numbers(root, where)
     joints = _joints(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
     for kind, names in (
@@ -268,6 +271,31 @@ def place_free_joints(model: pin.Model, constraints: list) -> list:
         M2 = data.oMi[c.joint2_id].inverse() * oM1
         out.append(type(c)(model, c.joint1_id, c.joint1_placement, c.joint2_id, M2))
     return out
+
+
+#: Numeric attributes of a fixed count, on any element: Pinocchio 4.1 reads a malformed
+#: one (a word, NaN, too few numbers) as zeros, the largest double or uninitialised memory.
+NUMERIC_ATTRIBUTES = {"pos": 3, "quat": 4, "euler": 3, "axisangle": 4, "xyaxes": 6, "zaxis": 3,
+                      "anchor": 3, "relpose": 7, "fromto": 6}  # fmt: skip
+#: Of those, the ones whose leading values may not all be zero (a rotation needs them).
+NONZERO = {"quat": 4, "axisangle": 3, "zaxis": 3}
+
+
+def _check_numbers(root: ET.Element, where: str) -> None:
+    """:class:`ModelFileError` for a malformed :data:`NUMERIC_ATTRIBUTES` value, a zero
+    quaternion or rotation axis, or a ``<connect>`` without its ``anchor``."""
+    for e in root.iter():
+        what = f"<{e.tag}>" + (f" {e.get('name')!r}" if e.get("name") else "")
+        for attr, count in NUMERIC_ATTRIBUTES.items():
+            text = e.get(attr)
+            if text is None:
+                continue
+            values = _numbers(text, count, where, f"{attr} of {what}")
+            if attr in NONZERO and not values[: NONZERO[attr]].any():
+                raise ModelFileError(f"{where}: {attr} of {what} is {text!r}; expected a rotation "
+                                     "(not all zeros)")  # fmt: skip
+        if e.tag == "connect" and e.get("anchor") is None:
+            raise ModelFileError(f'{where}: {what} has no anchor; expected anchor="x y z"')
 
 
 def _parse_xml(path: Path, where: str) -> ET.Element:

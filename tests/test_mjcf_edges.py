@@ -347,3 +347,23 @@ def test_bodies_nested_too_deep_and_unknown_classes_are_model_file_errors(fourba
     refused(write(tmp_path, mujoco(deep + "</body>" * 1200)), "nested too deep for the reader")
     path = fourbar_with(fourbar_mjcf, tmp_path, 'name="coupler"', 'name="coupler" class="nosuch"')
     refused(path, r"cannot be parsed: unordered_map::at")
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ('pos="0 0 0.1"', 'pos="a 0 0.1"', r"pos of <body> 'crank_end' is 'a 0 0.1'; expected 3"),
+        ('pos="0 0 0.1"', 'pos="0 0.1"', r"pos of <body> 'crank_end' is '0 0.1'; expected 3"),
+        ('pos="0 0 0.1"', 'pos="0 0 1e999"', r"pos of <body> 'crank_end' is '0 0 1e999'"),
+        ('pos="0 0 0.1"', 'pos="0 0 0.1" quat="0 0 0 0"', r"quat of <body> 'crank_end' is "
+         r"'0 0 0 0'; expected a rotation"),
+        ('anchor="0.3 0 0"', 'anchor="nan 0 0"', r"anchor of <connect> 'closedloop1' is "),
+        ('anchor="0.3 0 0"', 'anchor="0.3,0,0"', r"anchor of <connect> 'closedloop1' is "),
+        ('anchor="0.3 0 0"', "", r"<connect> 'closedloop1' has no anchor"),
+    ],
+)  # fmt: skip
+def test_malformed_positions_and_anchors_are_refused(fourbar_mjcf, tmp_path, old, new, match):
+    """Pinocchio 4.1 read them as zeros, the largest double or uninitialised memory (a body
+    at z = 2.2e243, an anchor at 6.9e-310): the loops then failed to close (exit 3), or
+    closed at the wrong point."""
+    refused(fourbar_with(fourbar_mjcf, tmp_path, old, new), match)
