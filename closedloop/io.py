@@ -38,6 +38,7 @@ import math
 import os
 import sys
 import tempfile
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -321,6 +322,7 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     # mimic joints follow their leader (nq = nv = 0), as the file says
     build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
     model = _parse(build, shown or path, "robot file")
+    _check_connected(model, path, shown or path)
     _check_limits(model, shown or path)
     visual = _geometry(
         geometry,
@@ -342,6 +344,18 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     ]
     springs = ball_springs({**spec.springs, **blocks}, spec.balls)
     return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual)
+
+
+def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
+    """:class:`ModelFileError` for links of the URDF file ``path`` that the model lacks:
+    those whose parent joints form a cycle away from the root (Pinocchio drops them)."""
+    links = [link.get("name") for link in ET.parse(path).getroot().iter("link")]
+    lost = [name for name in links if name and not model.existBodyName(name)]
+    if lost:
+        raise ModelFileError(
+            f"robot file {str(shown)!r}: links {lost} are not connected to the root (their "
+            "parent joints form a cycle); expected a tree, loops closed by a closure file"
+        )
 
 
 def _check_limits(model: pin.Model, path: Path) -> None:

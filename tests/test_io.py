@@ -337,6 +337,21 @@ def test_a_robot_name_given_as_a_path_says_how_to_load_it_by_name(name, hint):
         load_model(name)
 
 
+def test_links_in_a_cycle_away_from_the_root_are_refused(tmp_path):
+    """Pinocchio drops links whose parent joints form a cycle not attached to the root:
+    the model kept j1 and j2 and answered, without b, c, jx, jy."""
+    limit = '<limit lower="-3" upper="3" effort="1" velocity="1"/>'
+    joints = "".join(
+        f'<joint name="{n}" type="revolute"><parent link="{p}"/><child link="{c}"/>'
+        f'<axis xyz="0 0 1"/>{limit}</joint>'
+        for n, p, c in (("j1", "base", "a"), ("j2", "a", "tip"), ("jx", "c", "b"), ("jy", "b", "c"))
+    )
+    links = "".join(f'<link name="{n}"/>' for n in ("base", "a", "tip", "b", "c"))
+    path = write(tmp_path, "cyc.urdf", f'<robot name="cyc">{links}{joints}</robot>')
+    with pytest.raises(ModelFileError, match=r"links \['b', 'c'\] are not connected to the root"):
+        load_model(path)
+
+
 def test_an_unreadable_robot_file_is_named_as_unreadable(tmp_path, monkeypatch):
     """Pinocchio says "does not exist" of a URDF it cannot read. The file is made
     unreadable by its mode where that holds (not for root, who reads it anyway: there the
