@@ -241,8 +241,10 @@ def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
 def _parse(build: Callable, path: Path, what: str):
     """Run a Pinocchio parser; a failure becomes a one-line :class:`ModelFileError`.
 
-    What the parser's native code writes on file descriptor 2 (urdfdom's "Error:" lines)
-    is captured: folded into the message on failure, passed on to ``sys.stderr`` otherwise.
+    What the parser's native code writes on file descriptor 2 is captured. urdfdom's
+    "Error:" lines are folded into the message of a failure, and make one of a success
+    (urdfdom then has dropped the element, e.g. an inertial whose mass is not a number);
+    other lines are passed on to ``sys.stderr``.
     """
     sys.stderr.flush()
     saved, failure = os.dup(2), None
@@ -257,12 +259,12 @@ def _parse(build: Callable, path: Path, what: str):
             os.close(saved)
         tmp.seek(0)
         native = tmp.read().decode(errors="replace")
-    if failure is None:
-        sys.stderr.write(native)
-        return result
     details = [ln.strip() for ln in native.splitlines() if ln.strip().startswith("Error:")]
     detail = "; ".join(ln.removeprefix("Error:").strip() for ln in details[-2:])
-    msg = " ".join(f"{failure} {detail}".split())
+    if failure is None and not details:
+        sys.stderr.write(native)
+        return result
+    msg = " ".join(f"{failure or 'an element is dropped:'} {detail}".split())
     raise ModelFileError(f"{what} {str(path)!r} cannot be parsed: {msg}")
 
 

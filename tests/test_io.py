@@ -337,6 +337,19 @@ def test_a_robot_name_given_as_a_path_says_how_to_load_it_by_name(name, hint):
         load_model(name)
 
 
+@pytest.mark.parametrize("bad", ['<mass value="nan"/>', '<mass value="abc"/>'])
+def test_an_element_urdfdom_drops_is_refused(fourbar_urdf, fourbar_yaml, tmp_path, capfd, bad):
+    """urdfdom printed its "Error:" lines on stderr and dropped the inertial (the link's
+    mass became 0, which changes the weight); now one message, no native output."""
+    text = Path(fourbar_urdf).read_text()
+    assert '<mass value="0.1"/>' in text
+    path = write(tmp_path, "m.urdf", text.replace('<mass value="0.1"/>', bad, 1))
+    with pytest.raises(ModelFileError, match=r"cannot be parsed: an element is dropped: "
+                       r"Inertial: mass .* is not a float"):  # fmt: skip
+        load_model(path, fourbar_yaml)
+    assert capfd.readouterr().err == ""
+
+
 def test_links_in_a_cycle_away_from_the_root_are_refused(tmp_path):
     """Pinocchio drops links whose parent joints form a cycle not attached to the root:
     the model kept j1 and j2 and answered, without b, c, jx, jy."""
