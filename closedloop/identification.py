@@ -295,6 +295,16 @@ def _groups(clm: ClosedLoopModel, fit) -> list[tuple[str, ...]]:
             raise InvalidInputError(
                 f"group {group} mixes block springs and numbers; expected one kind"
             )
+        units = {
+            n: ("N/m" if clm.linear_coordinates[clm.joint_v_slice(n)].all() else "N m/rad")
+            for n in group
+            if n not in clm.spring_blocks
+        }
+        if len(set(units.values())) > 1:
+            raise InvalidInputError(
+                f"group {group} ties springs of different units ({units}); a value in N/m "
+                "and one in N m/rad are not one number: fit them apart"
+            )
         groups.append(group)
     seen = [n for g in groups for n in g]
     if len(set(seen)) != len(seen):

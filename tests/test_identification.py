@@ -157,7 +157,10 @@ def test_bad_fits_are_refused(fourbar):
     with pytest.raises(cl.InvalidInputError, match=r"'coupler' needs a finite start value > 0"):
         identify(clm, one, "P", ["coupler"])
     with pytest.raises(cl.InvalidInputError, match=r"appears in two fitted parameters"):
-        identify(clm, one, "P", ["crank", ("crank", "rocker_axial")])
+        identify(clm, one, "P", ["crank_axial", ("crank_axial", "rocker_axial")])
+    # one number in N m/rad and N/m at once (it was fitted, exit 0)
+    with pytest.raises(cl.InvalidInputError, match=r"ties springs of different units"):
+        identify(clm, one, "P", [("crank", "crank_axial")])
 
 
 # ------------------------------------------------------------------ audit: the edges
