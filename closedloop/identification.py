@@ -158,7 +158,7 @@ def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
         InvalidInputError: a bad measurement (its index is named).
     """
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8-sig")  # a spreadsheet's BOM, if any
         if Path(path).suffix.lower() == ".csv":
             frame, items = _csv_items(str(path), text)
         else:
@@ -195,9 +195,15 @@ def _yaml_items(path: str, doc) -> tuple[str, list[dict]]:
 def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     reader = csv.DictReader(io.StringIO(text), skipinitialspace=True)
     header, rows = list(reader.fieldnames or []), list(reader)
+    repeated = sorted({c for c in header if header.count(c) > 1})
+    if repeated:
+        raise ModelFileError(f"{path!r}: column(s) {repeated} given twice; expected each once")
     for i, row in enumerate(rows):
         if None in row or None in row.values():
             raise ModelFileError(f"{path!r}: row {i} has not one value per column")
+        empty = [c for c, v in row.items() if not v.strip()]
+        if empty:
+            raise ModelFileError(f"{path!r}: row {i} has no value in column(s) {empty}")
     sd = ["sd"] if "sd" in header else list(CSV_SD)
     config = [c for c in header if c.startswith(("q_", "actuated_"))]
     kind = config[0].split("_")[0] if config else "q"
@@ -225,11 +231,19 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     return frames[0], items
 
 
-def _number(value):
+def _number(value, depth: int = 0):
     """YAML 1.1 reads 1e-6 as a string, CSV gives strings: numbers, and lists of them, as
-    floats."""
+    floats.
+
+    Raises:
+        ValueError: a boolean (YAML's true/false), or a list inside a list.
+    """
     if isinstance(value, list):
-        return [_number(v) for v in value]
+        if depth:
+            raise ValueError(f"{value!r} is a list inside a list; expected numbers")
+        return [_number(v, 1) for v in value]
+    if isinstance(value, bool):
+        raise ValueError(f"{value!r} is not a number")
     return float(value) if isinstance(value, str) else value
 
 

@@ -172,3 +172,48 @@ def test_a_missing_file_and_an_unknown_frame_exit_2(tmp_path, exact, fourbar_urd
     code, _, err = _run(capsys, fourbar_urdf, "--closures", fourbar_yaml, "--measurements",
                         path, "--fit", "crank")  # fmt: skip
     assert code == 2 and "nowhere" in err and err.count("\n") == 1
+
+
+def test_a_spreadsheet_csv_with_a_bom_reads_as_without(tmp_path, exact):
+    """Excel's "CSV UTF-8" starts with a byte order mark: the header was '\\ufeffframe'."""
+    _, rows = exact
+    plain = _csv(tmp_path / "plain.csv", rows)
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    (frame, read), (frame0, read0) = read_measurements(bom), read_measurements(plain)
+    assert frame == frame0 == "P" and len(read) == len(read0)
+    for a, b in zip(read, read0, strict=True):
+        np.testing.assert_array_equal(a.wrench, b.wrench)
+        np.testing.assert_array_equal(a.twist, b.twist)
+
+
+def test_csv_columns_given_twice_or_empty_are_named(tmp_path, exact):
+    """A repeated column: csv.DictReader kept the last one. An empty cell: "could not
+    convert string to float: ''", without the column."""
+    _, rows = exact
+    header, first, *rest = _csv(tmp_path / "m.csv", rows).read_text().splitlines()
+    twice = tmp_path / "twice.csv"
+    twice.write_text("\n".join([header + ",fx", *(row + ",9" for row in (first, *rest))]) + "\n")
+    with pytest.raises(cl.ModelFileError, match=r"column\(s\) \['fx'\] given twice"):
+        read_measurements(twice)
+    cells = first.split(",")
+    cells[header.split(",").index("fy")] = ""
+    empty = tmp_path / "empty.csv"
+    empty.write_text("\n".join([header, ",".join(cells), *rest]) + "\n")
+    with pytest.raises(cl.ModelFileError, match=r"row 0 has no value in column\(s\) \['fy'\]"):
+        read_measurements(empty)
+
+
+@pytest.mark.parametrize(
+    ("sd", "wrench", "match"),
+    [("true", "[1, 0, 0, 0, 0, 0]", r"measurement 0 .*True is not a number"),
+     ("1e-7", "[[1, 0, 0], [0, 0, 0]]", r"measurement 0 .*is a list inside a list")],
+)  # fmt: skip
+def test_a_yaml_boolean_or_nested_list_is_refused(tmp_path, sd, wrench, match):
+    """sd: true was read as 1.0 and a nested wrench flattened."""
+    (tmp_path / "m.yaml").write_text(
+        f"frame: P\nmeasurements:\n  - {{q: [0, 0, 0, 0, 0], wrench: {wrench}, "
+        f"twist: [0, 0, 0, 0, 0, 0], sd: {sd}}}\n"
+    )
+    with pytest.raises(cl.InvalidInputError, match=match):
+        read_measurements(tmp_path / "m.yaml")
