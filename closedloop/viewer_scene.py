@@ -399,10 +399,11 @@ def deflection_scene(
     res = compliance(clm, q, frame, "world")
     q = res.q
     ramp = np.linspace(0.0, 1.0, int(frames))
-    if nonlinear:
-        equilibria = [solve_equilibrium(clm, q, frame, t * w) for t in ramp[1:]]
+    if nonlinear:  # the whole wrench first: an EquilibriumError names it, not a fraction
+        equilibrium = solve_equilibrium(clm, q, frame, w)
+        equilibria = [solve_equilibrium(clm, q, frame, t * w) for t in ramp[1:-1]]
         steps = [np.zeros(clm.model.nv), *(e.joint_deflection for e in equilibria)]
-        equilibrium = equilibria[-1]
+        steps.append(equilibrium.joint_deflection)
     else:
         dq_lin = res.joint_deflection(w)
         steps, equilibrium = [t * dq_lin for t in ramp], None

@@ -27,7 +27,7 @@ from cahyman_pin.model import cahyman_model
 from closedloop.assembly import ASSEMBLY_TOL, assemble
 from closedloop.beams import map_configuration
 from closedloop.compliance import compliance
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import EquilibriumError, InvalidInputError
 from closedloop.io import load_model
 from closedloop.kinematics import closure_residual
 from closedloop.statics import solve_equilibrium
@@ -241,6 +241,14 @@ def test_nonlinear_option_uses_the_static_solver(fourbar):
     linear = deflection_scene(clm, q, "P", w).dq
     assert scene.nonlinear
     assert np.linalg.norm(scene.dq - linear) > 0.1 * np.linalg.norm(linear)
+
+
+def test_a_nonlinear_view_beyond_the_limit_load_names_the_wrench_given(fourbar):
+    """The ramp solved its first fraction first: the error named 1/24 of the wrench."""
+    clm, q = fourbar
+    w = np.array([1e6, 0.0, -2e6, 0.0, 0.0, 0.0])
+    with pytest.raises(EquilibriumError, match=r"wrench \[1000000.0, 0.0, -2000000.0, 0.0"):
+        deflection_scene(clm, q, "P", w, nonlinear=True)
 
 
 def test_bad_inputs_raise(fourbar):
