@@ -160,6 +160,13 @@ def _check_springs(springs, where: str) -> dict[str, Stiffness]:
     return out
 
 
+def _value(doc: dict, key: str, empty):
+    """``doc[key]``, or ``empty`` when it is absent or null (a ``0`` or ``false`` stays, for
+    the type check to refuse)."""
+    value = doc.get(key)
+    return empty if value is None else value
+
+
 def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
     if key not in doc:
         return None
@@ -187,8 +194,7 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         raise ModelFileError(
             f"{where}: unknown key(s) {sorted(map(str, unknown))}; expected {', '.join(keys)}"
         )
-    pairs = doc.get("closed_loop") or []
-    types = doc.get("type") or []
+    pairs, types = _value(doc, "closed_loop", []), _value(doc, "type", [])
     if not isinstance(pairs, list) or any(
         not isinstance(p, list) or len(p) != 2 or not all(isinstance(n, str) for n in p)
         for p in pairs
@@ -208,9 +214,9 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),
         actuated=_name_list(doc, "name_mot", where),
-        springs=_check_springs(doc.get("springs") or {}, where),
+        springs=_check_springs(_value(doc, "springs", {}), where),
         locked=_name_list(doc, "locked", where) or (),
-        beams=_check_beams(doc.get("beams") or {}, where),
+        beams=_check_beams(_value(doc, "beams", {}), where),
         balls=_name_list(doc, "balls", where) or (),
     )
 

@@ -264,6 +264,10 @@ FOURBAR_CLOSURES = (
         (FOURBAR_CLOSURES + "springs: {crank: .nan}\n", "stiffness of joint 'crank' is nan"),
         (FOURBAR_CLOSURES + "springs: {crank: stiff}\n", "'stiff'; expected a number"),
         (FOURBAR_CLOSURES + "springs: {crank: yes}\n", "True; expected a number"),
+        # false-like values were read as "none"
+        ("closed_loop: 0\n", r"closed_loop must be a list .*got 0"),
+        (FOURBAR_CLOSURES + "springs: false\n", "springs must be a mapping"),
+        (FOURBAR_CLOSURES + "beams: 0\n", r"beams must be a mapping .*got 0"),
     ],
 )
 def test_malformed_closure_file(fourbar_urdf, tmp_path, text, match):
