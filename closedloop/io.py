@@ -331,6 +331,7 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
     model = _parse(build, shown or path, "robot file")
     _check_connected(model, path, shown or path)
+    _check_masses(model, shown or path)
     _check_limits(model, shown or path)
     visual = _geometry(
         geometry,
@@ -366,6 +367,18 @@ def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
         )
 
 
+def _check_masses(model: pin.Model, path: Path) -> None:
+    """:class:`ModelFileError` for a body of negative mass (the links a joint carries,
+    merged by Pinocchio): the weight would pull it up."""
+    for j in range(1, model.njoints):
+        mass = model.inertias[j].mass
+        if not mass >= 0.0:
+            raise ModelFileError(
+                f"robot file {str(path)!r}: the links of joint {model.names[j]!r} have mass "
+                f"{mass:.6g} kg; expected masses >= 0"
+            )
+
+
 def _check_limits(model: pin.Model, path: Path) -> None:
     """:class:`ModelFileError` for a joint whose lower position limit exceeds its upper one."""
     lower, upper = model.lowerPositionLimit, model.upperPositionLimit
@@ -399,6 +412,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
             lambda: pin.buildModelAndConstraintsFromMJCF(parsed), path, "robot file"
         )
         match_parsed(model, len(points) + len(welds), extras, path)
+        _check_masses(model, path)
         constraints = place_free_joints(model, [*points, *welds])
         visual = _geometry(
             geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
@@ -419,6 +433,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
 
 def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.sdf
+    _check_masses(robot.model, path)
     spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
     springs = {**robot.springs, **spec.springs}
     return _Tree(

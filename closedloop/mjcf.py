@@ -283,7 +283,8 @@ NONZERO = {"quat": 4, "axisangle": 3, "zaxis": 3}
 
 def _check_numbers(root: ET.Element, where: str) -> None:
     """:class:`ModelFileError` for a malformed :data:`NUMERIC_ATTRIBUTES` value, a zero
-    quaternion or rotation axis, or a ``<connect>`` without its ``anchor``."""
+    quaternion or rotation axis, a mass that is not a number >= 0, or a ``<connect>``
+    without its ``anchor``."""
     for e in root.iter():
         what = f"<{e.tag}>" + (f" {e.get('name')!r}" if e.get("name") else "")
         for attr, count in NUMERIC_ATTRIBUTES.items():
@@ -294,6 +295,12 @@ def _check_numbers(root: ET.Element, where: str) -> None:
             if attr in NONZERO and not values[: NONZERO[attr]].any():
                 raise ModelFileError(f"{where}: {attr} of {what} is {text!r}; expected a rotation "
                                      "(not all zeros)")  # fmt: skip
+        if (
+            e.get("mass") is not None
+            and not _numbers(e.get("mass"), 1, where, f"mass of {what}")[0] >= 0
+        ):
+            raise ModelFileError(f"{where}: mass of {what} is {e.get('mass')!r}; expected >= 0 kg "
+                                 "(Pinocchio reads a negative one as 0)")  # fmt: skip
         if e.tag == "connect" and e.get("anchor") is None:
             raise ModelFileError(f'{where}: {what} has no anchor; expected anchor="x y z"')
 

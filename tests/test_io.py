@@ -354,6 +354,16 @@ def test_an_element_urdfdom_drops_is_refused(fourbar_urdf, fourbar_yaml, tmp_pat
     assert capfd.readouterr().err == ""
 
 
+def test_a_negative_mass_is_refused(fourbar_urdf, fourbar_yaml, fourbar_mjcf, tmp_path):
+    """Accepted in every format: under gravity the link was pulled up."""
+    text = Path(fourbar_urdf).read_text().replace('<mass value="0.1"/>', '<mass value="-2"/>', 1)
+    with pytest.raises(ModelFileError, match=r"the links of joint 'crank' have mass -2 kg"):
+        load_model(write(tmp_path, "m.urdf", text), fourbar_yaml)
+    text = Path(fourbar_mjcf).read_text().replace('mass="0.1"', 'mass="-2"', 1)
+    with pytest.raises(ModelFileError, match=r"mass of <inertial> is .-2.; expected >= 0 kg"):
+        load_model(write(tmp_path, "m.xml", text))
+
+
 def test_links_in_a_cycle_away_from_the_root_are_refused(tmp_path):
     """Pinocchio drops links whose parent joints form a cycle not attached to the root:
     the model kept j1 and j2 and answered, without b, c, jx, jy."""
