@@ -369,8 +369,8 @@ def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
 
 def _check_masses(model: pin.Model, path: Path) -> None:
     """:class:`ModelFileError` for a body of negative mass (the links a joint carries,
-    merged by Pinocchio): the weight would pull it up."""
-    for j in range(1, model.njoints):
+    merged by Pinocchio; the ground's too): the weight would pull it up."""
+    for j in range(model.njoints):
         mass = model.inertias[j].mass
         if not mass >= 0.0:
             raise ModelFileError(

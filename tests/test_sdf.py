@@ -509,6 +509,17 @@ def test_missing_mesh_is_named(tmp_path):
     assert load_model(write(tmp_path, text), geometry=False).visual_model is None
 
 
+@pytest.mark.parametrize("link", ["ground", "crank_link"])
+def test_a_negative_mass_is_refused(tmp_path, link):
+    text = fourbar_sdf()
+    at = text.index(f'<link name="{link}">')
+    start = text.index("<mass>", at)
+    end = text.index("</mass>", start)
+    bad = text[:start] + "<mass>-2" + text[end:]
+    with pytest.raises(ModelFileError, match=r"have mass -2 kg; expected masses >= 0"):
+        load_model(write(tmp_path, bad), geometry=False)
+
+
 def test_a_mesh_that_cannot_be_loaded_is_named(tmp_path):
     """A file that exists but is no mesh: coal's ValueError was a traceback."""
     (tmp_path / "junk.stl").write_bytes(np.random.default_rng(0).bytes(3000))
