@@ -313,6 +313,7 @@ class _Tree:
     visual: pin.GeometryModel | None
     undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
     by_default: bool = False  # locked by the serial robot's default, not by a file
+    beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
 
 
 def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
@@ -344,15 +345,23 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
         both = {**spec.beams, **beams}
         model, (visual,), blocks, _ = apply_beams(model, [visual], both, urdf=path)
+    clash = sorted(set(spec.springs) & set(blocks))
+    if clash:
+        raise ModelFileError(
+            f"closure file {str(closures)!r}: springs name the beam joint(s) {clash}, whose "
+            "stiffness is their beam's (E, G and section, or stiffness_6x6, under beams:)"
+        )
     if closures is None:
         actuated, locked = _serial_defaults(tree, path)
-        return _Tree(model, [], actuated, blocks, locked, visual, by_default=True)
+        return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
+                     beam_joints=tuple(blocks))  # fmt: skip
     loops = [
         closure_between_frames(model, a, b, t)
         for (a, b), t in zip(spec.pairs, spec.types, strict=True)
     ]
     springs = ball_springs({**spec.springs, **blocks}, spec.balls)
-    return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual)
+    return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual,
+                 beam_joints=tuple(blocks))  # fmt: skip
 
 
 def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
@@ -522,6 +531,12 @@ def load_model(
     if tree.by_default:  # a joint named by a keyword is no longer locked by the default
         named = {*(springs or {}), *(() if actuated is None else actuated)}
         locked = tuple(n for n in locked if n not in named)
+    clash = sorted(set(springs or {}) & set(tree.beam_joints))
+    if clash:
+        raise InvalidInputError(
+            f"load_model: springs name the beam joint(s) {clash}, whose stiffness is their "
+            "beam's (give E, G and section, or stiffness_6x6, in beams=)"
+        )
     actuated = tree.actuated if actuated is None else joint_names("actuated", actuated)
     springs = {**tree.springs, **(springs or {})}
     if joint_stiffness is not None:

@@ -720,6 +720,24 @@ def test_two_beams_on_one_link_are_refused_by_link_name(tmp_path, end):
         once.with_beams({"arm": {**SECTION, "end": end}})
 
 
+def test_a_spring_on_a_beam_joint_is_refused_from_the_file_and_the_keyword(tmp_path):
+    """The closure file's spring on arm_beam was replaced by the beam's block without a
+    word; the keyword's replaced the block by a number. Both are refused now."""
+    path = massive_urdf(tmp_path, {"arm": 1.0})
+    beam = {"arm": {**SECTION, "end": "tip_joint"}}
+    with pytest.raises(
+        cl.InvalidInputError, match=r"springs name the beam joint\(s\) \['arm_beam'\]"
+    ):
+        load_model(path, beams=beam, springs={"arm_beam": 5.0}, geometry=False)
+    closures = tmp_path / "c.yaml"
+    closures.write_text(
+        "closed_loop: []\ntype: []\nname_mot: [hinge]\nsprings: {hinge: 100, arm_beam: 5}\n"
+        "beams: {arm: {end: tip_joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}\n"
+    )
+    with pytest.raises(cl.ModelFileError, match=r"springs name the beam joint\(s\) \['arm_beam'\]"):
+        load_model(path, closures, geometry=False)
+
+
 @pytest.mark.parametrize("frame", ["hand", "tip"])
 def test_stiffer_beams_tend_to_the_rigid_link_as_one_over_e(tmp_path, frame):
     """The beam's share of C falls as 1/E, towards the rigid robot's C, at the beam's
