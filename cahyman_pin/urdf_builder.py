@@ -59,7 +59,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import yaml
 
 from cahyman_pin.geometry import DELTA, T, U
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
@@ -350,6 +349,8 @@ def build_urdf(p: CaHyManParams = DEFAULT_PARAMS) -> str:
 
 def build_closure_yaml(p: CaHyManParams = DEFAULT_PARAMS) -> str:
     """Closure-file text (YAML) matching :func:`build_urdf` for parameters ``p``."""
+    import yaml  # on demand: the model is built without the file
+
     spec = closure_spec(p)
     body = yaml.safe_dump(
         {

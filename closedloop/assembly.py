@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-import scipy.linalg
 
+from . import lapack
 from .arrays import ReadOnlyArrays, check_count, check_positive, frozen, real_array
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
@@ -59,7 +59,7 @@ def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.nda
         rhs = np.zeros(n)
         rhs[:m] = b
     a = np.array(A, dtype=float, order="F")  # overwritten by dgelsy
-    _, x, _, _, info = scipy.linalg.lapack.dgelsy(
+    _, x, _, _, info = lapack.dgelsy(
         a, rhs, np.zeros(n, dtype=np.int32), rcond, overwrite_a=1,
         lwork=max(min(m, n) + 3 * n + 1, 2 * min(m, n) + 1),
     )  # fmt: skip

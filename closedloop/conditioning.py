@@ -39,8 +39,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
+from . import lapack
 from .arrays import frozen, readonly
 from .exceptions import InvalidInputError
 
@@ -115,9 +115,9 @@ def svd(A: np.ndarray, full_matrices: bool = True):
     """
     A = np.asarray(A, dtype=float)
     flag = int(full_matrices)
-    U, s, Vt, info = scipy.linalg.lapack.dgesdd(A, compute_uv=1, full_matrices=flag)
+    U, s, Vt, info = lapack.dgesdd(A, compute_uv=1, full_matrices=flag)
     if info > 0:
-        U, s, Vt, info = scipy.linalg.lapack.dgesvd(A, compute_uv=1, full_matrices=flag)
+        U, s, Vt, info = lapack.dgesvd(A, compute_uv=1, full_matrices=flag)
     if info != 0:
         raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK info {info})")
     return U, s, Vt

@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
 from .arrays import readonly
 from .compliance import TWIST_LABELS, UNITS, describe_directions
@@ -399,6 +398,8 @@ class StiffnessIndices:
     @property
     def eigenscrews(self) -> tuple[Eigenscrew, ...]:
         """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first)."""
+        import scipy.linalg  # on demand: its import costs a command line's start-up
+
         K = self.K
         mu, X = scipy.linalg.eigh(DELTA, K)  # Delta x = mu K x, X^T K X = I; lambda = 1/mu
         lam = 1.0 / mu

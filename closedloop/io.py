@@ -33,7 +33,6 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import os
 import sys
@@ -45,9 +44,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
-from . import strict_yaml
 from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError
@@ -109,6 +106,10 @@ def _existing(path: str | Path, what: str) -> Path:
 
 
 def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
+    import yaml  # on demand, as below: a model without such a file reads no YAML
+
+    from . import strict_yaml
+
     path = _existing(path, what)
     try:
         doc = strict_yaml.load(path.read_text())
@@ -126,7 +127,9 @@ def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
 
 def _number(value, where: str, name: str) -> float:
     if isinstance(value, str):
-        if strict_yaml.overflowing(value):
+        from .strict_yaml import overflowing  # loaded with the file that holds the value
+
+        if overflowing(value):
             raise ModelFileError(
                 f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
                 "range (about 1.8e308); expected a number, or .inf to lock the joint"
@@ -581,6 +584,8 @@ def robot_data_dir() -> Path:
     The package ships no Python module, only files under its cmeel prefix; they are
     located through the distribution's file list.
     """
+    import importlib.metadata  # on demand: 30 ms of a command line's start-up
+
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-import scipy.linalg
 
+from . import lapack
 from .conditioning import RANK_RTOL as _RANK_RTOL
 from .exceptions import InvalidInputError, SingularConfigurationError
 from .model import ClosedLoopModel
@@ -149,7 +149,7 @@ def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray
     m, n = A.shape
     if m == 0 or n == 0:
         return np.zeros((n, 0)), np.eye(n), 0
-    qr, _, tau, _, info = scipy.linalg.lapack.dgeqp3(np.asarray(A, dtype=float).T)
+    qr, _, tau, _, info = lapack.dgeqp3(np.asarray(A, dtype=float).T)
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqp3 failed (info={info})")
     d = np.abs(qr.diagonal())
@@ -157,7 +157,7 @@ def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray
     if tau.size < n:  # fewer reflectors than columns: pad to build the square Q
         qr = np.hstack([qr[:, : tau.size], np.zeros((n, n - tau.size))])
         tau = np.hstack([tau, np.zeros(n - tau.size)])
-    Q = scipy.linalg.lapack.dorgqr(qr[:, :n], tau, overwrite_a=1)[0]
+    Q = lapack.dorgqr(qr[:, :n], tau, overwrite_a=1)[0]
     return Q[:, :rank], Q[:, rank:], rank
 
 

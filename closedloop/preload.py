@@ -22,8 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
+from . import lapack
 from .arrays import check_wrench, readonly
 from .compliance import ComplianceResult, compliance, compliance_result
 from .conditioning import RANK_RTOL, spectrum_from_factor, spectrum_of_matrix, twist_scaling
@@ -201,7 +201,7 @@ def preloaded_compliance(
     d = twist_scaling(state.length)[:, None]
     kinematic = d * (J @ f.NV)  # rank and rigid directions, as without preload
     if conservative and margin > 0.0:  # M = L L^T: C = (B L^-T) (B L^-T)^T
-        F = scipy.linalg.solve_triangular(np.linalg.cholesky(M), B.T, lower=True).T
+        F = lapack.dtrtrs(np.linalg.cholesky(M), B.T, lower=1)[0].T if M.size else B
         spectrum = spectrum_from_factor(d * F, state.length, kinematic, spread=np.inf)
     else:
         spectrum = spectrum_of_matrix(C, state.length, kinematic)

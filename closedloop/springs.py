@@ -22,8 +22,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
+from . import lapack
 from .arrays import frozen, upper_triangular_inverses
 from .conditioning import RANK_RTOL, split_factor, svd, twist_scaling
 from .configuration import Configuration
@@ -190,7 +190,7 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F. With
     many passive coordinates, one such QR per independent block of loops.
     """
-    lapack, p = scipy.linalg.lapack, sc.passive.size
+    p = sc.passive.size
     if sc.loop_blocks is not None:
         return _passive_motion_by_blocks(Jc, sc)
     A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")

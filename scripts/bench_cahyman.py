@@ -224,9 +224,13 @@ def bench_closed_form(table: Table, mode: Mode, unit) -> None:
 def bench_cli(table: Table, mode: Mode) -> None:
     exe = shutil.which("cahyman", path=str(Path(sys.executable).parent))
     command = [exe] if exe else [sys.executable, "-m", "cahyman_pin"]
-    t = wall_ratio([*command, "stiffness", *CLI_POSE], [sys.executable, "-c", "pass"], mode)
+    python = [sys.executable, "-c", "pass"]
+    t = wall_ratio([*command, "stiffness", *CLI_POSE], python, mode)
     table.row("7", "`cahyman stiffness --json` wall vs `python -c pass`", "<= 10x",
               f"{t.ratio:.1f}x", f"{fmt_time(t.seconds)} vs {fmt_time(t.unit)}")  # fmt: skip
+    floor = wall_ratio([sys.executable, "-c", "import pinocchio"], python, mode)
+    table.note(f"7: bytecode cached; the floor, `python -c 'import pinocchio'`, {floor.ratio:.1f}x "
+               f"({fmt_time(floor.seconds)} vs {fmt_time(floor.unit)})")  # fmt: skip
 
 
 def main() -> None:
