@@ -12,6 +12,11 @@ default a link's to the model, a joint's to its child link, a frame's to ``attac
 mesh / box / cylinder / sphere, ``model://NAME/...`` found under the file's ancestors,
 ``$GZ_SIM_RESOURCE_PATH``, ``$SDF_PATH``, ``$GAZEBO_MODEL_PATH`` or example-robot-data.
 
+A ``<frame>`` becomes a frame of the model (a loaded frame), fixed to the link it is
+attached to: its ``attached_to`` link, the child link of its ``attached_to`` joint, the link
+of its ``attached_to`` frame, or by default the canonical link (``canonical_link``, else the
+first link).
+
 Tree and loops: a link's tree joint is the first joint in file order naming it as child
 (as in Pinocchio's parser); every later one closes a loop where the file draws it (the
 joint frame is fixed to the child link; q = 0 is the drawing):
@@ -103,6 +108,10 @@ class _Reader:
         self.links = self.named(m, "link")
         self.joints = self.named(m, "joint")
         self.frames = self.named(m, "frame")
+        canonical = m.get("canonical_link")
+        if canonical is not None and canonical not in self.links:
+            self.fail(f"canonical_link {canonical!r} is not a link; expected one of "
+                      f"{list(self.links)}")  # fmt: skip
         self.poses: dict[str, pin.SE3] = {MODEL: pin.SE3.Identity()}
 
     def fail(self, message: str):
@@ -114,7 +123,11 @@ class _Reader:
             name = e.get("name")
             if not name:
                 self.fail(f"a <{tag}> has no name attribute")
-            if name in out or (tag != "link" and name in self.links):
+            if (
+                name in out
+                or (tag != "link" and name in self.links)
+                or (tag == "frame" and name in self.joints)
+            ):
                 self.fail(f"name {name!r} is used twice; expected unique names")
             out[name] = e
         return out
@@ -144,6 +157,8 @@ class _Reader:
         quat = p.get("rotation_format") == "quat_xyzw"
         v = self.floats(p, f"pose of {what}", (7,) if quat else (6,))
         if quat:
+            if not np.any(v[3:]):
+                self.fail(f"pose of {what} has the quaternion 0 0 0 0; expected a rotation")
             R = pin.Quaternion(v[6], v[3], v[4], v[5]).normalized().matrix()
         else:
             rpy = np.deg2rad(v[3:]) if p.get("degrees") == "true" else v[3:]
@@ -169,6 +184,25 @@ class _Reader:
             self.fail(f"pose relative to unknown frame {name!r}; expected a link, joint or frame")
         self.poses[name] = pose = self.pose(ref, (*chain, name)) * local
         return pose
+
+    def frame_link(self, name: str, chain: tuple[str, ...] = ()) -> str:
+        """The link a ``<frame>`` is fixed to: its ``attached_to`` link, the child link of
+        its ``attached_to`` joint, that of its ``attached_to`` frame, or by default the
+        model frame's, the canonical link (``canonical_link``, else the first link)."""
+        if name in chain:
+            self.fail(f"frames attached to each other in a cycle: {' -> '.join((*chain, name))}")
+        target = self.frames[name].get("attached_to") or MODEL
+        if target == MODEL:
+            return self.elem.get("canonical_link") or next(iter(self.links))
+        if target in self.links:
+            return target
+        if target in self.joints:
+            return self.text(self.joints[target], "child", f"joint {target!r}")
+        if target in self.frames:
+            return self.frame_link(target, (*chain, name))
+        self.fail(
+            f"frame {name!r} is attached to unknown {target!r}; expected a link, joint or frame"
+        )
 
     def text(self, elem: ET.Element, tag: str, what: str) -> str:
         child = elem.find(tag)
@@ -343,6 +377,15 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
     lost = [link for link in r.links if link not in body]
     if lost:
         r.fail(f"links {lost} are not connected to the root (their parent joints form a cycle)")
+    for name in r.frames:  # loaded frames, like a URDF's fixed joints
+        link = r.frame_link(name)
+        if model.existFrame(name):  # "universe", "root_joint"
+            r.fail(f"frame {name!r} has the name of a frame of the model; expected another")
+        jid = body[link][0]
+        placement = W[jid].inverse() * r.pose(name)
+        model.addFrame(
+            pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
+        )
     closures = _closures(r, model, body, closing, W)
     rest = pin.neutral(model)
     for i, v in rest_values.items():

@@ -460,6 +460,28 @@ MALFORMED = [
         r"joint 'crank' has spring_stiffness -50.0; expected a number >= 0",
     ),
     ("</model>", '<model name="inner"/></model>', r"nested <model> elements are not supported"),
+    (
+        "</model>",
+        '<frame name="f" attached_to="nowhere"/></model>',
+        r"frame 'f' is attached to unknown 'nowhere'; expected a link, joint or frame",
+    ),
+    (
+        "</model>",
+        '<frame name="f" attached_to="h"/><frame name="h" attached_to="f"/></model>',
+        r"frames attached to each other in a cycle: f -> h -> f",
+    ),
+    ("</model>", '<frame name="crank"/></model>', r"name 'crank' is used twice"),
+    ("</model>", '<frame name="universe"/></model>', r"frame 'universe' has the name of a frame"),
+    (
+        '<model name="fourbar"',
+        '<model name="fourbar" canonical_link="nowhere"',
+        r"canonical_link 'nowhere' is not a link; expected one of \['ground'",
+    ),
+    (
+        "</model>",
+        '<frame name="f"><pose rotation_format="quat_xyzw">0 0 0 0 0 0 0</pose></frame></model>',
+        r"pose of frame 'f' has the quaternion 0 0 0 0; expected a rotation",
+    ),
     ("</model></sdf>", "", r"is not valid XML"),
 ]
 
@@ -596,6 +618,43 @@ def test_pose_and_axis_forms_agree(tmp_path, form):
         -math.inf,
         0.5,
     )
+
+
+def test_frames_are_loaded_frames(tmp_path):
+    """A <frame> is a frame of the model, fixed to the link it is attached to (directly,
+    through a joint's child link or another frame, or the canonical link by default), at
+    its pose: a 0.5 m pendulum on a spring k about y, frames on it at distances d from the
+    axis, each with the compliance d^2 / k across the arm (a rigid lever)."""
+    k = 10.0  # [N m/rad]
+    text = (
+        '<sdf version="1.7"><model name="m"><link name="g"/>'
+        '<link name="b"><pose>0 0 -0.5 0 0 0</pose></link>'
+        '<joint name="j" type="revolute"><parent>g</parent><child>b</child><axis><xyz>0 1 0'
+        f"</xyz><dynamics><spring_stiffness>{k}</spring_stiffness></dynamics></axis></joint>"
+        '<frame name="tip" attached_to="b"><pose>0 0 -0.5 0 0 0</pose></frame>'
+        '<frame name="tip2" attached_to="tip"><pose>0 0 -0.5 0 0 0</pose></frame>'
+        '<frame name="side" attached_to="j"><pose>0.2 0 0 0 0 0</pose></frame>'
+        '<frame name="ground_mark"><pose>1 0 0 0 0 0</pose></frame>'
+        "</model></sdf>"
+    )
+    robot = load_model(write(tmp_path, text), geometry=False)
+    expected = {  # frame: (origin [m] at q = 0, axis of its motion, distance to the axis [m])
+        "tip": ([0, 0, -1.0], 0, 0.5),
+        "tip2": ([0, 0, -1.5], 0, 1.0),
+        "side": ([0.2, 0, -0.5], 2, 0.2),
+    }
+    for frame, (origin, axis, d) in expected.items():
+        assert robot.model.frames[robot.model.getFrameId(frame)].parentJoint == 1
+        np.testing.assert_allclose(
+            cl.Configuration(robot, [0.0]).frame_placement(frame).translation, origin,
+            atol=ATOL_POSE,
+        )  # fmt: skip
+        C = cl.compliance(robot, [0.0], frame).C
+        np.testing.assert_allclose(C[axis, axis], d**2 / k, rtol=1e-12)
+    mark = robot.model.frames[robot.model.getFrameId("ground_mark")]
+    assert mark.parentJoint == 0  # the canonical link, the ground: it does not move
+    np.testing.assert_allclose(mark.placement.translation, [1.0, 0.0, 0.0], atol=ATOL_POSE)
+    assert cl.compliance(robot, [0.0], "ground_mark").rank == 0
 
 
 def test_universal_joint_has_two_sprung_axes(tmp_path):
