@@ -176,6 +176,9 @@ def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
     names = doc[key] if doc[key] is not None else []
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
         raise ModelFileError(f"{where}: {key} must be a list of joint names, got {names!r}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ModelFileError(f"{where}: {key} names {twice} more than once; expected each once")
     return tuple(names)
 
 

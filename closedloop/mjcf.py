@@ -68,8 +68,8 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             unknown joint type, a hinge or slide whose axis is the zero vector, a range or
             axis that is not numbers, a range whose lower bound is above its upper one, a
             joint with a nonzero stiffness but no name, a malformed position or orientation
-            (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor. The message names the
-            file.
+            (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor, a class that no
+            ``<default>`` defines. The message names the file.
     """
     where = f"robot file {str(path)!r}"
     root = _parse_xml(path, where)
@@ -81,6 +81,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 f"{where}: <{tag}> holding bodies or joints is not supported (Pinocchio's "
                 f"parser drops them); write the bodies without <{tag}>"
             )
+    _check_classes(root, where)
     equalities = _equalities(root, where)
     _check_numbers(root, where)
     joints = _joints(root)
@@ -326,6 +327,21 @@ def _numbers(text: str, count: int, where: str, what: str) -> np.ndarray:
 def _compiler(root: ET.Element) -> dict[str, str]:
     """Attributes of the ``<compiler>`` elements, merged in order (later ones win)."""
     return {k: v for c in root.findall("compiler") for k, v in c.attrib.items()}
+
+
+def _check_classes(root: ET.Element, where: str) -> None:
+    """Refuse a ``class`` or ``childclass`` that no ``<default>`` defines (Pinocchio's
+    parser fails on it with 'unordered_map::at')."""
+    defined = {"main"} | {d.get("class", "main") for d in root.iter("default")}
+    for elem in root.iter():
+        for key in ("class", "childclass"):
+            name = elem.get(key)
+            if elem.tag != "default" and name is not None and name not in defined:
+                label = f" {elem.get('name')!r}" if elem.get("name") else ""
+                raise ModelFileError(
+                    f"{where}: <{elem.tag}>{label} has {key}={name!r}; expected one of the "
+                    f"<default> classes {sorted(defined)}"
+                )
 
 
 def _defaults(root: ET.Element, tag: str) -> dict[str, dict[str, str]]:

@@ -68,6 +68,9 @@ def test_ball_springs_and_names_are_checked(tmp_path):
     urdf, yaml = _files(tmp_path, balls="[knee]")
     with pytest.raises(cl.ModelFileError, match=r"balls: 'knee' is not a joint of .*expected"):
         cl.load_model(urdf, yaml)
+    urdf, yaml = _files(tmp_path, balls="[elbow, elbow]")  # not "takes ... got 6"
+    with pytest.raises(cl.ModelFileError, match=r"balls names \['elbow'\] more than once"):
+        cl.load_model(urdf, yaml)
     urdf, yaml = _files(tmp_path, springs="{shoulder: 100.0, elbow: [1.0, 2.0]}")
     with pytest.raises(cl.ModelFileError, match=r"ball joint 'elbow' takes one stiffness or three"):
         cl.load_model(urdf, yaml)

@@ -342,11 +342,13 @@ def test_meshes_of_a_file_without_compiler(tmp_path):
 
 def test_bodies_nested_too_deep_and_unknown_classes_are_model_file_errors(fourbar_mjcf, tmp_path):
     """A RecursionError and Pinocchio's IndexError ('unordered_map::at') came out as
-    tracebacks from the command line, exit 1."""
+    tracebacks from the command line, exit 1; an unknown class is now named."""
     deep = "".join(f'<body name="b{i}"><joint name="j{i}" type="hinge"/>' for i in range(1200))
     refused(write(tmp_path, mujoco(deep + "</body>" * 1200)), "nested too deep for the reader")
     path = fourbar_with(fourbar_mjcf, tmp_path, 'name="coupler"', 'name="coupler" class="nosuch"')
-    refused(path, r"cannot be parsed: unordered_map::at")
+    refused(path, r"<joint> 'coupler' has class='nosuch'; expected one of the <default> classes")
+    path = fourbar_with(fourbar_mjcf, tmp_path, 'name="coupler"', 'name="coupler" childclass="x"')
+    refused(path, r"<joint> 'coupler' has childclass='x'; expected one of the <default> classes")
 
 
 @pytest.mark.parametrize(
