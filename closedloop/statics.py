@@ -430,6 +430,25 @@ def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:
         )
 
 
+def _advice(eqs: EquilibriumEquations, q) -> str:
+    """What to try after a failed continuation: a smaller step, unless the part of the
+    load reached already turns a joint coordinate by a radian or more (a load far beyond
+    the springs, which no step size helps)."""
+    clm = eqs.clm
+    turn = np.where(clm.linear_coordinates, 0.0, np.abs(pin.difference(clm.model, eqs.q_rest, q)))
+    i = int(np.argmax(turn)) if turn.size else 0
+    if turn.size and turn[i] >= 1.0:
+        joint = next(
+            clm.model.names[j] for j in range(1, clm.model.njoints)
+            if clm.model.joints[j].idx_v <= i < clm.model.joints[j].idx_v + clm.model.joints[j].nv
+        )  # fmt: skip
+        return (
+            f"the part of the load reached already turns joint {joint!r} by {turn[i]:.3g} rad "
+            "from rest: the load is far beyond what the springs hold; expected a smaller load"
+        )
+    return "try a smaller max_increment or a larger max_iter"
+
+
 def _failure(eqs: EquilibriumEquations, q, t, w, where, detail, iterations, state):
     """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
 
@@ -447,8 +466,7 @@ def _failure(eqs: EquilibriumEquations, q, t, w, where, detail, iterations, stat
     else:
         reason = (
             f"the solver failed to converge {where}: {detail}; not a limit load (stability "
-            f"margin {margin:.3g} > {LIMIT_MARGIN:g} at {t:.6g} of the load): try a smaller "
-            "max_increment or a larger max_iter"
+            f"margin {margin:.3g} > {LIMIT_MARGIN:g} at {t:.6g} of the load): {_advice(eqs, q)}"
         )
     return EquilibriumError(
         reason,

@@ -76,7 +76,8 @@ def test_past_the_limit_load_no_equilibrium_is_found(fourbar):
 def test_a_newton_failure_is_not_called_a_limit_load(fourbar):
     """Too few iterations: the tangent stiffness is still far from singular (margin ~1)."""
     clm, q0 = fourbar
-    with pytest.raises(EquilibriumError, match=r"failed to converge .* not a limit load") as err:
+    with pytest.raises(EquilibriumError, match=r"failed to converge .* not a limit load .*: "
+                       r"try a smaller max_increment or a larger max_iter") as err:  # fmt: skip
         solve_equilibrium(clm, q0, "P", [300.0, 0, -300.0, 0, 0, 0], max_iter=1, max_halvings=0)
     assert err.value.load_fraction == 0.0
     assert err.value.residual > 1e-12
@@ -87,6 +88,19 @@ def test_a_newton_failure_is_not_called_a_limit_load(fourbar):
         solve_equilibrium(clm, q0, "P", [300.0, 0, -300.0, 0, 0, 0], max_iter=2, max_halvings=2)
     assert 0.0 < err.value.load_fraction < 1.0 and not err.value.limit_load
     assert 0.5 < err.value.stability_margin < 1.0
+
+
+def test_a_load_far_beyond_the_springs_is_called_so(ur5):
+    """1e20 N on springs of 1e4 N m/rad: the continuation stalls after the arm has turned
+    towards the force; no step size helps, and the advice says so (it suggested a smaller
+    max_increment). The elbow had turned 1.4 rad (any joint past 1 rad triggers it)."""
+    clm, q = ur5
+    for force in (1e20, 1e300):
+        with pytest.raises(EquilibriumError, match=r"not a limit load .*: the part of the load "
+                           r"reached already turns joint '\w+' by \d\.\d+ rad from rest: the "
+                           r"load is far beyond what the springs hold") as err:  # fmt: skip
+            solve_equilibrium(clm, q, "tool0", [force, 0, 0, 0, 0, 0])
+        assert "max_increment" not in str(err.value)
 
 
 def test_vanishing_load_increments_stop_the_solver(fourbar):
