@@ -558,7 +558,7 @@ def test_measurements_that_do_not_fit_the_model_are_named(fourbar):
     with pytest.raises(cl.InvalidInputError, match=r"measurement 0: q contains non-finite"):
         identify(clm, [nan], "P", ["crank"])
     two = Measurement.of(actuated=[0.3, 0.1], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
-    with pytest.raises(cl.InvalidInputError, match=r"measurement 0: actuated has 2 values"):
+    with pytest.raises(cl.InvalidInputError, match=r"measurement 0: 2 actuated values given"):
         identify(clm, [two], "P", ["crank"])
     with pytest.raises(cl.NameNotFoundError, match=r"nowhere"):
         identify(clm, [good], "nowhere", ["crank"])
@@ -603,7 +603,7 @@ def test_a_measurement_beyond_the_actuated_limits_is_named(fourbar):
                        r"their limits: crank = 7 \(limits \[-6.3, 6.3\]\)"):  # fmt: skip
         identify(clm, data, "P", ["crank"])
     with pytest.raises(
-        cl.InvalidInputError, match=r"measurement 0: actuated has 2 values; expected 1"
+        cl.InvalidInputError, match=r"measurement 0: 2 actuated values given; expected 1"
     ):
         identify(clm, [Measurement.of(actuated=[0.3, 0.1], wrench=w, twist=w, sd=1.0)], "P",
                  ["crank"])  # fmt: skip
