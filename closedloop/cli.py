@@ -183,8 +183,8 @@ def add_preload_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--gravity", nargs="*", type=finite_float, metavar="G",
         help="weigh the model's link inertias: GX GY GZ [m/s^2], world axes (no values: "
-        "0 0 -9.81); q is then the springs' rest configuration and the result the tangent "
-        "compliance where the mechanism settles, with its sag",
+        "0 0 -9.80665, standard gravity); q is then the springs' rest configuration and the "
+        "result the tangent compliance where the mechanism settles, with its sag",
     )  # fmt: skip
     p.add_argument(
         "--payload", nargs="+", type=finite_float, metavar="V",
@@ -203,7 +203,9 @@ def preload_from_args(args: argparse.Namespace) -> dict:
     if args.gravity is not None:
         if len(args.gravity) not in (0, 3):
             raise InvalidInputError(f"--gravity takes 0 or 3 values, got {len(args.gravity)}")
-        out["gravity"] = tuple(args.gravity) or (0.0, 0.0, -9.81)
+        from .gravity import STANDARD_GRAVITY  # with the preload, on demand
+
+        out["gravity"] = tuple(args.gravity) or STANDARD_GRAVITY
     if args.payload is not None:
         if len(args.payload) not in (1, 4):
             raise InvalidInputError(

@@ -234,7 +234,7 @@ def test_command_line_gravity_payload_and_preload(capsys, ur5_urdf, soft_ur5):
             "0", "0", "--json"]  # fmt: skip
     assert main(args) == 0
     doc = json.loads(capsys.readouterr().out)
-    ref = cl.compliance(soft_ur5, q, "tool0", gravity=(0.0, 0.0, -9.81),
+    ref = cl.compliance(soft_ur5, q, "tool0", gravity=cl.STANDARD_GRAVITY,  # no values: g_n
                         payloads=[Payload(2.0, "tool0", np.array([0.0, 0.0, 0.05]))],
                         preload=[1.0, 0, 0, 0, 0, 0])  # fmt: skip
     np.testing.assert_allclose(doc["sag"], ref.sag, rtol=1e-12, atol=1e-15)
