@@ -13,7 +13,10 @@ from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
 
-#: Default closure tolerance [m for points; m and rad for welds], infinity norm.
+#: Default closure tolerance: infinity norm of the residual with its rows in metres divided
+#: by the model's characteristic length L (radians as they are), unit-free like
+#: :data:`closedloop.configuration.CLOSURE_TOL`: 1e-12 L for a point closure, whatever the
+#: size of the mechanism (an absolute 1e-12 m closed a nanometre mechanism to 1e-3 of L).
 ASSEMBLY_TOL = 1e-12
 
 
@@ -23,7 +26,7 @@ class Assembly(ReadOnlyArrays):
 
     Attributes:
         q: (nq,) configuration (read-only) satisfying every closure.
-        residual: infinity norm of the closure residual [m, rad].
+        residual: infinity norm of the closure residual [m, rad] (unscaled).
         iterations: Gauss-Newton iterations used.
         closure: when asked for (``jacobian=True``), the closure residuals (m,) [m; m, rad]
             and their Jacobian (m, nv) at q (:func:`closedloop.kinematics.closure_residual`
@@ -68,19 +71,31 @@ def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.nda
     return x[:n]
 
 
-def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray, tol: float):
-    """Closure residual r (m,) at q, its squared 2-norm and whether its infinity norm is
-    within ``tol``; leaves the joint placements and Jacobians of q in ``data`` (what the
-    constraints and their Jacobians read; the frame placements are not updated)."""
+def _row_tolerances(clm: ClosedLoopModel, tol: float) -> tuple[np.ndarray | float, float, float]:
+    """(tolerance of each residual row [m, rad] (one number when every row is in
+    metres), its smallest and its largest value) of the scaled tolerance ``tol``."""
+    L = clm.length
+    if clm.memo("metre_rows", clm.linear_rows.all):
+        return tol * L, tol * L, tol * L
+    rows = np.where(clm.linear_rows, tol * L, tol)
+    return rows, float(rows.min(initial=tol)), float(rows.max(initial=tol))
+
+
+def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray, tols) -> tuple:
+    """Closure residual r (m,) at q, its squared 2-norm and whether each row is within
+    its tolerance (``tols``: :func:`_row_tolerances`); leaves the joint placements and
+    Jacobians of q in ``data`` (what the constraints and their Jacobians read; the frame
+    placements are not updated)."""
     pin.computeJointJacobians(clm.model, data, q)
     r = residual_rows(clm, data, datas)
     size2 = float(r.dot(r))
-    # |r|_inf <= |r|_2 <= sqrt(m) |r|_inf: the infinity norm only when these leave it open
-    if size2 <= tol * tol:
+    rows, low, high = tols
+    # |r|_inf <= |r|_2 <= sqrt(m) |r|_inf: the rows one by one only when these leave it open
+    if size2 <= low * low:
         return r, size2, True
-    if size2 > r.size * tol * tol or size2 != size2:  # NaN: not closed
+    if size2 > r.size * high * high or size2 != size2:  # NaN: not closed
         return r, size2, False
-    return r, size2, bool(abs(r).max() <= tol)
+    return r, size2, bool((abs(r) <= rows).all())
 
 
 def assemble(
@@ -103,7 +118,8 @@ def assemble(
         actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
             ``clm.actuated``; ``None`` keeps those of ``q0``.
         q0: (nq,) start configuration, which picks the assembly branch (default: neutral).
-        tol: closure tolerance (infinity norm) [m, rad], > 0.
+        tol: closure tolerance, > 0: infinity norm of the residual with its rows in metres
+            divided by the model's length L (radians as they are; :data:`ASSEMBLY_TOL`).
         max_iter: iteration limit (an integer >= 0; 0 only checks the start).
         jacobian: also return the closure residuals and Jacobian at the solution
             (:attr:`Assembly.closure`).
@@ -113,7 +129,7 @@ def assemble(
             input); the message gives the residual reached.
         InvalidInputError: bad ``actuated``, ``q0``, ``tol`` or ``max_iter``.
     """
-    check_positive("tol", tol, "m, rad")
+    check_positive("tol", tol, "metres / L, rad")
     check_count("max_iter", max_iter, 0)
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     if actuated is not None:
@@ -170,7 +186,8 @@ def close_loops(
     model = clm.model
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.workspace()
-    r, size2, closed = _residual(clm, data, datas, q, tol)
+    tols = _row_tolerances(clm, tol)
+    r, size2, closed = _residual(clm, data, datas, q, tols)
     if not closed and not free.size:
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r}: no passive coordinate to move (every "
@@ -185,7 +202,7 @@ def close_loops(
         step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
         for _ in range(30):
             q_try = pin.integrate(model, q, step)
-            r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tol)
+            r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tols)
             if size2_try < size2 or closed_try:
                 break
             step *= 0.5

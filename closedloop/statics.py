@@ -51,8 +51,15 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import ReadOnlyArrays, check_count, check_positive, check_wrench, readonly, real_array
+from .assembly import close_loops
 from .configuration import Configuration, accepts_configuration
-from .exceptions import EquilibriumError, InvalidInputError, JointLimitError, JointLimitWarning
+from .exceptions import (
+    AssemblyError,
+    EquilibriumError,
+    InvalidInputError,
+    JointLimitError,
+    JointLimitWarning,
+)
 from .gravity import GravityLoad, Load, Payload
 from .kinematics import update_kinematics
 from .limits import describe_limits, joints_outside_limits
@@ -281,7 +288,10 @@ def solve_equilibrium(
         clm: model with closures and springs (or a :class:`Configuration`, then no q_rest:
             its q is the rest configuration).
         q_rest: (nq,) assembled configuration, rest configuration of the springs; it must
-            close the loops to :data:`closedloop.configuration.CLOSURE_TOL`.
+            close the loops to :data:`closedloop.configuration.CLOSURE_TOL`. Its passive
+            coordinates are first re-solved to the closure tolerance of the equilibrium
+            (:func:`closedloop.assembly.close_loops`; the result's ``q_rest``), else the
+            re-closing would count as displacement.
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin,
             fixed in world axes while the frame moves.
@@ -326,7 +336,7 @@ def solve_equilibrium(
     weight = None if gravity is None else GravityLoad(clm, gravity, payloads)
     w = Load(check_wrench(wrench), weight)
     rest = Configuration(clm, q_rest).require_closed()  # the one closure tolerance
-    q_rest = np.array(rest.q)
+    q_rest = _closed_rest(clm, rest)
     spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
     eqs = EquilibriumEquations(clm, q_rest, frame)
     units = eqs.units
@@ -415,6 +425,17 @@ def solve_equilibrium(
         limits_violated=tuple(bad),
         gravity=weight,
     )
+
+
+def _closed_rest(clm: ClosedLoopModel, rest: Configuration) -> np.ndarray:
+    """(nq,) the rest configuration, its passive coordinates re-solved to 1e-12 of L
+    (:func:`closedloop.assembly.close_loops`): one closed only to the configurations'
+    CLOSURE_TOL (1e-6 of L) moved by up to that much under any load, zero included. As
+    given where the passive coordinates cannot close it tighter."""
+    try:
+        return np.array(close_loops(clm, np.array(rest.q)).q)
+    except AssemblyError:
+        return np.array(rest.q)
 
 
 def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:

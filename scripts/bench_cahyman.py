@@ -136,7 +136,7 @@ def lean_assembly(clm, actuated: np.ndarray, q0: np.ndarray, free: np.ndarray) -
     q[clm.actuated_q_indices] = actuated
     pin.computeJointJacobians(model, data, q)
     r, it = residual_rows(clm, data, datas), 0
-    while abs(r).max() > ASSEMBLY_TOL:
+    while abs(r).max() > ASSEMBLY_TOL * clm.length:  # point closures: metres / L
         step = np.zeros(model.nv)
         step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
         q = pin.integrate(model, q, step)

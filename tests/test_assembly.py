@@ -102,7 +102,7 @@ def test_invalid_inputs(actuated, q0, match):
 @pytest.mark.parametrize(
     ("options", "match"),
     [
-        ({"tol": 0.0}, r"tol must be a number finite and > 0 \[m, rad\], got 0\.0"),
+        ({"tol": 0.0}, r"tol must be a number finite and > 0 \[metres / L, rad\], got 0\.0"),
         ({"tol": -1e-12}, r"got -1e-12"),
         ({"tol": np.inf}, r"got inf"),
         ({"tol": np.nan}, r"got nan"),

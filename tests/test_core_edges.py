@@ -464,6 +464,25 @@ def test_scaled_fourbar_follows_the_law_of_units(s):
         )
 
 
+@pytest.mark.parametrize("s", [1e-9, 1e-6, 1e-3, 1e3, 1e6])
+def test_scaled_fourbar_assembles_alike(s):
+    """assemble() closes the loops to ASSEMBLY_TOL of the mechanism's size L whatever s:
+    the same q (lengths times s) and C = D C_1 D at it. With an absolute 1e-12 m, a
+    nanometre four-bar stayed open by 4e-5 of L (its compliance refused the assembly's q)
+    and a micrometre one 3e-9 rad off."""
+    from closedloop.assembly import ASSEMBLY_TOL
+
+    unit = mech.fourbar_case()[0]
+    clm, _, frame = mech.scaled_fourbar(s)
+    ref, asm = cl.assemble(unit, [0.3]), cl.assemble(clm, [0.3])
+    assert asm.residual <= ASSEMBLY_TOL * clm.length
+    D = np.where(unit.linear_coordinates, s, 1.0)  # nq = nv: revolute and prismatic joints
+    np.testing.assert_allclose(asm.q / D, ref.q, rtol=0, atol=1e-11)  # Newton's last step
+    Dw = np.r_[s, s, s, 1.0, 1.0, 1.0]
+    C = cl.compliance(clm, asm.q, frame).C
+    assert _rel(C / np.outer(Dw, Dw), cl.compliance(unit, ref.q, frame).C) < 1e-10
+
+
 @pytest.mark.filterwarnings("ignore::closedloop.exceptions.JointLimitWarning")  # unscaled limits
 @pytest.mark.parametrize("s", [1e-8, 1e-3, 1e3, 1e6])
 def test_scaled_fourbar_equilibrium_follows_the_law_of_units(s):

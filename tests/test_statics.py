@@ -25,6 +25,7 @@ from helpers import (
 )
 from scipy.optimize import brentq, minimize
 
+import closedloop as cl
 from closedloop.assembly import assemble
 from closedloop.compliance import compliance
 from closedloop.exceptions import MechanismError
@@ -239,6 +240,25 @@ def test_zero_wrench_returns_the_rest_configuration_exactly(fourbar):
     np.testing.assert_allclose(eq.displacement, 0.0, atol=1e-16)  # log3(R R^T): rounding
     assert (eq.iterations, eq.load_steps) == (0, 1)
     assert not eq.q.flags.writeable
+
+
+def test_a_loosely_closed_rest_is_closed_again_first(fourbar):
+    """A q_rest whose loop closes only to 3e-7 of L (accepted: CLOSURE_TOL is 1e-6): its
+    passive coordinates are re-solved before the load. Before, that re-closing counted as
+    displacement: 3e-7 rad under no load at all, and 5-12 % of a small load's."""
+    from closedloop.assembly import free_coordinates
+
+    clm, q0 = fourbar
+    loose = q0.copy()
+    loose[free_coordinates(clm)[0]] += 3e-7  # a passive joint (nq = nv)
+    assert 1e-7 < cl.Configuration(clm, loose).closure_error < cl.CLOSURE_TOL
+    still = solve_equilibrium(clm, loose, "P", np.zeros(6))
+    np.testing.assert_allclose(still.displacement, 0.0, atol=1e-15)
+    np.testing.assert_allclose(still.q_rest, q0, rtol=0, atol=1e-13)  # the one closed rest
+    w = 1e-3 * np.array([1.0, 0.0, 2.0, 0.0, 0.3, 0.0])
+    ref, got = (solve_equilibrium(clm, q, "P", w).displacement for q in (q0, loose))
+    # to the solver's tolerance, 1e-12 L (the displacement is 2e-7 L: 1e-6 of it)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * clm.length)
 
 
 def test_large_load_is_followed_in_increments(fourbar):
