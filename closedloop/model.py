@@ -80,7 +80,28 @@ def frame_id(model: pin.Model, name: str) -> int:
     check_name("frame", name)
     if not model.existFrame(name):
         raise NameNotFoundError("frame", name, [f.name for f in model.frames])
-    return model.getFrameId(name)
+    try:
+        return model.getFrameId(name)
+    except ValueError:  # several frames of that name (a URDF link and joint, MJCF body and site)
+        return _one_of_frames(model, name)
+
+
+def _one_of_frames(model: pin.Model, name: str) -> int:
+    """The first of the frames named ``name`` when they are one place (a link and the
+    joint that carries it), else :class:`InvalidInputError`."""
+    ids = [i for i, f in enumerate(model.frames) if f.name == name]
+    first = model.frames[ids[0]]
+    if all(
+        model.frames[i].parentJoint == first.parentJoint
+        and model.frames[i].placement.isApprox(first.placement, 1e-12)
+        for i in ids[1:]
+    ):
+        return ids[0]
+    kinds = ", ".join(str(model.frames[i].type).rsplit(".", 1)[-1] for i in ids)
+    raise InvalidInputError(
+        f"frame name {name!r} names {len(ids)} frames at different places ({kinds}); expected "
+        "the name of one frame: rename one of them in the robot file"
+    )
 
 
 def joint_id(model: pin.Model, name: str) -> int:

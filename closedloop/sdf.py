@@ -154,16 +154,22 @@ class _Reader:
         p = elem.find("pose")
         if p is None:
             return pin.SE3.Identity(), None
+        ref = p.get("relative_to") or p.get("frame") or None
+        if not (p.text or "").strip():  # <pose relative_to="b"/>: the identity (SDF 1.7)
+            return pin.SE3.Identity(), ref
         quat = p.get("rotation_format") == "quat_xyzw"
         v = self.floats(p, f"pose of {what}", (7,) if quat else (6,))
         if quat:
-            if not np.any(v[3:]):
+            big = np.abs(v[3:]).max()
+            if big == 0.0:
                 self.fail(f"pose of {what} has the quaternion 0 0 0 0; expected a rotation")
-            R = pin.Quaternion(v[6], v[3], v[4], v[5]).normalized().matrix()
+            xyzw = v[3:] / big  # scaled first: its squared norm may underflow or overflow
+            x, y, z, w = xyzw / np.linalg.norm(xyzw)
+            R = pin.Quaternion(w, x, y, z).matrix()
         else:
-            rpy = np.deg2rad(v[3:]) if p.get("degrees") == "true" else v[3:]
-            R = pin.rpy.rpyToMatrix(*rpy)
-        return pin.SE3(R, v[:3]), (p.get("relative_to") or p.get("frame") or None)
+            degrees = "degrees" in p.attrib and self.boolean(p.get("degrees"), "degrees")
+            R = pin.rpy.rpyToMatrix(*(np.deg2rad(v[3:]) if degrees else v[3:]))
+        return pin.SE3(R, v[:3]), ref
 
     def pose(self, name: str, chain: tuple[str, ...] = ()) -> pin.SE3:
         """Placement [m] of the link, joint or frame ``name`` in the model frame, at q = 0."""
@@ -204,6 +210,13 @@ class _Reader:
             f"frame {name!r} is attached to unknown {target!r}; expected a link, joint or frame"
         )
 
+    def boolean(self, text: str | None, what: str) -> bool:
+        """An SDF boolean: true/false or 1/0, any case (as libsdformat reads it)."""
+        value = (text or "").strip().lower()
+        if value not in ("true", "1", "false", "0"):
+            self.fail(f"{what} is {text!r}; expected true or false (or 1 or 0)")
+        return value in ("true", "1")
+
     def text(self, elem: ET.Element, tag: str, what: str) -> str:
         child = elem.find(tag)
         if child is None or not (child.text or "").strip():
@@ -220,7 +233,8 @@ class _Reader:
         a = self.floats(xyz, f"{what} <xyz>", (3,))
         if np.linalg.norm(a) == 0.0:
             self.fail(f"{what} is the zero vector; expected a direction")
-        use_model = (elem.findtext("use_parent_model_frame") or "").strip() in ("1", "true")
+        flag = elem.find("use_parent_model_frame")  # SDF <= 1.4: always the model frame
+        use_model = self.version < (1, 5) if flag is None else self.boolean(flag.text, flag.tag)
         frame = xyz.get("expressed_in") or (MODEL if use_model and self.version < (1, 7) else "")
         if frame:
             R = self.pose(name).rotation.T @ self.pose(frame).rotation
@@ -261,7 +275,10 @@ class _Reader:
         upper = np.triu([[get(f"i{a}{b}", float(a == b)) for b in "xyz"] for a in "xyz"])
         inertia = upper + np.triu(upper, 1).T
         R, mass = local.rotation, self.number(elem, "mass", 1.0, what)
-        return pin.Inertia(mass, local.translation, R @ inertia @ R.T)
+        try:
+            return pin.Inertia(mass, local.translation, R @ inertia @ R.T)
+        except (RuntimeError, ValueError) as e:  # not positive
+            self.fail(f"{what} is not a valid inertia ({e}); expected a positive inertia matrix")
 
 
 def _joint_model(r: _Reader, name: str, kind: str):
@@ -322,6 +339,10 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
     if len(roots) != (0 if grounded else 1):
         found = f"links {roots} have no parent joint" if roots else "every link has a parent"
         r.fail(f"{found}; expected exactly one root link (none with a joint to 'world')")
+    for name in (*r.links, *r.joints):  # Pinocchio's names of the world and the free base
+        if name == "universe" or (name == "root_joint" and free_base):
+            role = "world" if name == "universe" else "free base joint"
+            r.fail(f"name {name!r} is taken by Pinocchio's {role}; expected another name")
     model = pin.Model()
     model.name = r.elem.get("name") or r.path.stem
     world_of_model = r.local_pose(r.elem, "model")[0]

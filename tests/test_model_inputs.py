@@ -197,3 +197,27 @@ def test_a_urdf_limit_with_lower_above_upper_is_refused(tmp_path, fourbar_urdf, 
                     + text[end:])  # fmt: skip
     with pytest.raises(ModelFileError, match=r"joint 'crank' has lower limit \[1.0\] above"):
         cl.load_model(path, fourbar_yaml, geometry=False)
+
+
+def test_a_frame_name_shared_by_several_frames(tmp_path):
+    """URDF allows a link and a joint of one name, MuJoCo a body and a site: Pinocchio's
+    getFrameId then raised "Several frames match" (a traceback). One place (a link and the
+    fixed joint that carries it): that frame; different places: refused by name."""
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(
+        '<robot name="r"><link name="base"/><link name="arm"/><link name="tool"/>'
+        '<joint name="j" type="revolute"><parent link="base"/><child link="arm"/>'
+        '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+        '<joint name="tool" type="fixed"><parent link="arm"/><child link="tool"/>'
+        '<origin xyz="1 0 0"/></joint></robot>'
+    )
+    robot = cl.load_model(urdf, joint_stiffness=3.0)
+    C = cl.compliance(robot, [0.0], "tool").C
+    assert C[1, 1] == pytest.approx(1.0**2 / 3.0, rel=1e-12)  # a 1 m lever on 3 N m/rad
+    model = pin.Model(robot.model)
+    joint = model.frames[model.getFrameId("arm")].parentJoint
+    model.addFrame(pin.Frame("arm", joint, pin.SE3(np.eye(3), np.ones(3)), pin.FrameType.OP_FRAME))
+    moved = cl.ClosedLoopModel(model, springs={"j": 3.0})
+    with pytest.raises(InvalidInputError, match=r"frame name 'arm' names 2 frames at different "
+                       r"places \(BODY, OP_FRAME\); expected the name of one frame"):  # fmt: skip
+        cl.compliance(moved, [0.0], "arm")

@@ -589,6 +589,40 @@ FORMS = {
         axis=numbers(AXIS_WORLD),
         upm="<use_parent_model_frame>true</use_parent_model_frame>",
     ),
+    "SDF 1.4: the axis in the model frame by default": dict(
+        v="1.4", pose=POSE, axis=numbers(AXIS_WORLD)
+    ),
+    "booleans in any case": dict(
+        v="1.6",
+        pose=POSE,
+        axis=numbers(AXIS_WORLD),
+        upm="<use_parent_model_frame>True</use_parent_model_frame>",
+    ),
+    "degrees='1'": dict(
+        v="1.9",
+        rel=' degrees="1"',
+        axis="0 0.6 0.8",
+        pose="0.1 0.2 0.5 " + " ".join(repr(math.degrees(a)) for a in RPY),
+    ),
+    "quaternion of norm 1e-200": dict(
+        v="1.9",
+        rel=' rotation_format="quat_xyzw"',
+        axis="0 0.6 0.8",
+        pose="0.1 0.2 0.5 " + numbers(1e-200 * QUAT),
+    ),
+    "quaternion of norm 1e200": dict(
+        v="1.9",
+        rel=' rotation_format="quat_xyzw"',
+        axis="0 0.6 0.8",
+        pose="0.1 0.2 0.5 " + numbers(1e200 * QUAT),
+    ),
+    "an empty pose relative to a <frame>": dict(
+        v="1.7",
+        rel=' relative_to="f"',
+        frame=f'<frame name="f" attached_to="g"><pose>{POSE}</pose></frame>',
+        pose="",
+        axis="0 0.6 0.8",
+    ),
     "expressed_in and a <frame>": dict(
         v="1.7",
         rel=' relative_to="f"',
@@ -655,6 +689,31 @@ def test_frames_are_loaded_frames(tmp_path):
     assert mark.parentJoint == 0  # the canonical link, the ground: it does not move
     np.testing.assert_allclose(mark.placement.translation, [1.0, 0.0, 0.0], atol=ATOL_POSE)
     assert cl.compliance(robot, [0.0], "ground_mark").rank == 0
+
+
+def test_names_pinocchio_takes_and_bad_values_are_refused(tmp_path):
+    """A link 'universe' (the world's frame), a joint 'root_joint' beside a free base (its
+    spring went onto the six free-flyer coordinates), a boolean that is not one, a
+    negative inertia (Pinocchio's RuntimeError was a traceback)."""
+    fields = {"v": "1.7", "rel": "", "xin": "", "upm": "", "frame": "", "pose": POSE,
+              "axis": "0 0 1"}  # fmt: skip
+    text = PENDULUM.format(**fields)
+    cases = [
+        (text.replace(">g<", ">universe<").replace('"g"', '"universe"'), {},
+         r"name 'universe' is taken by Pinocchio's world; expected another name"),
+        (text.replace('name="j"', 'name="root_joint"'), {"free_base": True},
+         r"name 'root_joint' is taken by Pinocchio's free base joint"),
+        (text.replace("<xyz>", "<use_parent_model_frame>yes</use_parent_model_frame><xyz>"), {},
+         r"use_parent_model_frame is 'yes'; expected true or false \(or 1 or 0\)"),
+        (text.replace("<pose>", '<pose degrees="on">', 1), {},
+         r"degrees is 'on'; expected true or false"),
+        (text.replace('<link name="b">', '<link name="b"><inertial><inertia><ixx>-1</ixx>'
+                      "</inertia></inertial>"), {},
+         r"inertial of link 'b' is not a valid inertia .*; expected a positive inertia"),
+    ]  # fmt: skip
+    for bad, options, match in cases:
+        with pytest.raises(ModelFileError, match=match):
+            load_model(write(tmp_path, bad), geometry=False, **options)
 
 
 def test_universal_joint_has_two_sprung_axes(tmp_path):
