@@ -569,53 +569,36 @@ QUAT = Rotation.from_euler("xyz", RPY).as_quat()  # x y z w
 R_WORLD = Rotation.from_euler("xyz", RPY).as_matrix()
 AXIS_LOCAL = np.array([0.0, 0.6, 0.8])
 AXIS_WORLD = R_WORLD @ AXIS_LOCAL
+
+
+def quaternion_form(scale: float = 1.0) -> dict:
+    """The pose as a quaternion (x y z w) times ``scale`` (SDF 1.9)."""
+    return dict(v="1.9", rel=' rotation_format="quat_xyzw"', axis="0 0.6 0.8",
+                pose="0.1 0.2 0.5 " + numbers(scale * QUAT))  # fmt: skip
+
+
+def degrees_form(flag: str) -> dict:
+    """The pose in degrees, ``degrees="flag"`` (SDF 1.9)."""
+    return dict(v="1.9", rel=f' degrees="{flag}"', axis="0 0.6 0.8",
+                pose="0.1 0.2 0.5 " + " ".join(repr(math.degrees(a)) for a in RPY))  # fmt: skip
+
+
+def model_axis_form(version: str, flag: str | None) -> dict:
+    """The axis in the model frame: ``use_parent_model_frame`` = flag, or by default."""
+    upm = "" if flag is None else f"<use_parent_model_frame>{flag}</use_parent_model_frame>"
+    return dict(v=version, pose=POSE, axis=numbers(AXIS_WORLD), upm=upm)
+
+
 FORMS = {
     "rpy, axis in the joint frame": dict(v="1.6", pose=POSE, axis="0 0.6 0.8"),
-    "quaternion": dict(
-        v="1.9",
-        rel=' rotation_format="quat_xyzw"',
-        axis="0 0.6 0.8",
-        pose="0.1 0.2 0.5 " + numbers(QUAT),
-    ),
-    "degrees": dict(
-        v="1.9",
-        rel=' degrees="true"',
-        axis="0 0.6 0.8",
-        pose="0.1 0.2 0.5 " + " ".join(repr(math.degrees(a)) for a in RPY),
-    ),
-    "use_parent_model_frame": dict(
-        v="1.6",
-        pose=POSE,
-        axis=numbers(AXIS_WORLD),
-        upm="<use_parent_model_frame>true</use_parent_model_frame>",
-    ),
-    "SDF 1.4: the axis in the model frame by default": dict(
-        v="1.4", pose=POSE, axis=numbers(AXIS_WORLD)
-    ),
-    "booleans in any case": dict(
-        v="1.6",
-        pose=POSE,
-        axis=numbers(AXIS_WORLD),
-        upm="<use_parent_model_frame>True</use_parent_model_frame>",
-    ),
-    "degrees='1'": dict(
-        v="1.9",
-        rel=' degrees="1"',
-        axis="0 0.6 0.8",
-        pose="0.1 0.2 0.5 " + " ".join(repr(math.degrees(a)) for a in RPY),
-    ),
-    "quaternion of norm 1e-200": dict(
-        v="1.9",
-        rel=' rotation_format="quat_xyzw"',
-        axis="0 0.6 0.8",
-        pose="0.1 0.2 0.5 " + numbers(1e-200 * QUAT),
-    ),
-    "quaternion of norm 1e200": dict(
-        v="1.9",
-        rel=' rotation_format="quat_xyzw"',
-        axis="0 0.6 0.8",
-        pose="0.1 0.2 0.5 " + numbers(1e200 * QUAT),
-    ),
+    "quaternion": quaternion_form(),
+    "degrees": degrees_form("true"),
+    "use_parent_model_frame": model_axis_form("1.6", "true"),
+    "SDF 1.4: the axis in the model frame by default": model_axis_form("1.4", None),
+    "booleans in any case": model_axis_form("1.6", "True"),
+    "degrees='1'": degrees_form("1"),
+    "quaternion of norm 1e-200": quaternion_form(1e-200),
+    "quaternion of norm 1e200": quaternion_form(1e200),
     "an empty pose relative to a <frame>": dict(
         v="1.7",
         rel=' relative_to="f"',
