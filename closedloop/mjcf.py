@@ -1,11 +1,13 @@
 """What Pinocchio's MJCF parser leaves out or reads wrong, read from the XML here.
 
 Pinocchio 4.1 keeps neither actuators nor joint stiffness, shifts hinge and slide limits by
-``ref`` and converts slide ranges as angles, ignores ``active`` on equalities, orders the
-equalities by name (keeping one of each name), and reads only the first ``<compiler>``,
-``<equality>`` and root body. :func:`read_mjcf_extras` reads the file as MuJoCo does and
-refuses what Pinocchio would silently get wrong; Pinocchio reads :func:`pinocchio_copy`;
-:func:`match_parsed` and :func:`place_free_joints` correct what it built.
+``ref`` and converts slide ranges as angles, ignores ``limited`` and ``active``, orders the
+equalities by name (keeping one of each name), reads only the first ``<compiler>``,
+``<equality>`` and root body, ignores positions and orientations given by ``<default>``
+classes, fails on ``class="main"``, and reads upper-case ``eulerseq`` axes as lower-case.
+:func:`read_mjcf_extras` reads the file as MuJoCo does and refuses what Pinocchio would
+silently get wrong; Pinocchio reads :func:`pinocchio_copy`; :func:`match_parsed` and
+:func:`place_free_joints` correct what it built.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ class MjcfExtras:
         undriven: actuators that drive no joint (name, else tag).
         limits: (configuration index, lower, upper) of every hinge and slide with a range,
             as MuJoCo reads it: hinge [rad] (from the compiler's angle unit), slide [m];
-            ``ref`` does not shift it.
+            ``ref`` does not shift it; (-inf, inf) for a ``limited="false"`` one.
         nq: configuration size of the file's joints.
     """
 
@@ -59,7 +61,8 @@ class MjcfExtras:
 def read_mjcf_extras(path: Path) -> MjcfExtras:
     """Actuators, joint stiffness, joint limits and closure names of an MJCF file.
 
-    ``<default>`` classes and ``childclass`` are resolved as MuJoCo does.
+    ``<default>`` classes and ``childclass`` are resolved as MuJoCo does. A hinge or slide
+    with ``limited="false"`` has no limits, whatever its range.
 
     Raises:
         ModelFileError: invalid XML, ``<include>``, a ``<frame>`` or ``<replicate>`` holding
@@ -69,7 +72,10 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             axis that is not numbers, a range whose lower bound is above its upper one, a
             joint with a nonzero stiffness but no name, a malformed position or orientation
             (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor, a class that no
-            ``<default>`` defines. The message names the file.
+            ``<default>`` defines, a ``limited`` other than true/false/auto, ``euler``
+            angles with an upper-case (extrinsic) ``eulerseq``, a spring on a joint that
+            Pinocchio merges into a composite joint (several joints in one body). The
+            message names the file.
     """
     where = f"robot file {str(path)!r}"
     root = _parse_xml(path, where)
@@ -82,6 +88,13 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 f"parser drops them); write the bodies without <{tag}>"
             )
     _check_classes(root, where)
+    seq = _compiler(root).get("eulerseq", "xyz")
+    if seq != seq.lower() and root.find(".//*[@euler]") is not None:
+        raise ModelFileError(
+            f"{where}: <compiler> eulerseq={seq!r} has upper-case (extrinsic) axes, which "
+            "Pinocchio reads as intrinsic; expected lower-case axes (extrinsic 'XYZ' is "
+            "intrinsic 'zyx' with the angles in reverse order)"
+        )
     equalities = _equalities(root, where)
     _check_numbers(root, where)
     joints = _joints(root)
@@ -103,7 +116,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     stiffness, limits, nq = {}, [], 0
     for body, attrs in joints:
         kind, name = attrs.get("type", "hinge"), attrs.get("name")
-        what = f"joint {name!r}" if name else f"an unnamed {kind} joint of body {body!r}"
+        what = f"joint {name!r}" if name else f"an unnamed {kind} joint of body {_name(body)}"
         if kind not in JOINT_NQ:
             raise ModelFileError(
                 f"{where}: {what} has type {kind!r}; expected one of {', '.join(JOINT_NQ)}"
@@ -115,7 +128,14 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                     f"{where}: {what}: axis {axis!r} is the zero vector; expected a direction "
                     f"(norm >= {MIN_AXIS_NORM:g}, as MuJoCo requires)"
                 )
-            if "range" in attrs:
+            limited = attrs.get("limited", "auto")
+            if limited not in ("true", "false", "auto"):
+                raise ModelFileError(
+                    f"{where}: {what} has limited={limited!r}; expected 'true', 'false' or 'auto'"
+                )
+            if limited == "false":  # MuJoCo ignores the range
+                limits.append((nq, -math.inf, math.inf))
+            elif "range" in attrs:
                 lo, hi = _numbers(attrs["range"], 2, where, f"range of {what}")
                 if lo > hi:  # MuJoCo refuses it (limited) or ignores it (autolimits)
                     raise ModelFileError(
@@ -133,6 +153,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 )
             if name is not None:
                 stiffness[name] = text
+            _check_composite(body, name, text, [a for b, a in joints if b is body], where)
         nq += JOINT_NQ[kind]
     actuators = [a for act in root.findall("actuator") for a in act]
     return MjcfExtras(
@@ -159,6 +180,13 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
       default directories: the copy has one, first, that merges them in order (MuJoCo's
       rule, later attributes winning); a relative ``meshdir``, ``texturedir`` or
       ``assetdir`` is made absolute so that the copy finds the assets.
+    * Pinocchio ignores the ``pos`` of a joint and the ``pos`` and orientation of a geom
+      or site that a ``<default>`` class gives, leaks a ``childclass`` into an element of
+      another class, and fails on ``class="main"``: the copy writes on each joint, geom,
+      site, mesh and material the attributes its class gives (:func:`_write_classes`),
+      and has neither classes nor ``<default>``.
+    * Pinocchio 4.1 does not normalise the axis of an ``axisangle`` (the placement is then
+      not a rotation): the copy's axes are unit vectors.
     * Pinocchio reads only the first ``<equality>``, ignores ``active``, and orders the
       equalities by name keeping one of each name: the copy has the active ones only, in
       one ``<equality>``, named by their rank, so that Pinocchio returns the connects, then
@@ -190,6 +218,12 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
     for element in root.findall("compiler") + root.findall("equality"):
         root.remove(element)
     root.insert(0, compiler)
+    _write_classes(root)
+    for e in root.iter():
+        if "axisangle" in e.attrib:  # checked: 4 numbers, the axis not zero
+            *axis, angle = e.get("axisangle").split()
+            unit = np.array(axis, dtype=float) / np.linalg.norm(np.array(axis, dtype=float))
+            e.set("axisangle", " ".join([*map(repr, unit.tolist()), angle]))
     equality = ET.SubElement(root, "equality")
     for rank, (_, element) in enumerate(active):
         element.set("name", f"{rank:09d}")
@@ -362,28 +396,82 @@ def _defaults(root: ET.Element, tag: str) -> dict[str, dict[str, str]]:
     return defaults
 
 
-def _joints(root: ET.Element) -> list[tuple[str | None, dict[str, str]]]:
-    """(body name, attributes) of every joint, in Pinocchio's order (depth first, a body's
+def _joints(root: ET.Element) -> list[tuple[ET.Element, dict[str, str]]]:
+    """(body, attributes) of every joint, in Pinocchio's order (depth first, a body's
     joints before its children); classes and childclass resolved, ``<freejoint>`` of type
     free."""
     defaults = _defaults(root, "joint")
-    joints: list[tuple[str | None, dict[str, str]]] = []
+    joints: list[tuple[ET.Element, dict[str, str]]] = []
 
     def visit(body: ET.Element, cls: str) -> None:
         cls = body.get("childclass", cls)
         for j in body:
             if j.tag == "joint":
-                joints.append(
-                    (body.get("name"), {**defaults.get(j.get("class", cls), {}), **j.attrib})
-                )
+                joints.append((body, {**defaults.get(j.get("class", cls), {}), **j.attrib}))
             elif j.tag == "freejoint":
-                joints.append((body.get("name"), {**j.attrib, "type": "free"}))
+                joints.append((body, {**j.attrib, "type": "free"}))
         for child in body.findall("body"):
             visit(child, cls)
 
     for world in root.findall("worldbody"):
         visit(world, "main")
     return joints
+
+
+def _name(element: ET.Element) -> str:
+    return repr(element.get("name")) if element.get("name") else "(unnamed)"
+
+
+def _check_composite(
+    body: ET.Element, name: str | None, stiffness: str, attrs: list[dict], where: str
+) -> None:
+    """Refuse a nonzero ``stiffness`` on one of several joints of ``body``: Pinocchio merges
+    them into one composite joint, named after the first, that no spring can name."""
+    if len(attrs) > 1 and _numbers(stiffness, 1, where, f"stiffness of joint {name!r}")[0]:
+        names = [a.get("name") for a in attrs]
+        raise ModelFileError(
+            f"{where}: joint {name!r} has stiffness {stiffness!r}, but Pinocchio merges the "
+            f"joints {names} of body {_name(body)} into one composite joint "
+            f"'Composite_{names[0]}' that has no spring per joint; expected one joint with a "
+            "spring per body (nest a body for each joint)"
+        )
+
+
+#: Elements Pinocchio reads whose attributes a ``<default>`` class may give.
+CLASSED = ("joint", "geom", "site", "mesh", "material")
+#: Orientations other than ``quat``: one given by a class beats the element's ``quat``.
+ALTERNATIVES = {"axisangle", "xyaxes", "zaxis", "euler"}
+#: What ``fromto`` overrides.
+PLACING = {"pos", "quat", *ALTERNATIVES}
+
+
+def _write_classes(root: ET.Element) -> None:
+    """Write on each :data:`CLASSED` element the attributes MuJoCo gives it: its own, then
+    its ``class``'s, else the ``childclass`` of the nearest enclosing body, else "main"
+    (each class holding those of the classes around it); an alternative orientation
+    (:data:`ALTERNATIVES`) beats ``quat``, the element's own beating its class's, and
+    ``fromto`` beats both and ``pos``. Remove ``class``, ``childclass`` and ``<default>``."""
+    defaults = {tag: _defaults(root, tag) for tag in CLASSED}
+
+    def visit(parent: ET.Element, cls: str) -> None:
+        for e in list(parent):
+            if e.tag == "default":
+                parent.remove(e)
+                continue
+            if e.tag in CLASSED:
+                given = defaults[e.tag].get(e.get("class", cls), {})
+                if ALTERNATIVES.intersection(e.keys()):
+                    given = {k: v for k, v in given.items() if k not in ALTERNATIVES}
+                e.attrib = {**given, **e.attrib}
+                if "fromto" in e.attrib:  # it places the element
+                    e.attrib = {k: v for k, v in e.attrib.items() if k not in PLACING}
+                elif ALTERNATIVES.intersection(e.keys()):
+                    e.attrib.pop("quat", None)
+            visit(e, e.get("childclass", cls))
+            for key in ("class", "childclass"):
+                e.attrib.pop(key, None)
+
+    visit(root, "main")
 
 
 def _equalities(root: ET.Element, where: str) -> list[tuple[str, ET.Element]]:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import frame_placement
+from scipy.spatial.transform import Rotation
 
 import closedloop as cl
 from closedloop.exceptions import ModelFileError
@@ -17,6 +19,10 @@ from closedloop.io import load_model, reference_configuration
 
 INERTIAL = '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
 RADIAN = '<compiler angle="radian"/>'
+#: Placements built by Pinocchio (Eigen) and here (scipy, numpy) from the same doubles, with
+#: entries of order 1: they differ by a few ulps (~1e-16); the misreadings fixed here were
+#: off by more than 1e-2.
+PLACEMENT_TOL = 1e-12
 
 
 def body(name: str, joints: str, children: str = "", attributes: str = "") -> str:
@@ -229,6 +235,28 @@ def test_bad_range_is_refused(tmp_path, joint_range, match):
     refused(write(tmp_path, text), match)
 
 
+@pytest.mark.parametrize(
+    ("head", "attribute", "expected"),
+    [
+        (RADIAN, 'limited="false"', (-np.inf, np.inf)),
+        (RADIAN + '<default><joint limited="false"/></default>', "", (-np.inf, np.inf)),
+        (RADIAN + '<default><joint limited="false"/></default>', 'limited="true"', (-1.0, 2.0)),
+        (RADIAN, 'limited="auto"', (-1.0, 2.0)),
+    ],
+)
+def test_limited_false_ignores_the_range(tmp_path, head, attribute, expected):
+    """MuJoCo ignores the range of a joint with limited="false" (own or from its class);
+    Pinocchio kept it as limits."""
+    text = mujoco(body("a", f'<joint name="h" range="-1 2" {attribute}/>'), head=head)
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    assert limits(robot, "h") == expected
+
+
+def test_bad_limited_value_is_refused(tmp_path):
+    text = mujoco(body("a", '<joint name="h" range="-1 2" limited="no"/>'))
+    refused(write(tmp_path, text), "joint 'h' has limited='no'; expected 'true', 'false' or")
+
+
 # ------------------------------------------------------------------------ equalities
 INACTIVE = (
     '<connect name="off" active="false" body1="crank_end" body2="rocker_end" anchor="0 0 0"/>'
@@ -369,3 +397,138 @@ def test_malformed_positions_and_anchors_are_refused(fourbar_mjcf, tmp_path, old
     at z = 2.2e243, an anchor at 6.9e-310): the loops then failed to close (exit 3), or
     closed at the wrong point."""
     refused(fourbar_with(fourbar_mjcf, tmp_path, old, new), match)
+
+
+# ------------------------------------------------------------------ placements, classes
+def site_in_world(tmp_path: Path, text: str, q: float) -> np.ndarray:
+    """4x4 world placement of site 's' of the one-joint file ``text`` at q."""
+    robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
+    return frame_placement(robot, np.array([q]), "s").homogeneous
+
+
+def placement(rotation: Rotation, translation) -> np.ndarray:
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = rotation.as_matrix(), translation
+    return M
+
+
+def test_axisangle_axis_is_normalised(tmp_path):
+    """MuJoCo normalises the axis of an axisangle; Pinocchio 4.1 built a placement that is
+    not a rotation from a non-unit one (degrees: the compiler's default)."""
+    site = '<site name="s" pos="0.1 0 0" axisangle="0 0 2 90"/>'
+    text = mujoco(body("b", '<joint name="j"/>', site, 'axisangle="1 1 0 40"'), head="")
+    R_b = Rotation.from_rotvec(np.radians(40) * np.array([1, 1, 0]) / np.sqrt(2))
+    expected = placement(R_b, [0, 0, 0]) @ placement(
+        Rotation.from_euler("z", 90, True), [0.1, 0, 0]
+    )
+    np.testing.assert_allclose(site_in_world(tmp_path, text, 0.0), expected, atol=PLACEMENT_TOL)
+
+
+@pytest.mark.parametrize(
+    ("defaults", "attributes", "joint", "site"),
+    [  # a class of the joint and site: from childclass, their own class, "main"
+        ('<default class="a">{}</default>', 'childclass="a"', "", ""),
+        ('<default class="a">{}</default>', "", 'class="a"', 'class="a"'),
+        ("{}", "", "", ""),
+        ("{}", "", 'class="main"', 'class="main"'),
+    ],
+)
+def test_positions_and_orientations_of_default_classes(tmp_path, defaults, attributes, joint, site):
+    """Pinocchio ignored a joint's pos and a site's pos and quat given by a class: the hinge
+    turned about the body origin and the site sat there, unrotated."""
+    given = '<joint pos="0.1 0 0" axis="0 1 0"/><site pos="0.1 0.2 0" quat="0 0 0 1"/>'
+    text = mujoco(
+        body("b", f'<joint name="j" {joint}/>', f'<site name="s" {site}/>', attributes),
+        head=RADIAN + "<default>" + defaults.format(given) + "</default>",
+    )
+    q, centre = 0.4, np.array([0.1, 0, 0])  # the hinge turns the site about y through centre
+    R = Rotation.from_euler("y", q)
+    expected = placement(R, centre + R.apply(np.array([0.1, 0.2, 0]) - centre))
+    expected[:3, :3] = expected[:3, :3] @ Rotation.from_euler("z", np.pi).as_matrix()
+    np.testing.assert_allclose(site_in_world(tmp_path, text, q), expected, atol=PLACEMENT_TOL)
+
+
+@pytest.mark.parametrize(
+    ("joint", "site", "axis", "turn"),
+    [  # the element's class beats childclass; a class's euler beats the site's own quat;
+        # the site's own axisangle beats its class's euler
+        ('class="b"', "", [0, 0, 1], np.pi / 2),
+        ("", 'quat="0 1 0 0"', [1, 0, 0], np.pi / 2),
+        ("", 'axisangle="0 0 1 3"', [1, 0, 0], 3.0),
+    ],
+)
+def test_class_rules_of_mujoco(tmp_path, joint, site, axis, turn):
+    """MuJoCo applies the element's class instead of the childclass (Pinocchio applied
+    both, so the childclass's axis x leaked into the joint of class b), and an alternative
+    orientation (euler, axisangle, xyaxes, zaxis) instead of quat, whichever of the class
+    and the element gives them (Pinocchio read quat first). The site turns by ``turn``
+    about z in the body, the body by q about ``axis``."""
+    defaults = (
+        '<default><default class="a"><joint axis="1 0 0"/><site euler="0 0 1.5707963267948966"/>'
+        '</default><default class="b"><joint ref="0"/></default></default>'
+    )
+    text = mujoco(
+        body("b", f'<joint name="j" {joint}/>', f'<site name="s" {site}/>', 'childclass="a"'),
+        head=RADIAN + defaults,
+    )
+    q = 0.3
+    R = Rotation.from_rotvec(q * np.array(axis)) * Rotation.from_euler("z", turn)
+    np.testing.assert_allclose(
+        site_in_world(tmp_path, text, q), placement(R, [0, 0, 0]), atol=PLACEMENT_TOL
+    )
+
+
+def test_fromto_beats_the_position_of_the_class(tmp_path):
+    """A geom's fromto places it, whatever pos its class gives (Pinocchio refuses a geom
+    that has both): the capsule from z = 0 to 0.2 is centred at z = 0.1."""
+    geom = '<geom type="capsule" size="0.01" fromto="0 0 0 0 0 0.2"/>'
+    text = mujoco(
+        body("b", '<joint name="j"/>' + geom),
+        head=RADIAN + '<default><geom pos="0 0 0.5"/></default>',
+    )
+    robot = load_model(write(tmp_path, text), actuated=[])
+    (capsule,) = robot.visual_model.geometryObjects
+    np.testing.assert_allclose(capsule.placement.translation, [0, 0, 0.1], atol=PLACEMENT_TOL)
+
+
+def test_class_main_loads_as_without_it(tmp_path):
+    """MuJoCo's top default class is "main": Pinocchio failed on it ('unordered_map::at')."""
+    plain = mujoco(
+        body("b", '<joint name="j" stiffness="2"/>', '<site name="s" pos="1 0 0"/>'),
+        head=RADIAN + '<default><joint axis="0 1 0"/></default>',
+    )
+    main = plain.replace('<joint name="j"', '<joint name="j" class="main"')
+    robots = [
+        load_model(write(tmp_path, text, f"{i}.xml"), actuated=[], geometry=False)
+        for i, text in enumerate((plain, main))
+    ]
+    assert robots[0].springs == robots[1].springs == {"j": 2.0}
+    np.testing.assert_array_equal(
+        *(frame_placement(r, np.array([0.5]), "s").homogeneous for r in robots)
+    )
+
+
+def test_upper_case_eulerseq_is_refused(tmp_path):
+    """MuJoCo's upper-case eulerseq letters are extrinsic axes; Pinocchio read them as
+    intrinsic. The equivalent the message gives (intrinsic 'zyx', angles reversed) is
+    MuJoCo's extrinsic rotation (scipy's lower case: extrinsic)."""
+    site = '<site name="s" euler="{}"/>'
+    head = '<compiler angle="degree" eulerseq="{}"/>'
+    text = mujoco(body("b", '<joint name="j"/>', site.format("10 20 30")), head.format("XYZ"))
+    refused(write(tmp_path, text), r"<compiler> eulerseq='XYZ' has upper-case \(extrinsic\) axes")
+    text = mujoco(body("b", '<joint name="j"/>', site.format("30 20 10")), head.format("zyx"))
+    expected = placement(Rotation.from_euler("xyz", [10, 20, 30], degrees=True), [0, 0, 0])
+    np.testing.assert_allclose(site_in_world(tmp_path, text, 0.0), expected, atol=PLACEMENT_TOL)
+    without_euler = mujoco(body("b", '<joint name="j"/>'), head.format("XYZ"))
+    assert load_model(write(tmp_path, without_euler), actuated=[], geometry=False).model.nq == 1
+
+
+def test_spring_on_a_joint_of_a_composite_is_refused(tmp_path):
+    """Pinocchio merges the joints of one body into a composite joint named after the
+    first: a spring on 's' failed with "unknown joint 's'; expected one of: 'Composite_s'"."""
+    joints = '<joint name="s" type="slide" stiffness="300"/><joint name="h" stiffness="5"/>'
+    refused(
+        write(tmp_path, mujoco(body("b", joints))),
+        r"joint 's' has stiffness '300', but Pinocchio merges the joints \['s', 'h'\] of body "
+        r"'b' into one composite joint 'Composite_s'",
+    )
