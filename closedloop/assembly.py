@@ -16,7 +16,7 @@ from .model import ClosedLoopModel
 #: Default closure tolerance: infinity norm of the residual with its rows in metres divided
 #: by the model's characteristic length L (radians as they are), unit-free like
 #: :data:`closedloop.configuration.CLOSURE_TOL`: 1e-12 L for a point closure, whatever the
-#: size of the mechanism (an absolute 1e-12 m closed a nanometre mechanism to 1e-3 of L).
+#: size of the mechanism (an absolute 1e-12 m is 3e-3 of the size of a nanometre one).
 ASSEMBLY_TOL = 1e-12
 
 
