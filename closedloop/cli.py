@@ -30,12 +30,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import __version__, cli_identify, cli_map
+from . import __version__
 from .assembly import assemble
 from .cli_common import (
     EXIT_HELP,
     Parser,
     UsageError,
+    add_subcommands,
+    command_of,
     finite_float,
     needs_gravity,
     path_text,
@@ -92,8 +94,20 @@ Examples:
 """
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Argument parser of the ``closedloop`` command."""
+#: Further subcommands: name -> (module defining ``add_parser(subparsers, arguments)``,
+#: help line); imported only when they run (the map's imports Dask's and tqdm's code).
+SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
+    "map": (
+        "closedloop.cli_map",
+        "a stiffness index over a grid of actuated inputs (NPZ, CSV, PNG)",
+    ),
+    "identify": ("closedloop.cli_identify", "fit spring stiffnesses to measured deflections"),
+}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Argument parser of the ``closedloop`` command; of the subcommands of
+    :data:`SUBCOMMAND_MODULES`, only ``command``'s module is imported."""
     parser = Parser(
         prog=PROG,
         description="Stiffness and compliance of robots with closed loops. " + EXIT_HELP,
@@ -131,8 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_model_arguments(v)
     add_view_arguments(v)
     v.set_defaults(func=view)
-    cli_map.add_parser(sub, add_source_arguments)
-    cli_identify.add_parser(sub, lambda p: add_source_arguments(p, frame=False))
+    add_subcommands(sub, SUBCOMMAND_MODULES, command, add_source_arguments)
     return parser
 
 
@@ -439,7 +452,7 @@ def view(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``closedloop`` command; returns the exit code (see module doc)."""
-    return run_main(PROG, lambda _: build_parser(), argv)
+    return run_main(PROG, lambda words: build_parser(command_of(words)), argv)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import json
 import math
 import os
@@ -405,6 +406,23 @@ def _remove_empty_outputs() -> None:
     while _CREATED:
         with contextlib.suppress(OSError):  # not empty: kept
             _CREATED.pop().rmdir()
+
+
+def command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand named by ``argv`` (its first word that is not an option), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def add_subcommands(subparsers, modules: dict[str, tuple[str, str]], command, *args) -> None:
+    """Subcommands defined in modules (name -> (module with ``add_parser(subparsers,
+    *args)``, help line)): only the module of ``command``, the one that will run, is
+    imported; the others stand in by their help line (enough for ``--help`` and for the
+    choices of an unknown command), so that a command does not pay for the others."""
+    for name, (module, help_line) in modules.items():
+        if command == name:
+            importlib.import_module(module).add_parser(subparsers, *args)
+        else:
+            subparsers.add_parser(name, help=help_line, add_help=False)
 
 
 def run_main(

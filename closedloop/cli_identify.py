@@ -20,14 +20,15 @@ from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 
 def add_parser(sub, model_arguments) -> None:
-    """The ``identify`` subparser; ``model_arguments(p)`` adds MODEL, --closures, springs."""
+    """The ``identify`` subparser; ``model_arguments(p, frame=False)`` adds MODEL,
+    --closures and the springs options."""
     p = sub.add_parser(
         "identify",
         help="fit spring stiffnesses to measured deflections",
         description=__doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    model_arguments(p)
+    model_arguments(p, frame=False)
     p.add_argument("--measurements", required=True, type=path_text, metavar="FILE",
                    help="YAML or CSV")  # fmt: skip
     p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")

@@ -67,3 +67,13 @@ def test_the_stiffness_command_loads_no_plotting_viewer_yaml_or_scipy_linalg():
     assert "scipy.linalg._flapack" in modules  # its LAPACK, without the package's code
     assert not loaded & {"matplotlib", "meshcat", "tqdm", "markdown", "dask", "yaml"}
     assert not modules & {"scipy.linalg", "importlib.metadata", "numpy.f2py"}
+
+
+def test_the_closedloop_stiffness_command_loads_no_map_machinery():
+    modules = modules_after(
+        "import os; from closedloop.cli import main; sys.stdout = open(os.devnull, 'w'); "
+        "assert main(['stiffness', 'fourbar', '--frame', 'P', '--actuated', '0.3']) == 0; "
+        "sys.stdout = sys.__stdout__"
+    )
+    assert "closedloop.compliance" in modules  # the query ran
+    assert not modules & {"closedloop.map_engine", "closedloop.cli_map", "tqdm", "scipy.linalg"}

@@ -22,12 +22,11 @@ error, number type, JSON writer and entry point are those of :mod:`closedloop.cl
 from __future__ import annotations
 
 import argparse
-import importlib
 from collections.abc import Sequence
 
 from cahyman_pin.cli.stiffness import add_deflect, add_stiffness
 from closedloop import __version__
-from closedloop.cli_common import EXIT_HELP, Parser, run_main
+from closedloop.cli_common import EXIT_HELP, Parser, add_subcommands, command_of, run_main
 
 PROG = "cahyman"
 #: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).
@@ -39,11 +38,6 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
 
 
 # ------------------------------------------------------------------ entry point
-def command_of(argv: Sequence[str]) -> str | None:
-    """The subcommand named by ``argv`` (its first word that is not an option), or None."""
-    return next((a for a in argv if not a.startswith("-")), None)
-
-
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`.
 
@@ -59,11 +53,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     add_stiffness(subparsers)
     add_deflect(subparsers)
-    for name, (module, help_line) in SUBCOMMAND_MODULES.items():
-        if command == name:
-            importlib.import_module(module).add_parser(subparsers)
-        else:
-            subparsers.add_parser(name, help=help_line, add_help=False)
+    add_subcommands(subparsers, SUBCOMMAND_MODULES, command)
     return parser
 
 
