@@ -113,7 +113,8 @@ class GravityLoad:
             point_mass = pin.Inertia(float(p.mass), np.zeros(3), np.zeros((3, 3)))
             model.appendBodyToJoint(f.parentJoint, point_mass, at)
         self.model = model
-        self.mass = float(sum(I.mass for I in model.inertias))
+        # the moving mass: the fixed base's (joint 0, the world) loads no spring
+        self.mass = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
         lever = max(clm.length, 1.0, *(float(np.max(np.abs(p.offset))) for p in self.payloads))
         weight = self.mass * float(np.max(np.abs(self.gravity))) * lever
         if not weight < WEIGHT_MAX:  # its moments, derivatives and the solver would overflow
@@ -141,7 +142,8 @@ class GravityLoad:
         return float(pin.computePotentialEnergy(self.model, self.model.createData(), q))
 
     def to_dict(self) -> dict:
-        """JSON-ready description: gravity [m/s^2], total mass [kg], payloads."""
+        """JSON-ready description: gravity [m/s^2], moving mass [kg] (links and payloads
+        beyond the fixed base), payloads."""
         return {
             "gravity_m_s2": self.gravity.tolist(),
             "mass_kg": self.mass,
