@@ -43,6 +43,10 @@ bodies beyond a ``fixed`` end (merged by Pinocchio's URDF parser into the link's
 move with the tip. Frames keep their indices (the virtual joint's frame is appended);
 joints from the virtual joint on get new indices; frames, geometry objects and closure
 anchors beyond the tip follow it.
+
+Preload: a beam has no geometric stiffness of its own (its block is the unloaded one), so
+an axial load P does not change its bending stiffness: first order in P L^2 / EI (25 % on
+the transverse compliance of a clamped rod at P = EI / L^2; the README's beams section).
 """
 
 from __future__ import annotations

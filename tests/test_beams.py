@@ -781,3 +781,30 @@ def test_a_beam_far_stiffer_than_the_joint_spring_is_the_rigid_limit(tmp_path):
     res = cl.compliance(flex, map_configuration(rigid.model, flex.model, q), "hand")
     assert res.rank == expected.rank
     assert_close_in_norm(res.C, expected.C, 1e-9)
+
+
+#: A beam element with its geometric stiffness (P-delta) reaches the beam-column closed
+#: form within about 1 % at P = EI / L^2; 2 % leaves room for the element's own error.
+RTOL_BEAM_COLUMN = 0.02
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="closedloop/beams.py: a beam is a 6-dof spring without a geometric stiffness of "
+    "its own, so its axial load neither softens (compression) nor stiffens (tension) its "
+    "bending: at P = EI / L^2 the tip's transverse compliance is 25 % above the beam-column "
+    "value, and the stability margin vanishes at 1.86 EI / L^2 instead of Euler's 2.47",
+)
+def test_an_axial_preload_softens_a_beam_as_a_beam_column(tmp_path):
+    """A clamped circular rod under an axial compression P at its tip: the transverse tip
+    compliance is (tan kL - kL) / (k^3 EI), k = sqrt(P / EI) (Timoshenko & Gere)."""
+    d, L = 0.01, 0.5
+    clm, q = cantilever(tmp_path, {"shape": "circle", "d": d}, length=L)
+    EI = STEEL["E"] * math.pi * d**4 / 64
+    P = EI / L**2
+    kL = math.sqrt(P / EI) * L
+    exact = (math.tan(kL) - kL) * L**3 / (kL**3 * EI)
+    res = cl.compliance(clm, q, "tip", preload=np.r_[-P * AXIS, np.zeros(3)])
+    across = beam_frame()[:, 1]
+    np.testing.assert_allclose(across @ res.C[:3, :3] @ across, exact, rtol=RTOL_BEAM_COLUMN)
