@@ -211,11 +211,14 @@ def close_loops(
         q, r, size2, closed = q_try, r_try, size2_try, closed_try
     err = _inf_norm(r)
     if not closed:
+        held = [n for n in (*clm.springs, *clm.locked) if n not in clm.actuated]
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r} with actuated "
-            f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}",
+            f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}"
+            + (f" (the joints with springs or locked, {held}, keep their start values: "
+               "a loop that needs them to move cannot close)" if held else ""),
             err,
-        )
+        )  # fmt: skip
     q.flags.writeable = False
     closure = None
     if jacobian:  # the datas are those of q's residual evaluation, the last one

@@ -58,7 +58,7 @@ from .data import BUNDLED_MODELS, ROBOTS, resolve
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
 from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
-from .limits import assemble_within_limits
+from .limits import assemble_connected
 from .model import ClosedLoopModel
 
 PROG = "closedloop"
@@ -330,7 +330,7 @@ def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
         q = (
             assemble(clm, None, start)  # the file's own configuration, as drawn
             if actuated is None
-            else assemble_within_limits(clm, actuated, start, jacobian=False)
+            else assemble_connected(clm, actuated, start, jacobian=False)  # start's mode
         ).q
     state = Configuration(clm, q)
     try:

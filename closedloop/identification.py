@@ -64,7 +64,8 @@ from .exceptions import (
     OpenLoopError,
     SingularConfigurationError,
 )
-from .limits import assemble_within_limits
+from .io import reference_configuration
+from .limits import assemble_connected
 from .model import ClosedLoopModel
 
 #: Largest standard error of log k (the 1-sigma interval of k spans a factor e^2) of an
@@ -360,7 +361,8 @@ def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
         try:
             out.append(clm.check_configuration(m.q) if m.q is not None else None)
             if m.q is None:  # the count and values checked by the assembly
-                out[-1] = assemble_within_limits(clm, m.actuated, jacobian=False).q
+                start = reference_configuration(clm)  # the file's, as the command line's
+                out[-1] = assemble_connected(clm, m.actuated, start, jacobian=False).q
         except InvalidInputError as e:
             raise InvalidInputError(f"measurement {i}: {e}") from None
     return out

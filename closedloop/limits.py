@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import Assembly, check_actuated, close_loops
-from .exceptions import InvalidInputError
+from .exceptions import AssemblyError, InvalidInputError
 from .model import ClosedLoopModel
 
 #: Excursion beyond a joint limit [m or rad] that counts as a violation: above the accuracy
@@ -111,3 +111,45 @@ def assemble_within_limits(
     if bad:
         raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
     return close_loops(clm, q, jacobian=jacobian)
+
+
+#: Largest change of an actuated value per step of :func:`assemble_connected` [rad, and
+#: lengths in units of the model's characteristic length L].
+INPUT_STEP = 0.05
+#: Most steps of :func:`assemble_connected` (a longer way takes longer steps).
+MAX_INPUT_STEPS = 1000
+
+
+def assemble_connected(
+    clm: ClosedLoopModel,
+    actuated: np.ndarray,
+    q0: np.ndarray | None = None,
+    *,
+    jacobian: bool = True,
+) -> Assembly:
+    """:func:`assemble_within_limits` on the assembly mode of q0 (default: neutral): the
+    actuated values go from q0's to ``actuated`` (n_act,) [rad, m] in steps of at most
+    :data:`INPUT_STEP`, each assembled from the last, as the robot is driven there.
+
+    One Gauss-Newton solve from far away may land on another mode: the bundled four-bar
+    solved at once from crank 0 is on the other mode at crank 1.0, not at 1.5. Where a step
+    cannot be assembled (q0's mode ends on the way, at a singular position, or the way
+    leaves the limits), the direct assembly from q0 is taken.
+
+    Raises:
+        As :func:`assemble_within_limits`.
+    """
+    q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
+    target = check_actuated(clm, actuated)
+    start = clm.actuated_values(q)
+    linear = clm.linear_coordinates[clm.actuated_v_indices]
+    span = float(np.max(np.abs(target - start) / np.where(linear, clm.length, 1.0), initial=0))
+    n = min(MAX_INPUT_STEPS, math.ceil(span / INPUT_STEP)) if math.isfinite(span) else 1
+    path = q
+    try:
+        for k in range(1, n):
+            path = assemble_within_limits(clm, start + k / n * (target - start), path,
+                                          jacobian=False).q  # fmt: skip
+    except (AssemblyError, InvalidInputError):
+        path = q
+    return assemble_within_limits(clm, target, path, jacobian=jacobian)

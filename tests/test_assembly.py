@@ -238,3 +238,36 @@ def test_threads_sharing_a_model_get_the_closures_of_their_own_assemblies():
         np.testing.assert_array_equal(a.q, b.q)
         np.testing.assert_array_equal(a.closure[0], b.closure[0])
         np.testing.assert_array_equal(a.closure[1], b.closure[1])
+
+
+@pytest.mark.parametrize("crank", [1.0, 1.2, 1.9, 2.6, -1.5])
+def test_actuated_values_are_assembled_on_the_mode_of_the_start(crank, capsys):
+    """assemble_connected drives the input from the start's value to the target: the
+    four-bar from crank 0 ends where a fine continuation (steps of 0.01 rad, each solve
+    from the last) ends. One solve from crank 0 lands on the other mode at crank 1.0, 1.2,
+    1.9 and 2.6 (P 0.13-0.16 m lower), and the command line's --actuated took it."""
+    import json
+
+    from closedloop.cli import main
+    from closedloop.limits import assemble_connected
+
+    clm = fourbar()
+    q = pin.neutral(clm.model)
+    for value in np.linspace(0.0, crank, 1 + round(abs(crank) / 0.01)):
+        q = assemble(clm, [value], q).q
+    got = assemble_connected(clm, [crank], pin.neutral(clm.model)).q
+    np.testing.assert_allclose(got, q, rtol=0, atol=1e-9)  # both closed to 1e-12 L
+    assert main(["stiffness", "fourbar", "--frame", "P", "--actuated", repr(crank), "--json"]) == 1
+    np.testing.assert_allclose(json.loads(capsys.readouterr().out)["q"], q, rtol=0, atol=1e-9)
+    if crank in (1.0, 1.2, 1.9, 2.6):  # what one solve gives: another mode
+        direct = assemble(clm, [crank]).q
+        assert np.max(np.abs(pin.difference(clm.model, direct, q))) > 0.1
+
+
+def test_a_loop_held_by_a_spring_names_the_held_joints():
+    """A spring on a passive joint holds it at its start value: the loop cannot close at
+    most inputs, and the message says which joints were held (it named only the inputs)."""
+    clm = fourbar().with_springs({**fourbar().springs, "coupler": 1.0})
+    held = r"\(the joints with springs or locked, \[.*'coupler'.*\], keep their start values"
+    with pytest.raises(AssemblyError, match=r"with actuated \{'crank': 0\.3\} " + held):
+        assemble(clm, [0.3])

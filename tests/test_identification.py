@@ -581,8 +581,11 @@ def test_measurements_given_by_actuated_values(fourbar):
     clm, _ = fourbar
     rng = np.random.default_rng(15)
     data = []
-    for a in FOURBAR_CRANKS:
-        C = cl.compliance(clm, cl.assemble(clm, actuated=[a]).q, "P").C
+    q = pin.neutral(clm.model)  # the file's configuration
+    for a in FOURBAR_CRANKS:  # measured as the robot is driven there: one assembly mode
+        for crank in np.linspace(q[0], a, 50):
+            q = cl.assemble(clm, actuated=[crank], q0=q).q
+        C = cl.compliance(clm, q, "P").C
         for w in 10.0 * rng.normal(size=(3, 6)):
             data.append(Measurement.of(actuated=[a], wrench=w, twist=C @ w, sd=1e-9))
     fit = identify(clm.with_springs({"crank": 10.0, "crank_axial": 1e6, "rocker_axial": 1e4}),
