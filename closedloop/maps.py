@@ -4,7 +4,8 @@ A map computes the compliance at a frame for many inputs (actuated values, SI), 
 sweep engine of :mod:`closedloop.map_engine` (path, chunks, kernels, executors), with the
 indices of each chunk's points at once (:func:`closedloop.indices.batch_indices`):
 :func:`grid_points` makes the inputs, :func:`stiffness_map` runs the map,
-:class:`StiffnessMap` holds it and writes its files (NPZ, CSV, PNG).
+:class:`StiffnessMap` holds it and writes its files (NPZ, CSV, PNG; each whole or not at
+all: :func:`closedloop.files.write_atomically`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from .arrays import ReadOnlyArrays
 from .exceptions import InvalidInputError
+from .files import save_figure, write_atomically
 from .indices import BATCH_INDICES
 from .map_engine import (
     CHUNK,
@@ -118,15 +120,14 @@ class StiffnessMap(ReadOnlyArrays):
                   "joints": np.asarray(self.joints), "inputs": self.inputs}  # fmt: skip
         taken = {*arrays, *NPZ_ARGUMENTS}
         arrays.update({n: self.inputs[:, j] for j, n in enumerate(self.joints) if n not in taken})
-        paths = [out / "map.npz"]
-        np.savez(paths[0], **arrays)
+        paths = [write_atomically(out / "map.npz", lambda f: np.savez(f, **arrays))]
         if len(self.inputs) <= CSV_MAX_POINTS:
-            paths.append(out / "map.csv")
             names = [*self.joints, *self.indices, "status"]
             rows = [[*map(repr, r), s] for r, s in zip(
                 np.column_stack([self.inputs, *self.indices.values()]).tolist(), self.status,
                 strict=True)]  # fmt: skip
-            paths[-1].write_text("\n".join(",".join(r) for r in [names, *rows]) + "\n")
+            csv = "\n".join(",".join(r) for r in [names, *rows]) + "\n"
+            paths.append(write_atomically(out / "map.csv", lambda f: f.write(csv), text=True))
         paths.append(out / "map.png")
         plot_map(self, index, paths[-1])
         return paths
@@ -180,8 +181,10 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
         ax.set_ylabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
     ax.set_title(map_title(smap, index), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def grid_points(

@@ -58,6 +58,7 @@ import pinocchio as pin
 
 from .configuration import accepts_configuration
 from .exceptions import ClosedLoopError, InvalidInputError
+from .files import write_atomically
 from .model import ClosedLoopModel
 from .viewer_draw import (  # noqa: F401  (constants: part of this module's interface)
     ANIMATION_DURATION,
@@ -276,9 +277,9 @@ class DeflectionViewer:
         Raises:
             InvalidInputError: the file cannot be written.
         """
-        path = Path(path)
+        path, html = Path(path), self.static_html()
         try:
-            path.write_text(self.static_html(), encoding="utf-8")
+            write_atomically(path, lambda f: f.write(html), text=True)
         except OSError as e:
             raise InvalidInputError(f"cannot write HTML file {str(path)!r}: {e.strerror}") from None
         return path

@@ -52,6 +52,7 @@ from closedloop.cli_common import (
     quoted,
 )
 from closedloop.cluster import add_worker_timeout, dask_executor
+from closedloop.files import save_figure
 from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
@@ -252,8 +253,10 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: di
     note = f" ({failed} points without a value)" if failed else ""
     ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 

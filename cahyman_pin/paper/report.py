@@ -67,6 +67,7 @@ from cahyman_pin.params import (
 )
 from closedloop.compliance import TWIST_LABELS
 from closedloop.exceptions import InvalidInputError, JointLimitWarning
+from closedloop.files import write_atomically
 
 
 def _diff(v: float, ref: float) -> str:
@@ -536,6 +537,6 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
         Figure(figure_load(out, params, torque=False), "Fig. 6: displacements versus force"),
         Figure(figure_load(out, params, torque=True), "Fig. 7: displacements versus moment"),
     )
-    (out / "report.md").write_text(doc.to_markdown(out))
-    (out / "report.html").write_text(doc.to_html())
+    for name, text in (("report.md", doc.to_markdown(out)), ("report.html", doc.to_html())):
+        write_atomically(out / name, lambda f, text=text: f.write(text), text=True)
     return doc

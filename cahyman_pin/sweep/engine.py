@@ -55,6 +55,7 @@ from cahyman_pin.sweep.points import (
 )
 from closedloop.arrays import check_wrench, frozen, readonly
 from closedloop.exceptions import InvalidInputError
+from closedloop.files import write_atomically
 from closedloop.map_engine import (
     OK,
     RANK_DEFICIENT,
@@ -180,14 +181,15 @@ class SweepResult:
 
     def save_csv(self, path) -> Path:
         """Write :meth:`columns` as CSV (one row per point); returns the path."""
-        path = Path(path)
         cols = self.columns()
-        with path.open("w", newline="") as f:
+
+        def write(f) -> None:
             writer = csv.writer(f)
             writer.writerow(list(cols))
             for row in zip(*(c.tolist() for c in cols.values()), strict=True):
                 writer.writerow([repr(x) if isinstance(x, float) else x for x in row])
-        return path
+
+        return write_atomically(path, write, text=True, newline="")
 
     def save_parquet(self, path) -> Path:
         """Write :meth:`columns` as Parquet (needs pyarrow, which is not a dependency)."""
@@ -197,8 +199,8 @@ class SweepResult:
         except ImportError as err:
             raise InvalidInputError("Parquet needs pyarrow: pip install pyarrow") from err
         cols = {k: v.tolist() if v.dtype == object else v for k, v in self.columns().items()}
-        pq.write_table(pa.table(cols), str(path))
-        return Path(path)
+        table = pa.table(cols)
+        return write_atomically(path, lambda f: pq.write_table(table, f))
 
     def save_npz(self, path) -> Path:
         """Write everything (inputs, C, indices, status, reasons, metadata) as NPZ."""
@@ -224,9 +226,7 @@ class SweepResult:
         arrays.update({f"design_{k}": v for k, v in p.design.items()})
         arrays.update({f"axis_{k}": v for k, v in p.axes})
         arrays.update({f"index_{k}": v for k, v in self.indices.items()})
-        path = Path(path)
-        np.savez_compressed(path, **arrays)
-        return path
+        return write_atomically(path, lambda f: np.savez_compressed(f, **arrays))
 
     @classmethod
     def load_npz(cls, path) -> SweepResult:
