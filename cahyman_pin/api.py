@@ -32,7 +32,7 @@ from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_f
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
-from closedloop.compliance import TWIST_LABELS, UNITS, compliance
+from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices
@@ -269,8 +269,13 @@ class CaHyManStiffness(ReadOnlyArrays):
     def deflection(self, wrench) -> Deflection:
         """Twists of M and of the plate under ``wrench`` (6,) at M [N, N m], world axes."""
         w = check_wrench(wrench)
-        H = None if self.C_platform is None else readonly(self.C_platform @ w)
-        return Deflection(wrench=readonly(w), M=readonly(self.C @ w), H=H)
+        M = finite_product(lambda: self.C @ w, "deflection of M", w)
+        H = (
+            None
+            if self.C_platform is None
+            else finite_product(lambda: self.C_platform @ w, "deflection of the platform", w)
+        )
+        return Deflection(wrench=readonly(w), M=M, H=H)
 
     def to_dict(self) -> dict:
         """JSON-ready summary (SI): K, C, det_K, eigenvalues, platform, inputs, units."""

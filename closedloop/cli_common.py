@@ -287,18 +287,30 @@ def _non_finite(doc, where: str = "") -> str | None:
     return next((found for path, v in items if (found := _non_finite(v, path))), None)
 
 
+def check_finite(doc) -> None:
+    """Refuse a JSON-ready ``doc`` (the results a command prints, as JSON or as text) that
+    holds a NaN or an infinity.
+
+    Raises:
+        NumericalError: the message says where (``M.displacement_mm[2]``).
+    """
+    where = _non_finite(doc)
+    if where is not None:
+        raise NumericalError(f"the result is not finite at {where}; nothing written")
+
+
 def print_json(doc) -> None:
     """Print ``doc`` as one JSON object (indented by 2), the one writer of both command lines.
 
     Raises:
         NumericalError: ``doc`` holds a NaN or an infinity (strict JSON has neither); the
-            message says where. Nothing is printed.
+            message says where (:func:`check_finite`). Nothing is printed.
     """
     try:
         text = json.dumps(doc, indent=2, allow_nan=False)
     except ValueError:
-        where = _non_finite(doc)
-        raise NumericalError(f"the result is not finite at {where}; nothing written") from None
+        check_finite(doc)
+        raise
     print(text)
 
 

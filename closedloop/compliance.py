@@ -160,12 +160,12 @@ class ComplianceResult(ReadOnlyArrays):
     def deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(6,) twist (dx, dy, dz [m], rx, ry, rz [rad]) of the frame under ``wrench`` (6,)."""
         w = check_wrench(wrench)
-        return _finite(lambda: self.C @ w, "deflection", wrench)
+        return finite_product(lambda: self.C @ w, "deflection", wrench)
 
     def joint_deflection(self, wrench: np.ndarray) -> np.ndarray:
         """(nv,) joint deflection dq (tangent of q) [rad or m] under ``wrench`` (6,)."""
         w = check_wrench(wrench)
-        return _finite(lambda: self.G @ w, "joint deflection", wrench)
+        return finite_product(lambda: self.G @ w, "joint deflection", wrench)
 
     def to_dict(self) -> dict:
         """JSON-ready summary: K (or None), C, frame, axes, point, rank, conditioning, units."""
@@ -189,8 +189,9 @@ class ComplianceResult(ReadOnlyArrays):
         }
 
 
-def _finite(product, what: str, wrench) -> np.ndarray:
-    """``product()`` (a map applied to the wrench), or a typed error if it overflows."""
+def finite_product(product, what: str, wrench) -> np.ndarray:
+    """``product()`` (a map applied to the wrench), read-only, or :class:`InvalidInputError`
+    if it overflows (the message names ``what`` and the wrench)."""
     with np.errstate(over="ignore", invalid="ignore"):
         x = product()
     if not np.isfinite(x).all():

@@ -138,7 +138,15 @@ def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
     symmetric = classify(out)
     if relabel is not None:
         relabel(out, from_C)
-    out.indices = batch_indices(out.C, out.rank, out.length, wrench, symmetric, out.condition)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow fails its point, below
+        out.indices = batch_indices(out.C, out.rank, out.length, wrench, symmetric, out.condition)
+    for name, values in out.indices.items():  # NaN: no value; inf: the index overflowed
+        for i in np.flatnonzero(np.isinf(values) & np.isin(out.status, (OK, RANK_DEFICIENT))):
+            out.status[i], out.C[i] = FAILED, np.nan
+            reason = f"the index {name} overflows the floating point range (a load or spring"
+            out.set_reason(i, reason + " far beyond the mechanism's; expected smaller)")
+            for other in out.indices.values():
+                other[i] = np.nan
 
 
 def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",

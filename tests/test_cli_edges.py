@@ -391,3 +391,13 @@ def test_a_frame_that_no_wrench_moves_reports_no_condition_number(capsys):
     assert "condition number of the scaled K: none (C = 0: no wrench moves the frame)" in out
     code, out, _ = run(main, capsys, "stiffness", "fourbar", "--frame", "P", "--actuated", "0.3")
     assert code == 1 and re.search(r"scaled K \S+ over the rank of C \(lengths per L", out)
+
+
+def test_results_beyond_the_float_range_are_refused_as_text_too(capsys):
+    """1e308 N at M with the printed spring: the displacement of M is 1.4e308 m, 1.4e311 mm
+    (inf). The JSON refused it; the text printed inf and exited 0."""
+    args = ("deflect", "--ks", "printed", "--force", "1e308", "1e308", "1e308")
+    for extra in ((), ("--json",)):
+        code, out, err = run(cahyman_main, capsys, *args, *extra)
+        assert code == 3 and out == ""
+        assert "the result is not finite at M.displacement_mm[2]" in one_line(err, "cahyman")

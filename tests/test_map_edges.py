@@ -46,6 +46,20 @@ def reachable(theta: np.ndarray) -> np.ndarray:
     return np.sin(theta) >= SIN_DEAD + 1e-6
 
 
+def test_an_index_that_overflows_fails_its_point(fourbar_urdf, fourbar_yaml):
+    """A load of 1e308 N on soft springs: the deflection index overflows (it was inf with
+    status ok, and the command said "no value at any point"). The point fails, naming the
+    index, with no C and no index, as a point that cannot be computed."""
+    stiff = cl.load_model(fourbar_urdf, fourbar_yaml)
+    clm = stiff.with_springs({n: np.asarray(v) * 1e-8 for n, v in stiff.springs.items()})
+    m = stiffness_map(clm, "P", sweeps={"crank": [0.3, 0.5]}, wrench=np.full(6, 1e308))
+    assert list(m.status) == ["failed"] * 2
+    assert all("the index deflection_translation overflows" in r for r in m.reasons)
+    assert np.all(np.isnan(m.C)) and all(np.all(np.isnan(v)) for v in m.indices.values())
+    fine = stiffness_map(clm, "P", sweeps={"crank": [0.3, 0.5]}, wrench=WRENCH)
+    assert list(fine.status) == ["rank_deficient"] * 2  # planar: the same points, computed
+
+
 def test_a_map_where_every_point_fails_writes_its_files(long_ground, tmp_path):
     clm = cl.load_model(*long_ground)
     cranks = np.array([-1.0, -1.5, -2.0])

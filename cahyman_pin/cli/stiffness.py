@@ -15,7 +15,7 @@ from cahyman_pin.cli.options import (
     inputs_echo,
     stiffness_from_args,
 )
-from closedloop.cli_common import EXIT_HELP, print_json
+from closedloop.cli_common import EXIT_HELP, check_finite, print_json
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 
@@ -58,6 +58,7 @@ def _run_stiffness(args: argparse.Namespace) -> int:
     if args.json:
         print_json(out)
         return status
+    check_finite(out)  # as the JSON: no inf or NaN printed as a result
     print(f"CaHyMan at alpha = {args.alpha} deg, alpha4 = {args.alpha4} deg, "
           f"s4 = {args.s4} mm (K_s {args.ks}, backend {args.backend})")  # fmt: skip
     print("\n".join(_pose_lines(r)))
@@ -88,12 +89,14 @@ def add_stiffness(subparsers) -> None:
 
 # ------------------------------------------------------------------ deflect
 def _twist_dict(t: np.ndarray) -> dict:
-    return {
-        "displacement_m": t[:3].tolist(),
-        "displacement_mm": (t[:3] * 1e3).tolist(),
-        "rotation_rad": t[3:].tolist(),
-        "rotation_deg": np.rad2deg(t[3:]).tolist(),
-    }
+    """SI and mm/deg copies; an overflow of the copies is left to :func:`check_finite`."""
+    with np.errstate(over="ignore"):
+        return {
+            "displacement_m": t[:3].tolist(),
+            "displacement_mm": (t[:3] * 1e3).tolist(),
+            "rotation_rad": t[3:].tolist(),
+            "rotation_deg": np.rad2deg(t[3:]).tolist(),
+        }
 
 
 def _run_deflect(args: argparse.Namespace) -> int:
@@ -116,6 +119,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
     if args.json:
         print_json(out)
         return 0
+    check_finite(out)
     print(f"force {args.force} N, torque {args.torque} N m at M")
     print("\n".join(_pose_lines(r)))
     rows = [("M (arm extremity)", d.M)] + ([] if d.H is None else [("H (platform)", d.H)])
