@@ -60,10 +60,17 @@ _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|infinity|nan"
 NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})([:,][-+.\w]*)*$", re.I)
 
 
+#: Options that may be given several times (each adds to a list, or counts).
+_REPEATABLE = (argparse._AppendAction, argparse._CountAction, argparse._HelpAction,
+               argparse._VersionAction)  # fmt: skip
+
+
 class Parser(argparse.ArgumentParser):
     """An argument parser that takes ``-1e5``, ``-.5`` or ``-inf`` for values, not options
-    (argparse's own rule knows only ``-1`` and ``-1.5``), and raises :class:`UsageError`
-    instead of printing its usage block and exiting; its subparsers are of this class."""
+    (argparse's own rule knows only ``-1`` and ``-1.5``), refuses an option given twice
+    (argparse keeps the last: ``--force 1 0 0 --force 0 0 1`` loaded one force), and
+    raises :class:`UsageError` instead of printing its usage block and exiting; its
+    subparsers are of this class."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -71,6 +78,20 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         raise UsageError(message)
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = sys.argv[1:] if args is None else list(args)
+        seen: dict = {}
+        for token in args:
+            if token == "--":
+                break
+            action = self._option_string_actions.get(token.split("=", 1)[0])
+            if action is None or isinstance(action, _REPEATABLE):
+                continue
+            if action in seen:
+                self.error(f"{seen[action]} given twice; expected it once")
+            seen[action] = "/".join(action.option_strings)
+        return super().parse_known_args(args, namespace)
 
     def _print_message(self, message: str, file=None) -> None:
         """argparse's writer of help and version, without swallowing an :class:`OSError`

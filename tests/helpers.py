@@ -198,3 +198,16 @@ def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
         )
     finally:
         os.close(write)
+
+
+def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]:
+    """Configurations (nq,) of a one-input mechanism driven from its neutral configuration
+    through the input values ``inputs`` [rad, m] in order, by steps of at most ``step``,
+    each assembled from the last: the assembly mode a robot driven there is on."""
+    q, out, value = pin.neutral(clm.model), [], 0.0
+    for target in inputs:
+        for v in np.linspace(value, target, 2 + int(abs(target - value) / step)):
+            q = assemble(clm, [v], q).q
+        out.append(q)
+        value = target
+    return out

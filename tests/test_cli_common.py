@@ -224,3 +224,25 @@ def test_a_long_malformed_list_is_cut_in_the_message(capsys, tmp_path):
     assert (code, out) == (EXIT_BAD_INPUT, "")
     assert len(err) < 300 and err.count("\n") == 1, err
     assert f"... ({len(text)} characters): 'q' is not a number" in err
+
+
+def test_an_option_given_twice_is_refused(capsys):
+    """argparse keeps the last value: `--force 1 0 0 --force 0 0 1` loaded one force and
+    `--payload 2 --payload 3` one payload. Options that collect (--mass, --sweep) may
+    repeat."""
+    from cahyman_pin.cli import main as cahyman_main
+    from closedloop.cli import main as closedloop_main
+
+    cases = [
+        (cahyman_main, ["deflect", "--force", "1", "0", "0", "--force", "0", "0", "1"],
+         "cahyman: error: --force given twice; expected it once"),
+        (closedloop_main, ["stiffness", "ur5", "--frame", "tool0", "--joint-stiffness", "1e4",
+                           "--gravity", "--payload", "2", "--payload", "3"],
+         "closedloop: error: --payload given twice; expected it once"),
+        (cahyman_main, ["stiffness", "--json", "--json"], "--json given twice"),
+    ]  # fmt: skip
+    for main, argv, message in cases:
+        assert main(argv) == 2
+        assert message in capsys.readouterr().err
+    argv = ["stiffness", "--gravity", "--mass", "m_M4=1", "--mass", "m_M5=2", "--json"]
+    assert cahyman_main(argv) == 0  # an option that collects

@@ -4,7 +4,7 @@ import mechanisms as mech
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import assert_close_in_norm, driven
 
 import closedloop as cl
 from closedloop.identification import (
@@ -581,10 +581,8 @@ def test_measurements_given_by_actuated_values(fourbar):
     clm, _ = fourbar
     rng = np.random.default_rng(15)
     data = []
-    q = pin.neutral(clm.model)  # the file's configuration
-    for a in FOURBAR_CRANKS:  # measured as the robot is driven there: one assembly mode
-        for crank in np.linspace(q[0], a, 50):
-            q = cl.assemble(clm, actuated=[crank], q0=q).q
+    # measured as the robot is driven there from its file's configuration: one assembly mode
+    for a, q in zip(FOURBAR_CRANKS, driven(clm, FOURBAR_CRANKS), strict=True):
         C = cl.compliance(clm, q, "P").C
         for w in 10.0 * rng.normal(size=(3, 6)):
             data.append(Measurement.of(actuated=[a], wrench=w, twist=C @ w, sd=1e-9))

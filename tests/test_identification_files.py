@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import driven
 
 import closedloop as cl
 from closedloop.cli import main
@@ -21,8 +22,8 @@ def exact(fourbar_urdf, fourbar_yaml):
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
     rng = np.random.default_rng(21)
     rows = []
-    for crank in (0.3, 0.8, 1.3):
-        q = cl.assemble(clm, actuated=[crank]).q
+    cranks = (0.3, 0.8, 1.3)
+    for crank, q in zip(cranks, driven(clm, cranks), strict=True):  # as the robot is driven
         C = cl.compliance(clm, q, "P").C
         rows += [(q, crank, w, C @ w) for w in 10 * rng.normal(size=(2, 6))]
     return clm, rows
