@@ -126,7 +126,7 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
                 )
             raise InvalidInputError(
                 f"{name} = ({rad}) rad = ({deg}) deg is beyond the joints' limits of one turn "
-                "(+-2 pi rad, +-360 deg); the Python API takes radians"
+                "(+-2 pi rad, +-360 deg); the Python API takes radians, the command line degrees"
             )
     if s4.size != 1 or not np.isfinite(s4) or not 0.0 <= float(s4) <= p.s4_max:
         raise InvalidInputError(

@@ -120,7 +120,8 @@ def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
         raise ModelFileError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
     if not isinstance(doc, dict):
         raise ModelFileError(
-            f"{what} {str(path)!r}: expected a mapping at top level, got {type(doc).__name__}"
+            f"{what} {str(path)!r}: expected a mapping at top level, got "
+            + ("an empty file" if doc is None else type(doc).__name__)
         )
     return path, doc
 

@@ -336,8 +336,11 @@ def test_bad_params_raise():
 
 
 def test_singular_parallelogram_raises():
-    with pytest.raises(SingularConfigurationError, match="alpha"):
+    with pytest.raises(SingularConfigurationError, match=r"alpha=\[0\.0, 57\.29.*\] deg: a "):
         leg_compliance(np.array([0.0, 1.0, 1.0]))
+    batch = np.array([[0.5, 1.0, 1.0], [0.0, 1.0, 1.0]])  # the singular pose named
+    with pytest.raises(SingularConfigurationError, match=r"alpha=\[0\.0, 57\.29.*\] deg: a "):
+        leg_compliance(batch)
 
 
 @pytest.mark.parametrize("x", [3.1622776601683795e-09, *np.logspace(-9.0, -8.0, 9)])

@@ -401,3 +401,13 @@ def test_results_beyond_the_float_range_are_refused_as_text_too(capsys):
         code, out, err = run(cahyman_main, capsys, *args, *extra)
         assert code == 3 and out == ""
         assert "the result is not finite at M.displacement_mm[2]" in one_line(err, "cahyman")
+
+
+def test_deflections_of_the_published_backend_say_their_coordinates(capsys):
+    """Its twists are in the paper's coordinates (H's z rises under a downward force); the
+    text labelled them as the world-axes twists of the other backends."""
+    code, out, _ = run(cahyman_main, capsys, "deflect", "--backend", "published",
+                       "--force", "0", "0", "-100")  # fmt: skip
+    assert code == 0 and "the twists below are in the coordinates of the paper" in out
+    code, out, _ = run(cahyman_main, capsys, "deflect", "--force", "0", "0", "-100")
+    assert code == 0 and "the twists below" not in out and "at M, world axes" in out

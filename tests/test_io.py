@@ -253,7 +253,7 @@ FOURBAR_CLOSURES = (
     [
         ("closed_loop: [[a, b]\n", "is not valid YAML"),
         ("- a\n- b\n", "expected a mapping at top level"),
-        ("", "expected a mapping at top level"),
+        ("", "expected a mapping at top level, got an empty file"),
         ("closed_loops: []\n", r"unknown key\(s\) \['closed_loops'\]"),
         ("closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: ['4d']\n", "type '4d'"),
         ("closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: []\n", "one of '3d'/'6d' per"),

@@ -79,7 +79,8 @@ def test_failed_points_are_reported_not_fatal(capsys, tmp_path):
     ("argv", "message"),
     [
         (["--alpha", "30:x:3"], "START:STOP:NUM"),
-        (["--alpha", "30"], "nothing to sweep"),
+        (["--alpha", "30"], "nothing to sweep: every input has one value"),
+        (["--alpha", "80:100:1"], "nothing to sweep: every input has one value"),
         (["--alpha", "1", "2"], "1 or 3 values"),
         (["--alpha", "30:90:3", "--alpha1", "40"], "cannot be combined"),
         (["--alpha", "30:90:3", "--param", "zz=1"], "NAME one of"),

@@ -89,12 +89,19 @@ def check_pose_inputs(alpha, alpha4, s4, params: CaHyManParams):
     return alpha, np.broadcast_to(alpha4, batch), np.broadcast_to(s4, batch)
 
 
+def _degrees(alpha) -> list:
+    """alpha (..., 3) [rad] in degrees for a message: one pose as one list."""
+    a = np.rad2deg(np.asarray(alpha, dtype=float)).reshape(-1, 3)
+    return a[0].tolist() if len(a) == 1 else a.tolist()
+
+
 def _check_alpha(alpha, params: CaHyManParams) -> np.ndarray:
     alpha, _, _ = check_pose_inputs(alpha, 0.0, 0.0, params)
     sa = np.sin(alpha)
     if np.any(np.abs(sa) < SIN_ALPHA_MIN):
         raise SingularConfigurationError(
-            f"alpha={np.rad2deg(alpha).tolist()} deg: a crank lies along the coupler "
+            f"alpha={_degrees(alpha[np.any(np.abs(sa) < SIN_ALPHA_MIN, axis=-1)])} deg: a "
+            "crank lies along the coupler "
             "(sin alpha_k = 0), the parallelogram is singular"
         )
     return alpha
@@ -296,7 +303,7 @@ def _leg_stiffness(C_leg: np.ndarray, alpha) -> np.ndarray:
         return np.linalg.inv(C_leg)
     except np.linalg.LinAlgError:
         raise SingularConfigurationError(
-            f"alpha={np.rad2deg(alpha).tolist()} deg: a leg's compliance is singular (a crank "
+            f"alpha={_degrees(alpha)} deg: a leg's compliance is singular (a crank "
             "nearly along its coupler); the plate stiffness K_H does not exist"
         ) from None
 

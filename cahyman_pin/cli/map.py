@@ -296,7 +296,10 @@ def _run(args: argparse.Namespace) -> int:
     inputs = _inputs(args)
     swept = {k: v for k, v in inputs.items() if v[0].size > 1}
     if not swept:
-        raise UsageError("nothing to sweep: give START:STOP:NUM or V1,V2,... to one or two inputs")
+        raise UsageError(
+            "nothing to sweep: every input has one value; give START:STOP:NUM with NUM >= 2 "
+            "or V1,V2,... to one or two inputs (one pose: cahyman stiffness)"
+        )
     if len(swept) > 2:
         raise UsageError(
             f"a map sweeps one or two inputs, got {len(swept)} ({', '.join(swept)}); "

@@ -120,8 +120,10 @@ def _run_deflect(args: argparse.Namespace) -> int:
         print_json(out)
         return 0
     check_finite(out)
-    print(f"force {args.force} N, torque {args.torque} N m at M")
+    print(f"force {args.force} N, torque {args.torque} N m at M, world axes")
     print("\n".join(_pose_lines(r)))
+    if r.axes != "world":  # the published backend: its own coordinates
+        print(f"the twists below are in the coordinates of the {r.axes}")
     rows = [("M (arm extremity)", d.M)] + ([] if d.H is None else [("H (platform)", d.H)])
     for name, t in rows:
         print("\n".join(_twist_lines(name, t)))
