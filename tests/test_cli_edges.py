@@ -411,3 +411,12 @@ def test_deflections_of_the_published_backend_say_their_coordinates(capsys):
     assert code == 0 and "the twists below are in the coordinates of the paper" in out
     code, out, _ = run(cahyman_main, capsys, "deflect", "--force", "0", "0", "-100")
     assert code == 0 and "the twists below" not in out and "at M, world axes" in out
+
+
+def test_gravity_without_any_mass_warns(capsys):
+    """Every mass is 0 by default: --gravity alone gives a zero sag, now with a warning
+    (--mass without --gravity was already an error)."""
+    code, _, err = run(cahyman_main, capsys, "stiffness", "--gravity")
+    assert code == 0 and "cahyman: warning: --gravity: every mass is 0" in err
+    code, _, err = run(cahyman_main, capsys, "stiffness", "--gravity", "--mass", "m_b=0.2")
+    assert code == 0 and err == ""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import warnings
 
 import numpy as np
 
@@ -126,12 +127,16 @@ def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
     """
     params = DEFAULT_PARAMS.with_ks(args.ks)
     masses = _masses(args)
+    params = params.replace(**masses) if masses else params
     weight = getattr(args, "gravity", False)
+    if weight and not any(getattr(params, name) for name in MASS_NAMES):  # 0 by default
+        warnings.warn("--gravity: every mass is 0, so the sag is 0; give the masses with "
+                      "--mass NAME=KG", stacklevel=2)  # fmt: skip
     result = stiffness(
         np.deg2rad(args.alpha),
         math.radians(args.alpha4),
         args.s4 / 1000.0,
-        params=params.replace(**masses) if masses else params,
+        params=params,
         backend=args.backend,
         weight=weight,
     )
