@@ -385,16 +385,25 @@ def error_line(prog: str, error: BaseException) -> str:
     return f"{prog}: error: {' '.join(str(error).split())}"
 
 
+#: Warnings from one place of the code printed in full; the others are counted.
+WARNINGS_PER_PLACE = 3
+
+
 @contextlib.contextmanager
 def one_line_warnings(prog: str):
     """Python warnings raised inside, printed as ``prog: warning: message`` (one line on
     stderr) instead of Python's two lines with the source file and line; filtered as
-    Python does by default for code outside ``__main__`` (once per place; deprecations of
-    the libraries underneath, import and resource warnings not shown), whatever the
-    filters of the caller (a test runner shows them all)."""
+    Python does by default for code outside ``__main__`` (once per message and place;
+    deprecations of the libraries underneath, import and resource warnings not shown),
+    whatever the filters of the caller (a test runner shows them all). Of different
+    messages from one place (one per load step of a nonlinear view), the first
+    :data:`WARNINGS_PER_PLACE` are printed and the others counted in one line."""
+    places: dict = {}
 
     def show(message, category, filename, lineno, file=None, line=None) -> None:
-        print(f"{prog}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        n = places[filename, lineno] = places.get((filename, lineno), 0) + 1
+        if n <= WARNINGS_PER_PLACE:
+            print(f"{prog}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
     with warnings.catch_warnings():
         warnings.simplefilter("default")
@@ -402,7 +411,12 @@ def one_line_warnings(prog: str):
                          ResourceWarning):  # fmt: skip
             warnings.simplefilter("ignore", category)
         warnings.showwarning = show
-        yield
+        try:
+            yield
+        finally:
+            more = sum(n - WARNINGS_PER_PLACE for n in places.values() if n > WARNINGS_PER_PLACE)
+            if more:
+                print(f"{prog}: warning: {more} more warnings like those above", file=sys.stderr)
 
 
 def run_command(prog: str, args: argparse.Namespace) -> int:

@@ -246,3 +246,21 @@ def test_an_option_given_twice_is_refused(capsys):
         assert message in capsys.readouterr().err
     argv = ["stiffness", "--gravity", "--mass", "m_M4=1", "--mass", "m_M5=2", "--json"]
     assert cahyman_main(argv) == 0  # an option that collects
+
+
+def test_warnings_of_one_place_are_counted_beyond_three(capsys):
+    """A nonlinear view warned once per load step (24 lines): the first three of one place
+    are printed, the others counted; a repeated message is printed once (Python's rule)."""
+    import warnings
+
+    from closedloop.cli_common import one_line_warnings
+
+    with one_line_warnings("prog"):
+        for step in range(6):
+            warnings.warn(f"step {step} is outside the limits", stacklevel=1)
+        for _ in range(2):
+            warnings.warn("the same message", stacklevel=1)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == [*(f"prog: warning: step {s} is outside the limits" for s in range(3)),
+                     "prog: warning: the same message",
+                     "prog: warning: 3 more warnings like those above"]  # fmt: skip
