@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
 import stat
@@ -25,11 +26,21 @@ def write_atomically(
     its file name where it named the temporary file; an existing file ``path`` is then left
     as it was. The new file gets the permissions of the file it replaces, or else
     ``0o666`` less the umask, as :func:`open` would give; a symbolic link ``path`` is
-    followed (its target is replaced). Returns ``path``.
+    followed (its target is replaced). A file that the user may not write is refused
+    (:class:`PermissionError`, as by :func:`open`); a target that is not a regular file
+    (a device such as ``/dev/null``, a pipe such as ``/dev/stdout``) is written into
+    directly. Returns ``path``.
     """
     path = Path(path)
     target = Path(os.path.realpath(path))
-    tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
+    if target.exists() and not target.is_file():  # a device, a pipe (/dev/stdout): into it
+        mode, encoding = ("w", "utf-8") if text else ("wb", None)
+        with open(target, mode, encoding=encoding, newline=newline) as f:
+            write(f)
+        return path
+    if target.exists() and not os.access(target, os.W_OK):  # as open() would refuse it
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+    tmp = target.with_name(f".{target.name[:100]}.{secrets.token_hex(4)}.tmp")
     try:
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
         fd = os.open(tmp, flags, 0o666)  # the umask applies (tempfile would give 0o600)

@@ -11,6 +11,7 @@ import pytest
 
 import closedloop as cl
 from cahyman_pin.sweep import SweepResult, pose_list, sweep
+from closedloop.files import write_atomically
 from closedloop.maps import stiffness_map
 
 
@@ -124,3 +125,40 @@ def test_sweep_save_that_fails_midway_keeps_the_previous_npz(tmp_path, monkeypat
         good.save_npz(tmp_path / "map.npz")
     assert os.listdir(tmp_path) == ["map.npz"]
     np.testing.assert_array_equal(SweepResult.load_npz(tmp_path / "map.npz").C, good.C)
+
+
+def test_a_pipe_is_written_into_not_replaced(tmp_path):
+    """`--html /dev/stdout` into a pipe, or `/dev/null`: the target is no regular file, so
+    it is written into (the rename turned root's /dev/null into a regular file)."""
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()))
+    reader.start()
+    write_atomically(fifo, lambda f: f.write(b"through the pipe"))
+    reader.join(timeout=10)
+    assert got == [b"through the pipe"] and stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]  # no temporary left
+
+
+def test_a_file_the_user_may_not_write_is_refused(tmp_path, monkeypatch):
+    """A read-only file is refused as open() refuses it (the rename only needs the folder's
+    permission). Root may write any file: the check is os.access, patched here."""
+    path = tmp_path / "protected.html"
+    path.write_text("old")
+    real = os.access
+    monkeypatch.setattr(
+        os, "access", lambda p, mode: False if str(p) == str(path) else real(p, mode)
+    )
+    with pytest.raises(PermissionError, match="Permission denied"):
+        write_atomically(path, lambda f: f.write(b"new"))
+    assert path.read_text() == "old"
+
+
+def test_a_name_of_255_characters_is_written(tmp_path):
+    """The temporary name is cut so that it stays within the file system's 255."""
+    path = tmp_path / ("m" * 251 + ".npz")
+    write_atomically(path, lambda f: f.write(b"data"))
+    assert path.read_bytes() == b"data" and len(list(tmp_path.iterdir())) == 1
