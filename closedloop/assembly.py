@@ -211,7 +211,9 @@ def close_loops(
         q, r, size2, closed = q_try, r_try, size2_try, closed_try
     err = _inf_norm(r)
     if not closed:
-        held = [n for n in (*clm.springs, *clm.locked) if n not in clm.actuated]
+        k, names = clm.stiffness, clm.model.names  # held: a joint with a spring or locked
+        held = [names[j] for j in range(1, len(names)) if names[j] not in clm.actuated
+                and np.any(k[clm.joint_v_slice(names[j])] != 0.0)]  # fmt: skip
         raise AssemblyError(
             f"cannot close the loops of {clm.name!r} with actuated "
             f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}"

@@ -68,11 +68,13 @@ _REPEATABLE = (argparse._AppendAction, argparse._CountAction, argparse._HelpActi
 class Parser(argparse.ArgumentParser):
     """An argument parser that takes ``-1e5``, ``-.5`` or ``-inf`` for values, not options
     (argparse's own rule knows only ``-1`` and ``-1.5``), refuses an option given twice
-    (argparse keeps the last: ``--force 1 0 0 --force 0 0 1`` loaded one force), and
+    (argparse keeps the last: ``--force 1 0 0 --force 0 0 1`` loaded one force) and
+    abbreviated options (``--forc`` for ``--force``), and
     raises :class:`UsageError` instead of printing its usage block and exiting; its
     subparsers are of this class."""
 
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)  # --forc would escape the check of repeats
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_NUMBER
 

@@ -271,3 +271,7 @@ def test_a_loop_held_by_a_spring_names_the_held_joints():
     held = r"\(the joints with springs or locked, \[.*'coupler'.*\], keep their start values"
     with pytest.raises(AssemblyError, match=r"with actuated \{'crank': 0\.3\} " + held):
         assemble(clm, [0.3])
+    free = fourbar().with_springs({**fourbar().springs, "coupler": 0.0, "rocker": 1.0})
+    with pytest.raises(AssemblyError, match=r"locked, \[[^]]*'rocker'[^]]*\]") as err:
+        assemble(free, [0.3])
+    assert "coupler" not in str(err.value)  # a spring of 0: free, it moved

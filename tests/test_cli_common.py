@@ -240,6 +240,8 @@ def test_an_option_given_twice_is_refused(capsys):
                            "--gravity", "--payload", "2", "--payload", "3"],
          "closedloop: error: --payload given twice; expected it once"),
         (cahyman_main, ["stiffness", "--json", "--json"], "--json given twice"),
+        (cahyman_main, ["deflect", "--force", "0", "0", "-10", "--forc", "0", "0", "-9"],
+         "unrecognized arguments: --forc"),  # an abbreviation escaped the check
     ]  # fmt: skip
     for main, argv, message in cases:
         assert main(argv) == 2
