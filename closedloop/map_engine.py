@@ -49,7 +49,7 @@ from .exceptions import (
 )
 from .indices import batch_indices
 from .io import load_model, reference_configuration
-from .limits import assemble_within_limits
+from .limits import assemble_connected, assemble_within_limits
 from .model import ClosedLoopModel
 from .progress import progress
 
@@ -310,7 +310,7 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
-    first = reference_configuration(clm) if chunk.first is None else chunk.first
+    first = path_start(clm, chunk.points) if chunk.first is None else chunk.first
     assemble_points(clm, chunk.frame, out, range(len(chunk)),
                     lambda i, q0: assemble_within_limits(clm, chunk.points[i], q0), first,
                     starts)  # fmt: skip
@@ -318,11 +318,25 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     return out
 
 
+def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
+    """(nq,) start of a map's path: its first point assembled on the mode of the file's
+    configuration (:func:`closedloop.limits.assemble_connected`), as ``closedloop
+    stiffness --actuated`` assembles it; the file's configuration where that fails (the
+    point's own assembly then reports why)."""
+    reference = reference_configuration(clm)
+    if not len(points):
+        return reference
+    try:
+        return np.array(assemble_connected(clm, points[0], reference, jacobian=False).q)
+    except POINT_ERRORS:
+        return reference
+
+
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
     """Start configuration of each chunk, by a serial continuation along the path.
 
     The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
-    each from the previous one (the first from the reference configuration), and keeps
+    each from the previous one (the first from :func:`path_start`), and keeps
     the configurations at the borders ``firsts``: the first point of a chunk then starts
     on the assembly mode the path followed, as in a serial run. A jump of several points
     is checked against two half jumps (:func:`_halves_agree`): where they disagree the
@@ -344,7 +358,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     Returns:
         One (nq,) configuration, or None for the first chunk (the reference), per border.
     """
-    q = reference_configuration(clm)
+    q = path_start(clm, points)
     wanted = set(firsts[1:])
     last = max(wanted, default=-1)
     visit = sorted(wanted | set(range(0, last, BORDER_STRIDE)))

@@ -300,3 +300,17 @@ def test_more_workers_than_tasks_start_no_more_processes_than_tasks():
     map). The results are those of the serial run."""
     got = dict(run_tasks(math.sqrt, [1.0, 4.0, 9.0], workers=100_000))
     assert got == {0: 1.0, 1: 2.0, 2: 3.0}
+
+
+def test_a_map_starts_on_the_mode_of_the_single_query(fourbar_urdf, fourbar_yaml):
+    """The first point of a map is assembled as `closedloop stiffness --actuated` assembles
+    it, on the mode of the file's configuration: at crank 1.0 the map's C was 176 % off
+    the command's (the map solved it at once from the file's configuration)."""
+    from closedloop.limits import assemble_connected
+
+    clm = cl.load_model(fourbar_urdf, fourbar_yaml)
+    single = cl.compliance(clm, assemble_connected(clm, [1.0], reference_configuration(clm)).q,
+                           "P").C  # fmt: skip
+    for chunk in (1, 3):  # the first chunk, and the border pass of the others
+        m = stiffness_map(clm, "P", sweeps={"crank": [1.0, 1.2, 1.4]}, chunk=chunk)
+        assert_close_in_norm(m.C[0], single, 1e-9)
