@@ -347,7 +347,9 @@ def test_second_order_terms_of_joints_with_a_varying_subspace(name):
     joint = VARYING_JOINTS[name]()
     m = _chain_with(joint)
     clm = ClosedLoopModel(m, springs=_springs(joint), name=name)
-    q = pin.randomConfiguration(m, -0.8 * np.ones(m.nq), 0.8 * np.ones(m.nq))
+    # a fixed q: pin.randomConfiguration's draw once made Pinocchio's Hessian of the
+    # universal joint only 0.9 % off, below the last check's 1 % (64-65 % at this q)
+    q = np.random.default_rng(2).uniform(-0.8, 0.8, m.nq)  # nq = nv, bounded coordinates
     w = np.array([30.0, -20.0, 10.0, 2.0, -1.0, 0.5])
     fid = m.getFrameId("tip")
 
