@@ -32,19 +32,22 @@ def write_atomically(
     directly. Returns ``path``.
     """
     path = Path(path)
-    target = Path(os.path.realpath(path))
-    if target.exists() and not target.is_file():  # a device, a pipe (/dev/stdout): into it
-        mode, encoding = ("w", "utf-8") if text else ("wb", None)
-        with open(target, mode, encoding=encoding, newline=newline) as f:
+    try:
+        special = not stat.S_ISREG(os.stat(path).st_mode)  # the file a link leads to
+    except FileNotFoundError:
+        special = False
+    mode, encoding = ("w", "utf-8") if text else ("wb", None)
+    if special:  # a device, a pipe (/dev/stdout, whose link names no file): written into
+        with open(path, mode, encoding=encoding, newline=newline) as f:
             write(f)
         return path
+    target = Path(os.path.realpath(path))
     if target.exists() and not os.access(target, os.W_OK):  # as open() would refuse it
         raise PermissionError(errno.EACCES, "Permission denied", str(path))
     tmp = target.with_name(f".{target.name[:100]}.{secrets.token_hex(4)}.tmp")
     try:
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
         fd = os.open(tmp, flags, 0o666)  # the umask applies (tempfile would give 0o600)
-        mode, encoding = ("w", "utf-8") if text else ("wb", None)
         with os.fdopen(fd, mode, encoding=encoding, newline=newline) as f:
             with contextlib.suppress(OSError):  # no old file, or no permissions here
                 os.chmod(tmp, stat.S_IMODE(os.stat(target).st_mode))

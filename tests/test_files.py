@@ -143,6 +143,19 @@ def test_a_pipe_is_written_into_not_replaced(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]  # no temporary left
 
 
+def test_dev_stdout_into_a_pipe_is_written_into():
+    """`--html /dev/stdout | ...`: the link leads to a pipe that has no file name; the
+    writer failed with "No such file or directory"."""
+    import subprocess
+    import sys
+
+    code = ("from closedloop.files import write_atomically; "
+            "write_atomically('/dev/stdout', lambda f: f.write(b'through stdout'))")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, check=True,
+                          timeout=60)  # fmt: skip
+    assert done.stdout == b"through stdout"
+
+
 def test_a_file_the_user_may_not_write_is_refused(tmp_path, monkeypatch):
     """A read-only file is refused as open() refuses it (the rename only needs the folder's
     permission). Root may write any file: the check is os.access, patched here."""
