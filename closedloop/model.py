@@ -115,6 +115,9 @@ def joint_id(model: pin.Model, name: str) -> int:
         hint = "joint 0, the world: it does not move"
     elif model.existFrame(name, pin.FrameType.FIXED_JOINT):
         hint = "a fixed joint: it does not move"
+    elif composite := [n for n in model.names if n.startswith("Composite_")]:
+        hint = (f"Pinocchio merges the joints of one MJCF body into a composite joint, "
+                f"{composite}: nest a body for each joint")  # fmt: skip
     else:
         hint = ""
     raise NameNotFoundError("joint", name, list(model.names)[1:], hint)

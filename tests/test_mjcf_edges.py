@@ -532,3 +532,8 @@ def test_spring_on_a_joint_of_a_composite_is_refused(tmp_path):
         r"joint 's' has stiffness '300', but Pinocchio merges the joints \['s', 'h'\] of body "
         r"'b' into one composite joint 'Composite_s'",
     )
+    # a spring given by keyword (or a side file) on a merged joint: the hint says why
+    plain = write(tmp_path, mujoco(body("b", '<joint name="s" type="slide"/><joint name="h"/>')))
+    merged = r"\(Pinocchio merges the joints of one MJCF body into a composite joint, \["
+    with pytest.raises(cl.NameNotFoundError, match=r"unknown joint 'h' " + merged):
+        load_model(plain, springs={"h": 5.0}, geometry=False)
