@@ -66,6 +66,12 @@ def write_atomically(
 
 def save_figure(fig, path: str | Path, **kwargs) -> Path:
     """``fig.savefig(path, **kwargs)`` through :func:`write_atomically`, in the format of
-    the suffix of ``path`` (matplotlib's default format without one); returns ``path``."""
+    the suffix of ``path`` (matplotlib's default format without one), then the figure
+    closed (saved or not); returns ``path``."""
+    import matplotlib.pyplot as plt  # the caller's figure: pyplot is loaded already
+
     fmt = Path(path).suffix[1:] or None
-    return write_atomically(path, lambda f: fig.savefig(f, format=fmt, **kwargs))
+    try:
+        return write_atomically(path, lambda f: fig.savefig(f, format=fmt, **kwargs))
+    finally:
+        plt.close(fig)

@@ -181,10 +181,7 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
         ax.set_ylabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
     ax.set_title(map_title(smap, index), fontsize=9)
     fig.tight_layout()
-    try:
-        save_figure(fig, path)
-    finally:
-        plt.close(fig)
+    save_figure(fig, path)
 
 
 def grid_points(

@@ -253,10 +253,7 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: di
     note = f" ({failed} points without a value)" if failed else ""
     ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
     fig.tight_layout()
-    try:
-        save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return path
 
 

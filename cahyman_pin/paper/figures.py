@@ -101,10 +101,7 @@ def figure5(out_dir: Path, params: CaHyManParams) -> Path:
     fig.suptitle("Fig. 5: determinant of the stiffness matrix at M (SI units)")
     fig.tight_layout()
     path = Path(out_dir) / "fig5_detK.png"
-    try:
-        save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return path
 
 
@@ -143,10 +140,7 @@ def figure_load(out_dir: Path, params: CaHyManParams, torque: bool) -> Path:
     fig.suptitle(f"{name}: displacement of M, {FIG67.describe()}")
     fig.tight_layout()
     path = Path(out_dir) / ("fig7_torque.png" if torque else "fig6_force.png")
-    try:
-        save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return path
 
 
@@ -204,8 +198,5 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
                  f"consistent model{no_change}", y=0.995)  # fmt: skip
     fig.subplots_adjust(left=0.16, right=0.98, top=0.93, bottom=0.04, wspace=0.45, hspace=0.25)
     path = Path(out_dir) / "tornado_dimensions.png"
-    try:
-        save_figure(fig, path, dpi=80)
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=80)
     return path
