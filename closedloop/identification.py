@@ -356,13 +356,13 @@ def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
         raise InvalidInputError(f"measurements must be a list of Measurement, got {measurements!r}")
     if not measurements or not all(isinstance(m, Measurement) for m in measurements):
         raise InvalidInputError("measurements must be a non-empty list of Measurement")
-    out = []
+    out, start = [], reference_configuration(clm)  # the file's, as the command line's
     for i, m in enumerate(measurements):
-        try:
-            out.append(clm.check_configuration(m.q) if m.q is not None else None)
-            if m.q is None:  # the count and values checked by the assembly
-                start = reference_configuration(clm)  # the file's, as the command line's
-                out[-1] = assemble_connected(clm, m.actuated, start, jacobian=False).q
+        try:  # actuated values: their count and values checked by the assembly
+            if m.q is not None:
+                out.append(clm.check_configuration(m.q))
+            else:
+                out.append(assemble_connected(clm, m.actuated, start, jacobian=False).q)
         except InvalidInputError as e:
             raise InvalidInputError(f"measurement {i}: {e}") from None
     return out
