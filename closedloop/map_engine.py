@@ -310,7 +310,9 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
-    first = path_start(clm, chunk.points) if chunk.first is None else chunk.first
+    first = chunk.first
+    if first is None and starts is None:  # the path's first chunk (a start provider: unused)
+        first = path_start(clm, chunk.points)
     assemble_points(clm, chunk.frame, out, range(len(chunk)),
                     lambda i, q0: assemble_within_limits(clm, chunk.points[i], q0), first,
                     starts)  # fmt: skip
