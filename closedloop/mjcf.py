@@ -97,6 +97,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         )
     equalities = _equalities(root, where)
     _check_numbers(root, where)
+    _write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
     joints = _joints(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
     for kind, names in (
@@ -113,6 +114,9 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 )
             seen.add(name)
     to_rad = 1.0 if _compiler(root).get("angle", "degree") == "radian" else math.pi / 180
+    of_body: dict[int, list[dict]] = {}  # the joints of each body (a composite if several)
+    for body, attrs in joints:
+        of_body.setdefault(id(body), []).append(attrs)
     stiffness, limits, nq = {}, [], 0
     for body, attrs in joints:
         kind, name = attrs.get("type", "hinge"), attrs.get("name")
@@ -153,7 +157,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 )
             if name is not None:
                 stiffness[name] = text
-            _check_composite(body, name, text, [a for b, a in joints if b is body], where)
+            _check_composite(body, name, text, of_body[id(body)], where)
         nq += JOINT_NQ[kind]
     actuators = [a for act in root.findall("actuator") for a in act]
     return MjcfExtras(
@@ -398,23 +402,21 @@ def _defaults(root: ET.Element, tag: str) -> dict[str, dict[str, str]]:
 
 def _joints(root: ET.Element) -> list[tuple[ET.Element, dict[str, str]]]:
     """(body, attributes) of every joint, in Pinocchio's order (depth first, a body's
-    joints before its children); classes and childclass resolved, ``<freejoint>`` of type
-    free."""
-    defaults = _defaults(root, "joint")
+    joints before its children), of a tree whose classes are written out
+    (:func:`_write_classes`); ``<freejoint>`` of type free."""
     joints: list[tuple[ET.Element, dict[str, str]]] = []
 
-    def visit(body: ET.Element, cls: str) -> None:
-        cls = body.get("childclass", cls)
+    def visit(body: ET.Element) -> None:
         for j in body:
             if j.tag == "joint":
-                joints.append((body, {**defaults.get(j.get("class", cls), {}), **j.attrib}))
+                joints.append((body, dict(j.attrib)))
             elif j.tag == "freejoint":
                 joints.append((body, {**j.attrib, "type": "free"}))
         for child in body.findall("body"):
-            visit(child, cls)
+            visit(child)
 
     for world in root.findall("worldbody"):
-        visit(world, "main")
+        visit(world)
     return joints
 
 
