@@ -44,9 +44,12 @@ move with the tip. Frames keep their indices (the virtual joint's frame is appen
 joints from the virtual joint on get new indices; frames, geometry objects and closure
 anchors beyond the tip follow it.
 
-Preload: a beam has no geometric stiffness of its own (its block is the unloaded one), so
-an axial load P does not change its bending stiffness: first order in P L^2 / EI (25 % on
-the transverse compliance of a clamped rod at P = EI / L^2; the README's beams section).
+Preload: the beam's energy is that of beam theory on the tip's displacement and rotation
+in its rest axes, with the shortening of the bent beam in its axial elongation
+(:mod:`closedloop.elastic`): an axial force softens (compression) or stiffens (tension) its
+bending as the one-element beam-column does (0.2 % from the closed form at P = EI / L^2;
+buckling of a clamped rod at 2.486 EI / L^2, Euler's pi^2 / 4 = 2.467). At zero deflection
+it is the block above: the unloaded compliance does not depend on it.
 """
 
 from __future__ import annotations

@@ -28,6 +28,7 @@ from .arrays import check_wrench, readonly
 from .compliance import ComplianceResult, compliance, compliance_result
 from .conditioning import RANK_RTOL, spectrum_from_factor, spectrum_of_matrix, twist_scaling
 from .configuration import Configuration
+from .elastic import deflection, spring_law
 from .exceptions import EquilibriumError, SingularConfigurationError
 from .model import ClosedLoopModel
 from .springs import spring_factor
@@ -74,7 +75,9 @@ class PreloadedCompliance(ComplianceResult):
         equilibrium: the preloaded equilibrium (its rest configuration, the weight, the
             multipliers); ``q`` above is its configuration q_eq.
         spring_forces: (nv,) forces of the springs at q_eq, K_q dq [N m or N] (0 on
-            passive and locked coordinates), dq = difference(q_rest, q_eq).
+            passive and locked coordinates), dq = difference(q_rest, q_eq); on a beam's
+            virtual joint the force [N] and moment [N m] at its tip, its rest axes, of
+            :mod:`closedloop.elastic` (with the axial force's share of the bending).
     """
 
     preload: np.ndarray
@@ -172,7 +175,7 @@ def preloaded_compliance(
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
     Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers, gravity=eq.load)
-    about = {"equilibrium": eq, "spring_forces": readonly(clm.spring_forces(eq.joint_deflection))}
+    about = {"equilibrium": eq, "spring_forces": readonly(_spring_forces(clm, eq))}
     M, P, T = scaled_tangent(clm, Kt, f.N, f.V, f.sigma**2)  # P: preload part; T^T K_r T = I
     if not np.any(P):
         base = compliance(state, frame, axes)
@@ -218,3 +221,8 @@ def preloaded_compliance(
         stability_margin=margin,
         **about,
     )
+
+
+def _spring_forces(clm: ClosedLoopModel, eq: Equilibrium) -> np.ndarray:
+    """(nv,) the springs' forces at the equilibrium (:func:`closedloop.elastic.spring_law`)."""
+    return spring_law(clm, deflection(clm, eq.q_rest, eq.q))[0]

@@ -3,7 +3,8 @@
 The wrench w = (f [N], n [N m]) acts at the origin of a frame, with both the force and the
 moment fixed in world axes while the frame moves (a dead load). The springs of the model
 store 1/2 dq^T K_q dq (1/2 sum_i k_i dq_i^2 without spring blocks) with
-dq = ``pin.difference(model, q_rest, q)`` on the spring coordinates; their rest
+dq = ``pin.difference(model, q_rest, q)`` on the spring coordinates (a beam's virtual
+joint stores the energy of a beam-column, :mod:`closedloop.elastic`); their rest
 configuration q_rest is the assembled configuration at which the load is applied.
 Locked coordinates (k = inf, including actuated joints without a spring) keep their
 values of q_rest; passive ones (k = 0) follow the closures.
@@ -53,6 +54,7 @@ import pinocchio as pin
 from .arrays import ReadOnlyArrays, check_count, check_positive, check_wrench, readonly, real_array
 from .assembly import close_loops
 from .configuration import Configuration, accepts_configuration
+from .elastic import deflection, spring_law
 from .exceptions import (
     AssemblyError,
     EquilibriumError,
@@ -179,7 +181,9 @@ def potential_energy(
 
     ``1/2 dq^T K_q dq - f . (p(q) - p(q_rest)) + V_g(q) - V_g(q_rest)`` over the spring
     coordinates (0 < k < inf; K_q = ``clm.spring_matrix``, diag(k) or with blocks),
-    dq = difference(q_rest, q). A world-fixed moment has no potential.
+    dq = difference(q_rest, q); a beam's energy is that of :mod:`closedloop.elastic`
+    (its tip displacement and rotation, with the shortening of the bent beam). A
+    world-fixed moment has no potential.
 
     Args:
         force: (3,) force [N], world axes, at the origin of ``frame``.
@@ -188,10 +192,10 @@ def potential_energy(
     f = real_array(force, "force").reshape(-1)
     if f.shape != (3,) or not np.isfinite(f).all():
         raise InvalidInputError(f"force must be 3 finite values (fx fy fz) [N], got {f.tolist()}")
-    dq = pin.difference(clm.model, q_rest, q)
+    springs = spring_law(clm, deflection(clm, q_rest, q))[1]
     dp = frame_displacement(clm, q, q_rest, frame)[:3]
     weight = 0.0 if gravity is None else gravity.potential(q) - gravity.potential(q_rest)
-    return float(0.5 * dq @ clm.spring_forces(dq) - f @ dp + weight)
+    return float(springs - f @ dp + weight)
 
 
 def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_limit):

@@ -46,6 +46,13 @@ import pinocchio as pin
 from .arrays import check_wrench
 from .conditioning import RANK_RTOL, rule_rank
 from .derivatives import DIFFERENCE_STEP, central_differences, pinocchio_second_order_exact
+from .elastic import (
+    beam_joints,
+    deflection,
+    deflection_jacobian,
+    spring_law,
+    spring_stiffness,
+)
 from .exceptions import InvalidInputError
 from .gravity import Load, as_load
 from .kinematics import (
@@ -228,30 +235,32 @@ def _exact_hessians(clm: ClosedLoopModel) -> bool:
 
 
 def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
-    """(nv, nv) stiffness of the springs 1/2 dq^T K_q dq, dq = difference(q_rest, q).
+    """(nv, nv) stiffness of the springs' energy at q (:mod:`closedloop.elastic`).
 
-    ``Jd^T K_q Jd + sum_i (K_q dq)_i Hess dq_i`` with Jd = d dq / dq (``pin.dDifference``,
-    ARG1) and K_q the joint stiffness (``clm.spring_matrix``: diag(k), or a block for the
-    coupled spring of a multi-dof joint). For 1-dof joints (revolute, prismatic) and the
-    other vector-space joints Jd is constant and the second term vanishes; for a sprung
-    joint on a Lie group (free flyer, spherical, planar: nq != nv) it is the derivative of
-    Jd^T f at fixed f = K_q dq, by central differences with step
-    :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f|), zero at zero deflection. Locked
-    coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
+    ``Je^T K_e Je + sum_i (f_e)_i Hess e_i`` with e the springs' deflection (dq =
+    difference(q_rest, q), a beam's tip displacement and rotation), Je = de/dq (
+    ``pin.dDifference``, ARG1, for the ordinary joints), f_e the springs' forces and K_e
+    their stiffness (``clm.spring_matrix``: diag(k), or a block for the coupled spring of
+    a multi-dof joint; on a beam with its geometric stiffness). For 1-dof joints
+    (revolute, prismatic) and the other vector-space joints Je is constant and the second
+    term vanishes; for a sprung joint on a Lie group (free flyer, spherical, planar:
+    nq != nv) it is the derivative of Je^T f_e at fixed f_e, by central differences with
+    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f_e|), zero at zero deflection.
+    Locked coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
     """
     model = clm.model
-    Jd = pin.dDifference(model, q_rest, q, pin.ARG1)
-    if clm.spring_blocks:
-        H = Jd.T @ clm.spring_matrix @ Jd
+    Jd = deflection_jacobian(clm, q_rest, q)
+    if clm.spring_blocks or beam_joints(clm):
+        H = Jd.T @ spring_stiffness(clm, deflection(clm, q_rest, q)) @ Jd
     else:
         k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
         H = (Jd.T * k) @ Jd
     curved = clm.memo("lie_group_springs", lambda: _lie_group_springs(clm))
     if curved.size:
-        f = clm.spring_forces(pin.difference(model, q_rest, q))
+        f = spring_law(clm, deflection(clm, q_rest, q))[0]
         if np.any(f[curved]):
             H += central_differences(
-                model, q, lambda x: pin.dDifference(model, q_rest, x, pin.ARG1).T @ f, curved
+                model, q, lambda x: deflection_jacobian(clm, q_rest, x).T @ f, curved
             )
     return H
 
@@ -409,9 +418,8 @@ class EquilibriumEquations:
         c, A = closure_gap(clm, q)
         A = A[:, free]
         J = frame_jacobian(clm, q, self.frame, "world", update=False)
-        dq = pin.difference(clm.model, self.q_rest, q)
-        Jd = pin.dDifference(clm.model, self.q_rest, q, pin.ARG1)
-        g = Jd.T @ (self.k * dq if self.root is None else clm.spring_forces(dq))
+        e = deflection(clm, self.q_rest, q)
+        g = deflection_jacobian(clm, self.q_rest, q).T @ spring_law(clm, e)[0]
         load = self.generalised_load(q, w, J)
         F = (g - load)[free]
         rows, cols = self.units.rows, self.free_scales

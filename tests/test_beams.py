@@ -783,28 +783,61 @@ def test_a_beam_far_stiffer_than_the_joint_spring_is_the_rigid_limit(tmp_path):
     assert_close_in_norm(res.C, expected.C, 1e-9)
 
 
-#: A beam element with its geometric stiffness (P-delta) reaches the beam-column closed
-#: form within about 1 % at P = EI / L^2; 2 % leaves room for the element's own error.
-RTOL_BEAM_COLUMN = 0.02
+#: The one-element beam with its geometric stiffness (closedloop.elastic: the cubic's
+#: shortening) against the beam-column closed forms: its own discretisation error, which
+#: grows with P L^2 / EI (0.2 % at 1, 2.4 % at 2 in compression; 0.07 % at -1 and 0.5 %
+#: at -4 in tension): 1 % up to |P| = EI / L^2.
+RTOL_BEAM_COLUMN = 0.01
+#: The one-element beam buckles at P L^2 / EI = (26 - sqrt(496)) / 1.5 = 2.486, 0.75 %
+#: above Euler's pi^2 / 4 (the root of det(K_b - P H_s) on the bending plane).
+ONE_ELEMENT_BUCKLING = (26.0 - math.sqrt(496.0)) / 1.5
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="closedloop/beams.py: a beam is a 6-dof spring without a geometric stiffness of "
-    "its own, so its axial load neither softens (compression) nor stiffens (tension) its "
-    "bending: at P = EI / L^2 the tip's transverse compliance is 25 % above the beam-column "
-    "value, and the stability margin vanishes at 1.86 EI / L^2 instead of Euler's 2.47",
-)
-def test_an_axial_preload_softens_a_beam_as_a_beam_column(tmp_path):
-    """A clamped circular rod under an axial compression P at its tip: the transverse tip
-    compliance is (tan kL - kL) / (k^3 EI), k = sqrt(P / EI) (Timoshenko & Gere)."""
+def _rod(tmp_path):
+    """The clamped circular rod of the beam-column tests: model, q, EI [N m^2], L [m]."""
     d, L = 0.01, 0.5
     clm, q = cantilever(tmp_path, {"shape": "circle", "d": d}, length=L)
-    EI = STEEL["E"] * math.pi * d**4 / 64
-    P = EI / L**2
-    kL = math.sqrt(P / EI) * L
-    exact = (math.tan(kL) - kL) * L**3 / (kL**3 * EI)
+    return clm, q, STEEL["E"] * math.pi * d**4 / 64, L
+
+
+def _across_compliance(clm, q, P: float):
+    """The rod's transverse tip compliance [m/N] under the axial compression P [N] (a
+    tension if negative), and the preloaded result."""
     res = cl.compliance(clm, q, "tip", preload=np.r_[-P * AXIS, np.zeros(3)])
     across = beam_frame()[:, 1]
-    np.testing.assert_allclose(across @ res.C[:3, :3] @ across, exact, rtol=RTOL_BEAM_COLUMN)
+    return across @ res.C[:3, :3] @ across, res
+
+
+@pytest.mark.parametrize("ratio", [0.1, 1.0])
+def test_an_axial_compression_softens_a_beam_as_a_beam_column(tmp_path, ratio):
+    """A clamped circular rod under an axial compression P at its tip: the transverse tip
+    compliance is (tan kL - kL) / (k^3 EI), k = sqrt(P / EI) (Timoshenko & Gere)."""
+    clm, q, EI, L = _rod(tmp_path)
+    P = ratio * EI / L**2
+    kL = math.sqrt(P / EI) * L
+    exact = (math.tan(kL) - kL) * L**3 / (kL**3 * EI)
+    c, _ = _across_compliance(clm, q, P)
+    np.testing.assert_allclose(c, exact, rtol=RTOL_BEAM_COLUMN)
+    assert c > L**3 / (3 * EI)  # softer than unloaded: the effect is there
+
+
+@pytest.mark.parametrize("ratio", [0.1, 1.0])
+def test_an_axial_tension_stiffens_a_beam_as_a_beam_column(tmp_path, ratio):
+    """Under a tension T the closed form is (kL - tanh kL) / (k^3 EI), k = sqrt(T / EI)."""
+    clm, q, EI, L = _rod(tmp_path)
+    T = ratio * EI / L**2
+    kL = math.sqrt(T / EI) * L
+    exact = (kL - math.tanh(kL)) * L**3 / (kL**3 * EI)
+    c, _ = _across_compliance(clm, q, -T)
+    np.testing.assert_allclose(c, exact, rtol=RTOL_BEAM_COLUMN)
+    assert c < L**3 / (3 * EI)
+
+
+def test_a_compressed_beam_loses_stability_at_the_buckling_load(tmp_path):
+    """The stability margin changes sign within 0.5 % of the one-element buckling load,
+    which is within 1 % of Euler's pi^2 EI / (4 L^2) for a clamped-free column."""
+    clm, q, EI, L = _rod(tmp_path)
+    assert ONE_ELEMENT_BUCKLING == pytest.approx(math.pi**2 / 4, rel=0.01)
+    below = _across_compliance(clm, q, 0.995 * ONE_ELEMENT_BUCKLING * EI / L**2)[1]
+    above = _across_compliance(clm, q, 1.005 * ONE_ELEMENT_BUCKLING * EI / L**2)[1]
+    assert below.stability_margin > 0.0 > above.stability_margin
