@@ -278,13 +278,16 @@ def output_file(path: str | Path, option: str) -> Path:
     """Check, before any work, that the file ``path`` can be written in an existing folder.
 
     Raises:
-        InvalidInputError: ``path`` is a folder, or its folder is missing, is a file or
-            cannot be written; the message names the option and the path.
+        InvalidInputError: ``path`` is a folder or a file the user may not write, or its
+            folder is missing, is a file or cannot be written; the message names the
+            option and the path.
     """
     path = Path(path)
     parent = path.parent
     if path.is_dir():
         raise InvalidInputError(f"{option} {str(path)!r} is a folder; expected a file")
+    if path.is_file() and not os.access(path, os.W_OK):  # refused by the writer, but late
+        raise InvalidInputError(f"{option} {str(path)!r} is read-only; expected a writable file")
     if not parent.is_dir():
         what = "is not a folder" if parent.exists() else "does not exist"
         raise InvalidInputError(f"{option} {str(path)!r}: folder {str(parent)!r} {what}")

@@ -316,6 +316,28 @@ def test_bad_html_path_exits_2_before_any_work(tmp_path, capsys, monkeypatch, ht
     assert match in err
 
 
+def test_a_read_only_html_file_exits_2_before_any_work(tmp_path, capsys, monkeypatch):
+    """Refused before the model is loaded, not by the writer after the work. Root may
+    write any file: the check is os.access, patched here."""
+    import os
+
+    import closedloop.cli as cli
+
+    path = tmp_path / "view.html"
+    path.write_text("old")
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, m: False if str(p) == str(path) else real(p, m))
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the model was loaded before the output path was checked")
+
+    monkeypatch.setattr(cli, "load_model", no_work)
+    code, out, err = run(capsys, "view", "fourbar", "--frame", "P", "--html", str(path))
+    assert (code, out) == (2, "") and err.count("\n") == 1
+    assert f"--html '{path}' is read-only; expected a writable file" in err
+    assert path.read_text() == "old"
+
+
 def test_closed_pipe_ends_quietly(ur5_urdf):
     done = closed_pipe_run("closedloop", *stiffness_args(ur5_urdf))
     assert (done.returncode, done.stderr) == (141, "")
