@@ -92,9 +92,15 @@ def paper_angles(R: np.ndarray) -> tuple[float, float, float]:
     return phi, float(np.arctan2(R[1, 2], R[0, 2])), float(np.arctan2(R[2, 1], -R[2, 0]))
 
 
+#: Overshoot of the stroke's ends, relative to s4_max, that is rounding of a computed stroke
+#: (0.05 * 6 / 6 is one unit in the last place above 0.05): taken as the end itself.
+STROKE_ROUNDING = 4.0 * np.finfo(float).eps
+
+
 def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float, float]:
     """Validated (alpha (3,) [rad], alpha_4 [rad], s_4 [m]): finite, the angles within the
-    joints' limits (+-``REVOLUTE_LIMIT``, one turn), the stroke within [0, s4_max].
+    joints' limits (+-``REVOLUTE_LIMIT``, one turn), the stroke within [0, s4_max] (a
+    stroke beyond an end by rounding, ``STROKE_ROUNDING``, is that end).
 
     Raises:
         InvalidInputError: names the value and what was expected (an angle beyond one turn
@@ -128,12 +134,13 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
                 f"{name} = ({rad}) rad = ({deg}) deg is beyond the joints' limits of one turn "
                 "(+-2 pi rad, +-360 deg); the Python API takes radians, the command line degrees"
             )
-    if s4.size != 1 or not np.isfinite(s4) or not 0.0 <= float(s4) <= p.s4_max:
+    slack = STROKE_ROUNDING * p.s4_max
+    if s4.size != 1 or not np.isfinite(s4) or not -slack <= float(s4) <= p.s4_max + slack:
         raise InvalidInputError(
             f"s_4 = {s4.tolist()} m is outside the stroke [0, {p.s4_max}] m "
             "(params.s4_max sets the stroke)"
         )
-    return alpha, float(alpha4), float(s4)
+    return alpha, float(alpha4), min(max(float(s4), 0.0), p.s4_max)
 
 
 def closed_form_pose(alpha, alpha4, s4, p: CaHyManParams = DEFAULT_PARAMS) -> CaHyManPose:

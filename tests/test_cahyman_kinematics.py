@@ -189,11 +189,21 @@ def test_unreachable_inputs_from_warm_start_raise_assembly_error(model):
         ([1.0, 1.0, 1.0], np.inf, 0.0),
         ([1.0, 1.0, 1.0], 0.0, -0.001),
         ([1.0, 1.0, 1.0], 0.0, 0.051),
+        ([1.0, 1.0, 1.0], 0.0, 0.05 * (1 + 1e-12)),  # beyond rounding
+        ([1.0, 1.0, 1.0], 0.0, -1e-15),
     ],
 )
 def test_invalid_inputs_raise(model, alpha, alpha4, s4):
     with pytest.raises(InvalidInputError):
         model.assemble(alpha, alpha4, s4)
+
+
+@pytest.mark.parametrize(("s4", "end"), [(0.05 * 6 / 6, 0.05), (0.05 - 0.05 * 6 / 6, 0.0)])
+def test_a_stroke_beyond_its_end_by_rounding_is_the_end(model, s4, end):
+    """0.05 * 6 / 6 is one unit in the last place above the 50 mm stroke."""
+    assert s4 != end and abs(s4 - end) < 1e-17
+    q = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), 0.3, s4)
+    np.testing.assert_array_equal(q, model.assemble(np.deg2rad([45.0, 60.0, 75.0]), 0.3, end))
 
 
 def test_elementary_rotations_are_scipys():
