@@ -43,6 +43,17 @@ def test_curve_writes_data_and_figure(capsys, tmp_path):
     np.testing.assert_allclose(res.indices["det_K"], ref.indices["det_K"], rtol=SAME_RTOL)
 
 
+def test_a_second_map_in_the_folder_leaves_no_figure_of_the_first(capsys, tmp_path):
+    """map.npz and map.csv are replaced: the first map's figure would show data that are no
+    longer there."""
+    (tmp_path / "notes.png").write_text("the user's")
+    for index in ("det_K", "min_translational"):
+        status, _, err = run(capsys, tmp_path, "--alpha", "40:80:3", "--index", index)
+        assert status == 0, err
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == ["map_min_translational.png",
+                                                             "notes.png"]  # fmt: skip
+
+
 def test_heat_map_of_a_design_sweep(capsys, tmp_path):
     status, _, err = run(capsys, tmp_path, "--alpha", "45", "60", "75", "--alpha4", "0:90:4",
                            "--param", "b=0.06:0.10:3", "--backend", "consistent",

@@ -135,7 +135,8 @@ def add_parser(subparsers) -> None:
     add_worker_timeout(p)
     p.add_argument("--chunk-size", type=positive_int, default=None, help="points per task")
     p.add_argument("--out", type=path_text, default=DEFAULT_OUT,
-                   help=f"output folder (default ./{DEFAULT_OUT})")  # fmt: skip
+                   help=f"output folder (default ./{DEFAULT_OUT}): map.npz, map.csv and "
+                   "map_INDEX.png replace those of an earlier map")  # fmt: skip
     p.set_defaults(func=_run)
 
 
@@ -335,6 +336,8 @@ def _run(args: argparse.Namespace) -> int:
     fixed = {k: (float(v[0][0]), v[1]) for k, v in inputs.items() if k not in swept}
     png = out / f"map_{args.index}.png"
     paths.append(plot_map(result, args.index, shown, png, fixed))
+    for other in INDEX_UNITS.keys() - {args.index}:  # an earlier map's figure: not of map.npz
+        (out / f"map_{other}.png").unlink(missing_ok=True)
     print(result.summary())
     print(index_line(args.index, result.indices[args.index], INDEX_UNITS[args.index]))
     failures = result.failures()
