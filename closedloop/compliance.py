@@ -21,8 +21,9 @@ coordinates: lengths divided by the characteristic length L of the configuration
 joint space (prismatic coordinates dq / L, their springs k L^2 [N m]) as in Cartesian
 space. K_r is never formed: the SVD of its square-root factor S = R N (K_q = R^T R; R is
 sqrt(k), or the transposed Cholesky factor of a block) gives K_r = V diag(sigma^2) V^T to
-the precision of S, and a motion is spring-free when its sigma is below ``RANK_RTOL``
-times the largest (the same rule as the rank of C, on the same square-root scale).
+the precision of S. A motion is spring-free when the sprung rows of N see it less than
+``RANK_RTOL`` times the motion they see most (the rule of the rank of C, on the
+kinematics: the springs' values, however far apart, do not decide it).
 C = B B^T with B = J N V diag(1/sigma), and K comes from the SVD of B, never from
 inv(C), which would lose cond(C) = cond(J)^2 digits.
 """

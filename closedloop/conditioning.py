@@ -14,8 +14,12 @@ Decisions are taken on a square-root factor B_s (C_s = B_s B_s^T, from the sprin
 :mod:`closedloop.compliance`), never on C_s itself: its singular values beta carry the
 square roots of the eigenvalues of C_s, so an SVD resolves a 1e-16 eigenvalue ratio that
 an eigen-decomposition of C_s (absolute error eps |C_s|) would turn into noise or a
-negative number. The same rule decides which motions have no restoring spring (on the
-factor sqrt(K_q) N of the joint stiffness).
+negative number. The same rule decides which motions have no restoring spring, on the
+kinematics alone: the rows of the sprung coordinates of the orthonormal (scaled) basis N
+of the admissible motions. A motion they see less than RANK_RTOL times the one they see
+most is spring-free (a singular configuration), whatever the values of the springs: a
+spring 1e20 times softer than the others is a spring, and its direction of C is known to
+about the rounding of each spring, as the factor sqrt(K_q) N is a row scaling of N.
 
 * **rank**: number of beta_i > :data:`RANK_RTOL` beta_max, i.e. eigenvalues of C_s above
   RANK_RTOL^2 = 1e-14 times the largest. Below that no double-precision computation of
@@ -44,9 +48,9 @@ from . import lapack
 from .arrays import frozen, readonly
 from .exceptions import InvalidInputError
 
-#: Relative threshold on the singular values of a scaled square-root factor (C_s = B B^T,
-#: K_r = S^T S) below which a direction counts as rigid (compliance) or spring-free
-#: (joint stiffness): 1e-14 on the eigenvalues of C_s and K_r.
+#: Relative threshold on the singular values of a scaled square-root factor (C_s = B B^T)
+#: below which a direction counts as rigid: 1e-14 on the eigenvalues of C_s; and on those
+#: of the sprung rows of the admissible motions, below which a motion is spring-free.
 RANK_RTOL = 1e-7
 #: Condition number of the scaled stiffness K_s above which a result is flagged
 #: ill-conditioned (8 decades between the stiffest and the softest scaled direction).

@@ -18,7 +18,6 @@ frame is a :class:`MechanismError`.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
@@ -146,13 +145,6 @@ class _Scaling(NamedTuple):
             frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None,
             loops,
         )
-
-    def spring_free(self, norm_T2: float) -> bool:
-        """The null-space path's spring-free rule on the fast paths' factor: that path
-        would find singular values of the spring factor between min(sigma) / |T| and
-        max(sigma), |T|^2 = s + norm_T2 for N = [I; X] (norm_T2 = |X|_F^2)."""
-        s = self.sigma.size
-        return s > 0 and 1.0 <= RANK_RTOL * self.spread * math.sqrt(s + norm_T2)
 
 
 def scaling(state: Configuration) -> _Scaling:
@@ -303,18 +295,17 @@ def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | Non
     Without closures nor passive joints N selects the spring coordinates (serial).
     """
     p, m = sc.passive.size, state.residual.size
-    X, norm2 = None, 0.0
+    X = None
+    if not sc.sprung.size:
+        return None
     if p:
-        if m < p or not sc.sprung.size:
+        if m < p:
             return None
         X = _passive_motion(state.closure_jacobian(), sc)
         if X is None:
             return None
-        norm2 = float(np.vdot(X, X))
     elif m:
         return None  # loops without passive joints tie the springs together
-    if sc.spring_free(norm2):
-        return None
     return ("partitioned", X) if m else ("serial", None)
 
 
@@ -372,18 +363,23 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
 
     Raises:
         MechanismError: a spring-free motion moves the frame (no static equilibrium):
-            a joint without spring, or a singular configuration where the springs resist
-            a motion RANK_RTOL^2 = 1e-14 times less than the stiffest one.
+            a joint without spring, or a singular configuration where an admissible motion
+            moves the sprung coordinates less than ``RANK_RTOL`` (1e-7) times the motion
+            that moves them most (scaled, unit-free; the springs' values do not enter).
     """
     clm, L, sc = state.model, state.length, scaling(state)
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)
+    # the motions the springs see: the sprung coordinates' rows of the orthonormal N_s, by
+    # the rank rule; the rest move no sprung coordinate (spring-free), whatever the springs
+    _, V_k, Z, _ = split_factor(N_s[sc.sprung])
     if sc.root is None:
-        S = sc.sqrt_k[:, None] * N_s[sc.sprung]
-    else:  # spring blocks: S^T S = N_s^T diag(s_q) K_q diag(s_q) N_s
-        S = sc.root @ N_s[sc.sprung]
-    sigma, V, Z, _ = split_factor(S)
+        S = sc.sqrt_k[:, None] * (N_s[sc.sprung] @ V_k)
+    else:  # spring blocks: S^T S = V_k^T N_s^T diag(s_q) K_q diag(s_q) N_s V_k
+        S = sc.root @ (N_s[sc.sprung] @ V_k)
+    _, sigma, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
+    V = V_k @ Vt.T
     N = N_s * sc.s_q[:, None]
     if Z.shape[1]:  # spring-free motions must not move the frame
         JN_s = (J * twist_scaling(L)[:, None]) @ N
@@ -391,8 +387,9 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
         if np.any(moves):
             raise MechanismError(
                 f"{clm.name!r} is still a mechanism at frame {frame!r}: {int(moves.sum())} "
-                "motion(s) with no restoring spring (or one below 1e-14 of the stiffest, a "
-                f"singular configuration) move it, driven mostly by "
+                "motion(s) with no restoring spring (no spring moves, or they move 1e-7 "
+                "times less than in another motion: a singular configuration) move it, "
+                "driven mostly by "
                 f"{_main_joints(clm, N @ Z[:, moves])}; add springs, lock joints or move away "
                 "from the singularity"
             )

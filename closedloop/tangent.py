@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench
-from .conditioning import RANK_RTOL, rule_rank
+from .conditioning import RANK_RTOL, rule_rank, split_factor, svd
 from .derivatives import DIFFERENCE_STEP, central_differences, pinocchio_second_order_exact
 from .elastic import (
     beam_joints,
@@ -395,6 +395,8 @@ class EquilibriumEquations:
         # square root of the springs on the free coordinates, K_ff = R_f^T R_f
         self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
+        #: the free coordinates with a spring (k > 0), indices into the free ones
+        self.sprung = np.flatnonzero(self.k[self.free] > 0.0)
         self.units = SolverUnits.of(clm)
         #: (n_free,) scale of each free coordinate [m or rad per unit]: dq_free = free_scales * y
         self.free_scales = self.units.coords[self.free]
@@ -471,21 +473,37 @@ class EquilibriumEquations:
         """
         free, cols = self.free, self.free_scales
         H = cols[:, None] * self._restricted(q, w, st) * cols  # on y = x / cols
-        R, N = st["R"], st["N"]
+        R = st["R"]
         if load is None:  # restores the closures
             dy = -R @ ((st["Ur"].T @ (st["c"] / self.units.rows)) / st["sr"])
-            rhs = -N.T @ (cols * st["F"] + H @ dy)
+            rhs = -(cols * st["F"] + H @ dy)
         else:
             J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
-            dy, rhs = np.zeros(free.size), N.T @ (cols * self.generalised_load(q, load, J)[free])
-        # the rule of the compliance on this stiffness scale: a motion resisted less than
-        # RANK_RTOL^2 of the stiffest is spring-free (a looser cutoff dropped the soft
-        # springs of a model whose springs span 1e12, and Newton stopped at no motion)
-        x, _, rank, _ = np.linalg.lstsq(N.T @ H @ N, rhs, rcond=RANK_RTOL**2)
-        dy += N @ x
+            dy, rhs = np.zeros(free.size), cols * self.generalised_load(q, load, J)[free]
+        # on the admissible motions: the sprung ones normalised by their springs and set on
+        # the scale of the stiffest (a soft spring beside a stiff one is solved for, however
+        # far apart), the spring-free ones as they are; a direction resisted less than
+        # RANK_RTOL^2 of that scale is left out (spring-free, or beyond the solve)
+        T, Z, top = self._sprung_motions(st)
+        B = np.hstack([T * top, Z])
+        x, _, rank, _ = np.linalg.lstsq(B.T @ H @ B, B.T @ rhs, rcond=RANK_RTOL**2)
+        dy += B @ x
         v = np.zeros(self.clm.model.nv)
         v[free] = cols * dy
-        return v, N.shape[1] - rank
+        return v, B.shape[1] - rank
+
+    def _sprung_motions(self, st: dict) -> tuple[np.ndarray, np.ndarray, float]:
+        """The admissible motions of ``st`` (on y = x / cols) split as the spring factor of
+        :func:`closedloop.springs.spring_factor` splits them: T (n_free, r) those that move
+        a sprung coordinate, with T^T K_q T = I; Z (n_free, d - r) orthonormal, the
+        spring-free ones (by the rank rule on the sprung rows, not on the springs' values);
+        and the largest singular value of the spring factor [sqrt(N m)]."""
+        cols, N = self.free_scales, st["N"]
+        _, V_k, Z, _ = split_factor(N[self.sprung])
+        NV = cols[:, None] * (N @ V_k)  # on x
+        S = np.sqrt(self.k[self.free])[:, None] * NV if self.root is None else self.root @ NV
+        _, sig, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
+        return (N @ V_k) @ (Vt.T / sig), N @ Z, float(sig[0]) if sig.size else 1.0
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
         """Stability margin at an equilibrium q (nq,) under the load w.
@@ -494,12 +512,8 @@ class EquilibriumEquations:
         the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by
         their spring stiffness; 1 unloaded, 0 where K_t turns singular, < 0 if unstable.
         Spring-free motions (a rod spinning about its axis) are left out; the sprung ones
-        are the right singular vectors of R N (K_q = R^T R) above ``RANK_RTOL`` times the largest.
+        are those that move a sprung coordinate (:meth:`_sprung_motions`).
         """
         st = self.evaluate(q, w)
-        N = self.free_scales[:, None] * st["N"]  # the admissible motions of the free coordinates
-        S = np.sqrt(self.k[self.free])[:, None] * N if self.root is None else self.root @ N
-        _, sig, Vt = np.linalg.svd(S, full_matrices=False)
-        r = rule_rank(sig)
-        T = N @ (Vt[:r].T / sig[:r])  # T^T K_q T = I on the sprung motions
+        T = self.free_scales[:, None] * self._sprung_motions(st)[0]  # T^T K_q T = I, on x
         return stability_margin(T.T @ self._restricted(q, w, st) @ T)

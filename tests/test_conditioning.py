@@ -80,26 +80,28 @@ def test_rank_boundary_of_a_matrix_and_of_a_batch(factor, rank):
     np.testing.assert_allclose(cond, 1.0 / mu[rank - 1], rtol=1e-2)
 
 
-def test_spring_free_boundary():
-    # Two sliders x, y with springs k_x and k_y = k_x (f RANK_RTOL)^2: the square-root
-    # factor has singular values sqrt(k): spring-free below the threshold.
+def test_springs_of_any_ratio_are_springs_and_no_spring_is_none():
+    """Two sliders x, y with springs k_x and k_y = k_x (f RANK_RTOL)^2: whatever f, both
+    are springs and C = diag(1/k_x, 1/k_y) on both paths; without the spring on y its
+    motion is spring-free and moves the tip (MechanismError naming 'y')."""
     model = pin.Model()
     jx = model.addJoint(0, pin.JointModelPX(), pin.SE3.Identity(), "x")
     jy = model.addJoint(jx, pin.JointModelPY(), pin.SE3.Identity(), "y")
     model.appendBodyToJoint(jy, pin.Inertia.Random(), pin.SE3.Identity())
     model.addFrame(pin.Frame("tip", jy, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
     kx = 1e6
-    for factor in (10.0, 0.1):
+    for factor in (10.0, 0.1, 1e-3):
         ky = kx * (factor * RANK_RTOL) ** 2
         clm = ClosedLoopModel(model, springs={"x": kx, "y": ky})
-        if factor > 1:
-            res = compliance(clm, np.zeros(2), "tip")
+        for path in ("auto", "null-space"):
+            res = compliance(clm, np.zeros(2), "tip", path=path)
             np.testing.assert_allclose(np.diag(res.C)[:2], [1 / kx, 1 / ky], rtol=RTOL_EXACT)
             assert res.rank == 2 and res.condition_number == pytest.approx(kx / ky, rel=1e-9)
-            assert res.ill_conditioned  # 1e12 over the range of C
-        else:
-            with pytest.raises(MechanismError, match=r"below 1e-14 of the stiffest.*'y'"):
-                compliance(clm, np.zeros(2), "tip")
+            assert res.ill_conditioned  # 1e12 and more over the range of C
+    passive = ClosedLoopModel(model, springs={"x": kx, "y": 0.0})
+    for path in ("auto", "null-space"):
+        with pytest.raises(MechanismError, match=r"no restoring spring.*'y'"):
+            compliance(passive, np.zeros(2), "tip", path=path)
 
 
 def test_rank_and_condition_do_not_depend_on_the_length_unit():

@@ -28,7 +28,6 @@ from scipy.optimize import brentq, minimize
 import closedloop as cl
 from closedloop.assembly import assemble
 from closedloop.compliance import compliance
-from closedloop.exceptions import MechanismError
 from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
 from closedloop.statics import potential_energy, solve_equilibrium
 
@@ -318,13 +317,14 @@ def test_delta_equilibrium_does_not_depend_on_the_closure_order():
     np.testing.assert_allclose(moment, 0.0, atol=RTOL_BALANCE * np.abs(w).max())
 
 
-def test_springs_twelve_orders_apart_still_deflect(fourbar):
+@pytest.mark.parametrize("axial", [1e14, 1e20])
+def test_springs_far_apart_still_deflect(fourbar, axial):
     """A soft crank spring (1e-3 N m/rad) beside axial springs of 2e9 N/m: the Newton step
     resolves the soft direction (its solve cut stiffnesses below 1e-12 of the largest,
-    and the solver returned no motion, the load unbalanced). Its rank rule is that of the
-    compliance, unit-free: axial springs of 1e14 N/m beside 1 N m/rad (1.1e13 apart in
-    units of the four-bar's length L = 0.34 m) deflect as C w (the solver refused them when
-    it compared N/m with N m/rad); at 1e15 N/m both refuse the mechanism."""
+    and the solver returned no motion, the load unbalanced). Axial springs of 1e14 and
+    1e20 N/m beside 1 N m/rad (1.1e13 and 1.1e19 apart in units of the four-bar's length
+    L = 0.34 m) deflect as C w: every spring is a spring, however far apart (the solver
+    once refused them, first comparing N/m with N m/rad, then beyond 1e14 apart)."""
     clm, _ = fourbar
     soft = clm.with_springs({"crank": 1e-3, "crank_axial": 2e9, "rocker_axial": 2e9})
     q0 = assemble(soft, actuated=[0.3]).q
@@ -332,15 +332,9 @@ def test_springs_twelve_orders_apart_still_deflect(fourbar):
     Cw = compliance(soft, q0, "P").C @ w
     eq = solve_equilibrium(soft, q0, "P", w)
     np.testing.assert_allclose(eq.displacement, Cw, rtol=0, atol=RTOL_SMALL_LOAD * np.abs(Cw).max())
-    apart = clm.with_springs({"crank": 1.0, "crank_axial": 1e14, "rocker_axial": 1e14})
+    apart = clm.with_springs({"crank": 1.0, "crank_axial": axial, "rocker_axial": axial})
     q0 = assemble(apart, actuated=[0.3]).q
     w = np.array([0, 0, -1e-6, 0, 0, 0])  # a small load: the linear response
     Cw = compliance(apart, q0, "P").C @ w
     eq = solve_equilibrium(apart, q0, "P", w)
     np.testing.assert_allclose(eq.displacement, Cw, rtol=0, atol=RTOL_SMALL_LOAD * np.abs(Cw).max())
-    beyond = clm.with_springs({"crank": 1.0, "crank_axial": 1e15, "rocker_axial": 1e15})
-    q0 = assemble(beyond, actuated=[0.3]).q
-    with pytest.raises(MechanismError):
-        compliance(beyond, q0, "P")
-    with pytest.raises(MechanismError):
-        solve_equilibrium(beyond, q0, "P", w)
