@@ -118,13 +118,35 @@ def generic_backend(
     )
 
 
+#: The backends that are the paper's closed forms: lumped springs, no masses, no beams.
+CLOSED_FORMS = ("consistent", "published")
+
+
+def check_closed_form(params: CaHyManParams, backend: str) -> None:
+    """Refuse the parameters of a machine that a closed-form ``backend`` does not model
+    (links as beams), rather than answer for another machine.
+
+    Raises:
+        InvalidInputError: ``params.links_as_beams`` with a backend of :data:`CLOSED_FORMS`.
+    """
+    if backend in CLOSED_FORMS and params.links_as_beams:
+        raise InvalidInputError(
+            f"links_as_beams needs the generic backend (the closed forms have the lumped "
+            f"springs K_b, K_d, K_4, no beams), got backend {backend!r}"
+        )
+
+
 def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
     """The consistent closed form (pure numpy); ``details["breakdown"]`` has its parts.
 
     The plate twist at H per wrench at M is C_H T^T (T^T carries the wrench from M to H).
+
+    Raises:
+        InvalidInputError: ``params.links_as_beams`` (:func:`check_closed_form`).
     """
     from cahyman_pin.backends.consistent import consistent_breakdown  # on demand: start-up
 
+    check_closed_form(params, "consistent")
     parts = consistent_breakdown(alpha, alpha4, s4, params)
     return BackendResult(
         C=parts.C,
@@ -150,9 +172,13 @@ def published_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) ->
     symmetric; C_platform is the plate term K_PAR^-1 of eq. (3) (displacement of H). No
     load is given, so the weight terms of eq. (11) are zero. ``details["result"]`` holds
     every matrix.
+
+    Raises:
+        InvalidInputError: ``params.links_as_beams`` (:func:`check_closed_form`).
     """
     from cahyman_pin.backends.published import PublishedOptions, published_stiffness
 
+    check_closed_form(params, "published")
     r = published_stiffness(alpha, alpha4, s4, params, PublishedOptions(ks="params"))
     return BackendResult(
         C=r.C,
@@ -333,7 +359,7 @@ def _indices(result: BackendResult, params: CaHyManParams, backend: str):
             springs reach all six directions of M at every regular pose, so that rank
             deficiency is not rigidity but one compliance 1e14 times larger than the others
             (a crank near its coupler); the generic backend refuses the same poses as a
-            mechanism (its spring-free rule works on the stiffness side).
+            mechanism (its spring-free rule works on the motions of the sprung joints).
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)

@@ -167,8 +167,8 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
         for ax, rotation in zip(row_axes, (False, True), strict=True):
             idx = [k for k, q in enumerate(qs) if q.table == pose.label
                    and q.row.endswith("[deg]") == rotation]  # fmt: skip
-            size = [max(np.nanmax(np.abs([sens[n][0][k], sens[n][1][k]])) for n in drawn)
-                    for k in idx]  # fmt: skip
+            size = [max((np.nanmax(np.abs([sens[n][0][k], sens[n][1][k]])) for n in drawn),
+                        default=0.0) for k in idx]  # fmt: skip
             idx = [idx[i] for i in np.argsort(size, kind="stable")[::-1]]
             slots = np.arange(len(idx)) * (n_dim + 1)
             unit = "deg" if rotation else "mm"
@@ -190,9 +190,10 @@ def figure_tornado(out_dir: Path, params: CaHyManParams) -> Path:
                          fontsize=9)  # fmt: skip
             ax.grid(True, axis="x", alpha=0.3)
     handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in drawn]
-    fig.legend(handles, drawn, loc="upper center", bbox_to_anchor=(0.5, 0.975), ncol=n_dim,
-               fontsize=9, title=f"solid: dimension +{step}, light: -{step}",
-               title_fontsize=8)  # fmt: skip
+    if drawn:
+        fig.legend(handles, drawn, loc="upper center", bbox_to_anchor=(0.5, 0.975), ncol=n_dim,
+                   fontsize=9, title=f"solid: dimension +{step}, light: -{step}",
+                   title_fontsize=8)  # fmt: skip
     no_change = f"; {', '.join(idle)}: no change" if idle else ""
     fig.suptitle(f"Change of every compared cell for -+{step} of each assumed dimension, "
                  f"consistent model{no_change}", y=0.995)  # fmt: skip

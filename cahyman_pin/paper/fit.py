@@ -260,6 +260,13 @@ def _fit(
     f_all = _weighted(params, groups, published, sd)
     inactive = _inactive(f_all, np.log(ref))
     act = [n for n, i in zip(names, inactive, strict=True) if not i]
+    if not act:  # no value changes any quantity (e.g. a machine far stiffer than the
+        # tables, every cell ~0 in their units): nothing to fit, every value unidentifiable
+        kept = dict(zip(names, map(float, ref), strict=True))
+        values = model_values(params)
+        chi2 = float(np.sum(f_all(np.log(ref)) ** 2))
+        return FitResult(tuple(names), kept, dict(kept), dict.fromkeys(names, ""), params,
+                         values, values - published, chi2, chi2, 0, tuple(names), True)  # fmt: skip
     sub = {n: groups[n] for n in act}
     ref_act = ref[~inactive]
     lo, hi = np.log(ref_act / ratio), np.log(ref_act * ratio)

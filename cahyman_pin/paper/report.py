@@ -8,6 +8,7 @@ The report lists every parameter with its source (paper, assumed, or given).
 from __future__ import annotations
 
 import dataclasses
+import math
 import shutil
 import warnings
 from pathlib import Path
@@ -341,7 +342,9 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
 
 def _ks_note(doc: Document, params: CaHyManParams, changes) -> None:
     """Why the printed K_s hardly changes the published backend, and the series arm a lot."""
-    size = {name: max(np.max(np.abs(d)) for d in changes[name].values() if d is not None)
+    # n/a where the published formulation is singular at every pose of the tables
+    size = {name: max((np.max(np.abs(d)) for d in changes[name].values() if d is not None),
+                      default=math.nan)
             for name in ("K_s value", "the arm model of eqs. (4)-(8)")}  # fmt: skip
     pose = TABLE_POSES[0]
     _, alpha4, s4 = pose.si
@@ -361,8 +364,12 @@ def _ks_note(doc: Document, params: CaHyManParams, changes) -> None:
                 f"{fmt(size['K_s value'], 2)} mm, while repairing the arm model (with the "
                 "printed K_s) moves them "
             )
-            + f"by up to {fmt(size['the arm model of eqs. (4)-(8)'], 3)} mm. In "
-            "the printed arm model "
+            + (
+                f"by up to {fmt(size['the arm model of eqs. (4)-(8)'], 3)} mm. In "
+                if math.isfinite(size["the arm model of eqs. (4)-(8)"])
+                else "by an amount it cannot tell (singular at every pose of the tables). In "
+            )
+            + "the printed arm model "
             "(eqs. 4-8) As has two equal columns (dL and ds_4 both move M along the arm), and "
             "its pseudo-inverse puts K_4 and K_s side by side: along the arm the stiffness is "
             f"(K_4 + K_s)/2, {fmt(k_printed, 5)} N/m with the printed K_s = {K_S_PRINTED:g} N/m "
@@ -479,9 +486,16 @@ def build_report(
         params_file: the file ``params`` were read from, named in the report (None: none).
 
     Raises:
-        InvalidInputError: parameters whose stroke cannot reach the paper's poses. Any
-            error (a pose the parameters make singular) leaves no file of this run behind.
+        InvalidInputError: parameters whose stroke cannot reach the paper's poses, or with
+            links as beams. Any error (a pose the parameters make singular) leaves no file
+            of this run behind.
     """
+    if params.links_as_beams:
+        raise InvalidInputError(
+            "links_as_beams: the report compares the closed forms with the generic model on "
+            "the paper's lumped springs (K_b, K_d, K_4); it shows the links as beams in its "
+            "section 'Lumped springs vs beam links'. Remove links_as_beams from the parameters"
+        )
     needed = max(pose.s4_mm for pose in TABLE_POSES) * 1e-3
     if params.s4_max < needed:
         raise InvalidInputError(

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cahyman_pin.api import get_backend
+from cahyman_pin.api import check_closed_form, get_backend
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.sweep.execution import STARTS, Chunk, run_chunk
 from cahyman_pin.sweep.points import (
@@ -356,14 +356,17 @@ def sweep(
         show_progress: progress bar on stderr.
 
     Raises:
-        InvalidInputError: unknown backend or start, bad wrench or executor. A point that
-            cannot be computed does not raise: it is marked in ``status`` and ``reasons``.
+        InvalidInputError: unknown backend or start, bad wrench or executor, links as
+            beams with a closed-form backend (:func:`cahyman_pin.api.check_closed_form`).
+            A point that cannot be computed does not raise: it is marked in ``status`` and
+            ``reasons``.
     """
     if not isinstance(points, SweepPoints):
         raise InvalidInputError(f"points must be SweepPoints, got {type(points).__name__}")
     w = None if wrench is None else readonly(check_wrench(wrench))
     if start not in STARTS:
         raise InvalidInputError(f"start {start!r}; expected one of {list(STARTS)}")
+    check_closed_form(points.params, backend)
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
     pool, n_workers = _executor(executor, workers)
