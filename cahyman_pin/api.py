@@ -35,7 +35,7 @@ from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
-from closedloop.indices import StiffnessIndices
+from closedloop.indices import StiffnessIndices, finite_determinant
 
 
 @dataclass(frozen=True)
@@ -261,8 +261,16 @@ class CaHyManStiffness(ReadOnlyArrays):
 
     @property
     def det_K(self) -> float:
-        """det K [N^6/rad^3] (the paper's performance index)."""
-        return float(np.linalg.det(self.K)) if self.indices is None else self.indices.determinant
+        """det K [N^6/rad^3] (the paper's performance index).
+
+        Raises:
+            SingularConfigurationError: det K is beyond the floating point range.
+        """
+        if self.indices is not None:
+            return self.indices.determinant
+        sign, log_det = np.linalg.slogdet(self.K)
+        with np.errstate(over="ignore", under="ignore"):
+            return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -307,10 +315,15 @@ class CaHyManStiffness(ReadOnlyArrays):
         """JSON-ready summary (SI): K, C, det_K, eigenvalues, platform, inputs, units."""
         full = self.is_full_rank
         ev = self.eigenvalues if full else None
+        missing = {}
+        try:
+            det = self.det_K if full else None
+        except SingularConfigurationError as e:
+            det, missing["det_K"] = None, str(e)
         return {
             "K": self.K.tolist() if full else None,
             "C": self.C.tolist(),
-            "det_K": self.det_K if full else None,
+            "det_K": det,
             "eigenvalues_K": None if ev is None else _real_or_pairs(ev),
             "condition_number_K": self.condition_number if full else None,
             "condition_number_scaled": (
@@ -331,6 +344,7 @@ class CaHyManStiffness(ReadOnlyArrays):
             },
             "backend": self.backend,
             "sag_M": None if self.sag_M is None else self.sag_M.tolist(),
+            "missing": missing,
             "units": {**UNITS, "det_K": "N^6/rad^3"},
         }
 

@@ -122,8 +122,9 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
     if alpha.shape != (3,) or not np.all(np.isfinite(alpha)):
         raise InvalidInputError(f"alpha must be 3 finite angles [rad], got {alpha.tolist()}")
     alpha4, s4 = np.asarray(alpha4, dtype=float), np.asarray(s4, dtype=float)
-    if alpha4.size != 1 or not np.isfinite(alpha4):
+    if alpha4.size != 1 or not np.isfinite(alpha4).all():
         raise InvalidInputError(f"alpha_4 must be one finite angle [rad], got {alpha4.tolist()}")
+    alpha4 = alpha4.reshape(())  # one value, given as [x] or x
     for name, value in (("alpha", alpha), ("alpha_4", alpha4)):
         if np.any(np.abs(value) > REVOLUTE_LIMIT):
             with np.errstate(over="ignore"):
@@ -135,12 +136,14 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
                 "(+-2 pi rad, +-360 deg); the Python API takes radians, the command line degrees"
             )
     slack = STROKE_ROUNDING * p.s4_max
-    if s4.size != 1 or not np.isfinite(s4) or not -slack <= float(s4) <= p.s4_max + slack:
+    if s4.size != 1 or not np.isfinite(s4).all():
+        raise InvalidInputError(f"s_4 must be one finite stroke [m], got {s4.tolist()}")
+    if not -slack <= s4.item() <= p.s4_max + slack:
         raise InvalidInputError(
             f"s_4 = {s4.tolist()} m is outside the stroke [0, {p.s4_max}] m "
             "(params.s4_max sets the stroke)"
         )
-    return alpha, float(alpha4), min(max(float(s4), 0.0), p.s4_max)
+    return alpha, float(alpha4), min(max(s4.item(), 0.0), p.s4_max)
 
 
 def closed_form_pose(alpha, alpha4, s4, p: CaHyManParams = DEFAULT_PARAMS) -> CaHyManPose:
@@ -343,18 +346,25 @@ class CaHyManModel:
         """Leg inputs for a plate height and tilt (closed form, the paper's branch).
 
         Args:
-            z_H: plate-centre height [m]; phi: elevation of the plate normal [rad]
-                (pi/2 = level); psi: azimuth of the tilt [rad].
+            z_H: plate-centre height [m]; phi: elevation of the plate normal [rad], in
+                [0, pi/2] (pi/2 = level); psi: azimuth of the tilt [rad].
 
         Returns:
             (3,) crank angles alpha_1..3 [rad] in [-pi/2, pi/2].
 
         Raises:
+            InvalidInputError: phi outside [0, pi/2], non-finite values.
             AssemblyError: a crank would have to reach beyond its length.
         """
         values = np.array([z_H, phi, psi], dtype=float)
         if values.shape != (3,) or not np.all(np.isfinite(values)):
             raise InvalidInputError(f"z_H, phi, psi must be finite numbers, got {values.tolist()}")
+        if not 0.0 <= values[1] <= 0.5 * np.pi:  # the closed form reads cos(phi) alone
+            raise InvalidInputError(
+                f"phi = {values[1]:.6g} rad = {np.rad2deg(values[1]):.6g} deg; expected the "
+                "elevation of the plate normal in [0, pi/2] rad (pi/2: level; a tilt the "
+                "other way is psi + pi)"
+            )
         alpha = geometry.inverse_legs(*values, self.params)
         return readonly(alpha)
 

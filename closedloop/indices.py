@@ -63,7 +63,7 @@ from .conditioning import (
     twist_scaling,
     twist_scalings,
 )
-from .exceptions import InvalidInputError, RigidDirectionsError
+from .exceptions import InvalidInputError, RigidDirectionsError, SingularConfigurationError
 
 T, R = slice(0, 3), slice(3, 6)
 #: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
@@ -295,6 +295,11 @@ class StiffnessIndices:
         eps sqrt(cond(K_s)) relative, where an LU determinant of K errs by eps cond(K_s) (at
         cond 3e18 it is off by a factor of two or has the wrong sign). A K that is not
         positive definite (an unstable preloaded equilibrium) has its LU determinant.
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            SingularConfigurationError: det K is beyond the floating point range
+                (:func:`finite_determinant`).
         """
         self._require_full_rank("det K")
         K = self.K
@@ -302,12 +307,16 @@ class StiffnessIndices:
         dd = np.outer(d, d)
         lam = inverse_pair_eigenvalues(self.C * dd, K / dd)
         if lam is None:
-            return float(np.linalg.det(K))
+            sign, log_det = np.linalg.slogdet(K)
+            with np.errstate(over="ignore", under="ignore"):
+                return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
         # mantissas and exponents apart: det K_s = det K L^6 may leave the float range
         # where det K does not
         mantissa, exponent = np.frexp(np.concatenate([lam, d, d]))
+        product, total = np.prod(mantissa), int(np.sum(exponent))
         with np.errstate(over="ignore", under="ignore"):
-            return float(np.ldexp(np.prod(mantissa), int(np.sum(exponent))))
+            det = float(np.ldexp(product, total))
+        return finite_determinant(det, (np.log2(abs(product)) + total) * np.log10(2.0))
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -425,11 +434,27 @@ class StiffnessIndices:
             try:
                 value = getattr(self, name)
                 out[name] = _jsonable(value() if callable(value) else value)
-            except RigidDirectionsError as e:
+            except (RigidDirectionsError, SingularConfigurationError) as e:
                 out[name], missing[name] = None, str(e)
         out["rigid_directions"] = _jsonable(out["rigid_directions"])
         out.update(missing=missing, order=list(TWIST_LABELS), units=INDEX_UNITS)
         return out
+
+
+def finite_determinant(det: float, log10: float) -> float:
+    """``det`` [N^6/rad^3] when it is a finite non-zero float (K is full rank here).
+
+    Raises:
+        SingularConfigurationError: it overflowed or underflowed; the message gives its
+            size 10^``log10``.
+    """
+    if det != 0.0 and np.isfinite(det):
+        return float(det)
+    raise SingularConfigurationError(
+        f"det K = 1e{log10:.1f} N^6/rad^3 is beyond the floating point range (1e-308 to "
+        "1e308); the other indices stand (springs far from 1 N/m or N m/rad make it so: "
+        "each enters at the power of its directions)"
+    )
 
 
 #: Indices exported by :meth:`StiffnessIndices.to_dict` (besides rank and rigid directions).

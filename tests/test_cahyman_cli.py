@@ -230,6 +230,8 @@ def test_published_backend_honours_ks_and_does_not_claim_world_axes(capsys):
     doc = json.loads(out)
     assert status == 0 and doc["axes"] != "world" and doc["units"].endswith(doc["axes"])
     assert "(plate), world axes" not in doc["units"]
+    status, out, _ = run(capsys, "deflect", "--backend", "published", "--force", "1", "0", "0")
+    assert status == 0 and "at M, world axes" not in out and "M_FT in the arm frame" in out
 
 
 # ------------------------------------------------------------------ closed pipe

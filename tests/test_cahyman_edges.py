@@ -3,6 +3,8 @@ made rigid by huge springs, a machine far stiffer than the paper's tables."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -10,7 +12,7 @@ from cahyman_pin.api import stiffness
 from cahyman_pin.cli import main
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import grid, sweep
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 
 ALPHA = np.deg2rad([45.0, 60.0, 75.0])
 #: The consistent closed form and the generic model: the same machine through different
@@ -61,3 +63,21 @@ def test_a_machine_far_stiffer_than_the_tables_gets_its_report(tmp_path, capsys)
     assert main(["report", "--params", str(path), "--out", str(tmp_path / "r")]) == 0
     text = (tmp_path / "r" / "report.md").read_text()
     assert "singular at every pose of the tables" in text
+
+
+@pytest.mark.parametrize("backend", ["generic", "consistent", "published"])
+@pytest.mark.parametrize("factor", [1e50, 1e-60])
+def test_a_determinant_beyond_the_float_range_is_an_error_not_inf_or_zero(backend, factor):
+    """Every spring times 1e50 (1e-60): det K ~ 1e330 (1e-330), which was inf (0.0 for a
+    full-rank K); the JSON summary keeps K and C and says why det_K is missing."""
+    params = DEFAULT_PARAMS.replace(**{n: getattr(DEFAULT_PARAMS, n) * factor for n in SPRINGS})
+    r = stiffness(ALPHA, 0.7, 0.02, params=params, backend=backend)
+    with pytest.raises(SingularConfigurationError, match="beyond the floating point range"):
+        _ = r.det_K
+    doc = r.to_dict()
+    json.dumps(doc, allow_nan=False)
+    assert doc["det_K"] is None and doc["K"] is not None
+    # det K scales as factor^6 (six directions, each a spring's): its size from the default
+    size = float(doc["missing"]["det_K"].split("= 1e")[1].split()[0])
+    expected = np.log10(abs(stiffness(ALPHA, 0.7, 0.02, backend=backend).det_K))
+    np.testing.assert_allclose(size, expected + 6 * np.log10(factor), atol=0.05)  # 1 decimal

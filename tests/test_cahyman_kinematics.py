@@ -234,3 +234,20 @@ def test_plate_rotation_is_the_product_of_eq_6():
     np.testing.assert_allclose(geometry.plate_rotation(0.2, -1.0, 2.5),
                                Rotation.from_euler("ZYZ", [-1.0, np.pi / 2 - 0.2, 2.5]).as_matrix(),
                                rtol=0, atol=1e-15)  # fmt: skip
+
+
+def test_one_value_given_as_a_list_or_array_is_that_value(model):
+    """alpha_4 and s_4 as [x] or np.array([x]) (numpy 2.4 refuses float() of a 1-element
+    array: it was a TypeError); two values are refused by name."""
+    alpha = np.deg2rad([45.0, 60.0, 75.0])
+    q = model.assemble(alpha, 0.5, 0.01)
+    np.testing.assert_array_equal(model.assemble(alpha, [0.5], np.array([0.01])), q)
+    with pytest.raises(InvalidInputError, match="s_4 must be one finite stroke"):
+        model.assemble(alpha, 0.5, [0.01, 0.02])
+
+
+@pytest.mark.parametrize("phi", [-1.3, np.pi / 2 + 0.3, 10.0])
+def test_inverse_refuses_an_elevation_outside_its_range(model, phi):
+    """The closed form reads cos(phi): -1.3 rad gave the cranks of phi = +74.5 deg."""
+    with pytest.raises(InvalidInputError, match=r"elevation of the plate normal in \[0, pi/2\]"):
+        model.inverse(0.1, phi, 0.2)

@@ -54,6 +54,18 @@ def test_a_second_map_in_the_folder_leaves_no_figure_of_the_first(capsys, tmp_pa
                                                              "notes.png"]  # fmt: skip
 
 
+def test_strokes_are_checked_against_the_largest_swept_stroke(capsys, tmp_path):
+    """--s4 60 mm with s4_max swept to 0.06 m is a map (its points with the shorter stroke
+    are marked invalid), not a typing error; beyond every stroke it is one, in mm."""
+    status, _, err = run(capsys, tmp_path, "--alpha", "60", "--s4", "0:60:3",
+                           "--param", "s4_max=0.03,0.06")  # fmt: skip
+    assert status == 0, err
+    res = SweepResult.load_npz(tmp_path / "map.npz")
+    assert list(res.status).count("invalid") == 1  # 60 mm with the 30 mm stroke
+    status, _, err = run(capsys, tmp_path, "--alpha", "60", "--s4", "0:80:3")
+    assert status == 2 and "--s4 80 mm is outside the stroke [0, 50] mm" in err
+
+
 def test_heat_map_of_a_design_sweep(capsys, tmp_path):
     status, _, err = run(capsys, tmp_path, "--alpha", "45", "60", "75", "--alpha4", "0:90:4",
                            "--param", "b=0.06:0.10:3", "--backend", "consistent",

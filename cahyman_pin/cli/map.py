@@ -52,6 +52,7 @@ from closedloop.cli_common import (
     quoted,
 )
 from closedloop.cluster import add_worker_timeout, dask_executor
+from closedloop.exceptions import InvalidInputError
 from closedloop.files import save_figure
 from closedloop.maps import load_text
 
@@ -280,14 +281,26 @@ def _check_values(inputs: dict, params: CaHyManParams) -> None:
     """Refuse values that no point could use (raises InvalidInputError).
 
     Each design value must make valid parameters, and each stroke must lie in
-    [0, s4_max]: a range that leaves them is a typing error, not a map with holes.
+    [0, s4_max] (the largest s4_max of the map, when it is swept): a range that leaves
+    them is a typing error, not a map with holes.
     """
     for name, (values, _, factor) in inputs.items():
-        for v in values * factor:
-            if name == "s4":
-                check_inputs(np.zeros(3), 0.0, v, params)
-            elif name in CaHyManParams.field_names():
+        if name in CaHyManParams.field_names():
+            for v in values * factor:
                 params.replace(**{name: float(v)})
+    if "s4_max" in inputs:
+        values, _, factor = inputs["s4_max"]
+        params = params.replace(s4_max=float(np.max(values * factor)))
+    if "s4" in inputs:
+        values, _, factor = inputs["s4"]
+        for v in values * factor:
+            try:
+                check_inputs(np.zeros(3), 0.0, v, params)
+            except InvalidInputError:
+                raise UsageError(
+                    f"--s4 {v * 1e3:g} mm is outside the stroke [0, {params.s4_max * 1e3:g}] mm "
+                    "(--param s4_max=... [m] sets the stroke)"
+                ) from None
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -64,7 +64,8 @@ def _run_stiffness(args: argparse.Namespace) -> int:
     print("\n".join(_pose_lines(r)))
     if r.is_full_rank:
         print(_matrix("K", r.K, "N/m, N/rad, N m/m, N m/rad", r.axes))
-        print(f"det K = {r.det_K:.6e} N^6/rad^3")
+        det = out["det_K"]
+        print(f"det K = {det:.6e} N^6/rad^3" if det is not None else out["missing"]["det_K"])
         print(f"eigenvalues of K [SI] = {_vec(np.real_if_close(r.eigenvalues))}")
         print(f"condition number of K [SI] = {r.condition_number:.6g}")
     else:
@@ -120,7 +121,10 @@ def _run_deflect(args: argparse.Namespace) -> int:
         print_json(out)
         return 0
     check_finite(out)
-    print(f"force {args.force} N, torque {args.torque} N m at M, world axes")
+    read = ("world axes" if r.axes == "world"  # the published formulation: its own reading
+            else "read as the paper's formulation reads them: M_FT in the arm frame, K_SER "
+            "in world axes")  # fmt: skip
+    print(f"force {args.force} N, torque {args.torque} N m at M, {read}")
     print("\n".join(_pose_lines(r)))
     if r.axes != "world":  # the published backend: its own coordinates
         print(f"the twists below are in the coordinates of the {r.axes}")
