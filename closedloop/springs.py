@@ -26,7 +26,7 @@ from . import lapack
 from .arrays import frozen, upper_triangular_inverses
 from .conditioning import RANK_RTOL, split_factor, svd, twist_scaling
 from .configuration import Configuration
-from .exceptions import InvalidInputError, MechanismError
+from .exceptions import InvalidInputError, MechanismError, SingularConfigurationError
 from .kinematics import nullspace, rigid_rows
 from .model import ClosedLoopModel
 
@@ -340,6 +340,27 @@ def kinematic_factor(
     return ((J * sc.s_q) @ Q) * sc.d[:, None]
 
 
+#: Largest spread of the scaled springs (stiffest / softest; k L^2 for prismatic joints)
+#: that the general path resolves. Its soft directions come from an SVD of sqrt(K_q) N,
+#: whose rounding reaches a soft spring beside the stiff ones at about 1e-22 sqrt(spread)
+#: relative on CaHyMan (1e-11 at 1e20, 3e-8 at 1e28, 5e-3 at 1e40; ``tests/test_core_edges.py``);
+#: the fast paths scale by the springs exactly, at any spread.
+SPREAD_RESOLVED = 1e20
+
+
+def check_spread(clm: ClosedLoopModel, L: float) -> None:
+    """Refuse springs further apart than :data:`SPREAD_RESOLVED` (scaled at length L [m])
+    for the general path and the statics (SingularConfigurationError naming the spread)."""
+    spread = model_scaling(clm, L).spread ** 2
+    if spread > SPREAD_RESOLVED:
+        raise SingularConfigurationError(
+            f"the springs of {clm.name!r} span {spread:.1e} (scaled: k L^2 for prismatic "
+            f"joints), beyond the {SPREAD_RESOLVED:.0e} that the general path and the statics "
+            "resolve in double precision; lock the stiffest joints (a spring of inf) or bring "
+            f"the springs within {SPREAD_RESOLVED:.0e} of each other"
+        )
+
+
 #: Values of the ``path`` argument of :func:`compliance`.
 PATHS = ("auto", "null-space")
 
@@ -366,8 +387,10 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
             a joint without spring, or a singular configuration where an admissible motion
             moves the sprung coordinates less than ``RANK_RTOL`` (1e-7) times the motion
             that moves them most (scaled, unit-free; the springs' values do not enter).
+        SingularConfigurationError: springs further apart than ``SPREAD_RESOLVED``.
     """
     clm, L, sc = state.model, state.length, scaling(state)
+    check_spread(clm, L)
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)

@@ -325,6 +325,8 @@ def solve_equilibrium(
             the loops.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame (no equilibrium).
+        SingularConfigurationError: springs further apart than
+            :data:`closedloop.springs.SPREAD_RESOLVED` (1e20, scaled).
         EquilibriumError: no equilibrium found even with the smallest load increment. Its
             ``limit_load`` is True when the tangent stiffness at the last equilibrium is
             near-singular (stability margin <= :data:`LIMIT_MARGIN`: a limit load ends the

@@ -81,3 +81,33 @@ def test_a_determinant_beyond_the_float_range_is_an_error_not_inf_or_zero(backen
     size = float(doc["missing"]["det_K"].split("= 1e")[1].split()[0])
     expected = np.log10(abs(stiffness(ALPHA, 0.7, 0.02, backend=backend).det_K))
     np.testing.assert_allclose(size, expected + 6 * np.log10(factor), atol=0.05)  # 1 decimal
+
+
+#: The general path against the closed form with leg motors K_T up to 1e20 times the
+#: others: the soft springs beside the stiff ones keep ~1e-22 sqrt(spread) relative
+#: (closedloop.springs.SPREAD_RESOLVED); 1e-10 leaves a factor of 10 at 1e20.
+RTOL_GENERAL_PATH = 1e-10
+
+
+def test_the_general_path_resolves_springs_up_to_its_spread_and_refuses_beyond():
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.urdf_builder import FRAME_M
+    from closedloop import compliance
+
+    for K_T in (1e12, 1e16, 1e20):
+        params = DEFAULT_PARAMS.replace(K_T=K_T)
+        model = cahyman_model(params)
+        q = model.assemble(ALPHA, 0.7, 0.02)
+        closed = stiffness(ALPHA, 0.7, 0.02, params=params, backend="consistent").C
+        general = compliance(model.clm, q, FRAME_M, path="null-space").C
+        scale = np.abs(closed).max()
+        np.testing.assert_allclose(general, closed, rtol=0, atol=RTOL_GENERAL_PATH * scale)
+    params = DEFAULT_PARAMS.replace(K_T=1e30)
+    model = cahyman_model(params)
+    q = model.assemble(ALPHA, 0.7, 0.02)
+    with pytest.raises(SingularConfigurationError, match="beyond the 1e\\+20 that the general"):
+        compliance(model.clm, q, FRAME_M, path="null-space")
+    closed = stiffness(ALPHA, 0.7, 0.02, params=params, backend="consistent").C
+    fast = compliance(model.clm, q, FRAME_M)  # the partitioned path: exact at any spread
+    assert fast.path == "partitioned"
+    np.testing.assert_allclose(fast.C, closed, rtol=0, atol=RTOL_BACKENDS * np.abs(closed).max())
