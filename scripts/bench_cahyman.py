@@ -19,6 +19,7 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
+from closedloop import lapack
 from closedloop.assembly import ASSEMBLY_TOL, free_coordinates, min_norm_solve
 from closedloop.batch import compliances
 from closedloop.compliance import compliance
@@ -68,6 +69,28 @@ def leg_grid(sides: tuple[int, int, int]):
     return grid(axes, alpha=alpha, alpha4=POSE[1], s4=0.025)
 
 
+def lean_query(clm, data, q):
+    """The least the partitioned query computes: Pinocchio's kinematics, the closure
+    Jacobians (welds without Jlog6, the identity at closure), the passive motion
+    X = -J_p^+ J_s by one QR, B = (J_s + J_p X) K_s^-1/2, C = B B^T and the SVD of B for
+    the rank (no check, no scaling, no G, no K, no result object)."""
+    model = clm.model
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    datas = clm.memo("lean_datas", lambda: [c.constraint.createData() for c in clm.closures])
+    parts = []
+    for c, cd in zip(clm.closures, datas, strict=True):
+        c.constraint.calc(model, data, cd)
+        parts.append(c.constraint.jacobian(model, data, cd))
+    Jc = np.concatenate(parts)
+    passive, sprung = clm.stiffness == 0.0, np.isfinite(clm.stiffness) & (clm.stiffness > 0)
+    Q, R = np.linalg.qr(Jc[:, passive])
+    X = -np.linalg.solve(R, Q.T @ Jc[:, sprung])
+    J = pin.getFrameJacobian(model, data, model.getFrameId(FRAME_M), pin.LOCAL_WORLD_ALIGNED)
+    B = (J[:, sprung] + J[:, passive] @ X) / np.sqrt(clm.stiffness[sprung])
+    return B @ B.T, lapack.dgesdd(B)
+
+
 def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> None:
     for p, key in (("auto", "1a"), ("null-space", "1b")):
         taken = compliance(model.clm, q, FRAME_M, path=p).path
@@ -79,6 +102,12 @@ def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> Non
         t = interleaved(lambda p=p: compliance(model.clm, q, FRAME_M, path=p), unit, mode)
         table.units(key, f"CaHyMan `closedloop.compliance` alone, path={p!r}",
                     "<= 25 units (C alone)" if p == "auto" else "-", t)  # fmt: skip
+    floor = partial(lean_query, model.clm, model.clm.model.createData(), q)
+    t = interleaved(floor, unit, mode)
+    table.note(f"1c: the floor of C and the rank rule written out without any check (scripts/"
+               f"bench_cahyman.py lean_query: the kinematics, the six closure Jacobians, the "
+               f"passive motion by one QR, C = B B^T, the SVD of B) {t.ratio:.1f} units = "
+               f"{fmt_time(t.seconds)}")  # fmt: skip
     t = interleaved(lambda: stiffness(*POSE), unit, mode)
     table.units("1e", "`cahyman_pin.api.stiffness` whole call (closed-form start, assembly, "
                 "query)", "-", t)  # fmt: skip

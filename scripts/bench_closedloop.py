@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 from benchtools import Mode, Table, fmt_time, growth_exponent, interleaved, parse_mode
 
+from closedloop import lapack
 from closedloop.batch import compliances
 from closedloop.compliance import compliance
 from closedloop.io import load_urdf, robot_data_dir
@@ -80,6 +81,14 @@ def unit_of(clm: ClosedLoopModel, q: np.ndarray):
     return partial(pin.computeJointJacobians, clm.model, workspace[0], q)
 
 
+def ur5_floor(model, data, q, fid, root_compliance):
+    """The least a serial query with the rank rule computes: Pinocchio's frame Jacobian J,
+    B = J K^-1/2, C = B B^T and the SVD of B (LAPACK, no check, no scaling, no result)."""
+    J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    B = J * root_compliance
+    return B @ B.T, lapack.dgesdd(B)
+
+
 def bench_ur5(table: Table, mode: Mode) -> None:
     path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
     ur5 = load_urdf(path, joint_stiffness=1e4, geometry=False)
@@ -89,6 +98,12 @@ def bench_ur5(table: Table, mode: Mode) -> None:
         taken = compliance(ur5, UR5_Q, "tool0", path=p).path
         table.units(key, f"UR5 (serial) query, `compliance(..., path={p!r})` -> {taken}",
                     target, t)  # fmt: skip
+    floor = partial(ur5_floor, ur5.model, ur5.model.createData(), UR5_Q,
+                    ur5.model.getFrameId("tool0"), 1.0 / np.sqrt(ur5.stiffness))  # fmt: skip
+    t = interleaved(floor, unit, mode)
+    table.note(f"2: the floor of its numbers written out without any check (scripts/"
+               f"bench_closedloop.py ur5_floor: the frame Jacobian, C = J K^-1 J^T, the SVD of "
+               f"the rank rule) {t.ratio:.1f} units = {fmt_time(t.seconds)}")  # fmt: skip
     Q = np.random.default_rng(0).uniform(-2.5, 2.5, (100, 6))
     t = interleaved(lambda: compliances(ur5, Q, "tool0"), unit, mode, per=len(Q))
     table.units("2c", f"UR5 `closedloop.compliances`, {len(Q)} poses at once (C, G, rank)", "-",
