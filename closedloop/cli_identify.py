@@ -6,9 +6,12 @@
 ``--fit`` names joints; ``a+b`` ties joints a and b to one value; a joint with a block
 spring (a beam's ``<link>_beam``) is fitted as a factor of its block. Start values come
 from the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the
-YAML or CSV of :func:`closedloop.identification.read_measurements`. Exit status: 0 every
-parameter identified, 1 some cannot be identified from these data (named, no value),
-2 bad input, 3 the computation failed.
+YAML or CSV of :func:`closedloop.identification.read_measurements`. Each estimate is
+printed with its unit (N m/rad, N/m, or 1 for a block's factor). Exit status: 0 every
+parameter identified and the model fits the data, 1 some cannot be identified from these
+data (named, no value) or the model does not fit them (a residual RMS above what the sd
+allow: one warning line, the standard errors do not hold), 2 bad input, 3 the computation
+failed.
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ def add_parser(sub, model_arguments) -> None:
 
 def run_identify(args) -> int:
     """Run ``closedloop identify``; returns the exit code (0, or 1 if a parameter is not
-    identifiable)."""
+    identifiable or the model does not fit the data: ``Fit.consistent`` False, whose
+    :class:`~closedloop.exceptions.ModelMisfitWarning` is the one line on stderr)."""
     from .cli_map import model_source  # MODEL, --closures and springs, as for a map
     from .identification import identify, read_measurements  # scipy.optimize: on demand
 
@@ -46,7 +50,7 @@ def run_identify(args) -> int:
     frame, data = read_measurements(args.measurements)
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
     fit = identify(clm, data, frame, groups)
-    status = EXIT_RANK_DEFICIENT if fit.unidentifiable else EXIT_OK
+    status = EXIT_RANK_DEFICIENT if fit.unidentifiable or not fit.consistent else EXIT_OK
     if args.json:
         print_json({"model": clm.name, "frame": frame, **fit.to_dict()})
         return status
@@ -57,8 +61,8 @@ def run_identify(args) -> int:
         if fit.estimates[name] is None:
             print(f"  {name}: not identifiable from these data")
         else:
-            print(f"  {name} = {fit.estimates[name]:.6g} +- {fit.std_errors[name]:.2g} "
-                  "[N m/rad, N/m, or a block's factor]")  # fmt: skip
+            unit = "(factor of its block)" if fit.units[name] == "1" else f"[{fit.units[name]}]"
+            print(f"  {name} = {fit.estimates[name]:.6g} +- {fit.std_errors[name]:.2g} {unit}")
     for names in fit.confounded:
         print(f"  seen only together: {', '.join(names)}")
     return status

@@ -209,15 +209,27 @@ def dask_executor(address: str | None, worker_timeout: float | None = None):
             client.close()
 
 
+#: Loggers (with their children) muted while a Dask run lasts: Dask's own, and those of
+#: the event loop its client runs on (tornado's ``tornado.application`` logs a callback's
+#: ``CommClosedError`` with its traceback when the scheduler is lost mid-gather; asyncio
+#: logs a task's exception that nobody retrieved).
+DASK_LOGGERS = ("distributed", "tornado", "asyncio")
+
+
 @contextlib.contextmanager
 def _quiet_dask_logs():
-    """Dask's own log records dropped while a run lasts, then the levels restored.
+    """The log records of :data:`DASK_LOGGERS` dropped while a run lasts, then the levels
+    restored.
 
-    A lost scheduler makes the client log its reconnection failures with their
-    tracebacks on stderr; the run's outcome is already one :class:`ClusterError`.
+    A lost scheduler makes the client log its reconnection failures, and its event loop
+    the failed callbacks, with their tracebacks on stderr; the run's outcome is already
+    one :class:`ClusterError`. Each logger of these families that exists is muted (a
+    child with a level of its own, such as ``tornado.application``, does not follow its
+    parent); one created during the run inherits the muted level of its family's root.
     """
     manager = logging.Logger.manager
-    names = ["distributed", *(n for n in list(manager.loggerDict) if n.startswith("distributed."))]
+    children = tuple(f"{root}." for root in DASK_LOGGERS)
+    names = [*DASK_LOGGERS, *(n for n in list(manager.loggerDict) if n.startswith(children))]
     loggers = [logging.getLogger(n) for n in names]
     levels = [logger.level for logger in loggers]
     for logger in loggers:

@@ -141,6 +141,12 @@ class JointLimitWarning(UserWarning):
     """An equilibrium lies outside the position limits of some joints."""
 
 
+class ModelMisfitWarning(UserWarning):
+    """:func:`closedloop.identification.identify`: the model does not fit the
+    measurements (a weighted residual RMS far above what their sd allow, ``Fit.consistent``
+    False): the standard errors, which assume a fit, do not hold."""
+
+
 class NumericalError(ClosedLoopError):
     """A result is not finite (NaN or infinity) on finite input: the computation failed."""
 

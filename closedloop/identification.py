@@ -39,6 +39,15 @@ unseen directions there); ``confounded`` names the parameters of each null direc
 errors of the identified parameters, outside every null direction, are exact. Before the
 fit, one common log offset brings the start to the scale of the data
 (:func:`_common_offset`).
+
+The standard errors assume that the model fits the data: the weighted residuals are then
+draws of a unit normal, and their sum of squares a chi-square variable of n_c - rank(S)
+degrees of freedom (n_c the measured components). A fit whose sum of squares exceeds the
+quantile of significance :data:`FIT_SIGNIFICANCE` of that distribution (a residual RMS far
+above what the stated sd allow: measurements taken on another assembly mode than the
+model's, another frame, a unit slip, sd stated too small) is flagged (``Fit.consistent``
+False, :class:`ModelMisfitWarning`): its estimates are the best compromise of a model that
+does not describe the data, and its standard errors do not hold.
 """
 
 from __future__ import annotations
@@ -46,12 +55,14 @@ from __future__ import annotations
 import csv
 import io
 import numbers
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import scipy.optimize
+import scipy.special
 import yaml
 
 from .arrays import check_wrench, readonly, real_array
@@ -61,6 +72,7 @@ from .exceptions import (
     InvalidInputError,
     MechanismError,
     ModelFileError,
+    ModelMisfitWarning,
     OpenLoopError,
     SingularConfigurationError,
 )
@@ -75,7 +87,7 @@ LOG_SE_MAX = 1.0
 #: Relative share of a null vector of S above which a parameter takes part in it.
 NULL_SHARE = 0.1
 #: A column of S below this share of the largest is rounding (the parameter is not seen):
-#: the convention of a mechanism's missing spring (1e-14 of the stiffest). A column above
+#: the rank rule's RANK_RTOL^2, its threshold on eigenvalue ratios. A column above
 #: it, however small, stays in the rank test: a stiff spring in series with a soft one is
 #: confounded with it, not "not seen" while the soft one is "identified".
 DEAD_RTOL = 1e-14
@@ -88,9 +100,16 @@ REJECTED = 1e100
 #: Weight of the offsets from the start, relative to the largest sensitivity (see _solve).
 PRIOR = 1e-9
 #: Largest weighted residual, weighted twist d / sd or weighted sensitivity at the start:
-#: their sums of squares stay finite (1e200 a term); beyond, a wrench or an sd is out of
-#: scale (a unit slip), not data.
+#: their sums of squares stay finite (1e200 a term); beyond, a twist, a wrench or an sd is
+#: out of scale (a unit slip), not data.
 LARGEST_WEIGHTED = 1e100
+#: Significance of the chi-square test of the fit (module docstring): a data set that the
+#: model fits, with Gaussian errors of the stated sd, is flagged once in a million fits.
+#: This small a value flags what the sd cannot explain (an RMS above 1.5 from 50
+#: components, above 1.11 from 1000), not a few outliers or sd known to within 10 %.
+FIT_SIGNIFICANCE = 1e-6
+#: Longest text of a bad argument shown in an error message; a longer one is cut.
+SHOWN_REPR = 80
 
 
 @dataclass(frozen=True)
@@ -264,6 +283,13 @@ class Fit:
         residuals: (n, 6) weighted residuals (C w - d) / sd at the solution (per
             measurement, components dx dy dz rx ry rz).
         residual_rms: RMS of the weighted residuals (about 1 for consistent data).
+        rms_limit: largest residual RMS that the chi-square test at
+            :data:`FIT_SIGNIFICANCE` accepts for these data, or None when no component is
+            left to test it (as many informative components as the rank of S).
+        consistent: False when ``residual_rms`` exceeds ``rms_limit`` (the model does not
+            fit the data: the standard errors do not hold; :class:`ModelMisfitWarning`).
+        units: name -> unit of its estimate and error ("N m/rad", "N/m", or "1" for a
+            block's factor).
         n_measurements: number of measurements.
         success: whether the optimiser reports convergence.
     """
@@ -277,6 +303,9 @@ class Fit:
     confounded: tuple[tuple[str, ...], ...]
     residuals: np.ndarray
     residual_rms: float
+    rms_limit: float | None
+    consistent: bool
+    units: dict
     n_measurements: int
     success: bool
 
@@ -290,6 +319,9 @@ class Fit:
             "confounded": [list(c) for c in self.confounded],
             "correlations": self.correlations.tolist(),
             "residual_rms": self.residual_rms,
+            "rms_limit": self.rms_limit,
+            "consistent": self.consistent,
+            "units": self.units,
             "residuals": self.residuals.tolist(),
             "n_measurements": self.n_measurements,
             "success": self.success,
@@ -327,6 +359,29 @@ def _groups(clm: ClosedLoopModel, fit) -> list[tuple[str, ...]]:
     return groups
 
 
+def _unit(clm: ClosedLoopModel, group: tuple[str, ...]) -> str:
+    """Unit of a fitted value: "1" (a factor of block springs), "N/m" (joints whose
+    coordinates all translate), "N m/rad" (all rotate), or both (a joint with both kinds
+    of coordinates, one stiffness on each)."""
+    if group[0] in clm.spring_blocks:
+        return "1"
+    linear = clm.linear_coordinates[clm.joint_v_slice(group[0])]
+    if linear.all():
+        return "N/m"
+    return "N m/rad" if not linear.any() else "N/m on translations, N m/rad on rotations"
+
+
+def _shown(value) -> str:
+    """``repr(value)`` for an error message, cut after :data:`SHOWN_REPR` characters (an
+    array of many measurements would fill kilobytes)."""
+    text = repr(value)
+    if len(text) <= SHOWN_REPR:
+        return text
+    shape = getattr(value, "shape", None)
+    what = f"{type(value).__name__} of shape {shape}" if shape is not None else type(value).__name__
+    return f"{text[:SHOWN_REPR]}... ({what}, {len(text)} characters)"
+
+
 def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
     """(p,) log start values: ``start``, else the model's (1 for a block factor)."""
     start = dict(start or {})
@@ -342,9 +397,10 @@ def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
             k = clm.stiffness[clm.joint_v_slice(group[0])]
             value = float(k[0]) if k.size else 0.0
         if not (isinstance(value, numbers.Real) and np.isfinite(value) and value > 0):
+            unit = _unit(clm, group)
             raise InvalidInputError(
-                f"parameter {name!r} needs a finite start value > 0 [N m/rad, N/m, or a "
-                f"block's factor], got {value!r}"
+                f"parameter {name!r} needs a finite start value > 0 "
+                f"[{'a factor of its block' if unit == '1' else unit}], got {_shown(value)}"
             )
         theta0[i] = np.log(value)
     return theta0
@@ -353,7 +409,9 @@ def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
 def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
     """The configuration of each measurement (its index named in an error)."""
     if isinstance(measurements, Measurement | str) or not isinstance(measurements, Sequence):
-        raise InvalidInputError(f"measurements must be a list of Measurement, got {measurements!r}")
+        raise InvalidInputError(
+            f"measurements must be a list of Measurement, got {_shown(measurements)}"
+        )
     if not measurements or not all(isinstance(m, Measurement) for m in measurements):
         raise InvalidInputError("measurements must be a non-empty list of Measurement")
     out, start = [], reference_configuration(clm)  # the file's, as the command line's
@@ -388,12 +446,17 @@ def identify(
         start: parameter name ("a+b" for a group) -> start value [N m/rad, N/m, or a
             block's factor], overriding the model's.
 
+    Warns:
+        ModelMisfitWarning: the model does not fit the data (``Fit.consistent`` False:
+            the chi-square test of the module docstring); the message gives the residual
+            RMS and the largest the sd allow.
+
     Raises:
         InvalidInputError: no parameter, a parameter without a start value > 0, a start
             value of a parameter not fitted, a group mixing blocks and numbers, a bad
             measurement (its index named), fewer measured components than parameters, a
-            measurement whose weighted deflection overflows (a wrench or an sd out of
-            scale, its index named).
+            measurement whose weighted deflection overflows (a twist, a wrench or an sd
+            out of scale, its index and the culprit named).
         NameNotFoundError: unknown joint or frame.
         OpenLoopError: a measurement's q does not close the loops (its index named).
         MechanismError, SingularConfigurationError: no compliance at a measurement's
@@ -440,10 +503,10 @@ def identify(
         return (pred - d) / sd, sens.reshape(-1, len(groups)) / sd.reshape(-1, 1)
 
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named below
-        _check_scale(*evaluate(theta0), d / sd, w, sd)
+        _check_scale(*evaluate(theta0), d, w, sd)
     theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd))
     r, S = evaluate(theta)
-    unidentifiable, confounded = _unidentifiable(S, names)
+    unidentifiable, confounded, rank = _unidentifiable(S, names)
     free = [i for i, n in enumerate(names) if n not in unidentifiable]
     cov = _covariance(S)[np.ix_(free, free)]
     se = np.sqrt(np.diag(cov))
@@ -457,6 +520,18 @@ def identify(
     estimates, ses = dict.fromkeys(names), dict.fromkeys(names)
     for j, i in enumerate(free):
         estimates[names[i]], ses[names[i]] = float(k[i]), float(k[i] * se[j])
+    rms = float(np.sqrt(np.mean(r**2)))
+    rms_limit = _rms_limit(r, S, rank)
+    consistent = rms_limit is None or rms <= rms_limit
+    if not consistent:
+        warnings.warn(
+            f"the model does not fit the data: weighted residual RMS {rms:.3g}, where "
+            f"errors of the stated sd give at most {rms_limit:.3g} (chi-square test at "
+            f"significance {FIT_SIGNIFICANCE:g}); the standard errors assume a fit and do "
+            "not hold (check the configurations' assembly mode, the frame, the units, the sd)",
+            ModelMisfitWarning,
+            stacklevel=2,
+        )
     return Fit(
         names=names,
         estimates=estimates,
@@ -466,30 +541,71 @@ def identify(
         unidentifiable=tuple(unidentifiable),
         confounded=tuple(confounded),
         residuals=readonly(r),
-        residual_rms=float(np.sqrt(np.mean(r**2))),
+        residual_rms=rms,
+        rms_limit=rms_limit,
+        consistent=consistent,
+        units={name: _unit(clm, g) for name, g in zip(names, groups, strict=True)},
         n_measurements=len(configs),
         success=success,
     )
 
 
-def _check_scale(r, S, data, w, sd) -> None:
+def _rms_limit(r: np.ndarray, S: np.ndarray, rank: int) -> float | None:
+    """Largest weighted residual RMS of r (n, 6) that the chi-square test at
+    :data:`FIT_SIGNIFICANCE` accepts, S (6 n, p) of rank ``rank``; None when no degree of
+    freedom is left.
+
+    The components that carry no noise are not counted: those whose sensitivities vanish
+    and whose residual is exactly zero (a planar mechanism's out-of-plane twist, zero in
+    the model whatever the springs and measured as 0): their residual is 0 for any fit,
+    and counting them would loosen the test. The limit is then on the RMS over all n 6
+    components, as ``Fit.residual_rms``.
+    """
+    flat = r.reshape(-1)
+    noisy = int(np.count_nonzero((flat != 0.0) | np.any(S != 0.0, axis=1)))
+    dof = noisy - rank
+    if dof <= 0:
+        return None
+    return float(np.sqrt(scipy.special.chdtri(dof, FIT_SIGNIFICANCE) / flat.size))
+
+
+def _check_scale(r, S, d, w, sd) -> None:
     """Refuse a measurement whose weighted values at the start overflow or exceed
-    :data:`LARGEST_WEIGHTED` (r, data (n, 6); S (6 n, p); w, sd (n, 6)).
+    :data:`LARGEST_WEIGHTED`: the residual r, the measured twist d / sd, the predicted one
+    C w / sd = r + d / sd or the sensitivities S (r, d, w, sd (n, 6); S (6 n, p)).
+
+    The culprit named is the measured twist when d / sd is out of scale and C w / sd (and
+    its sensitivities) is not, the wrench (or a start spring) in the opposite case, and the
+    sd when both are.
 
     Raises:
-        InvalidInputError: naming the first such measurement, its value, wrench and sd.
+        InvalidInputError: naming the first such measurement, its largest weighted value,
+            wrench, twist and sd, and the culprit.
     """
-    rows = np.abs(np.concatenate([r, data, S.reshape(len(r), -1)], axis=1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        data = d / sd
+        measured = np.abs(data)
+        predicted = np.abs(np.concatenate([r + data, S.reshape(len(r), -1)], axis=1))
+        rows = np.concatenate([np.abs(r), measured, predicted], axis=1)
     largest = np.where(np.isnan(rows), np.inf, rows).max(axis=1)
     bad = np.flatnonzero(~(largest <= LARGEST_WEIGHTED))
     if bad.size:
         m = int(bad[0])
+        twist_bad, predicted_bad = (
+            not np.all(a[m] <= LARGEST_WEIGHTED) for a in (measured, predicted)
+        )  # NaN (inf - inf) counts as out of scale
+        if twist_bad and not predicted_bad:
+            culprit = "the measured twist out of scale for its sd"
+        elif predicted_bad and not twist_bad:
+            culprit = "the wrench (or a start spring) out of scale for the sd: C w / sd is"
+        else:
+            culprit = "an sd out of scale for the twist and the wrench"
         value = "overflows" if not np.isfinite(largest[m]) else f"reaches {largest[m]:.3g}"
-        wrench, sds = (", ".join(f"{x:.6g}" for x in v) for v in (w[m], sd[m]))
+        wrench, twist, sds = (", ".join(f"{x:.6g}" for x in v) for v in (w[m], d[m], sd[m]))
         raise InvalidInputError(
             f"measurement {m}: its weighted deflection (C w - d) / sd {value} (wrench "
-            f"[{wrench}], sd [{sds}]); expected at most {LARGEST_WEIGHTED:g}: a wrench or an "
-            "sd out of scale (SI units)"
+            f"[{wrench}], twist [{twist}], sd [{sds}]); expected at most "
+            f"{LARGEST_WEIGHTED:g}: {culprit} (SI units)"
         )
 
 
@@ -513,7 +629,8 @@ def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
     The unknowns are the offsets u from theta0, scaled by ``LOG_STEP``: the first trust
     region allows a change of about ``100 * LOG_STEP`` in log k (MINPACK's initial step
     bound is 100 times the scaled size of the start, here zero), and a step to springs
-    that leave a mechanism (a spring 1e14 times softer than another) is rejected as a
+    that leave a mechanism, or that spread beyond what the general path resolves
+    (:data:`closedloop.springs.SPREAD_RESOLVED`), is rejected as a
     step that raises the cost. The residuals carry ``PRIOR`` times the largest singular
     value of S at theta0 times u: the directions the data do not see stay at the start
     (no drift that would make one of two series springs vanish beside the other), and
@@ -583,20 +700,21 @@ def _common_offset(evaluate, theta0: np.ndarray, data: np.ndarray) -> np.ndarray
     return theta
 
 
-def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[tuple]]:
-    """(names, confounded): the names whose column of S vanishes or that take part in a
-    null direction of S (columns scaled to unit norm; the rank rule), and the names of
-    each null direction."""
+def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[tuple], int]:
+    """(names, confounded, rank): the names whose column of S vanishes or that take part
+    in a null direction of S (columns scaled to unit norm; the rank rule), the names of
+    each null direction, and the rank of S by that rule."""
     norms = np.linalg.norm(S, axis=0)
     dead = norms <= DEAD_RTOL * max(norms.max(initial=0.0), 1e-300)
     out = {names[i] for i in np.flatnonzero(dead)}
     live = np.flatnonzero(~dead)
-    confounded = []
+    confounded, rank = [], 0
     if live.size:
         _, s, Vt = np.linalg.svd(S[:, live] / norms[live], full_matrices=True)
-        for v in Vt[rule_rank(s) :]:
+        rank = rule_rank(s)
+        for v in Vt[rank:]:
             part = tuple(sorted((names[live[i]] for i in np.flatnonzero(np.abs(v) > NULL_SHARE)),
                                 key=names.index))  # fmt: skip
             confounded.append(part)
             out |= set(part)
-    return sorted(out, key=names.index), confounded
+    return sorted(out, key=names.index), confounded, rank

@@ -18,6 +18,7 @@ from dask.distributed import Client, LocalCluster
 from helpers import REPO
 
 from closedloop.cli import main
+from closedloop.cluster import _quiet_dask_logs
 
 #: Worker timeout of the tests [s]: small, so that a run without workers ends in seconds.
 TIMEOUT = 3.0
@@ -200,3 +201,29 @@ def test_a_scheduler_lost_mid_run_is_one_line(tmp_path):
     assert command.returncode == 3 and len(lines) == 1, err
     assert lines[0].startswith(f"closedloop: error: the Dask cluster at {address!r} lost a task")
     assert t_end - t_lost < TIMEOUT + SLACK, t_end - t_lost
+
+
+@pytest.mark.parametrize("name", ["tornado.application", "asyncio", "distributed.client"])
+def test_the_logs_of_dask_and_its_event_loop_are_muted_while_a_run_lasts(name):
+    """A scheduler lost mid-gather makes tornado log the failed callback's CommClosedError
+    with its traceback (``tornado.application``, at the level ERROR that Dask's logging
+    configuration gives it) and asyncio an exception nobody retrieved; only distributed's
+    loggers were muted, and a lost scheduler printed 50 lines of traceback before the
+    one-line error in 2 runs of 3. Records of these loggers, and of a child created during
+    the run, are dropped while a run lasts; the levels are restored after it."""
+    logger, records = logging.getLogger(name), []
+    handler = logging.Handler()
+    handler.emit = records.append
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.ERROR)
+    try:
+        with _quiet_dask_logs():
+            logger.error("during the run")
+            logging.getLogger(f"{name}.made_during_the_run").error("during the run")
+        assert logger.level == logging.ERROR
+        logger.error("after the run")
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert [r.getMessage() for r in records] == ["after the run"]
