@@ -211,3 +211,14 @@ def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]
         out.append(q)
         value = target
     return out
+
+
+def tangent_differences(model, fun, q, h=1e-6):
+    """(n, nv) central differences of fun (n,) along pin.integrate(q, h e_b): the tests'
+    own, independent of the library's closedloop.derivatives."""
+    cols = []
+    for b in range(model.nv):
+        e = np.zeros(model.nv)
+        e[b] = h
+        cols.append((fun(pin.integrate(model, q, e)) - fun(pin.integrate(model, q, -e))) / (2 * h))
+    return np.array(cols).T

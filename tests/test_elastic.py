@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pinocchio as pin
 from helpers import UR5_BEAM_ENDS
+from helpers import tangent_differences as differences
 from test_beams import STEEL, cantilever
 
 from closedloop.beams import map_configuration
@@ -83,20 +84,10 @@ def _forces(clm, q_rest, q):
     return deflection_jacobian(clm, q_rest, q).T @ spring_law(clm, deflection(clm, q_rest, q))[0]
 
 
-def _differences(clm, q, f):
-    model = clm.model
-    cols = []
-    for b in range(model.nv):
-        e = np.zeros(model.nv)
-        e[b] = H
-        cols.append((f(pin.integrate(model, q, e)) - f(pin.integrate(model, q, -e))) / (2 * H))
-    return np.array(cols).T
-
-
 def test_the_spring_forces_are_the_gradient_of_the_energy():
     clm, q_rest, q = _flexible_ur5()
     assert len(beam_joints(clm)) == 6
-    expected = _differences(clm, q, lambda x: np.atleast_1d(_energy(clm, q_rest, x)))[0]
+    expected = differences(clm.model, lambda x: np.atleast_1d(_energy(clm, q_rest, x)), q, H)[0]
     got = _forces(clm, q_rest, q)
     np.testing.assert_allclose(got, expected, rtol=RTOL_DIFFERENCES,
                                atol=RTOL_DIFFERENCES * np.abs(expected).max())  # fmt: skip
@@ -104,7 +95,7 @@ def test_the_spring_forces_are_the_gradient_of_the_energy():
 
 def test_the_spring_stiffness_is_the_derivative_of_the_forces():
     clm, q_rest, q = _flexible_ur5()
-    expected = _differences(clm, q, lambda x: _forces(clm, q_rest, x))
+    expected = differences(clm.model, lambda x: _forces(clm, q_rest, x), q, H)
     got = spring_hessian(clm, q, q_rest)
     np.testing.assert_allclose(got, expected, rtol=RTOL_DIFFERENCES,
                                atol=RTOL_DIFFERENCES * np.abs(expected).max())  # fmt: skip

@@ -10,7 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm, spherical_fourbar, welded_fourbar
+from helpers import (
+    assert_close_in_norm,
+    spherical_fourbar,
+    welded_fourbar,
+)
+from helpers import tangent_differences as _differences
 
 import closedloop.preload
 import closedloop.tangent
@@ -31,16 +36,6 @@ RTOL_HESSIAN_FD = 1e-7
 # Identities that hold exactly in exact arithmetic (world gap vs Pinocchio's residual, a
 # spin that leaves the gap unchanged): rounding of metre-scale kinematics, ~1e-15 m.
 ATOL_ROUNDING = 1e-14
-
-
-def _differences(model, fun, q, h=1e-6):
-    """(n, nv) central differences of fun (n,) along pin.integrate(q, h e_b)."""
-    cols = []
-    for b in range(model.nv):
-        e = np.zeros(model.nv)
-        e[b] = h
-        cols.append((fun(pin.integrate(model, q, e)) - fun(pin.integrate(model, q, -e))) / (2 * h))
-    return np.array(cols).T
 
 
 def _anchor_frames(clm: ClosedLoopModel) -> tuple[pin.Model, list[tuple[int, int]]]:
