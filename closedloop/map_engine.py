@@ -27,6 +27,7 @@ restart from the reference configuration (which may lie on another assembly mode
 
 from __future__ import annotations
 
+import bisect
 import functools
 import itertools
 import os
@@ -37,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from .assembly import free_coordinates
 from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
 from .conditioning import batch_rank
@@ -49,7 +51,7 @@ from .exceptions import (
 )
 from .indices import batch_indices
 from .io import load_model, reference_configuration
-from .limits import assemble_connected, assemble_within_limits
+from .limits import INPUT_STEP, assemble_connected, assemble_within_limits
 from .model import ClosedLoopModel
 from .progress import progress
 
@@ -61,8 +63,9 @@ POINT_ERRORS = QUERY_ERRORS
 #: Points per task when not given: enough to amortise a task's overhead (pickling, the
 #: model load in a fresh process), small enough for a few tasks per core.
 CHUNK = 500
-#: Points between two assemblies of the serial pass that computes the chunks' starts:
-#: a continuation step short enough to stay on one assembly mode.
+#: Most points between two assemblies of the serial pass that computes the chunks' starts
+#: (:func:`border_starts`; fewer where they span more than INPUT_STEP), and the stride of
+#: that pass across a gap of failed points.
 BORDER_STRIDE = 16
 #: Relative tolerance of the symmetry test of a compliance.
 SYMMETRY_RTOL = 1e-9
@@ -141,10 +144,13 @@ def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow fails its point, below
         out.indices = batch_indices(out.C, out.rank, out.length, wrench, symmetric, out.condition)
     for name, values in out.indices.items():  # NaN: no value; inf: the index overflowed
-        for i in np.flatnonzero(np.isinf(values) & np.isin(out.status, (OK, RANK_DEFICIENT))):
+        beyond = np.isinf(values) | ((values == 0.0) if name == "det_K" else False)  # det K
+        # of a full-rank K is never 0: one that underflowed
+        for i in np.flatnonzero(beyond & np.isin(out.status, (OK, RANK_DEFICIENT))):
+            way = "overflows" if np.isinf(values[i]) else "underflows"
             out.status[i], out.C[i] = FAILED, np.nan
-            reason = f"the index {name} overflows the floating point range (a load or spring"
-            out.set_reason(i, reason + " far beyond the mechanism's; expected smaller)")
+            reason = f"the index {name} {way} the floating point range (a load or spring"
+            out.set_reason(i, reason + " far from the mechanism's scale; expected nearer)")
             for other in out.indices.values():
                 other[i] = np.nan
 
@@ -337,21 +343,21 @@ def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
     """Start configuration of each chunk, by a serial continuation along the path.
 
-    The pass assembles every :data:`BORDER_STRIDE`-th point up to the last chunk border,
-    each from the previous one (the first from :func:`path_start`), and keeps
-    the configurations at the borders ``firsts``: the first point of a chunk then starts
-    on the assembly mode the path followed, as in a serial run. A jump of several points
-    is checked against two half jumps (:func:`_halves_agree`): where they disagree the
-    jump left the assembly mode, and the pass walks that stretch point by point instead
-    (as a serial run; a coarse grid over a four-bar's whole crank turn switched mode at
-    the stride). Where a point fails, the
-    pass walks again point by point from the last assembled one, past the failure to the
-    next point that assembles, as a serial run does: across a gap of failed points the
-    continuation jumps from the same configuration to the same point whatever the chunks
-    (a failed border keeps the last assembled configuration, as a serial run). A gap of
-    :data:`BORDER_STRIDE` failed points or more is crossed at the stride (the pass stays
-    a small share of the map, failed points being the costliest): after it, the branch
-    may depend on the chunks.
+    The pass assembles the points of :func:`continuation_points` (steps of at most
+    :data:`closedloop.limits.INPUT_STEP` along the path, as :func:`path_start` is reached,
+    and at most :data:`BORDER_STRIDE` points) and the chunk borders ``firsts``, each from
+    the previous one (the first from :func:`path_start`), and keeps the configurations at
+    the borders: the first point of a chunk then starts on the assembly mode the path
+    followed, as in a serial run. (A jump of 16 points, checked against two half jumps,
+    left the mode: the four-bar over a whole crank turn in 40 points, chunks of 16, had 16
+    points on the other mode, C up to 51 % off; both half jumps landed there too.) Where a
+    point fails, the pass walks again point by point from the last assembled one, past the
+    failure to the next point that assembles, as a serial run does: across a gap of failed
+    points the continuation jumps from the same configuration to the same point whatever
+    the chunks (a failed border keeps the last assembled configuration, as a serial run).
+    A gap of :data:`BORDER_STRIDE` failed points or more is crossed :data:`BORDER_STRIDE`
+    points at a time (the pass stays a small share of the map, failed points being the
+    costliest): after it, the branch may depend on the chunks.
 
     Args:
         points: (n, n_act) actuated values in path order [rad, m].
@@ -363,23 +369,15 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     q = path_start(clm, points)
     wanted = set(firsts[1:])
     last = max(wanted, default=-1)
-    visit = sorted(wanted | set(range(0, last, BORDER_STRIDE)))
+    visit = sorted(wanted | set(continuation_points(clm, points[: last + 1])))
+    crossing = sorted(wanted | set(range(0, last, BORDER_STRIDE)))  # in a long gap
     found: dict = {}
-    k, p, done, failed = 0, 0, -1, None  # done: position of the last assembled point
+    p, done, failed = 0, -1, None  # done: position of the last assembled point
     while p <= last:
         try:
             q, ok = assemble_within_limits(clm, points[p], q).q, True
         except POINT_ERRORS:
             ok = False
-        if (
-            ok
-            and failed is None
-            and done >= 0
-            and p - done > 1
-            and not _halves_agree(clm, points, done, p, q, found[done])
-        ):
-            failed, p, q = p, done + 1, found[done]  # the jump left the mode: walk to p
-            continue
         found[p] = q
         if ok:
             done = p
@@ -390,32 +388,41 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
             if not (ok and p >= failed) and p - done < BORDER_STRIDE:
                 p += 1
                 continue
-            failed = None  # found, or a long gap: crossed at the stride
-        while k < len(visit) and visit[k] <= p:
-            k += 1
-        p = visit[k] if k < len(visit) else last + 1
+            failed = None  # found, or a long gap: crossed BORDER_STRIDE points at a time
+        ahead = visit if ok else crossing
+        k = bisect.bisect_right(ahead, p)
+        p = ahead[k] if k < len(ahead) else last + 1
     return [None, *(found.get(p) for p in firsts[1:])][: len(firsts)]
 
 
-#: Largest difference [rad, m] between the configurations of one point reached by one
-#: jump and by two half jumps of the border pass: on one assembly mode both converge to the
-#: closure tolerance (1e-10 and closer), another mode is a finite distance away.
-SAME_MODE_TOL = 1e-6
+def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:
+    """Path positions the border pass assembles between the chunk borders (ascending,
+    from 0; the same whatever the chunks).
 
+    From each, the next is the farthest point along the path within
+    :data:`closedloop.limits.INPUT_STEP` of path length (the largest change of an actuated
+    value, lengths in units of the characteristic length L, summed over the path's steps:
+    the step of :func:`closedloop.limits.assemble_connected`), at most
+    :data:`BORDER_STRIDE` points on and at least the next point: a step longer than
+    INPUT_STEP is taken whole, as a serial run takes it. A model whose assembly moves no
+    coordinate (no passive joint) has one configuration per point, whatever the start:
+    only the first position, the borders being enough.
 
-def _halves_agree(clm, points, start: int, end: int, q: np.ndarray, q_start: np.ndarray) -> bool:
-    """Whether the configuration q at path position ``end``, reached by one jump from
-    ``q_start`` at ``start``, is also reached in two half jumps (through the middle point):
-    the step control of a continuation. A jump that left the assembly mode lands elsewhere
-    than the shorter steps (measured: assembling back from it does not tell, it returned)."""
-    try:
-        middle = assemble_within_limits(clm, points[(start + end) // 2], q_start).q
-        again = assemble_within_limits(clm, points[end], middle).q
-    except POINT_ERRORS:
-        return False
-    return float(np.max(np.abs(pin.difference(clm.model, q, again)), initial=0.0)) <= (
-        SAME_MODE_TOL
-    )
+    Args:
+        points: (n, n_act) actuated values in path order [rad, m].
+    """
+    n = len(points)
+    if n < 2 or not clm.memo("free_coordinates", lambda: free_coordinates(clm)).size:
+        return [0]
+    linear = clm.linear_coordinates[clm.actuated_v_indices]
+    steps = np.max(np.abs(np.diff(points, axis=0)) / np.where(linear, clm.length, 1.0), axis=1)
+    arc = np.concatenate(([0.0], np.cumsum(steps)))  # path length up to each point
+    out, v = [0], 0
+    while v < n - 1:
+        j = int(np.searchsorted(arc, arc[v] + INPUT_STEP, side="right")) - 1
+        v = min(max(j, v + 1), v + BORDER_STRIDE, n - 1)
+        out.append(v)
+    return out
 
 
 def run_tasks(

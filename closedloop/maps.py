@@ -189,6 +189,12 @@ def grid_points(
 ) -> tuple[np.ndarray, tuple[int, ...], np.ndarray]:
     """(n, n_act) points of a grid, its shape, and the path order (n,) through it.
 
+    The points are in the order the sweeps list their values (C order over the axes); the
+    path (:func:`closedloop.map_engine.path_order`) walks each axis by its values in
+    ascending order, whatever their listed order, so that each step goes to a neighbouring
+    value and a map does not depend on the listed order (a four-bar's crank listed in a
+    shuffled order had 19 of 40 points on the other assembly mode).
+
     Args:
         clm: the model (its actuated joints are the inputs).
         sweeps: swept joint -> its values [rad, m].
@@ -222,7 +228,11 @@ def grid_points(
             points[:, j] = mesh[list(sweeps).index(name)].reshape(-1)
         else:
             points[:, j] = float(fixed[name])
-    return points, shape, path_order(shape)
+    ranks = [np.argsort(a, kind="stable") for a in axes]  # sorted position -> listed one
+    walk = np.unravel_index(path_order(shape), shape)  # positions in the sorted grid
+    order = np.ravel_multi_index(tuple(r[w] for r, w in zip(ranks, walk, strict=True)), shape)
+    order.flags.writeable = False
+    return points, shape, order
 
 
 def stiffness_map(
@@ -244,7 +254,8 @@ def stiffness_map(
     Args:
         model: the model, or a :class:`ModelSource` (needed by process executors).
         frame: the loaded frame.
-        sweeps, fixed: a grid (:func:`grid_points`); or
+        sweeps, fixed: a grid (:func:`grid_points`; each swept joint's values in any
+            order, walked in ascending order, the results in the listed order); or
         points: (n, n_act) actuated values [rad, m] in the model's actuated order, a path.
         wrench: (6,) wrench [N, N m] at the frame for the deflection indices, or None.
         start: start provider ``start(clm, points (c, n_act)) -> (c, nq)``: every point
@@ -254,7 +265,9 @@ def stiffness_map(
         executor: any ``concurrent.futures.Executor`` (e.g. Dask's) instead.
         chunk: points per task; the results depend on it only within the assembly
             tolerance (each chunk's first point starts from the serial continuation of
-            :func:`border_starts`), not on the executor.
+            :func:`border_starts`), except after a gap of
+            :data:`~closedloop.map_engine.BORDER_STRIDE` or more failed points; not on the
+            executor.
         show_progress: progress on stderr (:mod:`closedloop.progress`), in points.
 
     Raises:

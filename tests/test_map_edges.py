@@ -46,6 +46,18 @@ def reachable(theta: np.ndarray) -> np.ndarray:
     return np.sin(theta) >= SIN_DEAD + 1e-6
 
 
+def test_a_determinant_that_underflows_fails_its_point(ur5_urdf):
+    """Springs of 1e-60 N m/rad on the UR5: det K ~ 1e-360 underflowed to 0.0 with status
+    ok (a full-rank K has no zero determinant). The point fails, naming the index, as
+    one whose index overflows; the single query's det K is a typed error too."""
+    clm = cl.load_model(ur5_urdf, joint_stiffness=1e-60)
+    fixed = {"shoulder_pan_joint": 0.3, "shoulder_lift_joint": -1.2, "wrist_1_joint": -0.6,
+             "wrist_2_joint": 1.1, "wrist_3_joint": 0.2}  # fmt: skip
+    m = stiffness_map(clm, "tool0", sweeps={"elbow_joint": [1.0, 1.4]}, fixed=fixed)
+    assert list(m.status) == ["failed"] * 2
+    assert all("the index det_K underflows" in r for r in m.reasons)
+
+
 def test_an_index_that_overflows_fails_its_point(fourbar_urdf, fourbar_yaml):
     """A load of 1e308 N on soft springs: the deflection index overflows (it was inf with
     status ok, and the command said "no value at any point"). The point fails, naming the
