@@ -69,26 +69,31 @@ def leg_grid(sides: tuple[int, int, int]):
     return grid(axes, alpha=alpha, alpha4=POSE[1], s4=0.025)
 
 
-def lean_query(clm, data, q):
+def lean_query(model, data, closures, q, passive, sprung, root_compliance, fid):
     """The least the partitioned query computes: Pinocchio's kinematics, the closure
     Jacobians (welds without Jlog6, the identity at closure), the passive motion
-    X = -J_p^+ J_s by one QR, B = (J_s + J_p X) K_s^-1/2, C = B B^T and the SVD of B for
-    the rank (no check, no scaling, no G, no K, no result object)."""
-    model = clm.model
+    X = -J_p^+ J_s by the normal equations, B = (J_s + J_p X) K_s^-1/2, C = B B^T and the
+    SVD of B for the rank (index sets given; no check, no scaling, no G, no K, no result)."""
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
-    datas = clm.memo("lean_datas", lambda: [c.constraint.createData() for c in clm.closures])
-    parts = []
-    for c, cd in zip(clm.closures, datas, strict=True):
-        c.constraint.calc(model, data, cd)
-        parts.append(c.constraint.jacobian(model, data, cd))
-    Jc = np.concatenate(parts)
-    passive, sprung = clm.stiffness == 0.0, np.isfinite(clm.stiffness) & (clm.stiffness > 0)
-    Q, R = np.linalg.qr(Jc[:, passive])
-    X = -np.linalg.solve(R, Q.T @ Jc[:, sprung])
-    J = pin.getFrameJacobian(model, data, model.getFrameId(FRAME_M), pin.LOCAL_WORLD_ALIGNED)
-    B = (J[:, sprung] + J[:, passive] @ X) / np.sqrt(clm.stiffness[sprung])
+    for c, cd in closures:
+        c.calc(model, data, cd)
+    Jc = np.concatenate([c.jacobian(model, data, cd) for c, cd in closures])
+    Jp = Jc[:, passive]
+    X = np.linalg.solve(Jp.T @ Jp, -(Jp.T @ Jc[:, sprung]))
+    J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+    B = (J[:, sprung] + J[:, passive] @ X) * root_compliance
     return B @ B.T, lapack.dgesdd(B)
+
+
+def lean_floor(clm, q):
+    """:func:`lean_query` at q with its index sets and constraint data made once."""
+    k = clm.stiffness
+    passive, sprung = np.flatnonzero(k == 0.0), np.flatnonzero(np.isfinite(k) & (k > 0.0))
+    closures = [(c.constraint, c.constraint.createData()) for c in clm.closures]
+    fid = clm.model.getFrameId(FRAME_M)
+    return partial(lean_query, clm.model, clm.model.createData(), closures, q, passive, sprung,
+                   1.0 / np.sqrt(k[sprung]), fid)  # fmt: skip
 
 
 def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> None:
@@ -102,12 +107,12 @@ def bench_queries(table: Table, mode: Mode, model: CaHyManModel, q, unit) -> Non
         t = interleaved(lambda p=p: compliance(model.clm, q, FRAME_M, path=p), unit, mode)
         table.units(key, f"CaHyMan `closedloop.compliance` alone, path={p!r}",
                     "<= 25 units (C alone)" if p == "auto" else "-", t)  # fmt: skip
-    floor = partial(lean_query, model.clm, model.clm.model.createData(), q)
+    floor = lean_floor(model.clm, q)
     t = interleaved(floor, unit, mode)
     table.note(f"1c: the floor of C and the rank rule written out without any check (scripts/"
                f"bench_cahyman.py lean_query: the kinematics, the six closure Jacobians, the "
-               f"passive motion by one QR, C = B B^T, the SVD of B) {t.ratio:.1f} units = "
-               f"{fmt_time(t.seconds)}")  # fmt: skip
+               f"passive motion by the normal equations, C = B B^T, the SVD of B) "
+               f"{t.ratio:.1f} units = {fmt_time(t.seconds)}")  # fmt: skip
     t = interleaved(lambda: stiffness(*POSE), unit, mode)
     table.units("1e", "`cahyman_pin.api.stiffness` whole call (closed-form start, assembly, "
                 "query)", "-", t)  # fmt: skip
