@@ -312,16 +312,20 @@ class MapChunk:
 
 def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started, and
-    their indices."""
+    their indices. Each point starts from the last one assembled, and is driven there in
+    steps of at most :data:`closedloop.limits.INPUT_STEP` where it is further
+    (:func:`closedloop.limits.assemble_connected`); with a start provider, from its start
+    in one solve."""
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
     first = chunk.first
     if first is None and starts is None:  # the path's first chunk (a start provider: unused)
         first = path_start(clm, chunk.points)
+    # along the path, driven from the last point; from a provider's start, solved there
+    assemble = assemble_connected if starts is None else assemble_within_limits
     assemble_points(clm, chunk.frame, out, range(len(chunk)),
-                    lambda i, q0: assemble_within_limits(clm, chunk.points[i], q0), first,
-                    starts)  # fmt: skip
+                    lambda i, q0: assemble(clm, chunk.points[i], q0), first, starts)  # fmt: skip
     complete(out, chunk.wrench)
     return out
 
@@ -375,7 +379,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     p, done, failed = 0, -1, None  # done: position of the last assembled point
     while p <= last:
         try:
-            q, ok = assemble_within_limits(clm, points[p], q).q, True
+            q, ok = assemble_connected(clm, points[p], q, jacobian=False).q, True
         except POINT_ERRORS:
             ok = False
         found[p] = q
@@ -403,9 +407,10 @@ def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:
     :data:`closedloop.limits.INPUT_STEP` of path length (the largest change of an actuated
     value, lengths in units of the characteristic length L, summed over the path's steps:
     the step of :func:`closedloop.limits.assemble_connected`), at most
-    :data:`BORDER_STRIDE` points on and at least the next point: a step longer than
-    INPUT_STEP is taken whole, as a serial run takes it. A model whose assembly moves no
-    coordinate (no passive joint) has one configuration per point, whatever the start:
+    :data:`BORDER_STRIDE` points on and at least the next point (a step longer than
+    INPUT_STEP is driven in steps of INPUT_STEP, as a chunk drives it). A model whose
+    assembly moves no coordinate (no passive joint) has one configuration per point,
+    whatever the start:
     only the first position, the borders being enough.
 
     Args:

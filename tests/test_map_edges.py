@@ -293,13 +293,13 @@ def test_the_border_pass_crosses_a_long_gap_at_the_stride(long_ground, monkeypat
     cranks = np.r_[np.linspace(-2.5, -0.5, 300), np.linspace(0.0, 1.0, 20)]
     assert not np.any(reachable(cranks[:300])) and np.all(reachable(cranks[300:]))
     calls = []
-    real = map_engine.assemble_within_limits
+    real = map_engine.assemble_connected
 
-    def counted(*args):
+    def counted(*args, **kwargs):
         calls.append(1)
-        return real(*args)
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(map_engine, "assemble_within_limits", counted)
+    monkeypatch.setattr(map_engine, "assemble_connected", counted)
     firsts = list(range(0, len(cranks), 10))
     starts = map_engine.border_starts(clm, cranks[:, None], firsts)
     assert len(calls) <= len(cranks) // map_engine.BORDER_STRIDE + len(firsts) + 2 * 16

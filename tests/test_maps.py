@@ -9,6 +9,7 @@ from helpers import assert_close_in_norm
 
 import closedloop as cl
 from closedloop.io import reference_configuration
+from closedloop.limits import assemble_connected
 from closedloop.map_engine import ModelSource
 from closedloop.maps import INDICES, grid_points, stiffness_map
 
@@ -25,9 +26,9 @@ def test_fourbar_crank_range_equals_direct_queries(fourbar_urdf, fourbar_yaml):
     assert m.shape == (15,) and m.swept == ("crank",)
     assert set(m.indices) == set(INDICES)
     assert np.all(m.status == "rank_deficient")  # a planar loop is rigid out of its plane
-    q = reference_configuration(clm)  # the map's start, then each point from the last
-    for i, crank in enumerate(CRANKS):
-        q = cl.assemble(clm, actuated=[crank], q0=q).q
+    q = reference_configuration(clm)  # the map's start, then each point driven from the
+    for i, crank in enumerate(CRANKS):  # last (steps of 0.2 rad: four of INPUT_STEP each)
+        q = assemble_connected(clm, [crank], q).q
         res = cl.compliance(clm, q, "P")
         assert_close_in_norm(m.C[i], res.C, RTOL_SAME)
         d = res.deflection(WRENCH)
