@@ -322,10 +322,14 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     first = chunk.first
     if first is None and starts is None:  # the path's first chunk (a start provider: unused)
         first = path_start(clm, chunk.points)
-    # along the path, driven from the last point; from a provider's start, solved there
-    assemble = assemble_connected if starts is None else assemble_within_limits
-    assemble_points(clm, chunk.frame, out, range(len(chunk)),
-                    lambda i, q0: assemble(clm, chunk.points[i], q0), first, starts)  # fmt: skip
+    last = [None]  # the inputs of the last point assembled (q0: its configuration)
+
+    def solve(i: int, q0):
+        a = drive(clm, chunk.points[i], q0, last[0] if starts is None else None)
+        last[0] = chunk.points[i]
+        return a
+
+    assemble_points(clm, chunk.frame, out, range(len(chunk)), solve, first, starts)
     complete(out, chunk.wrench)
     return out
 
@@ -342,6 +346,30 @@ def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
         return np.array(assemble_connected(clm, points[0], reference, jacobian=False).q)
     except POINT_ERRORS:
         return reference
+
+
+def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | None, *,
+          jacobian: bool = True):  # fmt: skip
+    """:func:`closedloop.limits.assemble_within_limits` of ``actuated`` (n_act,) from q0
+    (nq,), whose inputs are ``start`` (None: unknown, solved at once); driven there in
+    steps of at most INPUT_STEP (:func:`closedloop.limits.assemble_connected`) where it
+    is further than that and the assembly moves a coordinate (a passive joint)."""
+    if start is not None and _free(clm) and _span(clm, start, actuated) > INPUT_STEP:
+        return assemble_connected(clm, actuated, q0, jacobian=jacobian)
+    return assemble_within_limits(clm, actuated, q0, jacobian=jacobian)
+
+
+def _free(clm: ClosedLoopModel) -> bool:
+    """Whether the assembly moves any coordinate (once per model)."""
+    return bool(clm.memo("free_coordinates", lambda: free_coordinates(clm)).size)
+
+
+def _span(clm: ClosedLoopModel, a: np.ndarray, b: np.ndarray) -> float:
+    """Largest change of an actuated value from a to b (n_act,), lengths per L (the step
+    measure of :func:`closedloop.limits.assemble_connected`)."""
+    scale = clm.memo("actuated_scale", lambda: np.where(
+        clm.linear_coordinates[clm.actuated_v_indices], clm.length, 1.0))  # fmt: skip
+    return float(np.max(np.abs(b - a) / scale, initial=0.0))
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
@@ -379,7 +407,8 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     p, done, failed = 0, -1, None  # done: position of the last assembled point
     while p <= last:
         try:
-            q, ok = assemble_connected(clm, points[p], q, jacobian=False).q, True
+            start = points[done] if done >= 0 else None  # q's inputs, as the kernel's
+            q, ok = drive(clm, points[p], q, start, jacobian=False).q, True
         except POINT_ERRORS:
             ok = False
         found[p] = q
