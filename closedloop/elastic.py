@@ -117,11 +117,8 @@ def spring_law(clm: ClosedLoopModel, e: np.ndarray) -> tuple[np.ndarray, float]:
     energy = 0.5 * float(e @ f)
     for b in beam_joints(clm):
         x = e[b.v]
-        grad = b.shortening @ x
-        stretched = x + 0.5 * float(x @ grad) * b.axis
-        elastic = b.stiffness @ stretched
-        axial = float(b.axis @ elastic)
-        f[b.v] = elastic + axial * grad
+        grad, stretched, elastic = _stretched(b, x)
+        f[b.v] = elastic + float(b.axis @ elastic) * grad
         energy += 0.5 * float(stretched @ elastic) - 0.5 * float(x @ (b.stiffness @ x))
     return f, energy
 
@@ -131,9 +128,15 @@ def spring_stiffness(clm: ClosedLoopModel, e: np.ndarray) -> np.ndarray:
     and on each beam T^T K_b T + N H_s (module docstring)."""
     K = np.array(clm.spring_matrix)
     for b in beam_joints(clm):
-        x = e[b.v]
-        grad = b.shortening @ x
+        grad, _, elastic = _stretched(b, e[b.v])
         T = np.eye(6) + np.outer(b.axis, grad)
-        axial = float(b.axis @ b.stiffness @ (x + 0.5 * float(x @ grad) * b.axis))
-        K[b.v, b.v] = T.T @ b.stiffness @ T + axial * b.shortening
+        K[b.v, b.v] = T.T @ b.stiffness @ T + float(b.axis @ elastic) * b.shortening
     return K
+
+
+def _stretched(b: BeamJoint, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At a beam's (t, r) x (6,): the gradient H_s x of its shortening, its deflection
+    e = x + s a6 with the shortening in the elongation, and the spring's force K_b e."""
+    grad = b.shortening @ x
+    stretched = x + 0.5 * float(x @ grad) * b.axis
+    return grad, stretched, b.stiffness @ stretched
