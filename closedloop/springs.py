@@ -371,6 +371,31 @@ def check_path(path: str) -> None:
         raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
 
 
+def spring_split(rows: np.ndarray, root: np.ndarray):
+    """The admissible motions y split by the springs: those the springs see, with the SVD
+    of their spring factor, and the spring-free ones.
+
+    The motions a spring sees are decided on the kinematics alone: the rows of the sprung
+    coordinates of an orthonormal, unit-free basis of the admissible motions, by the rank
+    rule (the rest move no sprung coordinate, whatever the springs' values); on them the
+    factor is S = root rows (K_r = S^T S), whose SVD gives sigma and V.
+
+    Args:
+        rows: (s, d) the sprung coordinates' rows of the basis (unit-free).
+        root: (s,) the square roots of the springs, or (m, s) a square-root factor R of
+            their stiffness (R^T R), in the units of ``rows``.
+
+    Returns:
+        V: (d, r) orthonormal directions with a restoring spring; sigma: (r,) their
+        singular values [sqrt(N m)]; Z: (d, d - r) orthonormal spring-free directions.
+    """
+    _, V_k, Z, _ = split_factor(rows)
+    seen = rows @ V_k
+    S = root[:, None] * seen if root.ndim == 1 else root @ seen
+    _, sigma, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
+    return V_k @ Vt.T, sigma, Z
+
+
 def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:
     """Admissible motions and spring factor at a configuration (module docstring), on the
     general (null-space) path: N orthonormal in the scaled coordinates, what the rank rule
@@ -394,15 +419,7 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
     Jc = state.closure_jacobian() * sc.row_scale
     A = np.vstack([Jc, sc.locked_rows]) if len(sc.locked_rows) else Jc
     N_s, _ = nullspace(A * sc.s_q)
-    # the motions the springs see: the sprung coordinates' rows of the orthonormal N_s, by
-    # the rank rule; the rest move no sprung coordinate (spring-free), whatever the springs
-    _, V_k, Z, _ = split_factor(N_s[sc.sprung])
-    if sc.root is None:
-        S = sc.sqrt_k[:, None] * (N_s[sc.sprung] @ V_k)
-    else:  # spring blocks: S^T S = V_k^T N_s^T diag(s_q) K_q diag(s_q) N_s V_k
-        S = sc.root @ (N_s[sc.sprung] @ V_k)
-    _, sigma, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
-    V = V_k @ Vt.T
+    V, sigma, Z = spring_split(N_s[sc.sprung], sc.sqrt_k if sc.root is None else sc.root)
     N = N_s * sc.s_q[:, None]
     if Z.shape[1]:  # spring-free motions must not move the frame
         JN_s = (J * twist_scaling(L)[:, None]) @ N

@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import check_wrench
-from .conditioning import RANK_RTOL, rule_rank, split_factor, svd
+from .conditioning import RANK_RTOL, rule_rank
 from .derivatives import DIFFERENCE_STEP, central_differences, pinocchio_second_order_exact
 from .elastic import (
     beam_joints,
@@ -62,6 +62,7 @@ from .kinematics import (
     update_kinematics,
 )
 from .model import ClosedLoopModel
+from .springs import spring_split
 
 #: Step [rad or m] of the central differences that give the curvature of weld closures
 #: (and every second derivative where Pinocchio's are wrong, :mod:`closedloop.derivatives`):
@@ -249,15 +250,15 @@ def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> n
     Locked coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
     """
     model = clm.model
-    Jd = deflection_jacobian(clm, q_rest, q)
+    Jd, e = deflection_jacobian(clm, q_rest, q), deflection(clm, q_rest, q)
     if clm.spring_blocks or beam_joints(clm):
-        H = Jd.T @ spring_stiffness(clm, deflection(clm, q_rest, q)) @ Jd
+        H = Jd.T @ spring_stiffness(clm, e) @ Jd
     else:
         k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
         H = (Jd.T * k) @ Jd
     curved = clm.memo("lie_group_springs", lambda: _lie_group_springs(clm))
     if curved.size:
-        f = spring_law(clm, deflection(clm, q_rest, q))[0]
+        f = spring_law(clm, e)[0]
         if np.any(f[curved]):
             H += central_differences(
                 model, q, lambda x: deflection_jacobian(clm, q_rest, x).T @ f, curved
@@ -391,15 +392,20 @@ class EquilibriumEquations:
 
     def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
         self.clm, self.q_rest, self.frame = clm, q_rest, frame
-        self.k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
-        # square root of the springs on the free coordinates, K_ff = R_f^T R_f
-        self.root = clm.spring_root[:, np.isfinite(clm.stiffness)] if clm.spring_blocks else None
         self.free = np.flatnonzero(np.isfinite(clm.stiffness))
-        #: the free coordinates with a spring (k > 0), indices into the free ones
-        self.sprung = np.flatnonzero(self.k[self.free] > 0.0)
         self.units = SolverUnits.of(clm)
         #: (n_free,) scale of each free coordinate [m or rad per unit]: dq_free = free_scales * y
         self.free_scales = self.units.coords[self.free]
+        #: the free coordinates with a spring (k > 0), indices into the free ones
+        self.sprung = np.flatnonzero(clm.stiffness[self.free] > 0.0)
+        # square root of their springs on y: sqrt(k) per coordinate, or the columns of the
+        # root factor K_q = R^T R of the spring blocks
+        coords, scales = self.free[self.sprung], self.free_scales[self.sprung]
+        self.root = (
+            clm.spring_root[:, coords] * scales
+            if clm.spring_blocks
+            else np.sqrt(clm.stiffness[coords]) * scales
+        )
 
     def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
         """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
@@ -498,12 +504,9 @@ class EquilibriumEquations:
         a sprung coordinate, with T^T K_q T = I; Z (n_free, d - r) orthonormal, the
         spring-free ones (by the rank rule on the sprung rows, not on the springs' values);
         and the largest singular value of the spring factor [sqrt(N m)]."""
-        cols, N = self.free_scales, st["N"]
-        _, V_k, Z, _ = split_factor(N[self.sprung])
-        NV = cols[:, None] * (N @ V_k)  # on x
-        S = np.sqrt(self.k[self.free])[:, None] * NV if self.root is None else self.root @ NV
-        _, sig, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
-        return (N @ V_k) @ (Vt.T / sig), N @ Z, float(sig[0]) if sig.size else 1.0
+        N = st["N"]
+        V, sig, Z = spring_split(N[self.sprung], self.root)
+        return N @ (V / sig), N @ Z, float(sig[0]) if sig.size else 1.0
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
         """Stability margin at an equilibrium q (nq,) under the load w.
