@@ -120,6 +120,15 @@ INPUT_STEP = 0.05
 MAX_INPUT_STEPS = 1000
 
 
+def input_scale(clm: ClosedLoopModel) -> np.ndarray:
+    """(n_act,) the unit of each actuated value in :data:`INPUT_STEP`: L [m] for a length,
+    1 for an angle (once per model)."""
+    return clm.memo(
+        "input_scale",
+        lambda: np.where(clm.linear_coordinates[clm.actuated_v_indices], clm.length, 1.0),
+    )
+
+
 def assemble_connected(
     clm: ClosedLoopModel,
     actuated: np.ndarray,
@@ -142,8 +151,7 @@ def assemble_connected(
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     target = check_actuated(clm, actuated)
     start = clm.actuated_values(q)
-    linear = clm.linear_coordinates[clm.actuated_v_indices]
-    span = float(np.max(np.abs(target - start) / np.where(linear, clm.length, 1.0), initial=0))
+    span = float(np.max(np.abs(target - start) / input_scale(clm), initial=0))
     n = min(MAX_INPUT_STEPS, math.ceil(span / INPUT_STEP)) if math.isfinite(span) else 1
     path = q
     try:

@@ -51,7 +51,7 @@ from .exceptions import (
 )
 from .indices import batch_indices
 from .io import load_model, reference_configuration
-from .limits import INPUT_STEP, assemble_connected, assemble_within_limits
+from .limits import INPUT_STEP, assemble_connected, assemble_within_limits, input_scale
 from .model import ClosedLoopModel
 from .progress import progress
 
@@ -354,7 +354,10 @@ def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | No
     (nq,), whose inputs are ``start`` (None: unknown, solved at once); driven there in
     steps of at most INPUT_STEP (:func:`closedloop.limits.assemble_connected`) where it
     is further than that and the assembly moves a coordinate (a passive joint)."""
-    if start is not None and _free(clm) and _span(clm, start, actuated) > INPUT_STEP:
+    far = start is not None and (
+        np.max(np.abs(actuated - start) / input_scale(clm), initial=0.0) > INPUT_STEP
+    )
+    if far and _free(clm):
         return assemble_connected(clm, actuated, q0, jacobian=jacobian)
     return assemble_within_limits(clm, actuated, q0, jacobian=jacobian)
 
@@ -362,14 +365,6 @@ def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | No
 def _free(clm: ClosedLoopModel) -> bool:
     """Whether the assembly moves any coordinate (once per model)."""
     return bool(clm.memo("free_coordinates", lambda: free_coordinates(clm)).size)
-
-
-def _span(clm: ClosedLoopModel, a: np.ndarray, b: np.ndarray) -> float:
-    """Largest change of an actuated value from a to b (n_act,), lengths per L (the step
-    measure of :func:`closedloop.limits.assemble_connected`)."""
-    scale = clm.memo("actuated_scale", lambda: np.where(
-        clm.linear_coordinates[clm.actuated_v_indices], clm.length, 1.0))  # fmt: skip
-    return float(np.max(np.abs(b - a) / scale, initial=0.0))
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
@@ -439,17 +434,15 @@ def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:
     :data:`BORDER_STRIDE` points on and at least the next point (a step longer than
     INPUT_STEP is driven in steps of INPUT_STEP, as a chunk drives it). A model whose
     assembly moves no coordinate (no passive joint) has one configuration per point,
-    whatever the start:
-    only the first position, the borders being enough.
+    whatever the start: only the first position, the borders being enough.
 
     Args:
         points: (n, n_act) actuated values in path order [rad, m].
     """
     n = len(points)
-    if n < 2 or not clm.memo("free_coordinates", lambda: free_coordinates(clm)).size:
+    if n < 2 or not _free(clm):
         return [0]
-    linear = clm.linear_coordinates[clm.actuated_v_indices]
-    steps = np.max(np.abs(np.diff(points, axis=0)) / np.where(linear, clm.length, 1.0), axis=1)
+    steps = np.max(np.abs(np.diff(points, axis=0)) / input_scale(clm), axis=1)
     arc = np.concatenate(([0.0], np.cumsum(steps)))  # path length up to each point
     out, v = [0], 0
     while v < n - 1:
