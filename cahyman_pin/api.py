@@ -35,7 +35,7 @@ from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
-from closedloop.indices import StiffnessIndices, finite_determinant
+from closedloop.indices import StiffnessIndices, lu_determinant
 
 
 @dataclass(frozen=True)
@@ -266,11 +266,7 @@ class CaHyManStiffness(ReadOnlyArrays):
         Raises:
             SingularConfigurationError: det K is beyond the floating point range.
         """
-        if self.indices is not None:
-            return self.indices.determinant
-        sign, log_det = np.linalg.slogdet(self.K)
-        with np.errstate(over="ignore", under="ignore"):
-            return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
+        return lu_determinant(self.K) if self.indices is None else self.indices.determinant
 
     @property
     def eigenvalues(self) -> np.ndarray:

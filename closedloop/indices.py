@@ -307,9 +307,7 @@ class StiffnessIndices:
         dd = np.outer(d, d)
         lam = inverse_pair_eigenvalues(self.C * dd, K / dd)
         if lam is None:
-            sign, log_det = np.linalg.slogdet(K)
-            with np.errstate(over="ignore", under="ignore"):
-                return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
+            return lu_determinant(K)
         # mantissas and exponents apart: det K_s = det K L^6 may leave the float range
         # where det K does not
         mantissa, exponent = np.frexp(np.concatenate([lam, d, d]))
@@ -439,6 +437,14 @@ class StiffnessIndices:
         out["rigid_directions"] = _jsonable(out["rigid_directions"])
         out.update(missing=missing, order=list(TWIST_LABELS), units=INDEX_UNITS)
         return out
+
+
+def lu_determinant(K: np.ndarray) -> float:
+    """det K [N^6/rad^3] of a (6, 6) stiffness from its LU factors (logarithms: no overflow
+    on the way), or :func:`finite_determinant`'s error."""
+    sign, log_det = np.linalg.slogdet(K)
+    with np.errstate(over="ignore", under="ignore"):
+        return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
 
 
 def finite_determinant(det: float, log10: float) -> float:
