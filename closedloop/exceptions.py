@@ -141,6 +141,12 @@ class JointLimitWarning(UserWarning):
     """An equilibrium lies outside the position limits of some joints."""
 
 
+class IgnoredFeatureWarning(UserWarning):
+    """A model file's element or attribute that changes the mechanism in its own simulator
+    and is not read here (an MJCF ``<position>`` actuator's kp, a ``springref`` away from
+    ``ref``)."""
+
+
 class ModelMisfitWarning(UserWarning):
     """:func:`closedloop.identification.identify`: the model does not fit the
     measurements (a weighted residual RMS far above what their sd allow, ``Fit.consistent``

@@ -26,7 +26,8 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
   a joint ``stiffness`` attribute > 0 (``<default>`` classes resolved) is a spring.
   Pinocchio's model does not keep either, so they are read from the XML here. A side
   file in the closure-file format with only ``name_mot``/``springs``/``locked`` overrides
-  them (``name_mot`` replaces the actuator list; springs are merged; locked added).
+  them (``name_mot`` replaces the actuator list; springs are merged; locked added, a joint
+  it locks losing the robot file's spring). An SDF's side file likewise.
 * Keyword ``springs``: merged over all of the above.
 * Keyword ``joint_stiffness``: given to every actuated joint that has no spring yet.
 """
@@ -37,8 +38,10 @@ import math
 import os
 import sys
 import tempfile
+import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,9 +50,9 @@ import pinocchio as pin
 
 from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
-from .exceptions import InvalidInputError, ModelFileError
+from .exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
-from .model import ClosedLoopModel, Closure, closure_between_frames, joint_names
+from .model import ClosedLoopModel, Closure, closure_between_frames, joint_id, joint_names
 from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
@@ -240,6 +243,42 @@ def _check_beams(beams, where: str) -> dict[str, dict]:
     return beams
 
 
+@contextmanager
+def _in_file(where: str) -> Iterator[None]:
+    """Put ``where`` (the file that gave the names) first in the message of a name or value
+    error raised inside; the error keeps its type."""
+    try:
+        yield
+    except (NameNotFoundError, InvalidInputError) as e:
+        e.args = (f"{where}: {e.args[0]}", *e.args[1:])
+        raise
+
+
+def _check_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
+    """:class:`NameNotFoundError` or :class:`InvalidInputError`, naming the file ``where``,
+    for a joint of the file's ``name_mot``, ``springs`` or ``locked`` that ``model`` lacks,
+    or one both locked and given a spring there."""
+    with _in_file(where):
+        for name in (*(spec.actuated or ()), *spec.springs, *spec.locked):
+            joint_id(model, name)
+        both = sorted(set(spec.springs) & set(spec.locked))
+        if both:
+            raise InvalidInputError(
+                f"joints {both} are both locked and given springs; expected one or the other"
+            )
+
+
+def _side_file(model: pin.Model, side_file, springs: dict) -> tuple[ClosureSpec, dict]:
+    """(the side file's contents, its joint names checked; the robot file's ``springs``
+    with those of the side file merged over them, those of the joints it locks removed)."""
+    if side_file is None:
+        return ClosureSpec(), springs
+    spec = read_closure_file(side_file, SIDE_FILE_KEYS)
+    _check_names(model, spec, f"closure file {str(side_file)!r}")
+    kept = {n: k for n, k in springs.items() if n not in spec.locked}
+    return spec, {**kept, **spec.springs}
+
+
 def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
     """Joint -> stiffness mapping [N m/rad or N/m] from a YAML file ``{joint: value}``.
 
@@ -251,6 +290,10 @@ def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
 
 
 # ------------------------------------------------------------------------ model files
+#: Held while a parser's native output is captured (:func:`_parse`).
+_PARSE_LOCK = threading.Lock()
+
+
 def _parse(build: Callable, path: Path, what: str):
     """Run a Pinocchio parser; a failure becomes a one-line :class:`ModelFileError`.
 
@@ -260,8 +303,11 @@ def _parse(build: Callable, path: Path, what: str):
     other lines are passed on to ``sys.stderr``.
     """
     sys.stderr.flush()
-    saved, failure = os.dup(2), None
-    with tempfile.TemporaryFile() as tmp:
+    failure = None
+    # file descriptor 2 is the process's: one parser at a time redirects it (two threads
+    # loading models at once would each restore the other's file, leaving it in place)
+    with _PARSE_LOCK, tempfile.TemporaryFile() as tmp:
+        saved = os.dup(2)
         os.dup2(tmp.fileno(), 2)
         try:
             result = build()
@@ -362,10 +408,13 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
         actuated, locked = _serial_defaults(tree, path)
         return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
                      beam_joints=tuple(blocks))  # fmt: skip
-    loops = [
-        closure_between_frames(model, a, b, t)
-        for (a, b), t in zip(spec.pairs, spec.types, strict=True)
-    ]
+    where = f"closure file {str(closures)!r}"
+    _check_names(model, spec, where)
+    with _in_file(where):
+        loops = [
+            closure_between_frames(model, a, b, t)
+            for (a, b), t in zip(spec.pairs, spec.types, strict=True)
+        ]
     springs = ball_springs({**spec.springs, **blocks}, spec.balls)
     return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual,
                  beam_joints=tuple(blocks))  # fmt: skip
@@ -435,12 +484,14 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
         )
     where = f"robot file {str(path)!r}"
     springs = {n: k for n, v in extras.stiffness.items() if (k := _number(v, where, n)) > 0}
-    spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
+    spec, springs = _side_file(model, side_file, springs)
+    if spec.actuated is None:  # the actuators' joints
+        _check_names(model, ClosureSpec(actuated=extras.actuated), where)
     return _Tree(
         model,
         [Closure(c, n) for c, n in zip(constraints, extras.closures, strict=True)],
         extras.actuated if spec.actuated is None else spec.actuated,
-        {**springs, **spec.springs},
+        springs,
         spec.locked,
         visual,
         extras.undriven if spec.actuated is None else (),
@@ -450,8 +501,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
 def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.sdf
     _check_masses(robot.model, path)
-    spec = read_closure_file(side_file, SIDE_FILE_KEYS) if side_file is not None else ClosureSpec()
-    springs = {**robot.springs, **spec.springs}
+    spec, springs = _side_file(robot.model, side_file, robot.springs)
     return _Tree(
         robot.model, robot.closures, spec.actuated or (), springs, spec.locked, robot.visual
     )

@@ -13,6 +13,7 @@ silently get wrong; Pinocchio reads :func:`pinocchio_copy`; :func:`match_parsed`
 from __future__ import annotations
 
 import math
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import ModelFileError
+from .exceptions import IgnoredFeatureWarning, ModelFileError
 
 #: MJCF equality constraints and the closure type each gives.
 MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
@@ -28,6 +29,8 @@ MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
 WORLD_BODY = "worldbody_bodies"
 #: Configuration coordinates of each MJCF joint type (ball and free: quaternions).
 JOINT_NQ = {"hinge": 1, "slide": 1, "ball": 4, "free": 7}
+
+
 #: Shortest hinge or slide axis (norm, the axis is normalised) that MuJoCo accepts: below
 #: it MuJoCo refuses the file ("axis too small in joint"; checked with MuJoCo 4.0).
 MIN_AXIS_NORM = 1e-7
@@ -74,8 +77,9 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor, a class that no
             ``<default>`` defines, a ``limited`` other than true/false/auto, ``euler``
             angles with an upper-case (extrinsic) ``eulerseq``, a spring on a joint that
-            Pinocchio merges into a composite joint (several joints in one body). The
-            message names the file.
+            Pinocchio merges into a composite joint (several joints in one body), a joint
+            ``springdamper`` (MuJoCo derives its stiffness from the mass), a tendon with a
+            stiffness (a spring coupling joints). The message names the file.
     """
     where = f"robot file {str(path)!r}"
     root = _parse_xml(path, where)
@@ -88,6 +92,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 f"parser drops them); write the bodies without <{tag}>"
             )
     _check_classes(root, where)
+    _check_tendons(root, where)  # before the classes are written out and removed
     seq = _compiler(root).get("eulerseq", "xyz")
     if seq != seq.lower() and root.find(".//*[@euler]") is not None:
         raise ModelFileError(
@@ -148,6 +153,14 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                     )
                 scale = to_rad if kind == "hinge" else 1.0  # slides: metres, never converted
                 limits.append((nq, lo * scale, hi * scale))
+        if "springdamper" in attrs and np.all(
+            _numbers(attrs["springdamper"], 2, where, f"springdamper of {what}") > 0
+        ):  # MuJoCo then computes the stiffness from the mass, which is not read here
+            raise ModelFileError(
+                f"{where}: {what} has springdamper={attrs['springdamper']!r}, whose stiffness "
+                "MuJoCo derives from the mass and is not read here; expected stiffness [N m/rad "
+                "or N/m] instead"
+            )
         if "stiffness" in attrs:
             text = attrs["stiffness"]
             if name is None and _numbers(text, 1, where, f"stiffness of {what}")[0] != 0:
@@ -158,8 +171,18 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             if name is not None:
                 stiffness[name] = text
             _check_composite(body, name, text, of_body[id(body)], where)
+            _check_springref(attrs, what, where)
         nq += JOINT_NQ[kind]
     actuators = [a for act in root.findall("actuator") for a in act]
+    for a in actuators:
+        if a.tag == "position" and a.get("joint"):
+            warnings.warn(
+                f"{where}: <position> actuator {_name(a)} is a servo spring (kp) on joint "
+                f"{a.get('joint')!r}; its kp is not read: the joint is a rigid actuator unless "
+                "it has a stiffness (joint stiffness, or springs in a side file)",
+                IgnoredFeatureWarning,
+                stacklevel=2,
+            )
     return MjcfExtras(
         tuple(dict.fromkeys(a.get("joint") for a in actuators if a.get("joint"))),
         stiffness,
@@ -168,6 +191,36 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         tuple(limits),
         nq,
     )
+
+
+def _check_springref(attrs: dict[str, str], what: str, where: str) -> None:
+    """Warn of a spring whose ``springref`` differs from its ``ref``: its rest is then not
+    at ``qpos0``, where the springs are taken at rest."""
+    if "springref" not in attrs or not _numbers(attrs["stiffness"], 1, where, what)[0]:
+        return
+    rest = _numbers(attrs["springref"], 1, where, f"springref of {what}")[0]
+    if rest != _numbers(attrs.get("ref", "0"), 1, where, f"ref of {what}")[0]:
+        warnings.warn(
+            f"{where}: {what} has springref={attrs['springref']!r}, not its ref "
+            f"{attrs.get('ref', '0')!r}: springref is not read, the spring is taken at rest at "
+            "qpos0",
+            IgnoredFeatureWarning,
+            stacklevel=3,
+        )
+
+
+def _check_tendons(root: ET.Element, where: str) -> None:
+    """Refuse a ``<tendon>`` with a stiffness (``<default>`` classes resolved): a spring
+    coupling joints, which neither Pinocchio nor the springs per joint can hold."""
+    defaults = _defaults(root, "tendon")
+    for tendon in (t for section in root.findall("tendon") for t in section):
+        text = {**defaults.get(tendon.get("class", "main"), {}), **tendon.attrib}.get("stiffness")
+        name = _name(tendon)
+        if text is not None and _numbers(text, 1, where, f"stiffness of tendon {name}")[0]:
+            raise ModelFileError(
+                f"{where}: <{tendon.tag}> tendon {name} has stiffness {text!r}: a spring "
+                "coupling joints is not read; expected springs on joints (joint stiffness)"
+            )
 
 
 def pinocchio_copy(path: Path, folder: Path) -> Path:

@@ -229,6 +229,9 @@ class _Reader:
         what = f"<{tag}> of joint {name!r}"
         if elem is None:
             self.fail(f"joint {name!r} has no <{tag}>; expected <{tag}><xyz>x y z</xyz>")
+        if elem.find("mimic") is not None:  # SDF 1.11
+            self.fail(f"{what} has a <mimic>, which is not read (the joint would move freely); "
+                      "expected no <mimic>")  # fmt: skip
         xyz = elem.find("xyz")
         a = self.floats(xyz, f"{what} <xyz>", (3,))
         if np.linalg.norm(a) == 0.0:
@@ -311,8 +314,9 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
 
     Raises:
         ModelFileError: invalid XML, unknown joint type, missing parent or child, a pose
-            or axis with the wrong number of values, a loop that cannot be closed, a mesh
-            not found; one line naming the element and what was expected.
+            or axis with the wrong number of values, an axis with a ``<mimic>``, a loop that
+            cannot be closed, a mesh not found; one line naming the element and what was
+            expected.
     """
     r = _Reader(Path(path))
     tree: dict[str, str] = {}  # child link -> its tree joint

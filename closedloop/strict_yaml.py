@@ -1,9 +1,11 @@
 """YAML as the project's input files need it: no key given twice, no number beyond the
-double range taken as infinity.
+double range taken as infinity, no number that YAML 1.1 and 1.2 read differently.
 
 PyYAML's safe loader keeps the last of two equal keys (``{crank: 5, crank: 7}`` is
 ``{crank: 7}``) and reads ``1.0e400`` as ``inf``, which for a stiffness means a locked
-joint. Here both are errors; ``.inf`` (YAML's infinity) stays infinity.
+joint. Here both are errors; ``.inf`` (YAML's infinity) stays infinity. It also reads, as
+YAML 1.1 says, a number with a leading zero as octal (``0100`` is 64) and one with colons
+in base 60 (``1:30`` is 90), where YAML 1.2 reads 100 and a string: both are errors.
 """
 
 from __future__ import annotations
@@ -36,8 +38,23 @@ def _mapping(loader: _Loader, node: yaml.MappingNode) -> dict:
     return loader.construct_mapping(node, deep=True)
 
 
+def _check_base(node: yaml.ScalarNode, value) -> None:
+    """Refuse a YAML 1.1 octal integer (leading zero) or base-60 number (colons)."""
+    digits = node.value.lstrip("+-")
+    octal = isinstance(value, int) and digits[:1] == "0" and digits[1:2] not in ("", "x", "b")
+    if octal or ":" in digits:
+        raise yaml.constructor.ConstructorError(
+            None,
+            None,
+            f"number {node.value} reads as {'octal' if octal else 'base 60'} ({value}) in YAML "
+            "1.1, not in YAML 1.2; write it in decimal without leading zeros",
+            node.start_mark,
+        )
+
+
 def _float(loader: _Loader, node: yaml.ScalarNode) -> float:
     value = loader.construct_yaml_float(node)
+    _check_base(node, value)
     if math.isinf(value) and "inf" not in node.value.lower():
         raise yaml.constructor.ConstructorError(
             None,
@@ -55,6 +72,8 @@ def _int(loader: _Loader, node: yaml.ScalarNode) -> int:
         beyond = abs(value) > sys.float_info.max
     except ValueError:
         beyond = True
+    else:
+        _check_base(node, value)
     if beyond:
         raise yaml.constructor.ConstructorError(
             None,

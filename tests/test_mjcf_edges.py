@@ -135,6 +135,7 @@ def test_ball_joint_ignores_its_axis(tmp_path):
 
 
 # -------------------------------------------------------------- actuators on one joint
+@pytest.mark.filterwarnings("ignore:.*<position> actuator")  # its kp: test_loading_edges
 def test_each_driven_joint_is_actuated_once(fourbar_mjcf, tmp_path):
     path = fourbar_with(
         fourbar_mjcf,

@@ -483,6 +483,11 @@ MALFORMED = [
         r"pose of frame 'f' has the quaternion 0 0 0 0; expected a rotation",
     ),
     ("</model></sdf>", "", r"is not valid XML"),
+    (  # SDF 1.11: a coupling that would be lost, leaving the joint free
+        '<xyz expressed_in="__model__">0 1 0</xyz>',
+        '<xyz expressed_in="__model__">0 1 0</xyz><mimic joint="rocker"/>',
+        r"<axis> of joint 'crank' has a <mimic>, which is not read",
+    ),
 ]
 
 
@@ -493,6 +498,14 @@ def test_malformed_sdf_one_line_errors(tmp_path, old, new, match):
     with pytest.raises(ModelFileError, match=match) as err:
         load_model(write(tmp_path, text.replace(old, new, 1)), geometry=False)
     assert "\n" not in str(err.value) and str(err.value).startswith("SDF file '")
+
+
+def test_a_side_file_locks_a_joint_the_sdf_gives_a_spring(tmp_path):
+    """The side file's lock replaces the file's spring (it used to be refused as both)."""
+    side = write(tmp_path, "locked: [crank_axial]\n", "side.yaml")
+    robot = load_model(write(tmp_path, fourbar_sdf("1.7")), side, geometry=False)
+    assert robot.stiffness[robot.joint_v_slice("crank_axial")][0] == math.inf
+    assert robot.springs == {"crank": 50.0, "rocker_axial": 2e5}
 
 
 def test_loop_closing_joint_with_a_spring_is_refused(tmp_path):
