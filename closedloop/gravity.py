@@ -71,9 +71,9 @@ class Payload:
         return {"mass_kg": float(self.mass), "frame": self.frame, "offset_m": self.offset.tolist()}
 
 
-#: Largest weight moment m max|g_i| max(L, 1 m, the payloads' offsets) [N m] of a gravity
-#: load: its derivatives and the equilibrium solver multiply it by the joint Jacobians and
-#: their squares.
+#: Largest weight moment m max|g_i| max(L, 1 m, the bodies' centres of mass in their joint
+#: frames, payloads included) [N m] of a gravity load: its derivatives and the equilibrium
+#: solver multiply it by the joint Jacobians and their squares.
 WEIGHT_MAX = 1e150
 
 
@@ -112,10 +112,11 @@ class GravityLoad:
             at = f.placement * pin.SE3(np.eye(3), p.offset)
             point_mass = pin.Inertia(float(p.mass), np.zeros(3), np.zeros((3, 3)))
             model.appendBodyToJoint(f.parentJoint, point_mass, at)
+        reach = _checked_reach(model)
         self.model = model
         # the moving mass: the fixed base's (joint 0, the world) loads no spring
         self.mass = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
-        lever = max(clm.length, 1.0, *(float(np.max(np.abs(p.offset))) for p in self.payloads))
+        lever = max(clm.length, 1.0, reach)
         weight = self.mass * float(np.max(np.abs(self.gravity))) * lever
         if not weight < WEIGHT_MAX:  # its moments, derivatives and the solver would overflow
             raise InvalidInputError(
@@ -149,6 +150,25 @@ class GravityLoad:
             "mass_kg": self.mass,
             "payloads": [p.to_dict() for p in self.payloads],
         }
+
+
+def _checked_reach(model: pin.Model) -> float:
+    """Largest |coordinate| [m] of the moving bodies' centres of mass in their joint frames
+    (the lever of their weight), once each body is checked: InvalidInputError for a mass
+    that is not finite or is negative, or a centre of mass that is not finite (a model
+    file's ``<inertial>``; the payloads are checked as they are made)."""
+    reach = 0.0
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        mass, com = float(inertia.mass), np.asarray(inertia.lever)
+        if not (math.isfinite(mass) and mass >= 0.0 and np.all(np.isfinite(com))):
+            raise InvalidInputError(
+                f"the body on joint {model.names[j]!r} has mass {mass:g} kg at centre of mass "
+                f"{com.tolist()} m; expected a finite mass >= 0 [kg] at a finite point [m] to "
+                "weigh it under gravity"
+            )
+        reach = max(reach, float(np.max(np.abs(com))))
+    return reach
 
 
 @dataclass(frozen=True)

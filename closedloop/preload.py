@@ -39,6 +39,7 @@ from .tangent import (
     closure_curvature,
     geometric_stiffness,
     scaled_tangent,
+    settled_tangent,
     spring_hessian,
     stability_margin,
     tangent_stiffness,
@@ -71,7 +72,8 @@ class PreloadedCompliance(ComplianceResult):
         preload: (6,) preload wrench (f [N], n [N m]), world axes, at the frame origin.
         stability_margin: smallest eigenvalue of the symmetric part of K_t scaled by the
             unloaded spring stiffness (1 without preload, <= 0 past a static instability;
-            for a non-conservative preload a divergence indicator only).
+            for a non-conservative preload a divergence indicator only), the spring-free
+            motions the preload acts on settled (:func:`closedloop.tangent.stability_margin`).
         equilibrium: the preloaded equilibrium (its rest configuration, the weight, the
             multipliers); ``q`` above is its configuration q_eq.
         spring_forces: (nv,) forces of the springs at q_eq, K_q dq [N m or N] (0 on
@@ -160,9 +162,11 @@ def preloaded_compliance(
 
     Returns:
         The compliance; when the preload terms vanish (zero wrench) it is exactly
-        :func:`closedloop.compliance.compliance` at q. As there, spring-free motions that
-        do not move the frame (internal mobilities) are left out; any coupling of the
-        preload into them is neglected.
+        :func:`closedloop.compliance.compliance` at q. Spring-free motions that do not
+        move the frame but that the preload acts on (a link hanging on a passive joint,
+        stiffened by its weight and coupled to the sprung motions) settle with the
+        increment (:func:`closedloop.tangent.settled_tangent`); the others (internal
+        mobilities: a rod spinning about its axis) are left out, as there.
 
     Raises:
         MechanismError: a spring-free motion moves the frame.
@@ -182,6 +186,8 @@ def preloaded_compliance(
         return PreloadedCompliance(
             **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
         )
+    s = T.shape[1]
+    M, T = settled_tangent(M, f.N.T @ Kt @ f.N, T, _spring_free(f))
     s_M = np.linalg.svd(M, compute_uv=False)
     if s_M.size and s_M[-1] <= CRITICAL_RTOL:  # on the scale of the springs (1 unloaded)
         raise SingularConfigurationError(
@@ -194,7 +200,7 @@ def preloaded_compliance(
             f"{s_M[0]:.3g} times beyond its springs: the tangent stiffness spans more than "
             f"{1 / RANK_RTOL**2:.0e} (the rank rule's resolution); give a smaller preload"
         )
-    margin = stability_margin(M)
+    margin = stability_margin(M, s)
     B = J @ f.N @ T
     X = np.linalg.solve(M, B.T) if M.size else B.T
     C = B @ X
@@ -221,6 +227,17 @@ def preloaded_compliance(
         stability_margin=margin,
         **about,
     )
+
+
+def _spring_free(f) -> np.ndarray:
+    """(d, n_internal) the spring-free admissible motions of a :class:`SpringFactor`:
+    orthonormal complement of its V, divided by its largest singular value (the scale of
+    :func:`closedloop.tangent.settled_tangent`)."""
+    d, s = f.V.shape
+    if s == d:
+        return np.zeros((d, 0))
+    Q = np.linalg.qr(f.V, mode="complete")[0] if s else np.eye(d)
+    return Q[:, s:] / (f.sigma[0] if s else 1.0)
 
 
 def _spring_forces(clm: ClosedLoopModel, eq: Equilibrium) -> np.ndarray:

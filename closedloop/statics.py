@@ -320,9 +320,9 @@ def solve_equilibrium(
             :attr:`Equilibrium.limits_violated`).
 
     Raises:
-        InvalidInputError: a wrench that is not 6 finite values, a solver argument out of
-            range, a bad q_rest; :class:`OpenLoopError` for a q_rest that does not close
-            the loops.
+        InvalidInputError: a wrench that is not 6 finite values, or so large that the
+            equations overflow (near 1e308 N), a solver argument out of range, a bad
+            q_rest; :class:`OpenLoopError` for a q_rest that does not close the loops.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame (no equilibrium).
         SingularConfigurationError: springs further apart than
@@ -363,7 +363,12 @@ def solve_equilibrium(
         if speed * ds > 1.0:
             ds = 1.0 / speed
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
-        if not s_try > t:  # also a NaN rate
+        if not np.isfinite(speed):  # the rate is that of the full load
+            raise InvalidInputError(
+                f"the load {where} overflows the equilibrium equations (their generalised "
+                "forces and stiffness leave the double range); expected a far smaller load"
+            )
+        if not s_try > t:
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
             raise _failure(eqs, q, t, w, where, detail, iterations, st)
         if steps >= MAX_LOAD_STEPS:  # a deflection of thousands of increments: hours

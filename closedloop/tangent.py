@@ -76,6 +76,13 @@ WELD_CURVATURE_STEP = DIFFERENCE_STEP
 #: refused as such, not as a critical load.
 CRITICAL_RTOL = 1e-12
 
+#: A spring-free admissible motion counts as acted on by the preload (stiffened by the
+#: weight, coupled to the sprung motions) when its rows of the scaled tangent stiffness
+#: (:func:`settled_tangent`, on the scale of the stiffest spring) exceed this; below, the
+#: preload terms are rounding (measured 1e-16 on the spinning rods of a Delta; the weld
+#: curvature by central differences carries ~1e-10 of them).
+SPRING_FREE_RTOL = 1e-9
+
 
 def _hessian(raw: np.ndarray, nv: int) -> np.ndarray:
     """(6, nv, nv) tensor H[r, i, k] = dJ[r, i]/dq_k from a Pinocchio kinematic Hessian.
@@ -338,13 +345,63 @@ def scaled_tangent(
     return np.eye(T.shape[1]) + T.T @ P @ T, P, T
 
 
-def stability_margin(M: np.ndarray) -> float:
+def settled_tangent(
+    M: np.ndarray, H: np.ndarray, T: np.ndarray, Z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled tangent stiffness extended to the spring-free motions the preload acts on.
+
+    A spring-free admissible motion that does not move the loaded frame (a link hanging
+    on a passive joint, a rod spinning about its axis) has no spring; the preload may
+    still stiffen it (the weight of the hanging link) or couple it to the sprung motions.
+    Those it acts on settle with them, and enter the compliance and the stability
+    margin; the others (every row of theirs below :data:`SPRING_FREE_RTOL`) are internal
+    mobilities, left out.
+
+    Args:
+        M: (s, s) T^T H T (:func:`scaled_tangent`).
+        H: (d, d) the tangent stiffness on the admissible motions (any coordinates).
+        T: (d, s) the sprung motions, T^T K_r T = I.
+        Z: (d, z) the spring-free motions, orthonormal (unit-free) and divided by the
+            square root of the stiffest spring (so that their rows of M are on its scale).
+
+    Returns:
+        (M, T) extended: M (s + a, s + a) on the motions T (d, s + a), the sprung ones
+        first, then the a spring-free ones the preload acts on (unchanged when a = 0).
+    """
+    if not Z.shape[1]:
+        return M, T
+    HZ = H @ Z
+    Mtz, Mzt, Mzz = T.T @ HZ, Z.T @ H @ T, Z.T @ HZ
+    U, sv, _ = np.linalg.svd(np.hstack([Mzt, Mzz, Mtz.T, Mzz.T]), full_matrices=False)
+    W = U[:, : int(np.count_nonzero(sv > SPRING_FREE_RTOL))]
+    if not W.shape[1]:
+        return M, T
+    extended = np.block([[M, Mtz @ W], [W.T @ Mzt, W.T @ Mzz @ W]])
+    return extended, np.hstack([T, Z @ W])
+
+
+def stability_margin(M: np.ndarray, sprung: int | None = None) -> float:
     """Smallest eigenvalue of the symmetric part of M (:func:`scaled_tangent`); 1 if empty
     (no sprung motion: the unloaded value). Above 1 when the preload stiffens every motion
-    (a hanging weight, tension)."""
+    (a hanging weight, tension).
+
+    With ``sprung`` < M's size (:func:`settled_tangent`: the spring-free motions the
+    preload acts on come last), those settle at each sprung motion: the margin is that
+    of the Schur complement of their block S_zz in the symmetric part S, still 1
+    unloaded and 0 where K_t turns singular; the smallest eigenvalue of S_zz (<= 0, on the
+    scale of the stiffest spring) when the preload leaves one of them unstable or neutral
+    (a link balanced upright on a passive joint).
+    """
     if not M.size:
         return 1.0
-    return float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
+    S = 0.5 * (M + M.T)
+    s = S.shape[0] if sprung is None else sprung
+    if s < S.shape[0]:
+        low = float(np.linalg.eigvalsh(S[s:, s:])[0])
+        if low <= 0.0 or s == 0:
+            return low
+        S = S[:s, :s] - S[:s, s:] @ np.linalg.solve(S[s:, s:], S[s:, :s])
+    return float(np.linalg.eigvalsh(S)[0])
 
 
 @dataclass(frozen=True)
@@ -475,7 +532,8 @@ class EquilibriumEquations:
         Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
         closures plus the Newton step of N^T F on the admissible motions. With ``load``
         (a :class:`Load` or a wrench (6,)): the rate dq/ds of the equilibrium when the
-        load grows by s ``load``.
+        load grows by s ``load``. NaN when the equations overflow the double range (a
+        load near 1e308 N).
         """
         free, cols = self.free, self.free_scales
         H = cols[:, None] * self._restricted(q, w, st) * cols  # on y = x / cols
@@ -492,7 +550,11 @@ class EquilibriumEquations:
         # RANK_RTOL^2 of that scale is left out (spring-free, or beyond the solve)
         T, Z, top = self._sprung_motions(st)
         B = np.hstack([T * top, Z])
-        x, _, rank, _ = np.linalg.lstsq(B.T @ H @ B, B.T @ rhs, rcond=RANK_RTOL**2)
+        with np.errstate(over="ignore", invalid="ignore"):  # a load beyond the doubles
+            lhs, rhs = B.T @ H @ B, B.T @ rhs
+        if not (np.all(np.isfinite(lhs)) and np.all(np.isfinite(rhs))):
+            return np.full(self.clm.model.nv, np.nan), B.shape[1]  # the callers stop on NaN
+        x, _, rank, _ = np.linalg.lstsq(lhs, rhs, rcond=RANK_RTOL**2)
         dy += B @ x
         v = np.zeros(self.clm.model.nv)
         v[free] = cols * dy
@@ -514,9 +576,15 @@ class EquilibriumEquations:
         As in :class:`closedloop.preload.PreloadedCompliance`: the smallest eigenvalue of
         the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by
         their spring stiffness; 1 unloaded, 0 where K_t turns singular, < 0 if unstable.
-        Spring-free motions (a rod spinning about its axis) are left out; the sprung ones
-        are those that move a sprung coordinate (:meth:`_sprung_motions`).
+        Spring-free motions the load does not act on (a rod spinning about its axis) are
+        left out; the sprung ones are those that move a sprung coordinate
+        (:meth:`_sprung_motions`).
+        The spring-free ones that the load acts on (a link hanging on a passive joint)
+        settle with them (:func:`settled_tangent`, :func:`stability_margin`).
         """
         st = self.evaluate(q, w)
-        T = self.free_scales[:, None] * self._sprung_motions(st)[0]  # T^T K_q T = I, on x
-        return stability_margin(T.T @ self._restricted(q, w, st) @ T)
+        T, Z, top = self._sprung_motions(st)
+        T, Z = self.free_scales[:, None] * T, self.free_scales[:, None] * Z / top  # on x
+        H = self._restricted(q, w, st)
+        M = settled_tangent(T.T @ H @ T, H, T, Z)[0]  # T^T K_q T = I on the sprung ones
+        return stability_margin(M, T.shape[1])
