@@ -50,6 +50,7 @@ _EXPORTS = {
             "OpenLoopError",
             "RigidDirectionsError",
             "SingularConfigurationError",
+            "ViewerError",
         ),
         ".exceptions",
     ),
@@ -87,6 +88,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
         OpenLoopError,
         RigidDirectionsError,
         SingularConfigurationError,
+        ViewerError,
     )
     from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
     from .indices import StiffnessIndices
@@ -161,6 +163,7 @@ __all__ = [
     "RigidDirectionsError",
     "SingularConfigurationError",
     "StiffnessIndices",
+    "ViewerError",
     "assemble",
     "closure_curvature",
     "compliance",

@@ -162,6 +162,11 @@ class ClusterError(ClosedLoopError):
     connection, or no worker connected for longer than the worker timeout."""
 
 
+class ViewerError(ClosedLoopError):
+    """The meshcat viewer could not be started: its server exited, could not be run, or
+    did not answer within its start timeout."""
+
+
 #: Exit status of the command lines (``closedloop``, ``cahyman``): success.
 EXIT_OK = 0
 #: The analysis succeeded but the compliance is rank deficient: the stiffness does not exist.
@@ -178,6 +183,7 @@ _FAILURES = (
     MechanismError,
     NumericalError,
     SingularConfigurationError,
+    ViewerError,
 )
 
 
@@ -186,8 +192,8 @@ def exit_status(error: ClosedLoopError) -> int:
 
     :data:`EXIT_RANK_DEFICIENT` for :class:`RigidDirectionsError`, :data:`EXIT_FAILED` for
     :class:`AssemblyError`, :class:`ClusterError`, :class:`EquilibriumError` (and
-    :class:`JointLimitError`), :class:`MechanismError`, :class:`NumericalError` and
-    :class:`SingularConfigurationError`,
+    :class:`JointLimitError`), :class:`MechanismError`, :class:`NumericalError`,
+    :class:`SingularConfigurationError` and :class:`ViewerError`,
     :data:`EXIT_BAD_INPUT` for the others (:class:`InvalidInputError`,
     :class:`ModelFileError`, :class:`NameNotFoundError`, :class:`OpenLoopError`).
     """

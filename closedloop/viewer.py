@@ -30,8 +30,10 @@ One meshcat scene, served by :mod:`closedloop.viewer_server` (the meshcat server
 
 The scene is translated so that the centre of everything drawn (both robots' geometry,
 arrows, ellipsoids) is at the origin of the three.js world (the camera orbits about it)
-and the camera placed so that all of it is in view; meshcat's axes follow, so they still
-mark the world origin.
+and the camera placed so that all of it is in view, its clipping distances per its size
+(``CAMERA_NEAR``, ``CAMERA_FAR``: a model of millimetres or of hundreds of metres is
+drawn); meshcat's axes follow, so they still mark the world origin. An unbounded visual
+object (an MJCF floor plane) is not drawn: the grid stands for it.
 
 Example::
 
@@ -57,7 +59,7 @@ import numpy as np
 import pinocchio as pin
 
 from .configuration import accepts_configuration
-from .exceptions import ClosedLoopError, InvalidInputError
+from .exceptions import ClosedLoopError, InvalidInputError, ViewerError
 from .files import write_atomically
 from .model import ClosedLoopModel
 from .viewer_draw import (  # noqa: F401  (constants: part of this module's interface)
@@ -65,8 +67,11 @@ from .viewer_draw import (  # noqa: F401  (constants: part of this module's inte
     BACKGROUND,
     BEAM_FRACTION,
     BEAMS,
+    CAMERA,
     CAMERA_DIRECTION,
+    CAMERA_FAR,
     CAMERA_MARGIN,
+    CAMERA_NEAR,
     COMPLIANCE,
     ELLIPSOID_COLORS,
     ELLIPSOID_MIN_FRACTION,
@@ -87,7 +92,7 @@ from .viewer_draw import (  # noqa: F401  (constants: part of this module's inte
     legend_info,
     look_at,
 )
-from .viewer_mesh import ROBOTS, RobotPair
+from .viewer_mesh import ROBOTS, RobotPair, drawn_model
 from .viewer_page import overlay
 from .viewer_scene import (
     LEVER_FRACTION,
@@ -116,7 +121,8 @@ class DeflectionViewer:
     """Meshcat scene of a model's nominal and deflected poses (module docstring).
 
     Args:
-        clm: model with visual geometry (load it with ``geometry=True``).
+        clm: model with visual geometry (load it with ``geometry=True``); unbounded
+            objects (an MJCF floor plane) are not drawn (:func:`drawn_geometry`).
         viewer: a meshcat visualizer to draw into; default: a new one, with its own
             meshcat server on 127.0.0.1 (:mod:`closedloop.viewer_server`), stopped by
             :meth:`close`. The legend and the page script are in the live page of that
@@ -125,18 +131,18 @@ class DeflectionViewer:
     Raises:
         InvalidInputError: the model has no visual geometry, or a geometry that cannot be
             drawn.
+        ViewerError: the meshcat server cannot be started (the message says why).
     """
 
     def __init__(self, clm: ClosedLoopModel, viewer: meshcat.Visualizer | None = None):
-        if clm.visual_model is None or clm.visual_model.ngeoms == 0:
-            raise InvalidInputError(
-                f"model {clm.name!r} has no visual geometry to show; load it with geometry"
-            )
         self.clm = clm
-        self.robots = RobotPair(clm.model, clm.visual_model, GHOST_RGBA)
+        self.robots = RobotPair(clm.model, drawn_geometry(clm), GHOST_RGBA)
         self._server = None
         if viewer is None:
-            self._server, zmq_url, _ = start_server()
+            try:
+                self._server, zmq_url, _ = start_server()
+            except RuntimeError as e:
+                raise ViewerError(f"no meshcat viewer: {e}") from None
             try:
                 with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
                     viewer = meshcat.Visualizer(zmq_url=zmq_url)
@@ -172,16 +178,21 @@ class DeflectionViewer:
                 the model's colours.
         """
         if scene.q.shape != (self.clm.model.nq,):
-            raise InvalidInputError("scene was computed for another model")
+            raise InvalidInputError(
+                f"scene of {scene.q.size} coordinates q; expected one of model "
+                f"{self.clm.name!r} (nq = {self.clm.model.nq})"
+            )
         for node in (LOAD, COMPLIANCE, GRID, BEAMS):
             self.viewer[node].delete()
         colours, colour_max = None, None
         if colour_by_displacement and scene.max_displacement > 0.0:
             magnitudes = self.robots.displacements(scene.q, scene.dq)
-            colour_max = max(float(np.max(m)) for m in magnitudes)
-            colours = [
-                c if len(m) > 1 else c[0] for m in magnitudes for c in [colormap(m / colour_max)]
-            ]
+            top = max(float(np.max(m)) for m in magnitudes)
+            if top > 0.0:  # else the deflection moves no geometry drawn: model colours
+                colour_max = top
+                colours = [
+                    c if len(m) > 1 else c[0] for m in magnitudes for c in [colormap(m / top)]
+                ]
         command = self.robots.command(scene.q, scene.q_deflected, colours)
         self.viewer.window.send(_Command(command))
         self.viewer[ROBOTS].set_property("amplification", scene.scale)
@@ -195,11 +206,14 @@ class DeflectionViewer:
         self.viewer["/Background"].set_property("bottom_color", list(BACKGROUND[1]))
         step = grid_step(scene.size)
         draw_grid(self.viewer, centre, lo[2], step, scene.size)
-        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+        radius = 0.5 * float(np.linalg.norm(hi - lo)) or 0.5 * scene.size
         camera = CAMERA_MARGIN * radius * np.array(CAMERA_DIRECTION)
         camera /= np.linalg.norm(CAMERA_DIRECTION)
         eye = np.array([camera[0], camera[2], -camera[1]])  # world (z up) -> three.js (y up)
-        self.viewer["/Cameras/default/rotated/<object>"].set_transform(look_at(eye))
+        node = self.viewer[CAMERA]
+        node.set_transform(look_at(eye))
+        node.set_property("near", CAMERA_NEAR * radius)
+        node.set_property("far", CAMERA_FAR * radius)
         draw_load(self.viewer, scene)
         for e in scene.ellipsoids:
             draw_ellipsoid(self.viewer, e, floor)
@@ -207,8 +221,10 @@ class DeflectionViewer:
         clips = 0
         if animate:
             clips = self._animate(scene)
-        info = legend_info(self.clm, scene, pose_text, colour_max) if legend else None
-        meshes = 2 * self.clm.visual_model.ngeoms
+        info = None
+        if legend:
+            info = legend_info(self.clm, scene, pose_text, colour_max, self.robots.visual_model)
+        meshes = 2 * self.robots.visual_model.ngeoms
         args = {"meshes": meshes, "clips": clips, "autoplay": autoplay, "robots": ROBOTS}
         self.overlay = overlay(info, **args)
         if self._server is not None:  # the live page: with the amplification slider
@@ -352,6 +368,23 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, previous)
 
 
+def drawn_geometry(clm: ClosedLoopModel) -> pin.GeometryModel:
+    """The visual geometry of ``clm`` that the viewer draws (:func:`drawn_model`: an MJCF
+    floor plane left out).
+
+    Raises:
+        InvalidInputError: there is none.
+    """
+    drawn = None if clm.visual_model is None else drawn_model(clm.visual_model)
+    if drawn is None or drawn.ngeoms == 0:
+        raise InvalidInputError(
+            f"model {clm.name!r} has no visual geometry to show (a robot file without "
+            "visual elements other than a floor plane, or loaded without geometry); "
+            "expected a model loaded with its visual geometry"
+        )
+    return drawn
+
+
 def check_output_path(html: str | Path) -> Path:
     """``html`` as a Path whose folder exists (checked before any work)."""
     path = Path(html)
@@ -399,6 +432,7 @@ def run_view(
         The scene drawn.
     """
     path = None if html is None else check_output_path(html)
+    drawn_geometry(clm)  # before any work
     if duration is not None and not (np.isfinite(duration) and duration >= 0.0):
         raise InvalidInputError(f"duration must be a finite number >= 0 [s], got {duration!r}")
     scene = deflection_scene(

@@ -16,6 +16,8 @@ from .model import ClosedLoopModel
 from .viewer_scene import LEVER_FRACTION, BeamCurve, DeflectionScene, Ellipsoid, unit_vector
 
 LOAD, COMPLIANCE, GRID, BEAMS = "load", "compliance", "grid", "beams"
+#: meshcat path of the camera (three.js, y up), placed by the viewer.
+CAMERA = "/Cameras/default/rotated/<object>"
 #: Colour and opacity (RGBA, 0..1) of the nominal pose.
 GHOST_RGBA = (0.55, 0.55, 0.6, 0.3)
 FORCE_COLOR, TORQUE_COLOR = 0xD62728, 0x9467BD
@@ -34,6 +36,10 @@ GRID_DIVISIONS, GRID_EXTENT = 8, 0.9
 #: bounding sphere (meshcat's vertical field of view is 75 deg: 1 / sin(37.5 deg) = 1.64;
 #: more, so that the near side does not fill the view).
 CAMERA_DIRECTION, CAMERA_MARGIN = (0.45, -1.0, 0.5), 2.4
+#: Camera's near and far clipping distances per radius of the drawn bounding sphere
+#: (meshcat's fixed 0.01 m and 100 m at a radius of 1 m): a model of a few millimetres,
+#: closer than 0.01 m, or of a hundred metres, farther than 100 m, is not clipped away.
+CAMERA_NEAR, CAMERA_FAR = 0.01, 100.0
 #: Colour map of the deflected robot, displacement magnitude 0 -> largest (viridis stops).
 COLORMAP = (
     (0.267, 0.005, 0.329),
@@ -97,6 +103,7 @@ def legend_info(
     scene: DeflectionScene,
     pose: str | None = None,
     colour_max: float | None = None,
+    visual_model: pin.GeometryModel | None = None,
 ) -> dict:
     """What the legend shows (:func:`closedloop.viewer_page.legend_rows`) for ``scene``.
 
@@ -106,11 +113,14 @@ def legend_info(
         pose: the pose as written in the legend (default: q, rad or m).
         colour_max: largest surface displacement [m] when the deflected robot is coloured
             by displacement magnitude (the colour bar's top), else None (model colours).
+        visual_model: the geometry drawn, whose colours the legend shows (default: the
+            model's).
     """
     if pose is None:
         pose = "q = (" + ", ".join(f"{x:.4g}" for x in scene.q) + ") rad or m"
     colours = []
-    for g in clm.visual_model.geometryObjects:
+    shown = clm.visual_model if visual_model is None else visual_model
+    for g in shown.geometryObjects:
         c = tuple(np.round(np.asarray(g.meshColor, dtype=float), 3))
         if c not in colours:
             colours.append(c)

@@ -35,6 +35,7 @@ from pinocchio.visualize.meshcat_visualizer import loadMesh
 
 from .exceptions import InvalidInputError
 from .indices import row_norms
+from .viewer_scene import joint_jacobian
 
 ROBOTS, GHOST, DEFLECTED = "robots", "nominal", "deflected"
 #: meshcat path of the animated object (meshcat puts an object under ``<object>``).
@@ -45,6 +46,20 @@ _RESERVED = re.compile(r"[\[\]\.:/\s]")  # three.js animation track-name syntax
 def node_name(root: str, name: str) -> str:
     """Name of the group of geometry object ``name`` under ``root`` (unique in the tree)."""
     return f"{root}_{_RESERVED.sub('_', name)}"
+
+
+#: Geometry without bounds (an MJCF floor ``plane``), not drawn: the viewer's grid shows
+#: the floor, and such a plane would fill the view and the bounding box.
+UNBOUNDED = (coal.Plane, coal.Halfspace)
+
+
+def drawn_model(visual_model: pin.GeometryModel) -> pin.GeometryModel:
+    """Copy of ``visual_model`` without its :data:`UNBOUNDED` objects (the ones drawn)."""
+    drawn = pin.GeometryModel()
+    for g in visual_model.geometryObjects:
+        if not isinstance(g.geometry, UNBOUNDED):
+            drawn.addGeometryObject(g)
+    return drawn
 
 
 def ghost_model(visual_model: pin.GeometryModel, rgba) -> pin.GeometryModel:
@@ -107,7 +122,8 @@ class RobotPair:
 
     Args:
         model: kinematic model.
-        visual_model: its visual geometry (not modified).
+        visual_model: its visual geometry, without unbounded objects (:func:`drawn_model`;
+            not modified).
         ghost_rgba: colour and opacity (0..1) of the nominal pose.
     """
 
@@ -152,7 +168,7 @@ class RobotPair:
         for g, M, (_, _, _, vertices) in zip(
             self.visual_model.geometryObjects, self.geometry_data.oMg, self.parts, strict=True
         ):
-            J = pin.getJointJacobian(self.model, self.data, g.parentJoint, pin.LOCAL_WORLD_ALIGNED)
+            J = joint_jacobian(self.model, self.data, g.parentJoint)
             v, w = np.split(J @ dq, 2)  # joint origin velocity and angular velocity
             local = vertices if vertices is not None else np.zeros((1, 3))
             points = local @ M.rotation.T + M.translation

@@ -172,7 +172,8 @@ def legend_rows(info: dict) -> list[str]:
     rows.append(
         f"{frame} moves {_vector(1e3 * t[:3])} mm (norm {1e3 * vector_norm(t[:3]):.4g} mm) "
         f"and turns {_vector(np.rad2deg(t[3:]))} deg (norm "
-        f"{np.rad2deg(vector_norm(t[3:])):.4g} deg), world axes, real, first order"
+        f"{np.rad2deg(vector_norm(t[3:])):.4g} deg), world axes, real, "
+        + ("first order" if info["kind"] == "linear" else "nonlinear equilibrium")
     )
     return [html.escape(r) for r in rows]
 

@@ -161,8 +161,9 @@ class DeflectionScene:
         q_deflected: (nq,) integrate(q, s dq).
         point: (3,) loaded frame origin at q [m], world frame.
         point_deflected: (3,) loaded frame origin at q_deflected [m], world frame.
-        frame_twist: (6,) first-order displacement J dq of the loaded frame (translation of
-            its origin [m], rotation [rad]), world axes, not amplified (= C w if linear).
+        frame_twist: (6,) displacement of the loaded frame (translation of its origin [m],
+            rotation vector [rad]), world axes, not amplified: the first-order J dq = C w if
+            linear, the finite ``equilibrium.displacement`` if nonlinear.
         compliance: compliance at the loaded frame, world axes, at q.
         ellipsoids: translational (and, on request, rotational) compliance ellipsoids.
         ramp: (n,) load fractions of the animation, 0 .. 1.
@@ -251,6 +252,14 @@ def model_size(clm: ClosedLoopModel, q: np.ndarray) -> float:
     return size if size > 0.0 else 1.0
 
 
+def joint_jacobian(model: pin.Model, data: pin.Data, joint: int) -> np.ndarray:
+    """(6, nv) Jacobian of ``joint``'s origin (velocity [m], angular velocity [rad]), world
+    axes (LOCAL_WORLD_ALIGNED), from the joint Jacobians already computed in ``data``
+    (Pinocchio gives a one-dof model's as a (6,) vector)."""
+    J = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+    return np.asarray(J).reshape(6, model.nv)
+
+
 def point_displacements(
     clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray
 ) -> np.ndarray:
@@ -269,10 +278,7 @@ def point_displacements(
     if dq.shape != (clm.model.nv,) or not np.all(np.isfinite(dq)):
         raise InvalidInputError(f"dq must be {clm.model.nv} finite values, got {dq.size}")
     J_f = frame_jacobian(clm, q, frame, "world")  # also the joint Jacobians of q
-    rows = [
-        pin.getJointJacobian(clm.model, clm.data, j, pin.LOCAL_WORLD_ALIGNED)[:3] @ dq
-        for j in range(1, clm.model.njoints)
-    ]
+    rows = [joint_jacobian(clm.model, clm.data, j)[:3] @ dq for j in range(1, clm.model.njoints)]
     return np.array([*rows, J_f[:3] @ dq]).reshape(-1, 3)
 
 
@@ -411,6 +417,8 @@ def deflection_scene(
     size = model_size(clm, q)
     with np.errstate(over="ignore", invalid="ignore"):
         twist = frame_jacobian(clm, q, frame, "world") @ dq
+        if equilibrium is not None:  # the finite displacement, not the first-order one
+            twist = equilibrium.displacement
         d_max = largest_displacement(clm, q, frame, dq)
     _check_finite(w, joint_deflection=dq, frame_displacement=twist, largest_displacement=d_max)
     s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)

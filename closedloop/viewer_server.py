@@ -3,7 +3,7 @@
 meshcat's own server (:mod:`meshcat.servers.zmqserver`) binds its ZeroMQ socket to
 127.0.0.1 but its web server to every interface (0.0.0.0 and [::]), and it outlives a
 parent killed by a signal. This module runs the same bridge (:class:`ZMQWebSocketBridge`,
-the real meshcat server) with three changes:
+the real meshcat server) with these changes:
 
 * the web server listens on 127.0.0.1 only;
 * the page at ``/static/`` is meshcat's page with the overlay (title, HTML legend, page
@@ -20,12 +20,16 @@ live one here, the static one in :mod:`closedloop.viewer`).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import queue
 import re
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 
 HOST = "127.0.0.1"
 #: Seconds between two checks that the parent process is still there.
@@ -50,25 +54,59 @@ def start_server() -> tuple[subprocess.Popen, str, str]:
     """Start the server as a child process; returns (process, ZeroMQ URL, web URL).
 
     Raises:
-        RuntimeError: the server did not start (its last output is in the message).
+        RuntimeError: the server did not start: the interpreter cannot be run, the server
+            exited (its last line on stderr is in the message) or did not give its
+            addresses within ``START_TIMEOUT`` s (it is stopped).
     """
-    proc = subprocess.Popen(
-        [sys.executable, "-I", "-u", os.path.abspath(__file__), str(os.getpid())],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        stdin=subprocess.DEVNULL,
-        start_new_session=True,  # Ctrl-C in a terminal reaches the parent, which stops it
-    )
-    urls = {}
-    for line in proc.stdout:
-        key, _, value = line.decode("utf-8", "replace").strip().partition("=")
-        if key in ("zmq_url", "web_url"):
-            urls[key] = value
+    log = tempfile.TemporaryFile()  # the server's stderr: a pipe not read would fill up
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-I", "-u", os.path.abspath(__file__), str(os.getpid())],
+            stdout=subprocess.PIPE,
+            stderr=log,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,  # Ctrl-C in a terminal reaches the parent, which stops it
+        )
+    except OSError as e:
+        log.close()
+        raise RuntimeError(
+            f"cannot run {sys.executable!r} for the meshcat server ({e.strerror or e})"
+        ) from None
+    with log:
+        found: queue.Queue = queue.Queue()
+        threading.Thread(target=_read_urls, args=(proc.stdout, found), daemon=True).start()
+        try:
+            urls, timed_out = found.get(timeout=START_TIMEOUT), False
+        except queue.Empty:
+            urls, timed_out = {}, True
         if len(urls) == 2:
-            proc.stdout.close()
             return proc, urls["zmq_url"], urls["web_url"]
-    proc.wait()
-    raise RuntimeError(f"the meshcat server exited with code {proc.returncode} before starting")
+        if not timed_out:  # it closed its stdout: it is exiting, with its own code
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(STOP_TIMEOUT)
+        stop_server(proc)
+        if timed_out:
+            raise RuntimeError(f"the meshcat server gave no address within {START_TIMEOUT:g} s")
+        log.seek(0)
+        lines = log.read().decode("utf-8", "replace").strip().splitlines()
+        last = f": {lines[-1].strip()}" if lines else ""
+        raise RuntimeError(
+            f"the meshcat server exited with code {proc.returncode} before starting{last}"
+        )
+
+
+def _read_urls(stream, found: queue.Queue) -> None:
+    """Put the server's {"zmq_url": ..., "web_url": ...} into ``found`` once both are read
+    from its stdout ``stream``, or what was read at its end; then close the stream."""
+    urls = {}
+    with stream:
+        for line in stream:
+            key, _, value = line.decode("utf-8", "replace").strip().partition("=")
+            if key in ("zmq_url", "web_url"):
+                urls[key] = value
+            if len(urls) == 2:
+                break
+    found.put(urls)
 
 
 def stop_server(proc: subprocess.Popen) -> None:

@@ -30,6 +30,7 @@ import pinocchio as pin
 import pytest
 from helpers import UR5_Q
 from PIL import Image
+from test_viewer_edges import scaled_fourbar
 from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
@@ -339,6 +340,19 @@ def test_live_server_shows_the_exported_scene(fourbar_shots):
     keep = np.ones(live.shape[:2], dtype=bool)
     keep[max(top, 0) : bottom + 1, max(left, 0) : right + 1] = False
     assert np.mean(np.abs(live - static)[keep]) < MAX_SAME_SCENE_DIFF
+
+
+def test_a_model_of_millimetres_is_drawn(fourbar_shots, fourbar_urdf, fourbar_yaml, tmp_path):
+    """meshcat's camera clips nearer than 0.01 m: the four-bar scaled to 3.7 mm, seen from
+    8 mm, was an empty page (the camera's clipping now follows the model's size)."""
+    clm = load_model(scaled_fourbar(fourbar_urdf, 0.01, tmp_path), fourbar_yaml, geometry=True)
+    scene = deflection_scene(clm, assemble(clm, [0.3]).q, "P", FOURBAR_WRENCH)
+    with DeflectionViewer(clm) as viewer:
+        viewer.show(scene, legend=False)
+        page = viewer.save_html(tmp_path / "tiny.html")
+    img, report = render(page.as_uri(), tmp_path / "tiny.png", tmp_path / "p")
+    assert report["ready"] == "ready"
+    assert content(img) > content(fourbar_shots["empty"][0]) + MIN_EXTRA_CONTENT
 
 
 # ------------------------------------------------------------------ UR5 (Collada), CaHyMan
