@@ -59,15 +59,35 @@ ILL_CONDITIONED = 1e8
 SCALED_TOL = 1e-8
 
 
-def characteristic_length(points: np.ndarray) -> float:
-    """Size [m] of a mechanism: diagonal of the bounding box of its points (n, 3) [m].
+#: Rows of the pairwise distances :func:`characteristic_length` forms at once (memory
+#: rows x n x 3 doubles: 40 MB for n = 10^4 points).
+DIAMETER_ROWS = 128
 
-    Returns 1.0 when the points coincide (a mechanism of one point has no size); this is
-    the only case where the length unit can then matter.
+
+def characteristic_length(points: np.ndarray) -> float:
+    """Size [m] of a mechanism: diameter of its points (n, 3) [m], the largest distance
+    between two of them (unchanged when the points move rigidly, unlike the diagonal of a
+    bounding box, which turns with the axes).
+
+    Returns 1.0 when the points coincide (a mechanism of one point has no size) or when
+    the diameter is not a finite float; this is the only case where the length unit can
+    then matter.
     """
     p = np.asarray(points, dtype=float).reshape(-1, 3)
-    size = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) if len(p) else 0.0
-    return size if size > 0.0 and np.isfinite(size) else 1.0
+    if len(p) < 2 or not np.all(np.isfinite(p)):
+        return 1.0
+    p = p - p[0]  # relative to a point of the set: translations far away cost no digits
+    scale = float(np.max(np.abs(p)))
+    if scale == 0.0:
+        return 1.0
+    p = p / scale  # squares of the scaled coordinates neither overflow nor underflow
+    square = 0.0
+    for start in range(0, len(p), DIAMETER_ROWS):  # (rows, n) distances at a time
+        block = p[start : start + DIAMETER_ROWS]
+        d2 = np.sum((block[:, None, :] - p[None, :, :]) ** 2, axis=2)
+        square = max(square, float(d2.max()))
+    size = math.sqrt(square) * scale
+    return size if 0.0 < size < math.inf else 1.0
 
 
 #: Smallest characteristic length [m]: the twist scaling 1 / L must be a finite float.

@@ -40,8 +40,8 @@ class Configuration:
         model: the model with closures and springs.
         q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints,
             of norm 1 to ``closedloop.model.UNIT_NORM_TOL`` (1e-6; InvalidInputError beyond)].
-        length: characteristic length L [m] (default: ``model.length``, the diagonal of the
-            bounding box of the joint origins at the neutral configuration).
+        length: characteristic length L [m] (default: ``model.length``, the diameter of
+            the joint origins and frames at the neutral configuration).
 
     Attributes:
         model: the :class:`ClosedLoopModel`.

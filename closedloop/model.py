@@ -147,11 +147,15 @@ def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
     * (nv,) read-only mask of the translational velocity coordinates (prismatic, the
       linear part of a free flyer...), read off the joint motion subspaces: a coordinate
       is linear when it moves its joint without rotating it;
-    * the characteristic length [m]: diagonal of the bounding box of the joint origins
+    * the characteristic length [m]: the diameter of the mechanism at the neutral
+      configuration, the largest distance between two of its joint origins and frames
+      (links, tools), not the world origin (the universe frame), so that moving the
+      mechanism in the world leaves it unchanged
       (:func:`closedloop.conditioning.characteristic_length`).
     """
     data = model.createData()
     pin.forwardKinematics(model, data, pin.neutral(model))
+    pin.updateFramePlacements(model, data)
     mask = np.zeros(model.nv, dtype=bool)
     for j in range(1, model.njoints):
         jm = model.joints[j]
@@ -163,7 +167,9 @@ def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
                     "nothing (a zero axis in the robot file?); expected an axis of non-zero length"
                 )
             mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
-    return frozen(mask), characteristic_length([M.translation for M in data.oMi])
+    points = [data.oMi[j].translation for j in range(1, model.njoints)]
+    points += [data.oMf[i].translation for i in range(1, model.nframes)]  # 0: the universe
+    return frozen(mask), characteristic_length(points)
 
 
 #: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
@@ -361,8 +367,9 @@ class ClosedLoopModel:
 
     @property
     def length(self) -> float:
-        """Characteristic length L [m]: diagonal of the bounding box of the joint origins at
-        the neutral configuration (1 m if they coincide); the default scale of the
+        """Characteristic length L [m]: the largest distance between two of the joint
+        origins and frames (not the world origin) at the neutral configuration (1 m if they
+        coincide), whatever the mechanism's place in the world; the default scale of the
         unit-free rules (:mod:`closedloop.conditioning`)."""
         return self._length
 

@@ -210,7 +210,7 @@ def test_springs_spanning_more_than_the_float_range_are_answered_as_the_single_q
 def _parallelogram_with_arm() -> ClosedLoopModel:
     """A parallelogram four-bar (crank sprung) carrying a sprung planar 2R arm on its
     rocker; at arm1 = 0 the rocker pivot, the arm's base and its elbow are aligned, and
-    the tip loses a direction (rank 2 of the planar twists below arm1 ~ 1.73e-6 rad)."""
+    the tip loses a direction (rank 2 of the planar twists below arm1 ~ 2.06e-6 rad)."""
     model = pin.Model()
 
     def joint(parent, name, x):
@@ -232,13 +232,13 @@ def _parallelogram_with_arm() -> ClosedLoopModel:
 
 
 def test_the_rank_threshold_does_not_depend_on_the_path():
-    """Across the rank threshold of the arm on a parallelogram, the partitioned path, the
-    null-space path and the stacked path decide the same rank (and condition number) at
-    every pose. The fast paths read the rank on J T, T = [I; X] not orthonormal, and put
-    the threshold about 1 % further out (arm1 = 1.7431e-6 against 1.7257e-6 rad): between
-    them, rank 2 (cond 61) against rank 3 (cond 2e14)."""
+    """Across the rank threshold of the arm on a parallelogram (arm1 = 2.0596e-6 rad at
+    the model's length, 1.35 m), the partitioned path, the null-space path and the stacked
+    path decide the same rank (and condition number) at every pose. When the fast paths
+    read the rank on J T, T = [I; X] not orthonormal, they put the threshold about 1 %
+    further out: between the two, rank 2 against rank 3 (cond 2e14)."""
     clm = _parallelogram_with_arm()
-    arm1 = np.linspace(1.70e-6, 1.78e-6, 17)
+    arm1 = np.linspace(2.02e-6, 2.10e-6, 17)
     Q = np.array([[0.9, -0.9, 0.9, a, 0.7] for a in arm1])  # the parallelogram closes exactly
     batch = _assert_as_single(clm, Q, "tip")
     assert set(batch.rank) == {2, 3}

@@ -125,6 +125,22 @@ def test_rank_and_condition_do_not_depend_on_the_length_unit():
 def test_characteristic_length():
     assert characteristic_length([[0, 0, 0], [3, 4, 0]]) == 5.0
     assert characteristic_length([[1, 1, 1]]) == 1.0  # one point has no size
+    assert characteristic_length([[2, 2, 2], [2, 2, 2]]) == 1.0
+
+
+def test_characteristic_length_is_the_diameter_at_any_size_place_and_orientation():
+    """The largest distance between two points: a cube's is its space diagonal, turned or
+    not (a bounding box turned with the cube grew by up to sqrt(3)), 1e155 or 1e-160 m
+    across (the squares of the distances leave the doubles: L fell back to 1 m), and 1e6
+    m from the origin (rounding eps 1e6 / sqrt(3) = 1.3e-10 there)."""
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    R = pin.exp3(np.array([0.3, -1.1, 0.7]))
+    for points in (corners, corners @ R.T, corners @ R.T + 1e6):
+        np.testing.assert_allclose(characteristic_length(points), np.sqrt(3.0), rtol=1e-9)
+    for scale in (1e155, 1e-160):
+        np.testing.assert_allclose(
+            characteristic_length(scale * corners), scale * np.sqrt(3.0), rtol=1e-15
+        )
 
 
 # ---------------------------------------------------------------- towards singularities
@@ -152,7 +168,8 @@ def test_stewart_towards_its_rotation_singularity(delta):
         res.K / scaled, K_ref / scaled, rtol=0, atol=tol * np.abs(K_ref / scaled).max()
     )
     assert res.ill_conditioned == (res.condition_number > ILL_CONDITIONED)
-    assert res.ill_conditioned == (delta <= 1e-3)  # cond ~ 160 / delta^2 here
+    # the flag of the reference's scaled K (cond ~ 83 / delta^2 at L = 1.93 m)
+    assert res.ill_conditioned == (np.linalg.cond(K_ref / scaled) > ILL_CONDITIONED)
 
 
 def _ur5():

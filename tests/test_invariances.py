@@ -347,15 +347,19 @@ WORLD_MOTIONS = {
     "shifted": pin.SE3(np.eye(3), np.array([0.3, -2.0, 5.0])),
     "both": pin.SE3(pin.exp3(np.array([-1.1, 0.2, 2.5])), np.array([0.1, 0.2, -0.3])),
 }
+#: Rounding of the characteristic length of a mechanism moved by at most 5 m: its points
+#: carry eps |p| of rounding against L ~ 1 m (measured 1e-15).
+RTOL_MOVED_LENGTH = 1e-13
 
 
 @pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("name", BUILDERS)
 def test_a_rigid_motion_of_the_world_turns_the_world_axes_compliance(name, path):
-    """The mechanism built with its world moved by M = (R, p), at the same characteristic
-    length: C in world axes becomes R6 C R6^T (R6 = diag(R, R)), G turns its wrench
-    columns, the rigid directions turn with R6; C in local axes, the point relative to
-    the frame, the rank, the condition number and det K do not change."""
+    """The mechanism built with its world moved by M = (R, p), 2 km away included: its
+    characteristic length does not change; C in world axes becomes R6 C R6^T
+    (R6 = diag(R, R)), G turns its wrench columns, the rigid directions turn with R6; C in
+    local axes, the point relative to the frame, the rank, the condition number and det K
+    do not change."""
     m, q, f = case(name)
     ref = {axes: cl.compliance(m, q, f, axes, path=path) for axes in ("world", "local")}
     L = ref["world"].length
@@ -363,8 +367,9 @@ def test_a_rigid_motion_of_the_world_turns_the_world_axes_compliance(name, path)
     for M in WORLD_MOTIONS.values():
         m2 = world_moved(m, M)
         R6 = np.kron(np.eye(2), M.rotation)
-        r = cl.compliance(m2, q, f, path=path, length=L)
-        local = cl.compliance(m2, q, f, "local", path=path, length=L)
+        np.testing.assert_allclose(m2.length, L, rtol=RTOL_MOVED_LENGTH)
+        r = cl.compliance(m2, q, f, path=path)
+        local = cl.compliance(m2, q, f, "local", path=path)
         w = ref["world"]
         assert r.rank == w.rank and local.rank == w.rank
         assert scaled_error(r.C, R6 @ w.C @ R6.T, L) <= rtol
@@ -383,6 +388,27 @@ def test_a_rigid_motion_of_the_world_turns_the_world_axes_compliance(name, path)
             np.testing.assert_allclose(
                 cl.StiffnessIndices.from_result(local).determinant, det, rtol=rtol
             )
+
+
+@pytest.mark.parametrize("distance", [1e3, 1e5])
+@pytest.mark.parametrize("name", BUILDERS)
+def test_far_from_the_world_origin_the_rules_do_not_change(name, distance):
+    """The mechanism moved 2.3 distance away from the world origin: its characteristic
+    length, and with it the rank, the condition number and the ill-conditioned flag, do
+    not change (L once spanned the world origin: the UR5 1 km away had cond 7.7e7 instead
+    of 70). Its points carry eps |p| of rounding, a relative error eps |p| / L in J,
+    amplified by cond(B) = sqrt(cond) in the condition number."""
+    m, q, f = case(name)
+    ref = cl.compliance(m, q, f)
+    M = pin.SE3(pin.exp3(np.array([0.2, 0.9, -0.4])), distance * np.array([1.0, -2.0, 0.5]))
+    m2 = world_moved(m, M)
+    rounding = 64 * EPS * np.linalg.norm(M.translation) / ref.length
+    np.testing.assert_allclose(m2.length, ref.length, rtol=rounding)
+    r = cl.compliance(m2, q, f)
+    assert r.rank == ref.rank and r.ill_conditioned == ref.ill_conditioned
+    np.testing.assert_allclose(
+        r.condition_number, ref.condition_number, rtol=rounding * np.sqrt(ref.condition_number)
+    )
 
 
 def test_world_and_local_axes_are_one_rotation_apart():
