@@ -341,10 +341,12 @@ def kinematic_factor(
 
 
 #: Largest spread of the scaled springs (stiffest / softest; k L^2 for prismatic joints)
-#: that the general path resolves. Its soft directions come from an SVD of sqrt(K_q) N,
-#: whose rounding reaches a soft spring beside the stiff ones at about 1e-22 sqrt(spread)
-#: relative on CaHyMan (1e-11 at 1e20, 3e-8 at 1e28, 5e-3 at 1e40; ``tests/test_core_edges.py``);
-#: the fast paths scale by the springs exactly, at any spread.
+#: that the general path resolves. Its basis N of the admissible motions mixes the
+#: coordinates: a soft direction's motion of a stiff coordinate, about 1/sqrt(spread), is
+#: known to eps absolutely, so C errs by up to eps sqrt(spread) relative, by mechanism
+#: (CaHyMan: 1e-12..1e-11 at a spread of 1.1e17, 5e-8 at 1.1e25; the spring factor's own
+#: grading is kept by :func:`spring_split`, so a Stewart platform's legs are exact at any
+#: spread); the fast paths scale by the springs exactly, at any spread.
 SPREAD_RESOLVED = 1e20
 
 
@@ -392,7 +394,14 @@ def spring_split(rows: np.ndarray, root: np.ndarray):
     _, V_k, Z, _ = split_factor(rows)
     seen = rows @ V_k
     S = root[:, None] * seen if root.ndim == 1 else root @ seen
-    _, sigma, Vt = svd(S, False) if S.size else (None, np.zeros(0), np.zeros((0, 0)))
+    if not S.size:
+        return V_k, np.zeros(0), Z
+    # the rows of S are graded by the springs: a QR with the rows in decreasing norm is
+    # row-wise stable (each row's error is eps of its own norm, so a soft spring keeps its
+    # digits beside a stiff one) and R carries the grading to its SVD; the SVD of S
+    # itself resolves a soft spring only to eps of the stiffest (eps sqrt(spread) relative)
+    R = np.linalg.qr(S[np.argsort(-np.einsum("ij,ij->i", S, S))], mode="r")
+    _, sigma, Vt = svd(R, False)
     return V_k @ Vt.T, sigma, Z
 
 

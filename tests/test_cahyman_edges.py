@@ -83,9 +83,10 @@ def test_a_determinant_beyond_the_float_range_is_an_error_not_inf_or_zero(backen
     np.testing.assert_allclose(size, expected + 6 * np.log10(factor), atol=0.05)  # 1 decimal
 
 
-#: The general path against the closed form with leg motors K_T up to 1e20 times the
-#: others: the soft springs beside the stiff ones keep ~1e-22 sqrt(spread) relative
-#: (closedloop.springs.SPREAD_RESOLVED); 1e-10 leaves a factor of 10 at 1e20.
+#: The general path against the closed form with leg motors K_T up to 1e20 (a scaled
+#: spread of 1.1e17): the soft springs beside the stiff ones keep ~4e-20 sqrt(spread)
+#: relative (closedloop.springs.SPREAD_RESOLVED; 1.2e-11 measured at 1e20); 1e-10 leaves
+#: a factor of 8.
 RTOL_GENERAL_PATH = 1e-10
 
 

@@ -578,6 +578,21 @@ def test_springs_far_apart_are_springs_on_both_paths(low, high):
             cl.compliance(clm, q, frame, path="null-space")
 
 
+def test_the_general_path_keeps_a_soft_leg_beside_stiff_ones():
+    """A Stewart platform whose leg springs span 1e20: the general path's C equals
+    A^-1 diag(1/k) A^-T (A the inverse Jacobian by hand, cond(A) ~ 10) to rounding, as
+    the fast path's does. Its spring factor diag(sqrt k) N is graded by rows; its SVD
+    resolved the soft leg only to eps of the stiff one: 1.6e-6 of C, eps sqrt(1e20)."""
+    k = mech.STEWART_K[0] * np.array([1.0, 1e4, 1e9, 1e13, 1e17, 1e20])
+    m = mech.stewart(position=(0.05, -0.02, 1.1), psi=0.2, tilt=(0.1, -0.05), k=k)
+    A_inv = np.linalg.inv(mech.stewart_inverse_jacobian(m.geometry["u"], m.geometry["r"]))
+    C_ref = (A_inv / k) @ A_inv.T
+    d = twist_scaling(m.clm.length)
+    for path in ("auto", "null-space"):
+        C = cl.compliance(m.clm, m.q, m.frame, path=path).C
+        assert _rel(C * np.outer(d, d), C_ref * np.outer(d, d)) < RTOL_SERIAL
+
+
 def test_springs_far_apart_are_answered_alike_at_every_scale():
     """Crank 1 N m/rad and axial springs r / L^2 (r the ratio of the scaled springs, 1e12
     to 1e19): the four-bar at every size s (1e-4, 1, 1e4) is answered on both paths with
