@@ -83,12 +83,13 @@ def check_count(name: str, value, least: int) -> None:
         raise InvalidInputError(f"{name} must be an integer >= {least}, got {_shown(value)}")
 
 
-def check_wrench(w) -> np.ndarray:
-    """(6,) validated wrench (fx, fy, fz [N], nx, ny, nz [N m]); raises InvalidInputError."""
-    w = real_array(w, "wrench").reshape(-1)
+def check_wrench(w, name: str = "wrench") -> np.ndarray:
+    """(6,) validated wrench (fx, fy, fz [N], nx, ny, nz [N m]); raises InvalidInputError
+    naming the argument ``name``."""
+    w = real_array(w, name).reshape(-1)
     if w.shape != (6,) or not np.all(np.isfinite(w)):
         raise InvalidInputError(
-            f"wrench must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"
+            f"{name} must be 6 finite values (fx fy fz [N], nx ny nz [N m]), got {w.tolist()}"
         )
     return w
 

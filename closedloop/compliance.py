@@ -270,7 +270,7 @@ def compliance(
         from .preload import preloaded_compliance
         from .statics import solve_equilibrium
 
-        w0 = np.zeros(6) if preload is None else preload
+        w0 = np.zeros(6) if preload is None else check_wrench(preload, "preload")
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
         return preloaded_compliance(state.model, eq, axes, length=state.length)
     with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error of _result

@@ -138,3 +138,11 @@ def test_a_wrench_that_overflows_the_equations_is_a_typed_error(fourbar):
         with pytest.raises(InvalidInputError, match=r"wrench \[1e\+308, 0.0.*overflows the "
                            r"equilibrium equations.*expected a far smaller load"):  # fmt: skip
             solve_equilibrium(clm, q0, "P", [1e308, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("preload", [[1.0, 2.0], [np.nan, 0, 0, 0, 0, 0], "6 N"])
+def test_a_bad_preload_is_named_as_the_preload(fourbar, preload):
+    """compliance(..., preload=...) names its own argument, not a "wrench"."""
+    clm, q0 = fourbar
+    with pytest.raises(InvalidInputError, match=r"^preload"):
+        cl.compliance(clm, q0, "P", preload=preload)
