@@ -12,8 +12,9 @@ top face, z up, x towards leg 1):
   - ``b_k_axial`` (prismatic, spring K_b) along the crank, at its tip B_k;
   - ``c_k`` (revolute, passive) at B_k, axis u_k: the coupler ``coupler_k`` (length a,
     along its local y); undeformed it stays parallel to t_k, so c_k = -alpha_k;
-  - ``s_k`` (prismatic, passive) at the coupler midpoint C_k along u_k: the slider and
-    connecting bar ``bar_k`` (length h, along the coupler normal) ending at ``H_k``;
+  - ``s_k`` (prismatic, passive) at the coupler midpoint C_k (frame ``coupler_k_mid``)
+    along u_k: the slider and connecting bar ``bar_k`` (length h, along the coupler
+    normal) ending at ``H_k``;
   - ``d_k`` (revolute, passive) at O_k + (a/2) t_k, axis u_k: the follower crank
     ``crank_d_k``; ``d_k_axial`` (prismatic, spring K_d) to its tip ``crank_d_k_tip``,
     closed to the coupler's far end ``coupler_k_end`` by a 3D point closure.
@@ -37,8 +38,10 @@ half at M, so that its centre is at L + s_4 / 2 from Q, as eq. (11) has it. Each
 links carry m_b, m_c, m_d, m_h at their middles (the paper names no leg masses).
 
 Links as beams (``CaHyManParams.links_as_beams``, :func:`beams`): each leg's input crank
-``crank_b_k`` (to ``b_k_axial``, length b), coupler ``coupler_k`` (to its far end, length
-a; the slider at C_k stays rigid with B_k), follower crank ``crank_d_k`` (to
+``crank_b_k`` (to ``b_k_axial``, length b), coupler as two beams of length a / 2 meeting
+at the slider's C_k (``coupler_k`` from B_k to ``coupler_k_mid``, ``coupler_k_mid`` to the
+far end: the load of the connecting bar bends a coupler held at both ends), follower
+crank ``crank_d_k`` (to
 ``d_k_axial``, length b) and connecting bar ``bar_k`` (to H_k, length h) are tubes
 (d_leg, t_leg), the arm ``arm`` (QM2, to ``arm_axial``, length L) a tube (d_arm, t_arm),
 of material E_beam, G_beam, each a cantilever from its link frame (Euler-Bernoulli,
@@ -117,7 +120,8 @@ def beams(p: CaHyManParams) -> dict[str, dict]:
     out = {}
     for k in LEGS:
         out[f"crank_b_{k}"] = tube(f"b_{k}_axial", p.d_leg, p.t_leg)
-        out[f"coupler_{k}"] = tube(f"coupler_{k}_end_fixed", p.d_leg, p.t_leg)
+        out[f"coupler_{k}"] = tube(f"coupler_{k}_mid_fixed", p.d_leg, p.t_leg)
+        out[f"coupler_{k}_mid"] = tube(f"coupler_{k}_end_fixed", p.d_leg, p.t_leg)
         out[f"crank_d_{k}"] = tube(f"d_{k}_axial", p.d_leg, p.t_leg)
         out[f"bar_{k}"] = tube(f"H_{k}_fixed", p.d_leg, p.t_leg)
     out["arm"] = tube("arm_axial", p.d_arm, p.t_arm)
@@ -256,9 +260,10 @@ def _leg(k: int, p: CaHyManParams, z: _Sizes) -> list[str]:
         _link(f"coupler_{k}",
               _visual(_cylinder(z.rod, p.a), "orange", (0, p.a / 2, 0), _ROD_ALONG_Y),
               masses=[(p.m_c, (0, p.a / 2, 0))]),
-        *_fixed_frame(f"coupler_{k}_end", f"coupler_{k}", (0, p.a, 0), hinge),
-        _joint(f"s_{k}", "prismatic", f"coupler_{k}", f"bar_{k}", (0, p.a / 2, 0),
-               axis=(1, 0, 0), limits=(-p.r_e - p.r_p, p.r_e + p.r_p, 1e3)),
+        *_fixed_frame(f"coupler_{k}_mid", f"coupler_{k}", (0, p.a / 2, 0)),
+        *_fixed_frame(f"coupler_{k}_end", f"coupler_{k}_mid", (0, p.a / 2, 0), hinge),
+        _joint(f"s_{k}", "prismatic", f"coupler_{k}_mid", f"bar_{k}", axis=(1, 0, 0),
+               limits=(-p.r_e - p.r_p, p.r_e + p.r_p, 1e3)),
         _link(f"bar_{k}", _visual(_box((4 * z.rod, 3 * z.rod, 3 * z.rod)), "grey"),
               _visual(_cylinder(z.rod, p.h), "green", (0, 0, p.h / 2)),
               masses=[(p.m_h, (0, 0, p.h / 2))]),

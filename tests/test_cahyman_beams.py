@@ -76,10 +76,24 @@ def test_beams_keep_the_kinematics(lumped):
     L_MM2, the telescope forward by as much) and the closures hold at the mapped pose."""
     model, q = lumped
     flex = beam_model()
-    assert flex.clm.model.nv == model.clm.model.nv + 6 * 14  # 4 beams a leg, QM2, MM2
+    assert flex.clm.model.nv == model.clm.model.nv + 6 * 17  # 5 beams a leg, QM2, MM2
     qb = map_configuration(model.clm.model, flex.clm.model, q)
     assert flex.residual(qb) < 1e-12
     np.testing.assert_allclose(flex.pose(qb).M, closed_form_pose(ALPHA, ALPHA4, S4).M, atol=1e-12)
+
+
+def test_the_slider_loads_the_coupler_between_its_two_halves():
+    """The coupler is held at both ends (crank b at B_k, crank d at its far end) and loaded
+    by the connecting bar at its midpoint C_k: the slider s_k rides on the tip of the beam
+    from B_k, where the beam to the far end starts (it rode on B_k, so that the bar's load
+    reached B_k rigidly and the coupler bent as a cantilever of length a)."""
+    model = beam_model().clm.model
+    for k in (1, 2, 3):
+        first = model.getJointId(f"coupler_{k}_beam")
+        second = model.getJointId(f"coupler_{k}_mid_beam")
+        assert model.parents[model.getJointId(f"s_{k}")] == first
+        assert model.parents[second] == first
+        assert model.frames[model.getFrameId(f"coupler_{k}_end")].parentJoint == second
 
 
 def test_very_stiff_beams_tend_to_the_rigid_link_model(lumped):
