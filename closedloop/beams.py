@@ -126,15 +126,19 @@ def section_from_spec(beam: str, spec) -> Section:
     y_axis = spec.pop("y_axis", None)
     if y_axis is not None:
         try:
-            y = np.asarray([float(v) for v in y_axis]) if isinstance(y_axis, list | tuple) else None
+            # a list, tuple or array of numbers; not a string, a mapping or a scalar
+            seq = isinstance(y_axis, list | tuple | np.ndarray) and np.ndim(y_axis) == 1
+            y = np.asarray([float(v) for v in y_axis]) if seq else None
         except (TypeError, ValueError):
             y = None
         if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
             raise BeamError(beam, f"section y_axis is {y_axis!r}; expected 3 numbers, not all 0")
-        y_axis = tuple(y)
+        y_axis = tuple(y.tolist())
     kap = {k: _positive(beam, f"section {k}", spec.pop(k)) for k in ("kappa_y", "kappa_z")
            if k in spec}  # fmt: skip
     shape = spec.pop("shape", None)
+    if shape is not None and not isinstance(shape, str):
+        raise BeamError(beam, f"section shape is {shape!r}; expected one of {list(SHAPES)}")
     if shape is None:
         if set(spec) != set(EXPLICIT):
             raise BeamError(beam, f"section keys {sorted(spec)}; expected shape: "

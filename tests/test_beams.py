@@ -158,6 +158,15 @@ def test_timoshenko_tube_adds_cowper_shear(tmp_path):
     assert_close_in_norm(diff, expected, RTOL_DIFFERENCE)
 
 
+def test_a_y_axis_given_as_an_array_is_the_same_as_its_list(tmp_path):
+    """From Python, y_axis may be a NumPy array (it was refused as "expected 3 numbers")."""
+    rect = {"shape": "rectangle", "b": 0.02, "h": 0.05}
+    listed = cantilever(tmp_path, {**rect, "y_axis": Y_AXIS.tolist()})[0]
+    array = cantilever(tmp_path, {**rect, "y_axis": Y_AXIS})[0]
+    np.testing.assert_array_equal(array.spring_blocks["ground_beam"],
+                                  listed.spring_blocks["ground_beam"])  # fmt: skip
+
+
 def test_stiffness_6x6_equals_its_beam(tmp_path):
     clm, q = cantilever(tmp_path, {"shape": "circle", "d": 0.03})
     K = clm.spring_blocks["ground_beam"]
@@ -487,6 +496,8 @@ def _tip_file(tmp_path):
         ({"section": {"shape": "tube", "d": 0.02, "t": 0.015}},
          r"beam 'arm': tube wall t = 0.015 m is thicker than its radius 0.01 m"),
         ({"section": {"shape": "hexagon", "d": 0.02}}, r"section 'hexagon'.*expected one of"),
+        ({"section": {"shape": ["tube"], "d": 0.02, "t": 0.002}},  # was a TypeError
+         r"beam 'arm': section shape is \['tube'\]; expected one of \['circle', 'tube'"),
         ({"end": "nowhere"}, r"beam 'arm': end 'nowhere' is not a joint of the model"),
         ({"end": "hinge"}, r"beam 'arm': end 'hinge' is not a child joint of the link"),
         ({"theory": "bernoulli"}, r"theory 'bernoulli'; expected one of"),
