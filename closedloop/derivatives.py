@@ -52,13 +52,16 @@ def central_differences(
     """(n, nv) derivative df/dq of f (n,) along the tangent of q (``pin.integrate``).
 
     Column b is (f(q + h e_b) - f(q - h e_b)) / 2h; only ``columns`` (default: all) are
-    computed, the others are 0.
+    computed, the others are 0 (all of them when there is none: a model without degrees
+    of freedom, or an empty ``columns``). Along a prismatic coordinate the Jacobians and
+    gravity forces differentiated by the library are affine (the links beyond it translate
+    rigidly): a step in metres then costs no truncation error whatever the mechanism's size.
 
     Args:
         model: the Pinocchio model of q.
         q: (nq,) configuration.
         f: function of a configuration (nq,) returning (n,) values.
-        columns: tangent indices b to differentiate along (at least one).
+        columns: tangent indices b to differentiate along.
         h: step [rad or m].
     """
     columns = range(model.nv) if columns is None else columns
@@ -70,4 +73,4 @@ def central_differences(
         if out is None:
             out = np.zeros((d.size, model.nv))
         out[:, b] = d
-    return out
+    return np.zeros((np.asarray(f(q)).size, model.nv)) if out is None else out

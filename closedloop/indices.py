@@ -40,7 +40,12 @@ pitch h (same sign as lambda) and an axis; ``K = sum_i k_i W_i W_i^T`` with ``W_
 unit wrench on screw i and ``k_i = lambda_i / (2 h_i) > 0`` [N/m].
 
 A rank-deficient C (rigid directions) has no K; indices that need K raise
-:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned.
+:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned. A
+non-symmetric C (a tangent compliance under a preload moment, :meth:`StiffnessIndices.
+from_result`) has K = C^-1, its determinant and 2-norm condition numbers (as
+:func:`batch_indices`); the indices of a symmetric matrix (eigenvalues, principal
+stiffnesses, eigenscrews) raise :class:`~closedloop.exceptions.InvalidInputError`, as do
+the eigenscrews of a K that is not positive definite (an unstable equilibrium).
 """
 
 from __future__ import annotations
@@ -132,6 +137,12 @@ def _check_length(length) -> float | None:
     return None if length is None else check_length(length)
 
 
+def _asymmetry(M: np.ndarray) -> float:
+    """max|M - M^T| / max|M| of a square matrix (0 for a zero matrix)."""
+    top = np.max(np.abs(M))
+    return float(np.max(np.abs(M - M.T)) / top) if top > 0.0 else 0.0
+
+
 @dataclass(frozen=True)
 class StiffnessIndices:
     """Stiffness indices of one Cartesian compliance (see the module docstring).
@@ -186,21 +197,27 @@ class StiffnessIndices:
             InvalidInputError: K is not a finite symmetric positive definite (6, 6) matrix.
         """
         K = _check_matrix(K, "stiffness")
-        if not np.allclose(K, K.T, rtol=SCALED_TOL, atol=0.0):
-            raise InvalidInputError("stiffness is not symmetric")
         length = _check_length(length)
         scale = 1.0 if length is None else length
         d = twist_scaling(scale)
-        # positive definite by the eigenvalues of the scaled K_s = D^-1 K D^-1, not by
-        # whether a Cholesky factorisation happens to fail on an unresolved one
-        with np.errstate(over="ignore"):
-            K_s = 0.5 * (K + K.T) / np.outer(d, d)
+        # symmetric and positive definite as judged on the scaled K_s = D^-1 K D^-1 (the
+        # rule of the compliances, unit-free: entries that vanish but for rounding count
+        # like the others), not by whether a Cholesky factorisation happens to fail
+        with np.errstate(over="ignore", invalid="ignore"):
+            K_s = K / np.outer(d, d)
         if not np.isfinite(K_s).all():
             raise InvalidInputError(
                 f"stiffness scaled to the length L = {scale:g} m (K L^2 for translations) "
                 f"leaves the float range (largest entry {np.abs(K).max():.3g}); give a "
                 "smaller length or a smaller stiffness"
             )
+        asymmetry = _asymmetry(K_s)
+        if asymmetry > SCALED_TOL:
+            raise InvalidInputError(
+                f"stiffness is not symmetric: scaled asymmetry max|K_s - K_s^T| / max|K_s| "
+                f"= {asymmetry:.2e} > {SCALED_TOL:g}"
+            )
+        K_s = 0.5 * (K_s + K_s.T)
         kappa, U = np.linalg.eigh(K_s)
         if not kappa[-1] > 0.0 or kappa[0] <= RESOLVED_RTOL * kappa[-1]:
             raise InvalidInputError(
@@ -241,6 +258,22 @@ class StiffnessIndices:
                 f"{what}: the compliance has rank {self.rank} < 6, the stiffness does not "
                 f"exist (infinitely stiff along {describe_directions(self.rigid_directions)})",
                 self.rigid_directions,
+            )
+
+    @property
+    def is_symmetric(self) -> bool:
+        """True when C is symmetric to :data:`SCALED_TOL` (judged on the scaled C_s); a
+        preload moment makes a tangent compliance non-symmetric (:meth:`from_result`)."""
+        d = twist_scaling(self._spectrum.length)
+        return _asymmetry(self.C * np.outer(d, d)) <= SCALED_TOL
+
+    def _require_symmetric(self, what: str) -> None:
+        if not self.is_symmetric:
+            d = twist_scaling(self._spectrum.length)
+            raise InvalidInputError(
+                f"{what}: defined for a symmetric compliance only, and this one is not (scaled "
+                f"asymmetry {_asymmetry(self.C * np.outer(d, d)):.2e} > {SCALED_TOL:g}: a "
+                "preload moment makes the tangent compliance non-symmetric)"
             )
 
     def _length(self, length: float | None) -> float:
@@ -316,13 +349,39 @@ class StiffnessIndices:
             det = float(np.ldexp(product, total))
         return finite_determinant(det, (np.log2(abs(product)) + total) * np.log10(2.0))
 
+    def _eigenvalues(self, t: np.ndarray, what: str) -> np.ndarray:
+        """(6,) eigenvalues of T^-1 K T^-1 (t: (6,) diagonal of T^-1), ascending, each from
+        whichever of T C T and T^-1 K T^-1 resolves it (:func:`inverse_pair_eigenvalues`)."""
+        self._require_full_rank(what)
+        self._require_symmetric(what)
+        tt = np.outer(t, t)
+        K = self.K * tt
+        lam = inverse_pair_eigenvalues(self.C / tt, K)
+        return readonly(np.linalg.eigvalsh(K) if lam is None else lam)
+
+    def _condition(self, t: np.ndarray) -> float:
+        """cond(T^-1 K T^-1): max |lambda| / min |lambda| of a symmetric C, the 2-norm
+        condition number of a non-symmetric one (as :func:`batch_indices`)."""
+        self._require_full_rank("the condition number of K")
+        if not self.is_symmetric:
+            return float(np.linalg.cond(self.K * np.outer(t, t)))
+        lam = np.abs(self._eigenvalues(t, "the condition number of K"))
+        return float(lam.max() / lam.min())
+
+    def _homogenising(self, length: float | None) -> np.ndarray:
+        """(6,) diagonal of T^-1 = diag(1, 1, 1, 1/L, 1/L, 1/L), L = ``length`` [m]."""
+        return np.r_[np.ones(3), np.full(3, 1.0 / self._length(length))]
+
     @property
     def eigenvalues(self) -> np.ndarray:
         """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring),
-        each from whichever of C and K resolves it (:func:`inverse_pair_eigenvalues`)."""
-        self._require_full_rank("the eigenvalues of K")
-        lam = inverse_pair_eigenvalues(self.C, self.K)
-        return readonly(np.linalg.eigvalsh(self.K) if lam is None else lam)
+        each from whichever of C and K resolves it (:func:`inverse_pair_eigenvalues`).
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            InvalidInputError: C is not symmetric (a preload moment).
+        """
+        return self._eigenvalues(np.ones(6), "the eigenvalues of K")
 
     @property
     def compliance_eigenvalues(self) -> np.ndarray:
@@ -332,25 +391,26 @@ class StiffnessIndices:
     @property
     def condition_number(self) -> float:
         """cond(K) = cond(C) of the SI matrix, max |lambda| / min |lambda| (positive also for
-        an indefinite K, at an unstable preloaded equilibrium): depends on the length unit
-        and the point."""
-        lam = np.abs(self.eigenvalues)
-        return float(lam.max() / lam.min())
+        an indefinite K, at an unstable preloaded equilibrium; the 2-norm condition number
+        of a non-symmetric K): depends on the length unit and the point."""
+        return self._condition(np.ones(6))
 
     def homogenised_stiffness(self, length: float | None = None) -> np.ndarray:
-        """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]."""
-        L = self._length(length)
-        t = np.r_[np.ones(3), np.full(3, 1.0 / L)]
+        """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]
+        (default: the instance's ``length``)."""
+        t = self._homogenising(length)
         return readonly(self.K * np.outer(t, t))
 
     def homogenised_eigenvalues(self, length: float | None = None) -> np.ndarray:
-        """(6,) eigenvalues of K_h [N/m], ascending."""
-        return readonly(np.linalg.eigvalsh(self.homogenised_stiffness(length)))
+        """(6,) eigenvalues of K_h [N/m], ascending, each from whichever of K_h and
+        C_h = T C T resolves it (as :attr:`eigenvalues`); at L equal to the length of the
+        scaling they are those of K_s / L^2 (K_s: :mod:`closedloop.conditioning`)."""
+        return self._eigenvalues(self._homogenising(length), "the homogenised eigenvalues")
 
     def homogenised_condition_number(self, length: float | None = None) -> float:
-        """cond(K_h), dimensionless; depends on L and on the reference point."""
-        lam = self.homogenised_eigenvalues(length)
-        return float(lam[-1] / lam[0])
+        """cond(K_h), dimensionless, as :attr:`condition_number`; depends on L and on the
+        reference point (at the length of the scaling, :attr:`scaled_condition_number`)."""
+        return self._condition(self._homogenising(length))
 
     # ------------------------------------------------------------------ blocks
     @property
@@ -377,6 +437,7 @@ class StiffnessIndices:
 
     def _principal(self, block: slice, which: str) -> PrincipalStiffness:
         kind = "translational" if block == T else "rotational"
+        self._require_symmetric(f"the {which} {kind} stiffness")
         c, V = self._block_eig(block, f"{which} {kind} stiffness", which == "max")
         i = -1 if which == "min" else 0
         return PrincipalStiffness(float(1.0 / c[i]), _unit(V[:, i]))
@@ -404,18 +465,48 @@ class StiffnessIndices:
     # ------------------------------------------------------------------ eigenscrews
     @property
     def eigenscrews(self) -> tuple[Eigenscrew, ...]:
-        """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first)."""
-        import scipy.linalg  # on demand: its import costs a command line's start-up
+        """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first).
 
-        K = self.K
-        mu, X = scipy.linalg.eigh(DELTA, K)  # Delta x = mu K x, X^T K X = I; lambda = 1/mu
-        lam = 1.0 / mu
+        With factors K = F F^T and C = B B^T, ``F^T Delta F`` has the eigenvalues lambda
+        (twist ``Delta F z``) and ``B^T Delta B`` their inverses (twist ``B z``): each
+        screw is taken from the one that resolves it, the stiff ones from K and the soft
+        ones from C (about eps sqrt(cond) relative, where a Cholesky factorisation of K
+        loses the soft ones at eps cond, and fails near a singular pose).
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            InvalidInputError: C is not symmetric, or K not positive definite (a preloaded
+                equilibrium): the decomposition does not exist.
+        """
+        what = "the eigenscrews of K"
+        self._require_full_rank(what)
+        self._require_symmetric(what)
+        C, K = 0.5 * (self.C + self.C.T), 0.5 * (self.K + self.K.T)
+        (mu, V), (kappa, U) = np.linalg.eigh(C), np.linalg.eigh(K)
+        if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
+            raise InvalidInputError(
+                f"{what} need a positive definite K; its eigenvalues run from {kappa[0]:.3g} "
+                f"to {kappa[-1]:.3g} (an unstable preloaded equilibrium)"
+            )
+        F, B = U * np.sqrt(np.clip(kappa, 0.0, None)), V * np.sqrt(np.clip(mu, 0.0, None))
+        lam_K, Z_K = np.linalg.eigh(F.T @ DELTA @ F)  # ascending: 3 negative, 3 positive
+        nu, Z_C = np.linalg.eigh(B.T @ DELTA @ B)  # 1 / lambda, ascending
+        # the lambda_K of the same screw: the inertia of Delta decides the positions
+        pair = [2, 1, 0, 5, 4, 3]
+        nu, Z_C = nu[pair], Z_C[:, pair]
+        with np.errstate(divide="ignore"):
+            lam_C = 1.0 / nu
+        # soft screws (|lambda| below the geometric mean of the extremes) from C
+        soft = np.abs(lam_C) <= np.sqrt(np.abs(lam_K).max() / np.abs(nu).max())
+        lam = np.where(soft, lam_C, lam_K)
+        X = np.where(soft, B @ Z_C, DELTA @ F @ Z_K)  # twists, each to a scale
         screws = []
-        for i in np.argsort(lam):
+        for i in np.argsort(lam, kind="stable"):
             v, w = X[:3, i], X[3:, i]
             n2 = float(w @ w)
             pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
-            screws.append(Eigenscrew(lam[i], pitch, _unit(w), point, lam[i] ** 2 * n2))
+            lam_i = float(lam[i])
+            screws.append(Eigenscrew(lam_i, pitch, _unit(w), point, lam_i / (2.0 * pitch)))
         return tuple(screws)
 
     # ------------------------------------------------------------------ export
@@ -432,7 +523,7 @@ class StiffnessIndices:
             try:
                 value = getattr(self, name)
                 out[name] = _jsonable(value() if callable(value) else value)
-            except (RigidDirectionsError, SingularConfigurationError) as e:
+            except (RigidDirectionsError, SingularConfigurationError, InvalidInputError) as e:
                 out[name], missing[name] = None, str(e)
         out["rigid_directions"] = _jsonable(out["rigid_directions"])
         out.update(missing=missing, order=list(TWIST_LABELS), units=INDEX_UNITS)
