@@ -33,6 +33,7 @@ from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
+from closedloop.conditioning import SCALED_TOL, scaled_asymmetry
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices, lu_determinant
@@ -373,7 +374,7 @@ def _indices(result: BackendResult, params: CaHyManParams, backend: str):
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)
-    if not np.allclose(result.C, result.C.T, rtol=1e-9, atol=0.0):
+    if scaled_asymmetry(result.C, params.length) > SCALED_TOL:
         return None
     indices = StiffnessIndices.from_compliance(result.C, length=params.length)
     if not indices.is_full_rank:

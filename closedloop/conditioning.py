@@ -123,6 +123,20 @@ def twist_scaling(length: float) -> np.ndarray:
     return np.array((s, s, s, 1.0, 1.0, 1.0))
 
 
+def scaled_asymmetry(C: np.ndarray, lengths) -> np.ndarray | float:
+    """max |C_s - C_s^T| / max |C_s| of compliances C (..., 6, 6) [SI] scaled at the
+    lengths L (...,) [m] (C_s = D C D, :func:`twist_scaling`), 0 for a zero C: the
+    asymmetry that :data:`SCALED_TOL` bounds, unit-free, and blind to entries that vanish
+    but for rounding (an entry-by-entry test takes them for an asymmetry)."""
+    d = twist_scalings(np.atleast_1d(lengths)).reshape(*np.shape(lengths), 6)
+    with np.errstate(over="ignore", invalid="ignore"):
+        C_s = C * d[..., :, None] * d[..., None, :]
+        top = np.abs(C_s).max(axis=(-2, -1))
+        skew = np.abs(C_s - np.swapaxes(C_s, -1, -2)).max(axis=(-2, -1))
+        out = np.where(top > 0.0, skew / np.where(top > 0.0, top, 1.0), 0.0)
+    return float(out) if out.ndim == 0 else out
+
+
 def twist_scalings(lengths: np.ndarray) -> np.ndarray:
     """(n, 6) diagonals of D (:func:`twist_scaling`) for the lengths L (n,) [m]."""
     return np.where(np.arange(6) < 3, 1.0 / np.asarray(lengths, dtype=float)[:, None], 1.0)

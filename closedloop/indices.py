@@ -63,6 +63,7 @@ from .conditioning import (
     Spectrum,
     batch_rank,
     check_length,
+    scaled_asymmetry,
     spectrum_from_compliance,
     spectrum_from_factor,
     twist_scaling,
@@ -137,12 +138,6 @@ def _check_length(length) -> float | None:
     return None if length is None else check_length(length)
 
 
-def _asymmetry(M: np.ndarray) -> float:
-    """max|M - M^T| / max|M| of a square matrix (0 for a zero matrix)."""
-    top = np.max(np.abs(M))
-    return float(np.max(np.abs(M - M.T)) / top) if top > 0.0 else 0.0
-
-
 @dataclass(frozen=True)
 class StiffnessIndices:
     """Stiffness indices of one Cartesian compliance (see the module docstring).
@@ -211,7 +206,7 @@ class StiffnessIndices:
                 f"leaves the float range (largest entry {np.abs(K).max():.3g}); give a "
                 "smaller length or a smaller stiffness"
             )
-        asymmetry = _asymmetry(K_s)
+        asymmetry = scaled_asymmetry(K_s, 1.0)  # K_s is scaled already
         if asymmetry > SCALED_TOL:
             raise InvalidInputError(
                 f"stiffness is not symmetric: scaled asymmetry max|K_s - K_s^T| / max|K_s| "
@@ -264,15 +259,14 @@ class StiffnessIndices:
     def is_symmetric(self) -> bool:
         """True when C is symmetric to :data:`SCALED_TOL` (judged on the scaled C_s); a
         preload moment makes a tangent compliance non-symmetric (:meth:`from_result`)."""
-        d = twist_scaling(self._spectrum.length)
-        return _asymmetry(self.C * np.outer(d, d)) <= SCALED_TOL
+        return scaled_asymmetry(self.C, self._spectrum.length) <= SCALED_TOL
 
     def _require_symmetric(self, what: str) -> None:
         if not self.is_symmetric:
-            d = twist_scaling(self._spectrum.length)
+            asymmetry = scaled_asymmetry(self.C, self._spectrum.length)
             raise InvalidInputError(
                 f"{what}: defined for a symmetric compliance only, and this one is not (scaled "
-                f"asymmetry {_asymmetry(self.C * np.outer(d, d)):.2e} > {SCALED_TOL:g}: a "
+                f"asymmetry {asymmetry:.2e} > {SCALED_TOL:g}: a "
                 "preload moment makes the tangent compliance non-symmetric)"
             )
 

@@ -41,7 +41,7 @@ import pinocchio as pin
 from .assembly import free_coordinates
 from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
-from .conditioning import batch_rank
+from .conditioning import SCALED_TOL, batch_rank, scaled_asymmetry
 from .exceptions import (
     AssemblyError,
     InvalidInputError,
@@ -67,8 +67,6 @@ CHUNK = 500
 #: (:func:`border_starts`; fewer where they span more than INPUT_STEP), and the stride of
 #: that pass across a gap of failed points.
 BORDER_STRIDE = 16
-#: Relative tolerance of the symmetry test of a compliance.
-SYMMETRY_RTOL = 1e-9
 #: Relative tolerance on equal steps for extrapolating a warm start.
 EQUAL_STEP_RTOL = 1e-9
 
@@ -590,8 +588,8 @@ def classify(data: ChunkResult) -> np.ndarray:
     """
     C, rank, codes = data.C, data.rank, data.status
     computed = (codes == OK) & np.all(np.isfinite(C), axis=(1, 2))
-    Ct = C.swapaxes(1, 2)
-    symmetric = computed & np.all(np.abs(C - Ct) <= SYMMETRY_RTOL * np.abs(Ct), axis=(1, 2))
+    symmetric = computed & (scaled_asymmetry(np.where(computed[:, None, None], C, 0.0),
+                                             data.length) <= SCALED_TOL)  # fmt: skip
     unknown = symmetric & (rank < 0)
     if np.any(unknown):
         rank[unknown], _, psd = batch_rank(C[unknown], data.length[unknown])

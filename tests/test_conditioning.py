@@ -18,6 +18,7 @@ from closedloop import (
 from closedloop.conditioning import (
     batch_rank,
     characteristic_length,
+    scaled_asymmetry,
     spectrum_from_compliance,
     spectrum_from_factor,
 )
@@ -269,3 +270,18 @@ def test_ur5_decision_is_the_same_in_the_api_the_indices_the_cli_and_the_json(el
     assert doc["rank"] == res.rank == StiffnessIndices.from_result(res).rank
     assert doc["ill_conditioned"] == res.ill_conditioned
     assert (doc["K"] is None) == (not res.is_full_rank)
+
+
+def test_scaled_asymmetry_sees_through_rounding_of_zero_entries():
+    """A compliance symmetric but for rounding in entries that vanish (+-1e-25 where the
+    others are 1e-6) has a scaled asymmetry of rounding; an entry-by-entry test called it
+    non-symmetric. A real asymmetry (a preload moment) is seen, at each of n lengths."""
+    C = np.diag([1e-6, 2e-6, 3e-6, 1e-4, 2e-4, 3e-4])
+    C[0, 5], C[5, 0] = 1e-25, -1e-25
+    assert scaled_asymmetry(C, 0.5) < 1e-18
+    skew = C.copy()
+    skew[0, 4] = 1e-7  # [m/(N m)], against its transpose 0
+    values = scaled_asymmetry(np.array([C, skew]), np.array([0.5, 2.0]))
+    assert values.shape == (2,) and values[0] < 1e-18
+    np.testing.assert_allclose(values[1], 1e-7 / 2.0 / (3e-4), rtol=1e-12)  # / L, / max C_s
+    assert scaled_asymmetry(np.zeros((6, 6)), 1.0) == 0.0

@@ -11,7 +11,7 @@ from helpers import REPO, assert_close_in_norm
 
 import closedloop as cl
 from closedloop.io import reference_configuration
-from closedloop.map_engine import ModelSource, run_tasks
+from closedloop.map_engine import OK, ChunkResult, ModelSource, classify, run_tasks
 from closedloop.maps import INDICES, stiffness_map
 
 #: The four-bar of urdf/fourbar.urdf with its ground link 0.42 m instead of 0.3 m: crank
@@ -326,3 +326,15 @@ def test_a_map_starts_on_the_mode_of_the_single_query(fourbar_urdf, fourbar_yaml
     for chunk in (1, 3):  # the first chunk, and the border pass of the others
         m = stiffness_map(clm, "P", sweeps={"crank": [1.0, 1.2, 1.4]}, chunk=chunk)
         assert_close_in_norm(m.C[0], single, 1e-9)
+
+
+def test_a_closed_form_symmetric_but_for_rounding_is_classified_symmetric():
+    """A map point's C from a closed form, symmetric but for +-1e-25 in an entry that
+    vanishes: symmetric, ranked and ok (the entry-by-entry test took it for the
+    non-symmetric C of a preload moment, whose principal stiffnesses are NaN)."""
+    out = ChunkResult.empty(1)
+    C = np.diag([1e-6, 2e-6, 3e-6, 1e-4, 2e-4, 3e-4])
+    C[0, 5], C[5, 0] = 1e-25, -1e-25
+    out.C[0], out.length[0] = C, 0.5
+    assert classify(out).tolist() == [True]
+    assert out.status[0] == OK and out.rank[0] == 6
