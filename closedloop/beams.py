@@ -594,7 +594,13 @@ def beam_stiffness(
     return site.end, K
 
 
-def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None):
+#: An anchor on a beam's link within this fraction of the beam's length of its tip is at
+#: the tip (the same point written twice: its rounding, far below).
+TIP_RTOL = 1e-9
+
+
+def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None,
+                anchors=()):  # fmt: skip
     """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
     inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
 
@@ -603,18 +609,23 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
         geometries: geometry models (or None) of ``model``, carried over.
         beams: link name -> specification.
         urdf: the URDF file of ``model``, for ``section: geometry`` (None: not allowed).
+        anchors: (joint index, placement in the joint's frame) of points of ``model``
+            (the closures' anchors), carried over: an anchor at a beam's tip (to
+            :data:`TIP_RTOL` of its length) moves with the tip, the others stay on their
+            joints.
 
     Returns:
-        (model, geometries, springs, index): the new model, its geometry models, the
-        block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]} and the map
-        old joint index -> new joint index.
+        (model, geometries, springs, anchors): the new model, its geometry models, the
+        block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]} and the anchors
+        on the new model.
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
     """
     if not isinstance(beams, Mapping):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
-    springs, index = {}, {j: j for j in range(model.njoints)}
+    springs = {}
+    anchors = [(int(j), pin.SE3(M)) for j, M in anchors]
     geometries = list(geometries)
     wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
@@ -626,20 +637,29 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
                             f"{name!r}): one beam a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(beam, [])
         end, K = beam_stiffness(model, beam, spec, link_shapes)
-        model, geometries, step = _insert(model, geometries, _site(model, beam, end), name)
-        index = {j: step[i] for j, i in index.items()}
+        site = _site(model, beam, end)
+        tip, start = site.placement, model.frames[site.link_frame].placement
+        length = float(np.linalg.norm(tip.translation - start.translation))
+        model, geometries, step = _insert(model, geometries, site, name)
+        anchors = [
+            (model.getJointId(name), tip.actInv(M))
+            if j == site.joint
+            and np.linalg.norm(M.translation - tip.translation) <= TIP_RTOL * length
+            else (step[j], M)
+            for j, M in anchors
+        ]
         springs[name] = K
-    return model, geometries, springs, index
+    return model, geometries, springs, anchors
 
 
 def insert_beams(clm, beams: Mapping[str, Mapping]):
     """:class:`ClosedLoopModel` ``clm`` with ``beams`` (:func:`apply_beams`) on its links.
 
     Actuated joints, springs and locked joints keep their names; closure anchors are
-    carried over on their joints (an anchor on a link's parent joint stays with the beam's
-    start: to close a loop at a beam's tip, name a frame beyond a fixed end in the closure
-    file, whose closures are built after the beams). A configuration of ``clm`` maps to
-    the new model by :func:`map_configuration`.
+    carried over on their joints, those at a beam's tip with the tip (a loop of an MJCF or
+    SDF file closed at the end of a link that becomes a beam); an anchor elsewhere on the
+    beam's link stays with the beam's start. A configuration of ``clm`` maps to the new
+    model by :func:`map_configuration`.
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
@@ -647,12 +667,14 @@ def insert_beams(clm, beams: Mapping[str, Mapping]):
     from .model import ClosedLoopModel, Closure
 
     geoms = [clm.visual_model, clm.collision_model]
-    model, geoms, springs, index = apply_beams(clm.model, geoms, beams)
+    ends = [(k.joint1_id, k.joint1_placement) for c in clm.closures for k in [c.constraint]]
+    ends += [(k.joint2_id, k.joint2_placement) for c in clm.closures for k in [c.constraint]]
+    model, geoms, springs, ends = apply_beams(clm.model, geoms, beams, anchors=ends)
+    n = len(clm.closures)
     closures = [
-        Closure(type(k)(model, index[k.joint1_id], k.joint1_placement, index[k.joint2_id],
-                        k.joint2_placement), c.name)
-        for c in clm.closures for k in [c.constraint]
-    ]  # fmt: skip
+        Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
+        for i, c in enumerate(clm.closures)
+    ]
     return ClosedLoopModel(
         model,
         closures,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import assert_close_in_norm
+from helpers import REPO, assert_close_in_norm
 
 from closedloop import io
 from closedloop.assembly import assemble
@@ -201,3 +201,34 @@ def test_yaml_numbers_that_yaml_versions_read_differently_are_refused(
     text = fourbar_yaml.read_text().replace("crank: 50.0", f"crank: {value}")
     with pytest.raises(ModelFileError, match=match):
         io.load_model(fourbar_urdf, write(tmp_path, "c.yaml", text), geometry=False)
+
+
+# ------------------------------------------------------------------------ beams
+def test_a_loop_closed_at_a_beams_tip_follows_the_tip(tmp_path):
+    """The four-bar's rocker as a beam, its loop closed at the rocker's end: from MJCF
+    (closure built by the parser, before the beam) as from URDF (closures built after the
+    beams, on a frame beyond the beam's fixed end). The MJCF anchor stayed with the
+    beam's start, so that the beam changed C by 1e-17 instead of 0.7 %."""
+    urdf = re.sub(
+        r'<joint name="rocker_axial" type="prismatic">(.*?)</joint>',
+        lambda m: (
+            '<joint name="rocker_axial" type="fixed">'
+            + re.sub(r"<axis[^>]*/>|<limit[^>]*/>", "", m.group(1))
+            + "</joint>"
+        ),
+        (REPO / "urdf/fourbar.urdf").read_text(),
+        flags=re.S,
+    )
+    yaml_text = (REPO / "urdf/fourbar.yaml").read_text().replace("  rocker_axial: 2.0e+5\n", "")
+    mjcf = re.sub(
+        r'\s*<joint name="rocker_axial"[^>]*/>', "", (REPO / "urdf/fourbar.xml").read_text()
+    )
+    beam = {"E": 7e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.006, "t": 0.001}}
+    by_urdf = io.load_model(write(tmp_path, "a.urdf", urdf), write(tmp_path, "a.yaml", yaml_text),
+                            beams={"rocker_link": {**beam, "end": "rocker_axial"}})  # fmt: skip
+    mjcf_file = write(tmp_path, "b.xml", mjcf)
+    by_mjcf = io.load_model(mjcf_file, beams={"rocker_link": {**beam, "end": "rocker_end_fixed"}})
+    rigid = io.load_model(mjcf_file)
+    C = [compliance(m, assemble(m, actuated=[0.5]).q, "P").C for m in (by_urdf, by_mjcf, rigid)]
+    assert_close_in_norm(C[1], C[0], RTOL_TWIN)
+    assert np.linalg.norm(C[1] - C[2]) > 1e-3 * np.linalg.norm(C[2])
