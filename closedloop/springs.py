@@ -400,8 +400,10 @@ def spring_split(rows: np.ndarray, root: np.ndarray):
     # row-wise stable (each row's error is eps of its own norm, so a soft spring keeps its
     # digits beside a stiff one) and R carries the grading to its SVD; the SVD of S
     # itself resolves a soft spring only to eps of the stiffest (eps sqrt(spread) relative)
-    R = np.linalg.qr(S[np.argsort(-np.einsum("ij,ij->i", S, S))], mode="r")
-    _, sigma, Vt = svd(R, False)
+    qr, _, _, info = lapack.dgeqrf(S[np.argsort(-np.einsum("ij,ij->i", S, S))])
+    if info != 0:
+        raise np.linalg.LinAlgError(f"QR of the spring factor failed (LAPACK info {info})")
+    _, sigma, Vt = svd(np.triu(qr[: S.shape[1]]), False)
     return V_k @ Vt.T, sigma, Z
 
 
