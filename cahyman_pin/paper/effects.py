@@ -81,8 +81,9 @@ EFFECTS = (
     Effect("K_s value", {"ks": "params"}, lambda p: _ks_effect_note(p.K_s)),
     Effect("weights of eq. (11)", {"weights": False}, _weights_note, eq11_masses),
     Effect("A_d damage, eqs. (18)-(19)", {"a_d": "printed"},
-           "A_d as printed (secant form, singular where y_1 = 0 or C_psi = 0) instead of "
-           "the Jacobian of the closed-form kinematics"),
+           "A_d as printed (secant form, singular where y_1, y_2 or C_psi = 2 z_1 - z_2 - "
+           "z_3 is 0, eq. (19)'s divisors) instead of the Jacobian of the closed-form "
+           "kinematics"),
     Effect("K_T dropped in eq. (14)", {"leg_block": "3x3"},
            "leg block keeps K_Tk (condensed 3x3) instead of the printed first 2x2"),
     Effect("the arm model of eqs. (4)-(8)", {"serial_form": "series", "serial_frame": "world"},

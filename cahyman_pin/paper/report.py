@@ -42,6 +42,7 @@ from cahyman_pin.paper.data import (
 from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
 from cahyman_pin.paper.effects import (
     EFFECTS,
+    NAMED_MASSES,
     effect_changes,
     eq11_masses,
     eq11_masses_text,
@@ -62,6 +63,7 @@ from cahyman_pin.params import (
     DEFAULT_PARAMS,
     K_S_ASSUMED,
     K_S_PRINTED,
+    WEIGHT_FIELDS,
     CaHyManParams,
     params_file_fields,
     source,
@@ -107,9 +109,16 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
             f"({', '.join(assumed) if assumed else 'none here'}); they shape every number "
             "below, except the beam fields ("
             f"{', '.join(BEAM_FIELDS)}), which act only where links are beams (with "
-            "links_as_beams, and in the section 'Lumped springs vs beam links'). "
-            f"The published backend always takes K_s = {K_S_PRINTED:g} N/m as printed (the "
-            "first of the choices below), whatever K_s is here."
+            "links_as_beams, and in the section 'Lumped springs vs beam links'), and the "
+            f"masses ({', '.join(WEIGHT_FIELDS[:-1])}), which act only through the weight: "
+            f"those eq. (11) names ({', '.join(NAMED_MASSES)}) in its weight terms (the "
+            "published column and the effect 'weights of eq. (11)'), all of them in the "
+            "section 'The weight as a preload'; the consistent and generic columns and the "
+            "fits do not depend on them. "
+            f"The published column always takes K_s = {K_S_PRINTED:g} N/m as printed (the "
+            "first of the choices below), whatever K_s is here (the backend 'published' of "
+            "the API and of 'cahyman stiffness' takes the parameters' K_s instead, '--ks "
+            "printed' for the printed value)."
         ),
         Table(
             ("parameter", "value (SI)", "assumed", "source"),
@@ -150,7 +159,12 @@ def _conventions(doc: Document, params: CaHyManParams, tables: list[TableValues]
             "Every table and figure gives displacements of M in world axes (dx, dy, dz [mm]) "
             "and rotations of the arm as increments of the paper's angles (dphi, dpsi, dtheta "
             "[deg], the paper's row order) of R = Rz(theta) Ry(pi/2 - phi) Rz(psi) at the "
-            "plate's pose. One exception: where the plate is level (phi = 90 deg: "
+            "plate's pose. The published column reads the published backend's C F_M the "
+            "same way, but that is in the formulation's own coordinates (choices above), "
+            "not a twist at M: translations of H (the plate, eq. 9) plus the arm's deflection "
+            "in plate axes (eqs. 4, 5 as printed), with no lever arm (eq. 3), and rotations "
+            "the plate's rotation vector plus the arm angle about -y_p. One exception: where "
+            "the plate is level (phi = 90 deg: "
             f"{', '.join(level) if level else 'none of the tables'}) the plate "
             "normal is along z, theta and psi turn about the same axis and only their sum is "
             "defined, while a tilt of the normal has no defined direction. There the rotation "
