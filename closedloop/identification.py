@@ -97,7 +97,7 @@ MAX_OFFSET_STEPS = 5
 LOG_STEP = 0.01
 #: Weighted residual returned for springs that leave a mechanism: a step there is rejected.
 REJECTED = 1e100
-#: Weight of the offsets from the start, relative to the largest sensitivity (see _solve).
+#: Weight of the offsets from the start, relative to the least seen direction (see _solve).
 PRIOR = 1e-9
 #: Largest weighted residual, weighted twist d / sd or weighted sensitivity at the start:
 #: their sums of squares stay finite (1e200 a term); beyond, a twist, a wrench or an sd is
@@ -135,7 +135,8 @@ class Measurement:
         """A validated measurement (see the attributes).
 
         Raises:
-            InvalidInputError: wrong shapes, NaN, sd <= 0, neither or both of q/actuated.
+            InvalidInputError: wrong shapes, a NaN or inf (in any array), sd <= 0, neither or
+                both of q/actuated.
         """
         if (q is None) == (actuated is None):
             raise InvalidInputError("a measurement needs exactly one of q and actuated")
@@ -151,8 +152,11 @@ class Measurement:
             raise InvalidInputError(
                 f"sd must be one or 6 finite values > 0 (units of the twist), got {given.tolist()}"
             )
-        vector = None if q is None else readonly(real_array(q, "q").reshape(-1))
-        act = None if actuated is None else readonly(real_array(actuated, "actuated").reshape(-1))
+        name = "q" if q is not None else "actuated"
+        values = real_array(q if q is not None else actuated, name).reshape(-1)
+        if not np.all(np.isfinite(values)):
+            raise InvalidInputError(f"{name} must be finite values, got {values.tolist()}")
+        vector, act = (readonly(values), None) if q is not None else (None, readonly(values))
         return cls(vector, act, readonly(check_wrench(wrench)), readonly(twist_), readonly(sd_))
 
 
@@ -164,7 +168,10 @@ _KEYS = ("q", "actuated", "wrench", "twist", "sd")
 
 
 def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
-    """(frame, measurements) from a YAML or CSV file.
+    """(frame, measurements) from a YAML or CSV file, every value in SI units (q and
+    actuated in rad and m, wrench in N and N m, twist and sd in m and rad): nothing is
+    converted, so mm or deg must be converted before (a twist in mm fits springs 1000
+    times too soft, or does not fit at all).
 
     YAML (module docstring): keys ``frame`` and ``measurements``, each a mapping with
     ``q`` or ``actuated``, ``wrench``, ``twist`` and ``sd``. CSV (``.csv``): a header, one
@@ -631,13 +638,18 @@ def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
     bound is 100 times the scaled size of the start, here zero), and a step to springs
     that leave a mechanism, or that spread beyond what the general path resolves
     (:data:`closedloop.springs.SPREAD_RESOLVED`), is rejected as a
-    step that raises the cost. The residuals carry ``PRIOR`` times the largest singular
-    value of S at theta0 times u: the directions the data do not see stay at the start
-    (no drift that would make one of two series springs vanish beside the other), and
-    the others move by ~PRIOR^2 / (smallest identified singular value)^2, below 1e-10.
+    step that raises the cost. The residuals carry ``PRIOR`` times u times the smallest
+    singular value of S at theta0 of the directions the data see (as many as the rank of
+    S with unit-norm columns, by the rank rule): the directions the data do not see stay
+    at the start (no drift that would make one of two series springs vanish beside the
+    other: the steps are the shortest in log k), and the others move by ~PRIOR^2, below
+    1e-16 relative, whatever the spread of the sensitivities. (A prior on the largest
+    singular value held a spring seen 1e10 times less than another, yet seen, at its
+    start; one on each column's norm made the shortest steps those of unit-norm columns,
+    a stiff spring in series then drifting to infinity.)
     """
     r0, S0 = evaluate(theta0)
-    weight = PRIOR * np.linalg.norm(S0, 2)
+    weight = PRIOR * _smallest_seen(S0)
     rejected = (np.full(r0.size, REJECTED), np.zeros_like(S0))
     last = {}
 
@@ -662,6 +674,13 @@ def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
         gtol=1e-15,
     )
     return theta0 + out.x, bool(out.success)
+
+
+def _smallest_seen(S: np.ndarray) -> float:
+    """Smallest singular value of S (6 n, p) among its rank(S) largest, the rank by the
+    rule on unit-norm columns (:func:`_unidentifiable`); 0 when S sees nothing."""
+    rank = _unidentifiable(S, tuple(map(str, range(S.shape[1]))))[2]
+    return float(np.linalg.svd(S, compute_uv=False)[rank - 1]) if rank else 0.0
 
 
 def _covariance(S: np.ndarray) -> np.ndarray:

@@ -328,7 +328,12 @@ EXTREME_SPRINGS = [
 def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, springs):
     """Noise-free data stated at a precision that resolves the stiffest spring's share of
     the twists (at 1e-9 the axial springs of 1e12 N/m move the point by 1e-10 m: below the
-    stated precision, they are rightly not identified)."""
+    stated precision, they are rightly not identified). At a ratio of 1e12 the soft
+    crank's twists reach 1e18 sd: one rounding of its log-stiffness moves them by ~100 sd,
+    so the fit stops at a residual RMS ~0.5 and the stiff springs are recovered within
+    their errors (~5e-8), not to 1e-8 (they did only when the common offset of a start
+    three times off landed on the truth and a prior on the largest sensitivity held them
+    there: test_identification_edges)."""
     clm, _ = fourbar
     exact_sd = 1e-9 * min(FOURBAR_TRUE[n] / v for n, v in springs.items())
     data = _fourbar_data(clm, np.random.default_rng(9), sd=0.0, springs=springs,
@@ -336,7 +341,9 @@ def test_tiny_and_huge_stiffnesses_are_recovered(fourbar, springs):
     start = clm.with_springs({n: 3.0 * v for n, v in springs.items()})
     fit = identify(start, data, "P", list(FOURBAR_TRUE))
     for name, value in springs.items():
-        np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT)
+        np.testing.assert_allclose(fit.estimates[name], value, rtol=RTOL_EXACT_FIT,
+                                   atol=SIGMAS * fit.std_errors[name])  # fmt: skip
+    assert fit.consistent
 
 
 def test_twists_that_a_rigid_spring_explains_best_are_unidentifiable(fourbar):
@@ -554,9 +561,8 @@ def test_measurements_that_do_not_fit_the_model_are_named(fourbar):
     open_loop = Measurement.of(q=q + 0.1, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.OpenLoopError, match=r"^measurement 1: .*close"):
         identify(clm, [good, open_loop], "P", ["crank"])
-    nan = Measurement.of(q=np.r_[q[:4], np.nan], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
-    with pytest.raises(cl.InvalidInputError, match=r"measurement 0: q contains non-finite"):
-        identify(clm, [nan], "P", ["crank"])
+    with pytest.raises(cl.InvalidInputError, match=r"q must be finite values"):
+        Measurement.of(q=np.r_[q[:4], np.nan], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     two = Measurement.of(actuated=[0.3, 0.1], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.InvalidInputError, match=r"measurement 0: 2 actuated values given"):
         identify(clm, [two], "P", ["crank"])
