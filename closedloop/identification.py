@@ -3,7 +3,9 @@
 Each measurement is a configuration (full q, or the actuated values to assemble), a
 wrench w (6,) applied at a frame (fx, fy, fz [N], nx, ny, nz [N m], world axes, at the
 frame origin) and the measured twist of that frame d (6,) (dx, dy, dz [m], rx, ry, rz
-[rad]) with its standard deviation sd (6,) (same units). The model predicts d = C(k) w
+[rad]) with its standard deviation sd (6,) (same units; ``inf`` for a component not
+measured, e.g. the rotations when a laser tracker gives positions only: its twist may
+then be NaN, and it weighs nothing). The model predicts d = C(k) w
 (:func:`closedloop.compliance.compliance`); the fitted parameters are spring values
 k_g, one per group of joints tied to one value, found by weighted nonlinear least squares
 
@@ -121,7 +123,8 @@ class Measurement:
         actuated: (n_act,) actuated joint values [rad, m] to assemble, or None.
         wrench: (6,) applied wrench (fx, fy, fz [N], nx, ny, nz [N m]), world axes.
         twist: (6,) measured twist (dx, dy, dz [m], rx, ry, rz [rad]), world axes.
-        sd: (6,) standard deviation of the twist, > 0 (same units).
+        sd: (6,) standard deviation of the twist, > 0 (same units); inf for a component
+            not measured (its twist is then 0 here, whatever was given: NaN or a value).
     """
 
     q: np.ndarray | None
@@ -140,18 +143,23 @@ class Measurement:
         """
         if (q is None) == (actuated is None):
             raise InvalidInputError("a measurement needs exactly one of q and actuated")
-        twist_ = real_array(twist, "measured twist").reshape(-1)
-        if twist_.shape != (6,) or not np.all(np.isfinite(twist_)):
-            raise InvalidInputError(
-                f"measured twist must be 6 finite values (dx dy dz [m], rx ry rz [rad]), "
-                f"got {twist_.tolist()}"
-            )
         given = real_array(sd, "sd")
         sd_ = np.full(6, float(given)) if given.ndim == 0 else given.reshape(-1)
-        if sd_.shape != (6,) or not np.all(np.isfinite(sd_)) or np.any(sd_ <= 0.0):
+        if sd_.shape != (6,) or np.any(np.isnan(sd_)) or np.any(sd_ <= 0.0):
             raise InvalidInputError(
-                f"sd must be one or 6 finite values > 0 (units of the twist), got {given.tolist()}"
+                f"sd must be one or 6 values > 0 (units of the twist; inf for a component not "
+                f"measured), got {given.tolist()}"
             )
+        measured = np.isfinite(sd_)
+        if not measured.any():
+            raise InvalidInputError("sd is inf for every component: nothing is measured")
+        twist_ = real_array(twist, "measured twist").reshape(-1)
+        if twist_.shape != (6,) or not np.all(np.isfinite(twist_[measured])):
+            raise InvalidInputError(
+                f"measured twist must be 6 values (dx dy dz [m], rx ry rz [rad]), finite where "
+                f"sd is, got {twist_.tolist()}"
+            )
+        twist_ = np.where(measured, twist_, 0.0)
         name = "q" if q is not None else "actuated"
         values = real_array(q if q is not None else actuated, name).reshape(-1)
         if not np.all(np.isfinite(values)):
@@ -475,14 +483,13 @@ def identify(
     names = tuple("+".join(g) for g in groups)
     configs = _configurations(clm, measurements)
     clm.frame_id(frame)  # NameNotFoundError listing the frames
-    if 6 * len(configs) < len(groups):
-        raise InvalidInputError(
-            f"{6 * len(configs)} measured components for {len(groups)} parameters"
-        )
+    n_measured = sum(int(np.isfinite(m.sd).sum()) for m in measurements)
+    if n_measured < len(groups):
+        raise InvalidInputError(f"{n_measured} measured components for {len(groups)} parameters")
     theta0 = _start(clm, names, groups, start)
     w = np.array([m.wrench for m in measurements])
     d = np.array([m.twist for m in measurements])
-    sd = np.array([m.sd for m in measurements])
+    sd = np.array([m.sd for m in measurements])  # inf: not measured, weight 0
     springs, locked = clm.springs, [n for n in clm.locked if n not in set().union(*groups)]
     coords = np.arange(clm.model.nv)
     parts = [[(coords[clm.joint_v_slice(n)], clm.spring_blocks.get(n)) for n in g] for g in groups]

@@ -7,9 +7,15 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
+import scipy.special
 
 import closedloop as cl
-from closedloop.identification import Measurement, identify, read_measurements
+from closedloop.identification import (
+    FIT_SIGNIFICANCE,
+    Measurement,
+    identify,
+    read_measurements,
+)
 
 NAMES = ("j1", "j2", "j3", "j4")
 #: 1e-2 N m/rad beside 1e8 N/m: the sensitivities of the fit span ten decades.
@@ -122,3 +128,48 @@ def test_a_non_finite_configuration_is_refused_naming_the_file(tmp_path, key):
     with pytest.raises(cl.InvalidInputError, match=rf"measurement 0 of .*m\.yaml.*{key} must be "
                        "finite"):  # fmt: skip
         read_measurements(path)
+
+
+def test_components_not_measured_weigh_nothing(loads, tmp_path):
+    """Positions only (a laser tracker): sd = inf and twist NaN on the rotations. The fit
+    equals the Cramer-Rao errors of the translations alone, and its chi-square test counts
+    only the measured components (3 per measurement, not 6)."""
+    rows = loads
+    rng = np.random.default_rng(34)
+    sd = np.r_[np.full(3, SD), np.full(3, np.inf)]
+    data = [Measurement.of(q=q, wrench=w, twist=np.r_[d[:3] + SD * rng.normal(size=3),
+                                                      np.full(3, np.nan)], sd=sd)
+            for q, _, w, d in rows]  # fmt: skip
+    fit = _fit(data, np.array(STARTS[0]))
+    assert fit.consistent and fit.unidentifiable == ()
+    k = np.array([fit.estimates[n] for n in NAMES])
+    se = np.array([fit.std_errors[n] for n in NAMES])
+    assert np.all(np.abs(k - DECADES) <= SIGMAS * se), (k, se)
+    S = np.vstack([np.column_stack([-(J[:, j] @ w) * J[:3, j] / k[j] for j in range(4)])
+                   for _, J, w, _ in rows]) / SD  # fmt: skip
+    np.testing.assert_allclose(se, k * np.sqrt(np.diag(np.linalg.inv(S.T @ S))),
+                               rtol=RTOL_CRAMER_RAO)  # fmt: skip
+    assert np.all(fit.residuals[:, 3:] == 0.0)
+    dof = 3 * len(rows) - len(NAMES)
+    limit = np.sqrt(scipy.special.chdtri(dof, FIT_SIGNIFICANCE) / fit.residuals.size)
+    np.testing.assert_allclose(fit.rms_limit, limit, rtol=1e-12)
+    path = tmp_path / "m.yaml"  # the same in a file: .inf and .nan
+    path.write_text(
+        "frame: tool\nmeasurements:\n  - {q: [0, 0, 0, 0], wrench: [1, 0, 0, 0, 0, 0], "
+        "twist: [0, 0, 0, .nan, .nan, .nan], sd: [1, 1, 1, .inf, .inf, .inf]}\n"
+    )
+    (m,) = read_measurements(path)[1]
+    assert np.array_equal(m.sd[3:], np.full(3, np.inf)) and np.all(m.twist[3:] == 0.0)
+
+
+@pytest.mark.parametrize(
+    ("twist", "sd", "match"),
+    [
+        ([0, 0, 0, np.nan, 0, 0], 1e-7, "finite where sd is"),
+        ([0] * 6, np.inf, "nothing is measured"),
+        ([0] * 6, [1, 1, 1, 1, 1, np.nan], "sd must be"),
+    ],
+)
+def test_a_twist_missing_where_sd_is_finite_is_refused(twist, sd, match):
+    with pytest.raises(cl.InvalidInputError, match=match):
+        Measurement.of(q=np.zeros(4), wrench=[1, 0, 0, 0, 0, 0], twist=twist, sd=sd)
