@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 
 from .cli_common import path_text, print_json
-from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
+from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, NumericalError
 
 
 def add_parser(sub, model_arguments) -> None:
@@ -40,9 +40,11 @@ def add_parser(sub, model_arguments) -> None:
 
 
 def run_identify(args) -> int:
-    """Run ``closedloop identify``; returns the exit code (0, or 1 if a parameter is not
+    """Run ``closedloop identify``; returns the exit code (0; 1 if a parameter is not
     identifiable or the model does not fit the data: ``Fit.consistent`` False, whose
-    :class:`~closedloop.exceptions.ModelMisfitWarning` is the one line on stderr)."""
+    :class:`~closedloop.exceptions.ModelMisfitWarning` is the one line on stderr; 3 if the
+    optimiser did not converge (NumericalError: one line on stderr, no estimates: they are
+    not a least-squares solution))."""
     from .cli_map import model_source  # MODEL, --closures and springs, as for a map
     from .identification import identify, read_measurements  # scipy.optimize: on demand
 
@@ -51,12 +53,18 @@ def run_identify(args) -> int:
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
     fit = identify(clm, data, frame, groups)
     status = EXIT_RANK_DEFICIENT if fit.unidentifiable or not fit.consistent else EXIT_OK
+    if not fit.success:
+        raise NumericalError(
+            "the optimiser did not converge: the estimates are not a least-squares solution "
+            "(check the start springs and the data)"
+        )
     if args.json:
         print_json({"model": clm.name, "frame": frame, **fit.to_dict()})
         return status
-    print(f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
-          f"weighted residual RMS {fit.residual_rms:.3g}"
-          + ("" if fit.success else " (the optimiser did not converge)"))  # fmt: skip
+    print(
+        f"model {clm.name!r}, frame {frame!r}: {fit.n_measurements} measurements, "
+        f"weighted residual RMS {fit.residual_rms:.3g}"
+    )
     for name in fit.names:
         if fit.estimates[name] is None:
             print(f"  {name}: not identifiable from these data")

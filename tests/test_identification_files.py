@@ -218,3 +218,17 @@ def test_a_yaml_boolean_or_nested_list_is_refused(tmp_path, sd, wrench, match):
     )
     with pytest.raises(cl.InvalidInputError, match=match):
         read_measurements(tmp_path / "m.yaml")
+
+
+def test_a_fit_that_did_not_converge_exits_3(tmp_path, exact, fourbar_urdf, fourbar_yaml, capsys,
+                                            monkeypatch):  # fmt: skip
+    """The optimiser's own report of non-convergence (simulated here: the real fit, its
+    success flag turned off) ended in exit 0 with the estimates printed."""
+    import closedloop.identification as identification
+
+    solve = identification._solve
+    monkeypatch.setattr(identification, "_solve", lambda *a: (solve(*a)[0], False))
+    code, out, err = _run(capsys, fourbar_urdf, "--closures", fourbar_yaml, "--measurements",
+                          _yaml(tmp_path / "m.yaml", exact[1]), "--fit", *TRUE)  # fmt: skip
+    assert code == 3 and out == "", (code, out)
+    assert err.count("\n") == 1 and "the optimiser did not converge" in err
