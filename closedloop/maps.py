@@ -10,6 +10,8 @@ all: :func:`closedloop.files.write_atomically`).
 
 from __future__ import annotations
 
+import csv
+import json
 import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
@@ -19,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .arrays import ReadOnlyArrays
+from .compliance import UNITS
 from .exceptions import InvalidInputError
 from .files import save_figure, write_atomically
 from .indices import BATCH_INDICES
@@ -46,6 +49,14 @@ INDICES = BATCH_INDICES
 CSV_MAX_POINTS = 10_000
 #: Names that ``numpy.savez`` takes as its own arguments, not as arrays.
 NPZ_ARGUMENTS = ("file", "allow_pickle")
+
+
+def column_name(name: str, unit: str) -> str:
+    """A CSV column's name with its unit: ``det_K_N^6_per_rad^3``, ``crank_rad``,
+    ``min_rotational_Nm_per_rad``; a dimensionless one (unit ``1 ...``) bare."""
+    if unit.startswith("1"):
+        return name
+    return f"{name}_{unit.replace(' ', '').replace('/', '_per_')}"
 
 
 @dataclass(frozen=True)
@@ -100,10 +111,13 @@ class StiffnessMap(ReadOnlyArrays):
 
     def save(self, out: str | Path, index: str = "det_K") -> list[Path]:
         """Write ``map.npz`` (every index under its name, C, rank, status, reasons, shape,
-        ``joints`` the actuated joints' names and ``inputs`` (n, n_act) their values, and
-        each joint's values under its name unless that name is one of these keys),
-        ``map.csv`` when at most :data:`CSV_MAX_POINTS` points, and ``map.png`` (curve or
-        heat map of ``index``); returns the paths.
+        ``joints`` the actuated joints' names and ``inputs`` (n, n_act) their values, each
+        joint's values under its name unless that name is one of these keys, and
+        ``units``: a JSON object, key -> unit, ``inputs`` a list per column), ``map.csv``
+        when at most :data:`CSV_MAX_POINTS` points (columns named with their units,
+        :func:`column_name`; the status and reason of each point; an earlier map's
+        ``map.csv`` is removed otherwise), and ``map.png`` (curve or heat map of
+        ``index``); returns the paths.
 
         Raises:
             InvalidInputError: unknown index, or ``out`` not a writable folder.
@@ -115,22 +129,42 @@ class StiffnessMap(ReadOnlyArrays):
             out.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
+        joint_units = dict(zip(self.joints, self.units, strict=True))
+        units = {**joint_units, **{k: INDICES[k] for k in self.indices}, "C": UNITS["C"],
+                 "inputs": list(self.units)}  # fmt: skip
         arrays = {**self.indices, "C": self.C, "rank": self.data.rank, "status": self.status,
                   "reasons": np.asarray(self.reasons), "shape": np.asarray(self.shape),
                   "joints": np.asarray(self.joints), "inputs": self.inputs}  # fmt: skip
-        taken = {*arrays, *NPZ_ARGUMENTS}
+        taken = {*arrays, *NPZ_ARGUMENTS, "units"}
         arrays.update({n: self.inputs[:, j] for j, n in enumerate(self.joints) if n not in taken})
+        arrays["units"] = np.array(json.dumps({k: v for k, v in units.items() if k in arrays}))
         paths = [write_atomically(out / "map.npz", lambda f: np.savez(f, **arrays))]
         if len(self.inputs) <= CSV_MAX_POINTS:
-            names = [*self.joints, *self.indices, "status"]
-            rows = [[*map(repr, r), s] for r, s in zip(
-                np.column_stack([self.inputs, *self.indices.values()]).tolist(), self.status,
-                strict=True)]  # fmt: skip
-            csv = "\n".join(",".join(r) for r in [names, *rows]) + "\n"
-            paths.append(write_atomically(out / "map.csv", lambda f: f.write(csv), text=True))
+            names = [*(column_name(n, u) for n, u in joint_units.items()),
+                     *(column_name(k, INDICES[k]) for k in self.indices),
+                     "status", "reason"]  # fmt: skip
+            values = np.column_stack([self.inputs, *self.indices.values()]).tolist()
+
+            def write(f) -> None:
+                writer = csv.writer(f, lineterminator="\n")
+                writer.writerow(names)
+                for row, status, reason in zip(values, self.status, self.reasons, strict=True):
+                    writer.writerow([*map(repr, row), status, reason])
+
+            paths.append(write_atomically(out / "map.csv", write, text=True, newline=""))
+        else:  # an earlier map's: it would disagree with the files beside it
+            (out / "map.csv").unlink(missing_ok=True)
         paths.append(out / "map.png")
         plot_map(self, index, paths[-1])
         return paths
+
+    def plotted(self) -> tuple[str, ...]:
+        """The swept joints along the picture's axes: those of a grid with more than one
+        value (the first when none has), or every joint of a list."""
+        if len(self.shape) == 1:
+            return self.swept
+        long = tuple(n for n, size in zip(self.swept, self.shape, strict=True) if size > 1)
+        return long or self.swept[:1]
 
 
 def load_text(wrench: np.ndarray | None) -> str:
@@ -145,41 +179,48 @@ def load_text(wrench: np.ndarray | None) -> str:
 def map_title(smap: StiffnessMap, index: str) -> str:
     """Title of the picture of ``index``: the index and its unit, the frame, the fixed
     inputs with their units and the load (lines of at most 80 characters)."""
+    plotted = smap.plotted()
     fixed = [f"{n} = {smap.inputs[0, j]:.6g} {u}"
              for j, (n, u) in enumerate(zip(smap.joints, smap.units, strict=True))
-             if n not in smap.swept]  # fmt: skip
+             if n not in plotted]  # fmt: skip
     parts = [*fixed, load_text(smap.wrench)] if smap.wrench is not None else fixed
     return "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
                       *textwrap.wrap(", ".join(parts), 80)])  # fmt: skip
 
 
 def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
-    """PNG of ``index`` over the swept joints: a curve (one axis) or a heat map (two),
-    with units, the fixed inputs and the load in the title; failed points left blank."""
+    """PNG of ``index`` over the swept joints: a curve (one axis with more than one value,
+    or a list) or a heat map (two), with units, the fixed inputs, the load and the number
+    of points without a value in the title; failed points left blank."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     unit = dict(zip(smap.joints, smap.units, strict=True))
+    axes = smap.plotted()
+    label = f"{index} [{INDICES[index]}]"
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=100)
-    if len(smap.shape) == 1:  # a list or one swept joint: the curve along its first input
-        x = smap.inputs[:, smap.joints.index(smap.swept[0])]
-        order = np.argsort(x, kind="stable") if len(smap.swept) == 1 else slice(None)
+    if len(axes) == 1 or len(smap.shape) == 1:  # the curve along its first input
+        x = smap.inputs[:, smap.joints.index(axes[0])]
+        listed = len(smap.shape) == 1 and len(smap.swept) > 1  # a list: its own order
+        order = slice(None) if listed else np.argsort(x, kind="stable")
         ax.plot(x[order], smap.indices[index][order], "o-")
-        ax.set_xlabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
-        ax.set_ylabel(f"{index} [{INDICES[index]}]")
+        ax.set_xlabel(f"{axes[0]} [{unit[axes[0]]}]")
+        ax.set_ylabel(label)
     else:  # the grid's axes sorted for the picture (a sweep may list its values in any order)
         grid = smap.inputs.reshape(*smap.shape, -1)
-        y = grid[:, 0, smap.joints.index(smap.swept[0])]
-        x = grid[0, :, smap.joints.index(smap.swept[1])]
+        y = grid[:, 0, smap.joints.index(axes[0])]
+        x = grid[0, :, smap.joints.index(axes[1])]
         iy, ix = np.argsort(y), np.argsort(x)
         values = smap.grid(index)[np.ix_(iy, ix)]
         mesh = ax.pcolormesh(x[ix], y[iy], values, shading="nearest")
-        fig.colorbar(mesh, ax=ax, label=f"{index} [{INDICES[index]}]")
-        ax.set_xlabel(f"{smap.swept[1]} [{unit[smap.swept[1]]}]")
-        ax.set_ylabel(f"{smap.swept[0]} [{unit[smap.swept[0]]}]")
-    ax.set_title(map_title(smap, index), fontsize=9)
+        fig.colorbar(mesh, ax=ax, label=label)
+        ax.set_xlabel(f"{axes[1]} [{unit[axes[1]]}]")
+        ax.set_ylabel(f"{axes[0]} [{unit[axes[0]]}]")
+    missing = int(np.count_nonzero(np.isnan(smap.indices[index])))
+    note = f" ({missing} points without a value)" if missing else ""
+    ax.set_title(map_title(smap, index) + note, fontsize=9)
     fig.tight_layout()
     save_figure(fig, path)
 

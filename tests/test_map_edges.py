@@ -12,7 +12,7 @@ from helpers import REPO, assert_close_in_norm
 import closedloop as cl
 from closedloop.io import reference_configuration
 from closedloop.map_engine import OK, ChunkResult, ModelSource, classify, run_tasks
-from closedloop.maps import INDICES, stiffness_map
+from closedloop.maps import INDICES, column_name, stiffness_map
 
 #: The four-bar of urdf/fourbar.urdf with its ground link 0.42 m instead of 0.3 m: crank
 #: 0.1 m, coupler 0.3 m, rocker 0.15 m; 0.1 + 0.42 > 0.3 + 0.15, so the crank cannot turn
@@ -83,7 +83,7 @@ def test_a_map_where_every_point_fails_writes_its_files(long_ground, tmp_path):
     npz, csv, png = m.save(tmp_path, index="deflection_translation")
     with np.load(npz, allow_pickle=False) as f:  # every key, no pickled object
         assert set(f.files) == {"crank", *INDICES, "C", "rank", "status", "reasons", "shape",
-                                "joints", "inputs"}  # fmt: skip
+                                "joints", "inputs", "units"}  # fmt: skip
         np.testing.assert_array_equal(f["crank"], cranks)
         np.testing.assert_array_equal(f["inputs"], cranks[:, None])
         assert f["joints"].tolist() == ["crank"]
@@ -95,8 +95,10 @@ def test_a_map_where_every_point_fails_writes_its_files(long_ground, tmp_path):
         assert f["reasons"].tolist() == list(m.reasons)
         np.testing.assert_array_equal(f["shape"], [3])
     lines = csv.read_text().splitlines()
-    assert lines[0] == ",".join(["crank", *INDICES, "status"])
-    assert lines[1].split(",") == ["-1.0", *["nan"] * len(INDICES), "unreachable"]
+    columns = [column_name(name, unit) for name, unit in INDICES.items()]
+    assert lines[0] == ",".join(["crank_rad", *columns, "status", "reason"])
+    assert lines[1].split(",")[: len(INDICES) + 2] == ["-1.0", *["nan"] * len(INDICES),
+                                                       "unreachable"]  # fmt: skip
     assert png.stat().st_size > 5_000
 
 

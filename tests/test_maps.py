@@ -115,7 +115,7 @@ def test_map_files(tmp_path):
     np.testing.assert_array_equal(data["det_K"], res.indices["det_K"])
     assert list(data["status"]).count("unreachable") == 2
     lines = paths[1].read_text().splitlines()
-    assert lines[0].startswith("leg0,leg1,") and len(lines) == 7 and "nan" in lines[-1]
+    assert lines[0].startswith("leg0_m,leg1_m,") and len(lines) == 7 and "nan" in lines[-1]
     assert paths[2].stat().st_size > 10_000  # a real picture
     with pytest.raises(cl.InvalidInputError, match=r"index 'nope'; expected one of"):
         res.save(tmp_path, index="nope")

@@ -333,7 +333,8 @@ def test_npz_round_trip_and_csv(tmp_path):
     assert len(lines) == 4 and lines[0].startswith("alpha1_rad,alpha2_rad,alpha3_rad")
     assert "alpha4_rad,s4_m,L_m,status" in lines[0]
     assert "unreachable" in lines[2] and "det_K" in lines[0]
-    assert float(lines[1].split(",")[lines[0].split(",").index("det_K")]) == res.indices["det_K"][0]
+    det = lines[0].split(",").index("det_K_N^6_per_rad^3")
+    assert float(lines[1].split(",")[det]) == res.indices["det_K"][0]
 
 
 def test_parquet_needs_pyarrow(tmp_path):

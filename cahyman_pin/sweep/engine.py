@@ -54,6 +54,7 @@ from cahyman_pin.sweep.points import (
     pose_list,
 )
 from closedloop.arrays import check_wrench, frozen, readonly
+from closedloop.compliance import UNITS
 from closedloop.exceptions import InvalidInputError
 from closedloop.files import write_atomically
 from closedloop.map_engine import (
@@ -64,7 +65,7 @@ from closedloop.map_engine import (
     gather,
     run_tasks_by_point,
 )
-from closedloop.maps import INDICES
+from closedloop.maps import INDICES, column_name
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
@@ -80,11 +81,6 @@ CHUNKS_PER_WORKER = 16
 #: Fewest points per task: a task costs about 1 ms, and each chunk's first point starts
 #: afresh (from the closed form) with ``start="neighbour"``.
 MIN_CHUNK = 64
-
-
-def _slug(unit: str) -> str:
-    """A unit as part of a column name: 'N m/rad' -> 'Nm_per_rad'."""
-    return unit.replace(" ", "").replace("/", "_per_")
 
 
 @dataclass(frozen=True)
@@ -164,15 +160,16 @@ class SweepResult:
 
     # ------------------------------------------------------------------ files
     def columns(self) -> dict[str, np.ndarray]:
-        """Flat table: inputs, design values, status, indices (SI; names carry the unit)."""
+        """Flat table: inputs, design values, status, indices (SI; names carry the unit,
+        :func:`closedloop.maps.column_name`)."""
         p = self.points
         cols = {f"alpha{k + 1}_rad": p.alpha[:, k] for k in range(3)}
         cols.update(alpha4_rad=p.alpha4, s4_m=p.s4)
-        cols.update({f"{k}_{_slug(param_unit(k))}": v for k, v in p.design.items()})
+        cols.update({column_name(k, param_unit(k)): v for k, v in p.design.items()})
         cols.update(status=self.status, rank=self.rank)
         for name, v in self.indices.items():
             if v.ndim == 1:
-                cols[name] = v
+                cols[column_name(name, INDEX_UNITS[name])] = v
         if "deflection" in self.indices:
             for j, lab in enumerate(("dx_m", "dy_m", "dz_m", "rx_rad", "ry_rad", "rz_rad")):
                 cols[f"deflection_{lab}"] = self.indices["deflection"][:, j]
@@ -213,7 +210,15 @@ class SweepResult:
             "design": list(p.design),
             "indices": list(self.indices),
             "seconds": self.seconds,
-            "units": {**INPUT_UNITS, **INDEX_UNITS, "C": "m/N, rad/N, m/(N m), rad/(N m)"},
+            "units": {
+                **INPUT_UNITS,
+                **{f"design_{k}": param_unit(k) for k in p.design},
+                **INDEX_UNITS,
+                "deflection": UNITS["twist"],
+                "C": UNITS["C"],
+                "wrench": UNITS["wrench"],
+                "length": "m",
+            },
         }
         arrays = {
             "alpha": p.alpha, "alpha4": p.alpha4, "s4": p.s4, "order": p.order, "C": self.C,
@@ -257,12 +262,15 @@ class SweepResult:
             )  # fmt: skip
 
     def save(self, directory, stem: str = "sweep") -> list[Path]:
-        """NPZ always, CSV too when there are at most :data:`CSV_MAX_POINTS` points."""
+        """NPZ always, CSV too when there are at most :data:`CSV_MAX_POINTS` points (else
+        an earlier sweep's CSV of that name is removed: it would disagree with the NPZ)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = [self.save_npz(directory / f"{stem}.npz")]
         if len(self) <= CSV_MAX_POINTS:
             paths.append(self.save_csv(directory / f"{stem}.csv"))
+        else:
+            (directory / f"{stem}.csv").unlink(missing_ok=True)
         return paths
 
 
