@@ -151,8 +151,9 @@ def assemble_connected(
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     target = check_actuated(clm, actuated)
     start = clm.actuated_values(q)
-    span = float(np.max(np.abs(target - start) / input_scale(clm), initial=0))
-    n = min(MAX_INPUT_STEPS, math.ceil(span / INPUT_STEP)) if math.isfinite(span) else 1
+    with np.errstate(over="ignore"):  # inputs near the float range: one step, refused there
+        steps = float(np.max(np.abs(target - start) / input_scale(clm), initial=0)) / INPUT_STEP
+    n = min(MAX_INPUT_STEPS, math.ceil(steps)) if math.isfinite(steps) else 1
     path = q
     try:
         for k in range(1, n):

@@ -360,20 +360,22 @@ def test_duration_with_html_is_refused(tmp_path, capsys, entry, argv):
     assert "--duration 3 serves the live page" in line
 
 
+@pytest.mark.parametrize("value", ["100", "1e+308"])
 @pytest.mark.parametrize("command", ["stiffness", "view"])
 def test_actuated_values_outside_their_limits_are_refused_as_a_map_marks_them(
-    capsys, tmp_path, command
+    capsys, tmp_path, command, value
 ):
     """``--actuated 100`` (crank limits +-6.3 rad) answered, while a map marks the same
-    point invalid with the same reason: now one line, exit 2, as the map's reason."""
+    point invalid with the same reason: now one line, exit 2, as the map's reason. At
+    1e308 the count of input steps to drive there overflowed (OverflowError)."""
     extra = ["--html", str(tmp_path / "v.html")] if command == "view" else []
-    code, out, err = run(main, capsys, command, "fourbar", "--frame", "P", "--actuated", "100",
+    code, out, err = run(main, capsys, command, "fourbar", "--frame", "P", "--actuated", value,
                          *extra)  # fmt: skip
     assert (code, out) == (2, "")
-    reason = "actuated joints outside their limits: crank = 100 (limits [-6.3, 6.3])"
+    reason = f"actuated joints outside their limits: crank = {value} (limits [-6.3, 6.3])"
     assert reason in one_line(err)
     code, _out, err = run(main, capsys, "map", "fourbar", "--frame", "P", "--sweep",
-                          "crank=100", "--workers", "1", "--out", str(tmp_path / "m"))  # fmt: skip
+                          f"crank={value}", "--workers", "1", "--out", str(tmp_path / "m"))  # fmt: skip
     assert code == 0, err
     reasons = np.load(tmp_path / "m" / "map.npz")["reasons"]
     assert any(reason in str(r) for r in reasons), reasons
