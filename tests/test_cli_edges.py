@@ -375,7 +375,8 @@ def test_actuated_values_outside_their_limits_are_refused_as_a_map_marks_them(
     reason = f"actuated joints outside their limits: crank = {value} (limits [-6.3, 6.3])"
     assert reason in one_line(err)
     code, _out, err = run(main, capsys, "map", "fourbar", "--frame", "P", "--sweep",
-                          f"crank={value}", "--workers", "1", "--out", str(tmp_path / "m"))  # fmt: skip
+                          f"crank={value}", "--workers", "1",
+                          "--out", str(tmp_path / "m"))  # fmt: skip
     assert code == 0, err
     reasons = np.load(tmp_path / "m" / "map.npz")["reasons"]
     assert any(reason in str(r) for r in reasons), reasons
