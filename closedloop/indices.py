@@ -277,9 +277,9 @@ class StiffnessIndices:
         return length
 
     def _block_eig(self, block: slice, what: str, need_full: bool):
-        """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked."""
-        c, V = np.linalg.eigh(self.C[block, block])
-        rigid = c <= RANK_RTOL**2 * max(c[-1], 0.0)  # the rule, on eigenvalues
+        """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked
+        (:func:`_block_spectrum`)."""
+        c, V, rigid = (a[0] for a in _block_spectrum(self.C[None], block, self._spectrum.length))
         if rigid.all() or (need_full and rigid.any()):
             directions = np.zeros((6, int(rigid.sum())))
             directions[block] = V[:, rigid]
@@ -593,12 +593,27 @@ BATCH_INDICES = {
 }
 
 
-def _block_extremes(C: np.ndarray, block: slice) -> tuple[np.ndarray, np.ndarray]:
+def _block_spectrum(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, ...]:
+    """Eigenvalues c (n, 3) ascending and vectors V (n, 3, 3) of a 3x3 block of n
+    compliances C (n, 6, 6) [SI], and which directions are rigid (n, 3): those whose
+    scaled compliance is at most ``RANK_RTOL``^2 of the largest eigenvalue of the scaled
+    C_s (lengths L (n,) or one [m]; the rank rule, on eigenvalues), so that a block of
+    rounding beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside
+    1e-4, read as stiffnesses of 1e31 N m/rad when judged on the block alone)."""
+    c, V = np.linalg.eigh(C[:, block, block])
+    d = twist_scalings(np.broadcast_to(np.asarray(length, dtype=float), (len(C),)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        top = np.linalg.norm(C * d[:, :, None] * d[:, None, :], 2, axis=(1, 2))
+        rigid = c * d[:, block.start, None] ** 2 <= RANK_RTOL**2 * top[:, None]
+    return c, V, rigid | (c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0))
+
+
+def _block_extremes(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, np.ndarray]:
     """(n,) min and max principal stiffness of a 3x3 block of symmetric compliances (the
     rule of :meth:`StiffnessIndices.min_translational_stiffness`: the minimum exists
-    unless the block is rigid, the maximum only when no direction of it is), NaN else."""
-    c = np.linalg.eigvalsh(C[:, block, block])
-    rigid = c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0)
+    unless the block is rigid, the maximum only when no direction of it is), NaN else;
+    lengths L (n,) or one [m] of the scaling (:func:`_block_spectrum`)."""
+    c, _, rigid = _block_spectrum(C, block, length)
     with np.errstate(divide="ignore"):
         low = np.where(rigid.all(axis=1), np.nan, 1.0 / c[:, -1])
         high = np.where(rigid.any(axis=1), np.nan, 1.0 / c[:, 0])
@@ -668,7 +683,9 @@ def batch_indices(
         _, out["condition_number"][rest], _ = batch_rank(C[rest], L[rest])
     if np.any(sym):
         for kind, block in (("translational", T), ("rotational", R)):
-            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(C[sym], block)
+            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(
+                C[sym], block, L[sym]
+            )
     both = sym & full
     if np.any(both):
         c = np.abs(np.linalg.eigvalsh(C[both]))  # an indefinite C (unstable preload) too

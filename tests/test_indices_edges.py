@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import types
 
+import mechanisms as mech
 import numpy as np
 import pinocchio as pin
 import pytest
 from test_indices import DET_RTOL_PER_SQRT_COND
 
+import closedloop as cl
 from closedloop.compliance import compliance
 from closedloop.derivatives import central_differences
 from closedloop.exceptions import InvalidInputError
@@ -180,3 +182,24 @@ def test_central_differences_without_columns():
     one.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "rz")
     got = central_differences(one, pin.neutral(one), lambda q: np.r_[np.sin(q), q], columns=[])
     np.testing.assert_array_equal(got, np.zeros((2, 1)))
+
+
+def test_a_block_of_rounding_beside_a_compliant_one_is_rigid():
+    """The Delta's platform cannot turn (rank 3): its rotational compliance block is
+    rounding (1e-32 beside 1e-4), whose principal stiffnesses read 6e31 and 1e33 N m/rad
+    in the single query and in the maps, judged on the block alone. Rigid now, in both;
+    the translational ones unchanged and equal."""
+    m = mech.delta()
+    res = cl.compliance(m.clm, m.q, m.frame)
+    assert res.rank == 3
+    ind = cl.StiffnessIndices.from_result(res)
+    for name in ("min_rotational_stiffness", "max_rotational_stiffness"):
+        with pytest.raises(cl.RigidDirectionsError, match="rotational stiffness does not exist"):
+            getattr(ind, name)
+    batch = batch_indices(res.C[None], np.array([res.rank]), res.length)
+    assert np.isnan(batch["min_rotational"][0]) and np.isnan(batch["max_rotational"][0])
+    np.testing.assert_allclose(
+        [batch["min_translational"][0], batch["max_translational"][0]],
+        [ind.min_translational_stiffness.value, ind.max_translational_stiffness.value],
+        rtol=1e-12,  # two eigen-solvers of the same 3x3 block: rounding
+    )
