@@ -596,14 +596,15 @@ BATCH_INDICES = {
 def _block_spectrum(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, ...]:
     """Eigenvalues c (n, 3) ascending and vectors V (n, 3, 3) of a 3x3 block of n
     compliances C (n, 6, 6) [SI], and which directions are rigid (n, 3): those whose
-    scaled compliance is at most ``RANK_RTOL``^2 of the largest eigenvalue of the scaled
-    C_s (lengths L (n,) or one [m]; the rank rule, on eigenvalues), so that a block of
-    rounding beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside
-    1e-4, read as stiffnesses of 1e31 N m/rad when judged on the block alone)."""
+    scaled compliance is at most ``RANK_RTOL``^2 of the largest diagonal entry of the
+    scaled C_s (lengths L (n,) or one [m]; the rank rule on eigenvalues, on the scale of
+    C_s: its largest eigenvalue is 1 to 6 times that entry), so that a block of rounding
+    beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside 1e-4, read
+    as stiffnesses of 1e31 N m/rad when judged on the block alone)."""
     c, V = np.linalg.eigh(C[:, block, block])
     d = twist_scalings(np.broadcast_to(np.asarray(length, dtype=float), (len(C),)))
     with np.errstate(over="ignore", invalid="ignore"):
-        top = np.linalg.norm(C * d[:, :, None] * d[:, None, :], 2, axis=(1, 2))
+        top = np.max(np.diagonal(C, axis1=1, axis2=2) * d**2, axis=1)
         rigid = c * d[:, block.start, None] ** 2 <= RANK_RTOL**2 * top[:, None]
     return c, V, rigid | (c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0))
 
