@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
-from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
+from cahyman_pin.params import DEFAULT_PARAMS, SPRING_FIELDS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
@@ -361,16 +361,19 @@ def _real_or_pairs(ev: np.ndarray) -> list:
     return ev.tolist() if np.isrealobj(ev) else [[float(e.real), float(e.imag)] for e in ev]
 
 
-def _indices(result: BackendResult, params: CaHyManParams, backend: str):
+def _indices(result: BackendResult, params: CaHyManParams, backend: str, inputs: tuple):
     """Indices by the one rank rule at the machine's length (the generic solver's own
     decision, taken on its square-root factor, is kept).
 
     Raises:
         SingularConfigurationError: a closed-form C of numerical rank < 6. CaHyMan's
             springs reach all six directions of M at every regular pose, so that rank
-            deficiency is not rigidity but one compliance 1e14 times larger than the others
-            (a crank near its coupler); the generic backend refuses the same poses as a
-            mechanism (its spring-free rule works on the motions of the sprung joints).
+            deficiency is not rigidity but one compliance 1e14 times larger than the others:
+            a crank near its coupler (the generic backend refuses the same poses as a
+            mechanism: its spring-free rule works on the motions of the sprung joints), or
+            springs many orders apart, which C, a sum of the springs' compliances, cannot
+            resolve (the generic backend does, from a square-root factor). The message
+            says which (:func:`_rank_deficiency_reason`).
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)
@@ -380,10 +383,30 @@ def _indices(result: BackendResult, params: CaHyManParams, backend: str):
     if not indices.is_full_rank:
         raise SingularConfigurationError(
             f"the {backend} compliance at M has numerical rank {indices.rank} < 6 (scaled "
-            "eigenvalue ratio below 1e-14): a singular pose, where one direction is almost "
-            "free; move the inputs away from it"
+            f"eigenvalue ratio below 1e-14): {_rank_deficiency_reason(params, backend, inputs)}"
         )
     return indices
+
+
+def _rank_deficiency_reason(params: CaHyManParams, backend: str, inputs: tuple) -> str:
+    """Why a closed form's C is rank deficient: the pose (still so with the paper's
+    springs) or the spread of ``params``' springs (full rank with the paper's)."""
+    paper = {name: getattr(DEFAULT_PARAMS, name) for name in SPRING_FIELDS}
+    given = {name: getattr(params, name) for name in SPRING_FIELDS}
+    if given != paper:
+        try:
+            C = get_backend(backend)(params.replace(**paper), *inputs).C
+            full = StiffnessIndices.from_compliance(C, length=params.length).is_full_rank
+        except SingularConfigurationError:
+            full = False
+        if full:
+            springs = ", ".join(f"{name}={value:g}" for name, value in given.items())
+            return (
+                f"the springs ({springs}) are too many orders apart for the closed form, "
+                "which sums their compliances (the pose is regular); the generic backend "
+                "resolves them"
+            )
+    return "a singular pose, where one direction is almost free; move the inputs away from it"
 
 
 def stiffness(
@@ -439,7 +462,7 @@ def stiffness(
         C=_read_only(result.C),
         C_platform=None if result.C_platform is None else _read_only(result.C_platform),
         pose=result.pose,
-        indices=_indices(result, params, backend),
+        indices=_indices(result, params, backend, (alpha, alpha4, s4)),
         details=result.details,
         axes=result.axes,
     )

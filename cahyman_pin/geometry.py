@@ -192,7 +192,8 @@ def inverse_legs(z_H, phi, psi, p: CaHyManParams) -> np.ndarray:
     if np.any(np.abs(sa) > 1.0):
         raise AssemblyError(
             f"pose z_H={z_H.tolist()} m, phi={np.rad2deg(phi).tolist()} deg, "
-            f"psi={np.rad2deg(psi).tolist()} deg is out of reach of the cranks",
+            f"psi={np.rad2deg(psi).tolist()} deg is out of reach of the cranks: each ball "
+            f"centre's height must lie within h +- b = [{p.h - p.b:.6g}, {p.h + p.b:.6g}] m",
             float(np.max(np.abs(sa) - 1.0) * p.b),
         )
     return np.arcsin(sa)

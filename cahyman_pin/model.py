@@ -28,7 +28,7 @@ from cahyman_pin.urdf_builder import (
     build_urdf,
     closure_spec,
 )
-from closedloop.arrays import readonly
+from closedloop.arrays import readonly, real_array
 from closedloop.assembly import close_loops
 from closedloop.beams import apply_beams
 from closedloop.exceptions import InvalidInputError
@@ -140,8 +140,9 @@ def check_inputs(alpha, alpha4, s4, p: CaHyManParams) -> tuple[np.ndarray, float
         raise InvalidInputError(f"s_4 must be one finite stroke [m], got {s4.tolist()}")
     if not -slack <= s4.item() <= p.s4_max + slack:
         raise InvalidInputError(
-            f"s_4 = {s4.tolist()} m is outside the stroke [0, {p.s4_max}] m "
-            "(params.s4_max sets the stroke)"
+            f"s_4 = {s4.item():.7g} m = {1e3 * s4.item():.7g} mm is outside the stroke "
+            f"[0, {p.s4_max:.7g}] m = [0, {1e3 * p.s4_max:.7g}] mm (params.s4_max sets the "
+            "stroke; the Python API takes metres, the command line millimetres)"
         )
     return alpha, float(alpha4), min(max(s4.item(), 0.0), p.s4_max)
 
@@ -353,17 +354,26 @@ class CaHyManModel:
             (3,) crank angles alpha_1..3 [rad] in [-pi/2, pi/2].
 
         Raises:
-            InvalidInputError: phi outside [0, pi/2], non-finite values.
+            InvalidInputError: not three finite real numbers (strings, complex, None,
+                sequences), phi outside [0, pi/2], psi beyond one turn (+-2 pi rad: most
+                likely degrees).
             AssemblyError: a crank would have to reach beyond its length.
         """
-        values = np.array([z_H, phi, psi], dtype=float)
+        values = real_array([z_H, phi, psi], "z_H, phi, psi")
         if values.shape != (3,) or not np.all(np.isfinite(values)):
-            raise InvalidInputError(f"z_H, phi, psi must be finite numbers, got {values.tolist()}")
+            raise InvalidInputError(
+                f"z_H, phi, psi must be 3 finite numbers [m, rad, rad], got {values.tolist()}"
+            )
         if not 0.0 <= values[1] <= 0.5 * np.pi:  # the closed form reads cos(phi) alone
             raise InvalidInputError(
                 f"phi = {values[1]:.6g} rad = {np.rad2deg(values[1]):.6g} deg; expected the "
                 "elevation of the plate normal in [0, pi/2] rad (pi/2: level; a tilt the "
                 "other way is psi + pi)"
+            )
+        if abs(values[2]) > REVOLUTE_LIMIT:
+            raise InvalidInputError(
+                f"psi = {values[2]:.7g} rad = {np.rad2deg(values[2]):.7g} deg is beyond one turn "
+                "(+-2 pi rad, +-360 deg); inverse() takes radians"
             )
         alpha = geometry.inverse_legs(*values, self.params)
         return readonly(alpha)

@@ -23,7 +23,8 @@ K_S_ASSUMED = 0.697e6
 _KS_PRESETS = {"assumed": K_S_ASSUMED, "printed": K_S_PRINTED}
 
 _LENGTHS = ("a", "b", "h", "r_e", "r_p", "HQ", "L")
-_SPRINGS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
+#: The lumped springs [N/m or N m/rad].
+SPRING_FIELDS = ("K_T", "K_b", "K_d", "K_T4", "K_s", "K_4")
 _MASSES = ("m_HQ", "m_QM", "m_MM2", "m_M4", "m_M5")
 #: Masses of each leg's links (the same in the three legs); the paper names none.
 LEG_MASSES = ("m_b", "m_c", "m_d", "m_h")
@@ -129,7 +130,7 @@ class CaHyManParams:
                     f"{PARAM_RANGE[0]:g}..{PARAM_RANGE[1]:g} (SI) in which the closed forms and "
                     "the model stay within the floating point range"
                 )
-        for name in (*_LENGTHS, *_SPRINGS, "s4_max", *BEAM_FIELDS):
+        for name in (*_LENGTHS, *SPRING_FIELDS, "s4_max", *BEAM_FIELDS):
             if getattr(self, name) <= 0.0:
                 raise InvalidInputError(
                     f"CaHyMan parameter {name}={getattr(self, name)!r} must be > 0"
