@@ -187,7 +187,8 @@ def preloaded_compliance(
             **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
         )
     s = T.shape[1]
-    M, T = settled_tangent(M, f.N.T @ Kt @ f.N, T, _spring_free(f))
+    Z = f.Z / (f.sigma[0] if f.sigma.size else 1.0)  # on the scale of the stiffest spring
+    M, T = settled_tangent(M, f.N.T @ Kt @ f.N, T, Z)
     s_M = np.linalg.svd(M, compute_uv=False)
     if s_M.size and s_M[-1] <= CRITICAL_RTOL:  # on the scale of the springs (1 unloaded)
         raise SingularConfigurationError(
@@ -227,17 +228,6 @@ def preloaded_compliance(
         stability_margin=margin,
         **about,
     )
-
-
-def _spring_free(f) -> np.ndarray:
-    """(d, n_internal) the spring-free admissible motions of a :class:`SpringFactor`:
-    orthonormal complement of its V, divided by its largest singular value (the scale of
-    :func:`closedloop.tangent.settled_tangent`)."""
-    d, s = f.V.shape
-    if s == d:
-        return np.zeros((d, 0))
-    Q = np.linalg.qr(f.V, mode="complete")[0] if s else np.eye(d)
-    return Q[:, s:] / (f.sigma[0] if s else 1.0)
 
 
 def _spring_forces(clm: ClosedLoopModel, eq: Equilibrium) -> np.ndarray:

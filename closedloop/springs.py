@@ -40,13 +40,19 @@ class SpringFactor(NamedTuple):
         V: (d, s) orthonormal directions of y with a restoring spring.
         sigma: (s,) their singular values: K_r = N^T K_q N = V diag(sigma^2) V^T on them
             [sqrt(N m)].
-        n_internal: number of spring-free motions that do not move the frame (left out).
+        Z: (d, d - s) orthonormal spring-free directions of y (they do not move the frame:
+            internal mobilities, left out of the compliance).
     """
 
     N: np.ndarray
     V: np.ndarray
     sigma: np.ndarray
-    n_internal: int
+    Z: np.ndarray
+
+    @property
+    def n_internal(self) -> int:
+        """Number of spring-free motions (internal mobilities)."""
+        return self.Z.shape[1]
 
     @property
     def NV(self) -> np.ndarray:
@@ -444,7 +450,7 @@ def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFact
                 f"{_main_joints(clm, N @ Z[:, moves])}; add springs, lock joints or move away "
                 "from the singularity"
             )
-    return SpringFactor(N, V, sigma, Z.shape[1])
+    return SpringFactor(N, V, sigma, Z)
 
 
 def spring_subspace(
