@@ -52,7 +52,14 @@ from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
-from .model import ClosedLoopModel, Closure, closure_between_frames, joint_id, joint_names
+from .model import (
+    ClosedLoopModel,
+    Closure,
+    check_locked_springs,
+    closure_between_frames,
+    joint_id,
+    joint_names,
+)
 from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
@@ -261,11 +268,7 @@ def _check_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
     with _in_file(where):
         for name in (*(spec.actuated or ()), *spec.springs, *spec.locked):
             joint_id(model, name)
-        both = sorted(set(spec.springs) & set(spec.locked))
-        if both:
-            raise InvalidInputError(
-                f"joints {both} are both locked and given springs; expected one or the other"
-            )
+        check_locked_springs(spec.springs, spec.locked)
 
 
 def _side_file(model: pin.Model, side_file, springs: dict) -> tuple[ClosureSpec, dict]:

@@ -172,6 +172,16 @@ def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
     return frozen(mask), characteristic_length(points)
 
 
+def check_locked_springs(springs: Mapping, locked: Iterable[str]) -> None:
+    """InvalidInputError for joints both ``locked`` and given ``springs`` (names)."""
+    both = sorted(set(locked) & set(springs))
+    if both:
+        raise InvalidInputError(
+            f"joints {both} are both locked and given springs; expected one or the other "
+            "(a lock is an infinite stiffness)"
+        )
+
+
 #: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
 #: read from 36 printed numbers is symmetric to their ~1e-16 rounding).
 BLOCK_SYMMETRY_RTOL = 1e-9
@@ -384,12 +394,7 @@ class ClosedLoopModel:
             raise InvalidInputError(
                 f"springs must be a mapping joint name -> stiffness, got {type(springs).__name__}"
             )
-        both = sorted(set(locked) & set(springs))
-        if both:
-            raise InvalidInputError(
-                f"joints {both} are both locked and given springs; expected one or the other "
-                "(a lock is an infinite stiffness)"
-            )
+        check_locked_springs(springs, locked)
         blocks = {}
         for name, value in springs.items():
             jm = self.model.joints[joint_id(self.model, name)]
