@@ -232,3 +232,13 @@ def test_a_loop_closed_at_a_beams_tip_follows_the_tip(tmp_path):
     C = [compliance(m, assemble(m, actuated=[0.5]).q, "P").C for m in (by_urdf, by_mjcf, rigid)]
     assert_close_in_norm(C[1], C[0], RTOL_TWIN)
     assert np.linalg.norm(C[1] - C[2]) > 1e-3 * np.linalg.norm(C[2])
+
+
+def test_a_joint_locked_and_sprung_in_a_closure_file_names_the_file(tmp_path):
+    yaml_text = (
+        (REPO / "urdf/fourbar.yaml").read_text().replace("locked: []", "locked: [crank_axial]")
+    )
+    path = write(tmp_path, "c.yaml", yaml_text)
+    with pytest.raises(InvalidInputError, match=r"c\.yaml.*\['crank_axial'\] are both locked and "
+                       r"given springs"):  # fmt: skip
+        io.load_model(REPO / "urdf/fourbar.urdf", path)
