@@ -229,7 +229,9 @@ def _yaml_items(path: str, doc) -> tuple[str, list[dict]]:
 
 def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     reader = csv.DictReader(io.StringIO(text), skipinitialspace=True)
-    header, rows = list(reader.fieldnames or []), list(reader)
+    # columns aligned by hand: names and the frame may carry spaces on either side
+    reader.fieldnames = header = [c.strip() for c in reader.fieldnames or []]
+    rows = list(reader)
     repeated = sorted({c for c in header if header.count(c) > 1})
     if repeated:
         raise ModelFileError(f"{path!r}: column(s) {repeated} given twice; expected each once")
@@ -254,7 +256,7 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     if not rows:
         raise ModelFileError(f"{path!r} has a header and no measurement rows; expected one "
                              "row a measurement")  # fmt: skip
-    frames = sorted({row["frame"] for row in rows})
+    frames = sorted({row["frame"].strip() for row in rows})
     if len(frames) != 1:
         raise ModelFileError(f"{path!r}: one frame expected in every row, got {frames}")
     items = [

@@ -188,6 +188,22 @@ def test_a_spreadsheet_csv_with_a_bom_reads_as_without(tmp_path, exact):
         np.testing.assert_array_equal(a.twist, b.twist)
 
 
+def test_a_csv_aligned_with_spaces_reads_as_without(tmp_path, exact):
+    """Columns padded to line up: the header's 'frame ' and the cell ' P ' were refused as
+    an unknown column and a second frame."""
+    _, rows = exact
+    plain = _csv(tmp_path / "plain.csv", rows)
+    aligned = tmp_path / "aligned.csv"
+    lines = plain.read_text().splitlines()
+    aligned.write_text("\n".join(" , ".join(f"{c:>8} " for c in line.split(",")) for line in lines))
+    (frame, read), (frame0, read0) = read_measurements(aligned), read_measurements(plain)
+    assert frame == frame0 == "P" and len(read) == len(read0)
+    for a, b in zip(read, read0, strict=True):
+        np.testing.assert_array_equal(a.wrench, b.wrench)
+        np.testing.assert_array_equal(a.twist, b.twist)
+        np.testing.assert_array_equal(a.q, b.q)
+
+
 def test_csv_columns_given_twice_or_empty_are_named(tmp_path, exact):
     """A repeated column: csv.DictReader kept the last one. An empty cell: "could not
     convert string to float: ''", without the column."""
