@@ -207,7 +207,9 @@ class DeflectionScene:
         )
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (SI)."""
+        """JSON-ready summary (SI): ``point_deflected_m`` is the frame origin displaced by
+        the deflection (not amplified: first order if linear), ``point_shown_m`` where the
+        amplified view draws it (:attr:`point_deflected`)."""
         return {
             "frame": self.frame,
             "scale": self.scale,
@@ -217,7 +219,9 @@ class DeflectionScene:
             "max_displacement_m": self.max_displacement,
             "wrench": self.wrench.tolist(),
             "point_m": self.point.tolist(),
-            "point_deflected_m": self.point_deflected.tolist(),
+            # the origin moved by the deflection itself; the drawn, amplified one apart
+            "point_deflected_m": (self.point + self.frame_twist[:3]).tolist(),
+            "point_shown_m": self.point_deflected.tolist(),
             "frame_twist": self.frame_twist.tolist(),
             "ellipsoids": [
                 {

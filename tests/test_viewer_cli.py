@@ -15,15 +15,22 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 from helpers import REPO
 
+from cahyman_pin.api import stiffness
 from cahyman_pin.cli import main as cahyman_main
 from closedloop.cli import main as closedloop_main
 
 #: Seconds a live view may take to print its URL, and to stop after a signal.
 START_TIMEOUT, STOP_TIMEOUT = 60.0, 10.0
 LISTEN = "0A"  # TCP state LISTEN in /proc/net/tcp
+#: The closed form against the Pinocchio model: they agree to ~1e-14 (README); margin.
+RTOL_SAME_QUERY = 1e-9
+#: The drawn point is the model moved by 30 dq and closed again: second order in the
+#: amplified rotation (~1e-3 rad here), against the first-order 30 C w.
+RTOL_AMPLIFIED = 1e-2
 
 
 def run(main, capsys, *argv) -> tuple[int, str, str]:
@@ -86,6 +93,16 @@ def test_cahyman_view_json_goes_to_stdout(tmp_path, capsys):
     doc = json.loads(out)
     assert (doc["scale"], doc["auto_scaled"], doc["html"]) == (30.0, False, str(html))
     assert len(doc["frame_twist"]) == 6
+    # the deflected point is the true one, C w from the stiffness query; the amplified
+    # one (x30) is the drawn one. It was the amplified point under the deflected name.
+    C = stiffness(np.deg2rad([90.0] * 3), np.deg2rad(90.0), 0.05, backend="consistent").C
+    moved = C[:3] @ np.array([0.0, 0.0, -5.0, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.subtract(doc["point_deflected_m"], doc["point_m"]), moved,
+                               atol=RTOL_SAME_QUERY * np.linalg.norm(moved))  # fmt: skip
+    shown = np.subtract(doc["point_shown_m"], doc["point_m"])
+    np.testing.assert_allclose(
+        shown, 30.0 * moved, atol=RTOL_AMPLIFIED * 30.0 * np.linalg.norm(moved)
+    )
 
 
 @pytest.mark.parametrize("main", [closedloop_main, cahyman_main])
