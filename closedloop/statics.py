@@ -61,12 +61,13 @@ from .exceptions import (
     InvalidInputError,
     JointLimitError,
     JointLimitWarning,
+    SingularConfigurationError,
 )
 from .gravity import GravityLoad, Load, Payload
 from .kinematics import update_kinematics
 from .limits import describe_limits, joints_outside_limits
 from .model import ClosedLoopModel
-from .springs import spring_factor
+from .springs import SPREAD_RESOLVED, model_scaling, spring_factor
 from .tangent import EquilibriumEquations
 
 #: Closure tolerance of the equilibrium (infinity norm) [rad, and lengths in units of the
@@ -325,8 +326,11 @@ def solve_equilibrium(
             q_rest; :class:`OpenLoopError` for a q_rest that does not close the loops.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame (no equilibrium).
-        SingularConfigurationError: springs further apart than
-            :data:`closedloop.springs.SPREAD_RESOLVED` (1e20, scaled).
+        SingularConfigurationError: a mechanism with closures whose springs are further
+            apart than :data:`closedloop.springs.SPREAD_RESOLVED` (1e20, scaled), the
+            message naming the stiffest and the softest (:func:`_check_spread`); so is one
+            with a passive joint (k = 0), whose spring-free motions
+            :func:`closedloop.springs.spring_factor` checks. Without either, any spread.
         EquilibriumError: no equilibrium found even with the smallest load increment. Its
             ``limit_load`` is True when the tangent stiffness at the last equilibrium is
             near-singular (stability margin <= :data:`LIMIT_MARGIN`: a limit load ends the
@@ -343,7 +347,9 @@ def solve_equilibrium(
     w = Load(check_wrench(wrench), weight)
     rest = Configuration(clm, q_rest).require_closed()  # the one closure tolerance
     q_rest = _closed_rest(clm, rest)
-    spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
+    _check_spread(clm)
+    if clm.closures or np.any(clm.stiffness == 0.0):  # else every free motion has a spring
+        spring_factor(rest, rest.frame_jacobian(frame), frame)  # MechanismError before any work
     eqs = EquilibriumEquations(clm, q_rest, frame)
     units = eqs.units
     weighed = "" if weight is None else f" and the weight under gravity {weight.gravity.tolist()}"
@@ -462,6 +468,52 @@ def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:
         )
 
 
+def _joint_of(clm: ClosedLoopModel, i: int) -> str:
+    """Name of the joint of velocity coordinate i."""
+    model = clm.model
+    return next(
+        model.names[j] for j in range(1, model.njoints)
+        if model.joints[j].idx_v <= i < model.joints[j].idx_v + model.joints[j].nv
+    )  # fmt: skip
+
+
+def _check_spread(clm: ClosedLoopModel) -> None:
+    """Refuse a mechanism with closures whose springs span more than
+    :data:`closedloop.springs.SPREAD_RESOLVED` (scaled at ``clm.length``), naming the
+    stiffest and the softest spring (with spring blocks: the stiffness of the stiffest and
+    the softest direction of the spring factor, on the joint it moves most).
+
+    The admissible motions of the closures (the null space of J_c, an SVD) mix the
+    coordinates: a soft motion's part on a stiff coordinate is known to eps of the soft
+    motion only, so the stiff springs' deflections and forces (and the multipliers) lose
+    their digits as the spread grows (the four-bar, crank 1 N m/rad and axial springs
+    spread / L^2, loads of 1e-6 N: up to 1e-3 of their deflection at 1e20, 0.2 at 1e22,
+    1 to 4 at 1e24, while the loaded frame's motion keeps 1e-7). Without closures the
+    basis is the identity on the free coordinates and each spring is solved for through
+    its own square root (:meth:`closedloop.tangent.EquilibriumEquations.step`), at any
+    spread.
+    """
+    sc = model_scaling(clm, clm.length)
+    spread = sc.spread**2
+    if not clm.closures or spread <= SPREAD_RESOLVED:
+        return
+    directions = np.eye(sc.sigma.size) if sc.W is None else sc.W * sc.sigma  # (s, s)
+
+    def spring(i: int) -> str:
+        c = sc.sprung[np.argmax(np.abs(directions[:, i]))]
+        unit = "N/m" if clm.linear_coordinates[c] else "N m/rad"
+        return f"{sc.sigma[i] ** 2 / sc.s_q[c] ** 2:.3g} {unit} on {_joint_of(clm, c)!r}"
+
+    raise SingularConfigurationError(
+        f"the springs of {clm.name!r} span {spread:.1e} (scaled: k L^2 for prismatic joints, "
+        f"L = {clm.length:.3g} m), from {spring(int(np.argmin(sc.sigma)))} to "
+        f"{spring(int(np.argmax(sc.sigma)))}, beyond the {SPREAD_RESOLVED:.0e} that the "
+        "statics of a mechanism with closures resolves in double precision; lock the "
+        f"stiffest joints (a spring of inf) or bring the springs within {SPREAD_RESOLVED:.0e} "
+        "of each other"
+    )
+
+
 def _advice(eqs: EquilibriumEquations, q) -> str:
     """What to try after a failed continuation: a smaller step, unless the part of the
     load reached already turns a joint coordinate by a radian or more (a load far beyond
@@ -470,13 +522,10 @@ def _advice(eqs: EquilibriumEquations, q) -> str:
     turn = np.where(clm.linear_coordinates, 0.0, np.abs(pin.difference(clm.model, eqs.q_rest, q)))
     i = int(np.argmax(turn)) if turn.size else 0
     if turn.size and turn[i] >= 1.0:
-        joint = next(
-            clm.model.names[j] for j in range(1, clm.model.njoints)
-            if clm.model.joints[j].idx_v <= i < clm.model.joints[j].idx_v + clm.model.joints[j].nv
-        )  # fmt: skip
         return (
-            f"the part of the load reached already turns joint {joint!r} by {turn[i]:.3g} rad "
-            "from rest: the load is far beyond what the springs hold; expected a smaller load"
+            f"the part of the load reached already turns joint {_joint_of(clm, i)!r} by "
+            f"{turn[i]:.3g} rad from rest: the load is far beyond what the springs hold; "
+            "expected a smaller load"
         )
     return "try a smaller max_increment or a larger max_iter"
 
