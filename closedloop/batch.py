@@ -10,9 +10,10 @@ of :mod:`closedloop.springs` (serial, partitioned) run once on the whole stack:
 
 the same formulas as :func:`closedloop.compliance.compliance`, with the same decisions:
 a configuration is answered here only when each test of the single query passes with a
-margin (:data:`MARGIN`): J_p well conditioned (the exact 1-norm condition, which bounds
-the estimate of the single query), the closure equations solved,
-no singular value of the rank rule near its threshold, C, G and K finite. Every other
+margin (:data:`MARGIN`): the closure residual within its tolerance and resolved to it
+(:func:`closedloop.configuration.residual_rounding`), J_p well conditioned (the exact
+1-norm condition, which bounds the estimate of the single query), the closure equations
+solved, no singular value of the rank rule near its threshold, C, G and K finite. Every other
 configuration (near a singular pose, the null-space path, open loops, a mechanism) goes
 through :func:`compliance` itself, so that the answer, or the error, is that of the single
 query. Results agree with the single query to rounding (the stacked LAPACK calls differ
@@ -30,7 +31,7 @@ import pinocchio as pin
 from .arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverses
 from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
-from .configuration import CLOSURE_TOL
+from .configuration import CLOSURE_TOL, residual_rounding
 from .exceptions import ClosedLoopError, InvalidInputError
 from .kinematics import jacobian_rows, reference_frame, residual_rows
 from .model import ClosedLoopModel, check_name
@@ -256,6 +257,8 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float,
         return C, G, np.full(n, -1), np.full(n, np.nan)  # no fast path (springs.partition)
     r, Jc, J = _kinematics(clm, Q, fid, reference, closure)
     ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
+    if m:  # the residual resolved to its tolerance (Configuration.require_closed)
+        ok &= MARGIN * residual_rounding(clm, Q, L) <= CLOSURE_TOL
     X, norm2 = None, np.zeros(n)
     if p:  # the fast paths have no spring-free motion: the springs' coordinates move
         X, ok_p = _passive_motions(Jc, sc)

@@ -9,7 +9,11 @@ against :data:`CLOSURE_TOL`). Jacobians are computed on first use and kept.
 
 The closure residual is judged unit-free: metres are divided by the characteristic
 length L of the mechanism (:attr:`ClosedLoopModel.length`), radians are taken as they
-are.
+are. It is judged only where the kinematics resolve it: Pinocchio places every joint from
+the world origin, so the residual, a difference of two anchors so placed, is known to
+about eps times their distance from the origin (:func:`residual_rounding`); coordinates
+that put the joints so far away that this exceeds the tolerance close no loop (sliders
+3e17 L out gave a residual of exactly 0 on a loop open by 0.65 L).
 """
 
 from __future__ import annotations
@@ -31,6 +35,50 @@ from .model import ClosedLoopModel, check_name
 #: of its size; the first-order error of a compliance at such a configuration is of the
 #: same relative size.
 CLOSURE_TOL = 1e-6
+
+
+def joint_reach(model: ClosedLoopModel, Q: np.ndarray) -> np.ndarray | float:
+    """(...,) bound of the distance [m] of every joint origin and closure anchor from the
+    world origin at the configurations Q (..., nq): the lengths of all joint placements,
+    plus the largest anchor offset, plus the absolute values of the translational
+    coordinates of q (prismatic joints, the position of a free flyer). A float for one q.
+    """
+    offset, translational = model.memo("joint_reach", lambda: _reach_terms(model))
+    if Q.ndim == 1:  # one configuration (every query): Python floats, inf past the range
+        return offset + sum(map(abs, Q[translational].tolist()))
+    with np.errstate(over="ignore"):  # beyond the float range: inf, refused
+        return offset + np.abs(Q[..., translational]).sum(axis=-1)
+
+
+def _reach_terms(model: ClosedLoopModel) -> tuple[float, np.ndarray]:
+    """(the placements' part of :func:`joint_reach` [m], the indices of the translational
+    coordinates of q: per joint those of :attr:`ClosedLoopModel.linear_coordinates`, the
+    leading ones of a joint with a quaternion or unit complex number, all of its q when
+    they do not lead)."""
+    pm = model.model
+    anchors = [p for c in model.closures
+               for p in (c.constraint.joint1_placement, c.constraint.joint2_placement)]  # fmt: skip
+    offset = sum(np.linalg.norm(M.translation) for M in pm.jointPlacements)
+    offset += max((np.linalg.norm(M.translation) for M in anchors), default=0.0)
+    indices = []
+    for j in range(1, pm.njoints):  # 0: the universe
+        jm = pm.joints[j]
+        linear = model.linear_coordinates[jm.idx_v : jm.idx_v + jm.nv]
+        lead = int(np.cumprod(linear).sum())
+        if jm.nq == jm.nv:
+            indices += (jm.idx_q + np.flatnonzero(linear)).tolist()
+        else:
+            indices += range(jm.idx_q, jm.idx_q + (jm.nq if linear[lead:].any() else lead))
+    return float(offset), frozen(np.array(indices, dtype=int))
+
+
+def residual_rounding(model: ClosedLoopModel, Q: np.ndarray, length: float) -> np.ndarray | float:
+    """(...,) bound of the rounding of the scaled closure residual at the configurations Q
+    (..., nq), at length L [m]: each joint placement composed from the world origin errs by
+    eps times the distance (:func:`joint_reach`), and a chain has at most njoints of them.
+    A float for one q."""
+    factor = model.memo("reach_rounding", lambda: model.model.njoints * np.finfo(float).eps)
+    return factor * joint_reach(model, Q) / length
 
 
 class Configuration:
@@ -69,7 +117,9 @@ class Configuration:
         pin.updateFramePlacements(pm, self.data)
         self.length = model.length if length is None else check_length(length)
         self.residual = frozen(residual_rows(model, self.data, self._constraint_datas))
+        self._rounding = 0.0  # of the scaled residual; no closure: none
         if self.residual.size:
+            self._rounding = residual_rounding(model, q, self.length)
             size = abs(self.residual)
             self.residual_norm = float(size.max())
             if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
@@ -99,12 +149,15 @@ class Configuration:
 
     @property
     def is_closed(self) -> bool:
-        """True when :attr:`closure_error` is within :data:`CLOSURE_TOL`."""
-        return self.closure_error <= CLOSURE_TOL
+        """True when :attr:`closure_error` is within :data:`CLOSURE_TOL` (and resolved to
+        it: the rounding of the residual is within it too, module docstring)."""
+        return self.closure_error <= CLOSURE_TOL and self._rounding <= CLOSURE_TOL
 
     def require_closed(self) -> Configuration:
-        """This configuration, or :class:`OpenLoopError` if it does not close the loops."""
-        if not self.is_closed:
+        """This configuration, or :class:`OpenLoopError` if it does not close the loops (or
+        its residual is not resolved to :data:`CLOSURE_TOL`: the error's ``residual`` is
+        then the bound of its rounding, :func:`residual_rounding`)."""
+        if not self.closure_error <= CLOSURE_TOL:
             worst = self._closure_of_row(int(np.argmax(np.abs(self._scaled_residual()))))
             raise OpenLoopError(
                 f"configuration does not close the loops of {self.model.name!r}: scaled "
@@ -112,6 +165,17 @@ class Configuration:
                 f"characteristic length L = {self.length:.4g} m, radians) exceeds "
                 f"{CLOSURE_TOL:g}; assemble it first (closedloop.assemble)",
                 self.closure_error,
+                CLOSURE_TOL,
+            )
+        if self._rounding > CLOSURE_TOL:
+            reach = float(joint_reach(self.model, self.q))
+            raise OpenLoopError(
+                f"configuration of {self.model.name!r} places its joints up to {reach:.3g} m "
+                f"from the world origin (q's translational coordinates): there the closure "
+                f"residual is known to {self._rounding:.1e} only (metres per characteristic "
+                f"length L = {self.length:.4g} m), above {CLOSURE_TOL:g}; expected joints "
+                f"within {reach * CLOSURE_TOL / self._rounding:.3g} m of the origin",
+                self._rounding,
                 CLOSURE_TOL,
             )
         return self

@@ -39,6 +39,9 @@ from .exceptions import InvalidInputError, NameNotFoundError
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
+#: Entries of :meth:`ClosedLoopModel.memo` past which those whose key carries a
+#: parameter are dropped (a few tens of kB each on CaHyMan: the scaling at a length L).
+MEMO_SIZE = 64
 #: Largest change of a coordinate when the quaternions and unit complex numbers of q are
 #: normalised: a q further from the configuration manifold is refused, a nearer one
 #: normalised (7 typed digits are within it).
@@ -369,11 +372,22 @@ class ClosedLoopModel:
             self._pool.append(workspace)
 
     def memo(self, key, factory):
-        """``factory()``, computed once per ``key`` for this model (immutable results only)."""
+        """``factory()``, computed once per ``key`` for this model (immutable results only).
+
+        A key with a parameter is a tuple (e.g. ``("scaling", L)``): past
+        :data:`MEMO_SIZE` entries those are dropped, so that a sweep of the parameter does
+        not keep one entry a value.
+        """
         try:
             return self._memo[key]
         except KeyError:
-            return self._memo.setdefault(key, factory())
+            pass
+        value = factory()  # outside the handler: its errors without the KeyError
+        if isinstance(key, tuple) and len(self._memo) >= MEMO_SIZE:
+            # a new dict, swapped in at once: a thread that reads the old one meanwhile
+            # only computes its entry again
+            self._memo = {k: v for k, v in list(self._memo.items()) if not isinstance(k, tuple)}
+        return self._memo.setdefault(key, value)
 
     @property
     def length(self) -> float:
