@@ -43,8 +43,14 @@ def real_array(value, name: str) -> np.ndarray:
 
     Raises:
         InvalidInputError: strings, complex numbers (their imaginary part would be dropped),
-            ``None`` or other objects, ragged sequences.
+            ``None`` or other objects, ragged sequences, a masked array with masked entries
+            (numpy would hand over the values hidden under the mask).
     """
+    if np.ma.is_masked(value):
+        raise InvalidInputError(
+            f"{name} has masked entries at {np.flatnonzero(np.ma.getmaskarray(value)).tolist()}"
+            " (flat indices); expected every value given (fill or drop them first)"
+        )
     try:
         a = np.asarray(value)
     except (TypeError, ValueError):  # ragged nesting

@@ -696,6 +696,8 @@ def fourbar_q():
         (lambda q: np.array(q, dtype=object), "q must be real numbers"),
         (lambda q: q[None], r"one configuration, shape \(nq,\) = \(5,\), got shape \(1, 5\)"),
         (lambda q: q[:, None], r"got shape \(5, 1\)"),
+        # numpy hands over the hidden values: a different pose, silently
+        (lambda q: np.ma.masked_array(q, mask=[0, 0, 1, 0, 0]), r"masked entries at \[2\]"),
         (lambda q: [q.tolist()], r"got shape \(1, 5\)"),
     ],
 )
