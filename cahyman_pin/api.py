@@ -33,7 +33,12 @@ from cahyman_pin.params import DEFAULT_PARAMS, SPRING_FIELDS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
 from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
-from closedloop.conditioning import SCALED_TOL, scaled_asymmetry
+from closedloop.conditioning import (
+    SCALED_TOL,
+    scaled_asymmetry,
+    spectrum_from_factor,
+    twist_scaling,
+)
 from closedloop.configuration import Configuration
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 from closedloop.indices import StiffnessIndices, lu_determinant
@@ -48,7 +53,9 @@ class BackendResult:
         pose: plate and arm pose.
         C_platform: (6, 6) twist of the plate at H (world axes) per wrench at M, or None
             when the backend does not provide it.
-        details: backend-specific extras (e.g. the configuration q).
+        details: backend-specific extras (e.g. the configuration q); ``factor``, a
+            square-root factor B (6, r) of C = B B^T [SI], when the backend has one: K and
+            its indices then come from the SVD of B, not from C.
         axes: coordinates of C: ``"world"`` (twist at M, world axes) or a description of
             the backend's own coordinates.
     """
@@ -138,7 +145,8 @@ def check_closed_form(params: CaHyManParams, backend: str) -> None:
 
 
 def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -> BackendResult:
-    """The consistent closed form (pure numpy); ``details["breakdown"]`` has its parts.
+    """The consistent closed form (pure numpy); ``details["breakdown"]`` has its parts and
+    ``details["factor"]`` the square-root factor B (6, 12) of C, whose SVD gives K.
 
     The plate twist at H per wrench at M is C_H T^T (T^T carries the wrench from M to H).
 
@@ -153,7 +161,7 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
         C=parts.C,
         pose=closed_form_pose(alpha, alpha4, s4, params),
         C_platform=readonly(parts.C_H @ parts.T.T),
-        details={"breakdown": parts},
+        details={"breakdown": parts, "factor": parts.B},
     )
 
 
@@ -363,7 +371,8 @@ def _real_or_pairs(ev: np.ndarray) -> list:
 
 def _indices(result: BackendResult, params: CaHyManParams, backend: str, inputs: tuple):
     """Indices by the one rank rule at the machine's length (the generic solver's own
-    decision, taken on its square-root factor, is kept).
+    decision, taken on its square-root factor, is kept; a backend's ``factor`` B gives the
+    rank, K and the condition number from its SVD, as the generic solver's does).
 
     Raises:
         SingularConfigurationError: a closed-form C of numerical rank < 6. CaHyMan's
@@ -371,15 +380,23 @@ def _indices(result: BackendResult, params: CaHyManParams, backend: str, inputs:
             deficiency is not rigidity but one compliance 1e14 times larger than the others:
             a crank near its coupler (the generic backend refuses the same poses as a
             mechanism: its spring-free rule works on the motions of the sprung joints), or
-            springs many orders apart, which C, a sum of the springs' compliances, cannot
-            resolve (the generic backend does, from a square-root factor). The message
-            says which (:func:`_rank_deficiency_reason`).
+            springs many orders apart, whose compliances C (or its factor B) cannot tell
+            from rigidity by the rank rule (the generic backend decides on the motions of
+            its sprung joints, whatever the springs). The message says which
+            (:func:`_rank_deficiency_reason`).
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)
-    if scaled_asymmetry(result.C, params.length) > SCALED_TOL:
+    if "factor" in result.details:
+        B_s = twist_scaling(params.length)[:, None] * result.details["factor"]
+        spectrum = spectrum_from_factor(B_s, params.length)
+        indices = StiffnessIndices(
+            readonly(result.C), spectrum.rank, spectrum.rigid_directions, params.length, spectrum
+        )
+    elif scaled_asymmetry(result.C, params.length) > SCALED_TOL:
         return None
-    indices = StiffnessIndices.from_compliance(result.C, length=params.length)
+    else:
+        indices = StiffnessIndices.from_compliance(result.C, length=params.length)
     if not indices.is_full_rank:
         raise SingularConfigurationError(
             f"the {backend} compliance at M has numerical rank {indices.rank} < 6 (scaled "

@@ -14,6 +14,17 @@ resolved consistently, in exact linear theory (no preload, analytic derivatives)
 * C = T C_H T^T + C_ser, with T the twist transport from H to M (T^T is the wrench
   transport from M to H, eq. 10 without its weight terms).
 
+Every compliance is formed from a square-root factor, one column per spring (its
+deflection per unit sqrt(energy)): C_leg = F_leg F_leg^T with F_leg = J_leg
+diag(K_leg^-1/2), C_ser = F_arm F_arm^T, and C = B B^T with the (6, 12) factor at M
+B = [T A_d blockdiag(F_leg), F_arm]. Stiffnesses come from the factors, never from
+the inverse of a formed compliance: C sums the springs' compliances, and its smallest
+eigenvalues, hence K and det K, lose cond(K) times the rounding when the springs are many
+orders apart. K at M comes from the SVD of B (K = U diag(1/s^2) U^T,
+:func:`closedloop.conditioning.spectrum_from_factor`, in :mod:`cahyman_pin.api`), whose
+singular values keep the small eigenvalues of C to sqrt(cond(K)) times the rounding; the
+2x2 leg stiffnesses of K_H come from the minors of their factors (:func:`plate_stiffness`).
+
 Twists are (dx, dy, dz, rx, ry, rz) in world axes, with r the small rotation vector;
 wrenches are (fx, fy, fz, nx, ny, nz), conjugate to them. Units are SI: C is in m/N
 (translation per force), 1/N (rad/N and m/(N m)) and rad/(N m). The rotation reported at
@@ -133,6 +144,31 @@ def leg_jacobian(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
     return np.stack([row_y, row_z], -2)
 
 
+def leg_factor(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
+    """Square-root factor F_leg = J_leg diag(K_T, K_b, K_d)^-1/2 of each leg compliance.
+
+    Args:
+        alpha: (..., 3) crank angles [rad].
+        params: parameters.
+
+    Returns:
+        (..., 3, 2, 3) array, one 2x3 block per leg: rows (dy_k, dz_k) as
+        :func:`leg_jacobian`, columns the springs (K_T, K_b, K_d) [m/sqrt(N m)];
+        C_leg = F_leg F_leg^T.
+    """
+    return leg_jacobian(alpha, params) * _root_compliances(params.K_T, params.K_b, params.K_d)
+
+
+def _root_compliances(*springs: float) -> np.ndarray:
+    """(n,) 1/sqrt(k) of the spring stiffnesses k."""
+    return 1.0 / np.sqrt(np.array(springs))
+
+
+def _gram(F: np.ndarray) -> np.ndarray:
+    """(..., m, m) F F^T of factors F (..., m, n), exactly symmetric."""
+    return _sym(F @ F.swapaxes(-1, -2))
+
+
 def leg_compliance(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
     """2x2 compliance of each ball centre H_k in its leg plane.
 
@@ -144,9 +180,7 @@ def leg_compliance(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
         (..., 3, 2, 2) array [m/N]: for leg k, (dy_k, dz_k) = C_k (f_t, f_z), with the
         force applied at H_k along t_k and z (world axes, leg-plane coordinates).
     """
-    J = leg_jacobian(alpha, params)
-    k_inv = np.array([1.0 / params.K_T, 1.0 / params.K_b, 1.0 / params.K_d])
-    return (J * k_inv) @ J.swapaxes(-1, -2)
+    return _gram(leg_factor(alpha, params))
 
 
 def twist_H_to_leg_displacements(R: np.ndarray, params: CaHyManParams = DEFAULT_PARAMS):
@@ -210,6 +244,14 @@ def arm_jacobian(R: np.ndarray, alpha4, s4, params: CaHyManParams = DEFAULT_PARA
     return np.stack([axial, axial, turn], axis=-1)
 
 
+def arm_factor(R: np.ndarray, alpha4, s4, params: CaHyManParams = DEFAULT_PARAMS):
+    """(..., 6, 3) square-root factor A_s diag(K_4, K_s, K_T4)^-1/2 of the arm compliance:
+    twist at M in world axes [m/sqrt(N m), rad/sqrt(N m)] per spring (arguments as
+    :func:`arm_jacobian`)."""
+    A = arm_jacobian(R, alpha4, s4, params)
+    return A * _root_compliances(params.K_4, params.K_s, params.K_T4)
+
+
 def arm_compliance(R: np.ndarray, alpha4, s4, params: CaHyManParams = DEFAULT_PARAMS):
     """Compliance of the telescopic arm alone (plate rigid) at M.
 
@@ -223,16 +265,15 @@ def arm_compliance(R: np.ndarray, alpha4, s4, params: CaHyManParams = DEFAULT_PA
         (..., 6, 6) array C_ser = A_s diag(1/K_4, 1/K_s, 1/K_T4) A_s^T, reference point M,
         world axes, twist/wrench coordinates of the module docstring (rank 2).
     """
-    A = arm_jacobian(R, alpha4, s4, params)
-    k_inv = np.array([1.0 / params.K_4, 1.0 / params.K_s, 1.0 / params.K_T4])
-    return (A * k_inv) @ A.swapaxes(-1, -2)
+    return _gram(arm_factor(R, alpha4, s4, params))
 
 
 def _block_diag3(blocks: np.ndarray) -> np.ndarray:
-    """(..., 3, 2, 2) -> (..., 6, 6) block diagonal."""
-    out = np.zeros((*blocks.shape[:-3], 6, 6))
+    """(..., 3, m, n) -> (..., 3 m, 3 n) block diagonal."""
+    m, n = blocks.shape[-2:]
+    out = np.zeros((*blocks.shape[:-3], 3 * m, 3 * n))
     for k in range(3):
-        out[..., 2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = blocks[..., k, :, :]
+        out[..., m * k : m * k + m, n * k : n * k + n] = blocks[..., k, :, :]
     return out
 
 
@@ -252,10 +293,17 @@ class ConsistentCompliance:
             :func:`twist_H_to_leg_displacements`).
         A_d: (..., 6, 6) = G^-1, in-plane leg displacements -> plate twist at H, world axes.
         C_H: (..., 6, 6) plate compliance at H, world axes.
-        K_H: (..., 6, 6) plate stiffness at H, world axes (G^T blockdiag(C_leg^-1) G).
+        K_H: (..., 6, 6) plate stiffness at H, world axes (G^T blockdiag(C_leg^-1) G, each
+            C_leg^-1 from its factor: :func:`plate_stiffness`).
         T: (..., 6, 6) twist transport from H to M (:func:`twist_transport_H_to_M`).
         C_ser: (..., 6, 6) arm compliance at M, world axes.
-        C: (..., 6, 6) total compliance T C_H T^T + C_ser at M, world axes.
+        B: (..., 6, 12) square-root factor of C, C = B B^T: twist at M, world axes
+            [m/sqrt(N m), rad/sqrt(N m)], per unit sqrt(energy) of each spring; columns
+            (K_T, K_b, K_d) of legs 1, 2, 3, then (K_4, K_s, K_T4):
+            [T A_d blockdiag(F_leg), A_s diag(K_4, K_s, K_T4)^-1/2]
+            (:func:`leg_factor`, :func:`arm_factor`). K and det K at M come from its SVD
+            (:func:`closedloop.conditioning.spectrum_from_factor`), never from inv(C).
+        C: (..., 6, 6) total compliance T C_H T^T + C_ser = B B^T at M, world axes.
     """
 
     pose: PlatePose
@@ -267,6 +315,7 @@ class ConsistentCompliance:
     K_H: np.ndarray
     T: np.ndarray
     C_ser: np.ndarray
+    B: np.ndarray
     C: np.ndarray
 
     def __post_init__(self) -> None:
@@ -290,37 +339,61 @@ def consistent_breakdown(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARA
         SingularConfigurationError: a crank lies along its coupler.
         AssemblyError: the plate cannot be assembled.
     """
-    parts = _compliance_parts(alpha, alpha4, s4, params)
-    C_leg, G = parts[2], parts[3]
-    K_H = _sym(G.swapaxes(-1, -2) @ _block_diag3(_leg_stiffness(C_leg, alpha)) @ G)
-    return ConsistentCompliance(*parts[:6], K_H, *parts[6:])
+    pose, M, F_leg, G, A_d, F_H, Tr, B = _factors(alpha, alpha4, s4, params)
+    return ConsistentCompliance(
+        pose=pose,
+        M=M,
+        leg_compliance=_gram(F_leg),
+        G=G,
+        A_d=A_d,
+        C_H=_gram(F_H),
+        K_H=_plate_stiffness(G, F_leg, alpha),
+        T=Tr,
+        C_ser=_gram(B[..., 9:]),
+        B=B,
+        C=_gram(B),
+    )
 
 
-def _leg_stiffness(C_leg: np.ndarray, alpha) -> np.ndarray:
-    """(..., 3, 2, 2) inverses of the leg compliances, or SingularConfigurationError where
-    one is singular (a crank within rounding of its coupler, alpha (..., 3) [rad])."""
-    try:
-        return np.linalg.inv(C_leg)
-    except np.linalg.LinAlgError:
+def _plate_stiffness(G: np.ndarray, F_leg: np.ndarray, alpha) -> np.ndarray:
+    """(..., 6, 6) K_H = G^T blockdiag(C_leg^-1) G from the leg factors F_leg (..., 3, 2, 3)
+    (C_leg = F_leg F_leg^T), or SingularConfigurationError where a leg compliance is
+    singular (a crank within rounding of its coupler, alpha (..., 3) [rad]).
+
+    C_leg^-1 = adj(C_leg) / det(C_leg), with det(C_leg) the sum of the squared 2x2 minors
+    of F_leg (Cauchy-Binet): positive terms, each a minor of J_leg times 1/sqrt(k_i k_j)
+    exactly, so its relative accuracy is that of the kinematics whatever the springs,
+    where the determinant of the formed C_leg cancels when they are orders apart.
+    """
+    f, g = F_leg[..., 0, :], F_leg[..., 1, :]  # rows (dy, dz), (..., 3 legs, 3 springs)
+    minors = f * np.roll(g, -1, axis=-1) - np.roll(f, -1, axis=-1) * g  # springs 01, 12, 20
+    det = np.sum(minors * minors, axis=-1)
+    c_yy, c_zz, c_yz = np.sum(f * f, axis=-1), np.sum(g * g, axis=-1), np.sum(f * g, axis=-1)
+    adjugate = np.stack([np.stack([c_zz, -c_yz], -1), np.stack([-c_yz, c_yy], -1)], -2)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        K_leg = adjugate / det[..., None, None]  # inf or NaN where a leg is singular
+    if not np.all(np.isfinite(K_leg)):
         raise SingularConfigurationError(
             f"alpha={_degrees(alpha)} deg: a leg's compliance is singular (a crank "
             "nearly along its coupler); the plate stiffness K_H does not exist"
-        ) from None
+        )
+    return _sym(G.swapaxes(-1, -2) @ _block_diag3(K_leg) @ G)
 
 
-def _compliance_parts(alpha, alpha4, s4, params: CaHyManParams):
-    """(pose, M, C_leg, G, A_d, C_H, T, C_ser, C): the consistent compliance without K_H."""
+def _factors(alpha, alpha4, s4, params: CaHyManParams):
+    """(pose, M, F_leg, G, A_d, F_H, T, B): the square-root factors of the consistent
+    compliance (legs F_leg, plate at H F_H = A_d blockdiag(F_leg), at M B) and the maps
+    they are built from."""
     alpha, alpha4, s4 = check_pose_inputs(alpha, alpha4, s4, params)
-    C_leg = leg_compliance(alpha, params)
+    F_leg = leg_factor(alpha, params)
     pose = plate_pose(alpha, params)
     G = twist_H_to_leg_displacements(pose.R, params)
     A_d = np.linalg.inv(G)
-    C_H = _sym(A_d @ _block_diag3(C_leg) @ A_d.swapaxes(-1, -2))
+    F_H = A_d @ _block_diag3(F_leg)  # (..., 6, 9), column 3 k + j: spring j of leg k
     _, M = extremity(pose, alpha4, s4, params)
     Tr = twist_transport_H_to_M(M - pose.H)
-    C_ser = arm_compliance(pose.R, alpha4, s4, params)
-    C = _sym(Tr @ C_H @ Tr.swapaxes(-1, -2) + C_ser)
-    return pose, M, C_leg, G, A_d, C_H, Tr, C_ser, C
+    B = np.concatenate([Tr @ F_H, arm_factor(pose.R, alpha4, s4, params)], axis=-1)
+    return pose, M, F_leg, G, A_d, F_H, Tr, B
 
 
 def consistent_compliance(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PARAMS):
@@ -342,7 +415,7 @@ def consistent_compliance(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PAR
         SingularConfigurationError: a crank lies along its coupler.
         AssemblyError: the plate cannot be assembled.
     """
-    C = _compliance_parts(alpha, alpha4, s4, params)[-1]
+    C = _gram(_factors(alpha, alpha4, s4, params)[-1])
     C.setflags(write=False)
     return C
 
@@ -350,12 +423,12 @@ def consistent_compliance(alpha, alpha4, s4, params: CaHyManParams = DEFAULT_PAR
 def plate_stiffness(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
     """(..., 6, 6) stiffness K_H of the plate on its three legs, at H, world axes.
 
-    (f [N], n [N m]) at H = K_H (dH [m], r [rad]); G^T blockdiag(C_leg^-1) G.
+    (f [N], n [N m]) at H = K_H (dH [m], r [rad]); G^T blockdiag(C_leg^-1) G, each
+    C_leg^-1 from the leg's factor (:func:`_plate_stiffness`).
     """
     alpha = _check_alpha(alpha, params)
     G = twist_H_to_leg_displacements(plate_pose(alpha, params).R, params)
-    K_leg = _leg_stiffness(leg_compliance(alpha, params), alpha)
-    return _sym(G.swapaxes(-1, -2) @ _block_diag3(K_leg) @ G)
+    return _plate_stiffness(G, leg_factor(alpha, params), alpha)
 
 
 def plate_twist_from_leg_displacements(alpha, params: CaHyManParams = DEFAULT_PARAMS):
@@ -371,11 +444,13 @@ def plate_twist_from_leg_displacements(alpha, params: CaHyManParams = DEFAULT_PA
 __all__ = [
     "ConsistentCompliance",
     "arm_compliance",
+    "arm_factor",
     "arm_jacobian",
     "check_pose_inputs",
     "consistent_breakdown",
     "consistent_compliance",
     "leg_compliance",
+    "leg_factor",
     "leg_jacobian",
     "plate_stiffness",
     "plate_twist_from_leg_displacements",
