@@ -11,7 +11,9 @@ Four parts, shared by :mod:`closedloop.maps` and CaHyMan's maps (:mod:`cahyman_p
   ``concurrent.futures.Executor`` (e.g. Dask's ``Client.get_executor()``): the results do
   not depend on the executor;
 * :func:`complete` (in each kernel, so in the workers): the rank and status from C
-  (:func:`classify`) and the stiffness indices of the chunk's points at once;
+  (:func:`classify`) and the stiffness indices of the chunk's points at once; those that
+  the formed C does not resolve (an ill-conditioned point) as the single query computes
+  them (:func:`resolve_ill_conditioned`);
 * :func:`gather`: per-point arrays (no per-point Python objects: statuses and reasons
   are small integer codes).
 
@@ -30,6 +32,7 @@ from __future__ import annotations
 import bisect
 import functools
 import itertools
+import math
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
@@ -41,7 +44,8 @@ import pinocchio as pin
 from .assembly import free_coordinates
 from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
-from .conditioning import SCALED_TOL, batch_rank, scaled_asymmetry
+from .compliance import compliance
+from .conditioning import ILL_CONDITIONED, SCALED_TOL, Spectrum, batch_rank, scaled_asymmetry
 from .exceptions import (
     AssemblyError,
     InvalidInputError,
@@ -49,7 +53,7 @@ from .exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
-from .indices import batch_indices
+from .indices import StiffnessIndices, batch_indices
 from .io import load_model, reference_configuration
 from .limits import INPUT_STEP, assemble_connected, assemble_within_limits, input_scale
 from .model import ClosedLoopModel
@@ -96,6 +100,9 @@ class ChunkResult:
         iterations: (c,) Gauss-Newton iterations of the assembly, -1 if none.
         reasons: error message per failed point, by position in the chunk.
         indices: name -> (c,) stiffness indices (:func:`complete`; empty until then).
+        K: position -> (6, 6) stiffness [SI] of the single query (from its square-root
+            factor) at the points whose cond(K_s) exceeds ``ILL_CONDITIONED``
+            (:meth:`answer`), for :func:`resolve_ill_conditioned`.
     """
 
     C: np.ndarray
@@ -106,6 +113,7 @@ class ChunkResult:
     iterations: np.ndarray
     reasons: dict[int, str] = field(default_factory=dict)
     indices: dict[str, np.ndarray] = field(default_factory=dict)
+    K: dict[int, np.ndarray] = field(default_factory=dict)
 
     @classmethod
     def empty(cls, n: int) -> ChunkResult:
@@ -128,19 +136,28 @@ class ChunkResult:
         """Record the reason of point i's status."""
         self.reasons[int(i)] = text
 
+    def answer(self, i: int, C: np.ndarray, rank: int, condition: float, K) -> None:
+        """Point i as its single query answered it: C (6, 6), rank, cond(K_s) and K (6, 6)
+        [SI] from the query's square-root factor (None: rank < 6)."""
+        self.C[i], self.rank[i], self.condition[i] = C, rank, condition
+        if K is not None:
+            self.K[int(i)] = K
+
 
 def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
     """Rank, status and stiffness indices of a chunk's points, in place (in the kernel, so
     that the workers of a map compute them in parallel): :func:`classify`, then
     ``relabel(out, from_C)`` if given (a caller's own statuses; from_C (c,) bool: the
     rank came from C, not from the solver), then
-    :func:`closedloop.indices.batch_indices` into ``out.indices``."""
+    :func:`closedloop.indices.batch_indices` into ``out.indices``, the ill-conditioned
+    points' by :func:`resolve_ill_conditioned`."""
     from_C = out.rank < 0
     symmetric = classify(out)
     if relabel is not None:
         relabel(out, from_C)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow fails its point, below
         out.indices = batch_indices(out.C, out.rank, out.length, wrench, symmetric, out.condition)
+    resolve_ill_conditioned(out, symmetric)
     for name, values in out.indices.items():  # NaN: no value; inf: the index overflowed
         beyond = np.isinf(values) | ((values == 0.0) if name == "det_K" else False)  # det K
         # of a full-rank K is never 0: one that underflowed
@@ -153,6 +170,46 @@ def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
                 other[i] = np.nan
 
 
+def resolve_ill_conditioned(out: ChunkResult, symmetric: np.ndarray) -> None:
+    """``det_K``, ``condition_number_si`` and ``condition_number`` of the full-rank
+    symmetric points that the formed C does not resolve to rounding, as the single query
+    computes them (:attr:`closedloop.indices.StiffnessIndices.determinant`,
+    ``.condition_number``, ``.scaled_condition_number``), in ``out.indices`` (in place).
+
+    Those are the points of cond(K_s) above ``ILL_CONDITIONED`` (1e8) or of an SI
+    condition number that :func:`closedloop.indices.batch_indices` leaves NaN (above its
+    ``SI_RESOLVED``, 1e12). From the formed C, det K and the SI condition number err by
+    about eps cond(K_s) relative (2e-8 at 1e8, 2e-4 at 1e12, nothing left at 1e16); from
+    the solver's square-root factor, by about eps sqrt(cond(K_s)) (2e-8 at 1e16). K is the
+    single query's where the kernel recorded it (``out.K``: every point above
+    ``ILL_CONDITIONED`` of the project's kernels, :meth:`ChunkResult.answer`); else (an SI
+    condition number beyond ``SI_RESOLVED`` at a scaled one below 1e8, which a length unit
+    alone makes so, or a kernel that records no K) from the eigen-decomposition of the
+    scaled C (:meth:`~closedloop.indices.StiffnessIndices.from_compliance`: eps cond(K_s)
+    relative). A det K beyond the float range becomes inf or 0 (its point fails in
+    :func:`complete`, as a point of the batch); the indices of a point whose C has rank
+    < 6 by that rule (a kernel without K, cond(K_s) near 1e14) are NaN.
+    """
+    names = ("det_K", "condition_number_si", "condition_number")
+    det, cond_si, cond = (out.indices[name] for name in names)
+    full = symmetric & (out.rank == 6)
+    for i in np.flatnonzero(full & ~((cond <= ILL_CONDITIONED) & (cond_si >= 0.0))):
+        C, K, L = out.C[i], out.K.get(i), float(out.length[i])
+        try:
+            if K is None:  # from C only
+                s = StiffnessIndices.from_compliance(C, length=L)
+            else:  # as StiffnessIndices.from_result of the single query
+                spectrum = Spectrum(6, np.zeros((6, 0)), float(out.condition[i]), L, K)
+                s = StiffnessIndices(C, 6, spectrum.rigid_directions, L, spectrum)
+            cond_si[i], cond[i] = s.condition_number, s.scaled_condition_number
+            det[i] = s.determinant
+        except SingularConfigurationError:  # det K beyond the float range
+            det[i] = math.inf if np.linalg.slogdet(s.K)[1] > 0.0 else 0.0
+        except RigidDirectionsError:  # C of rank < 6 by the rule on C
+            for name in names:
+                out.indices[name][i] = np.nan
+
+
 def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
                     length=None, inputs=None):  # fmt: skip
     """Assemble the points ``rows`` of a chunk in order (warm-started), then query them.
@@ -160,7 +217,10 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
     The compliances of the assembled points are computed together, :data:`STACK` at a
     time (:func:`closedloop.batch.stacked_compliances`); a point the stacked path leaves
     (near a singular pose, rank deficient...) gets the single query
-    :func:`closedloop.compliance.compliance`, whose error, if any, is the point's.
+    :func:`closedloop.compliance.compliance`, whose error, if any, is the point's. A
+    point of cond(K_s) above ``ILL_CONDITIONED`` takes the single query's C, rank,
+    condition number and K (``out.K``: from its square-root factor, which the formed C
+    does not replace there; :func:`resolve_ill_conditioned`).
 
     Args:
         clm: the :class:`ClosedLoopModel`.
@@ -220,6 +280,14 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
     out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, ok, strict=True) if s]
     for k, e in errors.items():
         out.fail(positions[k], e)
+    for k in np.flatnonzero(ok & (cond > ILL_CONDITIONED)):  # the single query's K (and C)
+        i = positions[k]
+        try:
+            r = compliance(clm, Q[k], frame, axes, length=length)
+        except POINT_ERRORS as e:
+            out.fail(i, e)
+            continue
+        out.answer(i, r.C, r.rank, r.condition_number, r.stiffness_matrix)
 
 
 def _repeated_steps(inputs: np.ndarray, rows) -> np.ndarray:

@@ -2,7 +2,9 @@
 
 A map computes the compliance at a frame for many inputs (actuated values, SI), on the
 sweep engine of :mod:`closedloop.map_engine` (path, chunks, kernels, executors), with the
-indices of each chunk's points at once (:func:`closedloop.indices.batch_indices`):
+indices of each chunk's points at once (:func:`closedloop.indices.batch_indices`; det K
+and the condition numbers of a point of cond(K_s) above 1e8 are its single query's,
+:func:`closedloop.map_engine.resolve_ill_conditioned`):
 :func:`grid_points` makes the inputs, :func:`stiffness_map` runs the map,
 :class:`StiffnessMap` holds it and writes its files (NPZ, CSV, PNG; each whole or not at
 all: :func:`closedloop.files.write_atomically`).

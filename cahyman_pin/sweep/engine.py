@@ -23,10 +23,12 @@ into chunks of contiguous points, one task each for a ``concurrent.futures.Execu
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
 (``pip install .[dask]``). Results do not depend on the executor. The path, the
 chunks, the executors, the per-point arrays and the indices are those of every map of the
-project (:mod:`closedloop.maps`, :func:`closedloop.indices.batch_indices`): the
-``condition_number`` is the unit-free one of the scaled K, ``condition_number_si`` that of
-the SI matrix (:attr:`cahyman_pin.api.CaHyManStiffness.condition_number`). Only the
-kernels are CaHyMan's (:mod:`cahyman_pin.sweep.execution`).
+project (:mod:`closedloop.maps`, :func:`closedloop.indices.batch_indices`; at a point of
+cond(K_s) above 1e8, det K and the condition numbers of :func:`cahyman_pin.api.stiffness`,
+:func:`closedloop.map_engine.resolve_ill_conditioned`): the ``condition_number`` is the
+unit-free one of the scaled K, ``condition_number_si`` that of the SI matrix
+(:attr:`cahyman_pin.api.CaHyManStiffness.condition_number`). Only the kernels are
+CaHyMan's (:mod:`cahyman_pin.sweep.execution`).
 """
 
 from __future__ import annotations

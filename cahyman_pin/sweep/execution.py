@@ -19,7 +19,12 @@ model, rebuilt once per run and cached per thread):
 
 A point that fails is recorded with a status and the error message; it never stops the
 sweep. The rank, the status from C and the indices are computed at the end of the chunk,
-for all its points at once (:func:`closedloop.map_engine.complete`).
+for all its points at once (:func:`closedloop.map_engine.complete`). A point whose scaled
+condition number exceeds ``ILL_CONDITIONED`` (1e8) takes its single query's C and K (K
+from a square-root factor where the query has one: the formed C loses cond(K_s) times the
+rounding): the generic kernel's in :func:`closedloop.map_engine.assemble_points`, the
+others' :func:`cahyman_pin.api.stiffness` (:func:`_single_queries`), so that its indices
+are that query's.
 """
 
 from __future__ import annotations
@@ -32,12 +37,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cahyman_pin.api import stiffness
 from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_M, REVOLUTE_LIMIT
+from closedloop.conditioning import ILL_CONDITIONED, SCALED_TOL, batch_rank, scaled_asymmetry
 from closedloop.exceptions import AssemblyError, InvalidInputError
 from closedloop.map_engine import (
+    OK,
     POINT_ERRORS,
     RANK_DEFICIENT,
     SINGULAR,
@@ -200,6 +208,27 @@ def _pointwise(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkR
             out.fail(int(i), e)
 
 
+def _single_queries(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkResult):
+    """The single query :func:`cahyman_pin.api.stiffness` at the points ``idx`` of a
+    closed form whose compliance is symmetric and ill-conditioned (cond(K_s) above
+    ``ILL_CONDITIONED`` by the eigenvalues of C, :func:`closedloop.conditioning.batch_rank`):
+    its C, rank, condition number and K (from the backend's square-root factor where it
+    has one) into ``out``; its error, if any, is the point's. (The backend must be
+    registered in the process, as for :func:`cahyman_pin.api.stiffness`.)"""
+    idx = idx[(out.status[idx] == OK) & np.isfinite(out.C[idx]).all(axis=(1, 2))]
+    idx = idx[scaled_asymmetry(out.C[idx], params.length) <= SCALED_TOL]
+    condition = batch_rank(out.C[idx], params.length)[1]
+    for i in idx[condition > ILL_CONDITIONED]:
+        try:
+            r = stiffness(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], params=params,
+                          backend=chunk.backend)  # fmt: skip
+        except POINT_ERRORS as e:
+            out.fail(int(i), e)
+            continue
+        s = r.indices
+        out.answer(i, r.C, s.rank, s.scaled_condition_number, s.K if s.is_full_rank else None)
+
+
 _KERNELS = {"generic": _generic, "consistent": _consistent}
 
 
@@ -211,6 +240,8 @@ def run_chunk(chunk: Chunk) -> ChunkResult:
     for idx, params in _runs(chunk, out):
         out.length[idx] = params.length
         kernel(chunk, _prevalidate(chunk, idx, params, out), params, out)
+        if kernel is not _generic:
+            _single_queries(chunk, idx, params, out)
     complete(out, chunk.wrench, functools.partial(_singular_poses, chunk.backend))
     return out
 
