@@ -9,6 +9,7 @@ import pinocchio as pin
 
 from . import lapack
 from .arrays import ReadOnlyArrays, check_count, check_positive, frozen, real_array
+from .configuration import CLOSURE_TOL
 from .exceptions import AssemblyError, InvalidInputError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
@@ -18,6 +19,11 @@ from .model import ClosedLoopModel
 #: :data:`closedloop.configuration.CLOSURE_TOL`: 1e-12 L for a point closure, whatever the
 #: size of the mechanism (an absolute 1e-12 m is 3e-3 of the size of a nanometre one).
 ASSEMBLY_TOL = 1e-12
+#: Step of a sweep: the largest change of an actuated value per step of
+#: :func:`closedloop.limits.assemble_connected` [rad, and lengths in units of the model's
+#: characteristic length L]; :func:`close_loops` follows the branch of a start's origin to
+#: first order up to twice as far (a step of INPUT_STEP whatever its rounding).
+INPUT_STEP = 0.05
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,12 @@ class Assembly(ReadOnlyArrays):
 def free_coordinates(clm: ClosedLoopModel) -> np.ndarray:
     """Tangent indices solved by assembly: the passive ones (zero stiffness)."""
     return np.flatnonzero(clm.stiffness == 0.0)
+
+
+def coordinate_scale(clm: ClosedLoopModel) -> np.ndarray:
+    """(nv,) the unit of each tangent coordinate in :data:`INPUT_STEP`: L [m] for a
+    length, 1 for an angle (once per model)."""
+    return clm.memo("coordinate_scale", lambda: np.where(clm.linear_coordinates, clm.length, 1.0))
 
 
 def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
@@ -111,13 +123,16 @@ def assemble(
 
     Actuated coordinates are set to ``actuated``; spring and locked coordinates keep the
     values they have in ``q0`` (their rest values). The passive coordinates are found by
-    :func:`close_loops`.
+    :func:`close_loops`; from an assembled q0, its first step follows q0's branch to first
+    order (``origin`` of :func:`close_loops`).
 
     Args:
         clm: the model.
         actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
             ``clm.actuated``; ``None`` keeps those of ``q0``.
-        q0: (nq,) start configuration, which picks the assembly branch (default: neutral).
+        q0: (nq,) start configuration, which picks the assembly branch (default: neutral):
+            a sweep passes the last configuration assembled, at a small step of the inputs
+            (a step that crosses a singular configuration may change branch).
         tol: closure tolerance, > 0: infinity norm of the residual with its rows in metres
             divided by the model's length L (radians as they are; :data:`ASSEMBLY_TOL`).
         max_iter: iteration limit (an integer >= 0; 0 only checks the start).
@@ -132,9 +147,10 @@ def assemble(
     check_positive("tol", tol, "metres / L, rad")
     check_count("max_iter", max_iter, 0)
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
+    origin = None if q0 is None else q.copy()
     if actuated is not None:
         clm.set_actuated(q, check_actuated(clm, actuated))
-    return close_loops(clm, q, tol=tol, max_iter=max_iter, jacobian=jacobian)
+    return close_loops(clm, q, tol=tol, max_iter=max_iter, jacobian=jacobian, origin=origin)
 
 
 def check_actuated(clm: ClosedLoopModel, actuated) -> np.ndarray:
@@ -163,6 +179,7 @@ def close_loops(
     tol: float = ASSEMBLY_TOL,
     max_iter: int = 50,
     jacobian: bool = False,
+    origin: np.ndarray | None = None,
 ) -> Assembly:
     """The loop of :func:`assemble` from a start that its caller has validated.
 
@@ -170,6 +187,15 @@ def close_loops(
     each step a minimum-norm least-squares solve (:func:`min_norm_solve`, rank revealing:
     redundant closure rows are harmless), with backtracking when a step does not reduce
     the residual.
+
+    Near a singular configuration the first step from a start whose inputs have just
+    moved is large (the passive Jacobian is nearly rank deficient and the residual holds
+    the second-order terms of the input step) and may land on another assembly branch:
+    the parallelogram four-bar 0.1 rad from its change point, the crank moved by 0.05 rad
+    towards it, went to the crossed branch. With an ``origin`` at most 2 :data:`INPUT_STEP`
+    away, the first step is instead the first-order continuation of the origin
+    (:func:`_continued`): the passive coordinates move along the tangent of the origin's
+    branch. (An origin at a singular configuration, where branches meet, picks none.)
 
     Args:
         clm: the model.
@@ -179,6 +205,11 @@ def close_loops(
         tol, max_iter: as :func:`assemble`.
         jacobian: also return the closure residuals and Jacobian at the solution
             (:attr:`Assembly.closure`).
+        origin: (nq,) the configuration q was made from by writing the actuated (and
+            held) values, validated as q, or None; used when it closes the loops to
+            :data:`closedloop.configuration.CLOSURE_TOL`, q is at most
+            2 :data:`INPUT_STEP` from it and the continuation closes the loops better than
+            q (the first iteration then), else ignored.
 
     Raises:
         AssemblyError: as :func:`assemble`.
@@ -187,6 +218,9 @@ def close_loops(
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.workspace()
     tols = _row_tolerances(clm, tol)
+    guess = None
+    if origin is not None and max_iter > 0 and free.size:
+        guess = _continued(clm, origin, q, free)
     r, size2, closed = _residual(clm, data, datas, q, tols)
     if not closed and not free.size:
         raise AssemblyError(
@@ -195,6 +229,12 @@ def close_loops(
             _inf_norm(r),
         )
     it = 0
+    if guess is not None and not closed:
+        r_g, size2_g, closed_g = _residual(clm, data, datas, guess, tols)
+        if size2_g < size2 or closed_g:
+            it, q, r, size2, closed = 1, guess, r_g, size2_g, closed_g
+        else:  # the kinematics of q back in the workspace, for its Jacobian
+            r, size2, closed = _residual(clm, data, datas, q, tols)
     while not closed and it < max_iter and size2 == size2:
         it += 1
         # the kinematics and constraint datas of q are those of its residual evaluation
@@ -228,6 +268,29 @@ def close_loops(
     result = object.__new__(Assembly)  # every field checked here: without the frozen __init__
     result.__dict__.update(q=q, residual=err, iterations=it, closure=closure)
     return result
+
+
+def _continued(clm: ClosedLoopModel, origin: np.ndarray, q: np.ndarray, free: np.ndarray):
+    """(nq,) q with its passive coordinates (tangent indices ``free``) moved by the
+    Gauss-Newton step at ``origin`` of the closures linearised in the move of the other
+    coordinates from origin to q: the first-order continuation of origin's branch (exact
+    on a branch along which the coordinates vary linearly). None where the other
+    coordinates do not move or move by more than 2 :data:`INPUT_STEP`, or origin does not
+    close the loops to :data:`closedloop.configuration.CLOSURE_TOL` (it has no branch to
+    follow); then or else, leaves origin's kinematics in the workspace."""
+    model = clm.model
+    move = pin.difference(model, origin, q)
+    move[free] = 0.0
+    if not 0.0 < float(np.max(np.abs(move) / coordinate_scale(clm))) <= 2 * INPUT_STEP:
+        return None
+    data, datas = clm.workspace()
+    r0, _, closed = _residual(clm, data, datas, origin, _row_tolerances(clm, CLOSURE_TOL))
+    if not closed:
+        return None
+    J0 = jacobian_rows(clm, data, datas, calc=False)
+    step = np.zeros(model.nv)
+    step[free] = -min_norm_solve(J0[:, free], r0 + J0 @ move)
+    return pin.integrate(model, q, step)
 
 
 def _inf_norm(r: np.ndarray) -> float:

@@ -28,7 +28,8 @@ def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
         tree = ET.parse(path)
     except ET.ParseError as e:
         raise ModelFileError(f"robot file {str(path)!r} is not valid XML: {e}") from None
-    joints = {j.get("name"): j for j in tree.getroot().iter("joint")}
+    # the joints of the robot, not the <joint> references of its <transmission>s
+    joints = {j.get("name"): j for j in tree.getroot().findall("joint")}
     for name in balls:
         if name not in joints:
             raise ModelFileError(

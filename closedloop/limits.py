@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .assembly import Assembly, check_actuated, close_loops
+from .assembly import INPUT_STEP, Assembly, check_actuated, close_loops, coordinate_scale
 from .exceptions import AssemblyError, InvalidInputError
 from .model import ClosedLoopModel
 
@@ -106,27 +106,23 @@ def assemble_within_limits(
         AssemblyError: the loops cannot be closed.
     """
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
+    origin = None if q0 is None else q.copy()  # an assembled q0: its branch is followed
     clm.set_actuated(q, check_actuated(clm, actuated))
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
     if bad:
         raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
-    return close_loops(clm, q, jacobian=jacobian)
+    return close_loops(clm, q, jacobian=jacobian, origin=origin)
 
 
-#: Largest change of an actuated value per step of :func:`assemble_connected` [rad, and
-#: lengths in units of the model's characteristic length L].
-INPUT_STEP = 0.05
 #: Most steps of :func:`assemble_connected` (a longer way takes longer steps).
 MAX_INPUT_STEPS = 1000
 
 
 def input_scale(clm: ClosedLoopModel) -> np.ndarray:
-    """(n_act,) the unit of each actuated value in :data:`INPUT_STEP`: L [m] for a length,
-    1 for an angle (once per model)."""
-    return clm.memo(
-        "input_scale",
-        lambda: np.where(clm.linear_coordinates[clm.actuated_v_indices], clm.length, 1.0),
-    )
+    """(n_act,) the unit of each actuated value in :data:`INPUT_STEP` (the largest change
+    of an actuated value per step of :func:`assemble_connected`): L [m] for a length, 1 for
+    an angle (once per model)."""
+    return clm.memo("input_scale", lambda: coordinate_scale(clm)[clm.actuated_v_indices])
 
 
 def assemble_connected(
