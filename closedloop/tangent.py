@@ -176,6 +176,8 @@ def geometric_stiffness(
     """
     w = check_wrench(wrench)
     fid = clm.frame_id(frame)
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q = clm.check_configuration(q)
     if not _exact_hessians(clm):
         K_G = central_differences(clm.model, q, lambda x: frame_jacobian(clm, x, frame).T @ w)
         update_kinematics(clm, q)
@@ -214,6 +216,8 @@ def closure_curvature(
         raise InvalidInputError(f"multipliers must be finite, got {lam.tolist()}")
     if not np.any(lam):
         return np.zeros((model.nv, model.nv))
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q = clm.check_configuration(q)
     if not _exact_hessians(clm):
         out = central_differences(model, q, lambda x: closure_gap(clm, x)[1].T @ lam)
         update_kinematics(clm, q)
@@ -312,7 +316,8 @@ def tangent_stiffness(
         gravity: a :class:`closedloop.gravity.Load` whose weight (scaled) adds dG/dq.
         update: recompute the kinematics of q first (else they must be current).
     """
-    if update:
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q, q_rest = clm.check_configuration(q), clm.check_configuration(q_rest)
         update_kinematics(clm, q)
     K = spring_hessian(clm, q, q_rest)
     K -= geometric_stiffness(clm, q, frame, wrench, update=False)

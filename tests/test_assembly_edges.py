@@ -288,8 +288,10 @@ def test_a_ball_quaternion_and_its_negative_give_the_same_answers(rssr):
 @pytest.mark.parametrize("factor", [0.5, 2.0, 0.0, np.nan])
 def test_a_ball_quaternion_off_norm_one_is_refused(rssr, factor):
     """A quaternion scaled by 0.5, 2, 0 or NaN: InvalidInputError naming the joint (or
-    the non-finite values) in the assembly, the compliance (single and stacked) and the
-    statics, never the answer of another rotation."""
+    the non-finite values) in the assembly, the compliance (single and stacked), the
+    statics and the tangent terms (they answered for the unnormalised quaternion: the
+    loop curvature off by 23 beside a largest entry of 8.7), never the answer of another
+    rotation."""
     clm, q = rssr
     bad = q.copy()
     bad[quaternion_of(clm)] *= factor
@@ -301,6 +303,10 @@ def test_a_ball_quaternion_off_norm_one_is_refused(rssr, factor):
         lambda: cl.compliance(clm, bad, "tip"),
         lambda: cl.compliances(clm, bad[None], "tip"),
         lambda: cl.solve_equilibrium(clm, bad, "tip", np.zeros(6)),
+        lambda: cl.geometric_stiffness(clm, bad, "tip", np.ones(6)),
+        lambda: cl.closure_curvature(clm, bad, np.ones(clm.n_constraints)),
+        lambda: cl.tangent_stiffness(clm, bad, q, "tip", np.ones(6), np.ones(clm.n_constraints)),
+        lambda: cl.tangent_stiffness(clm, q, bad, "tip", np.ones(6), np.ones(clm.n_constraints)),
     )
     for query in queries:
         with pytest.raises(InvalidInputError, match=match):
