@@ -15,6 +15,8 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from .exceptions import ModelFileError
 
 
@@ -48,19 +50,32 @@ def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
     return Path(handle.name)
 
 
-def ball_springs(springs: dict, balls: Sequence[str]) -> dict:
-    """``springs`` with each ball's translations locked and its spring on the rotations.
+def ball_springs(
+    springs: dict, balls: Sequence[str], *, locked: Sequence[str] = (), keyword=(), file=None
+) -> dict:
+    """``springs`` with each ball's translations locked and its spring on the rotations
+    (a locked ball is left to its lock).
+
+    Args:
+        springs: joint -> stiffness, the files' merged with the keyword's.
+        balls: the ball joints.
+        locked: joints locked whole.
+        keyword: the names whose spring the caller gave (``load_model(springs=)``), for the
+            message; the others are the closure file's (``file``).
 
     Raises:
         ModelFileError: a ball spring that is not one value or three.
     """
     out = dict(springs)
     for name in balls:
+        if name in locked:
+            continue
         k = out.get(name, 0.0)
-        rot = list(k) if isinstance(k, list | tuple) else [k] * 3
+        rot = list(k) if isinstance(k, list | tuple | np.ndarray) else [k] * 3
         if len(rot) != 3:
+            where = "load_model springs=" if name in keyword else f"closure file {str(file)!r}"
             raise ModelFileError(
-                f"springs: ball joint {name!r} takes one stiffness or three (its rotations "
+                f"{where}: ball joint {name!r} takes one stiffness or three (its rotations "
                 f"[N m/rad]), got {len(rot)}"
             )
         out[name] = [float("inf")] * 3 + [float(v) for v in rot]

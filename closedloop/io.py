@@ -370,6 +370,7 @@ class _Tree:
     undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
     by_default: bool = False  # locked by the serial robot's default, not by a file
     beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
+    balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
 
 
 def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
@@ -418,9 +419,8 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
             closure_between_frames(model, a, b, t)
             for (a, b), t in zip(spec.pairs, spec.types, strict=True)
         ]
-    springs = ball_springs({**spec.springs, **blocks}, spec.balls)
-    return _Tree(model, loops, spec.actuated or (), springs, spec.locked, visual,
-                 beam_joints=tuple(blocks))  # fmt: skip
+    return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks}, spec.locked,
+                 visual, beam_joints=tuple(blocks), balls=spec.balls)  # fmt: skip
 
 
 def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
@@ -598,6 +598,7 @@ def load_model(
             "beam's (give E, G and section, or stiffness_6x6, in beams=)"
         )
     actuated = tree.actuated if actuated is None else joint_names("actuated", actuated)
+    given = tuple(springs or ())
     springs = {**tree.springs, **(springs or {})}
     if joint_stiffness is not None:
         try:
@@ -611,6 +612,8 @@ def load_model(
             )
         for name in actuated:
             springs.setdefault(name, k)
+    if tree.balls:  # the keyword's springs of a ball too: on its rotations, as the file's
+        springs = ball_springs(springs, tree.balls, locked=locked, keyword=given, file=closures)
     clm = ClosedLoopModel(
         tree.model, tree.loops, actuated, springs, locked, visual_model=tree.visual
     )

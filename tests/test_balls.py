@@ -77,3 +77,28 @@ def test_ball_springs_and_names_are_checked(tmp_path):
     urdf, yaml = _files(tmp_path, springs="{shoulder: 100.0, elbow: [10.0, 20.0, 30.0]}")
     k = cl.load_model(urdf, yaml).stiffness
     np.testing.assert_array_equal(k[-6:], [np.inf] * 3 + [10.0, 20.0, 30.0])
+
+
+def test_a_ball_spring_given_as_keyword_acts_on_its_rotations(tmp_path):
+    """springs={"elbow": 7.0} made the ball's locked translations 7 N/m springs; three
+    values were refused as "expected 1 or 6". The keyword's spring is the file's."""
+    urdf, yaml = _files(tmp_path, springs="{shoulder: 100.0}")
+    for given, rotations in ((7.0, [7.0] * 3), ([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])):
+        k = cl.load_model(urdf, yaml, springs={"elbow": given}).stiffness
+        np.testing.assert_array_equal(k[-6:], [np.inf] * 3 + rotations)
+    urdf, yaml = _files(tmp_path, springs="{shoulder: 100.0, elbow: 40.0}")
+    k = cl.load_model(urdf, yaml, springs={"elbow": 7.0}).stiffness  # over the file's
+    np.testing.assert_array_equal(k[-6:], [np.inf] * 3 + [7.0] * 3)
+    with pytest.raises(cl.ModelFileError, match=r"load_model springs=: ball joint 'elbow' "
+                       r"takes one stiffness or three .*got 2"):  # fmt: skip
+        cl.load_model(urdf, yaml, springs={"elbow": [1.0, 2.0]})
+
+
+def test_a_locked_ball_is_locked_whole(tmp_path):
+    """A ball under locked: was refused as "locked and given springs" with none given."""
+    urdf, yaml = _files(tmp_path, springs="{shoulder: 100.0}")
+    yaml.write_text(yaml.read_text() + "locked: [elbow]\n")
+    clm = cl.load_model(urdf, yaml)
+    np.testing.assert_array_equal(clm.stiffness[-6:], np.inf)
+    res = cl.compliance(clm, pin.neutral(clm.model), "tip")
+    assert res.rank == 1  # the shoulder alone
