@@ -18,13 +18,14 @@ frame is a :class:`MechanismError`.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
 
 from . import lapack
 from .arrays import frozen, upper_triangular_inverses
-from .conditioning import RANK_RTOL, split_factor, svd, twist_scaling
+from .conditioning import RANK_RTOL, rule_rank, split_factor, svd, twist_scaling
 from .configuration import Configuration
 from .exceptions import InvalidInputError, MechanismError, SingularConfigurationError
 from .kinematics import nullspace, rigid_rows
@@ -347,12 +348,16 @@ def kinematic_factor(
 
 
 #: Largest spread of the scaled springs (stiffest / softest; k L^2 for prismatic joints)
-#: that the general path resolves. Its basis N of the admissible motions mixes the
-#: coordinates: a soft direction's motion of a stiff coordinate, about 1/sqrt(spread), is
-#: known to eps absolutely, so C errs by up to eps sqrt(spread) relative, by mechanism
-#: (CaHyMan: 1e-12..1e-11 at a spread of 1.1e17, 5e-8 at 1.1e25; the spring factor's own
-#: grading is kept by :func:`spring_split`, so a Stewart platform's legs are exact at any
-#: spread); the fast paths scale by the springs exactly, at any spread.
+#: that the general path and the statics accept. The general path's C keeps the soft
+#: springs to rounding at any spread (:func:`spring_split`; 2e-14 of its largest unit-free
+#: entry at worst on five test mechanisms up to 1e20, 6e-15 at 1e50 with this limit
+#: lifted). What only the stiff springs carry is not resolved: the basis N mixes the
+#: coordinates, so a soft motion's part on a stiff coordinate, about 1/sqrt(spread) of it,
+#: is known to eps of the soft motion only, and the stiff springs' deflections (rows of G)
+#: and the compliance of directions that only stiff springs resist (a Delta's platform
+#: turning on stiff rods) err by up to eps spread of their own size (0.7 on CaHyMan's leg
+#: motors at 1.1e17, 5 on a Delta at 1e20). The fast paths scale by the springs exactly,
+#: at any spread.
 SPREAD_RESOLVED = 1e20
 
 
@@ -379,6 +384,23 @@ def check_path(path: str) -> None:
         raise InvalidInputError(f"path {path!r}; expected one of {list(PATHS)}")
 
 
+#: QR steps of the spring factor's triangle before its SVD in :func:`spring_split`, when
+#: its diagonal spans more than GRADED_RATIO (springs far apart; below it the steps change
+#: nothing measurable). C against mpmath, relative to its largest unit-free entry, over
+#: 428 spring sets of five test mechanisms at scaled spreads of 1e4 to 1e20: 9e-8 at worst
+#: without steps, 2e-8 with one, 5e-11 with three (a Delta whose rods are far stiffer than
+#: its arms), 2e-14 with five.
+GRADED_QR_STEPS = 5
+GRADED_RATIO = 1e2
+
+
+@functools.cache
+def _upper(r: int) -> np.ndarray:
+    """(r, r) read-only mask, 1 on and above the diagonal and 0 below (a triangle from
+    LAPACK's QR in a product, faster than numpy.triu)."""
+    return frozen(np.triu(np.ones((r, r))))
+
+
 def spring_split(rows: np.ndarray, root: np.ndarray):
     """The admissible motions y split by the springs: those the springs see, with the SVD
     of their spring factor, and the spring-free ones.
@@ -397,20 +419,47 @@ def spring_split(rows: np.ndarray, root: np.ndarray):
         V: (d, r) orthonormal directions with a restoring spring; sigma: (r,) their
         singular values [sqrt(N m)]; Z: (d, d - r) orthonormal spring-free directions.
     """
-    _, V_k, Z, _ = split_factor(rows)
-    seen = rows @ V_k
+    n, d = rows.shape
+    full = False
+    if n >= d > 0:  # the rank alone tells whether every motion moves a sprung coordinate
+        _, s, _, info = lapack.dgesdd(rows, compute_uv=0)
+        full = info == 0 and rule_rank(s) == d
+    if full:  # nothing to split off
+        V_k, Z, seen = np.eye(d), np.zeros((d, 0)), rows
+    else:
+        _, V_k, Z, _ = split_factor(rows)
+        seen = rows @ V_k
     S = root[:, None] * seen if root.ndim == 1 else root @ seen
     if not S.size:
         return V_k, np.zeros(0), Z
-    # the rows of S are graded by the springs: a QR with the rows in decreasing norm is
-    # row-wise stable (each row's error is eps of its own norm, so a soft spring keeps its
-    # digits beside a stiff one) and R carries the grading to its SVD; the SVD of S
-    # itself resolves a soft spring only to eps of the stiffest (eps sqrt(spread) relative)
-    qr, _, _, info = lapack.dgeqrf(S[np.argsort(-np.einsum("ij,ij->i", S, S))])
+    # The rows of S are graded by the springs; the SVD of S itself resolves a soft spring
+    # only to eps of the stiffest (eps sqrt(spread) relative). A QR with the rows in
+    # decreasing norm and column pivoting, S P = Q R, is row-wise stable (each row's error
+    # is eps of its own norm, so a soft spring keeps its digits beside a stiff one); without
+    # the pivoting, a leading column that the stiff rows do not move reflects them into the
+    # soft rows, whose digits then cancel (eps sqrt(spread) again). R is graded down its
+    # rows but not along them, which the SVD of R does not resolve either; QRs of the
+    # transposed triangle (R^T = Q_1 R_1, R_1^T = Q_2 R_2, ...: steps of the unshifted QR
+    # iteration, each column-wise stable) grade it both ways and shrink the coupling of
+    # stiff and soft, until the SVD of the last triangle resolves the soft singular values
+    # (LAPACK's dgejsv preconditions so, then ends with a Jacobi SVD). The right factors
+    # are those of the even steps: R = Q_2 R_3^T Q_3^T Q_1^T after three, and
+    # R_3^T = U diag(sigma) W^T gives V = P Q_1 Q_3 W.
+    r = S.shape[1]
+    upper = _upper(r)
+    qr, jpvt, _, _, info = lapack.dgeqp3(S[np.argsort(-np.einsum("ij,ij->i", S, S))])
+    R, V = qr[:r] * upper, np.eye(r)
+    steps = GRADED_QR_STEPS if abs(R[0, 0]) > GRADED_RATIO * abs(R[-1, -1]) else 0
+    for step in range(steps):
+        qr, tau, _, step_info = lapack.dgeqrf(R.T)
+        info, R = info or step_info, qr * upper
+        if step % 2 == 0:
+            V = V @ lapack.dorgqr(qr, tau, overwrite_a=1)[0]
     if info != 0:
         raise np.linalg.LinAlgError(f"QR of the spring factor failed (LAPACK info {info})")
-    _, sigma, Vt = svd(np.triu(qr[: S.shape[1]]), False)
-    return V_k @ Vt.T, sigma, Z
+    _, sigma, Wt = svd(R.T if steps % 2 else R, False)
+    V[jpvt - 1] = V @ Wt.T
+    return V_k @ V, sigma, Z
 
 
 def spring_factor(state: Configuration, J: np.ndarray, frame: str) -> SpringFactor:

@@ -84,10 +84,10 @@ def test_a_determinant_beyond_the_float_range_is_an_error_not_inf_or_zero(backen
 
 
 #: The general path against the closed form with leg motors K_T up to 1e20 (a scaled
-#: spread of 1.1e17): the soft springs beside the stiff ones keep ~4e-20 sqrt(spread)
-#: relative (closedloop.springs.SPREAD_RESOLVED; 1.2e-11 measured at 1e20); 1e-10 leaves
-#: a factor of 8.
-RTOL_GENERAL_PATH = 1e-10
+#: spread of 1.1e17): the soft springs beside the stiff ones keep their digits
+#: (closedloop.springs.spring_split; 1e-16 measured at 1e20, 1.2e-11 before its graded
+#: QR); 1e-13 leaves rounding of the two backends' C a margin.
+RTOL_GENERAL_PATH = 1e-13
 
 
 def test_the_general_path_resolves_springs_up_to_its_spread_and_refuses_beyond():
