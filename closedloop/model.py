@@ -507,6 +507,14 @@ class ClosedLoopModel:
         """Index of joint ``name`` (raises :class:`NameNotFoundError`)."""
         return joint_id(self.model, name)
 
+    def coordinate_joint(self, i: int) -> str:
+        """Name of the joint whose velocity coordinates include i (0 <= i < nv)."""
+        model = self.model
+        return next(
+            model.names[j] for j in range(1, model.njoints)
+            if model.joints[j].idx_v <= i < model.joints[j].idx_v + model.joints[j].nv
+        )  # fmt: skip
+
     def joint_v_slice(self, name: str) -> slice:
         """Slice of joint ``name`` in the velocity (tangent) vector."""
         jm = self.model.joints[self.joint_id(name)]

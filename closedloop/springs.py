@@ -19,6 +19,7 @@ frame is a :class:`MechanismError`.
 from __future__ import annotations
 
 import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -361,17 +362,30 @@ def kinematic_factor(
 SPREAD_RESOLVED = 1e20
 
 
-def check_spread(clm: ClosedLoopModel, L: float) -> None:
+def check_spread(clm: ClosedLoopModel, L: float, what: str = "the general path") -> None:
     """Refuse springs further apart than :data:`SPREAD_RESOLVED` (scaled at length L [m])
-    for the general path and the statics (SingularConfigurationError naming the spread)."""
-    spread = model_scaling(clm, L).spread ** 2
-    if spread > SPREAD_RESOLVED:
-        raise SingularConfigurationError(
-            f"the springs of {clm.name!r} span {spread:.1e} (scaled: k L^2 for prismatic "
-            f"joints), beyond the {SPREAD_RESOLVED:.0e} that the general path and the statics "
-            "resolve in double precision; lock the stiffest joints (a spring of inf) or bring "
-            f"the springs within {SPREAD_RESOLVED:.0e} of each other"
-        )
+    with a SingularConfigurationError naming the spread and the softest and stiffest
+    springs (with spring blocks: the stiffness of the softest and stiffest direction of
+    the spring factor, on the joint it moves most); ``what`` is what refuses them."""
+    sc = model_scaling(clm, L)
+    if not sc.spread > math.sqrt(SPREAD_RESOLVED):  # sc.spread: of the square roots
+        return
+    directions = np.eye(sc.sigma.size) if sc.W is None else sc.W * sc.sigma  # (s, s)
+
+    def spring(i: int) -> str:
+        c = sc.sprung[np.argmax(np.abs(directions[:, i]))]
+        unit = "N/m" if clm.linear_coordinates[c] else "N m/rad"
+        k = float(sc.sigma[i] / sc.s_q[c]) ** 2 if sc.sigma[i] < 1e154 * sc.s_q[c] else math.inf
+        return f"{k:.3g} {unit} on {clm.coordinate_joint(int(c))!r}"
+
+    spread = sc.spread * sc.spread  # inf beyond the float range, not an OverflowError
+    raise SingularConfigurationError(
+        f"the springs of {clm.name!r} span {spread:.1e} (scaled: k L^2 for prismatic joints, "
+        f"L = {L:.3g} m), from {spring(int(np.argmin(sc.sigma)))} to "
+        f"{spring(int(np.argmax(sc.sigma)))}, beyond the {SPREAD_RESOLVED:.0e} that {what} "
+        "resolves in double precision; lock the stiffest joints (a spring of inf) or bring "
+        f"the springs within {SPREAD_RESOLVED:.0e} of each other"
+    )
 
 
 #: Values of the ``path`` argument of :func:`compliance`.

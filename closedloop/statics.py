@@ -61,13 +61,12 @@ from .exceptions import (
     InvalidInputError,
     JointLimitError,
     JointLimitWarning,
-    SingularConfigurationError,
 )
 from .gravity import GravityLoad, Load, Payload
 from .kinematics import update_kinematics
 from .limits import describe_limits, joints_outside_limits
 from .model import ClosedLoopModel
-from .springs import SPREAD_RESOLVED, model_scaling, spring_factor
+from .springs import check_spread, spring_factor
 from .tangent import EquilibriumEquations
 
 #: Closure tolerance of the equilibrium (infinity norm) [rad, and lengths in units of the
@@ -468,15 +467,6 @@ def _enforce_limits(clm, q, st: dict, t_within: float, where: str) -> None:
         )
 
 
-def _joint_of(clm: ClosedLoopModel, i: int) -> str:
-    """Name of the joint of velocity coordinate i."""
-    model = clm.model
-    return next(
-        model.names[j] for j in range(1, model.njoints)
-        if model.joints[j].idx_v <= i < model.joints[j].idx_v + model.joints[j].nv
-    )  # fmt: skip
-
-
 def _check_spread(clm: ClosedLoopModel) -> None:
     """Refuse a mechanism with closures whose springs span more than
     :data:`closedloop.springs.SPREAD_RESOLVED` (scaled at ``clm.length``), naming the
@@ -493,25 +483,8 @@ def _check_spread(clm: ClosedLoopModel) -> None:
     its own square root (:meth:`closedloop.tangent.EquilibriumEquations.step`), at any
     spread.
     """
-    sc = model_scaling(clm, clm.length)
-    spread = sc.spread**2
-    if not clm.closures or spread <= SPREAD_RESOLVED:
-        return
-    directions = np.eye(sc.sigma.size) if sc.W is None else sc.W * sc.sigma  # (s, s)
-
-    def spring(i: int) -> str:
-        c = sc.sprung[np.argmax(np.abs(directions[:, i]))]
-        unit = "N/m" if clm.linear_coordinates[c] else "N m/rad"
-        return f"{sc.sigma[i] ** 2 / sc.s_q[c] ** 2:.3g} {unit} on {_joint_of(clm, c)!r}"
-
-    raise SingularConfigurationError(
-        f"the springs of {clm.name!r} span {spread:.1e} (scaled: k L^2 for prismatic joints, "
-        f"L = {clm.length:.3g} m), from {spring(int(np.argmin(sc.sigma)))} to "
-        f"{spring(int(np.argmax(sc.sigma)))}, beyond the {SPREAD_RESOLVED:.0e} that the "
-        "statics of a mechanism with closures resolves in double precision; lock the "
-        f"stiffest joints (a spring of inf) or bring the springs within {SPREAD_RESOLVED:.0e} "
-        "of each other"
-    )
+    if clm.closures:
+        check_spread(clm, clm.length, "the statics of a mechanism with closures")
 
 
 def _advice(eqs: EquilibriumEquations, q) -> str:
@@ -523,7 +496,7 @@ def _advice(eqs: EquilibriumEquations, q) -> str:
     i = int(np.argmax(turn)) if turn.size else 0
     if turn.size and turn[i] >= 1.0:
         return (
-            f"the part of the load reached already turns joint {_joint_of(clm, i)!r} by "
+            f"the part of the load reached already turns joint {clm.coordinate_joint(i)!r} by "
             f"{turn[i]:.3g} rad from rest: the load is far beyond what the springs hold; "
             "expected a smaller load"
         )

@@ -19,6 +19,7 @@ import pytest
 from helpers import UR5_JOINTS
 from scipy.optimize import minimize
 
+from closedloop.compliance import compliance
 from closedloop.exceptions import SingularConfigurationError
 from closedloop.model import ClosedLoopModel
 from closedloop.springs import SPREAD_RESOLVED
@@ -229,4 +230,16 @@ def test_closures_keep_the_limit_naming_the_two_springs():
         rf"span 1\.0e\+22 .* from 2 N m/rad on 'crank' to {stiff} N/m on 'crank_axial', "
         r"beyond the 1e\+20 that the statics of a mechanism with closures resolves"
     )):  # fmt: skip
+        solve_equilibrium(clm, q, frame, [1e-6, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_springs_beyond_the_float_range_apart_are_refused_by_name():
+    """Springs 1e330 apart: their spread squared overflowed (a plain OverflowError, which
+    stopped a whole map); now the one refusal, from the query and the statics alike."""
+    springs = {"crank": 1e200, "crank_axial": 1e-130, "rocker_axial": 1.0}
+    clm, q, frame = mech.scaled_fourbar(1.0, springs)
+    match = r"span inf .* from 1e-130 N/m on 'crank_axial' to 1e\+200 N m/rad on 'crank'"
+    with pytest.raises(SingularConfigurationError, match=match + ".* the general path"):
+        compliance(clm, q, frame, path="null-space")
+    with pytest.raises(SingularConfigurationError, match=match + ".* the statics"):
         solve_equilibrium(clm, q, frame, [1e-6, 0.0, 0.0, 0.0, 0.0, 0.0])
