@@ -21,6 +21,17 @@ from closedloop.kinematics import closure_jacobian, closure_residual, frame_jaco
 from closedloop.model import ClosedLoopModel, Closure
 
 REPO = Path(__file__).resolve().parent.parent
+#: The per-point indices of a map (closedloop.indices.batch_indices names) as a single
+#: query's StiffnessIndices gives them.
+INDEX_GETTERS = {
+    "det_K": lambda s: s.determinant,
+    "condition_number": lambda s: s.scaled_condition_number,
+    "condition_number_si": lambda s: s.condition_number,
+    "min_translational": lambda s: s.min_translational_stiffness.value,
+    "max_translational": lambda s: s.max_translational_stiffness.value,
+    "min_rotational": lambda s: s.min_rotational_stiffness.value,
+    "max_rotational": lambda s: s.max_rotational_stiffness.value,
+}
 
 UR5_JOINTS = (
     "shoulder_pan_joint",

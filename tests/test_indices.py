@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import REPO, assert_close_in_norm
+from helpers import INDEX_GETTERS, REPO, assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 from closedloop.assembly import assemble
@@ -462,17 +462,8 @@ def test_batched_indices_equal_the_single_ones():
     symmetric = np.array([True] * 6 + [False])
     got = batch_indices(C, rank, length, w, symmetric)
     assert set(got) == set(BATCH_INDICES)
-    getters = {
-        "det_K": lambda s: s.determinant,
-        "condition_number": lambda s: s.scaled_condition_number,
-        "condition_number_si": lambda s: s.condition_number,
-        "min_translational": lambda s: s.min_translational_stiffness.value,
-        "max_translational": lambda s: s.max_translational_stiffness.value,
-        "min_rotational": lambda s: s.min_rotational_stiffness.value,
-        "max_rotational": lambda s: s.max_rotational_stiffness.value,
-    }
     for i, s in enumerate(single):
-        for name, get in getters.items():
+        for name, get in INDEX_GETTERS.items():
             try:
                 expected = get(s)
             except RigidDirectionsError:

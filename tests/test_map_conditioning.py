@@ -9,7 +9,7 @@ import mpmath
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import UR5_JOINTS
+from helpers import INDEX_GETTERS, UR5_JOINTS
 
 import closedloop as cl
 from cahyman_pin import api
@@ -30,16 +30,6 @@ ELBOW = np.geomspace(3e-2, 3e-6, 9)
 K_T = np.geomspace(1e2, 1e-12, 8)
 #: CaHyMan's pose of the K_T sweep (regular: alpha 45..75 deg).
 ALPHA, ALPHA4, S4 = np.deg2rad([45.0, 60.0, 75.0]), 0.7, 0.02
-#: Indices compared, as the single query's StiffnessIndices names them.
-SINGLE = {
-    "det_K": lambda s: s.determinant,
-    "condition_number": lambda s: s.scaled_condition_number,
-    "condition_number_si": lambda s: s.condition_number,
-    "min_translational": lambda s: s.min_translational_stiffness.value,
-    "max_translational": lambda s: s.max_translational_stiffness.value,
-    "min_rotational": lambda s: s.min_rotational_stiffness.value,
-    "max_rotational": lambda s: s.max_rotational_stiffness.value,
-}
 #: Equal but for the order of operations (the same functions on the same numbers).
 ROUNDING = 1e-13
 #: Digits of the exact reference: the 6x6 inverses and eigenvalues of a K of condition
@@ -115,7 +105,7 @@ def test_ur5_map_across_cond_1e12_is_the_single_query_and_exact(ur5_urdf, ur5_ma
         single = cl.StiffnessIndices.from_result(cl.compliance(clm, pose(elbow), "tool0"))
         exact = exact_indices(ur5_urdf, pose(elbow), clm.length)
         cond = exact["condition_number"]
-        for name, value in SINGLE.items():
+        for name, value in INDEX_GETTERS.items():
             got = m.indices[name][i]
             np.testing.assert_allclose(got, value(single), rtol=same_rtol(cond),
                                        err_msg=f"{name} at elbow {elbow:g}")  # fmt: skip
@@ -136,7 +126,7 @@ def test_ur5_map_files_carry_the_numbers(ur5_map, tmp_path):
     with open(csv_path, newline="") as f:
         rows = list(csv.DictReader(f))
     with np.load(npz_path) as npz:
-        for name in SINGLE:
+        for name in INDEX_GETTERS:
             column = [float(row[column_name(name, INDICES[name])]) for row in rows]
             np.testing.assert_array_equal(column, m.indices[name])  # repr: exact
             np.testing.assert_array_equal(npz[name], m.indices[name])
@@ -164,7 +154,7 @@ def test_cahyman_spring_sweep_across_cond_1e12_is_the_single_query(backend, tmp_
         assert res.status[i] == "ok"
         cond = ref.indices.scaled_condition_number
         crossed += cond > 1e12
-        for name, value in SINGLE.items():  # ref.det_K, ref.condition_number: these
+        for name, value in INDEX_GETTERS.items():  # ref.det_K, ref.condition_number: these
             np.testing.assert_allclose(res.indices[name][i], value(ref.indices),
                                        rtol=same_rtol(cond),
                                        err_msg=f"{name} at K_T {params.K_T:g}")  # fmt: skip
@@ -173,7 +163,7 @@ def test_cahyman_spring_sweep_across_cond_1e12_is_the_single_query(backend, tmp_
     loaded = SweepResult.load_npz(npz_path)
     with open(csv_path, newline="") as f:
         rows = list(csv.DictReader(f))
-    for name in SINGLE:
+    for name in INDEX_GETTERS:
         np.testing.assert_array_equal(loaded.indices[name], res.indices[name])
         column = [float(row[column_name(name, INDICES[name])]) for row in rows]
         np.testing.assert_array_equal(column, res.indices[name])  # repr: exact
