@@ -10,6 +10,7 @@ by spring and inverted in 50 digits (mpmath) from the kinematic maps of the clos
 
 from __future__ import annotations
 
+import mpmath as mp
 import numpy as np
 import pytest
 from helpers import assert_close_in_norm
@@ -72,7 +73,6 @@ def _reference_compliance(alpha, alpha4, s4, params):
     """C at M (mpmath, 50 digits): sum over the 12 springs of c c^T / k, c the twist at M
     per unit deflection of the spring (leg Jacobian, G^-1, transport H -> M, arm
     Jacobian), with G^-1 and the sum in high precision."""
-    mp = pytest.importorskip("mpmath")
     mp.mp.dps = 50
     pose = plate_pose(alpha, params)
     _, M = extremity(pose, alpha4, s4, params)
@@ -134,7 +134,6 @@ def test_default_springs_agree_with_the_generic_backend_to_rounding():
 def test_plate_stiffness_equals_the_high_precision_inverse(spread):
     """K_H = G^T blockdiag(C_leg^-1) G with each 2x2 C_leg inverted in 50 digits (the
     inverse of the formed C_leg erred by 1e-4 with K_b, K_d 1e12 times the default)."""
-    mp = pytest.importorskip("mpmath")
     mp.mp.dps = 50
     params = P.replace(**SPREADS[spread])
     alpha = POSES["table3"][0]

@@ -10,13 +10,12 @@ and C = J N (N^T K N)^-1 N^T J^T. No basis, QR or SVD of the library enters it.
 from __future__ import annotations
 
 import mechanisms as mech
+import mpmath
 import numpy as np
 import pytest
 
 from closedloop import compliance
 from closedloop.configuration import Configuration
-
-mpmath = pytest.importorskip("mpmath")
 
 #: Digits of the reference: the springs below are up to 1e20 apart (scaled), and C is
 #: wanted to 16 digits of its largest entries.
