@@ -253,7 +253,12 @@ def compliance(
         NameNotFoundError: unknown frame.
         OpenLoopError: q does not close the loops (tolerance ``CLOSURE_TOL``).
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
-        SingularConfigurationError: the compliance overflows (springs near 1e-308).
+        SingularConfigurationError: the compliance overflows (springs near 1e-308); on the
+            null-space path, springs further apart than
+            :data:`closedloop.springs.SPREAD_RESOLVED` (1e20, scaled; the message names the
+            softest and the stiffest).
+        InvalidInputError: a q, frame name, axes, path, length, gravity or preload that is
+            not what the arguments above expect (the message names it).
     """
     if isinstance(model, Configuration) and q is not None and frame is None:
         q, frame = None, q  # compliance(state, frame): a configuration carries its own q

@@ -23,8 +23,9 @@ joint frame is fixed to the child link; q = 0 is the drawing):
 
 * ball: one point closure (3 rows) at the joint origin, every rotation free;
 * revolute / continuous: two point closures, at the joint origin and a distance ``L``
-  along the axis (``L`` = bounding-box diagonal of the link origins): 6 rows of rank 5,
-  only the rotation about the axis free, rows in metres / ``L`` scaled like radians;
+  along the axis (``L``: the diameter of the link origins,
+  :func:`closedloop.conditioning.characteristic_length`): 6 rows of rank 5, only the
+  rotation about the axis free, rows in metres / ``L`` scaled like radians;
 * fixed: a weld. A prismatic or universal joint, or one with a spring, cannot close one.
 
 The root link (no joint names it as child) is fixed to the world at its pose, or carried
