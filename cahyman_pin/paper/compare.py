@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cahyman_pin.angles import COS_PHI_MIN, rotvec_to_euler_increments, yaw_tilt_increments
-from cahyman_pin.api import stiffness
+from cahyman_pin.api import CaHyManStiffness, stiffness
 from cahyman_pin.backends.published import PublishedOptions, published_stiffness
+from cahyman_pin.geometry import plate_pose
 from cahyman_pin.paper.data import LOADS, TABLES, PaperPose
 from cahyman_pin.params import CaHyManParams
 from closedloop.exceptions import ClosedLoopError
@@ -85,23 +86,37 @@ def backend_compliance(
     return r.C, r.pose.phi, r.pose.theta
 
 
+def backend_stiffness(backend: str, pose: PaperPose, params: CaHyManParams) -> CaHyManStiffness:
+    """The API's stiffness of one backend at a paper pose: its K, det K and eigenvalues are
+    those of :func:`cahyman_pin.api.stiffness` (from a square-root factor of C for the
+    consistent and generic backends). The published backend takes the printed K_s, as its
+    column of the tables, and no load (no weight terms).
+
+    Raises:
+        ClosedLoopError: the API's refusal (e.g. a closed form's C of numerical rank < 6).
+    """
+    if backend == "published":
+        params = params.with_ks("printed")
+    return stiffness(*pose.si, params=params, backend=backend)
+
+
 def table_values(
     pose: PaperPose, params: CaHyManParams, options: PublishedOptions | None = None
 ) -> TableValues:
     """Every backend's displacements at a table pose, beside the published ones."""
     published = TABLES[pose.label]
+    # the rows follow the pose, whichever backends fail there
+    level = bool(is_level(plate_pose(pose.si[0], params).phi))
+    rows = ROWS_LEVEL if level else ROWS_REGULAR
     values: dict[str, np.ndarray] = {}
-    level = None
     for backend in BACKENDS:
         cols = []
         for load in LOADS:
             try:
                 C, phi, theta = backend_compliance(backend, pose, params, load, options)
-                level = is_level(phi) if level is None else level
                 cols.append(paper_coordinates(C @ load, phi, theta))
             except ClosedLoopError:
-                cols.append(None)
-        n = 5 if level else 6
-        values[backend] = np.column_stack([np.full(n, np.nan) if c is None else c for c in cols])
+                cols.append(np.full(len(rows), np.nan))
+        values[backend] = np.column_stack(cols)
     values["paper"] = published_in_level_rows(published) if level else published
-    return TableValues(pose, bool(level), ROWS_LEVEL if level else ROWS_REGULAR, values)
+    return TableValues(pose, level, rows, values)

@@ -22,6 +22,7 @@ from cahyman_pin.paper.compare import (
     ROWS_LEVEL,
     ROWS_REGULAR,
     backend_compliance,
+    backend_stiffness,
     is_level,
     paper_coordinates,
 )
@@ -43,10 +44,11 @@ N_POINTS = 31
 
 
 def _det_K(backend: str, pose: PaperPose, params: CaHyManParams) -> float:
+    """det K of the API (:func:`cahyman_pin.paper.compare.backend_stiffness`), NaN where it
+    has none."""
     try:
-        C, _, _ = backend_compliance(backend, pose, params)
-        return float(1.0 / np.linalg.det(C))
-    except (ClosedLoopError, np.linalg.LinAlgError):
+        return backend_stiffness(backend, pose, params).det_K
+    except ClosedLoopError:
         return np.nan
 
 

@@ -26,7 +26,7 @@ from cahyman_pin.paper.compare import (
     ROWS_LEVEL,
     ROWS_REGULAR,
     TableValues,
-    backend_compliance,
+    backend_stiffness,
     is_level,
     paper_coordinates,
     table_values,
@@ -63,13 +63,15 @@ from cahyman_pin.params import (
     DEFAULT_PARAMS,
     K_S_ASSUMED,
     K_S_PRINTED,
+    SOURCES,
+    SPRING_FIELDS,
     WEIGHT_FIELDS,
     CaHyManParams,
     params_file_fields,
     source,
 )
 from closedloop.compliance import TWIST_LABELS
-from closedloop.exceptions import InvalidInputError, JointLimitWarning
+from closedloop.exceptions import ClosedLoopError, InvalidInputError, JointLimitWarning
 from closedloop.files import write_atomically
 
 
@@ -183,18 +185,28 @@ def _conventions(doc: Document, params: CaHyManParams, tables: list[TableValues]
 
 def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) -> None:
     """Findings in numbers, computed from the tables below."""
-    gap = max(np.nanmax(np.abs(tv.values["consistent"] - tv.values["generic"])) for tv in tables)
+    gap = np.concatenate([(tv.values["consistent"] - tv.values["generic"]).ravel()
+                          for tv in tables])  # fmt: skip
+    both = np.isfinite(gap)
+    na = ("'n/a' marks a cell a backend does not give, for the reason under 'Stiffness "
+          "matrices at the three configurations'")  # fmt: skip
+    if both.all():
+        agree = f"agree on every table cell to within {np.max(np.abs(gap)):.1e} (mm or deg)"
+    elif both.any():
+        agree = (f"agree on the {np.count_nonzero(both)} of {both.size} table cells that both "
+                 f"give to within {np.max(np.abs(gap[both])):.1e} (mm or deg; {na})")  # fmt: skip
+    else:
+        agree = f"cannot be compared here ({na})"
     rows = []
     for b in BACKENDS:
-        trans = [np.abs(tv.values[b][:3] - tv.values["paper"][:3]) for tv in tables]
-        rot = [np.abs(tv.values[b][3:] - tv.values["paper"][3:]) for tv in tables]
-        ratio = [np.abs(tv.values[b][3:]) / np.abs(tv.values["paper"][3:]) for tv in tables]
-        rows.append((
-            b,
-            fmt(max(np.nanmax(t) for t in trans), 3),
-            fmt(max(np.nanmax(r) for r in rot), 3),
-            fmt(np.nanmedian(np.concatenate([r.ravel() for r in ratio])), 3),
-        ))  # fmt: skip
+        # over the cells of every table (NaN: a cell the backend does not give)
+        diff = [tv.values[b] - tv.values["paper"] for tv in tables]
+        trans = np.abs(np.concatenate([d[:3] for d in diff], axis=None))
+        rot = np.abs(np.concatenate([d[3:] for d in diff], axis=None))
+        ratio = np.concatenate([np.abs(tv.values[b][3:] / tv.values["paper"][3:])
+                                for tv in tables], axis=None)  # fmt: skip
+        rows.append((b, fmt(np.nanmax(trans), 3), fmt(np.nanmax(rot), 3),
+                     fmt(np.nanmedian(ratio), 3)))  # fmt: skip
     lin = np.concatenate([linearity_residual(TABLES[tv.pose.label]) for tv in tables])
     lin = lin.reshape(len(tables), 6)
     ratio, ratio_printed = (rotation_ratio(p) for p in (params, params.with_ks("printed")))
@@ -207,10 +219,8 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
         Heading("Summary"),
         Paragraph(
             "The consistent closed form and the generic Pinocchio backend, two independent "
-            "implementations, agree on every table cell to within "
-            f"{gap:.1e} (mm or deg). Neither they nor the published backend "
-            "reproduces the published tables; the largest differences over the three "
-            "tables are:"
+            f"implementations, {agree}. Neither they nor the published backend reproduces "
+            "the published tables; the largest differences over the three tables are:"
         ),
         Table(
             (
@@ -227,7 +237,7 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
             f"{np.max(np.abs(lin[:, :3])):.2g} mm in translation and "
             f"{np.max(np.abs(lin[:, 3:])):.3g} deg in rotation. The published rotations are "
             f"also about {ratio:.0f} times (median) larger than those of the consistent model "
-            f"with the report's parameters (the printed springs, K_s = {params.K_s:g} N/m); "
+            f"with the report's parameters ({_springs_text(params)}, K_s = {params.K_s:g} N/m); "
             f"with the printed K_s = {K_S_PRINTED:g} N/m the median ratio is {ratio_printed:.0f} "
             "(K_s, an axial spring of the arm, does not turn it)."
         ),
@@ -246,6 +256,14 @@ def _summary(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
             f"{n['unexplained']} unexplained ('Every published cell')."
         ),
     )
+
+
+def _springs_text(params: CaHyManParams) -> str:
+    """The springs of ``params`` but K_s in words: the printed ones, or those that are not."""
+    printed = [n for n in SPRING_FIELDS if SOURCES[n] == "paper"]
+    given = [f"{n} = {getattr(params, n):g}" for n in printed
+             if getattr(params, n) != getattr(DEFAULT_PARAMS, n)]  # fmt: skip
+    return "the printed springs" + (f" but {', '.join(given)}" if given else "")
 
 
 def rotation_ratio(params: CaHyManParams) -> float:
@@ -330,6 +348,8 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
     _ks_note(doc, params, changes)
     k_t4 = np.rad2deg(1.0 / params.K_T4)
     k_t = np.rad2deg(1.0 / params.K_T)
+    printed = all(getattr(params, n) == getattr(DEFAULT_PARAMS, n) for n in ("K_T4", "K_T"))
+    springs = "printed" if printed else "given"
     qs = quantities(params)
     m = model_values(params)
     moment = [k for k, q in enumerate(qs) if q.load == 1 and q.row.endswith("[deg]")]
@@ -342,11 +362,11 @@ def _effects(doc: Document, params: CaHyManParams, tables: list[TableValues]) ->
             "they are compared through yaw and tilt (see 'Conventions'). Under the unit "
             "moment (load N, N_e = (1, 1, 1) N m) the published "
             f"rotations are {two_decimals(pub.min())} to {two_decimals(pub.max())} deg in size "
-            f"(Table 3: dphi, dpsi, dtheta = {', '.join(t3)} deg), while the printed torsional "
+            f"(Table 3: dphi, dpsi, dtheta = {', '.join(t3)} deg), while the {springs} torsional "
             f"stiffnesses imply {k_t4:.3g} deg per N m for the arm motor (1/K_T4) and "
             f"{k_t:.3g} deg per N m for a leg motor (1/K_T), and the consistent model turns by "
             f"{fmt(np.min(np.abs(m[moment])), 3)} to {fmt(np.max(np.abs(m[moment])), 3)} deg "
-            "under that load: no model with the printed springs reproduces the rotation rows, "
+            f"under that load: no model with the {springs} springs reproduces the rotation rows, "
             "whereas the translation rows and the sign pattern of the rotations can be "
             "compared. The published tables are also not linear in the load (previous "
             "section), which no linear formulation can reproduce."
@@ -445,6 +465,21 @@ def _weight(doc: Document, params: CaHyManParams) -> None:
                   tuple(rows)))  # fmt: skip
 
 
+def _api_value(result, name: str):
+    """``result.name`` of an API result, or the error of the API (``result`` itself when the
+    call was refused)."""
+    if isinstance(result, ClosedLoopError):
+        return result
+    try:
+        return getattr(result, name)
+    except ClosedLoopError as e:
+        return e
+
+
+def _eigenvalues_text(ev: np.ndarray) -> str:
+    return ", ".join(f"{e.real:.4g}" if abs(e.imag) < 1e-9 * abs(e) else f"{e:.3g}" for e in ev)
+
+
 def _matrices(doc: Document, params: CaHyManParams) -> None:
     doc.add(
         Heading("Stiffness matrices at the three configurations"),
@@ -453,38 +488,53 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
             "generic backend (a matrix acts on small rotation vectors rx, ry, rz about the "
             "world axes: the paper's angles, singular at the level plate, cannot be its "
             "coordinates); eigenvalues and determinant for every backend (the published "
-            "K is in its own mixed coordinates, see the choices above)."
+            "K is in its own mixed coordinates, see the choices above). Every number is that "
+            "of cahyman_pin.api.stiffness (the consistent and generic K from a square-root "
+            "factor of C, not inv(C)); 'n/a' where the API gives none, for the reason stated."
         ),
     )
     for pose in TABLE_POSES:
-        K = {}
+        results = {}
         for b in BACKENDS:
-            C, _, _ = backend_compliance(b, pose, params)
-            K[b] = np.linalg.inv(C)
+            try:
+                results[b] = backend_stiffness(b, pose, params)
+            except ClosedLoopError as e:
+                results[b] = e
+        values = {b: {name: _api_value(r, name) for name in ("K", "det_K", "eigenvalues")}
+                  for b, r in results.items()}  # fmt: skip
         doc.add(Heading(pose.label, 3))
-        doc.add(
-            Table(
-                ("", *TWIST_LABELS),
-                _matrix_rows(K["generic"]),
-                caption=f"K (generic), {pose.describe()}",
+        K_generic = values["generic"]["K"]
+        if not isinstance(K_generic, ClosedLoopError):
+            doc.add(
+                Table(
+                    ("", *TWIST_LABELS),
+                    _matrix_rows(K_generic),
+                    caption=f"K (generic), {pose.describe()}",
+                )
             )
-        )
-        rows = []
-        for b in BACKENDS:
-            ev = np.linalg.eigvals(K[b])
-            ev = ev[np.argsort(ev.real)]
-            ev_text = ", ".join(
-                f"{e.real:.4g}" if abs(e.imag) < 1e-9 * abs(e) else f"{e:.3g}" for e in ev
+        rows, reasons = [], {}
+        for b, v in values.items():
+            for e in v.values():
+                if isinstance(e, ClosedLoopError):
+                    reasons.setdefault(b, str(e).rstrip("."))
+            det, ev = v["det_K"], v["eigenvalues"]
+            rows.append((
+                b,
+                "n/a" if isinstance(det, ClosedLoopError) else f"{det:.4g}",
+                "n/a" if isinstance(ev, ClosedLoopError) else _eigenvalues_text(ev),
+            ))  # fmt: skip
+        doc.add(Table(("backend", "det K", "eigenvalues of K (ascending)"), tuple(rows)))
+        if reasons:
+            doc.add(Paragraph("n/a: " + "; ".join(f"{b}: {e}" for b, e in reasons.items()) + "."))
+        K_consistent = values["consistent"]["K"]
+        if not any(isinstance(K, ClosedLoopError) for K in (K_consistent, K_generic)):
+            rel = np.max(np.abs(K_consistent - K_generic)) / np.max(np.abs(K_generic))
+            doc.add(
+                Paragraph(
+                    f"Largest difference between the consistent and generic K, relative to "
+                    f"the largest entry: {rel:.2e}."
+                )
             )
-            rows.append((b, f"{np.linalg.det(K[b]):.4g}", ev_text))
-        rel = np.max(np.abs(K["consistent"] - K["generic"])) / np.max(np.abs(K["generic"]))
-        doc.add(
-            Table(("backend", "det K", "eigenvalues of K (ascending)"), tuple(rows)),
-            Paragraph(
-                f"Largest difference between the consistent and generic K, relative to the "
-                f"largest entry: {rel:.2e}."
-            ),
-        )
 
 
 def build_report(
