@@ -153,7 +153,10 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
     Raises:
         InvalidInputError: ``params.links_as_beams`` (:func:`check_closed_form`).
     """
-    from cahyman_pin.backends.consistent import consistent_breakdown  # on demand: start-up
+    from cahyman_pin.backends.consistent import (  # on demand: start-up
+        consistent_breakdown,
+        factor_root_stiffness,
+    )
 
     check_closed_form(params, "consistent")
     parts = consistent_breakdown(alpha, alpha4, s4, params)
@@ -161,7 +164,11 @@ def consistent_backend(params: CaHyManParams, alpha, alpha4: float, s4: float) -
         C=parts.C,
         pose=closed_form_pose(alpha, alpha4, s4, params),
         C_platform=readonly(parts.C_H @ parts.T.T),
-        details={"breakdown": parts, "factor": parts.B},
+        details={
+            "breakdown": parts,
+            "factor": parts.B,
+            "factor_roots": factor_root_stiffness(params),
+        },
     )
 
 
@@ -371,25 +378,35 @@ def _real_or_pairs(ev: np.ndarray) -> list:
 
 def _indices(result: BackendResult, params: CaHyManParams, backend: str, inputs: tuple):
     """Indices by the one rank rule at the machine's length (the generic solver's own
-    decision, taken on its square-root factor, is kept; a backend's ``factor`` B gives the
-    rank, K and the condition number from its SVD, as the generic solver's does).
+    decision, taken on its square-root factor, is kept; a backend's ``factor`` B gives
+    K and the condition number from its SVD, as the generic solver's does, and the rank
+    from its kinematic part B diag(sqrt k) when it gives ``factor_roots`` sqrt(k): springs
+    however far apart are springs, as in the generic backend).
 
     Raises:
         SingularConfigurationError: a closed-form C of numerical rank < 6. CaHyMan's
             springs reach all six directions of M at every regular pose, so that rank
-            deficiency is not rigidity but one compliance 1e14 times larger than the others:
-            a crank near its coupler (the generic backend refuses the same poses as a
-            mechanism: its spring-free rule works on the motions of the sprung joints), or
-            springs many orders apart, whose compliances C (or its factor B) cannot tell
-            from rigidity by the rank rule (the generic backend decides on the motions of
-            its sprung joints, whatever the springs). The message says which
+            deficiency is not rigidity but a singular pose: a crank near its coupler (the
+            generic backend refuses the same poses as a mechanism: its spring-free rule
+            works on the motions of the sprung joints), or, for a backend that gives C
+            alone, springs many orders apart, whose compliances C cannot tell from
+            rigidity by the rank rule. The message says which
             (:func:`_rank_deficiency_reason`).
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)
     if "factor" in result.details:
         B_s = twist_scaling(params.length)[:, None] * result.details["factor"]
-        spectrum = spectrum_from_factor(B_s, params.length)
+        roots = result.details.get("factor_roots")  # sqrt(k) of B's columns: the rank on
+        # the kinematic part B diag(sqrt k), as the generic backend's (springs far apart
+        # are springs; a singular pose is not)
+        spectrum = (
+            spectrum_from_factor(B_s, params.length)
+            if roots is None
+            else spectrum_from_factor(
+                B_s, params.length, lambda: B_s * roots, float(roots.max() / roots.min())
+            )
+        )
         indices = StiffnessIndices(
             readonly(result.C), spectrum.rank, spectrum.rigid_directions, params.length, spectrum
         )

@@ -136,11 +136,10 @@ def test_ur5_map_files_carry_the_numbers(ur5_map, tmp_path):
 @pytest.mark.parametrize("backend", ["generic", "consistent"])
 def test_cahyman_spring_sweep_across_cond_1e12_is_the_single_query(backend, tmp_path):
     """CaHyMan's leg motors from 1e2 down to 1e-12 N m/rad (cond(K_s) 6e3 to 4e17): each
-    point's indices are those of api.stiffness at that pose, whose K is the generic
-    solver's square-root factor's or, for the closed form, from its C (det K and the SI
-    condition number were NaN above 1e12); a point the query refuses (the closed form's
-    C of numerical rank < 6 at the softest motors) is singular. The sweep's NPZ and CSV
-    read back to the same numbers."""
+    point's indices are those of api.stiffness at that pose, whose K is from the
+    backend's square-root factor (det K and the SI condition number were NaN above
+    1e12); a point the query refuses, if any, is singular. The sweep's NPZ and CSV read
+    back to the same numbers."""
     points = grid({"K_T": K_T}, alpha=ALPHA, alpha4=ALPHA4, s4=S4)
     res = sweep(points, backend=backend, executor="serial")
     crossed = 0

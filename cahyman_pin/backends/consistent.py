@@ -159,6 +159,14 @@ def leg_factor(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
     return leg_jacobian(alpha, params) * _root_compliances(params.K_T, params.K_b, params.K_d)
 
 
+def factor_root_stiffness(params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray:
+    """(12,) sqrt(k) [sqrt(N m/rad) or sqrt(N/m)] of the spring of each column of the
+    factor B (:class:`ConsistentCompliance`): (K_T, K_b, K_d) for legs 1, 2, 3, then
+    (K_4, K_s, K_T4). B diag(sqrt(k)) is its kinematic part (the springs taken as 1)."""
+    legs = [params.K_T, params.K_b, params.K_d] * 3
+    return np.sqrt(np.array([*legs, params.K_4, params.K_s, params.K_T4]))
+
+
 def _root_compliances(*springs: float) -> np.ndarray:
     """(n,) 1/sqrt(k) of the spring stiffnesses k."""
     return 1.0 / np.sqrt(np.array(springs))

@@ -211,19 +211,24 @@ def _pointwise(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkR
 def _single_queries(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkResult):
     """The single query :func:`cahyman_pin.api.stiffness` at the points ``idx`` of a
     closed form whose compliance is symmetric and ill-conditioned (cond(K_s) above
-    ``ILL_CONDITIONED`` by the eigenvalues of C, :func:`closedloop.conditioning.batch_rank`):
+    ``ILL_CONDITIONED`` or rank < 6 by the eigenvalues of C,
+    :func:`closedloop.conditioning.batch_rank`):
     its C, rank, condition number and K (from the backend's square-root factor where it
-    has one) into ``out``; its error, if any, is the point's. (The backend must be
+    has one) into ``out``; its error, if any, is the point's (at a point of rank < 6 by
+    C, the refusal of that rank in :func:`closedloop.map_engine.complete`). (The backend must be
     registered in the process, as for :func:`cahyman_pin.api.stiffness`.)"""
     idx = idx[(out.status[idx] == OK) & np.isfinite(out.C[idx]).all(axis=(1, 2))]
     idx = idx[scaled_asymmetry(out.C[idx], params.length) <= SCALED_TOL]
-    condition = batch_rank(out.C[idx], params.length)[1]
-    for i in idx[condition > ILL_CONDITIONED]:
+    rank, condition, _ = batch_rank(out.C[idx], params.length)
+    # rank < 6 by the rule on C: the query's rule (on B's kinematic part) may answer
+    for k in np.flatnonzero((condition > ILL_CONDITIONED) | (rank < 6)):
+        i = idx[k]
         try:
             r = stiffness(chunk.alpha[i], chunk.alpha4[i], chunk.s4[i], params=params,
                           backend=chunk.backend)  # fmt: skip
         except POINT_ERRORS as e:
-            out.fail(int(i), e)
+            if rank[k] == 6:  # else refused as the rule on C says (complete), the same way
+                out.fail(int(i), e)
             continue
         s = r.indices
         out.answer(i, r.C, s.rank, s.scaled_condition_number, s.K if s.is_full_rank else None)
