@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -34,17 +35,38 @@ class ReadOnlyArrays:
         self.__dict__.update(state)
 
 
+#: A number as text: ASCII digits with an optional sign, decimal point and exponent
+#: (``-1e5``, ``.5``, ``2.``), or ``inf``, ``infinity``, ``nan`` in any case.
+DECIMAL = re.compile(r"[-+]?((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|infinity|nan)", re.ASCII | re.I)
+
+
+def decimal(text: str) -> float:
+    """The number written in ``text`` (:data:`DECIMAL`), which must be all of it.
+
+    Python's ``float`` also reads digits grouped by ``_`` (``0_3`` is 3.0), the digits of
+    other scripts (Arabic-Indic, full-width) and surrounding white space; a typo or a
+    pasted character must not pass for a number, so these are refused.
+
+    Raises:
+        ValueError: ``text`` is not such a number (as ``float`` raises).
+    """
+    if not DECIMAL.fullmatch(text):
+        raise ValueError(f"{text!r} is not a decimal number")
+    return float(text)
+
+
 def real_array(value, name: str) -> np.ndarray:
     """``value`` as a float array, refusing what is not real numbers.
 
     Args:
-        value: a number or a (nested) sequence or array of numbers (ints, floats, bools).
+        value: a number or a (nested) sequence or array of numbers (ints, floats).
         name: the argument, named by the error message.
 
     Raises:
-        InvalidInputError: strings, complex numbers (their imaginary part would be dropped),
-            ``None`` or other objects, ragged sequences, a masked array with masked entries
-            (numpy would hand over the values hidden under the mask).
+        InvalidInputError: booleans (``True`` is not 1 rad), strings, complex numbers
+            (their imaginary part would be dropped), ``None`` or other objects, ragged
+            sequences, a masked array with masked entries (numpy would hand over the values
+            hidden under the mask).
     """
     if np.ma.is_masked(value):
         raise InvalidInputError(
@@ -55,11 +77,13 @@ def real_array(value, name: str) -> np.ndarray:
         a = np.asarray(value)
     except (TypeError, ValueError):  # ragged nesting
         a = None
-    if a is None or a.dtype.kind not in "biuf":
+    if a is None or a.dtype.kind not in "iuf":
         text = " ".join(repr(value).split())
         text = text if len(text) <= 80 else text[:77] + "..."
-        kind = type(value).__name__ if a is None or a.dtype.kind != "c" else "complex"
-        kind = f"ragged {kind}" if a is None else kind
+        if a is None:
+            kind = f"ragged {type(value).__name__}"
+        else:
+            kind = {"b": "bool", "c": "complex"}.get(a.dtype.kind, type(value).__name__)
         raise InvalidInputError(f"{name} must be real numbers, got {text} ({kind})")
     return a.astype(float)
 

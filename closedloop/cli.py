@@ -40,6 +40,7 @@ from .cli_common import (
     command_of,
     finite_float,
     needs_gravity,
+    number,
     path_text,
     print_json,
     run_main,
@@ -182,7 +183,7 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
     springs = p.add_mutually_exclusive_group()
     springs.add_argument(
         "--joint-stiffness",
-        type=float,
+        type=number,
         metavar="VALUE",
         help="stiffness of every actuated joint without spring [N m/rad or N/m]",
     )

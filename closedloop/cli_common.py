@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .arrays import decimal
 from .blas import single_threaded_blas
 from .exceptions import (
     EXIT_BAD_INPUT,
@@ -55,9 +56,11 @@ class UsageError(InvalidInputError):
 
 #: A command-line value that reads as a negative number (``-1e5``, ``-.5``, ``-inf``).
 _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|infinity|nan"
+#: An integer as a command line takes it: ASCII digits after an optional sign.
+_INTEGER = re.compile(r"[-+]?[0-9]+")
 #: A value that starts with a minus sign: a number, or a specification whose first number
 #: is negative (``-90:90:3``, ``-1,0,1``), not an option.
-NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})([:,][-+.\w]*)*$", re.I)
+NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})([:,][-+.\w]*)*$", re.I | re.ASCII)
 
 
 #: Options that may be given several times (each adds to a list, or counts).
@@ -102,12 +105,21 @@ class Parser(argparse.ArgumentParser):
             (file or sys.stderr).write(message)
 
 
-def finite_float(text: str) -> float:
-    """Option type: a finite number (``nan``, ``inf`` and overflowing values are refused)."""
+def number(text: str) -> float:
+    """Option type: a number in ASCII decimal notation (:func:`closedloop.arrays.decimal`:
+    not ``0_3`` nor other scripts' digits), ``inf`` and ``nan`` included."""
     try:
-        value = float(text)
+        return decimal(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a number; expected ASCII decimal notation (e.g. -1.5e3)"
+        ) from None
+
+
+def finite_float(text: str) -> float:
+    """Option type: a finite number in ASCII decimal notation (:func:`number`; ``nan``,
+    ``inf`` and overflowing values are refused)."""
+    value = number(text)
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
     return value
@@ -122,11 +134,11 @@ def path_text(text: str) -> str:
 
 
 def positive_int(text: str) -> int:
-    """Option type: an integer >= 1 (a count of points, tasks or processes)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    """Option type: an integer >= 1 (a count of points, tasks or processes), in ASCII
+    digits."""
+    if not _INTEGER.fullmatch(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer")
+    value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
     return value
@@ -210,6 +222,8 @@ def parse_values(text: str) -> np.ndarray:
         parts = text.split(":")
         try:
             start, stop, num = parts
+            if not _INTEGER.fullmatch(num):
+                raise ValueError(num)
             count = int(num)
         except ValueError:
             raise SpecError(
@@ -221,7 +235,7 @@ def parse_values(text: str) -> np.ndarray:
     else:
         items = text.split(",")
     try:
-        numbers = [float(v) for v in items]
+        numbers = [decimal(v) for v in items]
     except ValueError:
         bad = next(v for v in items if not _is_number(v))
         where = "" if bad == text else f"{quoted(text)}: "
@@ -240,7 +254,7 @@ def parse_values(text: str) -> np.ndarray:
 
 def _is_number(text: str) -> bool:
     try:
-        float(text)
+        decimal(text)
     except ValueError:
         return False
     return True

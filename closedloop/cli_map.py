@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .arrays import decimal
 from .cli_common import (
     SpecError,
     UsageError,
@@ -104,7 +105,7 @@ def _points(path: str) -> np.ndarray:
         raise InvalidInputError(f"--points {path!r}: not a text file (UTF-8); expected rows "
                                 "of numbers") from None  # fmt: skip
     try:
-        rows = [[float(x) for x in line.split()] for line in text.splitlines() if line.strip()]
+        rows = [[decimal(x) for x in line.split()] for line in text.splitlines() if line.strip()]
         points = np.array(rows, dtype=float)
     except ValueError:
         raise InvalidInputError(f"--points {path!r}: expected rows of numbers") from None

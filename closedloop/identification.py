@@ -67,7 +67,7 @@ import scipy.optimize
 import scipy.special
 import yaml
 
-from .arrays import check_wrench, readonly, real_array
+from .arrays import check_wrench, decimal, readonly, real_array
 from .compliance import compliance
 from .conditioning import rule_rank
 from .exceptions import (
@@ -281,7 +281,7 @@ def _number(value, depth: int = 0):
         return [_number(v, 1) for v in value]
     if isinstance(value, bool):
         raise ValueError(f"{value!r} is not a number")
-    return float(value) if isinstance(value, str) else value
+    return decimal(value) if isinstance(value, str) else value
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .arrays import decimal
 from .balls import ball_springs, urdf_with_balls
 from .beams import apply_beams, insert_beams
 from .exceptions import InvalidInputError, ModelFileError, NameNotFoundError
@@ -146,7 +147,7 @@ def _number(value, where: str, name: str) -> float:
                 "range (about 1.8e308); expected a number, or .inf to lock the joint"
             )
         try:
-            value = float(value)
+            value = decimal(value)
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, int | float):

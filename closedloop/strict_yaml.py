@@ -5,7 +5,10 @@ PyYAML's safe loader keeps the last of two equal keys (``{crank: 5, crank: 7}`` 
 ``{crank: 7}``) and reads ``1.0e400`` as ``inf``, which for a stiffness means a locked
 joint. Here both are errors; ``.inf`` (YAML's infinity) stays infinity. It also reads, as
 YAML 1.1 says, a number with a leading zero as octal (``0100`` is 64) and one with colons
-in base 60 (``1:30`` is 90), where YAML 1.2 reads 100 and a string: both are errors.
+in base 60 (``1:30`` is 90), digits grouped by ``_`` (``1_000`` is 1000, ``0_3`` is 3)
+and binary (``0b101`` is 5), where YAML 1.2 reads 100 and strings: all are errors.
+A number that YAML 1.1 reads as a string (``1e5``, without a decimal point) is read by
+the model files with :func:`closedloop.arrays.decimal` (ASCII decimal notation only).
 """
 
 from __future__ import annotations
@@ -39,15 +42,23 @@ def _mapping(loader: _Loader, node: yaml.MappingNode) -> dict:
 
 
 def _check_base(node: yaml.ScalarNode, value) -> None:
-    """Refuse a YAML 1.1 octal integer (leading zero) or base-60 number (colons)."""
+    """Refuse a YAML 1.1 number that YAML 1.2 reads otherwise: digits grouped by ``_``,
+    binary, octal (leading zero) or base 60 (colons)."""
     digits = node.value.lstrip("+-")
     octal = isinstance(value, int) and digits[:1] == "0" and digits[1:2] not in ("", "x", "b")
-    if octal or ":" in digits:
+    kind = (
+        "digits grouped by _" if "_" in digits
+        else "binary" if digits[:2] == "0b"
+        else "octal" if octal
+        else "base 60" if ":" in digits
+        else None
+    )  # fmt: skip
+    if kind is not None:
         raise yaml.constructor.ConstructorError(
             None,
             None,
-            f"number {node.value} reads as {'octal' if octal else 'base 60'} ({value}) in YAML "
-            "1.1, not in YAML 1.2; write it in decimal without leading zeros",
+            f"number {node.value} reads as {value} ({kind}) in YAML 1.1, not in YAML 1.2; "
+            "write it in decimal, without leading zeros or _",
             node.start_mark,
         )
 

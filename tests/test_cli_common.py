@@ -19,6 +19,7 @@ from closedloop.cli_common import (
     UsageError,
     finite_float,
     parse_values,
+    positive_int,
     print_json,
     run_command,
 )
@@ -46,6 +47,9 @@ def run(capsys, prog: str, *argv: str) -> tuple[int, str, str]:
         (["--force", "0", "nan", "0"], "argument --force: 'nan' is not a finite number"),
         (["--force", "0", "1e999", "0"], "'1e999' is not a finite number"),
         (["--force", "0", "x", "0"], "argument --force: 'x' is not a number"),
+        # Python's float() reads 0_3 as 3.0 and other scripts' digits as digits
+        (["--force", "0", "0_3", "0"], "argument --force: '0_3' is not a number"),
+        (["--force", "0", "\u0663", "0"], "argument --force: '\u0663' is not a number"),
     ],
 )
 def test_usage_errors_are_one_line_and_exit_2(capsys, prog, extra, match):
@@ -89,10 +93,42 @@ def test_finite_float_reads_numbers(text, value):
     assert finite_float(text) == value
 
 
-@pytest.mark.parametrize("text", ["nan", "-inf", "inf", "1e309", "", "1,5", "0x10"])
+@pytest.mark.parametrize(
+    "text",
+    ["nan", "-inf", "inf", "1e309", "", "1,5", "0x10", "0_3", "1_000.5", " 1", "1 ",
+     "\u0663", "\uff11", "\u0661.5", "1e\u0663", "True"],  # Arabic-Indic, full-width digits
+)  # fmt: skip
 def test_finite_float_refuses_the_rest(text):
     with pytest.raises(argparse.ArgumentTypeError, match=repr(text)):
         finite_float(text)
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--q", "0", "-1", "1.5", "-0.5", "1.2", "0_3"], "argument --q: '0_3' is not a number"),
+        (["--actuated", "\u0660.3"], "argument --actuated: '\u0660.3' is not a number"),
+        (["--actuated", "0.3", "--joint-stiffness", "1_0"],
+         "argument --joint-stiffness: '1_0' is not a number"),
+    ],
+)  # fmt: skip
+def test_the_command_line_reads_ascii_decimal_numbers_only(capsys, argv, match):
+    code, out, err = run(capsys, "closedloop", "stiffness", "fourbar", "--frame", "P", *argv)
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert err == f"closedloop: error: {match}; expected ASCII decimal notation (e.g. -1.5e3)\n"
+
+
+def test_a_locked_joint_s_inf_and_negative_e_notation_stay_numbers(capsys):
+    code, out, _ = run(capsys, "closedloop", "stiffness", "fourbar", "--frame", "P",
+                       "--actuated", "-3E-1", "--joint-stiffness", "inf", "--json")  # fmt: skip
+    assert code in (0, 1)  # the crank locked: K or rank deficient, either way an answer
+    assert json.loads(out)["q"][0] == -0.3
+
+
+@pytest.mark.parametrize("text", ["1_0", "\u0663", "1.0", " 2"])
+def test_counts_are_ascii_integers(text):
+    with pytest.raises(argparse.ArgumentTypeError, match="is not an integer"):
+        positive_int(text)
 
 
 def test_print_json_writes_strict_indented_json(capsys):
@@ -209,6 +245,9 @@ def test_a_worker_timeout_without_a_scheduler_is_refused(capsys, tmp_path):
         ("0:1", "'0:1' is not START:STOP:NUM (numbers, NUM an integer)"),
         ("0:1:2.5", "'0:1:2.5' is not START:STOP:NUM"),
         ("z", "'z' is not a number"),
+        ("0_3,1", "'0_3,1': '0_3' is not a number"),
+        ("0:1:1_0", "'0:1:1_0' is not START:STOP:NUM"),
+        ("0:\u0661:3", "'0:\u0661:3': '\u0661' is not a number"),
     ],
 )
 def test_a_malformed_specification_names_its_bad_value(text, message):

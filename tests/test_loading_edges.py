@@ -193,7 +193,18 @@ def test_mjcf_springref_at_ref_does_not_warn(fourbar_mjcf, tmp_path, recwarn):
 # -------------------------------------------------------------- YAML 1.1 number forms
 @pytest.mark.parametrize(
     ("value", "match"),
-    [("0100", r"number 0100 reads as octal \(64\)"), ("1:30", r"number 1:30 reads as base 60")],
+    [
+        ("0100", r"number 0100 reads as 64 \(octal\)"),
+        ("1:30", r"number 1:30 reads as 90 \(base 60\)"),
+        # Python's float("0_3") is 3.0, YAML 1.1's 0_3 the octal 3 and 1_000.5 1000.5
+        ("0_3", r"number 0_3 reads as 3 \(digits grouped by _\)"),
+        ("1_000.5", r"number 1_000.5 reads as 1000.5 \(digits grouped by _\)"),
+        ("0b101", r"number 0b101 reads as 5 \(binary\)"),
+        # YAML 1.1 reads these as strings, which were then read by Python's float()
+        ('"0_3"', r"stiffness of joint 'crank' is '0_3'; expected a number"),
+        ("\u0663", r"stiffness of joint 'crank' is '\u0663'; expected a number"),  # Arabic-Indic 3
+        ("\uff13", r"stiffness of joint 'crank' is '\uff13'; expected a number"),  # full-width 3
+    ],
 )
 def test_yaml_numbers_that_yaml_versions_read_differently_are_refused(
     fourbar_urdf, fourbar_yaml, tmp_path, value, match

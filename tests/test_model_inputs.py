@@ -11,6 +11,7 @@ import pinocchio as pin
 import pytest
 
 import closedloop as cl
+from closedloop.arrays import decimal
 from closedloop.exceptions import (
     AssemblyError,
     InvalidInputError,
@@ -221,3 +222,36 @@ def test_a_frame_name_shared_by_several_frames(tmp_path):
     with pytest.raises(InvalidInputError, match=r"frame name 'arm' names 2 frames at different "
                        r"places \(BODY, OP_FRAME\); expected the name of one frame"):  # fmt: skip
         cl.compliance(moved, [0.0], "arm")
+
+
+# -------------------------------------------------------- numbers, not booleans or text
+@pytest.mark.parametrize("value", [np.ones(5, dtype=bool), [True, False, True, False, True]])
+def test_a_boolean_configuration_is_refused(fourbar, value):
+    """A boolean array as q was read as 1.0 and 0.0 rad."""
+    clm, _ = fourbar
+    with pytest.raises(InvalidInputError, match=r"^q must be real numbers, got .* \(bool\)$"):
+        cl.compliance(clm, value, "P")
+
+
+@pytest.mark.parametrize("value", [[True], np.array([True]), True, np.bool_(True)])
+def test_boolean_actuated_values_are_refused(fourbar, value):
+    clm, _ = fourbar
+    with pytest.raises(InvalidInputError, match=r"^actuated must be real numbers, .*\(bool\)$"):
+        cl.assemble(clm, value)
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [("-1e5", -1e5), ("+.5", 0.5), ("2.", 2.0), ("1E-3", 1e-3), ("-inf", -math.inf),
+     ("Infinity", math.inf)],
+)  # fmt: skip
+def test_decimal_reads_ascii_decimal_numbers(text, value):
+    assert decimal(text) == value
+
+
+@pytest.mark.parametrize(
+    "text", ["0_3", "1_000.5", "\u0663", "\uff13", "\u0661e2", " 1", "0x10", "", "1e"]
+)
+def test_decimal_refuses_what_python_s_float_also_reads(text):
+    with pytest.raises(ValueError, match="is not a decimal number"):
+        decimal(text)
