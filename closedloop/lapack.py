@@ -10,7 +10,9 @@ arrays: a few hundred milliseconds, most of a command line's start-up beyond Pin
 and numpy. The extension module itself loads in a few milliseconds, so it is loaded from
 its file in SciPy's folder; where that is not possible (SciPy already imported, another
 layout of SciPy, a failed load) the routines come from ``scipy.linalg.lapack``. Either
-way they are the same compiled functions with the same signatures.
+way they are the same compiled functions with the same signatures, each behind a check
+that raises ``numpy.linalg.LinAlgError`` for a zero-size array, which LAPACK would refuse
+with a message printed on the process's output.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
+
+import numpy as np
 
 #: The routines the library calls (``tests/test_lapack.py`` checks them against SciPy's).
 ROUTINES = ("dgesdd", "dgesvd", "dgeqrf", "dgeqp3", "dorgqr", "dtrcon", "dtrtri", "dtrtrs",
@@ -55,12 +59,37 @@ def _load() -> ModuleType:
 
 
 _lapack = _load()
-dgesdd = _lapack.dgesdd
-dgesvd = _lapack.dgesvd
-dgeqrf = _lapack.dgeqrf
-dgeqp3 = _lapack.dgeqp3
-dorgqr = _lapack.dorgqr
-dtrcon = _lapack.dtrcon
-dtrtri = _lapack.dtrtri
-dtrtrs = _lapack.dtrtrs
-dgelsy = _lapack.dgelsy
+
+
+def _refusing_empty(name: str):
+    """LAPACK routine ``name`` that raises instead of being handed a zero-size array.
+
+    LAPACK refuses a leading dimension of 0 (an empty matrix): it prints
+    ``** On entry to ... had an illegal value`` on the process's output and returns a
+    negative ``info``. The callers treat empty matrices themselves (an empty least-squares
+    problem, no rows to factor); one that does not gets this error instead of the print.
+    """
+    routine = getattr(_lapack, name)
+
+    def call(*args, **kwargs):
+        for a in args:
+            if type(a) is np.ndarray and a.size == 0:
+                raise np.linalg.LinAlgError(
+                    f"{name} called with an empty array of shape {a.shape} (LAPACK refuses it)"
+                )
+        return routine(*args, **kwargs)
+
+    call.__name__ = call.__qualname__ = name
+    call.__doc__ = routine.__doc__
+    return call
+
+
+dgesdd = _refusing_empty("dgesdd")
+dgesvd = _refusing_empty("dgesvd")
+dgeqrf = _refusing_empty("dgeqrf")
+dgeqp3 = _refusing_empty("dgeqp3")
+dorgqr = _refusing_empty("dorgqr")
+dtrcon = _refusing_empty("dtrcon")
+dtrtri = _refusing_empty("dtrtri")
+dtrtrs = _refusing_empty("dtrtrs")
+dgelsy = _refusing_empty("dgelsy")

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import scipy.linalg.lapack
 
 from closedloop import lapack
@@ -81,3 +82,33 @@ def test_single_threaded_blas_reaches_the_blas_of_these_routines():
     blas = [i for i in json.loads(done.stdout) if i["user_api"] == "blas"]
     assert any("scipy" in i["filepath"] for i in blas)
     assert all(i["num_threads"] == 1 for i in blas)
+
+
+#: A call of each routine with a zero-size matrix (LAPACK's own check refuses them all,
+#: printing "** On entry to ... had an illegal value" on the process's output).
+EMPTY_CALLS = {
+    "dgesdd": lambda: lapack.dgesdd(np.zeros((0, 3))),
+    "dgesvd": lambda: lapack.dgesvd(np.zeros((3, 0))),
+    "dgeqrf": lambda: lapack.dgeqrf(np.zeros((0, 3))),
+    "dgeqp3": lambda: lapack.dgeqp3(np.zeros((0, 0))),
+    "dorgqr": lambda: lapack.dorgqr(np.zeros((0, 0)), np.zeros(0)),
+    "dtrcon": lambda: lapack.dtrcon(np.zeros((0, 0))),
+    "dtrtri": lambda: lapack.dtrtri(np.zeros((0, 0))),
+    "dtrtrs": lambda: lapack.dtrtrs(np.zeros((0, 0)), np.zeros((0, 2))),
+    "dgelsy": lambda: lapack.dgelsy(np.zeros((0, 3), order="F"), np.zeros(3),
+                                    np.zeros(3, dtype=np.int32), 1e-12, lwork=16),
+}  # fmt: skip
+
+
+def test_every_routine_is_listed_with_an_empty_call():
+    assert sorted(EMPTY_CALLS) == sorted(lapack.ROUTINES)
+
+
+@pytest.mark.parametrize("name", sorted(EMPTY_CALLS))
+def test_an_empty_matrix_never_reaches_lapack(capfd, name):
+    """An empty matrix is refused before LAPACK, which would print its complaint on the
+    process's output (a four-bar without loops showed ``** On entry to DGELSY parameter
+    number 5 had an illegal value`` before a failure)."""
+    with pytest.raises(np.linalg.LinAlgError, match=rf"^{name} called with an empty array"):
+        EMPTY_CALLS[name]()
+    assert capfd.readouterr() == ("", "")
