@@ -9,8 +9,9 @@ import pinocchio as pin
 
 from . import lapack
 from .arrays import ReadOnlyArrays, check_count, check_positive, frozen, real_array
+from .conditioning import rule_rank, svd
 from .configuration import CLOSURE_TOL
-from .exceptions import AssemblyError, InvalidInputError
+from .exceptions import AssemblyError, InvalidInputError, SingularConfigurationError
 from .kinematics import jacobian_rows, residual_rows
 from .model import ClosedLoopModel
 
@@ -24,6 +25,24 @@ ASSEMBLY_TOL = 1e-12
 #: characteristic length L]; :func:`close_loops` follows the branch of a start's origin to
 #: first order up to twice as far (a step of INPUT_STEP whatever its rounding).
 INPUT_STEP = 0.05
+#: A closed configuration whose scaled passive Jacobian has a singular value below
+#: POLISH_FACTOR sqrt(tol) times its largest is iterated past the tolerance: at a distance t
+#: from a singular configuration that value is about c t (c ~ 1, the curvature of the
+#: closures) and the residual c t^2 / 2, so the tolerance alone admits poses up to
+#: sqrt(2 tol) from the singular one, where the rank rule would not see the rank drop.
+POLISH_FACTOR = 100.0
+#: Most Gauss-Newton iterations past the tolerance (towards a singular solution they gain
+#: about a factor 2 each: from 1e-6 to the rounding, 1e-8, in about 10).
+POLISH_ITER = 40
+#: Step [rad, or lengths per L] of the central second difference along a passive
+#: direction that the closure rows do not see to first order (:func:`_check_regular`).
+CURVATURE_STEP = 1e-4
+#: Scaled curvature of the closures along such a direction, outside the range of the
+#: passive Jacobian, relative to its largest singular value, above which the direction is
+#: not a motion: a singular configuration. An idle motion (a rod turning about its axis)
+#: gives the rounding over CURVATURE_STEP^2 and fourth-order terms, about 1e-8; the
+#: collinear four-bar about 1.
+CURVATURE_RTOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -66,8 +85,11 @@ def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.nda
     leading block of R whose estimated condition number stays below 1 / ``rcond``, then a
     complete orthogonal decomposition. Same answer as ``numpy.linalg.lstsq`` (an SVD) up
     to rounding when the rank decision agrees, and several times faster on small matrices.
+    No row (no closure) or no column: x = 0, without LAPACK (which refuses empty arrays).
     """
     m, n = A.shape
+    if m == 0 or n == 0:
+        return np.zeros(n)
     if m >= n:
         rhs = b  # dgelsy works on a copy
     else:
@@ -126,6 +148,11 @@ def assemble(
     :func:`close_loops`; from an assembled q0, its first step follows q0's branch to first
     order (``origin`` of :func:`close_loops`).
 
+    Passive coordinates that no closure row moves (a model without loops: a serial chain
+    has its actuated values set, and nothing else) keep their values of ``q0``: nothing
+    determines them, and a stiffness query at a frame they move reports them as a
+    mechanism (:class:`~closedloop.exceptions.MechanismError`).
+
     Args:
         clm: the model.
         actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
@@ -142,6 +169,9 @@ def assemble(
     Raises:
         AssemblyError: the closures cannot be satisfied from this start (unreachable
             input); the message gives the residual reached.
+        SingularConfigurationError: the closures are met at a singular configuration of
+            the assembly, where its branches meet (a change point): the passive
+            coordinates are not determined there (:func:`close_loops`).
         InvalidInputError: bad ``actuated``, ``q0``, ``tol`` or ``max_iter``.
     """
     check_positive("tol", tol, "metres / L, rad")
@@ -197,6 +227,11 @@ def close_loops(
     (:func:`_continued`): the passive coordinates move along the tangent of the origin's
     branch. (An origin at a singular configuration, where branches meet, picks none.)
 
+    A closed configuration is then checked not to be a singular one
+    (:func:`_check_regular`): at the parallelogram four-bar's change point (bars collinear)
+    the tolerance admitted poses up to 2.6e-6 rad from it, a different one from each start,
+    each with its own compliance; it is a SingularConfigurationError instead.
+
     Args:
         clm: the model.
         q: (nq,) start: a float array of the model's size, finite, quaternions normalised
@@ -212,9 +247,8 @@ def close_loops(
             q (the first iteration then), else ignored.
 
     Raises:
-        AssemblyError: as :func:`assemble`.
+        AssemblyError, SingularConfigurationError: as :func:`assemble`.
     """
-    model = clm.model
     free = clm.memo("free_coordinates", lambda: free_coordinates(clm))
     data, datas = clm.workspace()
     tols = _row_tolerances(clm, tol)
@@ -237,18 +271,12 @@ def close_loops(
             r, size2, closed = _residual(clm, data, datas, q, tols)
     while not closed and it < max_iter and size2 == size2:
         it += 1
-        # the kinematics and constraint datas of q are those of its residual evaluation
-        step = np.zeros(model.nv)
-        step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
-        for _ in range(30):
-            q_try = pin.integrate(model, q, step)
-            r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tols)
-            if size2_try < size2 or closed_try:
-                break
-            step *= 0.5
-        else:
+        found = _descend(clm, q, r, size2, free, tols)
+        if found is None:
             break
-        q, r, size2, closed = q_try, r_try, size2_try, closed_try
+        q, r, size2, closed = found
+    if closed and free.size and r.size:
+        q, r, it = _check_regular(clm, q, r, it, free, tols, tol)
     err = _inf_norm(r)
     if not closed:
         k, names = clm.stiffness, clm.model.names  # held: a joint with a spring or locked
@@ -268,6 +296,102 @@ def close_loops(
     result = object.__new__(Assembly)  # every field checked here: without the frozen __init__
     result.__dict__.update(q=q, residual=err, iterations=it, closure=closure)
     return result
+
+
+def _descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = False):
+    """One Gauss-Newton step from q (residual r, its squared norm size2) on the passive
+    coordinates ``free``, halved until the residual decreases (or, unless ``strict``, the
+    loops close): (q, r, size2, closed) of the new point, or None when 30 halvings do not
+    do it. The workspace holds the kinematics of q on entry, of the last point tried on
+    exit."""
+    data, datas = clm.workspace()
+    step = np.zeros(clm.model.nv)
+    step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
+    for _ in range(30):
+        q_try = pin.integrate(clm.model, q, step)
+        r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tols)
+        if size2_try < size2 or (closed_try and not strict):
+            return q_try, r_try, size2_try, closed_try
+        step *= 0.5
+    return None
+
+
+def _scaled_passive_jacobian(clm: ClosedLoopModel, free: np.ndarray) -> np.ndarray:
+    """(m, p) closure Jacobian of the passive coordinates ``free`` from the kinematics in
+    the workspace, unit-free: rows in metres divided by L, columns of lengths times L."""
+    data, datas = clm.workspace()
+    rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
+    J = jacobian_rows(clm, data, datas, calc=False)[:, free]
+    return J * rows[:, None] * coordinate_scale(clm)[free]
+
+
+def _singular_values(A: np.ndarray) -> np.ndarray:
+    """Singular values (min(m, n),) of a non-empty A (m, n), descending (NaN if LAPACK
+    fails, which no rank test passes)."""
+    _, s, _, info = lapack.dgesdd(A, compute_uv=0)
+    return s if info == 0 else np.full(min(A.shape), np.nan)
+
+
+def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
+    """(q, r, iterations) of a closed configuration q (residual r, kinematics in the
+    workspace), made sure not to be a singular one of the assembly.
+
+    Where the scaled passive Jacobian A (:func:`_scaled_passive_jacobian`) is nearly
+    rank deficient, the tolerance admits poses up to about sqrt(2 tol) from a singular
+    solution, each a different answer: q is then iterated further while the residual
+    decreases (:data:`POLISH_FACTOR`, :data:`POLISH_ITER`), towards the solution itself.
+    Then the rank rule (:func:`closedloop.conditioning.rule_rank`) splits off the directions Z of
+    the passive coordinates that A does not see. Each is either a motion that the
+    closures allow (a rod turning about its own axis: their curvature along it stays in
+    the range of A, where the other passive coordinates take it up) or the sign of a
+    singular configuration, where assembly branches meet (the parallelogram four-bar with
+    its bars collinear): there the closures curve along it out of the range of A (a
+    central second difference, :data:`CURVATURE_STEP`, :data:`CURVATURE_RTOL`), the
+    passive coordinates are not determined by the actuated ones, and neighbouring poses
+    within the tolerance answer differently.
+
+    Raises:
+        SingularConfigurationError: a singular configuration; the message names the
+            actuated values.
+    """
+    data, datas = clm.workspace()
+    s = _singular_values(_scaled_passive_jacobian(clm, free))
+    if not s[-1] > POLISH_FACTOR * np.sqrt(tol) * s[0]:
+        size2 = float(r.dot(r))
+        for _ in range(POLISH_ITER):
+            found = _descend(clm, q, r, size2, free, tols, strict=True)
+            if found is None:
+                break
+            q, r, size2, _ = found
+            it += 1
+        _residual(clm, data, datas, q, tols)  # q's kinematics back in the workspace
+        s = _singular_values(_scaled_passive_jacobian(clm, free))
+    rank = rule_rank(s)
+    if rank == len(free) or rank == len(r):  # nothing unseen, or every row in the range
+        return q, r, it
+    U, s, Vt = svd(_scaled_passive_jacobian(clm, free))
+    rank = rule_rank(s)
+    rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
+    scale = coordinate_scale(clm)[free]
+    h, U0, worst = CURVATURE_STEP, U[:, rank:], 0.0
+    for z in Vt[rank:]:
+        step = np.zeros(clm.model.nv)
+        step[free] = h * z * scale
+        ahead = _residual(clm, data, datas, pin.integrate(clm.model, q, step), tols)[0]
+        back = _residual(clm, data, datas, pin.integrate(clm.model, q, -step), tols)[0]
+        bend = (ahead + back - 2.0 * r) * rows / (h * h)
+        worst = max(worst, float(np.linalg.norm(U0.T @ bend)))
+    _residual(clm, data, datas, q, tols)
+    if worst > CURVATURE_RTOL * s[0]:
+        values = dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))
+        raise SingularConfigurationError(
+            f"cannot assemble {clm.name!r} with actuated {values}: a singular configuration "
+            f"(the closures lose rank {min(len(free), len(r)) - rank} on the passive joints, "
+            f"scaled singular value {s[rank]:.1e} of {s[0]:.1e}; assembly branches meet "
+            "there and the passive joints are not determined); give actuated values away "
+            "from it"
+        )
+    return q, r, it
 
 
 def _continued(clm: ClosedLoopModel, origin: np.ndarray, q: np.ndarray, free: np.ndarray):

@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import INPUT_STEP, Assembly, check_actuated, close_loops, coordinate_scale
-from .exceptions import AssemblyError, InvalidInputError
+from .exceptions import AssemblyError, InvalidInputError, SingularConfigurationError
 from .model import ClosedLoopModel
 
 #: Excursion beyond a joint limit [m or rad] that counts as a violation: above the accuracy
@@ -104,6 +104,7 @@ def assemble_within_limits(
             actuated value outside its joint's limits (an ``invalid`` point of a map: the
             robot cannot be driven there).
         AssemblyError: the loops cannot be closed.
+        SingularConfigurationError: they close at a singular configuration only.
     """
     q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
     origin = None if q0 is None else q.copy()  # an assembled q0: its branch is followed
@@ -139,7 +140,8 @@ def assemble_connected(
     One Gauss-Newton solve from far away may land on another mode: the bundled four-bar
     solved at once from crank 0 is on the other mode at crank 1.0, not at 1.5. Where a step
     cannot be assembled (q0's mode ends on the way, at a singular position, or the way
-    leaves the limits), the direct assembly from q0 is taken.
+    leaves the limits), the direct assembly from q0 is taken. A model without loops has
+    its actuated values set (:func:`closedloop.assembly.assemble`).
 
     Raises:
         As :func:`assemble_within_limits`.
@@ -155,6 +157,6 @@ def assemble_connected(
         for k in range(1, n):
             path = assemble_within_limits(clm, start + k / n * (target - start), path,
                                           jacobian=False).q  # fmt: skip
-    except (AssemblyError, InvalidInputError):
+    except (AssemblyError, InvalidInputError, SingularConfigurationError):
         path = q
     return assemble_within_limits(clm, target, path, jacobian=jacobian)
