@@ -33,10 +33,33 @@ def add_worker_timeout(parser: argparse.ArgumentParser) -> None:
 
 def _is_dask_error(error: BaseException) -> bool:
     """An error of Dask's machinery (not of the task's own code): a class of the
-    ``distributed`` package, or a cancelled task."""
+    ``distributed`` package, a cancelled task, or an error raised in Dask's code
+    (:func:`_raised_by_dask`)."""
+    return _is_dask_class(error) or _raised_by_dask(error)
+
+
+def _is_dask_class(error: BaseException) -> bool:
+    """A cancelled task, or an error of a class of the ``distributed`` package
+    (``KilledWorker``...)."""
     if isinstance(error, CancelledError):
         return True
     module = type(error).__module__
+    return module == "distributed" or module.startswith("distributed.")
+
+
+def _raised_by_dask(error: BaseException) -> bool:
+    """True for an error raised by the ``distributed`` package's own code (the innermost
+    frame of its traceback is there), not by the task: a task's error keeps the task's
+    frames. Dask's executor reads a task's status after gathering its result; when the
+    worker holding it is lost in between, the status is no longer "finished" and it takes
+    the result for an error (``TypeError: cannot unpack non-iterable ...`` in
+    ``distributed.cfexecutor``, distributed 2026.8): the task ran, its result was lost."""
+    tb = error.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    module = tb.tb_frame.f_globals.get("__name__", "")
     return module == "distributed" or module.startswith("distributed.")
 
 
@@ -45,11 +68,12 @@ class DaskExecutor(Executor):
 
     Each task's future is a future of its own, completed from Dask's: an error of Dask's
     machinery (e.g. ``KilledWorker`` once a task has lost ``allowed-failures`` workers)
-    becomes a :class:`ClusterError` naming the scheduler. A lost worker's tasks are
-    retried by Dask on the others, so a map stays identical to the serial one. A watch
-    thread checks every ``poll`` seconds that a worker is connected while tasks are
-    pending; after ``worker_timeout`` seconds without one (or without the scheduler),
-    the pending futures fail with a :class:`ClusterError`.
+    becomes a :class:`ClusterError` naming the scheduler; a task whose result Dask's
+    executor lost with its worker (:func:`_raised_by_dask`) runs once more. A lost
+    worker's tasks are retried by Dask on the others, so a map stays identical to the
+    serial one. A watch thread checks every ``poll`` seconds that a worker is connected
+    while tasks are pending; after ``worker_timeout`` seconds without one (or without the
+    scheduler), the pending futures fail with a :class:`ClusterError`.
 
     Args:
         client: a ``distributed.Client`` (closed by the caller).
@@ -67,12 +91,17 @@ class DaskExecutor(Executor):
         self._watch.start()
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
-        inner = self._inner.submit(fn, *args, **kwargs)
+        attempts = [self._inner.submit(fn, *args, **kwargs)]  # Dask's futures, the last current
         outer: Future = Future()
         with self._lock:
             self._pending.add(outer)
-        outer.add_done_callback(lambda f: self._done(f, inner))
-        inner.add_done_callback(lambda f: self._forward(f, outer))
+        outer.add_done_callback(lambda f: self._done(f, attempts[-1]))
+
+        def again() -> None:  # the task once more, as Dask recomputes a lost result
+            attempts.append(self._inner.submit(fn, *args, **kwargs))
+            attempts[-1].add_done_callback(lambda f: self._forward(f, outer))
+
+        attempts[0].add_done_callback(lambda f: self._forward(f, outer, again))
         return outer
 
     def _done(self, outer: Future, inner: Future) -> None:
@@ -81,8 +110,15 @@ class DaskExecutor(Executor):
         if outer.cancelled():
             inner.cancel()
 
-    def _forward(self, inner: Future, outer: Future) -> None:
+    def _forward(self, inner: Future, outer: Future, again=None) -> None:
         error = None if inner.cancelled() else inner.exception()
+        lost = error is not None and _raised_by_dask(error) and not _is_dask_class(error)
+        if lost and again is not None and not outer.done():
+            try:  # a result lost with its worker (not the task's error): run it again
+                again()
+                return
+            except RuntimeError:  # the executor is shut down: failed as a lost task below
+                pass
         try:
             if inner.cancelled() or (error is not None and _is_dask_error(error)):
                 what = (

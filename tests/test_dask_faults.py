@@ -1,6 +1,7 @@
 """``--scheduler`` under faults: a lost worker is a retried chunk (the map stays the serial
 one), a chunk lost with too many workers or a run without workers is one line, exit 3."""
 
+import asyncio
 import contextlib
 import logging
 import os
@@ -10,6 +11,7 @@ import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import Future
 
 import dask
 import numpy as np
@@ -18,7 +20,7 @@ from dask.distributed import Client, LocalCluster
 from helpers import REPO
 
 from closedloop.cli import main
-from closedloop.cluster import _quiet_dask_logs
+from closedloop.cluster import DaskExecutor, _quiet_dask_logs
 
 #: Worker timeout of the tests [s]: small, so that a run without workers ends in seconds.
 TIMEOUT = 3.0
@@ -151,6 +153,91 @@ def test_all_workers_lost_mid_run_stops_after_the_timeout(tmp_path, capsys):
     assert status == 3, line
     assert line.startswith("closedloop: error: no Dask worker connected to the scheduler")
     assert t_lost and TIMEOUT <= t_end - t_lost[0] < TIMEOUT + SLACK, t_end - t_lost[0]
+
+
+class _DaskFuture:
+    """A Dask future as distributed's executor reads it once done: ``status``, and the
+    value of ``_result(raiseit=False)``, the task's result or its error triple."""
+
+    def __init__(self, status: str, value):
+        self.status, self.value = status, value
+
+    async def _result(self, raiseit=True):
+        return self.value
+
+
+class _Client:
+    """A client whose executor completes each task's future with distributed's own
+    ``_cascade_future``: the first submission with ``status`` ("lost": a result gathered,
+    then its worker lost, so that the status is no longer "finished" when read, the race
+    of the test above, which failed once under load with ``TypeError: cannot unpack
+    non-iterable ChunkResult``), the next ones as finished (or failed) tasks."""
+
+    def __init__(self, status: str):
+        self.first, self.calls = status, 0
+        self.status = "running"
+
+    def scheduler_info(self, n_workers=1):
+        return {"workers": {"tcp://127.0.0.1:1": {}}}
+
+    def get_executor(self):
+        client = self
+
+        class Inner:
+            def submit(self, fn, *args):
+                client.calls += 1
+                try:
+                    value, status = fn(*args), "finished"
+                except Exception:
+                    value, status = sys.exc_info(), "error"
+                if client.calls == 1 and client.first == "lost":
+                    status = "lost"
+                future = Future()
+                asyncio.run(_cascade(_DaskFuture(status, value), future))
+                return future
+
+            def shutdown(self, wait=True):
+                pass
+
+        return Inner()
+
+
+async def _cascade(dask_future: _DaskFuture, future: Future) -> None:
+    """distributed's executor completing ``future`` from ``dask_future`` (on a loop)."""
+    from distributed.cfexecutor import _cascade_future
+
+    await _cascade_future(dask_future, future)
+
+
+def test_a_result_lost_with_its_worker_is_computed_again():
+    """distributed's executor takes a result whose worker was lost after the gather for
+    an error triple and fails the task with the TypeError of unpacking it (raised in its
+    own code, not the task's): the task runs again, as Dask recomputes lost results,
+    instead of the TypeError ending the map."""
+    client = _Client("lost")
+    executor = DaskExecutor(client, "tcp://127.0.0.1:1", worker_timeout=5.0)
+    try:
+        assert executor.submit(pow, 7, 2).result(timeout=10) == 49  # not iterable
+    finally:
+        executor.shutdown()
+    assert client.calls == 2
+
+
+def _fails(x):
+    return x + "2"  # TypeError in the task's own frame
+
+
+def test_a_task_s_own_type_error_is_not_run_again():
+    """A TypeError of the task itself (the task's frame innermost in its traceback) is
+    the task's error, run once."""
+    client = _Client("finished")
+    executor = DaskExecutor(client, "tcp://127.0.0.1:1", worker_timeout=5.0)
+    try:
+        with pytest.raises(TypeError, match="unsupported operand"):
+            executor.submit(_fails, 7).result(timeout=10)
+    finally:
+        executor.shutdown()
+    assert client.calls == 1
 
 
 @contextlib.contextmanager
