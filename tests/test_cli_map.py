@@ -52,10 +52,14 @@ def test_map_errors_are_one_line(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     (tmp_path / "file").write_text("")
     (tmp_path / "nan.txt").write_text("0.5\nnan\n")
     (tmp_path / "inf.txt").write_text("0.5, 0.7\n-inf\n")
+    (tmp_path / "grouped.txt").write_text("0.5\n0_7\n")  # Python's float() reads 0.7
     for extra, match in (
         (["--points", str(tmp_path / "nan.txt")], "finite actuated values (['crank']), got row 1 "
          "is [nan]"),
         (["--points", str(tmp_path / "inf.txt")], "expected rows of numbers"),
+        (["--points", str(tmp_path / "grouped.txt")], "expected rows of numbers"),
+        (["--sweep", "crank=0_1:1:3"], "'0_1' is not a number"),
+        (["--sweep", "crank=0:1:3", "--fixed", "x=\u0663"], "'\u0663' is not a number"),
         (["--sweep", "crank=0.1,0.1"], "the values of swept joint 'crank' must be distinct"),
         (["--sweep", "crank=0:1:3", "--chunk", "0"], "--chunk: '0': expected an integer >= 1"),
         (["--sweep", "crank=0:1:3", "--workers", "0"], "--workers: '0': expected an integer"),
