@@ -300,17 +300,18 @@ def close_loops(
 
 def _descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = False):
     """One Gauss-Newton step from q (residual r, its squared norm size2) on the passive
-    coordinates ``free``, halved until the residual decreases (or, unless ``strict``, the
-    loops close): (q, r, size2, closed) of the new point, or None when 30 halvings do not
-    do it. The workspace holds the kinematics of q on entry, of the last point tried on
-    exit."""
+    coordinates ``free``, halved until the residual decreases or the loops close (with
+    ``strict``, past the tolerance: until its square halves at least, less being the
+    rounding's play): (q, r, size2, closed) of the new point, or None when 30 halvings do
+    not do it. The workspace holds the kinematics of q on entry, of the last point tried
+    on exit."""
     data, datas = clm.workspace()
     step = np.zeros(clm.model.nv)
     step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
     for _ in range(30):
         q_try = pin.integrate(clm.model, q, step)
         r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tols)
-        if size2_try < size2 or (closed_try and not strict):
+        if (size2_try <= 0.5 * size2) if strict else (size2_try < size2 or closed_try):
             return q_try, r_try, size2_try, closed_try
         step *= 0.5
     return None
