@@ -270,10 +270,12 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
 
 def _number(value, depth: int = 0):
     """YAML 1.1 reads 1e-6 as a string, CSV gives strings: numbers, and lists of them, as
-    floats.
+    floats (a string in ASCII decimal notation, :func:`closedloop.arrays.decimal`, with
+    the spaces of an aligned column around it).
 
     Raises:
-        ValueError: a boolean (YAML's true/false), or a list inside a list.
+        ValueError: a boolean (YAML's true/false), a string that is not such a number, or
+            a list inside a list.
     """
     if isinstance(value, list):
         if depth:
@@ -281,7 +283,7 @@ def _number(value, depth: int = 0):
         return [_number(v, 1) for v in value]
     if isinstance(value, bool):
         raise ValueError(f"{value!r} is not a number")
-    return decimal(value) if isinstance(value, str) else value
+    return decimal(value.strip()) if isinstance(value, str) else value
 
 
 @dataclass(frozen=True)

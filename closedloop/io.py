@@ -147,7 +147,7 @@ def _number(value, where: str, name: str) -> float:
                 "range (about 1.8e308); expected a number, or .inf to lock the joint"
             )
         try:
-            value = decimal(value)
+            value = decimal(value.strip())
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, int | float):

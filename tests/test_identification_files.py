@@ -204,6 +204,20 @@ def test_a_csv_aligned_with_spaces_reads_as_without(tmp_path, exact):
         np.testing.assert_array_equal(a.q, b.q)
 
 
+@pytest.mark.parametrize("cell", ["0_3", "\u0663"])
+def test_a_csv_number_in_other_notation_is_refused(tmp_path, exact, cell):
+    """Python's float() read 0_3 as 3.0 and Arabic-Indic digits as digits."""
+    _, rows = exact
+    header, first, *rest = _csv(tmp_path / "m.csv", rows).read_text().splitlines()
+    cells = first.split(",")
+    column = header.split(",").index("fx")
+    cells[column] = cell
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join([header, ",".join(cells), *rest]) + "\n")
+    with pytest.raises(cl.ClosedLoopError, match=f"'{cell}' is not a decimal number"):
+        read_measurements(bad)
+
+
 def test_csv_columns_given_twice_or_empty_are_named(tmp_path, exact):
     """A repeated column: csv.DictReader kept the last one. An empty cell: "could not
     convert string to float: ''", without the column."""
