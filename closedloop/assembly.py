@@ -275,8 +275,9 @@ def close_loops(
         if found is None:
             break
         q, r, size2, closed = found
+    J = None  # the closure Jacobian at q, once computed
     if closed and free.size and r.size:
-        q, r, it = _check_regular(clm, q, r, it, free, tols, tol)
+        q, r, it, J = _check_regular(clm, q, r, it, free, tols, tol)
     err = _inf_norm(r)
     if not closed:
         k, names = clm.stiffness, clm.model.names  # held: a joint with a spring or locked
@@ -292,7 +293,10 @@ def close_loops(
     q.flags.writeable = False
     closure = None
     if jacobian:  # the datas are those of q's residual evaluation, the last one
-        closure = (frozen(r), frozen(jacobian_rows(clm, data, datas, calc=False)))
+        closure = (
+            frozen(r),
+            frozen(jacobian_rows(clm, data, datas, calc=False) if J is None else J),
+        )
     result = object.__new__(Assembly)  # every field checked here: without the frozen __init__
     result.__dict__.update(q=q, residual=err, iterations=it, closure=closure)
     return result
@@ -317,13 +321,11 @@ def _descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = Fa
     return None
 
 
-def _scaled_passive_jacobian(clm: ClosedLoopModel, free: np.ndarray) -> np.ndarray:
-    """(m, p) closure Jacobian of the passive coordinates ``free`` from the kinematics in
-    the workspace, unit-free: rows in metres divided by L, columns of lengths times L."""
-    data, datas = clm.workspace()
+def _scaled_passive_jacobian(clm: ClosedLoopModel, J: np.ndarray, free: np.ndarray):
+    """(m, p) columns ``free`` (the passive coordinates) of the closure Jacobian J (m, nv),
+    unit-free: rows in metres divided by L, columns of lengths multiplied by L."""
     rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
-    J = jacobian_rows(clm, data, datas, calc=False)[:, free]
-    return J * rows[:, None] * coordinate_scale(clm)[free]
+    return J[:, free] * rows[:, None] * coordinate_scale(clm)[free]
 
 
 def _singular_values(A: np.ndarray) -> np.ndarray:
@@ -334,8 +336,9 @@ def _singular_values(A: np.ndarray) -> np.ndarray:
 
 
 def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
-    """(q, r, iterations) of a closed configuration q (residual r, kinematics in the
-    workspace), made sure not to be a singular one of the assembly.
+    """(q, r, iterations, closure Jacobian (m, nv) at q) of a closed configuration q
+    (residual r, kinematics in the workspace), made sure not to be a singular one of the
+    assembly.
 
     Where the scaled passive Jacobian A (:func:`_scaled_passive_jacobian`) is nearly
     rank deficient, the tolerance admits poses up to about sqrt(2 tol) from a singular
@@ -356,7 +359,8 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
             actuated values.
     """
     data, datas = clm.workspace()
-    s = _singular_values(_scaled_passive_jacobian(clm, free))
+    J = jacobian_rows(clm, data, datas, calc=False)
+    s = _singular_values(_scaled_passive_jacobian(clm, J, free))
     if not s[-1] > POLISH_FACTOR * np.sqrt(tol) * s[0]:
         size2 = float(r.dot(r))
         for _ in range(POLISH_ITER):
@@ -366,11 +370,12 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
             q, r, size2, _ = found
             it += 1
         _residual(clm, data, datas, q, tols)  # q's kinematics back in the workspace
-        s = _singular_values(_scaled_passive_jacobian(clm, free))
+        J = jacobian_rows(clm, data, datas, calc=False)
+        s = _singular_values(_scaled_passive_jacobian(clm, J, free))
     rank = rule_rank(s)
     if rank == len(free) or rank == len(r):  # nothing unseen, or every row in the range
-        return q, r, it
-    U, s, Vt = svd(_scaled_passive_jacobian(clm, free))
+        return q, r, it, J
+    U, s, Vt = svd(_scaled_passive_jacobian(clm, J, free))
     rank = rule_rank(s)
     rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
     scale = coordinate_scale(clm)[free]
@@ -392,7 +397,7 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
             "there and the passive joints are not determined); give actuated values away "
             "from it"
         )
-    return q, r, it
+    return q, r, it, J
 
 
 def _continued(clm: ClosedLoopModel, origin: np.ndarray, q: np.ndarray, free: np.ndarray):
