@@ -277,7 +277,8 @@ def close_loops(
         q, r, size2, closed = found
     J = None  # the closure Jacobian at q, once computed
     if closed and free.size and r.size:
-        q, r, it, J = _check_regular(clm, q, r, it, free, tols, tol)
+        polish = POLISH_ITER if max_iter else 0  # max_iter 0: the start as it is
+        q, r, it, J = _check_regular(clm, q, r, it, free, tols, tol, polish)
     err = _inf_norm(r)
     if not closed:
         k, names = clm.stiffness, clm.model.names  # held: a joint with a spring or locked
@@ -335,21 +336,21 @@ def _singular_values(A: np.ndarray) -> np.ndarray:
     return s if info == 0 else np.full(min(A.shape), np.nan)
 
 
-def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
+def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float, polish: int):
     """(q, r, iterations, closure Jacobian (m, nv) at q) of a closed configuration q
     (residual r, kinematics in the workspace), made sure not to be a singular one of the
     assembly.
 
     Where the scaled passive Jacobian A (:func:`_scaled_passive_jacobian`) is nearly
     rank deficient, the tolerance admits poses up to about sqrt(2 tol) from a singular
-    solution, each a different answer: q is then iterated further while the residual
-    decreases (:data:`POLISH_FACTOR`, :data:`POLISH_ITER`), towards the solution itself.
-    Then the rank rule (:func:`closedloop.conditioning.rule_rank`) splits off the directions Z of
-    the passive coordinates that A does not see. Each is either a motion that the
-    closures allow (a rod turning about its own axis: their curvature along it stays in
-    the range of A, where the other passive coordinates take it up) or the sign of a
-    singular configuration, where assembly branches meet (the parallelogram four-bar with
-    its bars collinear): there the closures curve along it out of the range of A (a
+    solution, each a different answer: q is then iterated further (at most ``polish``
+    iterations, :data:`POLISH_FACTOR`) while the residual decreases, towards the solution
+    itself. Then the rank rule (:func:`closedloop.conditioning.rule_rank`) splits off the
+    directions Z of the passive coordinates that A does not see. Each is either a motion
+    that the closures allow (a rod turning about its own axis: their curvature along it
+    stays in the range of A, where the other passive coordinates take it up) or the sign
+    of a singular configuration, where assembly branches meet (the parallelogram four-bar
+    with its bars collinear): there the closures curve along it out of the range of A (a
     central second difference, :data:`CURVATURE_STEP`, :data:`CURVATURE_RTOL`), the
     passive coordinates are not determined by the actuated ones, and neighbouring poses
     within the tolerance answer differently.
@@ -363,7 +364,7 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float):
     s = _singular_values(_scaled_passive_jacobian(clm, J, free))
     if not s[-1] > POLISH_FACTOR * np.sqrt(tol) * s[0]:
         size2 = float(r.dot(r))
-        for _ in range(POLISH_ITER):
+        for _ in range(polish):
             found = _descend(clm, q, r, size2, free, tols, strict=True)
             if found is None:
                 break

@@ -175,3 +175,9 @@ def test_the_command_line_at_the_change_point_exits_3(capfd, parallelogram_urdf,
     assert "a singular configuration" in err and err.count("\n") == 1
     code, out, err = cli(capfd, *base, "--actuated", "1.5", "--json")
     assert code == 1 and err == ""  # 0.07 rad away: planar, C of rank 3 (K does not exist)
+
+
+def test_a_start_at_the_change_point_checked_as_it_is(parallelogram):
+    """max_iter = 0 moves nothing: the collinear start itself is the singular one."""
+    with pytest.raises(SingularConfigurationError, match="a singular configuration"):
+        cl.assemble(parallelogram, None, branch(CHANGE_POINT), max_iter=0)
