@@ -46,6 +46,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,6 +59,7 @@ from .compliance import compliance
 from .conditioning import ILL_CONDITIONED, SCALED_TOL, Spectrum, batch_rank, scaled_asymmetry
 from .exceptions import (
     AssemblyError,
+    ClusterError,
     InvalidInputError,
     MechanismError,
     RigidDirectionsError,
@@ -617,8 +619,25 @@ def _start_worker() -> None:
         ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
         if os.getppid() != parent:  # ended before prctl
             os._exit(1)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     single_threaded_blas()
+
+
+@contextlib.contextmanager
+def _signals_blocked():
+    """SIGINT and SIGTERM blocked in this thread inside the block, and so in the processes
+    it starts until their initializer (:func:`_start_worker`) has set what the signals do
+    there; a signal received meanwhile is handled at the end of the block. Nothing where
+    Python cannot block signals (Windows)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
 
 
 def _end_pool(pool: ProcessPoolExecutor) -> None:
@@ -656,6 +675,7 @@ def run_tasks(
 
     Raises:
         InvalidInputError: ``workers`` not a positive integer.
+        ClusterError: a local process ended abruptly (killed) during a task.
     """
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
@@ -667,15 +687,19 @@ def run_tasks(
         return
     pool, futures, finished = executor, {}, False
     try:
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)  # in the processes
-        try:  # forked here, until their initializer has set what the signals do
+        with _signals_blocked():  # the processes are started here
             if executor is None:
                 pool = ProcessPoolExecutor(workers, initializer=_start_worker)
             futures = {pool.submit(kernel, task): k for k, task in enumerate(tasks)}
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         for future in as_completed(futures):
-            yield futures[future], future.result()
+            try:
+                result = future.result()
+            except BrokenProcessPool:
+                raise ClusterError(
+                    "a worker process of the map ended abruptly (killed, or out "
+                    "of memory?); the map stopped, the others ended"
+                ) from None
+            yield futures[future], result
         finished = True
     finally:
         if executor is not None:

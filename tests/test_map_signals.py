@@ -209,6 +209,34 @@ def test_a_worker_ends_with_its_parent_killed_by_sigkill(tmp_path):
             proc.wait()
 
 
+def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
+    """A worker killed by SIGKILL while computing: the command does not hang; one line,
+    exit 3 (a failed computation), no process left."""
+    argv, label = COMMANDS["closedloop"]
+    proc = subprocess.Popen(
+        [sys.executable, *argv, "--workers", "2", "--out", str(tmp_path)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + START_TIMEOUT
+        while not proc.stderr.readline().startswith(label):
+            assert time.monotonic() < deadline and proc.poll() is None
+        workers = psutil.Process(proc.pid).children(recursive=True)
+        workers[0].kill()
+        code = proc.wait(timeout=STOP_TIMEOUT)
+        err = proc.stderr.read().splitlines()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert not _left(workers)
+    assert code == 3
+    own = [line for line in err if not line.startswith(label)]
+    assert own == ["closedloop: error: a worker process of the map ended abruptly (killed, or "
+                   "out of memory?); the map stopped, the others ended"]  # fmt: skip
+
+
 def test_a_failing_task_ends_the_pool_at_once():
     """An error in one task ends the other running tasks' processes at once, instead of
     waiting for them (the pool is ended, not shut down)."""
