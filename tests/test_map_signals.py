@@ -18,10 +18,12 @@ import numpy as np
 import psutil
 import pytest
 
-from closedloop.map_engine import Interrupted, ModelSource, run_tasks
+from closedloop.map_engine import STATUS, ChunkResult, Interrupted, ModelSource, gather, run_tasks
 from closedloop.maps import StiffnessMap, stiffness_map
 
 REPO = Path(__file__).resolve().parents[1]
+#: The tests of worker processes: a map's pool has at most one process a core.
+two_cores = pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs 2 cores for 2 workers")
 #: Seconds a command may take to start computing (imports, the estimate, the border pass).
 START_TIMEOUT = 60.0
 #: Seconds from the signal to the end of the command (1-3 s seen on a loaded machine:
@@ -106,6 +108,7 @@ def _interrupted_run(prog: str, sig: signal.Signals, out: Path):
     return code, after, workers, elapsed, progress_label
 
 
+@two_cores
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("prog", list(COMMANDS))
 def test_a_signal_stops_the_map_and_writes_what_it_computed(tmp_path, prog, sig):
@@ -145,6 +148,7 @@ def test_a_signal_stops_the_map_and_writes_what_it_computed(tmp_path, prog, sig)
     }
 
 
+@two_cores
 def test_a_keyboard_interrupt_in_python_ends_the_workers_and_keeps_the_partial_map():
     """stiffness_map(workers=2) interrupted (SIGINT to this process, as Ctrl-C once the
     workers run): Interrupted, a KeyboardInterrupt, with the map so far; no worker left."""
@@ -184,6 +188,7 @@ def test_a_keyboard_interrupt_in_python_ends_the_workers_and_keeps_the_partial_m
     assert str(stop) == "interrupted (SIGINT); nothing written"
 
 
+@two_cores
 def test_a_worker_ends_with_its_parent_killed_by_sigkill(tmp_path):
     """A parent that cannot clean up (SIGKILL) takes its workers with it (Linux)."""
     if not sys.platform.startswith("linux"):
@@ -209,6 +214,7 @@ def test_a_worker_ends_with_its_parent_killed_by_sigkill(tmp_path):
             proc.wait()
 
 
+@two_cores
 def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
     """A worker killed by SIGKILL while computing: the command does not hang; one line,
     exit 3 (a failed computation), no process left."""
@@ -235,6 +241,40 @@ def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
     own = [line for line in err if not line.startswith(label)]
     assert own == ["closedloop: error: a worker process of the map ended abruptly (killed, or "
                    "out of memory?); the map stopped, the others ended"]  # fmt: skip
+
+
+@pytest.mark.parametrize("received", [0, 1])
+def test_gather_keeps_the_chunks_received_before_a_keyboard_interrupt(received):
+    """Chunks received are kept as they came; the others' points are not_computed, NaN,
+    under every index of the map (its deflections too: a wrench), whatever was received."""
+    pieces = [np.array([4, 0]), np.array([1, 3]), np.array([2])]
+    first = ChunkResult.empty(2)
+    first.C[:] = np.eye(6)
+    first.rank[:] = 6
+    first.indices = {"det_K": np.array([1.0, 2.0])}
+    closed = []
+
+    def results():
+        try:
+            yield from [(0, first)][:received]
+            raise KeyboardInterrupt
+        finally:
+            closed.append(True)
+
+    with pytest.raises(Interrupted) as caught:
+        gather(5, pieces, results(), wrench=np.ones(6))
+    data = caught.value.data
+    assert closed and caught.value.signum == signal.SIGINT
+    lost = np.array([1, 2, 3] if received else [0, 1, 2, 3, 4])
+    kept = np.setdiff1d(np.arange(5), lost)
+    assert (data.codes[lost] == STATUS.index("not_computed")).all()
+    assert (data.codes[kept] == STATUS.index("ok")).all()
+    assert {data.reason_texts[c] for c in data.reason_codes[lost]} == {"interrupted by SIGINT"}
+    assert np.isnan(data.C[lost]).all() and (data.rank[lost] == -1).all()
+    np.testing.assert_array_equal(data.C[kept], np.broadcast_to(np.eye(6), (len(kept), 6, 6)))
+    assert {"det_K", "deflection_translation", "deflection_rotation"} <= set(data.indices)
+    assert all(np.isnan(v[lost]).all() for v in data.indices.values())
+    np.testing.assert_array_equal(data.indices["det_K"][kept], [2.0, 1.0][: len(kept)])
 
 
 def test_a_failing_task_ends_the_pool_at_once():
