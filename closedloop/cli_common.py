@@ -17,6 +17,7 @@ import json
 import math
 import os
 import re
+import signal
 import sys
 import tempfile
 import warnings
@@ -442,7 +443,9 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     """Run a parsed subcommand ``args.func(args)`` and return its exit status; a closed
     pipe, a typed error or a LAPACK failure end as one line and the documented status
     (:func:`closedloop.exceptions.exit_status`; a :class:`ClusterError` is a failed
-    computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``).
+    computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``);
+    a Ctrl-C, or a map stopped by a signal (:class:`closedloop.map_engine.Interrupted`),
+    ends as ``prog: interrupted (SIGNAL)...`` and 128 + the signal's number (130, 143).
     Shared by both command lines."""
     _CREATED.clear()
     try:
@@ -464,6 +467,10 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
         _remove_empty_outputs()
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
+    except KeyboardInterrupt as e:  # Ctrl-C; a map's SIGINT or SIGTERM: map_engine.Interrupted
+        _remove_empty_outputs()
+        print(f"{prog}: {str(e) or 'interrupted (SIGINT)'}", file=sys.stderr)
+        return 128 + getattr(e, "signum", signal.SIGINT)
 
 
 def _remove_empty_outputs() -> None:

@@ -11,7 +11,9 @@ Values are SI (rad, m). ``--points`` reads a text file of actuated values, one p
 distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
 ``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
 with too many workers or a run without any worker for ``--worker-timeout`` seconds stops
-with one line (exit 3).
+with one line (exit 3). SIGINT (Ctrl-C) or SIGTERM stops the map at once, its workers
+with it, writes the points computed (the others with status ``not_computed``) and ends
+with one line, exit 130 (SIGINT) or 143 (SIGTERM).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from .cli_common import (
 )
 from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
-from .map_engine import CHUNK, ModelSource
+from .map_engine import CHUNK, Interrupted, ModelSource, stop_on_signals
 from .maps import INDICES, stiffness_map
 
 #: Points timed first for the estimate of a long map, and the time [s] the probe aims at
@@ -162,20 +164,24 @@ def run_map(args) -> int:
     clm.frame_id(args.frame)
     out = output_folder(args.out)  # before any computation
     options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk}
-    with dask_executor(args.scheduler, args.worker_timeout) as executor:
+    with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)
             share = max(1, args.workers or 1)
             print(f"closedloop map: {n} points, about {per_point * n / share:.3g} s "
                   f"({1e3 * per_point:.3g} ms a point)", file=sys.stderr)  # fmt: skip
-        result = stiffness_map(
-            source if (args.workers or args.scheduler) else clm,
-            workers=args.workers,
-            executor=executor,
-            show_progress=True,
-            **options,
-            **grid,
-        )
+        try:
+            result = stiffness_map(
+                source if (args.workers or args.scheduler) else clm,
+                workers=args.workers,
+                executor=executor,
+                show_progress=True,
+                **options,
+                **grid,
+            )
+        except Interrupted as stop:  # the points computed, written before the one line
+            stop.write(lambda partial: partial.save(out, args.index), out)
+            raise
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))

@@ -17,6 +17,11 @@ Four parts, shared by :mod:`closedloop.maps` and CaHyMan's maps (:mod:`cahyman_p
 * :func:`gather`: per-point arrays (no per-point Python objects: statuses and reasons
   are small integer codes).
 
+A map stops at once on SIGINT (Ctrl-C) or SIGTERM (:func:`stop_on_signals`, in
+:func:`gather`): its worker processes are ended (they ignore SIGINT themselves, and end with
+their parent), the chunks not received are marked ``not_computed``, and
+:class:`Interrupted` (a ``KeyboardInterrupt``) carries what was computed.
+
 The kernel for any :class:`~closedloop.model.ClosedLoopModel` is :func:`assemble_chunk`:
 each point is assembled by :func:`closedloop.assembly.assemble` from the previous point's
 configuration along the path (or from a per-point start provider), then the chunk's
@@ -30,12 +35,18 @@ restart from the reference configuration (which may lie on another assembly mode
 from __future__ import annotations
 
 import bisect
+import contextlib
+import ctypes
 import functools
 import itertools
 import math
 import os
+import signal
+import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,6 +59,7 @@ from .compliance import compliance
 from .conditioning import ILL_CONDITIONED, SCALED_TOL, Spectrum, batch_rank, scaled_asymmetry
 from .exceptions import (
     AssemblyError,
+    ClusterError,
     InvalidInputError,
     MechanismError,
     RigidDirectionsError,
@@ -59,9 +71,14 @@ from .limits import INPUT_STEP, assemble_connected, assemble_within_limits, inpu
 from .model import ClosedLoopModel
 from .progress import progress
 
-#: Status of a point, by code (its index in this tuple).
-STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed")
-OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED = range(len(STATUS))
+#: Status of a point, by code (its index in this tuple); ``not_computed``: the map was
+#: interrupted before the point's chunk was computed (:class:`Interrupted`).
+STATUS = ("ok", "rank_deficient", "invalid", "unreachable", "singular", "failed", "not_computed")
+OK, RANK_DEFICIENT, INVALID, UNREACHABLE, SINGULAR, FAILED, NOT_COMPUTED = range(len(STATUS))
+#: Signals that stop a map (:func:`stop_on_signals`).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: ``prctl`` option: the signal a process receives when its parent ends (Linux).
+PR_SET_PDEATHSIG = 1
 #: Exceptions recorded per point (anything else, a programming error, propagates).
 POINT_ERRORS = QUERY_ERRORS
 #: Points per task when not given: enough to amortise a task's overhead (pickling, the
@@ -518,6 +535,124 @@ def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:
     return out
 
 
+class Interrupted(KeyboardInterrupt):
+    """A map stopped by SIGINT (Ctrl-C) or SIGTERM: its workers ended, what it computed kept.
+
+    A ``KeyboardInterrupt``, so that code that catches Ctrl-C catches it. :func:`gather`
+    raises it with ``data``; :func:`closedloop.maps.stiffness_map` and
+    :func:`cahyman_pin.sweep.sweep` attach their result as ``partial`` and re-raise it.
+
+    Attributes:
+        signum: the signal (SIGINT, also for a plain ``KeyboardInterrupt``, or SIGTERM).
+        data: the :class:`PointData` so far, or None (stopped outside a map): the points of
+            the chunks not received have status ``not_computed`` and the reason
+            :attr:`reason`, NaN values.
+        partial: the map's result built on ``data`` (a
+            :class:`~closedloop.maps.StiffnessMap` or a
+            :class:`~cahyman_pin.sweep.SweepResult`), or None.
+        written: the folder ``partial`` was written to (:meth:`write`), or None.
+    """
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signum)
+        self.signum = signal.Signals(signum)
+        self.data: PointData | None = None
+        self.partial = None
+        self.written = None
+
+    @property
+    def reason(self) -> str:
+        """The reason of the points not computed, e.g. ``interrupted by SIGINT``."""
+        return f"interrupted by {self.signum.name}"
+
+    def write(self, save: Callable, folder) -> None:
+        """Write ``partial`` (if any) by ``save(partial)`` into ``folder``, and say so in
+        the message."""
+        if self.partial is not None:
+            save(self.partial)
+            self.written = folder
+
+    def __str__(self) -> str:
+        text = f"interrupted ({self.signum.name})"
+        if self.data is None or self.written is None:
+            return f"{text}; nothing written"
+        done = int(np.count_nonzero(self.data.codes != NOT_COMPUTED))
+        return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+    """Inside the block, SIGINT and SIGTERM raise :class:`Interrupted`, once: a later one is
+    ignored until the block ends, so that the clean-up after the first (workers ended, a
+    partial map written) is not cut short. Only in the main thread (where Python runs its
+    signal handlers), and only for a signal whose handler is Python's default (SIGINT:
+    ``KeyboardInterrupt``; SIGTERM: the end of the process): an ignored signal, a
+    handler of the program's own or of an enclosing block stay as they are."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    received: list[int] = []
+
+    def stop(signum, frame):
+        if not received:
+            received.append(signum)
+            raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, stop) for s, h in defaults.items() if signal.getsignal(s) is h}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _start_worker() -> None:
+    """Initializer of a map's worker processes (started with SIGINT and SIGTERM blocked,
+    :func:`run_tasks`): SIGINT ignored (a Ctrl-C reaches the whole process group; the
+    parent ends the workers), SIGTERM ends the process, the process ends with its parent
+    (Linux: even a parent killed by SIGKILL), one BLAS thread."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        parent = os.getppid()
+        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:  # ended before prctl
+            os._exit(1)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+    single_threaded_blas()
+
+
+@contextlib.contextmanager
+def _signals_blocked():
+    """SIGINT and SIGTERM blocked in this thread inside the block, and so in the processes
+    it starts until their initializer (:func:`_start_worker`) has set what the signals do
+    there; a signal received meanwhile is handled at the end of the block. Nothing where
+    Python cannot block signals (Windows)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+
+
+def _end_pool(pool: ProcessPoolExecutor) -> None:
+    """End the processes of ``pool`` at once, their running tasks with them (the executor
+    has no public way to stop a running task: its processes are its ``_processes``), then
+    its thread, which finds them gone and fails the pending tasks (none may be cancelled
+    first: the thread of Python 3.11 raises on a cancelled one, with a traceback)."""
+    processes = list((pool._processes or {}).values())
+    for process in processes:
+        process.kill()
+    for process in processes:
+        process.join()
+    pool.shutdown()
+
+
 def run_tasks(
     kernel: Callable,
     tasks: Sequence,
@@ -526,16 +661,21 @@ def run_tasks(
 ) -> Iterator[tuple[int, ChunkResult]]:
     """Yield (task index, ``kernel(task)``) as the tasks finish.
 
+    Stopped early (an exception, e.g. :class:`Interrupted` or ``KeyboardInterrupt``, or
+    the generator closed), the tasks not started are cancelled and the local processes
+    ended at once, their running tasks lost; an executor's running tasks are left to it.
+
     Args:
         kernel: picklable callable (a module-level function) for process executors.
         tasks: the tasks (picklable for process executors).
         executor: any ``concurrent.futures.Executor``, used as given and left open.
-        workers: without an executor, local processes (a pool shut down at the end),
-            at most one per task and per core (more would only wait); None or 1: this
-            process.
+        workers: without an executor, local processes (a pool ended at the end), at most
+            one per task and per core (more would only wait); None or 1: this process.
+            They ignore SIGINT and end with this process (:func:`_start_worker`).
 
     Raises:
         InvalidInputError: ``workers`` not a positive integer.
+        ClusterError: a local process ended abruptly (killed) during a task.
     """
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
@@ -545,16 +685,30 @@ def run_tasks(
         for k, task in enumerate(tasks):
             yield k, kernel(task)
         return
-    pool = executor or ProcessPoolExecutor(workers, initializer=single_threaded_blas)
-    futures = {pool.submit(kernel, task): k for k, task in enumerate(tasks)}
+    pool, futures, finished = executor, {}, False
     try:
+        with _signals_blocked():  # the processes are started here
+            if executor is None:
+                pool = ProcessPoolExecutor(workers, initializer=_start_worker)
+            futures = {pool.submit(kernel, task): k for k, task in enumerate(tasks)}
         for future in as_completed(futures):
-            yield futures[future], future.result()
+            try:
+                result = future.result()
+            except BrokenProcessPool:
+                raise ClusterError(
+                    "a worker process of the map ended abruptly (killed, or out "
+                    "of memory?); the map stopped, the others ended"
+                ) from None
+            yield futures[future], result
+        finished = True
     finally:
-        for future in futures:
-            future.cancel()
-        if executor is None:
+        if executor is not None:
+            for future in futures:
+                future.cancel()
+        elif pool is not None and finished:
             pool.shutdown()
+        elif pool is not None:
+            _end_pool(pool)
 
 
 def run_tasks_by_point(
@@ -568,15 +722,20 @@ def run_tasks_by_point(
     show_progress: bool = False,
 ) -> Iterator[tuple[int, ChunkResult]]:
     """:func:`run_tasks`, its progress shown in points (task k holds ``sizes[k]`` points)
-    by :func:`closedloop.progress.progress` on stderr when ``show_progress``."""
+    by :func:`closedloop.progress.progress` on stderr when ``show_progress``; closed or
+    stopped by an exception, it stops the tasks at once (:func:`run_tasks`)."""
+    running = run_tasks(kernel, tasks, executor, workers)
 
     def by_point():
-        for k, result in run_tasks(kernel, tasks, executor, workers):
+        for k, result in running:
             yield k, result
             yield from itertools.repeat(None, sizes[k] - 1)
 
-    done = progress(by_point(), total=sum(sizes), label=label, enabled=show_progress)
-    return (item for item in done if item is not None)
+    try:
+        done = progress(by_point(), total=sum(sizes), label=label, enabled=show_progress)
+        yield from (item for item in done if item is not None)
+    finally:
+        running.close()
 
 
 @dataclass(frozen=True)
@@ -617,30 +776,73 @@ class PointData:
         self.reason_codes[i] = self._codes[text]
 
 
-def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator) -> PointData:
+def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator, wrench=None) -> PointData:
     """Per-point arrays from the results of the chunks.
+
+    SIGINT and SIGTERM stop it (:func:`stop_on_signals`), as a ``KeyboardInterrupt`` does:
+    ``results`` is closed (which ends the workers of :func:`run_tasks`) and
+    :class:`Interrupted` raised, its ``data`` the arrays so far, the points of the chunks
+    not received ``not_computed``.
 
     Args:
         n: number of points.
         pieces: storage indices of each chunk's points, in chunk order.
         results: (chunk index, :class:`ChunkResult`) pairs in any order
             (e.g. :func:`run_tasks`).
+        wrench: (6,) wrench of the chunks' deflection indices [N, N m], or None: the
+            indices of a map whose chunks are all lost (their names).
+
+    Raises:
+        Interrupted: by SIGINT (or a ``KeyboardInterrupt``) or SIGTERM.
     """
-    data = PointData(C=np.full((n, 6, 6), np.nan), rank=np.full(n, -1, dtype=np.int8),
-                     condition=np.full(n, np.nan), codes=np.zeros(n, dtype=np.int8),
-                     length=np.full(n, np.nan),
-                     iterations=np.full(n, -1, dtype=np.int16),
-                     reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
-    for k, r in results:
-        p = pieces[k]
-        for name, values in r.indices.items():
-            data.indices.setdefault(name, np.full(n, np.nan))[p] = values
-        data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
-        data.condition[p] = r.condition
-        data.length[p], data.iterations[p] = r.length, r.iterations
-        for i, text in r.reasons.items():
-            data.set_reason(p[i], text)
+    data, received = None, np.zeros(len(pieces), dtype=bool)
+    with stop_on_signals():
+        try:
+            data = _no_points(n)
+            for k, r in results:
+                p = pieces[k]
+                for name, values in r.indices.items():
+                    data.indices.setdefault(name, np.full(n, np.nan))[p] = values
+                data.C[p], data.rank[p], data.codes[p] = r.C, r.rank, r.status
+                data.condition[p] = r.condition
+                data.length[p], data.iterations[p] = r.length, r.iterations
+                for i, text in r.reasons.items():
+                    data.set_reason(p[i], text)
+                received[k] = True
+        except KeyboardInterrupt as e:
+            stop = e if isinstance(e, Interrupted) else Interrupted()
+            getattr(results, "close", lambda: None)()
+            data = _no_points(n) if data is None else data
+            _not_computed(data, [pieces[k] for k in np.flatnonzero(~received)], wrench, stop)
+            if stop is e:
+                raise
+            raise stop from None
     return data
+
+
+def _no_points(n: int) -> PointData:
+    """The arrays of n points before any is received (status ``ok``, values NaN)."""
+    return PointData(C=np.full((n, 6, 6), np.nan), rank=np.full(n, -1, dtype=np.int8),
+                     condition=np.full(n, np.nan), codes=np.zeros(n, dtype=np.int8),
+                     length=np.full(n, np.nan), iterations=np.full(n, -1, dtype=np.int16),
+                     reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
+
+
+def _not_computed(data: PointData, pieces: list, wrench, stop: Interrupted) -> None:
+    """Mark the points of ``pieces`` not computed (in place), attach ``data`` to ``stop``."""
+    empty = ChunkResult.empty(0)
+    complete(empty, wrench)
+    for name in empty.indices:
+        data.indices.setdefault(name, np.full(len(data.codes), np.nan))
+    p = np.concatenate([np.zeros(0, dtype=np.intp), *pieces]).astype(np.intp)
+    data.C[p], data.rank[p], data.condition[p], data.codes[p] = np.nan, -1, np.nan, NOT_COMPUTED
+    data.length[p], data.iterations[p] = np.nan, -1
+    for values in data.indices.values():
+        values[p] = np.nan
+    if p.size:
+        data.set_reason(p[0], stop.reason)
+        data.reason_codes[p] = data.reason_codes[p[0]]
+    stop.data = data
 
 
 def classify(data: ChunkResult) -> np.ndarray:

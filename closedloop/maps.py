@@ -32,6 +32,7 @@ from .map_engine import (
     OK,
     RANK_DEFICIENT,
     STATUS,
+    Interrupted,
     MapChunk,
     ModelSource,
     PointData,
@@ -316,6 +317,13 @@ def stiffness_map(
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
         NameNotFoundError: unknown frame.
+        Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the map
+            (:class:`closedloop.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
+            the worker processes are ended at once (none is left), and the map so far is
+            its ``partial``: a :class:`StiffnessMap` whose points not computed (their
+            chunk not finished) have status ``not_computed`` and reason ``interrupted by
+            SIGINT`` (or ``SIGTERM``), values NaN. A SIGTERM handler is installed only
+            while the map runs, in the main thread, where SIGTERM would end the process.
     """
     clm = model_of(model)
     clm.frame_id(frame)
@@ -344,14 +352,26 @@ def stiffness_map(
     n = len(pts)
     firsts = list(range(0, n, chunk))
     pieces = [order[f : f + chunk] for f in firsts]
-    borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
-    tasks = [MapChunk(model, frame, pts[p], q, start, w)
-             for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
 
-    sizes = [len(piece) for piece in pieces]
-    results = run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,
-                                 label="map points", show_progress=show_progress)  # fmt: skip
-    data = gather(n, pieces, results)
+    def results():
+        borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
+        tasks = [MapChunk(model, frame, pts[p], q, start, w)
+                 for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
+        sizes = [len(piece) for piece in pieces]
+        yield from run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,
+                                      label="map points", show_progress=show_progress)  # fmt: skip
+
+    try:
+        data = gather(n, pieces, results(), w)
+    except Interrupted as stop:
+        if stop.data is not None:  # else stopped before gather began
+            stop.partial = _stiffness_map(clm, pts, shape, swept, frame, w, stop.data)
+        raise
+    return _stiffness_map(clm, pts, shape, swept, frame, w, data)
+
+
+def _stiffness_map(clm, pts, shape, swept, frame, wrench, data: PointData) -> StiffnessMap:
+    """The :class:`StiffnessMap` of the arrays of :func:`stiffness_map` (made read-only)."""
     values = data.indices
     for a in (pts, data.C, data.rank, data.codes, *values.values()):
         a.flags.writeable = False
@@ -364,7 +384,7 @@ def stiffness_map(
         shape=shape,
         swept=swept,
         frame=frame,
-        wrench=w,
+        wrench=wrench,
         indices=values,
         data=data,
     )

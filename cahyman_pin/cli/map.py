@@ -23,6 +23,9 @@ three (alpha_1, alpha_2, alpha_3). A value starting with a minus sign needs ``=`
 receives ``map.npz`` (everything, SI), ``map.csv`` when the map is small and
 ``map_<index>.png``. ``--start closed_form`` starts every generic assembly from CaHyMan's
 closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep.engine`).
+SIGINT (Ctrl-C) or SIGTERM stops the map at once, its workers with it, writes the points
+computed (the others with status ``not_computed``) and ends with one line, exit 130
+(SIGINT) or 143 (SIGTERM).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from closedloop.cli_common import (
 from closedloop.cluster import add_worker_timeout, dask_executor
 from closedloop.exceptions import InvalidInputError
 from closedloop.files import save_figure
+from closedloop.map_engine import Interrupted, stop_on_signals
 from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
@@ -333,24 +337,33 @@ def _run(args: argparse.Namespace) -> int:
         params=params,
     )
     local = "serial" if args.workers == 1 else "processes"
-    with dask_executor(args.scheduler, args.worker_timeout) as executor:
-        result = sweep(
-            points,
-            backend=args.backend,
-            wrench=wrench,
-            start=args.start,
-            executor=local if executor is None else executor,
-            workers=args.workers,
-            chunk_size=args.chunk_size,
-            show_progress=True,
-        )
-    paths = result.save(out, "map")
     shown = {k: (v[1], v[2]) for k, v in swept.items()}
     fixed = {k: (float(v[0][0]), v[1]) for k, v in inputs.items() if k not in swept}
-    png = out / f"map_{args.index}.png"
-    paths.append(plot_map(result, args.index, shown, png, fixed))
-    for other in INDEX_UNITS.keys() - {args.index}:  # an earlier map's figure: not of map.npz
-        (out / f"map_{other}.png").unlink(missing_ok=True)
+
+    def save(result: SweepResult) -> list[Path]:
+        paths = result.save(out, "map")
+        png = out / f"map_{args.index}.png"
+        paths.append(plot_map(result, args.index, shown, png, fixed))
+        for other in INDEX_UNITS.keys() - {args.index}:  # an earlier map's figure: not of map.npz
+            (out / f"map_{other}.png").unlink(missing_ok=True)
+        return paths
+
+    with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
+        try:
+            result = sweep(
+                points,
+                backend=args.backend,
+                wrench=wrench,
+                start=args.start,
+                executor=local if executor is None else executor,
+                workers=args.workers,
+                chunk_size=args.chunk_size,
+                show_progress=True,
+            )
+        except Interrupted as stop:  # the points computed, written before the one line
+            stop.write(save, out)
+            raise
+    paths = save(result)
     print(result.summary())
     print(index_line(args.index, result.indices[args.index], INDEX_UNITS[args.index]))
     failures = result.failures()

@@ -63,6 +63,7 @@ from closedloop.map_engine import (
     OK,
     RANK_DEFICIENT,
     STATUS,
+    Interrupted,
     PointData,
     gather,
     run_tasks_by_point,
@@ -123,7 +124,8 @@ class SweepResult:
     @property
     def status(self) -> np.ndarray:
         """(n,) status names (:data:`closedloop.map_engine.STATUS`): ``ok``, ``rank_deficient``
-        (C exists, K does not), ``invalid``, ``unreachable``, ``singular``, ``failed``."""
+        (C exists, K does not), ``invalid``, ``unreachable``, ``singular``, ``failed``,
+        ``not_computed`` (the sweep was interrupted first)."""
         return np.asarray(STATUS)[self.data.codes]
 
     @property
@@ -370,6 +372,13 @@ def sweep(
             beams with a closed-form backend (:func:`cahyman_pin.api.check_closed_form`).
             A point that cannot be computed does not raise: it is marked in ``status`` and
             ``reasons``.
+        Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the sweep
+            (:class:`closedloop.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
+            the worker processes are ended at once (none is left), and the sweep so far is
+            its ``partial``: a :class:`SweepResult` whose points not computed have status
+            ``not_computed`` and reason ``interrupted by SIGINT`` (or ``SIGTERM``), values
+            NaN. A SIGTERM handler is installed only while the sweep runs, in the main
+            thread, where SIGTERM would end the process.
     """
     if not isinstance(points, SweepPoints):
         raise InvalidInputError(f"points must be SweepPoints, got {type(points).__name__}")
@@ -390,7 +399,17 @@ def sweep(
 
     results = run_tasks_by_point(run_chunk, chunks, [len(p) for p in pieces], pool, n_workers,
                                  label=f"{backend} sweep", show_progress=show_progress)  # fmt: skip
-    data = gather(n, pieces, results)
+    try:
+        data = gather(n, pieces, results, w)
+    except Interrupted as stop:
+        if stop.data is not None:  # else stopped before gather began
+            stop.partial = _result(points, backend, w, stop.data, time.perf_counter() - t0)
+        raise
+    return _result(points, backend, w, data, time.perf_counter() - t0)
+
+
+def _result(points: SweepPoints, backend: str, w, data: PointData, seconds: float) -> SweepResult:
+    """The :class:`SweepResult` of the arrays of :func:`sweep` (made read-only)."""
     indices = data.indices
     if w is not None:
         indices["deflection"] = data.C @ w
@@ -398,12 +417,7 @@ def sweep(
     for a in (*arrays, *indices.values()):  # the indices are the data's, not copies
         a.flags.writeable = False
     return SweepResult(
-        points=points,
-        backend=backend,
-        wrench=w,
-        indices=indices,
-        data=data,
-        seconds=time.perf_counter() - t0,
+        points=points, backend=backend, wrench=w, indices=indices, data=data, seconds=seconds
     )
 
 
