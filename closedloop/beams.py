@@ -67,7 +67,7 @@ from .exceptions import BeamError, InvalidInputError
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
 EXPLICIT = ("A", "Iy", "Iz", "J")
-BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6")
+BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6", "density")
 #: ``section: geometry``: the section from the link's URDF cylinder or box.
 GEOMETRY = "geometry"
 #: Largest angle [rad] between the axis of that shape and the beam (0.057 deg): far above
@@ -114,6 +114,17 @@ class Section:
         else:
             k = None
         return (self.kappa_y or k, self.kappa_z or k)
+
+
+@dataclass(frozen=True)
+class BeamMass:
+    """What a beam's own mass needs besides its length: the section's area A [m^2] and
+    polar second moment Ip = Iy + Iz [m^4], and the density [kg/m^3] of its ``density:``
+    key (None: the model-wide default of :func:`closedloop.vibration.modes`)."""
+
+    A: float
+    Ip: float
+    density: float | None
 
 
 def section_from_spec(beam: str, spec) -> Section:
@@ -531,11 +542,12 @@ def _tip_stiffness(beam: str, stiffness, what: str) -> np.ndarray:
 
 def beam_stiffness(
     model: pin.Model, beam: str, spec: Mapping, shapes: list[Shape] | None = None
-) -> tuple[str | None, np.ndarray]:
-    """(end, K) of one beam: its end joint and its (6, 6) tip stiffness in the end joint's
-    axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the ``beams:``
-    entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
-    compliance_6x6 given in that same frame); ``shapes``: the link's URDF shapes, for
+) -> tuple[str | None, np.ndarray, BeamMass | None]:
+    """(end, K, mass) of one beam: its end joint, its (6, 6) tip stiffness in the end
+    joint's axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the
+    ``beams:`` entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
+    compliance_6x6 given in that same frame; density [kg/m^3]), and its section for its
+    own mass (None without a section); ``shapes``: the link's URDF shapes, for
     ``section: geometry`` (:func:`geometry_section`)."""
     if not isinstance(spec, Mapping):
         raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
@@ -546,15 +558,20 @@ def beam_stiffness(
     if end is not None and not isinstance(end, str):
         raise BeamError(beam, f"end is {end!r}; expected a joint name")
     site = _site(model, beam, end)
+    density = _positive(beam, "density [kg/m^3]", spec["density"]) if "density" in spec else None
     given = [k for k in ("stiffness_6x6", "compliance_6x6") if k in spec]
     if given:
         if len(given) == 2 or any(k in spec for k in ("E", "G", "section", "theory")):
             raise BeamError(beam, f"give either {given[0]} or E, G and section, not both")
+        if density is not None:
+            raise BeamError(beam, f"density needs a section (its area), not {given[0]}")
         M = _matrix(beam, given[0], spec[given[0]])
         if given[0] == "stiffness_6x6":
-            return site.end, M
-        return site.end, _tip_stiffness(
-            beam, lambda: np.linalg.inv(M), f"compliance_6x6 {M.tolist()}"
+            return site.end, M, None
+        return (
+            site.end,
+            _tip_stiffness(beam, lambda: np.linalg.inv(M), f"compliance_6x6 {M.tolist()}"),
+            None,
         )
     missing = [k for k in ("E", "G", "section") if k not in spec]
     if missing:
@@ -591,7 +608,7 @@ def beam_stiffness(
         f"{section.A:.4g} m^2, Iy = {section.Iy:.4g}, Iz = {section.Iz:.4g}, "
         f"J = {section.J:.4g} m^4)",
     )
-    return site.end, K
+    return site.end, K, BeamMass(section.A, section.Iy + section.Iz, density)
 
 
 #: An anchor on a beam's link within this fraction of the beam's length of its tip is at
@@ -615,16 +632,17 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             joints.
 
     Returns:
-        (model, geometries, springs, anchors): the new model, its geometry models, the
-        block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]} and the anchors
-        on the new model.
+        (model, geometries, springs, anchors, masses): the new model, its geometry models,
+        the block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]}, the
+        anchors on the new model and the sections of the beams that have one {virtual
+        joint name: :class:`BeamMass`}.
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
     """
     if not isinstance(beams, Mapping):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
-    springs = {}
+    springs, masses = {}, {}
     anchors = [(int(j), pin.SE3(M)) for j, M in anchors]
     geometries = list(geometries)
     wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
@@ -636,7 +654,7 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             raise BeamError(beam, f"the link already has a beam (or the model a joint named "
                             f"{name!r}): one beam a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(beam, [])
-        end, K = beam_stiffness(model, beam, spec, link_shapes)
+        end, K, mass = beam_stiffness(model, beam, spec, link_shapes)
         site = _site(model, beam, end)
         tip, start = site.placement, model.frames[site.link_frame].placement
         length = float(np.linalg.norm(tip.translation - start.translation))
@@ -649,7 +667,9 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             for j, M in anchors
         ]
         springs[name] = K
-    return model, geometries, springs, anchors
+        if mass is not None:
+            masses[name] = mass
+    return model, geometries, springs, anchors, masses
 
 
 def insert_beams(clm, beams: Mapping[str, Mapping]):
@@ -669,7 +689,7 @@ def insert_beams(clm, beams: Mapping[str, Mapping]):
     geoms = [clm.visual_model, clm.collision_model]
     ends = [(k.joint1_id, k.joint1_placement) for c in clm.closures for k in [c.constraint]]
     ends += [(k.joint2_id, k.joint2_placement) for c in clm.closures for k in [c.constraint]]
-    model, geoms, springs, ends = apply_beams(clm.model, geoms, beams, anchors=ends)
+    model, geoms, springs, ends, masses = apply_beams(clm.model, geoms, beams, anchors=ends)
     n = len(clm.closures)
     closures = [
         Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
@@ -684,4 +704,5 @@ def insert_beams(clm, beams: Mapping[str, Mapping]):
         geoms[0],
         geoms[1],
         clm.name,
+        beam_masses={**clm.beam_masses, **masses},
     )

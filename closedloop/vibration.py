@@ -9,10 +9,25 @@ potential energy 1/2 y^T K_r y with
 
 M(q) (nv, nv) the joint-space mass matrix of the tree's inertias (Pinocchio's composite
 rigid body algorithm, :func:`pinocchio.crba`), payloads as point masses on their frames'
-joints, and K the stiffness of every spring, beam and elastic closure (K_q), or with
-``gravity`` the tangent stiffness at the equilibrium under the weight (springs, gravity's
-dG/dq and the closures' curvature, :func:`closedloop.tangent.tangent_stiffness`). The
-modes solve the generalised symmetric eigenproblem K_r y = omega^2 M_r y.
+joints, plus the beams' own mass, and K the stiffness of every spring, beam and elastic
+closure (K_q), or with ``gravity`` the tangent stiffness at the equilibrium under the
+weight (springs, gravity's dG/dq and the closures' curvature,
+:func:`closedloop.tangent.tangent_stiffness`). The modes solve the generalised
+symmetric eigenproblem K_r y = omega^2 M_r y.
+
+Beams' own mass (a ``density:`` key [kg/m^3] in a beam's entry, or the model-wide
+``density`` of :func:`modes`; on top of the link's own inertia, which stays at the beam's
+start). A beam is a rigid link with a 6-dof virtual joint at its tip
+(:mod:`closedloop.beams`): its distributed mass is the consistent mass matrix of the
+Euler-Bernoulli frame element on its two ends' twists, M_e (12, 12) in the beam axes
+(axial rho A L / 6 [[2, 1], [1, 2]], torsion rho Ip L / 6 [[2, 1], [1, 2]], bending the
+Hermite cubics' rho A L / 420 [[156, 22 L, 54, -13 L], ...]), the start's twist that of
+the link frame and the tip's that of the virtual joint, both by their Jacobians J_e (12,
+nv) at q: M += J_e^T M_e J_e. The cubics hold every rigid motion exactly (the beam's mass,
+centre and second moment as a slender rod) and with one element a clamped beam's first
+bending frequency comes out 0.48 % high (3.533 instead of 1.8751^2 = 3.516 times
+sqrt(EI / (rho A L^4))); a chain of beam links converges as h^4 (the cubic element's
+rate). The section's own rotary inertia in bending is left out (slender beams).
 
 Numerics. M_r is never inverted. Its eigendecomposition M_r = U diag(mu) U^T splits the
 motions into massive ones (mu above :data:`MASSLESS_RTOL` times the largest) and massless
@@ -41,6 +56,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import frozen, readonly
+from .beams import beam_axes, inserted_beams
 from .conditioning import RANK_RTOL
 from .configuration import Configuration, as_configuration
 from .exceptions import InvalidInputError, ModesError
@@ -144,13 +160,62 @@ class ModesResult:
         }
 
 
-def mass_matrix(clm: ClosedLoopModel, q: np.ndarray, payloads: Sequence[Payload] = ()):
-    """(nv, nv) joint-space mass matrix M(q) [kg, kg m, kg m^2] of the tree's inertias and
-    ``payloads`` (point masses on their frames' joints), symmetric (Pinocchio's CRBA fills
-    the upper triangle)."""
+def mass_matrix(
+    state: Configuration, payloads: Sequence[Payload] = (), density: float | None = None
+) -> np.ndarray:
+    """(nv, nv) joint-space mass matrix M(q) [kg, kg m, kg m^2] of the tree's inertias,
+    ``payloads`` (point masses on their frames' joints) and the beams' own mass (module
+    docstring; ``density`` [kg/m^3] for the beams without a ``density:`` key),
+    symmetric."""
+    clm = state.model
     model = GravityLoad(clm, (0.0, 0.0, 0.0), payloads).model if payloads else clm.model
-    M = pin.crba(model, model.createData(), q)
-    return np.triu(M) + np.triu(M, 1).T
+    M = pin.crba(model, model.createData(), state.q)
+    M = np.triu(M) + np.triu(M, 1).T  # CRBA fills the upper triangle
+    for beam in inserted_beams(clm.model):
+        section = clm.beam_masses.get(beam.name)
+        rho = None if section is None else section.density or density
+        if rho is None:
+            continue
+        tip = beam.rest.translation
+        R_LB = beam_axes(beam.name, tip, None)  # the beam axes in the link frame
+        ends = []
+        for frame, R in (
+            (beam.link_frame, R_LB),
+            (clm.model.getFrameId(beam.name, pin.JOINT), beam.rest.rotation.T @ R_LB),
+        ):
+            J = pin.getFrameJacobian(clm.model, state.data, frame, pin.LOCAL)
+            ends += [R.T @ J[:3], R.T @ J[3:]]
+        J_e = np.vstack(ends)  # (12, nv): the two ends' twists in the beam axes
+        mass = consistent_mass(float(np.linalg.norm(tip)), rho * section.A, rho * section.Ip)
+        M += J_e.T @ mass @ J_e
+    return M
+
+
+def consistent_mass(length: float, mass_per_length: float, polar_per_length: float):
+    """(12, 12) consistent mass matrix [kg, kg m, kg m^2] of a straight Euler-Bernoulli
+    frame element of ``length`` L [m], rho A [kg/m] and rho Ip [kg m], on the twists (v,
+    w) of its start, then its end, in the beam axes (x along the beam)."""
+    L, m = length, mass_per_length * length
+    M = np.zeros((12, 12))
+    rod = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0
+    M[np.ix_([0, 6], [0, 6])] = m * rod  # axial
+    M[np.ix_([3, 9], [3, 9])] = polar_per_length * L * rod  # torsion
+    bending = (
+        m
+        / 420.0
+        * np.array(
+            [
+                [156.0, 22.0 * L, 54.0, -13.0 * L],
+                [22.0 * L, 4.0 * L * L, 13.0 * L, -3.0 * L * L],
+                [54.0, 13.0 * L, 156.0, -22.0 * L],
+                [-13.0 * L, -3.0 * L * L, -22.0 * L, 4.0 * L * L],
+            ]
+        )
+    )
+    M[np.ix_([1, 5, 7, 11], [1, 5, 7, 11])] = bending  # v, rz: rz = dv/dx
+    flip = np.array([1.0, -1.0, 1.0, -1.0])  # w, ry: ry = -dw/dx
+    M[np.ix_([2, 4, 8, 10], [2, 4, 8, 10])] = flip[:, None] * bending * flip
+    return M
 
 
 def modes(
@@ -163,6 +228,7 @@ def modes(
     length: float | None = None,
     gravity=None,
     payloads: Sequence[Payload] = (),
+    density: float | None = None,
 ) -> ModesResult:
     """Natural frequencies and mode shapes at a configuration (module docstring).
 
@@ -181,12 +247,15 @@ def modes(
             those about that equilibrium, with gravity's tangent stiffness.
         payloads: point masses at frames (:class:`closedloop.gravity.Payload`): they add
             to the mass matrix (and to the weight, with ``gravity``).
+        density: density [kg/m^3] of the beams whose entry has no ``density:`` key (a
+            finite number > 0); None: those beams add no mass of their own.
 
     Raises:
         OpenLoopError: q does not close the loops.
         ModesError: no admissible motion (a rigid model), no mass on any admissible
             motion, or an unstable equilibrium (a negative omega^2).
-        InvalidInputError: a bad n, frame, axes, gravity or payload.
+        InvalidInputError: a bad n, frame, axes, gravity, payload or density (not a
+            finite number > 0, or given to a model without a beam section).
         NameNotFoundError: an unknown frame.
     """
     if frame is not None:
@@ -196,6 +265,8 @@ def modes(
     state = as_configuration(model, q, length=length)
     state.require_closed()
     clm = state.model
+    if density is not None:
+        _check_density(clm, density)
     K = clm.spring_matrix
     if gravity is not None:
         state, K = _settled(state, gravity, payloads)
@@ -206,7 +277,7 @@ def modes(
             f"{clm.name!r} has no admissible motion at this configuration (every joint "
             "locked or held by the closures): a rigid model has no natural frequency"
         )
-    M_r = N.T @ mass_matrix(clm, state.q, payloads) @ N
+    M_r = N.T @ mass_matrix(state, payloads, density) @ N
     K_r = N.T @ K @ N
     lam, Y, info = _eigen(0.5 * (M_r + M_r.T), 0.5 * (K_r + K_r.T), clm.name)
     n_all = lam.size
@@ -241,6 +312,17 @@ def modes(
     )
 
 
+def _check_density(clm: ClosedLoopModel, density) -> None:
+    number = isinstance(density, int | float | np.integer | np.floating)
+    if isinstance(density, bool) or not number or not 0.0 < density < math.inf:
+        raise InvalidInputError(f"density {density!r}; expected a finite number > 0 [kg/m^3]")
+    if not clm.beam_masses:
+        raise InvalidInputError(
+            f"density {density} kg/m^3 given, but {clm.name!r} has no beam with a section "
+            "(beams: with E, G and section) to weigh"
+        )
+
+
 def _settled(state: Configuration, gravity, payloads) -> tuple[Configuration, np.ndarray]:
     """The equilibrium under the weight (rest configuration ``state``) and the tangent
     stiffness there (nv, nv)."""
@@ -249,9 +331,7 @@ def _settled(state: Configuration, gravity, payloads) -> tuple[Configuration, np
 
     clm, frame = state.model, state.model.model.frames[0].name  # the world: no load on it
     eq = solve_equilibrium(clm, state.q, frame, np.zeros(6), gravity=gravity, payloads=payloads)
-    K = tangent_stiffness(
-        clm, eq.q, eq.q_rest, frame, np.zeros(6), eq.multipliers, gravity=eq.load
-    )
+    K = tangent_stiffness(clm, eq.q, eq.q_rest, frame, np.zeros(6), eq.multipliers, gravity=eq.load)
     return Configuration(clm, eq.q, length=state.length), K
 
 
@@ -333,4 +413,3 @@ def batch_modes(
         rows.append(modes(model, q, n=n, **options).frequencies)
         n = rows[0].size
     return frozen(np.array(rows))
-

@@ -175,3 +175,115 @@ def test_open_loop_is_refused():
     clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
     with pytest.raises(cl.OpenLoopError):
         cl.modes(clm, pin.neutral(clm.model) + 0.3)
+
+
+# ------------------------------------------------------------------------- beams' own mass
+E_STEEL, G_STEEL, RHO_STEEL, D_ROD, L_ROD = 2.1e11, 8.1e10, 7850.0, 0.01, 0.5
+#: Roots beta_n L of 1 + cos(x) cosh(x) = 0: the clamped-free beam's bending modes.
+CANTILEVER_ROOTS = (1.87510407, 4.69409113, 7.85475744)
+
+
+def rod(tmp_path, n: int, density=RHO_STEEL, **keys) -> ClosedLoopModel:
+    """A steel rod (circle, D_ROD) of length L_ROD along x, clamped by a locked hinge
+    about z at the origin, as n beam links of L_ROD / n in a row (fixed joints between),
+    frame 'tip' at its end; the links have no inertia of their own."""
+    h = L_ROD / n
+    links = "".join(f'<link name="seg{i}"/>' for i in range(n))
+    joints = [
+        '<joint name="root" type="revolute"><parent link="base"/><child link="seg0"/>'
+        '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+    ]
+    joints += [
+        f'<joint name="j{i}" type="fixed"><parent link="seg{i - 1}"/><child link="seg{i}"/>'
+        f'<origin xyz="{h} 0 0"/></joint>'
+        for i in range(1, n)
+    ]
+    joints.append(
+        f'<joint name="j{n}" type="fixed"><parent link="seg{n - 1}"/><child link="tip"/>'
+        f'<origin xyz="{h} 0 0"/></joint>'
+    )
+    path = tmp_path / f"rod{n}.urdf"
+    path.write_text(f'<robot name="rod"><link name="base"/>{links}<link name="tip"/>'
+                    f'{"".join(joints)}</robot>')  # fmt: skip
+    section = {"shape": "circle", "d": D_ROD}
+    spec = {"E": E_STEEL, "G": G_STEEL, "section": section, **keys}
+    if density is not None:
+        spec["density"] = density
+    beams = {f"seg{i}": {"end": f"j{i + 1}", **spec} for i in range(n)}
+    return cl.load_model(path, springs={"root": math.inf}, beams=beams)
+
+
+def at_rest(clm: ClosedLoopModel) -> tuple[ClosedLoopModel, np.ndarray]:
+    """(model, its neutral configuration): the beams undeflected."""
+    return clm, pin.neutral(clm.model)
+
+
+def cantilever_hz(mode: int) -> float:
+    """The Euler-Bernoulli cantilever's bending frequency [Hz] (closed form)."""
+    area, inertia = math.pi * D_ROD**2 / 4, math.pi * D_ROD**4 / 64
+    beta = CANTILEVER_ROOTS[mode]
+    return beta**2 * math.sqrt(E_STEEL * inertia / (RHO_STEEL * area * L_ROD**4)) / (2 * math.pi)
+
+
+def test_one_element_cantilever_within_half_a_percent(tmp_path):
+    """The consistent mass: 3.533 / 3.516 - 1 = 0.48 % high with one element (a lumped
+    half at the tip would be 30 % off). The round section bends alike in both planes."""
+    f = cl.modes(*at_rest(rod(tmp_path, 1))).frequencies
+    np.testing.assert_allclose(f[1], f[0], rtol=1e-12)
+    error = f[0] / cantilever_hz(0) - 1.0
+    assert 0.0047 < error < 0.0048, error
+
+
+def test_cantilever_converges_as_h4(tmp_path):
+    """Split into n elements, the first bending frequency approaches the closed form from
+    above at the cubic element's rate h^4 (ratio of errors 2^4 = 16 per halving, once in
+    the asymptotic range). At n = 8 the next two bending frequencies err as the first
+    one at their shorter wavelength, (beta_m / beta_1)^4 times its error (within 20 %)."""
+    errors = []
+    for n in (2, 4, 8):
+        clm = rod(tmp_path, n)
+        f = cl.modes(clm, pin.neutral(clm.model), n=6).frequencies  # three bending pairs
+        errors.append(f[0] / cantilever_hz(0) - 1.0)
+    rates = np.log2(np.array(errors[:-1]) / errors[1:])
+    np.testing.assert_allclose(rates, 4.0, atol=0.15)
+    error = f[::2] / [cantilever_hz(m) for m in range(3)] - 1.0
+    bound = errors[-1] * (np.array(CANTILEVER_ROOTS) / CANTILEVER_ROOTS[0]) ** 4
+    assert np.all(error > 0.0) and np.all(error < 1.2 * bound), (error, bound)
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_beam_mass_holds_the_rigid_rod(tmp_path, n):
+    """Turning the whole rod about the root hinge: the inertia of a slender rod about its
+    end, rho A L^3 / 3, exactly (the cubics hold rigid motions)."""
+    from closedloop.vibration import mass_matrix
+
+    clm = rod(tmp_path, n)
+    M = mass_matrix(cl.Configuration(clm, pin.neutral(clm.model)))
+    root = clm.joint_v_slice("root").start
+    area = math.pi * D_ROD**2 / 4
+    np.testing.assert_allclose(M[root, root], RHO_STEEL * area * L_ROD**3 / 3, rtol=1e-12)
+
+
+def test_model_wide_density(tmp_path):
+    with_key = cl.modes(*at_rest(rod(tmp_path, 2))).frequencies
+    by_default = cl.modes(*at_rest(rod(tmp_path, 2, None)), density=RHO_STEEL).frequencies
+    np.testing.assert_array_equal(by_default, with_key)
+    with pytest.raises(cl.ModesError, match="no mass"):  # no density, no inertia
+        cl.modes(*at_rest(rod(tmp_path, 2, None)))
+
+
+@pytest.mark.parametrize("density", [0.0, -7850.0, math.inf, "steel"])
+def test_bad_density(tmp_path, density):
+    with pytest.raises(cl.BeamError, match="density"):
+        rod(tmp_path, 1, density)
+    with pytest.raises(cl.InvalidInputError, match="density"):
+        cl.modes(*at_rest(rod(tmp_path, 1, None)), density=density)
+
+
+def test_density_without_a_section_is_refused(tmp_path):
+    rod(tmp_path, 1)  # writes rod1.urdf
+    beam = {"end": "j1", "stiffness_6x6": np.eye(6).tolist(), "density": 1.0}
+    with pytest.raises(cl.BeamError, match="density needs a section"):
+        cl.load_model(tmp_path / "rod1.urdf", beams={"seg0": beam})
+    with pytest.raises(cl.InvalidInputError, match="no beam with a section"):
+        cl.modes(hinge_pendulum(40.0, 2.0, 0.5), np.zeros(2), density=RHO_STEEL)
