@@ -57,7 +57,7 @@ import pinocchio as pin
 
 from .arrays import frozen, readonly
 from .beams import beam_axes, inserted_beams
-from .conditioning import RANK_RTOL
+from .conditioning import RANK_RTOL, twist_scaling
 from .configuration import Configuration, as_configuration
 from .exceptions import InvalidInputError, ModesError
 from .gravity import GravityLoad, Payload
@@ -97,8 +97,9 @@ class ModesResult:
         effective_masses: (6, n) effective mass of each mode at the frame, per twist
             component: 1 / twists^2 [kg for translations, kg m^2 for rotations], the mass
             of the one-dof oscillator (stiffness omega^2 m) that the mode is when seen
-            along that component at the frame; inf where the mode does not move it. None
-            without a frame.
+            along that component at the frame; inf where the mode does not move it (the
+            component, translations per the length L, at most RANK_RTOL times the mode's
+            largest: rounding). None without a frame.
         n_rigid: number of rigid-body modes among the returned ones (frequency 0).
         mobility: d, the number of admissible motions.
         n_massless: massless admissible motions condensed statically.
@@ -291,8 +292,10 @@ def modes(
     if frame is not None:
         twists = state.frame_jacobian(frame, axes) @ shapes
         point = state.data.oMf[clm.frame_id(frame)].translation
+        scaled = np.abs(twists) * twist_scaling(state.length)[:, None]  # unit-free
+        moved = scaled > RANK_RTOL * scaled.max(axis=0, initial=0.0)  # beyond rounding
         with np.errstate(divide="ignore"):
-            masses = 1.0 / twists**2
+            masses = np.where(moved, 1.0 / np.where(moved, twists, 1.0) ** 2, np.inf)
     return ModesResult(
         frequencies=frozen(np.sqrt(lam) / (2.0 * math.pi)),
         eigenvalues=frozen(lam),
@@ -356,7 +359,7 @@ def _eigen(M: np.ndarray, K: np.ndarray, name: str):
         raise ModesError(
             f"{name!r} has no mass on its admissible motions (no link inertia moves, no "
             "payload, no beam density): it has no natural frequency; give the links "
-            "inertias or a payload"
+            "inertias (masses), a payload or the beams' density"
         )
     Ua, Ub = U[:, heavy], U[:, ~heavy]
     Ka = Ua.T @ K @ Ua

@@ -1,0 +1,76 @@
+"""``closedloop modes`` and ``cahyman modes``: JSON frequencies as the API's, one-line
+errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import REPO
+
+import closedloop as cl
+from cahyman_pin.cli import main as cahyman_main
+from closedloop.cli import main
+
+UR5_Q = ("0.3", "-1.2", "1.4", "-0.6", "1.1", "0.2")
+
+
+def run(capsys, entry, *argv: str) -> tuple[int, str, str]:
+    status = entry(list(argv))
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_fourbar_json_frequencies_are_the_api_ones(capsys):
+    code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", "--frame", "P",
+                         "--json")  # fmt: skip
+    assert code == 0 and err == ""
+    doc = json.loads(out)
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    res = cl.modes(clm, cl.assemble(clm, actuated=[0.3]).q, frame="P")
+    np.testing.assert_allclose(doc["frequencies"], res.frequencies, rtol=1e-12)
+    assert doc["frame"] == "P" and len(doc["effective_masses"]) == 3
+
+
+def test_text_lists_the_lowest_modes(capsys):
+    code, out, _ = run(capsys, main, "modes", "ur5", "--q", *UR5_Q, "--joint-stiffness", "1e4",
+                       "--n", "2")  # fmt: skip
+    assert code == 0
+    rows = [line.split() for line in out.splitlines() if line.split()[:1] in (["1"], ["2"])]
+    assert len(rows) == 2 and float(rows[0][1]) < float(rows[1][1])
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (("--density", "-1"), "density -1"),
+        (("--density", "7800"), "no beam with a section"),
+        (("--n", "9"), "n = 9"),
+        (("--frame", "nope"), "nope"),
+        (("--preload", "0", "0", "1", "0", "0", "0"), "--preload"),
+    ],
+)
+def test_bad_input_is_one_line(capsys, argv, message):
+    code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", *argv)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith("closedloop: error: ") and message in err
+
+
+def test_cahyman_modes_need_masses(capsys):
+    code, out, err = run(capsys, cahyman_main, "modes")
+    assert code == 2 and out == "" and err.count("\n") == 1 and "no mass" in err
+
+
+def test_cahyman_modes_json(capsys):
+    code, out, _ = run(capsys, cahyman_main, "modes", "--mass", "m_HQ=2", "--mass", "m_M4=1",
+                       "--mass", "m_b=0.3", "--json")  # fmt: skip
+    doc = json.loads(out)
+    assert code == 0 and doc["frame"] == "M" and doc["masses_kg"]["m_HQ"] == 2.0
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    machine = cahyman_model(DEFAULT_PARAMS.replace(m_HQ=2.0, m_M4=1.0, m_b=0.3))
+    q = machine.assemble(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(90.0), 0.05)  # defaults
+    np.testing.assert_allclose(doc["frequencies"], cl.modes(machine.clm, q).frequencies,
+                               rtol=1e-12)  # fmt: skip
