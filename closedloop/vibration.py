@@ -169,27 +169,44 @@ def mass_matrix(
     docstring; ``density`` [kg/m^3] for the beams without a ``density:`` key),
     symmetric."""
     clm = state.model
-    model = GravityLoad(clm, (0.0, 0.0, 0.0), payloads).model if payloads else clm.model
-    M = pin.crba(model, model.createData(), state.q)
+    if payloads:
+        model = GravityLoad(clm, (0.0, 0.0, 0.0), payloads).model
+        M = pin.crba(model, model.createData(), state.q)
+    else:  # the configuration's own Data, at its q: the kinematics it holds stay the same
+        M = pin.crba(clm.model, state.data, state.q).copy()
     M = np.triu(M) + np.triu(M, 1).T  # CRBA fills the upper triangle
-    for beam in inserted_beams(clm.model):
-        section = clm.beam_masses.get(beam.name)
-        rho = None if section is None else section.density or density
+    for link, tip, axes, length, section in _beam_sites(clm):
+        rho = section.density or density
         if rho is None:
             continue
-        tip = beam.rest.translation
-        R_LB = beam_axes(beam.name, tip, None)  # the beam axes in the link frame
         ends = []
-        for frame, R in (
-            (beam.link_frame, R_LB),
-            (clm.model.getFrameId(beam.name, pin.JOINT), beam.rest.rotation.T @ R_LB),
-        ):
+        for frame, R in zip((link, tip), axes, strict=True):
             J = pin.getFrameJacobian(clm.model, state.data, frame, pin.LOCAL)
             ends += [R.T @ J[:3], R.T @ J[3:]]
         J_e = np.vstack(ends)  # (12, nv): the two ends' twists in the beam axes
-        mass = consistent_mass(float(np.linalg.norm(tip)), rho * section.A, rho * section.Ip)
-        M += J_e.T @ mass @ J_e
+        M += J_e.T @ consistent_mass(length, rho * section.A, rho * section.Ip) @ J_e
     return M
+
+
+def _beam_sites(clm: ClosedLoopModel) -> tuple:
+    """Per beam with a section: (link frame, tip frame (the virtual joint's), (the beam
+    axes in the link frame, in the tip frame at rest), length [m], its BeamMass); once a
+    model."""
+
+    def sites():
+        out = []
+        for beam in inserted_beams(clm.model) if clm.beam_masses else ():
+            section = clm.beam_masses.get(beam.name)
+            if section is None:
+                continue
+            tip = beam.rest.translation
+            R_LB = beam_axes(beam.name, tip, None)  # x along the beam
+            frame = clm.model.getFrameId(beam.name, pin.JOINT)
+            axes = (R_LB, beam.rest.rotation.T @ R_LB)
+            out.append((beam.link_frame, frame, axes, float(np.linalg.norm(tip)), section))
+        return tuple(out)
+
+    return clm.memo("beam_sites", sites)
 
 
 def consistent_mass(length: float, mass_per_length: float, polar_per_length: float):
