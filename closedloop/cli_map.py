@@ -160,7 +160,8 @@ def run_map(args) -> int:
     clm = source.load()
     clm.frame_id(args.frame)
     out = output_folder(args.out)  # before any computation
-    options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk}
+    options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk,
+               "modes": args.index == "lowest_frequency"}  # fmt: skip
     with dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)

@@ -45,8 +45,9 @@ from .map_engine import (
 from .model import ClosedLoopModel
 
 #: Indices of a map and their units (SI; ``condition_number`` is the unit-free one of the
-#: scaled K, ``condition_number_si`` that of the SI matrix).
-INDICES = BATCH_INDICES
+#: scaled K, ``condition_number_si`` that of the SI matrix; ``lowest_frequency``, the lowest
+#: nonzero natural frequency, with ``modes=True`` only).
+INDICES = {**BATCH_INDICES, "lowest_frequency": "Hz"}
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
 #: Names that ``numpy.savez`` takes as its own arguments, not as arrays.
@@ -291,6 +292,7 @@ def stiffness_map(
     executor: Executor | None = None,
     chunk: int = CHUNK,
     show_progress: bool = False,
+    modes: bool = False,
 ) -> StiffnessMap:
     """Stiffness indices at many configurations (see the module docstring).
 
@@ -312,13 +314,21 @@ def stiffness_map(
             :data:`~closedloop.map_engine.BORDER_STRIDE` or more failed points; not on the
             executor.
         show_progress: progress on stderr (:mod:`closedloop.progress`), in points.
+        modes: also the index ``lowest_frequency`` [Hz]: the lowest nonzero natural
+            frequency of every point (:func:`closedloop.vibration.modes`, rigid-body modes
+            skipped; NaN where it has none).
 
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
         NameNotFoundError: unknown frame.
+        ModesError: ``modes`` on a model without any mass.
     """
     clm = model_of(model)
     clm.frame_id(frame)
+    if modes:
+        from .vibration import check_massive
+
+        check_massive(clm)
     w = None if wrench is None else np.asarray(wrench, dtype=float)
     if w is not None and (w.shape != (6,) or not np.all(np.isfinite(w))):
         raise InvalidInputError(f"wrench must be 6 finite values, got {np.asarray(wrench)}")
@@ -345,7 +355,7 @@ def stiffness_map(
     firsts = list(range(0, n, chunk))
     pieces = [order[f : f + chunk] for f in firsts]
     borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
-    tasks = [MapChunk(model, frame, pts[p], q, start, w)
+    tasks = [MapChunk(model, frame, pts[p], q, start, w, modes)
              for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
 
     sizes = [len(piece) for piece in pieces]

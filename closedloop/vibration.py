@@ -59,7 +59,7 @@ from .arrays import frozen, readonly
 from .beams import beam_axes, inserted_beams
 from .conditioning import RANK_RTOL, twist_scaling
 from .configuration import Configuration, as_configuration
-from .exceptions import InvalidInputError, ModesError
+from .exceptions import ClosedLoopError, InvalidInputError, ModesError
 from .gravity import GravityLoad, Payload
 from .kinematics import nullspace
 from .model import ClosedLoopModel, check_name
@@ -330,6 +330,31 @@ def modes(
         n_modes=n_all,
         mass_condition=info[2],
     )
+
+
+def lowest_frequencies(clm: ClosedLoopModel, configurations: dict, done: np.ndarray):
+    """(len(done),) the lowest nonzero natural frequency [Hz] (rigid-body modes skipped)
+    at the configurations {position: q (nq,)} of the positions where ``done`` (bool); NaN
+    elsewhere and where :func:`modes` raises or every mode is rigid (a map's index
+    ``lowest_frequency``)."""
+    out = np.full(len(done), np.nan)
+    for i, q in configurations.items():
+        if done[i]:
+            try:
+                out[i] = modes(clm, q).lowest_elastic_frequency
+            except ClosedLoopError:
+                pass  # no value at this point: NaN, as the other indices
+    return out
+
+
+def check_massive(clm: ClosedLoopModel, density: float | None = None) -> None:
+    """Refuse a model without any mass (ModesError): no link inertia, no beam density."""
+    weighed = any(s.density or density for s in clm.beam_masses.values())
+    if not weighed and not any(inertia.mass > 0.0 for inertia in clm.model.inertias):
+        raise ModesError(
+            f"{clm.name!r} has no mass (no link inertia, no beam density): it has no natural "
+            "frequency; give the links inertias (masses) or the beams' density"
+        )
 
 
 def _check_density(clm: ClosedLoopModel, density) -> None:

@@ -287,3 +287,24 @@ def test_density_without_a_section_is_refused(tmp_path):
         cl.load_model(tmp_path / "rod1.urdf", beams={"seg0": beam})
     with pytest.raises(cl.InvalidInputError, match="no beam with a section"):
         cl.modes(hinge_pendulum(40.0, 2.0, 0.5), np.zeros(2), density=RHO_STEEL)
+
+
+# ------------------------------------------------------------------------------------ maps
+def test_map_index_is_the_lowest_frequency_at_each_point():
+    from closedloop.maps import stiffness_map
+
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    cranks = [0.2, 0.3, 0.5]
+    smap = stiffness_map(clm, "P", sweeps={"crank": cranks}, modes=True)
+    expected = [cl.modes(clm, cl.assemble(clm, actuated=[c]).q).frequencies[0] for c in cranks]
+    # the map assembles each point from the last one: the same pose to the assembly
+    # tolerance (1e-6 scaled), frequencies to about as much
+    np.testing.assert_allclose(smap.indices["lowest_frequency"], expected, rtol=1e-5)
+    assert "lowest_frequency" not in stiffness_map(clm, "P", sweeps={"crank": cranks}).indices
+
+
+def test_map_of_frequencies_refuses_a_massless_model():
+    from closedloop.maps import stiffness_map
+
+    with pytest.raises(cl.ModesError, match="no mass"):
+        stiffness_map(pendulum(), "tip", sweeps={"hinge": [0.0, 0.1]}, modes=True)

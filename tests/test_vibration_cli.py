@@ -74,3 +74,16 @@ def test_cahyman_modes_json(capsys):
     q = machine.assemble(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(90.0), 0.05)  # defaults
     np.testing.assert_allclose(doc["frequencies"], cl.modes(machine.clm, q).frequencies,
                                rtol=1e-12)  # fmt: skip
+
+
+def test_map_of_the_lowest_frequency(capsys, tmp_path):
+    code, out, err = run(capsys, main, "map", "fourbar", "--frame", "P", "--sweep",
+                         "crank=0.2:0.5:4", "--index", "lowest_frequency", "--out",
+                         str(tmp_path))  # fmt: skip
+    assert code == 0, err
+    assert "lowest_frequency: min" in out and "[Hz]" in out
+    data = np.load(tmp_path / "map.npz")
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    q = cl.assemble(clm, actuated=[0.2]).q
+    np.testing.assert_allclose(data["lowest_frequency"][0], cl.modes(clm, q).frequencies[0],
+                               rtol=1e-5)  # fmt: skip
