@@ -40,7 +40,7 @@ from .cli_common import (
 from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, ModelSource
-from .maps import INDICES, stiffness_map
+from .maps import ALL_INDICES, stiffness_map
 
 #: Points timed first for the estimate of a long map, and the time [s] the probe aims at
 #: (ten times more points while it takes less; see _time_per_point).
@@ -81,7 +81,7 @@ def add_parser(sub, parent_arguments) -> None:
     )
     what.add_argument("--points", metavar="FILE", help="actuated values, one point a row")
     p.add_argument("--fixed", type=_fixed, action="append", default=[], metavar="JOINT=VALUE")
-    p.add_argument("--index", choices=sorted(INDICES), default="det_K", help="index to plot")
+    p.add_argument("--index", choices=sorted(ALL_INDICES), default="det_K", help="index to plot")
     for name, unit in (("--force", "N"), ("--torque", "N m")):
         p.add_argument(name, nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                        help=f"load of the deflection indices, world axes [{unit}]")  # fmt: skip
@@ -179,7 +179,7 @@ def run_map(args) -> int:
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))
-    print(index_line(args.index, result.indices[args.index], INDICES[args.index]))
+    print(index_line(args.index, result.indices[args.index], ALL_INDICES[args.index]))
     for path in paths:
         print(f"wrote {path}")
     return 0

@@ -45,9 +45,12 @@ from .map_engine import (
 from .model import ClosedLoopModel
 
 #: Indices of a map and their units (SI; ``condition_number`` is the unit-free one of the
-#: scaled K, ``condition_number_si`` that of the SI matrix; ``lowest_frequency``, the lowest
-#: nonzero natural frequency, with ``modes=True`` only).
-INDICES = {**BATCH_INDICES, "lowest_frequency": "Hz"}
+#: scaled K, ``condition_number_si`` that of the SI matrix).
+INDICES = BATCH_INDICES
+#: The index of ``stiffness_map(..., modes=True)``: the lowest nonzero natural frequency.
+MODE_INDICES = {"lowest_frequency": "Hz"}
+#: Every index a map may hold, and its unit.
+ALL_INDICES = {**INDICES, **MODE_INDICES}
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
 #: Names that ``numpy.savez`` takes as its own arguments, not as arrays.
@@ -74,7 +77,7 @@ class StiffnessMap(ReadOnlyArrays):
         swept: names of the swept joints (grid axes), or all joints for a list.
         frame: loaded frame.
         wrench: (6,) wrench of the deflection indices [N, N m], or None.
-        indices: name -> (n,) values (units in :data:`INDICES`), NaN where not defined.
+        indices: name -> (n,) values (units in :data:`ALL_INDICES`), NaN where not defined.
         data: the per-point arrays (C, rank, status and reason codes).
     """
 
@@ -133,7 +136,7 @@ class StiffnessMap(ReadOnlyArrays):
         except OSError as e:
             raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
         joint_units = dict(zip(self.joints, self.units, strict=True))
-        units = {**joint_units, **{k: INDICES[k] for k in self.indices}, "C": UNITS["C"],
+        units = {**joint_units, **{k: ALL_INDICES[k] for k in self.indices}, "C": UNITS["C"],
                  "inputs": list(self.units)}  # fmt: skip
         arrays = {**self.indices, "C": self.C, "rank": self.data.rank, "status": self.status,
                   "reasons": np.asarray(self.reasons), "shape": np.asarray(self.shape),
@@ -144,7 +147,7 @@ class StiffnessMap(ReadOnlyArrays):
         paths = [write_atomically(out / "map.npz", lambda f: np.savez(f, **arrays))]
         if len(self.inputs) <= CSV_MAX_POINTS:
             names = [*(column_name(n, u) for n, u in joint_units.items()),
-                     *(column_name(k, INDICES[k]) for k in self.indices),
+                     *(column_name(k, ALL_INDICES[k]) for k in self.indices),
                      "status", "reason"]  # fmt: skip
             values = np.column_stack([self.inputs, *self.indices.values()]).tolist()
 
@@ -187,7 +190,7 @@ def map_title(smap: StiffnessMap, index: str) -> str:
              for j, (n, u) in enumerate(zip(smap.joints, smap.units, strict=True))
              if n not in plotted]  # fmt: skip
     parts = [*fixed, load_text(smap.wrench)] if smap.wrench is not None else fixed
-    return "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
+    return "\n".join([f"{index} [{ALL_INDICES[index]}] at {smap.frame}",
                       *textwrap.wrap(", ".join(parts), 80)])  # fmt: skip
 
 
@@ -202,7 +205,7 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
 
     unit = dict(zip(smap.joints, smap.units, strict=True))
     axes = smap.plotted()
-    label = f"{index} [{INDICES[index]}]"
+    label = f"{index} [{ALL_INDICES[index]}]"
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=100)
     if len(axes) == 1 or len(smap.shape) == 1:  # the curve along its first input
         x = smap.inputs[:, smap.joints.index(axes[0])]

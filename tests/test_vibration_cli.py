@@ -86,4 +86,4 @@ def test_map_of_the_lowest_frequency(capsys, tmp_path):
     clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
     q = cl.assemble(clm, actuated=[0.2]).q
     np.testing.assert_allclose(data["lowest_frequency"][0], cl.modes(clm, q).frequencies[0],
-                               rtol=1e-5)  # fmt: skip
+                               rtol=1e-9)  # fmt: skip
