@@ -6,7 +6,9 @@ the beams that have no ``density:`` key, ``--gravity`` adds the weight's tangent
 stiffness about the equilibrium where the mechanism settles (``--payload``: a point mass
 at the frame, with it). Prints the frequencies [Hz], ascending, rigid-body modes as 0, and
 with ``--frame`` each mode's effective masses at the frame; ``--json`` one object whose
-``frequencies`` are those [Hz].
+``frequencies`` are those [Hz]. ``--html FILE`` (with ``--frame``) writes a self-contained
+page that plays mode ``--mode K`` (1: the lowest), its shape amplified ``--scale`` times
+(default: automatic), the legend giving its frequency and the amplification.
 """
 
 from __future__ import annotations
@@ -40,6 +42,10 @@ def add_parser(sub, model_arguments) -> None:
     )  # fmt: skip
     add_preload_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--html", metavar="FILE", help="write a page that plays mode --mode")
+    p.add_argument("--mode", type=int, default=1, metavar="K", help="mode to play (1: lowest)")
+    p.add_argument("--scale", type=finite_float, metavar="S",
+                   help="amplification of the played shape (default: automatic)")  # fmt: skip
     p.set_defaults(func=run_modes)
 
 
@@ -52,15 +58,43 @@ def run_modes(args: argparse.Namespace) -> int:
         raise UsageError("--preload: modes take the weight (--gravity), not a dead load")
     if args.payload is not None and args.frame is None:
         raise UsageError("--payload needs --frame (the payload sits at that frame)")
+    if args.html is not None and args.frame is None:
+        raise UsageError("--html needs --frame (the played mode is scaled and drawn there)")
     options = preload_from_args(args)
-    clm, state = model_from_args(args)
+    page = None
+    if args.html is not None:
+        from .viewer import check_output_path
+
+        page = check_output_path(args.html)  # before any work
+    clm, state = model_from_args(args, geometry=page is not None)
     res = modes(state, n=args.n, frame=args.frame, axes=args.axes, density=args.density,
                 **options)  # fmt: skip
-    if args.json:
+    if page is not None:
+        play_mode(clm, res, args.mode, page, args.scale)
+    elif args.json:
         print_json({"model": clm.name, **res.to_dict(), "q": res.q.tolist()})
         return EXIT_OK
     print(format_modes(clm.name, res))
     return EXIT_OK
+
+
+def play_mode(clm, res, number: int, page, scale: float | None) -> None:
+    """Write the page of mode ``number`` (1: the lowest) of ``res`` to ``page``."""
+    from .exceptions import InvalidInputError
+    from .viewer import DeflectionViewer
+    from .viewer_scene import mode_scene
+
+    if not 1 <= number <= res.frequencies.size:
+        raise InvalidInputError(
+            f"--mode {number}; expected 1 to {res.frequencies.size} (the modes computed)"
+        )
+    k = number - 1
+    scene = mode_scene(clm, res.q, res.shapes[:, k], res.frequencies[k], number, res.frame,
+                       scale=scale)  # fmt: skip
+    with DeflectionViewer(clm) as viewer:
+        viewer.show(scene, autoplay=True)
+        print(f"wrote {viewer.save_html(page)} (mode {number}, {res.frequencies[k]:.6g} Hz, "
+              f"amplified x{scene.scale:.4g})")  # fmt: skip
 
 
 def format_modes(name: str, res) -> str:

@@ -87,3 +87,37 @@ def test_map_of_the_lowest_frequency(capsys, tmp_path):
     q = cl.assemble(clm, actuated=[0.2]).q
     np.testing.assert_allclose(data["lowest_frequency"][0], cl.modes(clm, q).frequencies[0],
                                rtol=1e-9)  # fmt: skip
+
+
+def test_page_plays_a_mode(capsys, tmp_path):
+    page = tmp_path / "mode.html"
+    code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", "--frame", "P",
+                         "--html", str(page), "--mode", "2", "--scale", "0.01")  # fmt: skip
+    assert code == 0 and f"wrote {page}" in out, err
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    f = cl.modes(clm, cl.assemble(clm, actuated=[0.3]).q).frequencies[1]
+    text = page.read_text()
+    assert f"mode 2: natural frequency {f:.6g} Hz" in text  # the legend
+    assert "shape amplified \u00d70.01 (given)" in text
+    assert '"autoplay": true' in text and "set_animation" in text  # the page plays it
+
+
+def test_mode_scene_swings_between_plus_and_minus_the_shape():
+    import pinocchio as pin
+
+    from closedloop.viewer_scene import mode_scene
+
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    res = cl.modes(clm, cl.assemble(clm, actuated=[0.3]).q, frame="P")
+    scene = mode_scene(clm, res.q, res.shapes[:, 0], res.frequencies[0], 1, "P", scale=0.02)
+    np.testing.assert_allclose(scene.ramp[[0, -1]], [-1.0, 1.0], rtol=1e-15)
+    for t, q in ((-1.0, scene.ramp_q[0]), (1.0, scene.ramp_q[-1])):
+        expected = pin.integrate(clm.model, res.q, 0.02 * t * res.shapes[:, 0])
+        np.testing.assert_allclose(q, expected, atol=1e-15)
+    np.testing.assert_allclose(scene.frame_twist, res.twists[:, 0], rtol=1e-12, atol=1e-15)
+
+
+def test_page_needs_a_frame(capsys, tmp_path):
+    code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", "--html",
+                         str(tmp_path / "x.html"))  # fmt: skip
+    assert code == 2 and out == "" and err.count("\n") == 1 and "--html needs --frame" in err
