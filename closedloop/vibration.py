@@ -26,8 +26,9 @@ the link frame and the tip's that of the virtual joint, both by their Jacobians 
 nv) at q: M += J_e^T M_e J_e. The cubics hold every rigid motion exactly (the beam's mass,
 centre and second moment as a slender rod) and with one element a clamped beam's first
 bending frequency comes out 0.48 % high (3.533 instead of 1.8751^2 = 3.516 times
-sqrt(EI / (rho A L^4))); a chain of beam links converges as h^4 (the cubic element's
-rate). The section's own rotary inertia in bending is left out (slender beams).
+sqrt(EI / (rho A L^4))); split into N elements (the beam entry's ``elements: N``) it
+converges as h^4 (the cubic element's rate). The section's own rotary inertia in
+bending is left out (slender beams).
 
 Numerics. M_r is never inverted. Its eigendecomposition M_r = U diag(mu) U^T splits the
 motions into massive ones (mu above :data:`MASSLESS_RTOL` times the largest) and massless

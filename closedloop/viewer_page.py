@@ -300,7 +300,12 @@ def overlay(
     title = "closedloop viewer"
     body = script
     if info is not None:
-        title = f"{_headline(info)} (closedloop viewer)"
+        shown = (
+            _headline(info)
+            if info.get("mode")
+            else f"{info['model']}: deflection at {info['frame']}"
+        )
+        title = f"{shown} (closedloop viewer)"
         body = _STYLE + legend_html(info) + script
     if slider is not None:
         base = float(slider) if slider > 0.0 else 1.0

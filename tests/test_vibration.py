@@ -235,13 +235,14 @@ def test_one_element_cantilever_within_half_a_percent(tmp_path):
 
 
 def test_cantilever_converges_as_h4(tmp_path):
-    """Split into n elements, the first bending frequency approaches the closed form from
-    above at the cubic element's rate h^4 (ratio of errors 2^4 = 16 per halving, once in
-    the asymptotic range). At n = 8 the next two bending frequencies err as the first
-    one at their shorter wavelength, (beta_m / beta_1)^4 times its error (within 20 %)."""
+    """Split into n elements (``elements: n``), the first bending frequency approaches the
+    closed form from above at the cubic element's rate h^4 (ratio of errors 2^4 = 16 per
+    halving, once in the asymptotic range). At n = 8 the next two bending frequencies err
+    as the first one at their shorter wavelength, (beta_m / beta_1)^4 times its error
+    (within 20 %)."""
     errors = []
     for n in (2, 4, 8):
-        clm = rod(tmp_path, n)
+        clm = rod(tmp_path, 1, elements=n)
         f = cl.modes(clm, pin.neutral(clm.model), n=6).frequencies  # three bending pairs
         errors.append(f[0] / cantilever_hz(0) - 1.0)
     rates = np.log2(np.array(errors[:-1]) / errors[1:])
@@ -249,6 +250,26 @@ def test_cantilever_converges_as_h4(tmp_path):
     error = f[::2] / [cantilever_hz(m) for m in range(3)] - 1.0
     bound = errors[-1] * (np.array(CANTILEVER_ROOTS) / CANTILEVER_ROOTS[0]) ** 4
     assert np.all(error > 0.0) and np.all(error < 1.2 * bound), (error, bound)
+
+
+@pytest.mark.parametrize("n", [2, 4])
+def test_elements_key_is_the_chain_of_beam_links(tmp_path, n):
+    """``elements: n`` on one link: the same n-element model as n beam links in a row
+    (frequencies to rounding, eigenvalues of other coordinate orders), and the same tip
+    compliance as one element (exact for end loads: Euler-Bernoulli's cubics)."""
+    split, chain, one = rod(tmp_path, 1, elements=n), rod(tmp_path, n), rod(tmp_path, 1)
+    assert split.model.nv == chain.model.nv == 1 + 6 * n
+    np.testing.assert_allclose(cl.modes(*at_rest(split)).frequencies,
+                               cl.modes(*at_rest(chain)).frequencies, rtol=1e-10)  # fmt: skip
+    C = cl.compliance(*at_rest(one), "tip").C
+    np.testing.assert_allclose(cl.compliance(*at_rest(split), "tip").C, C, rtol=1e-9,
+                               atol=1e-12 * np.abs(C).max())  # fmt: skip
+
+
+@pytest.mark.parametrize("elements", [0, 1.5, True, "2", 65])
+def test_bad_elements(tmp_path, elements):
+    with pytest.raises(cl.BeamError, match="elements"):
+        rod(tmp_path, 1, elements=elements)
 
 
 @pytest.mark.parametrize("n", [1, 3])
@@ -284,6 +305,9 @@ def test_density_without_a_section_is_refused(tmp_path):
     rod(tmp_path, 1)  # writes rod1.urdf
     beam = {"end": "j1", "stiffness_6x6": np.eye(6).tolist(), "density": 1.0}
     with pytest.raises(cl.BeamError, match="density needs a section"):
+        cl.load_model(tmp_path / "rod1.urdf", beams={"seg0": beam})
+    beam = {"end": "j1", "stiffness_6x6": np.eye(6).tolist(), "elements": 2}
+    with pytest.raises(cl.BeamError, match="elements needs E, G and a section"):
         cl.load_model(tmp_path / "rod1.urdf", beams={"seg0": beam})
     with pytest.raises(cl.InvalidInputError, match="no beam with a section"):
         cl.modes(hinge_pendulum(40.0, 2.0, 0.5), np.zeros(2), density=RHO_STEEL)
