@@ -44,6 +44,13 @@ move with the tip. Frames keep their indices (the virtual joint's frame is appen
 joints from the virtual joint on get new indices; frames, geometry objects and closure
 anchors beyond the tip follow it.
 
+Elements and mass: ``elements: N`` (default 1) splits the beam into N equal elements, a
+6-dof virtual joint at each node, ``<link>_beam_1`` .. ``<link>_beam_{N-1}``, then
+``<link>_beam`` at the tip, all in the end joint's axes, each with the clamped stiffness of
+length L / N (:func:`inserted_beams` lists the elements, each from its start node).
+``density`` [kg/m^3] gives the beam a mass of its own (:class:`BeamMass`, the consistent
+mass of :mod:`closedloop.vibration`), with a section only.
+
 Preload: the beam's energy is that of beam theory on the tip's displacement and rotation
 in its rest axes, with the shortening of the bent beam in its axial elongation
 (:mod:`closedloop.elastic`): an axial force softens (compression) or stiffens (tension) its
