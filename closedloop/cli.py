@@ -1,7 +1,8 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
 ``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
-under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`).
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); ``closedloop modes
+MODEL ...`` gives the natural frequencies (:mod:`closedloop.cli_modes`).
 
 MODEL is a robot file, a bundled model by name (``fourbar``, with its closure file) or an
 example-robot-data robot by name (``ur5``, ``panda``, ...; see :mod:`closedloop.data`).
