@@ -85,9 +85,9 @@ class ModesResult:
         frequencies: (n,) natural frequencies [Hz], ascending; rigid-body modes are
             exactly 0.
         eigenvalues: (n,) omega^2 [rad^2/s^2], ascending (0 for the rigid-body modes).
-        shapes: (nv, n) mode shapes as joint deflections (tangent of q [rad, m]),
-            mass-normalised: shapes[:, i] M shapes[:, i] = 1 [kg m^2 or kg per unit of the
-            modal coordinate squared], so that the modal coordinate carries sqrt(kg m^2).
+        shapes: (nv, n) mode shapes as joint deflections (tangent of q [rad, m]) per unit
+            modal amplitude, mass-normalised: shapes.T @ M @ shapes = I (the modal
+            amplitude eta in sqrt(kg) m: kinetic energy 1/2 eta'^2 [J]).
         q: (nq,) the configuration of the modes (the equilibrium under gravity if given).
         frame: name of the frame of ``twists`` and ``effective_masses``, or None.
         axes: ``"world"`` or ``"local"``: the axes of ``twists``.
@@ -284,6 +284,8 @@ def modes(
     state = as_configuration(model, q, length=length)
     state.require_closed()
     clm = state.model
+    if frame is not None:
+        clm.frame_id(frame)  # an unknown frame: before any work
     if density is not None:
         _check_density(clm, density)
     K = clm.spring_matrix
@@ -398,7 +400,7 @@ def _eigen(M: np.ndarray, K: np.ndarray, name: str):
     mu, U = np.linalg.eigh(M)
     top = mu[-1] if mu.size else 0.0
     heavy = mu > MASSLESS_RTOL * top
-    if not top > 0.0 or not np.isfinite(M).all():
+    if not top > 0.0:
         raise ModesError(
             f"{name!r} has no mass on its admissible motions (no link inertia moves, no "
             "payload, no beam density): it has no natural frequency; give the links "
