@@ -61,6 +61,13 @@ def test_pendulum_on_a_torsion_spring():
     assert res.n_rigid == 0 and res.mobility == 1
 
 
+def test_payload_adds_its_mass():
+    k, m, L, extra = 40.0, 2.0, 0.5, 1.5
+    payload = cl.Payload(extra, "bob")
+    res = cl.modes(hinge_pendulum(k, m, L), np.zeros(2), payloads=[payload])
+    np.testing.assert_allclose(res.frequencies, hz([k / ((m + extra) * L**2)]), rtol=RTOL)
+
+
 @pytest.mark.parametrize("up", [False, True])
 def test_pendulum_with_gravity_stiffness(up):
     """Hanging, the weight adds m g L to the spring; upright it takes it away."""
