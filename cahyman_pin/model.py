@@ -182,9 +182,9 @@ def build_closed_loop_model(p: CaHyManParams = DEFAULT_PARAMS) -> ClosedLoopMode
     model = pin.buildModelFromXML(urdf)
     visual = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.VISUAL)
     spec = closure_spec(p)
-    springs = spec.springs
+    springs, masses = spec.springs, {}
     if spec.beams:
-        model, (visual,), blocks, _ = apply_beams(model, [visual], spec.beams)
+        model, (visual,), blocks, _, masses = apply_beams(model, [visual], spec.beams)
         springs = {**springs, **blocks}
     closures = [
         closure_between_frames(model, a, b, kind)
@@ -192,7 +192,7 @@ def build_closed_loop_model(p: CaHyManParams = DEFAULT_PARAMS) -> ClosedLoopMode
     ]
     return ClosedLoopModel(
         model, closures, spec.actuated, springs, spec.locked, visual_model=visual,
-        name="cahyman",
+        name="cahyman", beam_masses=masses,
     )  # fmt: skip
 
 

@@ -45,6 +45,7 @@ _EXPORTS = {
             "MechanismError",
             "ModelFileError",
             "ModelMisfitWarning",
+            "ModesError",
             "NameNotFoundError",
             "NumericalError",
             "OpenLoopError",
@@ -61,6 +62,7 @@ _EXPORTS = {
     **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".preload"),
     **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".statics"),
     **dict.fromkeys(("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".tangent"),
+    **dict.fromkeys(("ModesResult", "batch_modes", "modes"), ".vibration"),
 }
 _SUBMODULES = frozenset({"data"})
 
@@ -83,6 +85,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
         MechanismError,
         ModelFileError,
         ModelMisfitWarning,
+        ModesError,
         NameNotFoundError,
         NumericalError,
         OpenLoopError,
@@ -97,6 +100,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from .preload import PreloadedCompliance, preloaded_compliance
     from .statics import Equilibrium, solve_equilibrium
     from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
+    from .vibration import ModesResult, batch_modes, modes
 
 
 def __getattr__(name: str):
@@ -155,6 +159,8 @@ __all__ = [
     "MechanismError",
     "ModelFileError",
     "ModelMisfitWarning",
+    "ModesError",
+    "ModesResult",
     "NameNotFoundError",
     "NumericalError",
     "OpenLoopError",
@@ -165,12 +171,14 @@ __all__ = [
     "StiffnessIndices",
     "ViewerError",
     "assemble",
+    "batch_modes",
     "closure_curvature",
     "compliance",
     "compliances",
     "data",
     "geometric_stiffness",
     "load_model",
+    "modes",
     "preloaded_compliance",
     "robot_data_dir",
     "solve_equilibrium",

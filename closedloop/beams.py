@@ -44,6 +44,13 @@ move with the tip. Frames keep their indices (the virtual joint's frame is appen
 joints from the virtual joint on get new indices; frames, geometry objects and closure
 anchors beyond the tip follow it.
 
+Elements and mass: ``elements: N`` (default 1) splits the beam into N equal elements, a
+6-dof virtual joint at each node, ``<link>_beam_1`` .. ``<link>_beam_{N-1}``, then
+``<link>_beam`` at the tip, all in the end joint's axes, each with the clamped stiffness of
+length L / N (:func:`inserted_beams` lists the elements, each from its start node).
+``density`` [kg/m^3] gives the beam a mass of its own (:class:`BeamMass`, the consistent
+mass of :mod:`closedloop.vibration`), with a section only.
+
 Preload: the beam's energy is that of beam theory on the tip's displacement and rotation
 in its rest axes, with the shortening of the bent beam in its axial elongation
 (:mod:`closedloop.elastic`): an axial force softens (compression) or stiffens (tension) its
@@ -67,7 +74,10 @@ from .exceptions import BeamError, InvalidInputError
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
 EXPLICIT = ("A", "Iy", "Iz", "J")
-BEAM_KEYS = ("end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6")
+BEAM_KEYS = (
+    "end", "E", "G", "section", "theory", "stiffness_6x6", "compliance_6x6", "density",
+    "elements",
+)  # fmt: skip
 #: ``section: geometry``: the section from the link's URDF cylinder or box.
 GEOMETRY = "geometry"
 #: Largest angle [rad] between the axis of that shape and the beam (0.057 deg): far above
@@ -114,6 +124,17 @@ class Section:
         else:
             k = None
         return (self.kappa_y or k, self.kappa_z or k)
+
+
+@dataclass(frozen=True)
+class BeamMass:
+    """What a beam's own mass needs besides its length: the section's area A [m^2] and
+    polar second moment Ip = Iy + Iz [m^4], and the density [kg/m^3] of its ``density:``
+    key (None: the model-wide default of :func:`closedloop.vibration.modes`)."""
+
+    A: float
+    Ip: float
+    density: float | None
 
 
 def section_from_spec(beam: str, spec) -> Section:
@@ -447,19 +468,24 @@ class InsertedBeam:
 
 
 def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
-    """The beams of ``model``: its ``<link>_beam`` joint frames whose parent frame is the
-    link's body frame, on the joint's parent joint (as :func:`apply_beams` builds them)."""
+    """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: its
+    ``<link>_beam`` joint frames whose parent frame is the link's body frame, on the
+    joint's parent joint; of a beam split into n elements, ``<link>_beam_1`` so, then
+    ``<link>_beam_k`` (and last ``<link>_beam``) whose parent frame is the joint frame of
+    ``<link>_beam_{k-1}``, on its joint (``link_frame``: the element's start)."""
     out = []
     for f in model.frames:
-        link = model.frames[f.parentFrame]
+        start = model.frames[f.parentFrame]
         j = f.parentJoint
-        if (
-            f.type == pin.JOINT
-            and link.type == pin.BODY
-            and f.name == f"{link.name}_beam"
-            and link.parentJoint == model.parents[j]
-        ):
-            rest = link.placement.actInv(model.jointPlacements[j])
+        if f.type != pin.JOINT or start.parentJoint != model.parents[j]:
+            continue
+        if start.type == pin.BODY:
+            names = (f"{start.name}_beam", f"{start.name}_beam_1")
+        else:
+            head, _, k = start.name.rpartition("_beam_")
+            names = (f"{head}_beam", f"{head}_beam_{int(k) + 1}") if k.isdigit() else ()
+        if start.type in (pin.BODY, pin.JOINT) and f.name in names:
+            rest = start.placement.actInv(model.jointPlacements[j])
             out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
     return out
 
@@ -529,14 +555,28 @@ def _tip_stiffness(beam: str, stiffness, what: str) -> np.ndarray:
     return K
 
 
+def element_count(beam: str, spec: Mapping) -> int:
+    """The ``elements:`` of a beam's entry: an integer >= 1 (default 1)."""
+    n = spec.get("elements", 1)
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_ELEMENTS:
+        raise BeamError(beam, f"elements is {n!r}; expected an integer from 1 to {MAX_ELEMENTS}")
+    return int(n)
+
+
+#: Most elements a beam may be split into.
+MAX_ELEMENTS = 64
+
+
 def beam_stiffness(
     model: pin.Model, beam: str, spec: Mapping, shapes: list[Shape] | None = None
-) -> tuple[str | None, np.ndarray]:
-    """(end, K) of one beam: its end joint and its (6, 6) tip stiffness in the end joint's
-    axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the ``beams:``
-    entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
-    compliance_6x6 given in that same frame); ``shapes``: the link's URDF shapes, for
-    ``section: geometry`` (:func:`geometry_section`)."""
+) -> tuple[str | None, np.ndarray, BeamMass | None]:
+    """(end, K, mass) of one beam: its end joint, its (6, 6) tip stiffness in the end
+    joint's axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the
+    ``beams:`` entry of a closure file: end, E, G, section, theory, or stiffness_6x6 /
+    compliance_6x6 given in that same frame; density [kg/m^3]; elements: split into that
+    many equal elements, K then that of one of them), and its section for its own mass
+    (None without a section); ``shapes``: the link's URDF shapes, for ``section:
+    geometry`` (:func:`geometry_section`)."""
     if not isinstance(spec, Mapping):
         raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
     unknown = set(spec) - set(BEAM_KEYS)
@@ -546,15 +586,23 @@ def beam_stiffness(
     if end is not None and not isinstance(end, str):
         raise BeamError(beam, f"end is {end!r}; expected a joint name")
     site = _site(model, beam, end)
+    density = _positive(beam, "density [kg/m^3]", spec["density"]) if "density" in spec else None
+    elements = element_count(beam, spec)
     given = [k for k in ("stiffness_6x6", "compliance_6x6") if k in spec]
     if given:
         if len(given) == 2 or any(k in spec for k in ("E", "G", "section", "theory")):
             raise BeamError(beam, f"give either {given[0]} or E, G and section, not both")
+        if density is not None:
+            raise BeamError(beam, f"density needs a section (its area), not {given[0]}")
+        if elements > 1:
+            raise BeamError(beam, f"elements needs E, G and a section, not {given[0]}")
         M = _matrix(beam, given[0], spec[given[0]])
         if given[0] == "stiffness_6x6":
-            return site.end, M
-        return site.end, _tip_stiffness(
-            beam, lambda: np.linalg.inv(M), f"compliance_6x6 {M.tolist()}"
+            return site.end, M, None
+        return (
+            site.end,
+            _tip_stiffness(beam, lambda: np.linalg.inv(M), f"compliance_6x6 {M.tolist()}"),
+            None,
         )
     missing = [k for k in ("E", "G", "section") if k not in spec]
     if missing:
@@ -584,14 +632,14 @@ def beam_stiffness(
     K = _tip_stiffness(
         beam,
         lambda: transport_stiffness(
-            np.linalg.inv(clamped_compliance(length, E, G, section, theory)),
+            np.linalg.inv(clamped_compliance(length / elements, E, G, section, theory)),
             R_LB.T @ M_LE.rotation,
         ),
         f"E = {E:.4g} Pa, G = {G:.4g} Pa, length {length:.4g} m and the section (A = "
         f"{section.A:.4g} m^2, Iy = {section.Iy:.4g}, Iz = {section.Iz:.4g}, "
         f"J = {section.J:.4g} m^4)",
     )
-    return site.end, K
+    return site.end, K, BeamMass(section.A, section.Iy + section.Iz, density)
 
 
 #: An anchor on a beam's link within this fraction of the beam's length of its tip is at
@@ -615,16 +663,17 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             joints.
 
     Returns:
-        (model, geometries, springs, anchors): the new model, its geometry models, the
-        block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]} and the anchors
-        on the new model.
+        (model, geometries, springs, anchors, masses): the new model, its geometry models,
+        the block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]}, the
+        anchors on the new model and the sections of the beams that have one {virtual
+        joint name: :class:`BeamMass`}.
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
     """
     if not isinstance(beams, Mapping):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
-    springs = {}
+    springs, masses = {}, {}
     anchors = [(int(j), pin.SE3(M)) for j, M in anchors]
     geometries = list(geometries)
     wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
@@ -636,7 +685,7 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             raise BeamError(beam, f"the link already has a beam (or the model a joint named "
                             f"{name!r}): one beam a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(beam, [])
-        end, K = beam_stiffness(model, beam, spec, link_shapes)
+        end, K, mass = beam_stiffness(model, beam, spec, link_shapes)
         site = _site(model, beam, end)
         tip, start = site.placement, model.frames[site.link_frame].placement
         length = float(np.linalg.norm(tip.translation - start.translation))
@@ -648,8 +697,39 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             else (step[j], M)
             for j, M in anchors
         ]
-        springs[name] = K
-    return model, geometries, springs, anchors
+        elements = [name] + [f"{name}_{k}" for k in range(1, element_count(beam, spec))]
+        if len(elements) > 1:
+            model, geometries, anchors = _split(model, geometries, anchors, name, len(elements))
+        for element in elements:
+            springs[element] = K
+            if mass is not None:
+                masses[element] = mass
+    return model, geometries, springs, anchors, masses
+
+
+def _split(model, geometries, anchors, name: str, n: int):
+    """``model`` with the beam of virtual joint ``name`` split into n equal elements: the
+    virtual joints ``name_1`` .. ``name_{n-1}`` inserted at its nodes (k / n of the way
+    from the start, in the tip's axes), each the start of the next element, ``name`` the
+    last; returns (model, geometries, anchors) (:func:`apply_beams`)."""
+    tip = model.getJointId(name)
+    frame = model.getFrameId(name, pin.JOINT)
+    start = model.frames[model.frames[frame].parentFrame].placement  # in the parent joint
+    rest = model.jointPlacements[tip]  # the tip in the parent joint
+    step = (rest.translation - start.translation) / n
+    node = pin.SE3(rest.rotation, start.translation + step)  # the first node, parent joint
+    parent_joint, parent_frame = model.parents[tip], model.frames[frame].parentFrame
+    for k in range(1, n):
+        site = _Site(parent_frame, parent_joint, name, tip, frame, node)
+        element = f"{name}_{k}"
+        model, geometries, index = _insert(model, geometries, site, element)
+        anchors = [(index[j], M) for j, M in anchors]
+        parent_joint = model.getJointId(element)
+        parent_frame = model.getFrameId(element, pin.JOINT)
+        tip, frame = model.getJointId(name), model.getFrameId(name, pin.JOINT)
+        node = pin.SE3(np.eye(3), rest.rotation.T @ step)  # the next node, in this one
+    model.frames[frame].parentFrame = parent_frame  # the last element starts at its node
+    return model, geometries, anchors
 
 
 def insert_beams(clm, beams: Mapping[str, Mapping]):
@@ -669,7 +749,7 @@ def insert_beams(clm, beams: Mapping[str, Mapping]):
     geoms = [clm.visual_model, clm.collision_model]
     ends = [(k.joint1_id, k.joint1_placement) for c in clm.closures for k in [c.constraint]]
     ends += [(k.joint2_id, k.joint2_placement) for c in clm.closures for k in [c.constraint]]
-    model, geoms, springs, ends = apply_beams(clm.model, geoms, beams, anchors=ends)
+    model, geoms, springs, ends, masses = apply_beams(clm.model, geoms, beams, anchors=ends)
     n = len(clm.closures)
     closures = [
         Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
@@ -684,4 +764,5 @@ def insert_beams(clm, beams: Mapping[str, Mapping]):
         geoms[0],
         geoms[1],
         clm.name,
+        beam_masses={**clm.beam_masses, **masses},
     )

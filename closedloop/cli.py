@@ -1,7 +1,8 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
 ``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
-under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`).
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); ``closedloop modes
+MODEL ...`` gives the natural frequencies (:mod:`closedloop.cli_modes`).
 
 MODEL is a robot file, a bundled model by name (``fourbar``, with its closure file) or an
 example-robot-data robot by name (``ur5``, ``panda``, ...; see :mod:`closedloop.data`).
@@ -103,6 +104,7 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
         "a stiffness index over a grid of actuated inputs (NPZ, CSV, PNG)",
     ),
     "identify": ("closedloop.cli_identify", "fit spring stiffnesses to measured deflections"),
+    "modes": ("closedloop.cli_modes", "natural frequencies and mode shapes at a pose"),
 }
 
 
@@ -150,9 +152,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def add_model_arguments(p: argparse.ArgumentParser) -> None:
-    """MODEL, --closures, --frame, --q | --actuated, --joint-stiffness | --springs."""
-    add_source_arguments(p)
+def add_model_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None:
+    """MODEL, --closures, --frame (if ``frame``), --q | --actuated, --joint-stiffness |
+    --springs."""
+    add_source_arguments(p, frame)
     config = p.add_mutually_exclusive_group()
     config.add_argument(
         "--q", nargs="+", type=finite_float, metavar="Q", help="full configuration (nq values)"
@@ -402,7 +405,8 @@ def model_from_args(args: argparse.Namespace, geometry: bool = False):
         joint_stiffness=args.joint_stiffness,
         geometry=geometry,
     )
-    clm.frame_id(args.frame)  # unknown frame: fail before any assembly
+    if args.frame is not None:
+        clm.frame_id(args.frame)  # unknown frame: fail before any assembly
     return clm, configuration(clm, args.q, args.actuated)
 
 

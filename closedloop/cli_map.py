@@ -43,7 +43,7 @@ from .cli_common import (
 from .cluster import add_worker_timeout, dask_executor
 from .exceptions import InvalidInputError
 from .map_engine import CHUNK, Interrupted, ModelSource, stop_on_signals
-from .maps import INDICES, stiffness_map
+from .maps import ALL_INDICES, stiffness_map
 
 #: Points timed first for the estimate of a long map, and the time [s] the probe aims at
 #: (ten times more points while it takes less; see _time_per_point).
@@ -84,7 +84,7 @@ def add_parser(sub, parent_arguments) -> None:
     )
     what.add_argument("--points", metavar="FILE", help="actuated values, one point a row")
     p.add_argument("--fixed", type=_fixed, action="append", default=[], metavar="JOINT=VALUE")
-    p.add_argument("--index", choices=sorted(INDICES), default="det_K", help="index to plot")
+    p.add_argument("--index", choices=sorted(ALL_INDICES), default="det_K", help="index to plot")
     for name, unit in (("--force", "N"), ("--torque", "N m")):
         p.add_argument(name, nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                        help=f"load of the deflection indices, world axes [{unit}]")  # fmt: skip
@@ -163,7 +163,8 @@ def run_map(args) -> int:
     clm = source.load()
     clm.frame_id(args.frame)
     out = output_folder(args.out)  # before any computation
-    options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk}
+    options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk,
+               "modes": args.index == "lowest_frequency"}  # fmt: skip
     with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)
@@ -185,7 +186,7 @@ def run_map(args) -> int:
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))
-    print(index_line(args.index, result.indices[args.index], INDICES[args.index]))
+    print(index_line(args.index, result.indices[args.index], ALL_INDICES[args.index]))
     for path in paths:
         print(f"wrote {path}")
     return 0

@@ -153,6 +153,11 @@ class ModelMisfitWarning(UserWarning):
     False): the standard errors, which assume a fit, do not hold."""
 
 
+class ModesError(ClosedLoopError):
+    """No natural frequency to report: a rigid model (no admissible motion), no mass on
+    the admissible motions, or an unstable equilibrium."""
+
+
 class NumericalError(ClosedLoopError):
     """A result is not finite (NaN or infinity) on finite input: the computation failed."""
 

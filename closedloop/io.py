@@ -372,6 +372,7 @@ class _Tree:
     by_default: bool = False  # locked by the serial robot's default, not by a file
     beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
     balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
+    beam_masses: tuple = ()  # (virtual joint name, closedloop.beams.BeamMass) of the beams
 
 
 def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
@@ -399,10 +400,10 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
         ),
         path,
     )
-    tree, blocks = model, {}
+    tree, blocks, masses = model, {}, {}
     if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
         both = {**spec.beams, **beams}
-        model, (visual,), blocks, _ = apply_beams(model, [visual], both, urdf=path)
+        model, (visual,), blocks, _, masses = apply_beams(model, [visual], both, urdf=path)
     clash = sorted(set(spec.springs) & set(blocks))
     if clash:
         raise ModelFileError(
@@ -412,7 +413,7 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
     if closures is None:
         actuated, locked = _serial_defaults(tree, path)
         return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
-                     beam_joints=tuple(blocks))  # fmt: skip
+                     beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
     where = f"closure file {str(closures)!r}"
     _check_names(model, spec, where)
     with _in_file(where):
@@ -421,7 +422,8 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
             for (a, b), t in zip(spec.pairs, spec.types, strict=True)
         ]
     return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks}, spec.locked,
-                 visual, beam_joints=tuple(blocks), balls=spec.balls)  # fmt: skip
+                 visual, beam_joints=tuple(blocks), balls=spec.balls,
+                 beam_masses=tuple(masses.items()))  # fmt: skip
 
 
 def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
@@ -616,7 +618,13 @@ def load_model(
     if tree.balls:  # the keyword's springs of a ball too: on its rotations, as the file's
         springs = ball_springs(springs, tree.balls, locked=locked, keyword=given, file=closures)
     clm = ClosedLoopModel(
-        tree.model, tree.loops, actuated, springs, locked, visual_model=tree.visual
+        tree.model,
+        tree.loops,
+        actuated,
+        springs,
+        locked,
+        visual_model=tree.visual,
+        beam_masses=dict(tree.beam_masses),
     )
     if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}

@@ -380,6 +380,8 @@ class MapChunk:
         first: (nq,) configuration the first point starts from, or None (reference).
         start: start provider ``start(clm, points) -> (c, nq)`` or None (picklable).
         wrench: (6,) wrench of the deflection indices [N, N m] at the frame, or None.
+        modes: also the index ``lowest_frequency`` [Hz] of every point
+            (:func:`closedloop.vibration.lowest_frequencies`).
     """
 
     model: ClosedLoopModel | ModelSource
@@ -388,6 +390,7 @@ class MapChunk:
     first: np.ndarray | None = None
     start: Callable | None = None
     wrench: np.ndarray | None = None
+    modes: bool = False
 
     def __len__(self) -> int:
         return len(self.points)
@@ -406,14 +409,21 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     if first is None and starts is None:  # the path's first chunk (a start provider: unused)
         first = path_start(clm, chunk.points)
     last = [None]  # the inputs of the last point assembled (q0: its configuration)
+    configurations = {}  # position -> q of the assembled points
 
     def solve(i: int, q0):
         a = drive(clm, chunk.points[i], q0, last[0] if starts is None else None)
         last[0] = chunk.points[i]
+        configurations[i] = a.q
         return a
 
     assemble_points(clm, chunk.frame, out, range(len(chunk)), solve, first, starts)
     complete(out, chunk.wrench)
+    if chunk.modes:  # the vibration module on demand
+        from .vibration import lowest_frequencies
+
+        done = np.isin(out.status, (OK, RANK_DEFICIENT))
+        out.indices["lowest_frequency"] = lowest_frequencies(clm, configurations, done)
     return out
 
 

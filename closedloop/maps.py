@@ -48,6 +48,10 @@ from .model import ClosedLoopModel
 #: Indices of a map and their units (SI; ``condition_number`` is the unit-free one of the
 #: scaled K, ``condition_number_si`` that of the SI matrix).
 INDICES = BATCH_INDICES
+#: The index of ``stiffness_map(..., modes=True)``: the lowest nonzero natural frequency.
+MODE_INDICES = {"lowest_frequency": "Hz"}
+#: Every index a map may hold, and its unit.
+ALL_INDICES = {**INDICES, **MODE_INDICES}
 #: Largest map also written as CSV.
 CSV_MAX_POINTS = 10_000
 #: Names that ``numpy.savez`` takes as its own arguments, not as arrays.
@@ -74,7 +78,7 @@ class StiffnessMap(ReadOnlyArrays):
         swept: names of the swept joints (grid axes), or all joints for a list.
         frame: loaded frame.
         wrench: (6,) wrench of the deflection indices [N, N m], or None.
-        indices: name -> (n,) values (units in :data:`INDICES`), NaN where not defined.
+        indices: name -> (n,) values (units in :data:`ALL_INDICES`), NaN where not defined.
         data: the per-point arrays (C, rank, status and reason codes).
     """
 
@@ -133,7 +137,7 @@ class StiffnessMap(ReadOnlyArrays):
         except OSError as e:
             raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
         joint_units = dict(zip(self.joints, self.units, strict=True))
-        units = {**joint_units, **{k: INDICES[k] for k in self.indices}, "C": UNITS["C"],
+        units = {**joint_units, **{k: ALL_INDICES[k] for k in self.indices}, "C": UNITS["C"],
                  "inputs": list(self.units)}  # fmt: skip
         arrays = {**self.indices, "C": self.C, "rank": self.data.rank, "status": self.status,
                   "reasons": np.asarray(self.reasons), "shape": np.asarray(self.shape),
@@ -144,7 +148,7 @@ class StiffnessMap(ReadOnlyArrays):
         paths = [write_atomically(out / "map.npz", lambda f: np.savez(f, **arrays))]
         if len(self.inputs) <= CSV_MAX_POINTS:
             names = [*(column_name(n, u) for n, u in joint_units.items()),
-                     *(column_name(k, INDICES[k]) for k in self.indices),
+                     *(column_name(k, ALL_INDICES[k]) for k in self.indices),
                      "status", "reason"]  # fmt: skip
             values = np.column_stack([self.inputs, *self.indices.values()]).tolist()
 
@@ -187,7 +191,7 @@ def map_title(smap: StiffnessMap, index: str) -> str:
              for j, (n, u) in enumerate(zip(smap.joints, smap.units, strict=True))
              if n not in plotted]  # fmt: skip
     parts = [*fixed, load_text(smap.wrench)] if smap.wrench is not None else fixed
-    return "\n".join([f"{index} [{INDICES[index]}] at {smap.frame}",
+    return "\n".join([f"{index} [{ALL_INDICES[index]}] at {smap.frame}",
                       *textwrap.wrap(", ".join(parts), 80)])  # fmt: skip
 
 
@@ -202,7 +206,7 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
 
     unit = dict(zip(smap.joints, smap.units, strict=True))
     axes = smap.plotted()
-    label = f"{index} [{INDICES[index]}]"
+    label = f"{index} [{ALL_INDICES[index]}]"
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=100)
     if len(axes) == 1 or len(smap.shape) == 1:  # the curve along its first input
         x = smap.inputs[:, smap.joints.index(axes[0])]
@@ -292,6 +296,7 @@ def stiffness_map(
     executor: Executor | None = None,
     chunk: int = CHUNK,
     show_progress: bool = False,
+    modes: bool = False,
 ) -> StiffnessMap:
     """Stiffness indices at many configurations (see the module docstring).
 
@@ -313,10 +318,14 @@ def stiffness_map(
             :data:`~closedloop.map_engine.BORDER_STRIDE` or more failed points; not on the
             executor.
         show_progress: progress on stderr (:mod:`closedloop.progress`), in points.
+        modes: also the index ``lowest_frequency`` [Hz]: the lowest nonzero natural
+            frequency of every point (:func:`closedloop.vibration.modes`, rigid-body modes
+            skipped; NaN where it has none).
 
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
         NameNotFoundError: unknown frame.
+        ModesError: ``modes`` on a model without any mass.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the map
             (:class:`closedloop.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
             the worker processes are ended at once (none is left), and the map so far is
@@ -327,6 +336,10 @@ def stiffness_map(
     """
     clm = model_of(model)
     clm.frame_id(frame)
+    if modes:
+        from .vibration import check_massive
+
+        check_massive(clm)
     w = None if wrench is None else np.asarray(wrench, dtype=float)
     if w is not None and (w.shape != (6,) or not np.all(np.isfinite(w))):
         raise InvalidInputError(f"wrench must be 6 finite values, got {np.asarray(wrench)}")
@@ -355,7 +368,7 @@ def stiffness_map(
 
     def results():
         borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
-        tasks = [MapChunk(model, frame, pts[p], q, start, w)
+        tasks = [MapChunk(model, frame, pts[p], q, start, w, modes)
                  for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
         sizes = [len(piece) for piece in pieces]
         yield from run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,
@@ -365,6 +378,8 @@ def stiffness_map(
         data = gather(n, pieces, results(), w)
     except Interrupted as stop:
         if stop.data is not None:  # else stopped before gather began
+            if modes:  # its index even when no chunk came back
+                stop.data.indices.setdefault("lowest_frequency", np.full(n, np.nan))
             stop.partial = _stiffness_map(clm, pts, shape, swept, frame, w, stop.data)
         raise
     return _stiffness_map(clm, pts, shape, swept, frame, w, data)

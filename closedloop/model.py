@@ -274,6 +274,9 @@ class ClosedLoopModel:
         locked: names of joints held rigid.
         visual_model, collision_model: optional geometry for viewers.
         name: display name.
+        beam_masses: virtual beam joint name -> :class:`closedloop.beams.BeamMass`, the
+            sections (and densities) of the beams for their own mass
+            (:mod:`closedloop.vibration`); filled by the loaders.
 
     Attributes:
         stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf);
@@ -297,6 +300,7 @@ class ClosedLoopModel:
         collision_model: pin.GeometryModel | None = None,
         name: str = "",
         *,
+        beam_masses: Mapping | None = None,
         _neutral: tuple[np.ndarray, float] | None = None,  # with_springs: the same model
     ):
         if not isinstance(model, pin.Model):
@@ -312,6 +316,7 @@ class ClosedLoopModel:
         self.visual_model = visual_model
         self.collision_model = collision_model
         self.name = name or model.name
+        self.beam_masses = MappingProxyType(dict(beam_masses or {}))
         self.actuated = joint_names("actuated", actuated)
         self.actuated_ids = tuple(joint_id(model, n) for n in self.actuated)
         for n, j in zip(self.actuated, self.actuated_ids, strict=True):
@@ -583,6 +588,7 @@ class ClosedLoopModel:
             self.visual_model,
             self.collision_model,
             self.name,
+            beam_masses=self.beam_masses,
             _neutral=(self.linear_coordinates, self._length),
         )
 

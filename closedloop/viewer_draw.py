@@ -152,6 +152,7 @@ def legend_info(
         "grid_step": grid_step(scene.size),
         "colour_max": colour_max,
         "colormap": COLORMAP,
+        "mode": scene.mode,
     }
 
 

@@ -155,6 +155,8 @@ def legend_rows(info: dict) -> list[str]:
     w = np.asarray(info["wrench"], dtype=float)
     frame = info["frame"]
     rows = [f"pose: {info['pose']}"]
+    if info.get("mode"):
+        return [html.escape(r) for r in rows + _mode_rows(info)]
     if np.any(w):
         rows.append(
             f"load at {frame} (world axes): force {_vector(w[:3])} N, moment {_vector(w[3:])} N m"
@@ -178,9 +180,34 @@ def legend_rows(info: dict) -> list[str]:
     return [html.escape(r) for r in rows]
 
 
+def _mode_rows(info: dict) -> list[str]:
+    """The legend lines of a natural mode: its frequency and the amplification of its
+    shape (per unit modal amplitude: a mode has no size of its own)."""
+    mode, frame = info["mode"], info["frame"]
+    how = "automatic" if info["auto_scaled"] else "given"
+    d_mm, t = 1e3 * info["max_displacement"], np.asarray(info["frame_twist"], dtype=float)
+    return [
+        f"mode {mode['number']}: natural frequency {mode['frequency_hz']:.6g} Hz, swinging "
+        "between \u00b1 its shape",
+        f"shape amplified \u00d7{info['scale']:.4g} ({how}): largest point displacement "
+        f"{d_mm:.4g} mm per unit modal amplitude (mass-normalised shape), drawn as "
+        f"{info['scale'] * d_mm:.4g} mm",
+        f"{frame} moves {_vector(1e3 * t[:3])} mm and turns {_vector(np.rad2deg(t[3:]))} deg "
+        "per unit modal amplitude, world axes",
+    ]
+
+
+def _headline(info: dict) -> str:
+    """What the page shows: a deflection under a load, or a natural mode."""
+    if info.get("mode"):
+        mode = info["mode"]
+        return f"{info['model']}: mode {mode['number']}, {mode['frequency_hz']:.6g} Hz"
+    return f"{info['model']}: deflection under a load at {info['frame']}"
+
+
 def legend_html(info: dict) -> str:
     """The legend ``<div>`` (module docstring) for the scene described by ``info``."""
-    head = html.escape(f"{info['model']}: deflection under a load at {info['frame']}")
+    head = html.escape(_headline(info))
     key = [
         (_swatch(info["ghost_rgba"]), "nominal pose (unloaded), translucent ghost"),
     ]
@@ -273,7 +300,12 @@ def overlay(
     title = "closedloop viewer"
     body = script
     if info is not None:
-        title = f"{info['model']}: deflection at {info['frame']} (closedloop viewer)"
+        shown = (
+            _headline(info)
+            if info.get("mode")
+            else f"{info['model']}: deflection at {info['frame']}"
+        )
+        title = f"{shown} (closedloop viewer)"
         body = _STYLE + legend_html(info) + script
     if slider is not None:
         base = float(slider) if slider > 0.0 else 1.0

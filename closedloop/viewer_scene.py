@@ -170,6 +170,9 @@ class DeflectionScene:
         ramp_q: (n, nq) amplified configurations integrate(q, s dq(t)) for each fraction t.
         equilibrium: the nonlinear equilibrium under the full wrench, or None (linear).
         beams: the flexible links at q_deflected (:func:`beam_curves`; () without beams).
+        mode: for a natural mode (:func:`mode_scene`; then no wrench, no compliance):
+            {"number": its rank from the lowest (1), "frequency_hz": its frequency}; None
+            for a deflection.
     """
 
     frame: str
@@ -190,6 +193,7 @@ class DeflectionScene:
     ramp_q: np.ndarray
     equilibrium: Equilibrium | None
     beams: tuple[BeamCurve, ...] = ()
+    mode: dict | None = None
 
     @property
     def nonlinear(self) -> bool:
@@ -462,4 +466,72 @@ def deflection_scene(
         ramp_q=readonly(ramp_q),
         equilibrium=equilibrium,
         beams=beams,
+    )
+
+
+def mode_scene(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    shape: np.ndarray,
+    frequency: float,
+    number: int,
+    frame: str,
+    *,
+    scale: float | None = None,
+    frames: int = ANIMATION_FRAMES,
+) -> DeflectionScene:
+    """A natural mode as a scene: the pose swinging harmonically between -s shape and
+    +s shape (the animation, played back and forth), drawn at +s shape.
+
+    Args:
+        clm: the model; q: (nq,) the configuration of the modes
+            (:attr:`closedloop.vibration.ModesResult.q`).
+        shape: (nv,) the mode shape (joint deflections per unit modal amplitude).
+        frequency: its natural frequency [Hz], for the legend; number: its rank (1: the
+            lowest).
+        frame: the frame whose origin counts among the displaced points.
+        scale: amplification s >= 0 of the shape; None chooses it (:func:`auto_scale`).
+        frames: number of poses of the swing (>= 2).
+
+    Raises:
+        InvalidInputError: bad scale or frame count, a shape that is not (nv,) finite.
+    """
+    if scale is not None and not (np.isfinite(scale) and scale >= 0.0):
+        raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
+    if int(frames) != frames or frames < 2:
+        raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
+    dq = np.asarray(shape, dtype=float)
+    if dq.shape != (clm.model.nv,) or not np.all(np.isfinite(dq)):
+        raise InvalidInputError(f"mode shape of shape {dq.shape}; expected ({clm.model.nv},)")
+    q = clm.check_configuration(q)
+    size = model_size(clm, q)
+    d_max = largest_displacement(clm, q, frame, dq)
+    s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
+    ramp = np.sin(np.linspace(-0.5 * np.pi, 0.5 * np.pi, int(frames)))  # harmonic
+    ramp_q = np.array([pin.integrate(clm.model, q, s * t * dq) for t in ramp])
+    update_kinematics(clm, ramp_q[-1])
+    point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
+    beams = beam_curves(clm, ramp_q[-1])
+    update_kinematics(clm, q)
+    point = clm.data.oMf[clm.frame_id(frame)].translation.copy()
+    return DeflectionScene(
+        frame=frame,
+        q=readonly(q),
+        wrench=readonly(np.zeros(6)),
+        dq=readonly(dq),
+        scale=s,
+        auto_scaled=scale is None,
+        size=size,
+        max_displacement=d_max,
+        q_deflected=readonly(ramp_q[-1]),
+        point=readonly(point),
+        point_deflected=readonly(point_deflected),
+        frame_twist=readonly(frame_jacobian(clm, q, frame, "world") @ dq),
+        compliance=None,
+        ellipsoids=(),
+        ramp=readonly(ramp),
+        ramp_q=readonly(ramp_q),
+        equilibrium=None,
+        beams=beams,
+        mode={"number": int(number), "frequency_hz": float(frequency)},
     )

@@ -1,5 +1,5 @@
-"""Benchmark closedloop (issues 10, 11): UR5 serial query, growth of the query with nv,
-UR5 with its links as beams."""
+"""Benchmark closedloop (issues 10, 11, 37): UR5 serial query, growth of the query with nv,
+UR5 with its links as beams, CaHyMan's natural frequencies."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from closedloop.batch import compliances
 from closedloop.compliance import compliance
 from closedloop.io import load_urdf, robot_data_dir
 from closedloop.model import ClosedLoopModel
+from closedloop.vibration import batch_modes, modes
 
 #: UR5 pose of the serial query [rad].
 UR5_Q = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])
@@ -153,12 +154,41 @@ def bench_growth(table: Table, mode: Mode) -> None:
             table.note(f"{key} ({label}, {p}): " + "; ".join(details))
 
 
+#: CaHyMan's masses for its modes [kg] (its defaults are 0): plate, arm, motor, leg links.
+CAHYMAN_MASSES = {"m_HQ": 2.0, "m_QM": 1.0, "m_MM2": 0.5, "m_M4": 1.5, "m_M5": 0.5,
+                  "m_b": 0.3, "m_c": 0.2, "m_d": 0.3, "m_h": 0.1}  # fmt: skip
+
+
+def bench_modes(table: Table, mode: Mode) -> None:
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    machine = cahyman_model(DEFAULT_PARAMS.replace(**CAHYMAN_MASSES))
+    clm = machine.clm
+    q = machine.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.01)
+    query = partial(compliance, clm, q, "M")  # the unit: one compliance query, this run
+    t = interleaved(lambda: modes(clm, q, n=10, frame="M"), query, mode)
+    table.row("9", "CaHyMan, lowest 10 modes at one pose (`modes(..., n=10, frame='M')`), in "
+              "units of one compliance query at M", "<= 3 queries (issue 37)",
+              f"{t.ratio:.2f} queries",
+              f"{fmt_time(t.seconds)}; query {fmt_time(t.unit)}")  # fmt: skip
+    rng = np.random.default_rng(0)
+    poses = [machine.assemble(np.deg2rad(rng.uniform(50.0, 80.0, 3)),
+                              np.deg2rad(rng.uniform(30.0, 60.0)), rng.uniform(0.0, 0.04))
+             for _ in range(20)]  # fmt: skip
+    Q = np.array(poses)
+    t = interleaved(lambda: batch_modes(clm, Q, n=10), query, mode, per=len(Q))
+    table.row("9b", f"CaHyMan, lowest 10 modes, `batch_modes` over {len(Q)} poses, per pose",
+              "-", f"{t.ratio:.2f} queries", f"{fmt_time(t.seconds)} per pose")  # fmt: skip
+
+
 def main() -> None:
     mode = parse_mode(__doc__)
     table = Table("closedloop benchmarks", mode)
     bench_ur5(table, mode)
     bench_ur5_beams(table, mode)
     bench_growth(table, mode)
+    bench_modes(table, mode)
     table.close()
 
 

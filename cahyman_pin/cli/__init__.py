@@ -34,6 +34,7 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
     "report": ("cahyman_pin.cli.report", "write the comparison report against the paper"),
     "map": ("cahyman_pin.cli.map", "a stiffness index over swept inputs (NPZ, CSV, PNG)"),
     "view": ("cahyman_pin.cli.view", "meshcat view of the deflection under a wrench at M"),
+    "modes": ("cahyman_pin.cli.modes", "natural frequencies at a pose (give the masses)"),
 }
 
 

@@ -101,10 +101,12 @@ def add_weight_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
-def _masses(args: argparse.Namespace) -> dict[str, float]:
+def _masses(args: argparse.Namespace, weight: bool = True) -> dict[str, float]:
+    """The --mass values {name: kg}; ``weight``: they are weights (need --gravity)."""
     out = {}
     for item in getattr(args, "mass", []):
-        needs_gravity(f"--mass {item}", args.gravity)
+        if weight:
+            needs_gravity(f"--mass {item}", args.gravity)
         name, _, value = item.partition("=")
         if name not in MASS_NAMES or not value:
             raise UsageError(f"--mass {item!r}: expected NAME=KG with NAME one of "
