@@ -101,11 +101,10 @@ MAX_LOAD_STEPS = 1000
 #: across (a bifurcation, where the branch goes on) or finds no equilibrium on the branch:
 #: the fold then lies in [t, (1 + FOLD_RTOL) t] (``EquilibriumError.fold_bracket``).
 FOLD_RTOL = 1e-6
-#: Change of tau^2 below which it is rounding, not a trend to extrapolate (the weld
-#: curvature by central differences carries 1e-10 of M; a fold approached by halves moves
-#: tau^2 by 1e-6 in the last increments: tau^2 ~ 8 and 22 times the remaining load at the
-#: folds of CaHyMan and the four-bar).
-TAU_RESOLUTION = 1e-9
+#: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences
+#: carries 1e-10 of it): a fall of tau^2 below TAU_NOISE (2 |tau| + TAU_NOISE) is rounding,
+#: not a trend to extrapolate.
+TAU_NOISE = 1e-9
 #: Fraction of the extrapolated distance to a singularity that one increment may cover:
 #: at a fold, where the branch goes like the square root of the remaining load, the
 #: corrector of such an increment is at most 0.17 of its predictor.
@@ -571,15 +570,15 @@ def _fold_distance(history) -> float:
     """Load fraction still to go to where tau (:meth:`EquilibriumEquations.stability`)
     vanishes: a Newton step on tau^2, its slope at the last equilibrium that of the parabola
     through the last three (t, tau) pairs of ``history`` (the chord through two if only
-    two); inf when |tau| does not fall (by more than TAU_RESOLUTION in tau^2) or has
-    changed sign."""
+    two); inf when |tau| does not fall (beyond its rounding, TAU_NOISE) or has changed
+    sign."""
     if len(history) < 2:
         return np.inf
     t, tau = np.array(history[-3:]).T
     if np.any(tau[:-1] * tau[-1] <= 0.0):
         return np.inf
     y = tau * tau
-    if y[-2] - y[-1] <= TAU_RESOLUTION:  # rounding (or |tau| does not fall)
+    if y[-2] - y[-1] <= TAU_NOISE * (2.0 * abs(tau[-2]) + TAU_NOISE):  # rounding, or rising
         return np.inf
     slope = (y[-1] - y[-2]) / (t[-1] - t[-2])
     if t.size == 3:  # add the curvature term of the parabola, at t[-1]
