@@ -343,7 +343,8 @@ def solve_equilibrium(
         tol: closure tolerance (infinity norm) [m, rad], finite and > 0; default
             :data:`CLOSURE_TOL` rad and CLOSURE_TOL L for the rows in metres.
         max_iter: Newton iterations per load increment (>= 1).
-        max_halvings: how many times in all a failed load increment may be halved (>= 0).
+        max_halvings: how many times in all a failed or refused load increment may be
+            halved (>= 0).
         max_step: largest Newton step (infinity norm) [rad or m], > 0; default 0.5 rad
             and 0.5 L (:data:`MAX_STEP`).
         max_increment: largest predicted joint motion per load increment (infinity

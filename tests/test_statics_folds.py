@@ -297,3 +297,19 @@ def test_cahyman_answers_near_a_leg_singularity_are_the_branch_from_rest_or_a_fo
         wrench = np.r_[0.23 * unit(rng.normal(size=3)), 0.97 * unit(rng.normal(size=3))]
         folds += check_branch(cahyman.clm, q, "M", 0.5 * wrench, finest=0.01 * cahyman.clm.length)
     assert folds >= 1
+
+
+def test_the_advice_of_a_newton_failure_leads_to_the_same_branch(fourbar):
+    """Two Newton iterations an increment are too few for 300 N on the four-bar (below
+    its fold, about 990 N along this direction): not a limit load, and the advice (more
+    iterations, smaller increments) gives the answer of the finer continuation."""
+    clm, q0 = fourbar
+    w = np.array([300.0, 0, -300.0, 0, 0, 0])
+    with pytest.raises(cl.EquilibriumError, match="try a smaller max_increment") as err:
+        solve_equilibrium(clm, q0, "P", w, max_iter=2, max_halvings=2)
+    assert not err.value.limit_load and err.value.fold_bracket is None
+    fine = solve_or_error(clm, q0, "P", w, max_increment=0.01)
+    for options in ({"max_iter": 30, "max_halvings": 2}, {"max_iter": 2, "max_increment": 0.02}):
+        eq = solve_or_error(clm, q0, "P", w, **options)
+        assert isinstance(eq, cl.Equilibrium), str(eq)
+        assert_same_deflection(eq.joint_deflection, fine.joint_deflection)
