@@ -375,7 +375,8 @@ def solve_equilibrium(
         EquilibriumError: no equilibrium of the branch from rest found. Its ``limit_load``
             is True at a limit load (a fold: the tangent stiffness turns singular and the
             branch ends), located in ``fold_bracket`` = (``load_fraction``, upper) of
-            relative width :data:`FOLD_RTOL`; False when Newton failed to converge (or
+            relative width :data:`FOLD_RTOL` (the failed increment, wider, when
+            ``max_halvings`` ran out first); False when Newton failed to converge (or
             only converged on another branch) with the tangent stiffness regular:
             ``stability_margin`` holds the margin at the last equilibrium. A smaller
             ``max_increment`` or more ``max_iter`` / ``max_halvings`` then may reach
@@ -626,8 +627,8 @@ def _failure(eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iteratio
 
     (q, t): the last equilibrium and its load fraction; ``s_fail`` the load fraction that
     failed; ``state``: the :meth:`evaluate` state whose residuals the error reports;
-    ``history``: (t, tau) of the last two equilibria. A limit load when tau extrapolates to
-    zero within the failed increment: the fold is bracketed by [t, s_fail].
+    ``history``: (t, tau) of the last three equilibria. A limit load when tau extrapolates
+    to zero within the failed increment: the fold is bracketed by [t, s_fail].
     """
     margin, tau = eqs.stability(q, t * w)
     fold = _fold_distance(history)
