@@ -97,11 +97,14 @@ class EquilibriumError(ClosedLoopError):
         residual: infinity norm of the closure residual reached [m, rad].
         force_residual: infinity norm of the unbalanced generalised force [N m, N].
         load_fraction: fraction of the wrench at which equilibrium was last found.
-        limit_load: True when the tangent stiffness at the last equilibrium is
-            near-singular (a limit load ends the branch), False for a plain failure of the
-            iterations (None when not examined).
-        stability_margin: that spring-scaled margin (1 unloaded, 0 at a limit), or None.
+        limit_load: True when a limit load (a fold, where the tangent stiffness turns
+            singular) ends the branch, False for a plain failure of the iterations (None
+            when not examined).
+        stability_margin: the spring-scaled margin at the last equilibrium (1 unloaded, 0
+            at a limit), or None.
         iterations: Newton iterations spent, or None.
+        fold_bracket: (lower, upper) load fractions between which the limit load lies
+            (lower = ``load_fraction``), or None when it is not a limit load.
     """
 
     def __init__(
@@ -114,8 +117,10 @@ class EquilibriumError(ClosedLoopError):
         limit_load: bool | None = None,
         stability_margin: float | None = None,
         iterations: int | None = None,
+        fold_bracket: tuple[float, float] | None = None,
     ):
         self.residual, self.force_residual = residual, force_residual
+        self.fold_bracket = fold_bracket
         self.load_fraction = load_fraction
         self.limit_load, self.stability_margin = limit_load, stability_margin
         self.iterations = iterations

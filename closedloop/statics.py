@@ -26,12 +26,19 @@ and its null space N (a Newton step on N^T F with the tangent stiffness of
 :func:`closedloop.tangent.tangent_stiffness`). The multipliers are the least-squares
 ones, lambda = -(J_c^T)^+ g_F with g_F = g - J^T w: the part of the closure forces that
 redundant rows leave statically indeterminate is set to zero (minimum norm, rows in
-metres counted in units of L). The load is followed from zero (continuation): each
-increment starts from the tangent prediction dq = N K_t^-1 N^T J^T dw, is sized so that
-this prediction stays small, and is halved when Newton fails, so that the solution stays
-on the branch that starts at q_rest. When even the smallest increment fails, the tangent
-stiffness at the last equilibrium tells a limit load (near-singular: no equilibrium
-further on this branch) from a plain failure of the iterations.
+metres counted in units of L). The load is followed from zero (continuation) on the
+branch that starts at q_rest: each increment starts from the tangent prediction
+dq = N K_t^-1 N^T J^T dw, is sized so that this prediction stays small and its corrector
+a fraction of it, and is halved when Newton fails. An increment is refused, and halved,
+when Newton's answer is not the continuation of the branch: it lies far from the
+prediction, or the prediction back from it misses the last equilibrium, or the tangent
+stiffness turned singular in between (the sign of its determinant). The signed smallest
+singular value of the spring-scaled tangent stiffness, watched at each equilibrium and
+extrapolated, makes the increments approach a singularity by halves; there the solver
+steps across (a bifurcation) or stops at a limit load (a fold) bracketed to
+:data:`FOLD_RTOL` of its load. An answer is an equilibrium of the branch from rest, or
+an :class:`EquilibriumError` that says which: a limit load, or a failure of the
+iterations.
 
 Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and
 prismatic joints) are not part of the equations: an equilibrium outside them is flagged
@@ -85,13 +92,43 @@ MAX_STEP, MAX_INCREMENT = 0.5, 0.1
 MAX_LOAD_STEPS = 1000
 
 
-#: Stability margin (smallest eigenvalue of the symmetric part of the spring-scaled tangent
-#: stiffness, 1 unloaded) at the last equilibrium below which a failed continuation is a
-#: limit load. Near a limit point the margin falls like the square root of the remaining
-#: load, and the continuation stops within the smallest increment of it: measured 0.011 to
-#: 0.053 at the limit loads of the four-bar (five directions) and of the Delta (three); a
-#: Newton failure away from them leaves it O(1) (0.5 to 1 in the tests).
-LIMIT_MARGIN = 0.1
+#: Width of the bracket in which a limit load (fold) is located, relative to its load.
+#: Along the branch the signed smallest singular value tau of the spring-scaled tangent
+#: stiffness (:meth:`closedloop.tangent.EquilibriumEquations.stability`) falls like the
+#: square root of the load still to go; tau^2 extrapolated from the last equilibria gives
+#: the distance to the singularity, which the increments approach by halves. Within
+#: FOLD_RTOL / 4 of the load of the last equilibrium, t, an increment of FOLD_RTOL t steps
+#: across (a bifurcation, where the branch goes on) or finds no equilibrium on the branch:
+#: the fold then lies in [t, (1 + FOLD_RTOL) t] (``EquilibriumError.fold_bracket``).
+FOLD_RTOL = 1e-6
+#: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences
+#: carries 1e-10 of it): a fall of tau^2 below TAU_NOISE (2 |tau| + TAU_NOISE) is rounding,
+#: not a trend to extrapolate.
+TAU_NOISE = 1e-9
+#: Fraction of the extrapolated distance to a singularity that one increment may cover:
+#: at a fold, where the branch goes like the square root of the remaining load, the
+#: corrector of such an increment is at most 0.17 of its predictor.
+FOLD_APPROACH = 0.5
+#: An increment is refused as a jump to another branch when Newton's answer lies further
+#: than JUMP_RATIO times the predicted motion from the prediction (the corrector of a step
+#: on a smooth branch is second order), or when the prediction back from the answer, along
+#: its own tangent, misses the last equilibrium by as much (the unstable twin of a fold
+#: has its tangent reversed). Infinity norms, lengths in units of L.
+JUMP_RATIO = 0.5
+#: Corrector below which an increment is not refused, whatever its predictor: JUMP_FLOOR
+#: [rad, and lengths in units of L] (a load with no first-order motion along the branch)
+#: plus JUMP_RTOL times the deflection from rest, the resolution of the equilibria under
+#: huge loads (1e16 N on the UR5's 1e4 N m/rad springs: correctors of 5e-8 rad at
+#: predictors of 1e-10 rad, at deflections of 1.5 rad). A jump to another branch moves
+#: the joints by a part of the deflection itself (8 times it in CaHyMan near a leg
+#: singularity).
+JUMP_FLOOR, JUMP_RTOL = 1e-9, 1e-6
+#: Newton's iterations for an increment stop when they leave WANDER times the largest
+#: corrector allowed (:func:`_allowed`): bound for another branch, or nowhere.
+WANDER = 4.0
+#: Ratio of corrector to predictor that the next increment aims at (the increments follow
+#: the curvature of the branch, within JUMP_RATIO).
+CORRECTOR_AIM = 0.25
 
 
 @dataclass(frozen=True)
@@ -198,14 +235,16 @@ def potential_energy(
     return float(springs - f @ dp + weight)
 
 
-def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_limit):
+def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_limit, radius):
     """Newton iterations at a fixed wrench; returns (q or None, state, iterations).
 
     Args:
         row_tol: (m,) closure tolerance of each row [m, rad]; step_limit: (nv,) largest
-            step of each coordinate [rad, m].
+            step of each coordinate [rad, m]; radius: the iterations stop (None) when they
+            leave this distance from the start (:func:`_distance`): bound for another
+            branch.
     """
-    units = eqs.units
+    units, start = eqs.units, q
     st = eqs.evaluate(q, w)
     for it in range(max_iter + 1):
         if _closed(st, row_tol) and _balanced(st, eqs.free_scales):
@@ -220,6 +259,8 @@ def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_lim
         if capped:
             v /= ratio
         q = pin.integrate(eqs.clm.model, q, v)
+        if _distance(eqs, start, q) > radius:
+            break
         st = eqs.evaluate(q, w)
         if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
             break
@@ -302,7 +343,8 @@ def solve_equilibrium(
         tol: closure tolerance (infinity norm) [m, rad], finite and > 0; default
             :data:`CLOSURE_TOL` rad and CLOSURE_TOL L for the rows in metres.
         max_iter: Newton iterations per load increment (>= 1).
-        max_halvings: how many times in all a failed load increment may be halved (>= 0).
+        max_halvings: how many times in all a failed or refused load increment may be
+            halved (>= 0).
         max_step: largest Newton step (infinity norm) [rad or m], > 0; default 0.5 rad
             and 0.5 L (:data:`MAX_STEP`).
         max_increment: largest predicted joint motion per load increment (infinity
@@ -330,11 +372,15 @@ def solve_equilibrium(
             message naming the stiffest and the softest (:func:`_check_spread`); so is one
             with a passive joint (k = 0), whose spring-free motions
             :func:`closedloop.springs.spring_factor` checks. Without either, any spread.
-        EquilibriumError: no equilibrium found even with the smallest load increment. Its
-            ``limit_load`` is True when the tangent stiffness at the last equilibrium is
-            near-singular (stability margin <= :data:`LIMIT_MARGIN`: a limit load ends the
-            branch), False when Newton merely failed to converge; ``stability_margin``
-            holds that margin. :class:`JointLimitError` (a subclass) with
+        EquilibriumError: no equilibrium of the branch from rest found. Its ``limit_load``
+            is True at a limit load (a fold: the tangent stiffness turns singular and the
+            branch ends), located in ``fold_bracket`` = (``load_fraction``, upper) of
+            relative width :data:`FOLD_RTOL` (the failed increment, wider, when
+            ``max_halvings`` ran out first); False when Newton failed to converge (or
+            only converged on another branch) with the tangent stiffness regular:
+            ``stability_margin`` holds the margin at the last equilibrium. A smaller
+            ``max_increment`` or more ``max_iter`` / ``max_halvings`` then may reach
+            further, never another branch. :class:`JointLimitError` (a subclass) with
             ``enforce_limits``.
     """
     _check_options(tol, max_iter, max_halvings, max_step, max_increment)
@@ -357,66 +403,79 @@ def solve_equilibrium(
     step_limit = units.limit(max_step, MAX_STEP)
     increment_limit = units.limit(max_increment, MAX_INCREMENT)
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
-    margin = 1.0  # stability margin of the last equilibrium (1 at rest)
+    st = eqs.evaluate(q, 0.0 * w)
     if enforce_limits:
-        _enforce_limits(clm, q, eqs.evaluate(q, 0.0 * w), 0.0, where)
+        _enforce_limits(clm, q, st, 0.0, where)
+    rate = _rate(eqs, q, 0.0, w, st)
+    # (load fraction, tau) of the last three equilibria (tau of
+    # EquilibriumEquations.stability: 1 at rest)
+    history = [(0.0, 1.0)]
     while t < 1.0:
-        st = eqs.evaluate(q, t * w)  # also the kinematics of q, after a failed attempt
-        rate = eqs.step(q, t * w, st, load=w)[0] if w.any() else np.zeros(clm.model.nv)
-        ds = min(dt, 1.0 - t)
+        fold = _fold_distance(history)
+        probe = fold <= 0.25 * FOLD_RTOL * t  # a singularity within reach: across, or stop
         speed = float(np.max(np.abs(rate) / increment_limit, initial=0.0))
-        if speed * ds > 1.0:
-            ds = 1.0 / speed
-        s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not np.isfinite(speed):  # the rate is that of the full load
             raise InvalidInputError(
                 f"the load {where} overflows the equilibrium equations (their generalised "
                 "forces and stiffness leave the double range); expected a far smaller load"
             )
+        if probe:
+            ds = min(FOLD_RTOL * t, 1.0 - t)
+        else:
+            ds = min(dt, 1.0 - t, FOLD_APPROACH * fold)
+            if speed * ds > 1.0:
+                ds = 1.0 / speed
+        s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not s_try > t:
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
-            raise _failure(eqs, q, t, w, where, detail, iterations, st)
+            raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
         if steps >= MAX_LOAD_STEPS:  # a deflection of thousands of increments: hours
             detail = (
                 f"{steps} load increments reached only {t:.3g} of the load (each moving the "
                 f"joints by at most max_increment, now {ds:.3g} of the load): a deflection "
                 "far beyond the mechanism's size; give a smaller load or a larger max_increment"
             )
-            raise _failure(eqs, q, t, w, where, detail, iterations, st)
+            raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
+        allowed = _allowed(eqs, q, guess)
         q_new, st_try, it = _newton(
-            eqs, guess, s_try * w, row_tol=row_tol, max_iter=max_iter, step_limit=step_limit
+            eqs,
+            guess,
+            s_try * w,
+            row_tol=row_tol,
+            max_iter=max_iter,
+            step_limit=step_limit,
+            radius=WANDER * allowed,
         )
         iterations += it
-        # An increment whose equilibrium turns unstable far from the predicted point has
-        # jumped across a fold (a limit load) onto another branch: refused like a failed
-        # one. A branch that turns unstable where it is (a bifurcation, e.g. a column
-        # loaded through its hinge) is followed.
-        unstable, margin_new = False, margin
-        if q_new is not None and margin > 0.0:
-            margin_new = eqs.margin(q_new, s_try * w)
-            if margin_new <= 0.0:
-                predicted = np.max(
-                    np.abs(pin.difference(clm.model, q, guess)) / units.coords, initial=0.0
-                )
-                corrected = np.max(
-                    np.abs(pin.difference(clm.model, guess, q_new)) / units.coords, initial=0.0
-                )
-                unstable = corrected > 0.5 * max(predicted, STEP_TOL)
-        if q_new is None or unstable:
-            halvings += 1
-            if halvings > max_halvings:
-                what = "only an unstable equilibrium found" if unstable else "Newton failed"
+        why = "Newton failed"
+        if q_new is not None:
+            tau_new = eqs.stability(q_new, s_try * w)[1]
+            rate_new = _rate(eqs, q_new, s_try, w, st_try)  # also the kinematics of q_new
+            back = pin.integrate(clm.model, q_new, (t - s_try) * rate_new)
+            # unloaded, M = I; a spring-free motion that any load destabilises (a link
+            # upright on a passive joint) flips the sign of det M at once, at t = 0
+            across = probe or t == 0.0
+            points = (q, guess, q_new, back)
+            why = _jump(eqs, points, (history[-1][1], tau_new), allowed, across)
+        if why:
+            if probe or halvings >= max_halvings:
                 detail = (
-                    f"{what} at {s_try:.6g} of the load, {iterations} iterations in all "
-                    f"({steps} increments, {halvings - 1} halvings)"
+                    f"{why} at {s_try:.9g} of the load, {iterations} iterations in all "
+                    f"({steps} increments, {halvings} halvings)"
                 )
-                raise _failure(eqs, q, t, w, where, detail, iterations, st_try)
+                raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st_try, history)
+            halvings += 1
             dt = 0.5 * ds
             continue
         if enforce_limits:
             _enforce_limits(clm, q_new, st_try, t, where)
-        q, st, t, steps, dt, margin = q_new, st_try, s_try, steps + 1, 2.0 * ds, margin_new
+        # the corrector grows like the square of the increment: the next one aims at
+        # CORRECTOR_AIM of its predictor (at most doubled, at least halved)
+        ratio = _distance(eqs, guess, q_new) / max(_distance(eqs, q, guess), JUMP_FLOOR)
+        dt = ds * min(2.0, max(0.5, CORRECTOR_AIM / max(ratio, 1e-300)))
+        q, st, rate, t, steps = q_new, st_try, rate_new, s_try, steps + 1
+        history = [*history[-2:], (t, tau_new)]
     bad = joints_outside_limits(clm, q)
     if bad:
         warnings.warn(
@@ -503,24 +562,92 @@ def _advice(eqs: EquilibriumEquations, q) -> str:
     return "try a smaller max_increment or a larger max_iter"
 
 
-def _failure(eqs: EquilibriumEquations, q, t, w, where, detail, iterations, state):
+def _rate(eqs: EquilibriumEquations, q, t: float, w, st: dict) -> np.ndarray:
+    """(nv,) dq/ds at the equilibrium q under t w (state ``st``) as the load grows by s w
+    [rad or m per unit of load fraction]; zero without load."""
+    return eqs.step(q, t * w, st, load=w)[0] if w.any() else np.zeros(eqs.clm.model.nv)
+
+
+def _fold_distance(history) -> float:
+    """Load fraction still to go to where tau (:meth:`EquilibriumEquations.stability`)
+    vanishes: a Newton step on tau^2, its slope at the last equilibrium that of the parabola
+    through the last three (t, tau) pairs of ``history`` (the chord through two if only
+    two); inf when |tau| does not fall (beyond its rounding, TAU_NOISE) or has changed
+    sign."""
+    if len(history) < 2:
+        return np.inf
+    t, tau = np.array(history[-3:]).T
+    if np.any(tau[:-1] * tau[-1] <= 0.0):
+        return np.inf
+    y = tau * tau
+    if y[-2] - y[-1] <= TAU_NOISE * (2.0 * abs(tau[-2]) + TAU_NOISE):  # rounding, or rising
+        return np.inf
+    slope = (y[-1] - y[-2]) / (t[-1] - t[-2])
+    if t.size == 3:  # add the curvature term of the parabola, at t[-1]
+        slope += (t[-1] - t[-2]) * (slope - (y[1] - y[0]) / (t[1] - t[0])) / (t[2] - t[0])
+    return y[-1] / -slope if slope < 0.0 else np.inf
+
+
+def _distance(eqs: EquilibriumEquations, a: np.ndarray, b: np.ndarray) -> float:
+    """Infinity norm of difference(a, b) [rad, and lengths in units of L]."""
+    d = pin.difference(eqs.clm.model, a, b) / eqs.units.coords
+    return float(np.max(np.abs(d), initial=0.0))
+
+
+def _allowed(eqs: EquilibriumEquations, q: np.ndarray, guess: np.ndarray) -> float:
+    """Largest corrector of an increment from the equilibrium q predicted at ``guess``
+    (both (nq,)) [rad, and lengths in units of L]: JUMP_RATIO of the predictor, plus the
+    resolution of the equilibria (JUMP_FLOOR, JUMP_RTOL)."""
+    rounding = JUMP_FLOOR + JUMP_RTOL * _distance(eqs, eqs.q_rest, guess)
+    return JUMP_RATIO * _distance(eqs, q, guess) + rounding
+
+
+def _jump(eqs: EquilibriumEquations, points, taus, allowed: float, across: bool) -> str:
+    """Why an increment that converged is refused ('' when it is not).
+
+    Args:
+        points: (q, guess, q_new, back): the last equilibrium, the prediction Newton
+            started from, its answer, and the prediction from q_new back to the last load
+            fraction along its own tangent, (nq,) each.
+        allowed: the largest corrector (:func:`_allowed`).
+        taus: tau at q and at q_new; across: whether the increment may step across a
+            singularity (one extrapolated within it): a sign change of det M is allowed
+            only then.
+    """
+    q, guess, q_new, back = points
+    if _distance(eqs, guess, q_new) > allowed or _distance(eqs, back, q) > allowed:
+        return "Newton converged away from the predicted equilibrium (on another branch)"
+    if taus[0] * taus[1] <= 0.0 and not across:
+        return "the tangent stiffness turned singular within the increment"
+    return ""
+
+
+def _failure(eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iterations, state, history):
     """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
 
-    (q, t): the last equilibrium and its load fraction; ``state``: the :meth:`evaluate`
-    state whose residuals the error reports (of the failed attempt).
+    (q, t): the last equilibrium and its load fraction; ``s_fail`` the load fraction that
+    failed; ``state``: the :meth:`evaluate` state whose residuals the error reports;
+    ``history``: (t, tau) of the last three equilibria. A limit load when tau extrapolates
+    to zero within the failed increment: the fold is bracketed by [t, s_fail].
     """
-    margin = eqs.margin(q, t * w)
-    limit = margin <= LIMIT_MARGIN
+    margin, tau = eqs.stability(q, t * w)
+    fold = _fold_distance(history)
+    limit = fold <= s_fail - t
     if limit:
         reason = (
-            f"no static equilibrium found {where} beyond {t:.6g} of the load: a limit load "
-            f"(stability margin {margin:.3g} <= {LIMIT_MARGIN:g} there: the tangent stiffness "
-            f"is near-singular or indefinite) ends the branch that starts at q_rest; {detail}"
+            f"no static equilibrium found {where} beyond {t:.9g} of the load: a limit load "
+            f"(fold) between {t:.9g} and {s_fail:.9g} of the load ends the branch that starts "
+            f"at q_rest (the spring-scaled tangent stiffness turns singular there: its "
+            f"smallest singular value {abs(tau):.3g}, extrapolated to 0 at {t + fold:.9g}; "
+            f"stability margin {margin:.3g}); {detail}"
         )
     else:
+        near = "" if not np.isfinite(fold) else f", extrapolated to 0 at {t + fold:.6g}"
         reason = (
-            f"the solver failed to converge {where}: {detail}; not a limit load (stability "
-            f"margin {margin:.3g} > {LIMIT_MARGIN:g} at {t:.6g} of the load): {_advice(eqs, q)}"
+            f"the solver failed to converge {where}: {detail}; not a limit load (the "
+            f"spring-scaled tangent stiffness is regular at {t:.6g} of the load: smallest "
+            f"singular value {abs(tau):.3g}{near}, stability margin {margin:.3g}): "
+            f"{_advice(eqs, q)}"
         )
     return EquilibriumError(
         reason,
@@ -530,4 +657,5 @@ def _failure(eqs: EquilibriumEquations, q, t, w, where, detail, iterations, stat
         limit_load=limit,
         stability_margin=margin,
         iterations=iterations,
+        fold_bracket=(float(t), float(s_fail)) if limit else None,
     )

@@ -576,20 +576,35 @@ class EquilibriumEquations:
         return N @ (V / sig), N @ Z, float(sig[0]) if sig.size else 1.0
 
     def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
-        """Stability margin at an equilibrium q (nq,) under the load w.
+        """Stability margin at an equilibrium q (nq,) under the load w (the first value of
+        :meth:`stability`)."""
+        return self.stability(q, w)[0]
 
-        As in :class:`closedloop.preload.PreloadedCompliance`: the smallest eigenvalue of
-        the symmetric part of N^T K_t N on the motions with a restoring spring, scaled by
-        their spring stiffness; 1 unloaded, 0 where K_t turns singular, < 0 if unstable.
-        Spring-free motions the load does not act on (a rod spinning about its axis) are
-        left out; the sprung ones are those that move a sprung coordinate
-        (:meth:`_sprung_motions`).
-        The spring-free ones that the load acts on (a link hanging on a passive joint)
-        settle with them (:func:`settled_tangent`, :func:`stability_margin`).
+    def stability(self, q: np.ndarray, w: Load | np.ndarray) -> tuple[float, float]:
+        """(margin, tau) at an equilibrium q (nq,) under the load w, both dimensionless.
+
+        tau is the smallest singular value of the spring-scaled tangent stiffness M (the
+        matrix whose symmetric part gives the margin) with the sign of det M: 1 unloaded,
+        0 where K_t turns singular (a limit load or a bifurcation), and it changes sign
+        only there; also for a world-fixed moment, whose M is not symmetric and whose
+        margin may turn negative while M stays regular. Near a limit load it falls like
+        the square root of the load still to go.
+
+        The margin, as in :class:`closedloop.preload.PreloadedCompliance`: the smallest
+        eigenvalue of the symmetric part of N^T K_t N on the motions with a restoring
+        spring, scaled by their spring stiffness; 1 unloaded, 0 where K_t turns singular,
+        < 0 if unstable. Spring-free motions the load does not act on (a rod spinning about
+        its axis) are left out; the sprung ones are those that move a sprung coordinate
+        (:meth:`_sprung_motions`). The spring-free ones that the load acts on (a link
+        hanging on a passive joint) settle with them (:func:`settled_tangent`,
+        :func:`stability_margin`).
         """
         st = self.evaluate(q, w)
         T, Z, top = self._sprung_motions(st)
         T, Z = self.free_scales[:, None] * T, self.free_scales[:, None] * Z / top  # on x
         H = self._restricted(q, w, st)
         M = settled_tangent(T.T @ H @ T, H, T, Z)[0]  # T^T K_q T = I on the sprung ones
-        return stability_margin(M, T.shape[1])
+        if not M.size:
+            return 1.0, 1.0
+        tau = np.linalg.slogdet(M)[0] * np.linalg.svd(M, compute_uv=False)[-1]
+        return stability_margin(M, T.shape[1]), float(tau)

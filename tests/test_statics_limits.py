@@ -103,15 +103,20 @@ def test_a_load_far_beyond_the_springs_is_called_so(ur5):
         assert "max_increment" not in str(err.value)
 
 
-def test_vanishing_load_increments_stop_the_solver(fourbar):
-    """Halving without end makes the increment vanish next to the limit load: no loop."""
+def test_few_iterations_and_endless_halvings_still_bracket_the_limit_load(fourbar):
+    """Three Newton iterations an increment and no bound on the halvings: the increments
+    approach the limit load by halves and bracket it as the default settings do (they
+    were once halved until they vanished, 'no progress', without locating it)."""
     clm, q0 = fourbar
-    with pytest.raises(EquilibriumError, match="no progress, the load increment") as err:
-        solve_equilibrium(
-            clm, q0, "P", [3000.0, 0, -3000.0, 0, 0, 0], max_iter=3, max_halvings=10**4
-        )
-    assert err.value.limit_load
-    assert 0.25 < err.value.load_fraction < 0.34
+    w = [3000.0, 0, -3000.0, 0, 0, 0]
+    with pytest.raises(EquilibriumError, match="a limit load") as err:
+        solve_equilibrium(clm, q0, "P", w, max_iter=3, max_halvings=10**4)
+    with pytest.raises(EquilibriumError, match="a limit load") as default:
+        solve_equilibrium(clm, q0, "P", w)
+    assert err.value.limit_load and default.value.limit_load
+    (lo, hi), (lo_d, hi_d) = err.value.fold_bracket, default.value.fold_bracket
+    assert err.value.load_fraction == lo and 0.25 < lo < 0.34
+    assert max(lo, lo_d) <= min(hi, hi_d)  # the two brackets hold the same fold
 
 
 @pytest.mark.parametrize(
