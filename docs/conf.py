@@ -46,6 +46,7 @@ myst_heading_anchors = 3
 
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
+autodoc_typehints_description_target = "documented"
 autodoc_default_options = {"members": True, "show-inheritance": False}
 napoleon_google_docstring = True
 napoleon_numpy_docstring = False
@@ -68,6 +69,9 @@ sphinx_gallery_conf = {
     "plot_gallery": "False" if os.environ.get("CLOSEDLOOP_DOCS_NO_GALLERY") else "True",
     "image_scrapers": ("matplotlib",),
     "matplotlib_animations": False,
+    # the examples that use a public name, listed on its API page (``minigallery``)
+    "backreferences_dir": "api/generated",
+    "doc_module": ("closedloop", "cahyman_pin"),
 }
 
 #: The viewer's self-contained page of the four-bar, written at build time and embedded by
