@@ -20,9 +20,11 @@ matplotlib.use("Agg")
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import closedloop  # noqa: E402
+from closedloop.blas import single_threaded_blas  # noqa: E402
+
+single_threaded_blas()  # the examples run many small queries in this process
 
 project = "closedloop"
 author = "The closedloop authors"
