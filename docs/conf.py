@@ -28,7 +28,7 @@ single_threaded_blas()  # the examples run many small queries in this process
 
 project = "closedloop"
 author = "The closedloop authors"
-copyright = "2024-2026, The closedloop authors"
+copyright = "2026, The closedloop authors"
 release = closedloop.__version__
 version = ".".join(release.split(".")[:2])
 
