@@ -131,7 +131,9 @@ def test_bash_commands_run_from_an_empty_folder(tmp_path, document):
 PYTHON_BLOCKS = [(d, i) for d in DOCUMENTS for i in range(len(blocks(d, "python")))]
 
 
-@pytest.mark.parametrize(("document", "index"), PYTHON_BLOCKS, ids=lambda v: str(v))
+@pytest.mark.parametrize(
+    ("document", "index"), PYTHON_BLOCKS, ids=[f"{name(d)}-{i}" for d, i in PYTHON_BLOCKS]
+)
 def test_python_blocks_run_from_an_empty_folder(tmp_path, document, index):
     block = blocks(document, "python")[index]
     done = subprocess.run(
