@@ -5,9 +5,11 @@ docs/_build/html``), which sets ``CLOSEDLOOP_DOCS_HTML`` to the build folder. Wi
 variable the tests are skipped, saying so; with it set and no built site there, they fail.
 The pages are served on 127.0.0.1 from the build folder and loaded over the DevTools
 protocol: the index page, the API page of ``closedloop.compliance``, the four-bar gallery
-page (with the viewer's page embedded) and the search page. On each page: no JavaScript
-exception or console error, no request that fails, every image decoded and every embedded
-page loaded; the search page finds ``compliance``.
+page (with the viewer's page embedded), the theory page and the search page. On each page:
+no JavaScript exception or console error, no request that fails, every image decoded and
+every embedded page loaded; the equations typeset offline; the search page finds
+``compliance``. And every public name of ``closedloop`` and ``cahyman_pin`` has an entry
+in the API reference.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import functools
 import http.server
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -28,6 +31,9 @@ from pathlib import Path
 import pytest
 from helpers import FLAGS, browser
 from tornado.websocket import websocket_connect
+
+import cahyman_pin
+import closedloop
 
 ENV = "CLOSEDLOOP_DOCS_HTML"
 PAGE_TIMEOUT = 60.0  # [s] per page, Chromium's start included
@@ -212,3 +218,18 @@ def test_search_finds_compliance(site, server, tmp_path):
     links = json.loads(result["value"] or "[]")
     assert links, "the search for 'compliance' listed no page"
     assert any("ompliance" in link for link in links), links
+
+
+def test_every_public_name_has_an_api_entry(site):
+    """Each name of ``closedloop.__all__`` and ``cahyman_pin.__all__`` is documented on an
+    API page (a public submodule by its members)."""
+    text = "".join(p.read_text() for p in (site / "api").glob("*.html"))
+    ids = set(re.findall(r'id="([^"]+)"', text))
+    missing = [
+        f"{package.__name__}.{n}"
+        for package in (closedloop, cahyman_pin)
+        for n in package.__all__
+        if f"{package.__name__}.{n}" not in ids
+        and not any(i.startswith(f"{package.__name__}.{n}.") for i in ids)
+    ]
+    assert not missing, f"public names without an entry in docs/api/: {missing}"
