@@ -122,9 +122,9 @@ def compliances(
     Raises:
         InvalidInputError: Q is not (n, nq) finite real numbers; bad axes or length.
         NameNotFoundError: unknown frame.
-        The error of :func:`closedloop.compliance.compliance` at the first configuration
-        that has one (open loops, a mechanism, an overflow), with a note naming the
-        configuration's index (an error of the frame, axes or length concerns no
+        ClosedLoopError: the error of :func:`closedloop.compliance.compliance` at the first
+        configuration that has one (open loops, a mechanism, an overflow), with a note
+        naming the configuration's index (an error of the frame, axes or length concerns no
         configuration: it has no such note).
     """
     Q = _check_configurations(clm, Q)

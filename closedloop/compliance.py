@@ -430,8 +430,8 @@ def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dic
         joint name -> share (dimensionless, >= 0), every joint with a finite spring, in
         the model's order; empty when the wrench does no work: a zero wrench, or one along
         the rigid directions, whose work w^T C w is rounding (in the scaled coordinates of
-        the rank rule, at most ``RANK_RTOL``^2 |C_s|_F |w_s|^2, about the most that a wrench along
-        a direction the rank leaves out could do).
+        the rank rule, at most ``RANK_RTOL**2 * norm(C_s) * norm(w_s)**2``, Frobenius norm:
+        about the most that a wrench along a direction the rank leaves out could do).
     """
     if hasattr(result, "equilibrium"):  # a PreloadedCompliance
         raise InvalidInputError(

@@ -384,7 +384,7 @@ class StiffnessIndices:
 
     @property
     def condition_number(self) -> float:
-        """cond(K) = cond(C) of the SI matrix, max |lambda| / min |lambda| (positive also for
+        """cond(K) = cond(C) of the SI matrix, max abs(lambda) / min abs(lambda) (positive also for
         an indefinite K, at an unstable preloaded equilibrium; the 2-norm condition number
         of a non-symmetric K): depends on the length unit and the point."""
         return self._condition(np.ones(6))

@@ -324,7 +324,7 @@ def solve_equilibrium(
     Converged when the closure residual is below ``tol`` and the unbalanced generalised
     force on the admissible motions is below ``FORCE_RTOL`` times the largest spring or
     load generalised force, or (when rounding in the spring forces prevents that) after a
-    Newton step below ``STEP_TOL`` max(1, |q|_inf); Newton converging quadratically, q is
+    Newton step below ``STEP_TOL * max(1, norm(q, inf))``; Newton converging quadratically, q is
     then exact to rounding. The tests are unit-free: lengths count in units of the
     mechanism's characteristic length L (``clm.length``), forces on translations as N L,
     so that a mechanism scaled from micrometres to kilometres converges alike.

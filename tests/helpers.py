@@ -8,12 +8,14 @@ several modules use are in ``conftest.py``.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import pytest
 import scipy.linalg
 
 from closedloop.assembly import assemble
@@ -21,6 +23,27 @@ from closedloop.kinematics import closure_jacobian, closure_residual, frame_jaco
 from closedloop.model import ClosedLoopModel, Closure
 
 REPO = Path(__file__).resolve().parent.parent
+BROWSERS = ("chromium", "chromium-browser", "google-chrome")
+#: Headless Chromium with software WebGL and no background traffic (closed network).
+FLAGS = (
+    "--headless", "--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader", "--disable-gpu", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--window-size=800,600", "--remote-debugging-port=0", "--remote-allow-origins=*",
+)  # fmt: skip
+
+
+def browser() -> str:
+    """The path of a Chromium on PATH; without one, the calling test is skipped, saying so."""
+    for name in BROWSERS:
+        if path := shutil.which(name):
+            return path
+    pytest.skip(
+        f"real-browser tests skipped: no Chromium on PATH (looked for {', '.join(BROWSERS)}); "
+        "install the Debian package 'chromium' to run them"
+    )
+
+
 #: The per-point indices of a map (closedloop.indices.batch_indices names) as a single
 #: query's StiffnessIndices gives them.
 INDEX_GETTERS = {

@@ -17,7 +17,6 @@ import asyncio
 import base64
 import json
 import os
-import shutil
 import signal
 import subprocess
 import time
@@ -28,7 +27,7 @@ import meshcat
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import UR5_Q
+from helpers import FLAGS, UR5_Q, browser
 from PIL import Image
 from test_viewer_edges import scaled_fourbar
 from tornado.websocket import websocket_connect
@@ -41,14 +40,6 @@ from closedloop.viewer_mesh import DEFLECTED, GHOST, node_name
 from closedloop.viewer_page import LOOP_PING_PONG, SLIDER_RANGE
 from closedloop.viewer_scene import deflection_scene
 
-BROWSERS = ("chromium", "chromium-browser", "google-chrome")
-#: Headless Chromium with software WebGL and no background traffic (closed network).
-FLAGS = (
-    "--headless", "--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader", "--disable-gpu", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--window-size=800,600", "--remote-debugging-port=0", "--remote-allow-origins=*",
-)  # fmt: skip
 BROWSER_TIMEOUT = 60.0  # [s] per page
 VIEWPORT = (800, 600)  # [CSS px]
 #: Browsers run at the same time (each renders on the CPU).
@@ -123,16 +114,6 @@ PROBE = """new Promise(function (resolve) {
   }, 20);
 })"""
 PROBE = PROBE.replace("GHOST", GHOST).replace("DELAY", str(PROBE_DELAY_MS))
-
-
-def browser() -> str:
-    for name in BROWSERS:
-        if path := shutil.which(name):
-            return path
-    pytest.skip(
-        f"real-browser tests skipped: no Chromium on PATH (looked for {', '.join(BROWSERS)}); "
-        "install the Debian package 'chromium' to run them"
-    )
 
 
 async def _devtools(target: str, profile, wait_ms: int, actions=None):

@@ -731,7 +731,7 @@ def test_universal_joint_has_two_sprung_axes(tmp_path):
 
 
 def test_cassie_which_spring_dominates(cassie):
-    """The README's reading of Cassie's foot compliance: in the sagittal directions the
+    """The documentation's reading of Cassie's foot compliance: in the sagittal directions the
     heel spring stores more energy than the knee-shin spring; lateral loads deflect only
     the roll and yaw motors; the near-rigid twist is lateral (dy, rx, rz)."""
     res = cl.compliance(cassie, np.zeros(22), "left-foot")

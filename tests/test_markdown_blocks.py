@@ -1,12 +1,13 @@
-"""The README's examples, run as a newcomer would: from an empty folder, as written.
+"""The code of the README and of the documentation's Markdown pages, run as a newcomer would.
 
-Every ```python block runs (exit 0). Every command of the ```bash blocks runs in one empty
-folder, in order (one shell per block, so that a variable set by a line is seen by the
-next), and exits with status 0, or with the status ``N`` its trailing comment announces as
-``# exit N`` (the README documents the status there). The commands that
-install software are not run here: they are listed, with the reason, in
-:data:`NOT_RUN_HERE`; a listed command that the README no longer has fails the test, so
-that the list cannot hide a command.
+Every ```python block runs (exit 0) from an empty folder. Every command of the ```bash
+blocks runs in one empty folder per document, in order (one shell per block, so that a
+variable set by a line is seen by the next), and exits with status 0, or with the status
+``N`` its trailing comment announces as ``# exit N`` (the page documents the status there).
+Every ```yaml block parses. The commands that install software or take minutes are not
+run here: they are listed, with the reason, in :data:`NOT_RUN_HERE`; a listed command that
+no document has any more fails the test, so that the list cannot hide a command. The
+gallery's scripts (``examples/``) run when the documentation is built.
 """
 
 from __future__ import annotations
@@ -18,10 +19,13 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 from helpers import REPO
 
-README = REPO / "README.md"
-#: Commands of the README not run by this test, and why (they are the CI's: .ci/run).
+#: The documents whose blocks run: the README and every Markdown page of the docs.
+DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("**/*.md"))]
+DOCUMENTS = [d for d in DOCUMENTS if "_build" not in d.parts]
+#: Commands not run by this test, and why (they are the CI's: .ci/run).
 NOT_RUN_HERE = {
     "python3 -m venv .venv && . .venv/bin/activate && pip install . && cahyman report": (
         "creates a virtual environment and installs from the network (minutes); "
@@ -32,13 +36,27 @@ NOT_RUN_HERE = {
         "creates a virtual environment, installs from the network and runs this suite; "
         ".ci/run does it"
     ),
+    "python3 -m venv .venv && . .venv/bin/activate && pip install .": (
+        "creates a virtual environment and installs from the network; .ci/run installs"
+    ),
+    'pip install ".[docs]" && python -m sphinx -W --keep-going -b html docs docs/_build/html': (
+        "installs from the network and builds the site (minutes); .ci/run builds it"
+    ),
+    "python scripts/bench_closedloop.py": (
+        "takes minutes and needs the repository's scripts/; tests/test_bench_scripts.py "
+        "runs its --smoke mode"
+    ),
 }
 EXIT_COMMENT = re.compile(r"#\s*exit\s+(\d+)\b")
 
 
-def blocks(language: str) -> list[str]:
-    """The README's fenced blocks of ``language``, in order."""
-    text = README.read_text()
+def name(document: Path) -> str:
+    return str(document.relative_to(REPO))
+
+
+def blocks(document: Path, language: str) -> list[str]:
+    """The document's fenced blocks of ``language``, in order."""
+    text = document.read_text()
     return [b.split("```", 1)[0] for b in text.split(f"```{language}\n")[1:]]
 
 
@@ -60,8 +78,8 @@ def commands(block: str) -> list[tuple[str, int]]:
     return out
 
 
-def bash_commands() -> list[tuple[str, int]]:
-    return [c for block in blocks("bash") for c in commands(block)]
+def bash_commands(document: Path) -> list[tuple[str, int]]:
+    return [c for block in blocks(document, "bash") for c in commands(block)]
 
 
 def run_block(block: list[tuple[str, int]], folder: Path) -> tuple[list[int], str]:
@@ -83,16 +101,23 @@ def newcomer_env() -> dict[str, str]:
 
 
 def test_commands_are_found_and_the_not_run_list_is_current():
-    found = [c for c, _ in bash_commands()]
-    assert len(found) >= 8 and any(c.startswith("closedloop stiffness") for c in found)
+    found = [c for d in DOCUMENTS for c, _ in bash_commands(d)]
+    assert len(found) >= 20 and any(c.startswith("closedloop stiffness") for c in found)
     missing = sorted(set(NOT_RUN_HERE) - set(found))
-    assert not missing, f"NOT_RUN_HERE lists commands the README no longer has: {missing}"
+    assert not missing, f"NOT_RUN_HERE lists commands no document has any more: {missing}"
     assert not any(c.endswith("\\") for c in found)  # continuation lines were joined
 
 
-def test_bash_commands_run_from_an_empty_folder(tmp_path):
-    ran = 0
-    for text in blocks("bash"):
+def test_the_readme_keeps_its_two_commands_and_fits_on_a_few_screens():
+    readme = REPO / "README.md"
+    found = [c for c, _ in bash_commands(readme)]
+    assert set(list(NOT_RUN_HERE)[:2]) <= set(found)  # the two commands, exactly
+    assert len(readme.read_text().splitlines()) <= 250
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=name)
+def test_bash_commands_run_from_an_empty_folder(tmp_path, document):
+    for text in blocks(document, "bash"):
         block = [(c, s) for c, s in commands(text) if c not in NOT_RUN_HERE]
         if not block:
             continue
@@ -101,13 +126,16 @@ def test_bash_commands_run_from_an_empty_folder(tmp_path):
             assert status == expected, (command, status, stderr[-2000:])
         assert len(statuses) == len(block), stderr[-2000:]
         assert "Traceback" not in stderr, stderr[-2000:]
-        ran += len(block)
-    assert ran >= 6
 
 
-@pytest.mark.parametrize("index", range(len(blocks("python"))))
-def test_python_blocks_run_from_an_empty_folder(tmp_path, index):
-    block = blocks("python")[index]
+PYTHON_BLOCKS = [(d, i) for d in DOCUMENTS for i in range(len(blocks(d, "python")))]
+
+
+@pytest.mark.parametrize(
+    ("document", "index"), PYTHON_BLOCKS, ids=[f"{name(d)}-{i}" for d, i in PYTHON_BLOCKS]
+)
+def test_python_blocks_run_from_an_empty_folder(tmp_path, document, index):
+    block = blocks(document, "python")[index]
     done = subprocess.run(
         [sys.executable, "-c", block],
         cwd=tmp_path,
@@ -120,5 +148,11 @@ def test_python_blocks_run_from_an_empty_folder(tmp_path, index):
     assert done.returncode == 0, done.stderr[-2000:]
 
 
+@pytest.mark.parametrize("document", DOCUMENTS, ids=name)
+def test_yaml_blocks_parse(document):
+    for text in blocks(document, "yaml"):
+        assert isinstance(yaml.safe_load(text), dict), text
+
+
 def test_python_blocks_exist():
-    assert len(blocks("python")) >= 2
+    assert len(PYTHON_BLOCKS) >= 15

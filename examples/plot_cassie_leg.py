@@ -1,0 +1,34 @@
+"""
+Cassie's leg from its SDF file
+==============================
+
+example-robot-data ships the Cassie biped as SDF. Each leg is closed by two ball joints
+(the achilles rod and the plantar rod) and carries two springs written in the file (the
+shin flex and the heel spring). An SDF names no actuators, so the five motors of the left
+leg get springs of 1e4 N m/rad; with the pelvis fixed, every other joint is passive.
+"""
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+import closedloop as cl
+from closedloop.compliance import energy_shares
+from closedloop.io import reference_configuration
+
+sdf = cl.robot_data_dir() / "cassie_description/robots/cassie_v2.sdf"
+motors = ["left-roll-op", "left-yaw-op", "left-pitch-op", "left-knee-op", "left-foot-op"]
+leg = cl.load_model(sdf, springs=dict.fromkeys(motors, 1.0e4))
+q = cl.assemble(leg, None, reference_configuration(leg)).q  # the pose drawn in the file
+res = cl.compliance(leg, q, "left-foot")
+print("diagonal of C:", ", ".join(f"{c:.3g}" for c in np.diag(res.C)))
+print(f"scaled condition number {res.condition_number:.2g}, ill-conditioned: {res.ill_conditioned}")
+
+# %%
+# Which spring takes the energy of a vertical force at the foot?
+shares = energy_shares(leg, res, [0, 0, -1.0, 0, 0, 0])
+named = {k: v for k, v in shares.items() if v > 0.01}
+fig, ax = plt.subplots(figsize=(6, 3.5))
+ax.barh(list(named), [100 * v for v in named.values()])
+ax.set_xlabel("share of the deflection energy [%]")
+ax.set_title("Cassie's left leg under a vertical force at the foot")
+fig.tight_layout()

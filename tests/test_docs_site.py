@@ -1,0 +1,235 @@
+"""The built documentation site in a real browser (headless Chromium).
+
+The site is built by ``.ci/run`` (``python -m sphinx -W --keep-going -b html docs
+docs/_build/html``), which sets ``CLOSEDLOOP_DOCS_HTML`` to the build folder. Without that
+variable the tests are skipped, saying so; with it set and no built site there, they fail.
+The pages are served on 127.0.0.1 from the build folder and loaded over the DevTools
+protocol: the index page, the API page of ``closedloop.compliance``, the four-bar gallery
+page (with the viewer's page embedded), the theory page and the search page. On each page:
+no JavaScript exception or console error, no request that fails, every image decoded and
+every embedded page loaded; the equations typeset offline; the search page finds
+``compliance``. And every public name of ``closedloop`` and ``cahyman_pin`` has an entry
+in the API reference.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import http.server
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+from helpers import FLAGS, browser
+from tornado.websocket import websocket_connect
+
+import cahyman_pin
+import closedloop
+
+ENV = "CLOSEDLOOP_DOCS_HTML"
+PAGE_TIMEOUT = 60.0  # [s] per page, Chromium's start included
+#: Evaluated in the page once loaded: images not decoded, frames not loaded (an embedded
+#: viewer page must have run its script: ``viewer`` defined), the number of each.
+PROBE = """(function () {
+  const images = Array.from(document.images);
+  const frames = Array.from(document.querySelectorAll('iframe'));
+  const badImages = images.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.src);
+  const badFrames = frames.filter(f => {
+    const d = f.contentDocument;
+    return !(d && d.readyState === 'complete' && f.contentWindow.viewer !== undefined);
+  }).map(f => f.src);
+  return JSON.stringify({images: images.length, frames: frames.length,
+                         badImages: badImages, badFrames: badFrames});
+})()"""
+#: True once the search results are listed (Sphinx's search fills #search-results).
+SEARCH_DONE = """(function () {
+  const box = document.getElementById('search-results');
+  if (!box) return null;
+  const links = Array.from(box.querySelectorAll('ul li a')).map(a => a.textContent);
+  const status = box.querySelector('p');
+  return (links.length || (status && /did not match|found/i.test(status.textContent)))
+    ? JSON.stringify(links) : null;
+})()"""
+
+
+@pytest.fixture(scope="module")
+def site() -> Path:
+    folder = os.environ.get(ENV)
+    if not folder:
+        pytest.skip(f"documentation site tests skipped: {ENV} is not set (.ci/run sets it)")
+    site = Path(folder)
+    assert (site / "index.html").is_file(), f"{ENV}={folder}: no built site (index.html)"
+    return site
+
+
+@pytest.fixture(scope="module")
+def server(site):
+    """Base URL of the site served on 127.0.0.1 (an ephemeral port) for the module."""
+    handler = functools.partial(QuietHandler, directory=str(site))
+    httpd = Server(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}/"
+    httpd.shutdown()
+    httpd.server_close()
+
+
+class Server(http.server.ThreadingHTTPServer):
+    def handle_error(self, request, client_address) -> None:
+        """A browser closed before a reply was sent (its pages are done): not an error."""
+        if not isinstance(sys.exc_info()[1], ConnectionError):
+            super().handle_error(request, client_address)
+
+
+class QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args) -> None:  # no request lines in the test output
+        pass
+
+
+async def _visit(url: str, profile: Path, done: str | None) -> dict:
+    """Load ``url``; (events of errors, the probe's report, ``done``'s value if given)."""
+    proc = subprocess.Popen(
+        [browser(), *FLAGS, "--no-proxy-server", f"--user-data-dir={profile}", "about:blank"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + PAGE_TIMEOUT
+    try:
+        port_file = profile / "DevToolsActivePort"
+        while not (port_file.is_file() and port_file.read_text().strip()):
+            assert proc.poll() is None, f"Chromium exited with code {proc.returncode}"
+            assert time.monotonic() < deadline, "Chromium did not open its DevTools port"
+            await asyncio.sleep(0.05)
+        port = int(port_file.read_text().split()[0])
+        direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+        with direct.open(f"http://127.0.0.1:{port}/json/list", timeout=10) as f:
+            (page,) = [t for t in json.load(f) if t["type"] == "page"]
+        ws = await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
+        ids, errors, failed = iter(range(1, 1 << 30)), [], []
+
+        def record(message: dict) -> None:
+            method, params = message.get("method"), message.get("params", {})
+            if method == "Runtime.exceptionThrown":
+                errors.append(params["exceptionDetails"].get("exception", {}).get("description")
+                              or params["exceptionDetails"].get("text"))  # fmt: skip
+            elif method == "Runtime.consoleAPICalled" and params.get("type") == "error":
+                errors.append(" ".join(str(a.get("value", a.get("description"))) for a in
+                                       params.get("args", [])))  # fmt: skip
+            elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
+                errors.append(f"{params['entry']['text']} ({params['entry'].get('url')})")
+            elif method == "Network.loadingFailed" and not params.get("canceled"):
+                failed.append(params.get("errorText"))
+            elif method == "Network.responseReceived" and params["response"]["status"] >= 400:
+                failed.append(f"{params['response']['status']} {params['response']['url']}")
+
+        async def call(method: str, **params) -> dict:
+            n = next(ids)
+            await ws.write_message(json.dumps({"id": n, "method": method, "params": params}))
+            while True:
+                message = json.loads(await ws.read_message())
+                if message.get("id") == n:
+                    return message
+                record(message)
+
+        async def evaluate(expression: str):
+            message = await call("Runtime.evaluate", expression=expression, returnByValue=True)
+            return message.get("result", {}).get("result", {}).get("value")
+
+        for domain in ("Runtime", "Log", "Network", "Page"):
+            await call(f"{domain}.enable")
+        await call("Page.navigate", url=url)
+        while await evaluate("document.readyState") != "complete" or await evaluate(
+            "location.href"
+        ) in (None, "about:blank"):
+            assert time.monotonic() < deadline, f"{url} did not load"
+            await asyncio.sleep(0.05)
+        value = None
+        while True:  # embedded pages finish their scripts; the search fills its list
+            report = json.loads(await evaluate(PROBE))
+            value = await evaluate(done) if done else None
+            if not report["badImages"] and not report["badFrames"] and (value or not done):
+                break
+            if time.monotonic() > deadline:
+                break
+            await asyncio.sleep(0.1)
+        await asyncio.sleep(0.3)  # late errors
+        await evaluate("1")  # reads the events that came meanwhile
+        ws.close()
+        return {"errors": errors, "failed": failed, "report": report, "value": value}
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the browser's own process group only
+        proc.wait()
+
+
+def visit(url: str, profile: Path, done: str | None = None) -> dict:
+    return asyncio.run(asyncio.wait_for(_visit(url, profile, done), PAGE_TIMEOUT + 10))
+
+
+def check_page(result: dict, url: str) -> None:
+    assert not result["errors"], (url, result["errors"])
+    assert not result["failed"], (url, result["failed"])
+    assert not result["report"]["badImages"], (url, result["report"])
+    assert not result["report"]["badFrames"], (url, result["report"])
+
+
+def test_index_page_loads_without_errors(site, server, tmp_path):
+    url = server + "index.html"
+    result = visit(url, tmp_path)
+    check_page(result, url)
+    assert result["report"]["images"] >= 1  # the picture of the front page
+
+
+def test_api_page_of_compliance_loads_and_documents_it(site, server, tmp_path):
+    text = (site / "api" / "queries.html").read_text()
+    assert 'id="closedloop.compliance"' in text and 'id="closedloop.compliances"' in text
+    url = server + "api/queries.html"
+    check_page(visit(url, tmp_path), url)
+
+
+def test_gallery_page_shows_its_figure_and_the_embedded_viewer(site, server, tmp_path):
+    url = server + "gallery/plot_fourbar.html"
+    result = visit(url, tmp_path)
+    check_page(result, url)
+    assert result["report"]["images"] >= 1  # the figure of the example
+    assert result["report"]["frames"] == 1  # the viewer's page, loaded with its scene
+
+
+def test_theory_page_typesets_its_equations_offline(site, server, tmp_path):
+    url = server + "theory.html"
+    result = visit(url, tmp_path, "document.querySelectorAll('mjx-container').length || null")
+    check_page(result, url)
+    assert result["value"] and result["value"] >= 10, result["value"]  # MathJax ran
+
+
+def test_search_finds_compliance(site, server, tmp_path):
+    url = server + "search.html?q=compliance"
+    result = visit(url, tmp_path, SEARCH_DONE)
+    check_page(result, url)
+    links = json.loads(result["value"] or "[]")
+    assert links, "the search for 'compliance' listed no page"
+    assert any("ompliance" in link for link in links), links
+
+
+def test_every_public_name_has_an_api_entry(site):
+    """Each name of ``closedloop.__all__`` and ``cahyman_pin.__all__`` is documented on an
+    API page (a public submodule by its members)."""
+    text = "".join(p.read_text() for p in (site / "api").glob("*.html"))
+    ids = set(re.findall(r'id="([^"]+)"', text))
+    missing = [
+        f"{package.__name__}.{n}"
+        for package in (closedloop, cahyman_pin)
+        for n in package.__all__
+        if f"{package.__name__}.{n}" not in ids
+        and not any(i.startswith(f"{package.__name__}.{n}.") for i in ids)
+    ]
+    assert not missing, f"public names without an entry in docs/api/: {missing}"
