@@ -49,7 +49,9 @@ import numpy as np
 import pinocchio as pin
 
 from .balls import ball_springs, urdf_with_balls
-from .beams import apply_beams, insert_beams
+from .beams import apply_beams
+from .data import BUNDLED_MODELS, ROBOTS
+from .data import robot_data_dir as robot_data_dir  # its former home; cl.robot_data_dir
 from .exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
 from .model import (
@@ -91,8 +93,6 @@ class ClosureSpec:
 def _by_name_hint(path: str | os.PathLike) -> str:
     """Where a robot named like the command line's MODEL (``"ur5"``, ``"fourbar"``) is
     found from Python, for the message of a path without a suffix; else ""."""
-    from .data import BUNDLED_MODELS, ROBOTS
-
     name = os.fspath(path)
     if name in ROBOTS:
         return f"; the robot {name!r} by name is cl.load_model(cl.data.robot_file({name!r}))"
@@ -620,7 +620,7 @@ def load_model(
     if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
         if side or beams:
-            clm = insert_beams(clm, {**side, **(beams or {})})
+            clm = clm.with_beams({**side, **(beams or {})})
     return clm
 
 
@@ -636,23 +636,3 @@ def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
     key = next((k for k in ("qpos0", REST) if k in refs), None)
     q = refs[key] if key else pin.neutral(clm.model)
     return np.array(q, dtype=float)
-
-
-def robot_data_dir() -> Path:
-    """Folder ``robots/`` of the installed example-robot-data distribution.
-
-    The package ships no Python module, only files under its cmeel prefix; they are
-    located through the distribution's file list.
-    """
-    import importlib.metadata  # on demand: 30 ms of a command line's start-up
-
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        raise ModelFileError("example-robot-data is not installed") from None
-    for f in dist.files or ():
-        parts = Path(f).parts
-        if "example-robot-data" in parts and "robots" in parts:
-            i = parts.index("robots")
-            return Path(dist.locate_file(Path(*parts[: i + 1])))
-    raise ModelFileError("example-robot-data is installed but its robots folder was not found")

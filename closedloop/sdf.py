@@ -50,6 +50,7 @@ import numpy as np
 import pinocchio as pin
 
 from .conditioning import characteristic_length
+from .data import robot_data_dir
 from .exceptions import ModelFileError
 from .model import Closure
 
@@ -462,8 +463,6 @@ def model_dirs(path: Path) -> list[Path]:
     dirs = list(path.resolve().parents)
     for var in ("GZ_SIM_RESOURCE_PATH", "SDF_PATH", "GAZEBO_MODEL_PATH"):
         dirs += [Path(p) for p in os.environ.get(var, "").split(os.pathsep) if p]
-    from .io import robot_data_dir  # io imports this module
-
     try:
         share = [robot_data_dir().parent.parent]  # share/ holds example-robot-data/robots
     except ModelFileError:  # example-robot-data not installed: not searched
