@@ -34,6 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import frozen, real_array
+from .beams import apply_beams
 from .conditioning import characteristic_length
 from .exceptions import InvalidInputError, NameNotFoundError
 
@@ -590,12 +591,36 @@ class ClosedLoopModel:
         """This model with flexible links: each beam (link name -> specification: end, E,
         G, section, theory, or stiffness_6x6) becomes a 6-dof virtual joint
         ``<link>_beam`` with its tip stiffness as a block spring
-        (:func:`closedloop.beams.insert_beams`). The new model has more coordinates: map a
+        (:func:`closedloop.beams.apply_beams`). The new model has more coordinates: map a
         configuration with :func:`closedloop.beams.map_configuration`.
-        """
-        from .beams import insert_beams  # beams builds models: imported on demand
 
-        return insert_beams(self, beams)
+        Actuated joints, springs and locked joints keep their names; closure anchors are
+        carried over on their joints, those at a beam's tip with the tip (a loop of an MJCF
+        or SDF file closed at the end of a link that becomes a beam); an anchor elsewhere on
+        the beam's link stays with the beam's start.
+
+        Raises:
+            BeamError: a bad specification (the message names the beam and the value).
+        """
+        geoms = [self.visual_model, self.collision_model]
+        ends = [(k.joint1_id, k.joint1_placement) for c in self.closures for k in [c.constraint]]
+        ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
+        model, geoms, springs, ends = apply_beams(self.model, geoms, beams, anchors=ends)
+        n = len(self.closures)
+        closures = [
+            Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
+            for i, c in enumerate(self.closures)
+        ]
+        return ClosedLoopModel(
+            model,
+            closures,
+            self.actuated,
+            {**self.springs, **springs},
+            self.locked,
+            geoms[0],
+            geoms[1],
+            self.name,
+        )
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """Validated copy of a configuration vector q (nq,)."""
