@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .argtypes import finite_float as finite_float  # the option type, shared below the CLI
 from .blas import single_threaded_blas
 from .exceptions import (
     EXIT_BAD_INPUT,
@@ -100,17 +101,6 @@ class Parser(argparse.ArgumentParser):
         (``--help > /dev/full`` fails, as any other output)."""
         if message:
             (file or sys.stderr).write(message)
-
-
-def finite_float(text: str) -> float:
-    """Option type: a finite number (``nan``, ``inf`` and overflowing values are refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
 
 
 def path_text(text: str) -> str:
