@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from .arrays import check_wrench
+from .closures import check_name
 from .configuration import Configuration, as_configuration
 from .exceptions import InvalidInputError
-from .model import ClosedLoopModel, check_name
+from .model import ClosedLoopModel
 from .preload import preloaded_compliance
 from .springs import PATHS, SpringFactor, check_path, spring_factor, spring_subspace
 from .statics import solve_equilibrium

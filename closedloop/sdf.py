@@ -49,10 +49,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .closures import Closure
 from .conditioning import characteristic_length
 from .data import robot_data_dir
 from .exceptions import ModelFileError
-from .model import Closure
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
