@@ -31,9 +31,10 @@ from cahyman_pin.urdf_builder import (
 from closedloop.arrays import readonly, real_array
 from closedloop.assembly import close_loops
 from closedloop.beams import apply_beams
+from closedloop.closures import closure_between_frames
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics import closure_residual, update_kinematics
-from closedloop.model import ClosedLoopModel, closure_between_frames
+from closedloop.model import ClosedLoopModel
 
 #: Below this value of cos(phi) the plate normal is vertical and only theta + psi is
 #: defined: :func:`paper_angles` then reports psi = 0 and theta = the yaw.

@@ -53,7 +53,7 @@ virtual joints of K_b, K_d and K_4 are locked (the beams carry the links' axial
 stiffness); the motors' K_T, K_T4, K_s stay.
 
 Closure file: the "Extended URDF" keys ``closed_loop``, ``type``, ``name_mot`` plus the
-``springs`` extension read by :func:`closedloop.io.read_closure_file` (and ``locked``,
+``springs`` extension read by :func:`closedloop.closure_file.read_closure_file` (and ``locked``,
 ``beams`` with links as beams).
 """
 

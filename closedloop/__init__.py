@@ -57,7 +57,8 @@ _EXPORTS = {
     ),
     **dict.fromkeys(("STANDARD_GRAVITY", "GravityLoad", "Payload"), ".gravity"),
     "StiffnessIndices": ".indices",
-    **dict.fromkeys(("load_model", "robot_data_dir"), ".io"),
+    "load_model": ".io",
+    "robot_data_dir": ".data",
     "ClosedLoopModel": ".model",
     **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".preload"),
     **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".statics"),
@@ -73,6 +74,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from .compliance import ComplianceResult, compliance
     from .conditioning import ILL_CONDITIONED, RANK_RTOL
     from .configuration import CLOSURE_TOL, Configuration
+    from .data import robot_data_dir
     from .exceptions import (
         AssemblyError,
         BeamError,
@@ -95,7 +97,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     )
     from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
     from .indices import StiffnessIndices
-    from .io import load_model, robot_data_dir
+    from .io import load_model
     from .model import ClosedLoopModel
     from .preload import PreloadedCompliance, preloaded_compliance
     from .statics import Equilibrium, solve_equilibrium

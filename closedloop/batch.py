@@ -29,12 +29,13 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverses
+from .closures import check_name
 from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
 from .configuration import CLOSURE_TOL, residual_rounding
 from .exceptions import ClosedLoopError, InvalidInputError
 from .kinematics import jacobian_rows, reference_frame, residual_rows
-from .model import ClosedLoopModel, check_name
+from .model import ClosedLoopModel
 from .springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
 
 #: Errors of a configuration's query: the project's typed errors and LAPACK's (anything

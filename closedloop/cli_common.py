@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .argtypes import finite_float as finite_float  # option types, shared below the CLI
+from .argtypes import number as number
 from .arrays import decimal
 from .blas import single_threaded_blas
 from .exceptions import (
@@ -104,26 +106,6 @@ class Parser(argparse.ArgumentParser):
         (``--help > /dev/full`` fails, as any other output)."""
         if message:
             (file or sys.stderr).write(message)
-
-
-def number(text: str) -> float:
-    """Option type: a number in ASCII decimal notation (:func:`closedloop.arrays.decimal`:
-    not ``0_3`` nor other scripts' digits), ``inf`` and ``nan`` included."""
-    try:
-        return decimal(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a number; expected ASCII decimal notation (e.g. -1.5e3)"
-        ) from None
-
-
-def finite_float(text: str) -> float:
-    """Option type: a finite number in ASCII decimal notation (:func:`number`; ``nan``,
-    ``inf`` and overflowing values are refused)."""
-    value = number(text)
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
 
 
 def path_text(text: str) -> str:

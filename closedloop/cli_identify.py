@@ -6,7 +6,7 @@
 ``--fit`` names joints; ``a+b`` ties joints a and b to one value; a joint with a block
 spring (a beam's ``<link>_beam``) is fitted as a factor of its block. Start values come
 from the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the
-YAML or CSV of :func:`closedloop.identification.read_measurements`. Each estimate is
+YAML or CSV of :func:`closedloop.measurements.read_measurements`. Each estimate is
 printed with its unit (N m/rad, N/m, or 1 for a block's factor). Exit status: 0 every
 parameter identified and the model fits the data, 1 some cannot be identified from these
 data (named, no value) or the model does not fit them (a residual RMS above what the sd
@@ -46,7 +46,8 @@ def run_identify(args) -> int:
     optimiser did not converge (NumericalError: one line on stderr, no estimates: they are
     not a least-squares solution))."""
     from .cli_map import model_source  # MODEL, --closures and springs, as for a map
-    from .identification import identify, read_measurements  # scipy.optimize: on demand
+    from .identification import identify  # scipy.optimize: on demand
+    from .measurements import read_measurements
 
     clm = model_source(args).load()
     frame, data = read_measurements(args.measurements)

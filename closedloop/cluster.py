@@ -16,7 +16,7 @@ import threading
 import time
 from concurrent.futures import CancelledError, Executor, Future, InvalidStateError
 
-from .cli_common import finite_float
+from .argtypes import finite_float
 from .exceptions import ClusterError, InvalidInputError
 
 #: Longest time [s] a Dask run waits with tasks pending and no worker connected (or the

@@ -24,10 +24,11 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import frozen
+from .closures import check_name
 from .conditioning import check_length
 from .exceptions import InvalidInputError, OpenLoopError
 from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
-from .model import ClosedLoopModel, check_name
+from .model import ClosedLoopModel
 
 #: Largest scaled closure residual (infinity norm: metres / L, radians) at which a
 #: configuration counts as closed: the tolerance of the compliance, the statics and the

@@ -25,7 +25,7 @@ BUNDLED_MODELS: dict[str, tuple[str, str | None]] = {
     "fourbar": ("fourbar.urdf", "fourbar.yaml"),
     "fourbar_mjcf": ("fourbar.xml", None),
 }
-#: example-robot-data robots by name: URDF under :func:`closedloop.io.robot_data_dir`.
+#: example-robot-data robots by name: URDF under :func:`robot_data_dir`.
 ROBOTS: dict[str, str] = {
     "ur3": "ur_description/urdf/ur3_robot.urdf",
     "ur5": "ur_description/urdf/ur5_robot.urdf",
@@ -79,8 +79,6 @@ def robot_file(name: str) -> Path:
     """
     if name not in ROBOTS:
         raise ModelFileError(f"unknown robot {name!r}; expected one of {sorted(ROBOTS)}")
-    from .io import robot_data_dir
-
     return robot_data_dir() / ROBOTS[name]
 
 
@@ -110,3 +108,23 @@ def resolve(model: str | Path, closures: str | Path | None = None) -> tuple[Path
     if closures is not None:
         return path(robot), Path(closures)
     return path(robot), None if side is None else path(side)
+
+
+def robot_data_dir() -> Path:
+    """Folder ``robots/`` of the installed example-robot-data distribution.
+
+    The package ships no Python module, only files under its cmeel prefix; they are
+    located through the distribution's file list.
+    """
+    import importlib.metadata  # on demand: 30 ms of a command line's start-up
+
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        raise ModelFileError("example-robot-data is not installed") from None
+    for f in dist.files or ():
+        parts = Path(f).parts
+        if "example-robot-data" in parts and "robots" in parts:
+            i = parts.index("robots")
+            return Path(dist.locate_file(Path(*parts[: i + 1])))
+    raise ModelFileError("example-robot-data is installed but its robots folder was not found")

@@ -33,6 +33,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from .beams import inserted_beams
 from .model import ClosedLoopModel
 
 
@@ -68,8 +69,6 @@ def _beam_joints(clm: ClosedLoopModel) -> tuple[BeamJoint, ...]:
     model = clm.model
     if not any(f.name.endswith("_beam") for f in model.frames):
         return ()
-    from .beams import inserted_beams  # beams builds models: imported on demand
-
     out = []
     for beam in inserted_beams(model):
         jm = model.joints[beam.joint]

@@ -1,18 +1,6 @@
 """Loading models: URDF + closure file, MJCF with equality constraints, serial robots.
 
-Closure file (YAML), after the "Extended URDF" convention, extended with springs::
-
-    closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
-    type: ['3d' | '6d', ...]               # point or weld, one per pair
-    name_mot: [joint, ...]                 # actuated joints
-    springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
-    locked: [joint, ...]                   # optional rigid joints
-    beams: {link: {end: joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}
-                                           # optional flexible links (closedloop.beams);
-                                           # section: geometry = the link's URDF shape
-
-A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
-number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
+The closure file and the side file: :mod:`closedloop.closure_file`.
 
 Sources of actuated joints and springs, later ones overriding earlier ones:
 
@@ -40,60 +28,42 @@ import sys
 import tempfile
 import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from .arrays import decimal
 from .balls import ball_springs, urdf_with_balls
-from .beams import apply_beams, insert_beams
-from .exceptions import InvalidInputError, ModelFileError, NameNotFoundError
-from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
-from .model import (
-    ClosedLoopModel,
-    Closure,
-    check_locked_springs,
-    closure_between_frames,
-    joint_id,
-    joint_names,
+from .beams import apply_beams
+from .closure_file import (
+    SIDE_FILE_KEYS,
+    ClosureSpec,
+    Stiffness,
+    check_spec_names,
+    existing_path,
+    file_number,
+    in_file,
+    read_closure_file,
+    read_side_file,
 )
+from .closure_file import read_springs_file as read_springs_file  # importable from here too
+from .closures import Closure, closure_between_frames, joint_names
+from .data import BUNDLED_MODELS, ROBOTS
+from .data import robot_data_dir as robot_data_dir  # its former home; cl.robot_data_dir
+from .exceptions import InvalidInputError, ModelFileError
+from .mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
+from .model import ClosedLoopModel
 from .sdf import REST, load_sdf
 
 #: Model-file suffixes and their format.
 MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
-CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
-SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
-#: MJCF equality constraints that Pinocchio turns into anchor constraints.
-
-Stiffness = float | list[float]
 
 
-@dataclass(frozen=True)
-class ClosureSpec:
-    """Contents of a closure file (see the module docstring).
-
-    ``actuated`` is ``None`` when the file has no ``name_mot`` key.
-    """
-
-    pairs: tuple[tuple[str, str], ...] = ()
-    types: tuple[str, ...] = ()
-    actuated: tuple[str, ...] | None = None
-    springs: dict[str, Stiffness] = field(default_factory=dict)
-    locked: tuple[str, ...] = ()
-    beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.beams)
-    balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.balls)
-
-
-# ---------------------------------------------------------------------------- YAML files
 def _by_name_hint(path: str | os.PathLike) -> str:
     """Where a robot named like the command line's MODEL (``"ur5"``, ``"fourbar"``) is
     found from Python, for the message of a path without a suffix; else ""."""
-    from .data import BUNDLED_MODELS, ROBOTS
-
     name = os.fspath(path)
     if name in ROBOTS:
         return f"; the robot {name!r} by name is cl.load_model(cl.data.robot_file({name!r}))"
@@ -101,196 +71,6 @@ def _by_name_hint(path: str | os.PathLike) -> str:
         files = ", ".join(f"cl.data.path({f!r})" for f in BUNDLED_MODELS[name] if f)
         return f"; the bundled model {name!r} is cl.load_model({files})"
     return ""
-
-
-def _existing(path: str | Path, what: str) -> Path:
-    """``path`` as a Path, once it is a file that can be opened (Pinocchio's readers say
-    "does not exist" of a file they cannot read)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError(f"{what} {str(path)!r} does not exist or is not a file")
-    try:
-        path.open("rb").close()
-    except OSError as e:
-        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e.strerror}") from None
-    return path
-
-
-def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
-    import yaml  # on demand, as below: a model without such a file reads no YAML
-
-    from . import strict_yaml
-
-    path = _existing(path, what)
-    try:
-        doc = strict_yaml.load(path.read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e}") from None
-    except yaml.YAMLError as e:
-        msg = " ".join(str(e).split())
-        raise ModelFileError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
-    if not isinstance(doc, dict):
-        raise ModelFileError(
-            f"{what} {str(path)!r}: expected a mapping at top level, got "
-            + ("an empty file" if doc is None else type(doc).__name__)
-        )
-    return path, doc
-
-
-def _number(value, where: str, name: str) -> float:
-    if isinstance(value, str):
-        from .strict_yaml import overflowing  # loaded with the file that holds the value
-
-        if overflowing(value):
-            raise ModelFileError(
-                f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
-                "range (about 1.8e308); expected a number, or .inf to lock the joint"
-            )
-        try:
-            value = decimal(value.strip())
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ModelFileError(
-            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number"
-        )
-    if math.isnan(value) or value < 0:
-        raise ModelFileError(
-            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
-            "(0 = passive, .inf = locked)"
-        )
-    return float(value)
-
-
-def _check_springs(springs, where: str) -> dict[str, Stiffness]:
-    """Validated joint -> stiffness mapping (a number or a list of numbers per joint)."""
-    if not isinstance(springs, dict) or not all(isinstance(k, str) for k in springs):
-        raise ModelFileError(f"{where}: springs must be a mapping joint name -> stiffness")
-    out: dict[str, Stiffness] = {}
-    for name, value in springs.items():
-        if isinstance(value, list) and value:
-            out[name] = [_number(v, where, name) for v in value]
-        else:
-            out[name] = _number(value, where, name)
-    return out
-
-
-def _value(doc: dict, key: str, empty):
-    """``doc[key]``, or ``empty`` when it is absent or null (a ``0`` or ``false`` stays, for
-    the type check to refuse)."""
-    value = doc.get(key)
-    return empty if value is None else value
-
-
-def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
-    if key not in doc:
-        return None
-    names = doc[key] if doc[key] is not None else []
-    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        raise ModelFileError(f"{where}: {key} must be a list of joint names, got {names!r}")
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise ModelFileError(f"{where}: {key} names {twice} more than once; expected each once")
-    return tuple(names)
-
-
-def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> ClosureSpec:
-    """Parse and validate a closure file.
-
-    Args:
-        path: YAML file (see the module docstring).
-        keys: keys allowed at top level (:data:`SIDE_FILE_KEYS` for an MJCF side file).
-
-    Raises:
-        ModelFileError: missing or unreadable file, invalid YAML, unknown key, malformed
-            value; the message names the file and the fault.
-    """
-    path, doc = _read_yaml_mapping(path, "closure file")
-    where = f"closure file {str(path)!r}"
-    unknown = set(doc) - set(keys)
-    if unknown:
-        raise ModelFileError(
-            f"{where}: unknown key(s) {sorted(map(str, unknown))}; expected {', '.join(keys)}"
-        )
-    pairs, types = _value(doc, "closed_loop", []), _value(doc, "type", [])
-    if not isinstance(pairs, list) or any(
-        not isinstance(p, list) or len(p) != 2 or not all(isinstance(n, str) for n in p)
-        for p in pairs
-    ):
-        raise ModelFileError(
-            f"{where}: closed_loop must be a list of [frameA, frameB] name pairs, got {pairs!r}"
-        )
-    if not isinstance(types, list) or len(types) != len(pairs):
-        raise ModelFileError(
-            f"{where}: type must list one of '3d'/'6d' per closed_loop pair "
-            f"({len(pairs)}), got {types!r}"
-        )
-    bad = [t for t in types if t not in ("3d", "6d")]
-    if bad:
-        raise ModelFileError(f"{where}: type {bad[0]!r}; expected '3d' or '6d'")
-    return ClosureSpec(
-        pairs=tuple((a, b) for a, b in pairs),
-        types=tuple(types),
-        actuated=_name_list(doc, "name_mot", where),
-        springs=_check_springs(_value(doc, "springs", {}), where),
-        locked=_name_list(doc, "locked", where) or (),
-        beams=_check_beams(_value(doc, "beams", {}), where),
-        balls=_name_list(doc, "balls", where) or (),
-    )
-
-
-def _check_beams(beams, where: str) -> dict[str, dict]:
-    """``beams:`` mapping link name -> beam mapping; the beams module checks the contents."""
-    if not isinstance(beams, dict) or not all(
-        isinstance(k, str) and isinstance(v, dict) for k, v in beams.items()
-    ):
-        raise ModelFileError(
-            f"{where}: beams must be a mapping link name -> {{end, E, G, section, theory}} "
-            f"or {{end, stiffness_6x6}}, got {beams!r}"
-        )
-    return beams
-
-
-@contextmanager
-def _in_file(where: str) -> Iterator[None]:
-    """Put ``where`` (the file that gave the names) first in the message of a name or value
-    error raised inside; the error keeps its type."""
-    try:
-        yield
-    except (NameNotFoundError, InvalidInputError) as e:
-        e.args = (f"{where}: {e.args[0]}", *e.args[1:])
-        raise
-
-
-def _check_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
-    """:class:`NameNotFoundError` or :class:`InvalidInputError`, naming the file ``where``,
-    for a joint of the file's ``name_mot``, ``springs`` or ``locked`` that ``model`` lacks,
-    or one both locked and given a spring there."""
-    with _in_file(where):
-        for name in (*(spec.actuated or ()), *spec.springs, *spec.locked):
-            joint_id(model, name)
-        check_locked_springs(spec.springs, spec.locked)
-
-
-def _side_file(model: pin.Model, side_file, springs: dict) -> tuple[ClosureSpec, dict]:
-    """(the side file's contents, its joint names checked; the robot file's ``springs``
-    with those of the side file merged over them, those of the joints it locks removed)."""
-    if side_file is None:
-        return ClosureSpec(), springs
-    spec = read_closure_file(side_file, SIDE_FILE_KEYS)
-    _check_names(model, spec, f"closure file {str(side_file)!r}")
-    kept = {n: k for n, k in springs.items() if n not in spec.locked}
-    return spec, {**kept, **spec.springs}
-
-
-def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
-    """Joint -> stiffness mapping [N m/rad or N/m] from a YAML file ``{joint: value}``.
-
-    Raises:
-        ModelFileError: missing file, invalid YAML, a value that is not a number >= 0.
-    """
-    path, doc = _read_yaml_mapping(path, "springs file")
-    return _check_springs(doc, f"springs file {str(path)!r}")
 
 
 # ------------------------------------------------------------------------ model files
@@ -415,8 +195,8 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
         return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
                      beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
     where = f"closure file {str(closures)!r}"
-    _check_names(model, spec, where)
-    with _in_file(where):
+    check_spec_names(model, spec, where)
+    with in_file(where):
         loops = [
             closure_between_frames(model, a, b, t)
             for (a, b), t in zip(spec.pairs, spec.types, strict=True)
@@ -489,10 +269,10 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
             geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
         )
     where = f"robot file {str(path)!r}"
-    springs = {n: k for n, v in extras.stiffness.items() if (k := _number(v, where, n)) > 0}
-    spec, springs = _side_file(model, side_file, springs)
+    springs = {n: k for n, v in extras.stiffness.items() if (k := file_number(v, where, n)) > 0}
+    spec, springs = read_side_file(model, side_file, springs)
     if spec.actuated is None:  # the actuators' joints
-        _check_names(model, ClosureSpec(actuated=extras.actuated), where)
+        check_spec_names(model, ClosureSpec(actuated=extras.actuated), where)
     return _Tree(
         model,
         [Closure(c, n) for c, n in zip(constraints, extras.closures, strict=True)],
@@ -507,7 +287,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
 def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.sdf
     _check_masses(robot.model, path)
-    spec, springs = _side_file(robot.model, side_file, robot.springs)
+    spec, springs = read_side_file(robot.model, side_file, robot.springs)
     return _Tree(
         robot.model, robot.closures, spec.actuated or (), springs, spec.locked, robot.visual
     )
@@ -576,7 +356,7 @@ def load_model(
             f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf' or 'sdf' "
             "(free_base: SDF only)" + _by_name_hint(path)
         )
-    path = _existing(path, "robot file")
+    path = existing_path(path, "robot file")
     if kind == "sdf":
         tree = _read_sdf(path, closures, geometry, free_base)
     else:
@@ -629,7 +409,7 @@ def load_model(
     if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
         if side or beams:
-            clm = insert_beams(clm, {**side, **(beams or {})})
+            clm = clm.with_beams({**side, **(beams or {})})
     return clm
 
 
@@ -645,23 +425,3 @@ def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
     key = next((k for k in ("qpos0", REST) if k in refs), None)
     q = refs[key] if key else pin.neutral(clm.model)
     return np.array(q, dtype=float)
-
-
-def robot_data_dir() -> Path:
-    """Folder ``robots/`` of the installed example-robot-data distribution.
-
-    The package ships no Python module, only files under its cmeel prefix; they are
-    located through the distribution's file list.
-    """
-    import importlib.metadata  # on demand: 30 ms of a command line's start-up
-
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        raise ModelFileError("example-robot-data is not installed") from None
-    for f in dist.files or ():
-        parts = Path(f).parts
-        if "example-robot-data" in parts and "robots" in parts:
-            i = parts.index("robots")
-            return Path(dist.locate_file(Path(*parts[: i + 1])))
-    raise ModelFileError("example-robot-data is installed but its robots folder was not found")

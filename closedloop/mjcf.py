@@ -22,9 +22,21 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import IgnoredFeatureWarning, ModelFileError
+from .mjcf_xml import (
+    MJCF_EQUALITIES,
+    active_equalities,
+    check_classes,
+    check_composite,
+    check_numbers,
+    class_defaults,
+    compiler_attributes,
+    element_name,
+    joints_with_defaults,
+    parse_xml,
+    read_numbers,
+    write_classes,
+)
 
-#: MJCF equality constraints and the closure type each gives.
-MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
 #: Name of the body that holds several root bodies for Pinocchio (:func:`pinocchio_copy`).
 WORLD_BODY = "worldbody_bodies"
 #: Configuration coordinates of each MJCF joint type (ball and free: quaternions).
@@ -82,7 +94,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             stiffness (a spring coupling joints). The message names the file.
     """
     where = f"robot file {str(path)!r}"
-    root = _parse_xml(path, where)
+    root = parse_xml(path, where)
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
     for tag in ("frame", "replicate"):  # Pinocchio drops what they hold
@@ -91,19 +103,19 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 f"{where}: <{tag}> holding bodies or joints is not supported (Pinocchio's "
                 f"parser drops them); write the bodies without <{tag}>"
             )
-    _check_classes(root, where)
+    check_classes(root, where)
     _check_tendons(root, where)  # before the classes are written out and removed
-    seq = _compiler(root).get("eulerseq", "xyz")
+    seq = compiler_attributes(root).get("eulerseq", "xyz")
     if seq != seq.lower() and root.find(".//*[@euler]") is not None:
         raise ModelFileError(
             f"{where}: <compiler> eulerseq={seq!r} has upper-case (extrinsic) axes, which "
             "Pinocchio reads as intrinsic; expected lower-case axes (extrinsic 'XYZ' is "
             "intrinsic 'zyx' with the angles in reverse order)"
         )
-    equalities = _equalities(root, where)
-    _check_numbers(root, where)
-    _write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
-    joints = _joints(root)
+    equalities = active_equalities(root, where)
+    check_numbers(root, where)
+    write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
+    joints = joints_with_defaults(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
     for kind, names in (
         ("body", [b.get("name") for w in root.findall("worldbody") for b in w.iter("body")]),
@@ -118,21 +130,23 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                     f"one {kind} of each name"
                 )
             seen.add(name)
-    to_rad = 1.0 if _compiler(root).get("angle", "degree") == "radian" else math.pi / 180
+    to_rad = 1.0 if compiler_attributes(root).get("angle", "degree") == "radian" else math.pi / 180
     of_body: dict[int, list[dict]] = {}  # the joints of each body (a composite if several)
     for body, attrs in joints:
         of_body.setdefault(id(body), []).append(attrs)
     stiffness, limits, nq = {}, [], 0
     for body, attrs in joints:
         kind, name = attrs.get("type", "hinge"), attrs.get("name")
-        what = f"joint {name!r}" if name else f"an unnamed {kind} joint of body {_name(body)}"
+        what = (
+            f"joint {name!r}" if name else f"an unnamed {kind} joint of body {element_name(body)}"
+        )
         if kind not in JOINT_NQ:
             raise ModelFileError(
                 f"{where}: {what} has type {kind!r}; expected one of {', '.join(JOINT_NQ)}"
             )
         if kind in ("hinge", "slide"):
             axis = attrs.get("axis", "0 0 1")
-            if not np.linalg.norm(_numbers(axis, 3, where, f"axis of {what}")) >= MIN_AXIS_NORM:
+            if not np.linalg.norm(read_numbers(axis, 3, where, f"axis of {what}")) >= MIN_AXIS_NORM:
                 raise ModelFileError(
                     f"{where}: {what}: axis {axis!r} is the zero vector; expected a direction "
                     f"(norm >= {MIN_AXIS_NORM:g}, as MuJoCo requires)"
@@ -145,7 +159,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             if limited == "false":  # MuJoCo ignores the range
                 limits.append((nq, -math.inf, math.inf))
             elif "range" in attrs:
-                lo, hi = _numbers(attrs["range"], 2, where, f"range of {what}")
+                lo, hi = read_numbers(attrs["range"], 2, where, f"range of {what}")
                 if lo > hi:  # MuJoCo refuses it (limited) or ignores it (autolimits)
                     raise ModelFileError(
                         f"{where}: range of {what} is {attrs['range']!r}: lower above upper; "
@@ -154,7 +168,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
                 scale = to_rad if kind == "hinge" else 1.0  # slides: metres, never converted
                 limits.append((nq, lo * scale, hi * scale))
         if "springdamper" in attrs and np.all(
-            _numbers(attrs["springdamper"], 2, where, f"springdamper of {what}") > 0
+            read_numbers(attrs["springdamper"], 2, where, f"springdamper of {what}") > 0
         ):  # MuJoCo then computes the stiffness from the mass, which is not read here
             raise ModelFileError(
                 f"{where}: {what} has springdamper={attrs['springdamper']!r}, whose stiffness "
@@ -163,21 +177,21 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             )
         if "stiffness" in attrs:
             text = attrs["stiffness"]
-            if name is None and _numbers(text, 1, where, f"stiffness of {what}")[0] != 0:
+            if name is None and read_numbers(text, 1, where, f"stiffness of {what}")[0] != 0:
                 raise ModelFileError(
                     f"{where}: {what} has stiffness {text!r} but no name; name the joint "
                     "(its spring needs a name)"
                 )
             if name is not None:
                 stiffness[name] = text
-            _check_composite(body, name, text, of_body[id(body)], where)
+            check_composite(body, name, text, of_body[id(body)], where)
             _check_springref(attrs, what, where)
         nq += JOINT_NQ[kind]
     actuators = [a for act in root.findall("actuator") for a in act]
     for a in actuators:
         if a.tag == "position" and a.get("joint"):
             warnings.warn(
-                f"{where}: <position> actuator {_name(a)} is a servo spring (kp) on joint "
+                f"{where}: <position> actuator {element_name(a)} is a servo spring (kp) on joint "
                 f"{a.get('joint')!r}; its kp is not read: the joint is a rigid actuator unless "
                 "it has a stiffness (joint stiffness, or springs in a side file)",
                 IgnoredFeatureWarning,
@@ -196,10 +210,10 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
 def _check_springref(attrs: dict[str, str], what: str, where: str) -> None:
     """Warn of a spring whose ``springref`` differs from its ``ref``: its rest is then not
     at ``qpos0``, where the springs are taken at rest."""
-    if "springref" not in attrs or not _numbers(attrs["stiffness"], 1, where, what)[0]:
+    if "springref" not in attrs or not read_numbers(attrs["stiffness"], 1, where, what)[0]:
         return
-    rest = _numbers(attrs["springref"], 1, where, f"springref of {what}")[0]
-    if rest != _numbers(attrs.get("ref", "0"), 1, where, f"ref of {what}")[0]:
+    rest = read_numbers(attrs["springref"], 1, where, f"springref of {what}")[0]
+    if rest != read_numbers(attrs.get("ref", "0"), 1, where, f"ref of {what}")[0]:
         warnings.warn(
             f"{where}: {what} has springref={attrs['springref']!r}, not its ref "
             f"{attrs.get('ref', '0')!r}: springref is not read, the spring is taken at rest at "
@@ -212,11 +226,11 @@ def _check_springref(attrs: dict[str, str], what: str, where: str) -> None:
 def _check_tendons(root: ET.Element, where: str) -> None:
     """Refuse a ``<tendon>`` with a stiffness (``<default>`` classes resolved): a spring
     coupling joints, which neither Pinocchio nor the springs per joint can hold."""
-    defaults = _defaults(root, "tendon")
+    defaults = class_defaults(root, "tendon")
     for tendon in (t for section in root.findall("tendon") for t in section):
         text = {**defaults.get(tendon.get("class", "main"), {}), **tendon.attrib}.get("stiffness")
-        name = _name(tendon)
-        if text is not None and _numbers(text, 1, where, f"stiffness of tendon {name}")[0]:
+        name = element_name(tendon)
+        if text is not None and read_numbers(text, 1, where, f"stiffness of tendon {name}")[0]:
             raise ModelFileError(
                 f"{where}: <{tendon.tag}> tendon {name} has stiffness {text!r}: a spring "
                 "coupling joints is not read; expected springs on joints (joint stiffness)"
@@ -240,8 +254,8 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
     * Pinocchio ignores the ``pos`` of a joint and the ``pos`` and orientation of a geom
       or site that a ``<default>`` class gives, leaks a ``childclass`` into an element of
       another class, and fails on ``class="main"``: the copy writes on each joint, geom,
-      site, mesh and material the attributes its class gives (:func:`_write_classes`),
-      and has neither classes nor ``<default>``.
+      site, mesh and material the attributes its class gives
+      (:func:`closedloop.mjcf_xml.write_classes`), and has neither classes nor ``<default>``.
     * Pinocchio 4.1 does not normalise the axis of an ``axisangle`` (the placement is then
       not a rotation): the copy's axes are unit vectors.
     * Pinocchio reads only the first ``<equality>``, ignores ``active``, and orders the
@@ -255,7 +269,7 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
         ModelFileError: the file is not valid XML.
     """
     where = f"robot file {str(path)!r}"
-    tree = ET.ElementTree(_parse_xml(path, where))
+    tree = ET.ElementTree(parse_xml(path, where))
     root = tree.getroot()
     worlds = root.findall("worldbody")
     for extra in worlds[1:]:
@@ -267,15 +281,15 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
         for body in roots:
             worlds[0].remove(body)
             wrapper.append(body)
-    compiler = ET.Element("compiler", _compiler(root))
+    compiler = ET.Element("compiler", compiler_attributes(root))
     for key in ("meshdir", "texturedir", "assetdir"):
         if key in compiler.attrib or (key != "assetdir" and "assetdir" not in compiler.attrib):
             compiler.set(key, str(path.parent.resolve() / compiler.get(key, "")))
-    active = _equalities(root, where)
+    active = active_equalities(root, where)
     for element in root.findall("compiler") + root.findall("equality"):
         root.remove(element)
     root.insert(0, compiler)
-    _write_classes(root)
+    write_classes(root)
     for e in root.iter():
         if "axisangle" in e.attrib:  # checked: 4 numbers, the axis not zero
             *axis, angle = e.get("axisangle").split()
@@ -363,194 +377,3 @@ def place_free_joints(model: pin.Model, constraints: list) -> list:
         M2 = data.oMi[c.joint2_id].inverse() * oM1
         out.append(type(c)(model, c.joint1_id, c.joint1_placement, c.joint2_id, M2))
     return out
-
-
-#: Numeric attributes of a fixed count, on any element: Pinocchio 4.1 reads a malformed
-#: one (a word, NaN, too few numbers) as zeros, the largest double or uninitialised memory.
-NUMERIC_ATTRIBUTES = {"pos": 3, "quat": 4, "euler": 3, "axisangle": 4, "xyaxes": 6, "zaxis": 3,
-                      "anchor": 3, "relpose": 7, "fromto": 6}  # fmt: skip
-#: Of those, the ones whose leading values may not all be zero (a rotation needs them).
-NONZERO = {"quat": 4, "axisangle": 3, "zaxis": 3}
-
-
-def _check_numbers(root: ET.Element, where: str) -> None:
-    """:class:`ModelFileError` for a malformed :data:`NUMERIC_ATTRIBUTES` value, a zero
-    quaternion or rotation axis, a mass that is not a number >= 0, or a ``<connect>``
-    without its ``anchor``."""
-    for e in root.iter():
-        what = f"<{e.tag}>" + (f" {e.get('name')!r}" if e.get("name") else "")
-        for attr, count in NUMERIC_ATTRIBUTES.items():
-            text = e.get(attr)
-            if text is None:
-                continue
-            values = _numbers(text, count, where, f"{attr} of {what}")
-            if attr in NONZERO and not values[: NONZERO[attr]].any():
-                raise ModelFileError(f"{where}: {attr} of {what} is {text!r}; expected a rotation "
-                                     "(not all zeros)")  # fmt: skip
-        if (
-            e.get("mass") is not None
-            and not _numbers(e.get("mass"), 1, where, f"mass of {what}")[0] >= 0
-        ):
-            raise ModelFileError(f"{where}: mass of {what} is {e.get('mass')!r}; expected >= 0 kg "
-                                 "(Pinocchio reads a negative one as 0)")  # fmt: skip
-        if e.tag == "connect" and e.get("anchor") is None:
-            raise ModelFileError(f'{where}: {what} has no anchor; expected anchor="x y z"')
-
-
-def _parse_xml(path: Path, where: str) -> ET.Element:
-    try:
-        return ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ModelFileError(f"{where} is not valid XML: {e}") from None
-
-
-def _numbers(text: str, count: int, where: str, what: str) -> np.ndarray:
-    """``count`` finite numbers written in ``text``, or :class:`ModelFileError`."""
-    try:
-        values = np.array(text.split(), dtype=float)
-    except ValueError:
-        values = np.array([])
-    if values.shape != (count,) or not np.isfinite(values).all():
-        raise ModelFileError(f"{where}: {what} is {text!r}; expected {count} finite numbers")
-    return values
-
-
-def _compiler(root: ET.Element) -> dict[str, str]:
-    """Attributes of the ``<compiler>`` elements, merged in order (later ones win)."""
-    return {k: v for c in root.findall("compiler") for k, v in c.attrib.items()}
-
-
-def _check_classes(root: ET.Element, where: str) -> None:
-    """Refuse a ``class`` or ``childclass`` that no ``<default>`` defines (Pinocchio's
-    parser fails on it with 'unordered_map::at')."""
-    defined = {"main"} | {d.get("class", "main") for d in root.iter("default")}
-    for elem in root.iter():
-        for key in ("class", "childclass"):
-            name = elem.get(key)
-            if elem.tag != "default" and name is not None and name not in defined:
-                label = f" {elem.get('name')!r}" if elem.get("name") else ""
-                raise ModelFileError(
-                    f"{where}: <{elem.tag}>{label} has {key}={name!r}; expected one of the "
-                    f"<default> classes {sorted(defined)}"
-                )
-
-
-def _defaults(root: ET.Element, tag: str) -> dict[str, dict[str, str]]:
-    """Default class -> attributes it gives ``tag`` elements (inherited ones included)."""
-    defaults: dict[str, dict[str, str]] = {}
-
-    def visit(elem: ET.Element, inherited: dict[str, str]) -> None:
-        own = elem.find(tag)
-        defaults[elem.get("class", "main")] = attrs = {
-            **inherited,
-            **(own.attrib if own is not None else {}),
-        }
-        for child in elem.findall("default"):
-            visit(child, attrs)
-
-    for d in root.findall("default"):
-        visit(d, {})
-    return defaults
-
-
-def _joints(root: ET.Element) -> list[tuple[ET.Element, dict[str, str]]]:
-    """(body, attributes) of every joint, in Pinocchio's order (depth first, a body's
-    joints before its children), of a tree whose classes are written out
-    (:func:`_write_classes`); ``<freejoint>`` of type free."""
-    joints: list[tuple[ET.Element, dict[str, str]]] = []
-
-    def visit(body: ET.Element) -> None:
-        for j in body:
-            if j.tag == "joint":
-                joints.append((body, dict(j.attrib)))
-            elif j.tag == "freejoint":
-                joints.append((body, {**j.attrib, "type": "free"}))
-        for child in body.findall("body"):
-            visit(child)
-
-    for world in root.findall("worldbody"):
-        visit(world)
-    return joints
-
-
-def _name(element: ET.Element) -> str:
-    return repr(element.get("name")) if element.get("name") else "(unnamed)"
-
-
-def _check_composite(
-    body: ET.Element, name: str | None, stiffness: str, attrs: list[dict], where: str
-) -> None:
-    """Refuse a nonzero ``stiffness`` on one of several joints of ``body``: Pinocchio merges
-    them into one composite joint, named after the first, that no spring can name."""
-    if len(attrs) > 1 and _numbers(stiffness, 1, where, f"stiffness of joint {name!r}")[0]:
-        names = [a.get("name") for a in attrs]
-        raise ModelFileError(
-            f"{where}: joint {name!r} has stiffness {stiffness!r}, but Pinocchio merges the "
-            f"joints {names} of body {_name(body)} into one composite joint "
-            f"'Composite_{names[0]}' that has no spring per joint; expected one joint with a "
-            "spring per body (nest a body for each joint)"
-        )
-
-
-#: Elements Pinocchio reads whose attributes a ``<default>`` class may give.
-CLASSED = ("joint", "geom", "site", "mesh", "material")
-#: Orientations other than ``quat``: one given by a class beats the element's ``quat``.
-ALTERNATIVES = {"axisangle", "xyaxes", "zaxis", "euler"}
-#: What ``fromto`` overrides.
-PLACING = {"pos", "quat", *ALTERNATIVES}
-
-
-def _write_classes(root: ET.Element) -> None:
-    """Write on each :data:`CLASSED` element the attributes MuJoCo gives it: its own, then
-    its ``class``'s, else the ``childclass`` of the nearest enclosing body, else "main"
-    (each class holding those of the classes around it); an alternative orientation
-    (:data:`ALTERNATIVES`) beats ``quat``, the element's own beating its class's, and
-    ``fromto`` beats both and ``pos``. Remove ``class``, ``childclass`` and ``<default>``."""
-    defaults = {tag: _defaults(root, tag) for tag in CLASSED}
-
-    def visit(parent: ET.Element, cls: str) -> None:
-        for e in list(parent):
-            if e.tag == "default":
-                parent.remove(e)
-                continue
-            if e.tag in CLASSED:
-                given = defaults[e.tag].get(e.get("class", cls), {})
-                if ALTERNATIVES.intersection(e.keys()):
-                    given = {k: v for k, v in given.items() if k not in ALTERNATIVES}
-                e.attrib = {**given, **e.attrib}
-                if "fromto" in e.attrib:  # it places the element
-                    e.attrib = {k: v for k, v in e.attrib.items() if k not in PLACING}
-                elif ALTERNATIVES.intersection(e.keys()):
-                    e.attrib.pop("quat", None)
-            visit(e, e.get("childclass", cls))
-            for key in ("class", "childclass"):
-                e.attrib.pop(key, None)
-
-    visit(root, "main")
-
-
-def _equalities(root: ET.Element, where: str) -> list[tuple[str, ET.Element]]:
-    """(closure name, element) of the active equalities, in :attr:`MjcfExtras.closures`
-    order, from every ``<equality>`` section; classes resolved for ``active``."""
-    found = [e for eq in root.findall("equality") for e in eq]
-    other = sorted({e.tag for e in found} - set(MJCF_EQUALITIES))
-    if other:
-        raise ModelFileError(f"{where}: equality <{other[0]}> is not supported (connect, weld)")
-    defaults = _defaults(root, "equality")
-    active = []
-    for tag in MJCF_EQUALITIES:  # Pinocchio returns the connects, then the welds
-        for i, e in enumerate([f for f in found if f.tag == tag]):
-            name = e.get("name") or f"{tag}{i}"
-            if e.get("body1") is None:
-                raise ModelFileError(
-                    f"{where}: <{tag}> {name!r} names no body1 (site equalities are not "
-                    "supported); expected body1 and optionally body2"
-                )
-            state = {**defaults.get(e.get("class", "main"), {}), **e.attrib}.get("active", "true")
-            if state not in ("true", "false"):
-                raise ModelFileError(
-                    f"{where}: <{tag}> {name!r} has active={state!r}; expected 'true' or 'false'"
-                )
-            if state == "true":
-                active.append((name, e))
-    return active

@@ -27,15 +27,23 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
 import pinocchio as pin
 
 from .arrays import frozen, real_array
+from .beams import apply_beams
+from .closures import (
+    AnchorConstraint,
+    Closure,
+    checked_closures,
+    frame_id,
+    joint_id,
+    joint_names,
+)
 from .conditioning import characteristic_length
-from .exceptions import InvalidInputError, NameNotFoundError
+from .exceptions import InvalidInputError
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
@@ -46,102 +54,6 @@ MEMO_SIZE = 64
 #: normalised: a q further from the configuration manifold is refused, a nearer one
 #: normalised (7 typed digits are within it).
 UNIT_NORM_TOL = 1e-6
-
-AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
-
-#: Closure types of the closure-file convention and their Pinocchio constraint.
-CLOSURE_TYPES = {"3d": pin.PointAnchorConstraintModel, "6d": pin.FrameAnchorConstraintModel}
-
-
-@dataclass(frozen=True)
-class Closure:
-    """One loop closure: a Pinocchio anchor constraint and a display name."""
-
-    constraint: AnchorConstraint
-    name: str
-
-    @property
-    def kind(self) -> str:
-        """``"3d"`` (point) or ``"6d"`` (frame weld)."""
-        return "3d" if isinstance(self.constraint, pin.PointAnchorConstraintModel) else "6d"
-
-    @property
-    def size(self) -> int:
-        """Number of residual rows (3 or 6)."""
-        return self.constraint.residualSize()
-
-
-def check_name(kind: str, name) -> None:
-    """:class:`InvalidInputError` unless ``name`` (of a ``kind``: frame, joint) is a str."""
-    if not isinstance(name, str):
-        raise InvalidInputError(f"{kind} name must be a str, got {name!r} ({type(name).__name__})")
-
-
-def frame_id(model: pin.Model, name: str) -> int:
-    """Index of frame ``name``; raises :class:`NameNotFoundError` listing the frames
-    (:class:`InvalidInputError` when ``name`` is not a str)."""
-    check_name("frame", name)
-    if not model.existFrame(name):
-        raise NameNotFoundError("frame", name, [f.name for f in model.frames])
-    try:
-        return model.getFrameId(name)
-    except ValueError:  # several frames of that name (a URDF link and joint, MJCF body and site)
-        return _one_of_frames(model, name)
-
-
-def _one_of_frames(model: pin.Model, name: str) -> int:
-    """The first of the frames named ``name`` when they are one place (a link and the
-    joint that carries it), else :class:`InvalidInputError`."""
-    ids = [i for i, f in enumerate(model.frames) if f.name == name]
-    first = model.frames[ids[0]]
-    if all(
-        model.frames[i].parentJoint == first.parentJoint
-        and model.frames[i].placement.isApprox(first.placement, 1e-12)
-        for i in ids[1:]
-    ):
-        return ids[0]
-    kinds = ", ".join(str(model.frames[i].type).rsplit(".", 1)[-1] for i in ids)
-    raise InvalidInputError(
-        f"frame name {name!r} names {len(ids)} frames at different places ({kinds}); expected "
-        "the name of one frame: rename one of them in the robot file"
-    )
-
-
-def joint_id(model: pin.Model, name: str) -> int:
-    """Index of joint ``name``; raises :class:`NameNotFoundError` listing the joints
-    (:class:`InvalidInputError` when ``name`` is not a str)."""
-    check_name("joint", name)
-    known = model.existJointName(name)
-    if known and (j := model.getJointId(name)) != 0:  # joint 0 is the universe
-        return j
-    if known:
-        hint = "joint 0, the world: it does not move"
-    elif model.existFrame(name, pin.FrameType.FIXED_JOINT):
-        hint = "a fixed joint: it does not move"
-    elif composite := [n for n in model.names if n.startswith("Composite_")]:
-        hint = (f"Pinocchio merges the joints of one MJCF body into a composite joint, "
-                f"{composite}: nest a body for each joint")  # fmt: skip
-    else:
-        hint = ""
-    raise NameNotFoundError("joint", name, list(model.names)[1:], hint)
-
-
-def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: str) -> Closure:
-    """Closure that makes frames ``frame_a`` and ``frame_b`` coincide.
-
-    Args:
-        model: the kinematic tree.
-        frame_a, frame_b: frame names; for ``"3d"`` their origins coincide, for ``"6d"``
-            their whole placements do.
-        kind: ``"3d"`` or ``"6d"``.
-    """
-    if kind not in CLOSURE_TYPES:
-        raise InvalidInputError(f"closure type {kind!r}; expected one of {sorted(CLOSURE_TYPES)}")
-    fa, fb = model.frames[frame_id(model, frame_a)], model.frames[frame_id(model, frame_b)]
-    constraint = CLOSURE_TYPES[kind](
-        model, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement
-    )
-    return Closure(constraint, f"{frame_a}<->{frame_b}")
 
 
 def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
@@ -217,49 +129,6 @@ def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
     return frozen(K)
 
 
-def joint_names(what: str, names) -> tuple[str, ...]:
-    """``names`` (an iterable of str, not a str) as a tuple; repeated names refused."""
-    if isinstance(names, str) or not isinstance(names, Iterable):
-        raise InvalidInputError(
-            f"{what} joints must be a list of joint names, got {names!r} ({type(names).__name__})"
-        )
-    names = tuple(names)
-    repeated = sorted({n for n in names if isinstance(n, str) and names.count(n) > 1})
-    if repeated:
-        raise InvalidInputError(f"{what} joints {repeated} are listed more than once")
-    return names
-
-
-def _checked_closures(model: pin.Model, closures) -> tuple[Closure, ...]:
-    """The closures as :class:`Closure` objects, each joining two bodies of ``model``."""
-    if isinstance(closures, str) or not isinstance(closures, Iterable):
-        raise InvalidInputError(
-            f"closures must be a list of Closure or anchor constraints, got {closures!r}"
-        )
-    out = []
-    for i, c in enumerate(closures):
-        c = c if isinstance(c, Closure) else Closure(c, f"closure{i}")
-        if not isinstance(c.constraint, AnchorConstraint):
-            raise InvalidInputError(
-                f"closure {i} is a {type(c.constraint).__name__}; expected a Closure, a "
-                "pinocchio.PointAnchorConstraintModel or a pinocchio.FrameAnchorConstraintModel"
-            )
-        j1, j2 = c.constraint.joint1_id, c.constraint.joint2_id
-        if not (0 <= j1 < model.njoints and 0 <= j2 < model.njoints):
-            raise InvalidInputError(
-                f"closure {c.name!r} joins joints {j1} and {j2}, but the model has joints "
-                f"0..{model.njoints - 1}: it was built for another model"
-            )
-        if j1 == j2:
-            raise InvalidInputError(
-                f"closure {c.name!r} has both ends on the body of joint {model.names[j1]!r}: "
-                "a closure must join two different bodies (it would hold nothing, or never "
-                "close)"
-            )
-        out.append(c)
-    return tuple(out)
-
-
 class ClosedLoopModel:
     """Kinematic tree + loop closures + actuated joints + per-coordinate stiffness.
 
@@ -312,7 +181,7 @@ class ClosedLoopModel:
         self._pool: list[tuple[pin.Data, list]] = []
         self._memo: dict = {}
         self._frame_ids: dict[str, int] = {}
-        self.closures = _checked_closures(model, closures)
+        self.closures = checked_closures(model, closures)
         self.visual_model = visual_model
         self.collision_model = collision_model
         self.name = name or model.name
@@ -596,12 +465,37 @@ class ClosedLoopModel:
         """This model with flexible links: each beam (link name -> specification: end, E,
         G, section, theory, or stiffness_6x6) becomes a 6-dof virtual joint
         ``<link>_beam`` with its tip stiffness as a block spring
-        (:func:`closedloop.beams.insert_beams`). The new model has more coordinates: map a
+        (:func:`closedloop.beams.apply_beams`). The new model has more coordinates: map a
         configuration with :func:`closedloop.beams.map_configuration`.
-        """
-        from .beams import insert_beams  # beams builds models: imported on demand
 
-        return insert_beams(self, beams)
+        Actuated joints, springs and locked joints keep their names; closure anchors are
+        carried over on their joints, those at a beam's tip with the tip (a loop of an MJCF
+        or SDF file closed at the end of a link that becomes a beam); an anchor elsewhere on
+        the beam's link stays with the beam's start.
+
+        Raises:
+            BeamError: a bad specification (the message names the beam and the value).
+        """
+        geoms = [self.visual_model, self.collision_model]
+        ends = [(k.joint1_id, k.joint1_placement) for c in self.closures for k in [c.constraint]]
+        ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
+        model, geoms, springs, ends, masses = apply_beams(self.model, geoms, beams, anchors=ends)
+        n = len(self.closures)
+        closures = [
+            Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
+            for i, c in enumerate(self.closures)
+        ]
+        return ClosedLoopModel(
+            model,
+            closures,
+            self.actuated,
+            {**self.springs, **springs},
+            self.locked,
+            geoms[0],
+            geoms[1],
+            self.name,
+            beam_masses={**self.beam_masses, **masses},
+        )
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """Validated copy of a configuration vector q (nq,)."""

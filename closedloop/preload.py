@@ -25,7 +25,6 @@ import numpy as np
 
 from . import lapack
 from .arrays import check_wrench, readonly
-from .compliance import ComplianceResult, compliance, compliance_result
 from .conditioning import RANK_RTOL, spectrum_from_factor, spectrum_of_matrix, twist_scaling
 from .configuration import Configuration
 from .elastic import deflection, spring_law
@@ -44,6 +43,7 @@ from .tangent import (
     stability_margin,
     tangent_stiffness,
 )
+from .unloaded import ComplianceResult, compliance_result, unloaded_compliance
 
 __all__ = [
     "CRITICAL_RTOL",
@@ -182,7 +182,7 @@ def preloaded_compliance(
     about = {"equilibrium": eq, "spring_forces": readonly(_spring_forces(clm, eq))}
     M, P, T = scaled_tangent(clm, Kt, f.N, f.V, f.sigma**2)  # P: preload part; T^T K_r T = I
     if not np.any(P):
-        base = compliance(state, frame, axes)
+        base = unloaded_compliance(state, frame, axes, "auto")
         return PreloadedCompliance(
             **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
         )

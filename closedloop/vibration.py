@@ -57,13 +57,15 @@ import numpy as np
 import pinocchio as pin
 
 from .arrays import frozen, readonly
-from .beams import beam_axes, inserted_beams
+from .beam_theory import beam_axes
+from .beams import inserted_beams
+from .closures import check_name
 from .conditioning import RANK_RTOL, twist_scaling
 from .configuration import Configuration, as_configuration
 from .exceptions import ClosedLoopError, InvalidInputError, ModesError
 from .gravity import GravityLoad, Payload
 from .kinematics import nullspace
-from .model import ClosedLoopModel, check_name
+from .model import ClosedLoopModel
 from .springs import scaling
 
 #: Eigenvalues of the reduced mass matrix at or below this fraction of the largest are

@@ -20,8 +20,9 @@ from helpers import REPO
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
+from closedloop.closures import closure_between_frames
 from closedloop.io import load_urdf, robot_data_dir
-from closedloop.model import ClosedLoopModel, closure_between_frames
+from closedloop.model import ClosedLoopModel
 
 EZ = np.array([0.0, 0.0, 1.0])
 #: Inertia of every body (0.1 kg, 1e-4 kg m^2): only needs to be nonzero.

@@ -24,8 +24,8 @@ from closedloop.cli import main
 from closedloop.cli_common import MAX_MAP_POINTS, index_line
 from closedloop.compliance import energy_shares
 from closedloop.exceptions import InvalidInputError
-from closedloop.identification import read_measurements
 from closedloop.maps import grid_points
+from closedloop.measurements import read_measurements
 
 UR5 = ["stiffness", "ur5", "--frame", "tool0", "--q", *map(str, UR5_Q), "--joint-stiffness"]
 #: A probe's estimate and the map's own time agree within this factor (the probe is a

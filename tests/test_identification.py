@@ -7,13 +7,9 @@ import pytest
 from helpers import assert_close_in_norm, driven
 
 import closedloop as cl
-from closedloop.identification import (
-    Measurement,
-    compliance_derivative,
-    identify,
-    read_measurements,
-)
+from closedloop.identification import Measurement, compliance_derivative, identify
 from closedloop.io import load_urdf, robot_data_dir
+from closedloop.measurements import read_measurements
 
 #: Central differences of C in k (relative step 1e-4): truncation ~1e-8, rounding ~1e-12.
 RTOL_DERIVATIVE = 1e-6

@@ -10,12 +10,8 @@ import pytest
 import scipy.special
 
 import closedloop as cl
-from closedloop.identification import (
-    FIT_SIGNIFICANCE,
-    Measurement,
-    identify,
-    read_measurements,
-)
+from closedloop.identification import FIT_SIGNIFICANCE, Measurement, identify
+from closedloop.measurements import read_measurements
 
 NAMES = ("j1", "j2", "j3", "j4")
 #: 1e-2 N m/rad beside 1e8 N/m: the sensitivities of the fit span ten decades.

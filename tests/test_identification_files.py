@@ -9,7 +9,8 @@ from helpers import driven
 
 import closedloop as cl
 from closedloop.cli import main
-from closedloop.identification import CSV_SD, CSV_TWIST, CSV_WRENCH, identify, read_measurements
+from closedloop.identification import identify
+from closedloop.measurements import CSV_SD, CSV_TWIST, CSV_WRENCH, read_measurements
 
 TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
 #: Noise-free data: the fit stops at the optimiser's tolerances, far below 1e-8.

@@ -15,15 +15,10 @@ import yaml
 from helpers import assert_close_in_norm
 
 from closedloop.assembly import assemble
+from closedloop.closure_file import read_closure_file, read_springs_file
 from closedloop.compliance import compliance
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
-from closedloop.io import (
-    load_model,
-    load_urdf,
-    read_closure_file,
-    read_springs_file,
-    reference_configuration,
-)
+from closedloop.io import load_model, load_urdf, reference_configuration
 from closedloop.kinematics import closure_residual
 
 # The MJCF and URDF four-bars are the same mechanism read by two parsers; their models

@@ -12,13 +12,14 @@ import pytest
 
 import closedloop as cl
 from closedloop.arrays import decimal
+from closedloop.closure_file import read_springs_file
 from closedloop.exceptions import (
     AssemblyError,
     InvalidInputError,
     ModelFileError,
     NameNotFoundError,
 )
-from closedloop.io import read_springs_file, reference_configuration
+from closedloop.io import reference_configuration
 from closedloop.sdf import load_sdf
 
 #: C = J K^-1 J^T computed two ways (Pinocchio's Jacobian here, the library's path):
