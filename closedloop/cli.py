@@ -68,6 +68,8 @@ EPILOG = """\
 Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
 gives the actuated joints' values and the loops are closed by moving the passive joints
 (start: MJCF qpos0, else the neutral configuration). Without either: that start, assembled.
+A configuration outside the joints' position limits is refused (angles in degrees are);
+--no-limits takes it as it is.
 A --q of a model with loops must close them to 1e-6 (metres per size of the mechanism, rad).
 
 Springs: --joint-stiffness K gives stiffness K [N m/rad or N/m] to every actuated joint
@@ -102,6 +104,8 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
         "a stiffness index over a grid of actuated inputs (NPZ, CSV, PNG)",
     ),
     "identify": ("closedloop.cli_identify", "fit spring stiffnesses to measured deflections"),
+    "info": ("closedloop.cli_info", "joints, frames, closures, springs and sizes of a model"),
+    "deflect": ("closedloop.cli_deflect", "twist of a frame and joint deflections under a load"),
 }
 
 
@@ -158,6 +162,12 @@ def add_model_arguments(p: argparse.ArgumentParser) -> None:
     )
     config.add_argument(
         "--actuated", nargs="+", type=finite_float, metavar="A", help="actuated joint values"
+    )
+    p.add_argument(
+        "--no-limits",
+        action="store_true",
+        help="accept a configuration outside the joints' position limits (refused by default: "
+        "an angle in degrees is the usual cause)",
     )
 
 
@@ -233,8 +243,9 @@ def preload_from_args(args: argparse.Namespace) -> dict:
     return out
 
 
-def add_view_arguments(p: argparse.ArgumentParser) -> None:
-    """Options of a deflection view: wrench, amplification, output (SI)."""
+def add_wrench_arguments(p: argparse.ArgumentParser) -> None:
+    """--force FX FY FZ [N], --torque NX NY NZ [N m] at the frame origin, world axes
+    (default 0)."""
     for name, labels, unit in (
         ("--force", ("FX", "FY", "FZ"), "N"),
         ("--torque", ("NX", "NY", "NZ"), "N m"),
@@ -247,6 +258,11 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
             metavar=labels,
             help=f"{name[2:]} at the frame origin, world axes [{unit}]",
         )
+
+
+def add_view_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of a deflection view: wrench, amplification, output (SI)."""
+    add_wrench_arguments(p)
     p.add_argument(
         "--scale",
         type=finite_float,
@@ -314,25 +330,31 @@ def view_from_args(
     )
 
 
-def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
+def configuration(
+    clm: ClosedLoopModel, q=None, actuated=None, check_limits: bool = True
+) -> Configuration:
     """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
+    ``check_limits`` False (``--no-limits``): the joints' position limits are not checked.
+
     Raises:
-        InvalidInputError: wrong count, non-finite values, given actuated values outside
-            their joints' limits (a map's ``invalid`` point: the robot is not driven there;
-            without values, those of the file's configuration are taken as they are).
+        InvalidInputError: wrong count, non-finite values.
+        OutsideLimitsError: ``check_limits`` and joints of the configuration outside their
+            limits (with ``--actuated``: an actuated value outside, InvalidInputError, a
+            map's ``invalid`` point: the robot is not driven there).
         OpenLoopError: a ``--q`` that does not close the loops (the one closure tolerance,
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
     if q is None:
         start = reference_configuration(clm)
-        q = (
-            assemble(clm, None, start)  # the file's own configuration, as drawn
-            if actuated is None
-            else assemble_connected(clm, actuated, start, jacobian=False)  # start's mode
-        ).q
-    state = Configuration(clm, q)
+        if actuated is None:
+            q = assemble(clm, None, start).q  # the file's own configuration, as drawn
+        elif check_limits:
+            q = assemble_connected(clm, actuated, start, jacobian=False).q  # start's mode
+        else:
+            q = assemble(clm, actuated, start, jacobian=False).q
+    state = Configuration(clm, q, check_limits=check_limits)
     try:
         return state.require_closed()
     except OpenLoopError as e:
@@ -359,6 +381,7 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
         + f" (lengths per L = {res.length:.4g} m)"
         if res.rank
         else "condition number of the scaled K: none (C = 0: no wrench moves the frame)"
+        + (f"; {res.note}" if res.note else "")
     )
     lines = [
         f"model {clm.name!r}, frame {res.frame!r}",
@@ -390,19 +413,24 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
     return "\n".join(lines)
 
 
-def model_from_args(args: argparse.Namespace, geometry: bool = False):
-    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options."""
+def load_from_args(args: argparse.Namespace, geometry: bool = False) -> ClosedLoopModel:
+    """The model of :func:`add_source_arguments`' options (MODEL, --closures, springs)."""
     springs = read_springs_file(args.springs) if args.springs else None
     robot, closures = resolve(args.model, args.closures)
-    clm = load_model(
+    return load_model(
         robot,
         closures,
         springs=springs,
         joint_stiffness=args.joint_stiffness,
         geometry=geometry,
     )
+
+
+def model_from_args(args: argparse.Namespace, geometry: bool = False):
+    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options."""
+    clm = load_from_args(args, geometry)
     clm.frame_id(args.frame)  # unknown frame: fail before any assembly
-    return clm, configuration(clm, args.q, args.actuated)
+    return clm, configuration(clm, args.q, args.actuated, not args.no_limits)
 
 
 def _vector(v) -> str:

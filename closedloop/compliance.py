@@ -114,6 +114,7 @@ class ComplianceResult(ReadOnlyArrays):
             None; read it as :attr:`K`, which explains a missing K.
         path: how the admissible motions were found (:class:`SpringFactor`):
             ``"serial"``, ``"partitioned"`` or ``"null-space"``.
+        note: why C = 0 when no wrench moves the frame (:func:`spring_note`), else "".
     """
 
     C: np.ndarray
@@ -131,6 +132,7 @@ class ComplianceResult(ReadOnlyArrays):
     condition_number: float = field(kw_only=True)
     stiffness_matrix: np.ndarray | None = field(kw_only=True, repr=False)
     path: str = field(kw_only=True, default="null-space")
+    note: str = field(kw_only=True, default="", repr=False)
 
     @property
     def is_full_rank(self) -> bool:
@@ -153,7 +155,8 @@ class ComplianceResult(ReadOnlyArrays):
         if not self.is_full_rank or self.stiffness_matrix is None:
             raise RigidDirectionsError(
                 f"compliance at frame {self.frame!r} has rank {self.rank} < 6: the stiffness "
-                f"is infinite along {describe_directions(self.rigid_directions)}",
+                f"is infinite along {describe_directions(self.rigid_directions)}"
+                + (f"; {self.note}" if self.note else ""),
                 self.rigid_directions,
             )
         return self.stiffness_matrix
@@ -186,6 +189,7 @@ class ComplianceResult(ReadOnlyArrays):
             "mobility": self.mobility,
             "internal_mobilities": self.internal_mobilities,
             "path": self.path,
+            "note": self.note,
             "units": UNITS,
         }
 
@@ -224,6 +228,7 @@ def compliance(
     gravity=None,
     payloads=(),
     preload=None,
+    check_limits: bool = True,
 ) -> ComplianceResult:
     """Cartesian compliance of ``frame`` at a configuration (see the module docstring).
 
@@ -248,9 +253,14 @@ def compliance(
             preload (:func:`closedloop.statics.solve_equilibrium`) and the result is the
             tangent compliance there (:class:`closedloop.preload.PreloadedCompliance`,
             with the sag of the frame, q_eq and the spring forces).
+        check_limits: with a model, refuse a q outside the joints' position limits
+            (default; :class:`closedloop.exceptions.OutsideLimitsError`, which asks
+            "degrees?" for revolute values beyond 2 pi); False takes q as it is (a
+            :class:`Configuration` is checked when it is made).
 
     Raises:
         NameNotFoundError: unknown frame.
+        OutsideLimitsError: ``check_limits`` and joints of q outside their limits.
         OpenLoopError: q does not close the loops (tolerance ``CLOSURE_TOL``).
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
         SingularConfigurationError: the compliance overflows (springs near 1e-308); on the
@@ -268,7 +278,7 @@ def compliance(
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)
     check_path(path)
-    state = as_configuration(model, q, length=length)
+    state = as_configuration(model, q, length=length, check_limits=check_limits)
     state.require_closed()
     if gravity is not None or payloads or preload is not None:
         # the preloaded compliance builds on this module: imported here, on demand
@@ -403,12 +413,33 @@ def _result(
         condition_number=spectrum.condition_number,
         stiffness_matrix=K,
         path=path,
+        note=spring_note(state.model) if spectrum.rank == 0 else "",
     )
     if cls is None:  # every field given, checked above: set without the dataclass __init__
         result = object.__new__(ComplianceResult)
         result.__dict__.update(fields)
         return result
     return cls(**fields, **extra)
+
+
+#: How to give springs, in every API and command-line message that finds none.
+HOW_TO_GIVE_SPRINGS = (
+    "give springs: command line --joint-stiffness K (every actuated joint) or --springs FILE "
+    "(joint -> stiffness), Python load_model(..., joint_stiffness=K) or springs={...}"
+)
+
+
+def spring_note(clm: ClosedLoopModel) -> str:
+    """Why no wrench moves a frame (C = 0) of ``clm``: the model has no spring at all (no
+    joint, beam or closure: every actuated joint without one is rigid), or none of its
+    springs moves the frame; with :data:`HOW_TO_GIVE_SPRINGS` in the first case."""
+    k = clm.stiffness
+    if not np.any((k > 0) & np.isfinite(k)):
+        return (
+            "no joint, beam or closure of the model has a spring (an actuated joint without "
+            "one is rigid), so nothing deflects; " + HOW_TO_GIVE_SPRINGS
+        )
+    return "none of the model's springs moves this frame (the frame is not beyond them)"
 
 
 def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dict[str, float]:
