@@ -52,7 +52,7 @@ from .compliance import (
     describe_directions,
     energy_shares,
 )
-from .conditioning import ILL_CONDITIONED
+from .conditioning import ILL_CONDITIONED, twist_scaling
 from .configuration import Configuration
 from .data import BUNDLED_MODELS, ROBOTS, resolve
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
@@ -60,6 +60,7 @@ from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
 from .limits import assemble_connected
 from .model import ClosedLoopModel
+from .rounding import without_rounding
 
 PROG = "closedloop"
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
@@ -373,7 +374,9 @@ def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
 
 
 def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
-    """Readable report of a compliance result: configuration, C, then K or rigid directions."""
+    """Readable report of a compliance result: configuration, C, then K or rigid directions
+    (every entry as computed: an entry 1e-13 of the largest may be rounding or, in an
+    ill-conditioned C, a true stiff direction)."""
     axes = "world-aligned axes" if res.axes == "world" else f"axes of frame {res.frame!r}"
     condition = (
         f"condition number of the scaled K {res.condition_number:.3e}"
@@ -459,7 +462,7 @@ def stiffness(args: argparse.Namespace) -> int:
     else:
         print(format_report(clm, res))
         if getattr(res, "equilibrium", None) is not None:
-            sag = res.sag
+            sag = without_rounding(res.sag, twist_scaling(res.length))
             print(f"sag under the preload: {_vector(1e3 * sag[:3])} mm, "
                   f"{_vector(np.degrees(sag[3:]))} deg (world axes); stability margin "
                   f"{res.stability_margin:.3g}")  # fmt: skip

@@ -20,6 +20,7 @@ import numpy as np
 
 from .cli_common import print_json
 from .compliance import TWIST_LABELS, describe_directions, energy_shares
+from .conditioning import twist_scaling
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 from .rounding import without_rounding
 
@@ -44,7 +45,8 @@ def add_parser(sub, source_arguments) -> None:
 def deflection_report(clm, res, wrench: np.ndarray) -> dict:
     """JSON-ready deflection of ``res`` (a world-axes compliance of ``clm``) under
     ``wrench`` (6,) [N, N m]: twist (6,) [m, rad], joint deflections by coordinate (joint
-    name, index in the tangent of q, value [rad or m]), energy shares, rank."""
+    name, index in the tangent of q, value [rad or m]), energy shares, rank, length L [m]
+    of the unit-free rules."""
     twist = res.deflection(wrench)
     dq = res.joint_deflection(wrench)
     units = np.where(clm.linear_coordinates, "m", "rad")
@@ -68,6 +70,7 @@ def deflection_report(clm, res, wrench: np.ndarray) -> dict:
         ],
         "energy_shares": energy_shares(clm, res, wrench),
         "rank": res.rank,
+        "length": res.length,
         "rigid_directions": res.rigid_directions.T.tolist(),
         "note": res.note,
     }
@@ -76,8 +79,9 @@ def deflection_report(clm, res, wrench: np.ndarray) -> dict:
 def format_deflection(doc: dict) -> str:
     """Text of :func:`deflection_report`; rounding noise shown as 0
     (:func:`closedloop.rounding.without_rounding`)."""
-    t = without_rounding(doc["twist"])
-    dq = without_rounding([d["value"] for d in doc["joint_deflections"]])
+    t = without_rounding(doc["twist"], twist_scaling(doc["length"]))
+    per_m = [1.0 / doc["length"] if d["unit"] == "m" else 1.0 for d in doc["joint_deflections"]]
+    dq = without_rounding([d["value"] for d in doc["joint_deflections"]], per_m)
     w = doc["wrench"]
     lines = [
         f"model {doc['model']!r}, frame {doc['frame']!r}, world-aligned axes, at the frame "

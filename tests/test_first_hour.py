@@ -5,12 +5,17 @@ printed numbers."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import REPO
 
 import closedloop as cl
+from closedloop import data
 from closedloop.cli import main
 from closedloop.rounding import ROUNDING_RTOL, without_rounding
 
@@ -231,3 +236,64 @@ def test_rounding_noise_is_zero_and_the_rest_kept():
     np.testing.assert_array_equal(without_rounding([90.0, edge, 2 * edge]), [90.0, 0.0, 2 * edge])
     np.testing.assert_array_equal(without_rounding([0.0, 0.0]), [0.0, 0.0])
     assert without_rounding([-1e-30])[0] == -1e-30  # a vector's only component is its size
+
+
+# ------------------------------------------------------------------------ bundled models
+def test_every_bundled_file_has_a_name():
+    """Each URDF (with its closure file) and each MJCF of urdf/ is a bundled model."""
+    files = {p.name for p in data.data_dir().iterdir() if p.suffix in (".urdf", ".xml")}
+    named = {robot for robot, _ in data.BUNDLED_MODELS.values()}
+    assert named == files
+    for _, side in data.BUNDLED_MODELS.values():
+        assert side is None or data.path(side).is_file()
+
+
+@pytest.mark.parametrize(
+    ("name", "actuated"),
+    [
+        ("stewart", [f"leg{i}" for i in range(6)]),
+        ("stewart_mjcf", [f"leg{i}" for i in range(6)]),
+        ("delta", ["arm0", "arm1", "arm2"]),
+        ("delta_mjcf", ["arm0", "arm1", "arm2"]),
+        ("rrr3", ["leg0", "leg1", "leg2"]),
+        ("fivebar5_mjcf", ["leg0", "leg1"]),
+        ("cahyman", ["alpha_1", "alpha_2", "alpha_3", "alpha_4", "s_4"]),
+    ],
+)
+def test_bundled_models_load_by_name_with_their_actuators(capsys, name, actuated):
+    code, out, err = run(capsys, "info", name, "--json")
+    assert code == 0 and err == ""
+    assert json.loads(out)["actuated"] == actuated
+
+
+def test_a_bundled_name_works_from_any_folder(tmp_path):
+    """From an empty folder, as a subprocess: the Stewart platform by name, driven by its
+    six legs (K exists, exit 0)."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    line = [sys.executable, "-m", "closedloop", "stiffness", "stewart", "--frame", "platform",
+            "--actuated", "0.01", "0", "0", "0", "0", "-0.01", "--json"]  # fmt: skip
+    done = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120, check=False)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["rank"] == 6
+
+
+# ------------------------------------------------------------------------ printed numbers
+def test_cahyman_deflect_prints_rounding_as_zero_and_json_keeps_it(capsys):
+    """At alpha = alpha4 = 90 deg the plate's theta and M's rz are 0 in exact arithmetic:
+    the text shows 0 (it showed -1.31542e-47 deg and 2.08899e-19 deg), the JSON the raw
+    values, which are rounding (below ROUNDING_RTOL of their vector)."""
+    from cahyman_pin.cli import main as cahyman_main
+
+    line = ["deflect", "--alpha", "90", "90", "90", "--alpha4", "90", "--s4", "50",
+            "--force", "1", "1", "-1e2", "--torque", "0", "0", "0"]  # fmt: skip
+    assert cahyman_main(line) == 0
+    text = capsys.readouterr().out
+    assert "phi, theta, psi = ( 90,  0,  0) deg" in text
+    assert "e-19" not in text and "e-47" not in text
+    assert cahyman_main([*line, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    rot = np.array(doc["M"]["rotation_rad"])
+    assert abs(rot[2]) <= ROUNDING_RTOL * np.abs(rot).max()
+    np.testing.assert_array_equal(without_rounding(rot), [rot[0], rot[1], 0.0])
+    assert rot[0] != 0.0 and rot[1] != 0.0
