@@ -1,10 +1,14 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
 ``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
-under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`).
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); ``closedloop deflect``
+prints it (:mod:`closedloop.cli_deflect`), ``closedloop info MODEL`` lists what a model
+holds (:mod:`closedloop.cli_info`).
 
-MODEL is a robot file, a bundled model by name (``fourbar``, with its closure file) or an
+MODEL is a robot file, a bundled model by name (``fourbar``, ``stewart``, ... with its
+closure file; ``fourbar_mjcf``, ... the MJCF: :data:`closedloop.data.BUNDLED_MODELS`) or an
 example-robot-data robot by name (``ur5``, ``panda``, ...; see :mod:`closedloop.data`).
+A configuration outside the joints' limits is bad input (``--no-limits`` takes it).
 
 Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`):
 
@@ -13,9 +17,10 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
   directions, K does not exist. C and the rigid directions are printed (JSON: ``"K": null``).
   This is an answer, not an error, hence not 2; it differs from 0 so that scripts notice.
 * ``2`` - bad input (missing file, unknown frame or joint, malformed closure file, wrong
-  number of values, NaN, negative stiffness, an output path that cannot be written, a
-  ``--q`` that does not close the loops): one line ``closedloop: error: <message>`` on
-  stderr, a command-line syntax error included (:class:`closedloop.cli_common.UsageError`).
+  number of values, NaN, negative stiffness, joints outside their limits, an output
+  path that cannot be written, a ``--q`` that does not close the loops): one line
+  ``closedloop: error: <message>`` on stderr, a command-line syntax error included
+  (:class:`closedloop.cli_common.UsageError`).
 * ``3`` - the computation failed on valid input (loops that cannot be closed for these
   actuated values, no static equilibrium, a singular configuration or a mechanism, a result
   that is not finite): one line on stderr.

@@ -297,3 +297,17 @@ def test_cahyman_deflect_prints_rounding_as_zero_and_json_keeps_it(capsys):
     assert abs(rot[2]) <= ROUNDING_RTOL * np.abs(rot).max()
     np.testing.assert_array_equal(without_rounding(rot), [rot[0], rot[1], 0.0])
     assert rot[0] != 0.0 and rot[1] != 0.0
+
+
+def test_a_preloaded_query_refuses_the_rest_pose_outside_unless_asked(fourbar):
+    """compliance(..., gravity) checks the rest configuration as the plain query does;
+    with check_limits=False the statics take it and flag the equilibrium outside the
+    limits (JointLimitWarning), their own rule."""
+    clm, q = fourbar
+    turned = q.copy()
+    turned[clm.model.joints[clm.joint_id("crank")].idx_q] += 2 * np.pi
+    with pytest.raises(cl.OutsideLimitsError, match=r"crank = 6\.58"):
+        cl.compliance(clm, turned, "P", preload=[1.0, 0, 2.0, 0, 0, 0])
+    with pytest.warns(cl.JointLimitWarning, match=r"crank = 6\.58"):
+        res = cl.compliance(clm, turned, "P", preload=[1.0, 0, 2.0, 0, 0, 0], check_limits=False)
+    assert res.equilibrium.limits_violated == ("crank",)

@@ -597,8 +597,8 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
     _intro(doc)
-    _summary(doc, params, tables)  # the findings first, then the figures
-    _figures(doc, out, params)
+    _summary(doc, params, tables)  # the findings first, then the figures (placed here,
+    at = len(doc.blocks)  # computed last: a section that fails stops the run before them)
     _tables(doc, tables)
     _linearity(doc)
     floor_section(doc, params)
@@ -611,6 +611,9 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
     _matrices(doc, params)
     _parameters(doc, params, params_file)
     _conventions(doc, params, tables)
+    figures = Document(doc.title)
+    _figures(figures, out, params)
+    doc.blocks[at:at] = figures.blocks
     for name, text in (("report.md", doc.to_markdown(out)), ("report.html", doc.to_html())):
         write_atomically(out / name, lambda f, text=text: f.write(text), text=True)
     return doc
