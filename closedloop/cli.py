@@ -310,7 +310,8 @@ def view_from_args(
     """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options.
 
     Warnings (a view without load) go to stderr, one line each, prefixed by ``prog``.
-    ``pose``: the pose as the page's legend writes it (default q).
+    ``pose``: the pose as the page's legend writes it (default q). ``--no-limits``, where
+    the command has it, draws a q outside the joints' limits.
     """
     from .viewer import run_view  # meshcat is imported only for a view
 
@@ -333,6 +334,7 @@ def view_from_args(
         pose=pose,
         out=out,
         warn=warn,
+        check_limits=not getattr(args, "no_limits", False),
     )
 
 

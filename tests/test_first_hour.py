@@ -117,6 +117,16 @@ def test_cli_refuses_degrees_and_takes_no_limits(capsys, ur5_urdf):
     assert code == 2 and "outside their limits" in one_error_line(err)
 
 
+def test_view_refuses_degrees_and_draws_them_with_no_limits(capsys, ur5_urdf, tmp_path):
+    base = ["view", ur5_urdf, "--frame", "tool0", "--joint-stiffness", UR5_K, "--q",
+            *UR5_DEGREES, "--force", 0, 0, -10, "--html", tmp_path / "v.html"]  # fmt: skip
+    code, out, err = run(capsys, *base)
+    assert code == 2 and out == "" and "degrees?" in one_error_line(err)
+    assert not (tmp_path / "v.html").exists()
+    code, out, err = run(capsys, *base, "--no-limits")
+    assert code == 0 and err == "" and (tmp_path / "v.html").is_file()
+
+
 # ------------------------------------------------------------------------ no springs
 def test_no_spring_is_named_with_the_way_to_give_springs(capsys, ur5_urdf):
     bare = cl.load_model(ur5_urdf)
