@@ -305,13 +305,21 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def view_from_args(
-    clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=print, pose=None, prog=PROG
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    frame: str,
+    args,
+    out=print,
+    pose=None,
+    prog=PROG,
+    check_limits: bool = True,
 ):
     """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options.
 
     Warnings (a view without load) go to stderr, one line each, prefixed by ``prog``.
-    ``pose``: the pose as the page's legend writes it (default q). ``--no-limits``, where
-    the command has it, draws a q outside the joints' limits.
+    ``pose``: the pose as the page's legend writes it (default q). ``check_limits``: refuse
+    a q outside the joints' limits (False: ``--no-limits``, or the file's own
+    configuration, as :func:`configuration`).
     """
     from .viewer import run_view  # meshcat is imported only for a view
 
@@ -334,7 +342,7 @@ def view_from_args(
         pose=pose,
         out=out,
         warn=warn,
-        check_limits=not getattr(args, "no_limits", False),
+        check_limits=check_limits,
     )
 
 
@@ -343,7 +351,9 @@ def configuration(
 ) -> Configuration:
     """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
-    ``check_limits`` False (``--no-limits``): the joints' position limits are not checked.
+    ``check_limits`` False (``--no-limits``): the joints' position limits are not checked;
+    neither are they for the file's own configuration (no values given: a file may count
+    a joint's zero outside its limits, as Cassie's SDF does).
 
     Raises:
         InvalidInputError: wrong count, non-finite values.
@@ -354,6 +364,7 @@ def configuration(
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
+    given = q is not None or actuated is not None  # else the file's own configuration
     if q is None:
         start = reference_configuration(clm)
         if actuated is None:
@@ -362,7 +373,7 @@ def configuration(
             q = assemble_connected(clm, actuated, start, jacobian=False).q  # start's mode
         else:
             q = assemble(clm, actuated, start, jacobian=False).q
-    state = Configuration(clm, q, check_limits=check_limits)
+    state = Configuration(clm, q, check_limits=check_limits and given)
     try:
         return state.require_closed()
     except OpenLoopError as e:
@@ -484,7 +495,8 @@ def stiffness(args: argparse.Namespace) -> int:
 def view(args: argparse.Namespace) -> int:
     """Run ``closedloop view``; returns the exit code (0)."""
     clm, state = model_from_args(args, geometry=True)
-    view_from_args(clm, state.q, args.frame, args)
+    given = args.q is not None or args.actuated is not None  # else the file's configuration
+    view_from_args(clm, state.q, args.frame, args, check_limits=given and not args.no_limits)
     return EXIT_OK
 
 

@@ -117,6 +117,16 @@ def test_cli_refuses_degrees_and_takes_no_limits(capsys, ur5_urdf):
     assert code == 2 and "outside their limits" in one_error_line(err)
 
 
+def test_the_files_own_configuration_is_taken_as_drawn(capsys, panda_urdf):
+    """The Panda's neutral configuration (its file's) has joints 4 and 6 at 0, outside
+    their limits: typed as --q it is refused, taken from the file (no --q) it is not."""
+    base = ["stiffness", panda_urdf, "--frame", "panda_hand", "--joint-stiffness", UR5_K]
+    code, out, err = run(capsys, *base)
+    assert code in (0, 1) and err == "" and "compliance C" in out
+    code, out, err = run(capsys, *base, "--q", *[0] * 8)
+    assert code == 2 and out == "" and "panda_joint4 = 0 " in one_error_line(err)
+
+
 def test_view_refuses_degrees_and_draws_them_with_no_limits(capsys, ur5_urdf, tmp_path):
     base = ["view", ur5_urdf, "--frame", "tool0", "--joint-stiffness", UR5_K, "--q",
             *UR5_DEGREES, "--force", 0, 0, -10, "--html", tmp_path / "v.html"]  # fmt: skip
