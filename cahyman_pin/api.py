@@ -115,8 +115,8 @@ def generic_backend(
     state = Configuration(model.clm, q, length=params.length)
     gravity = (0.0, 0.0, -params.gravity) if weight else None
     result = compliance(state, FRAME_M, gravity=gravity)
-    if weight:  # the plate Jacobian at the sagged configuration
-        state = Configuration(model.clm, result.q, length=params.length)
+    if weight:  # the plate Jacobian at the sagged configuration (its limits: the statics')
+        state = Configuration(model.clm, result.q, length=params.length, check_limits=False)
     J_H = state.frame_jacobian(FRAME_H)
     return BackendResult(
         C=result.C,

@@ -32,8 +32,8 @@ from .arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverse
 from .closures import check_name
 from .compliance import compliance
 from .conditioning import RANK_RTOL, check_length
-from .configuration import CLOSURE_TOL, residual_rounding
-from .exceptions import ClosedLoopError, InvalidInputError
+from .configuration import CLOSURE_TOL, require_within_limits, residual_rounding
+from .exceptions import ClosedLoopError, InvalidInputError, OutsideLimitsError
 from .kinematics import jacobian_rows, reference_frame, residual_rows
 from .model import ClosedLoopModel
 from .springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
@@ -106,6 +106,7 @@ def compliances(
     axes: str = "world",
     *,
     length: float | None = None,
+    check_limits: bool = True,
 ) -> BatchCompliance:
     """Compliance of ``frame`` at each of n assembled configurations (module docstring).
 
@@ -115,6 +116,8 @@ def compliances(
         frame: name of the loaded frame; the reference point is its origin.
         axes: ``"world"`` (world-aligned axes, default) or ``"local"``.
         length: characteristic length [m] of the unit-free rules (default: the model's).
+        check_limits: refuse configurations outside the joints' position limits (as the
+            single query; False takes them as they are).
 
     Returns:
         The :class:`BatchCompliance`; each configuration's C, G and rank equal those of
@@ -123,6 +126,8 @@ def compliances(
     Raises:
         InvalidInputError: Q is not (n, nq) finite real numbers; bad axes or length.
         NameNotFoundError: unknown frame.
+        OutsideLimitsError: ``check_limits`` and a configuration outside the limits (a
+            note names its index).
         ClosedLoopError: the error of :func:`closedloop.compliance.compliance` at the first
         configuration that has one (open loops, a mechanism, an overflow), with a note
         naming the configuration's index (an error of the frame, axes or length concerns no
@@ -130,8 +135,14 @@ def compliances(
     """
     Q = _check_configurations(clm, Q)
     _check_query(clm, frame, axes, length)  # before any configuration
+    for i, q in enumerate(Q if check_limits else ()):
+        try:
+            require_within_limits(clm, q)
+        except OutsideLimitsError as e:
+            e.add_note(f"at configuration {i} of Q")
+            raise
     C, G, rank, cond, stacked, errors, L = answered(
-        clm, Q, frame, axes, length, QUERY_ERRORS, first_error=True
+        clm, Q, frame, axes, length, QUERY_ERRORS, first_error=True, check_limits=False
     )
     for i, e in errors.items():  # the single query's error, with the configuration
         e.add_note(f"at configuration {i} of Q")
@@ -140,7 +151,18 @@ def compliances(
     return BatchCompliance(*arrays, frame, axes, L)
 
 
-def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False, closure=None):
+def answered(
+    clm,
+    Q,
+    frame,
+    axes,
+    length,
+    catch,
+    *,
+    first_error: bool = False,
+    closure=None,
+    check_limits: bool = True,
+):
     """Every configuration of Q (n, nq) answered: by :func:`stacked_compliances`, and the
     others by :func:`closedloop.compliance.compliance`.
 
@@ -152,6 +174,8 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False, c
             configuration, it propagates).
         first_error: stop at the first recorded error.
         closure: as :func:`stacked_compliances`.
+        check_limits: as for :func:`closedloop.compliance.compliance` (the stacked path
+            does not check them).
 
     Returns:
         C (n, 6, 6), G (n, nv, 6), rank (n,), the scaled condition number cond(K_s) (n,)
@@ -176,7 +200,7 @@ def answered(clm, Q, frame, axes, length, catch, *, first_error: bool = False, c
     stacked, errors = rank >= 0, {}
     for i in np.flatnonzero(~stacked):
         try:
-            r = compliance(clm, Q[i], frame, axes, length=length)
+            r = compliance(clm, Q[i], frame, axes, length=length, check_limits=check_limits)
         except catch as e:
             errors[int(i)] = e
             if first_error:

@@ -1,11 +1,15 @@
 """Command-line front end: ``closedloop stiffness MODEL --frame NAME ...``.
 
 ``closedloop view MODEL --frame NAME [--force ...] [--html FILE]`` shows the deflection
-under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); ``closedloop modes
-MODEL ...`` gives the natural frequencies (:mod:`closedloop.cli_modes`).
+under a wrench in a meshcat viewer (see :mod:`closedloop.viewer`); ``closedloop deflect``
+prints it (:mod:`closedloop.cli_deflect`), ``closedloop info MODEL`` lists what a model
+holds (:mod:`closedloop.cli_info`), ``closedloop modes MODEL ...`` gives the natural
+frequencies (:mod:`closedloop.cli_modes`).
 
-MODEL is a robot file, a bundled model by name (``fourbar``, with its closure file) or an
+MODEL is a robot file, a bundled model by name (``fourbar``, ``stewart``, ... with its
+closure file; ``fourbar_mjcf``, ... the MJCF: :data:`closedloop.data.BUNDLED_MODELS`) or an
 example-robot-data robot by name (``ur5``, ``panda``, ...; see :mod:`closedloop.data`).
+A configuration outside the joints' limits is bad input (``--no-limits`` takes it).
 
 Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`):
 
@@ -14,9 +18,10 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
   directions, K does not exist. C and the rigid directions are printed (JSON: ``"K": null``).
   This is an answer, not an error, hence not 2; it differs from 0 so that scripts notice.
 * ``2`` - bad input (missing file, unknown frame or joint, malformed closure file, wrong
-  number of values, NaN, negative stiffness, an output path that cannot be written, a
-  ``--q`` that does not close the loops): one line ``closedloop: error: <message>`` on
-  stderr, a command-line syntax error included (:class:`closedloop.cli_common.UsageError`).
+  number of values, NaN, negative stiffness, joints outside their limits, an output
+  path that cannot be written, a ``--q`` that does not close the loops): one line
+  ``closedloop: error: <message>`` on stderr, a command-line syntax error included
+  (:class:`closedloop.cli_common.UsageError`).
 * ``3`` - the computation failed on valid input (loops that cannot be closed for these
   actuated values, no static equilibrium, a singular configuration or a mechanism, a result
   that is not finite): one line on stderr.
@@ -54,7 +59,7 @@ from .compliance import (
     describe_directions,
     energy_shares,
 )
-from .conditioning import ILL_CONDITIONED
+from .conditioning import ILL_CONDITIONED, twist_scaling
 from .configuration import Configuration
 from .data import BUNDLED_MODELS, ROBOTS, resolve
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
@@ -62,6 +67,7 @@ from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
 from .limits import assemble_connected
 from .model import ClosedLoopModel
+from .rounding import without_rounding
 
 PROG = "closedloop"
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
@@ -70,6 +76,8 @@ EPILOG = """\
 Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
 gives the actuated joints' values and the loops are closed by moving the passive joints
 (start: MJCF qpos0, else the neutral configuration). Without either: that start, assembled.
+A configuration outside the joints' position limits is refused (angles in degrees are);
+--no-limits takes it as it is.
 A --q of a model with loops must close them to 1e-6 (metres per size of the mechanism, rad).
 
 Springs: --joint-stiffness K gives stiffness K [N m/rad or N/m] to every actuated joint
@@ -105,6 +113,8 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
     ),
     "identify": ("closedloop.cli_identify", "fit spring stiffnesses to measured deflections"),
     "modes": ("closedloop.cli_modes", "natural frequencies and mode shapes at a pose"),
+    "info": ("closedloop.cli_info", "joints, frames, closures, springs and sizes of a model"),
+    "deflect": ("closedloop.cli_deflect", "twist of a frame and joint deflections under a load"),
 }
 
 
@@ -162,6 +172,12 @@ def add_model_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None:
     )
     config.add_argument(
         "--actuated", nargs="+", type=finite_float, metavar="A", help="actuated joint values"
+    )
+    p.add_argument(
+        "--no-limits",
+        action="store_true",
+        help="accept a configuration outside the joints' position limits (refused by default: "
+        "an angle in degrees is the usual cause)",
     )
 
 
@@ -237,8 +253,9 @@ def preload_from_args(args: argparse.Namespace) -> dict:
     return out
 
 
-def add_view_arguments(p: argparse.ArgumentParser) -> None:
-    """Options of a deflection view: wrench, amplification, output (SI)."""
+def add_wrench_arguments(p: argparse.ArgumentParser) -> None:
+    """--force FX FY FZ [N], --torque NX NY NZ [N m] at the frame origin, world axes
+    (default 0)."""
     for name, labels, unit in (
         ("--force", ("FX", "FY", "FZ"), "N"),
         ("--torque", ("NX", "NY", "NZ"), "N m"),
@@ -251,6 +268,11 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
             metavar=labels,
             help=f"{name[2:]} at the frame origin, world axes [{unit}]",
         )
+
+
+def add_view_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of a deflection view: wrench, amplification, output (SI)."""
+    add_wrench_arguments(p)
     p.add_argument(
         "--scale",
         type=finite_float,
@@ -287,12 +309,21 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def view_from_args(
-    clm: ClosedLoopModel, q: np.ndarray, frame: str, args, out=print, pose=None, prog=PROG
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    frame: str,
+    args,
+    out=print,
+    pose=None,
+    prog=PROG,
+    check_limits: bool = True,
 ):
     """Run :func:`closedloop.viewer.run_view` with :func:`add_view_arguments`' options.
 
     Warnings (a view without load) go to stderr, one line each, prefixed by ``prog``.
-    ``pose``: the pose as the page's legend writes it (default q).
+    ``pose``: the pose as the page's legend writes it (default q). ``check_limits``: refuse
+    a q outside the joints' limits (False: ``--no-limits``, or the file's own
+    configuration, as :func:`configuration`).
     """
     from .viewer import run_view  # meshcat is imported only for a view
 
@@ -315,28 +346,38 @@ def view_from_args(
         pose=pose,
         out=out,
         warn=warn,
+        check_limits=check_limits,
     )
 
 
-def configuration(clm: ClosedLoopModel, q=None, actuated=None) -> Configuration:
+def configuration(
+    clm: ClosedLoopModel, q=None, actuated=None, check_limits: bool = True
+) -> Configuration:
     """The configuration of the analysis from ``--q`` or ``--actuated`` values.
 
+    ``check_limits`` False (``--no-limits``): the joints' position limits are not checked;
+    neither are they for the file's own configuration (no values given: a file may count
+    a joint's zero outside its limits, as Cassie's SDF does).
+
     Raises:
-        InvalidInputError: wrong count, non-finite values, given actuated values outside
-            their joints' limits (a map's ``invalid`` point: the robot is not driven there;
-            without values, those of the file's configuration are taken as they are).
+        InvalidInputError: wrong count, non-finite values.
+        OutsideLimitsError: ``check_limits`` and joints of the configuration outside their
+            limits (with ``--actuated``: an actuated value outside, InvalidInputError, a
+            map's ``invalid`` point: the robot is not driven there).
         OpenLoopError: a ``--q`` that does not close the loops (the one closure tolerance,
             :data:`closedloop.configuration.CLOSURE_TOL`, relative to the mechanism size).
         AssemblyError: the loops cannot be closed for these actuated values.
     """
+    given = q is not None or actuated is not None  # else the file's own configuration
     if q is None:
         start = reference_configuration(clm)
-        q = (
-            assemble(clm, None, start)  # the file's own configuration, as drawn
-            if actuated is None
-            else assemble_connected(clm, actuated, start, jacobian=False)  # start's mode
-        ).q
-    state = Configuration(clm, q)
+        if actuated is None:
+            q = assemble(clm, None, start).q  # the file's own configuration, as drawn
+        elif check_limits:
+            q = assemble_connected(clm, actuated, start, jacobian=False).q  # start's mode
+        else:
+            q = assemble(clm, actuated, start, jacobian=False).q
+    state = Configuration(clm, q, check_limits=check_limits and given)
     try:
         return state.require_closed()
     except OpenLoopError as e:
@@ -355,7 +396,9 @@ def _matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
 
 
 def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
-    """Readable report of a compliance result: configuration, C, then K or rigid directions."""
+    """Readable report of a compliance result: configuration, C, then K or rigid directions
+    (every entry as computed: an entry 1e-13 of the largest may be rounding or, in an
+    ill-conditioned C, a true stiff direction)."""
     axes = "world-aligned axes" if res.axes == "world" else f"axes of frame {res.frame!r}"
     condition = (
         f"condition number of the scaled K {res.condition_number:.3e}"
@@ -363,6 +406,7 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
         + f" (lengths per L = {res.length:.4g} m)"
         if res.rank
         else "condition number of the scaled K: none (C = 0: no wrench moves the frame)"
+        + (f"; {res.note}" if res.note else "")
     )
     lines = [
         f"model {clm.name!r}, frame {res.frame!r}",
@@ -394,20 +438,26 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
     return "\n".join(lines)
 
 
-def model_from_args(args: argparse.Namespace, geometry: bool = False):
-    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options."""
+def load_from_args(args: argparse.Namespace, geometry: bool = False) -> ClosedLoopModel:
+    """The model of :func:`add_source_arguments`' options (MODEL, --closures, springs)."""
     springs = read_springs_file(args.springs) if args.springs else None
     robot, closures = resolve(args.model, args.closures)
-    clm = load_model(
+    return load_model(
         robot,
         closures,
         springs=springs,
         joint_stiffness=args.joint_stiffness,
         geometry=geometry,
     )
+
+
+def model_from_args(args: argparse.Namespace, geometry: bool = False):
+    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options (a frame
+    checked when one is given)."""
+    clm = load_from_args(args, geometry)
     if args.frame is not None:
         clm.frame_id(args.frame)  # unknown frame: fail before any assembly
-    return clm, configuration(clm, args.q, args.actuated)
+    return clm, configuration(clm, args.q, args.actuated, not args.no_limits)
 
 
 def _vector(v) -> str:
@@ -436,7 +486,7 @@ def stiffness(args: argparse.Namespace) -> int:
     else:
         print(format_report(clm, res))
         if getattr(res, "equilibrium", None) is not None:
-            sag = res.sag
+            sag = without_rounding(res.sag, twist_scaling(res.length))
             print(f"sag under the preload: {_vector(1e3 * sag[:3])} mm, "
                   f"{_vector(np.degrees(sag[3:]))} deg (world axes); stability margin "
                   f"{res.stability_margin:.3g}")  # fmt: skip
@@ -451,7 +501,8 @@ def stiffness(args: argparse.Namespace) -> int:
 def view(args: argparse.Namespace) -> int:
     """Run ``closedloop view``; returns the exit code (0)."""
     clm, state = model_from_args(args, geometry=True)
-    view_from_args(clm, state.q, args.frame, args)
+    given = args.q is not None or args.actuated is not None  # else the file's configuration
+    view_from_args(clm, state.q, args.frame, args, check_limits=given and not args.no_limits)
     return EXIT_OK
 
 

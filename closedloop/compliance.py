@@ -56,6 +56,7 @@ def compliance(
     gravity=None,
     payloads=(),
     preload=None,
+    check_limits: bool = True,
 ) -> ComplianceResult:
     """Cartesian compliance of ``frame`` at a configuration (see the module docstring).
 
@@ -80,9 +81,14 @@ def compliance(
             preload (:func:`closedloop.statics.solve_equilibrium`) and the result is the
             tangent compliance there (:class:`closedloop.preload.PreloadedCompliance`,
             with the sag of the frame, q_eq and the spring forces).
+        check_limits: with a model, refuse a q outside the joints' position limits
+            (default; :class:`closedloop.exceptions.OutsideLimitsError`, which asks
+            "degrees?" for revolute values beyond 2 pi); False takes q as it is (a
+            :class:`Configuration` is checked when it is made).
 
     Raises:
         NameNotFoundError: unknown frame.
+        OutsideLimitsError: ``check_limits`` and joints of q outside their limits.
         OpenLoopError: q does not close the loops (tolerance ``CLOSURE_TOL``).
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
         SingularConfigurationError: the compliance overflows (springs near 1e-308); on the
@@ -100,7 +106,7 @@ def compliance(
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)
     check_path(path)
-    state = as_configuration(model, q, length=length)
+    state = as_configuration(model, q, length=length, check_limits=check_limits)
     state.require_closed()
     if gravity is not None or payloads or preload is not None:
         w0 = np.zeros(6) if preload is None else check_wrench(preload, "preload")

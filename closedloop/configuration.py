@@ -26,7 +26,7 @@ import pinocchio as pin
 from .arrays import frozen
 from .closures import check_name
 from .conditioning import check_length
-from .exceptions import InvalidInputError, OpenLoopError
+from .exceptions import InvalidInputError, OpenLoopError, OutsideLimitsError
 from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
 from .model import ClosedLoopModel
 
@@ -73,6 +73,35 @@ def _reach_terms(model: ClosedLoopModel) -> tuple[float, np.ndarray]:
     return float(offset), frozen(np.array(indices, dtype=int))
 
 
+def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
+    """:class:`OutsideLimitsError` when joints of q (nq,) are outside their position limits,
+    by the rule of :func:`closedloop.limits.joints_outside_limits` (joints without limits,
+    continuous joints and unbounded limits are never out; an angle that the assembly may
+    wind, a revolute joint that is not actuated, counts by its placement). The message
+    names each joint, its value and its limits, and asks "degrees?" when a revolute value
+    exceeds 2 pi in magnitude.
+    """
+    # limits builds on the assembly, which builds on this module: imported here
+    from .limits import describe_limits, joints_outside_limits
+
+    bad = joints_outside_limits(model, q)
+    if not bad:
+        return
+    pm = model.model
+    turned = [n for n, (x, _, _) in bad.items() if abs(x) > 2 * np.pi
+              and pm.joints[model.joint_id(n)].shortname().startswith("JointModelR")]  # fmt: skip
+    degrees = (
+        f"; {', '.join(turned)} beyond 2 pi: degrees? q is in radians (numpy.radians)"
+        if turned
+        else ""
+    )
+    raise OutsideLimitsError(
+        f"configuration of {model.name!r} outside the joint limits: {describe_limits(bad)}"
+        f"{degrees}; to query it anyway: check_limits=False (command line: --no-limits)",
+        bad,
+    )
+
+
 def residual_rounding(model: ClosedLoopModel, Q: np.ndarray, length: float) -> np.ndarray | float:
     """(...,) bound of the rounding of the scaled closure residual at the configurations Q
     (..., nq), at length L [m]: each joint placement composed from the world origin errs by
@@ -91,6 +120,14 @@ class Configuration:
             of norm 1 to ``closedloop.model.UNIT_NORM_TOL`` (1e-6; InvalidInputError beyond)].
         length: characteristic length L [m] (default: ``model.length``, the diameter of
             the joint origins and frames at the neutral configuration).
+        check_limits: refuse a q with joints outside their position limits
+            (:func:`require_within_limits`, :class:`OutsideLimitsError`; an angle typed in
+            degrees is the usual cause). False: take q as it is (a pose the robot is meant
+            to be analysed at beyond its stops, a deflected equilibrium).
+
+    Raises:
+        OutsideLimitsError: ``check_limits`` and joints of q outside their limits.
+        InvalidInputError: q not (nq,) finite, quaternions not of norm 1, bad length.
 
     Attributes:
         model: the :class:`ClosedLoopModel`.
@@ -105,13 +142,22 @@ class Configuration:
         closure_error: scaled residual, infinity norm (metres / L, radians).
     """
 
-    def __init__(self, model: ClosedLoopModel, q, *, length: float | None = None):
+    def __init__(
+        self,
+        model: ClosedLoopModel,
+        q,
+        *,
+        length: float | None = None,
+        check_limits: bool = True,
+    ):
         if not isinstance(model, ClosedLoopModel):
             raise InvalidInputError(
                 f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
             )
         self.model = model
         self.q = q = frozen(model.check_configuration(q))
+        if check_limits:
+            require_within_limits(model, q)
         pm = model.model
         self.data, self._constraint_datas = model.acquire_workspace()
         pin.computeJointJacobians(pm, self.data, q)
@@ -135,7 +181,7 @@ class Configuration:
     def __copy__(self) -> Configuration:
         """A new configuration of the same model and q, with a workspace of its own (two
         configurations never share a pinocchio Data)."""
-        return Configuration(self.model, self.q, length=self.length)
+        return Configuration(self.model, self.q, length=self.length, check_limits=False)
 
     def __deepcopy__(self, memo: dict) -> Configuration:
         """As :meth:`__copy__`: the model is shared, not copied (it is not changed by a
@@ -230,8 +276,11 @@ class Configuration:
         )
 
 
-def as_configuration(model, q=None, *, length: float | None = None) -> Configuration:
-    """A :class:`Configuration` from a configuration, or from a model and q (nq,).
+def as_configuration(
+    model, q=None, *, length: float | None = None, check_limits: bool = True
+) -> Configuration:
+    """A :class:`Configuration` from a configuration, or from a model and q (nq,)
+    (``check_limits`` as for :class:`Configuration`, with a model).
 
     Raises:
         InvalidInputError: q or ``length`` given with a configuration (it has its own), or
@@ -245,7 +294,7 @@ def as_configuration(model, q=None, *, length: float | None = None) -> Configura
         return model
     if q is None:
         raise InvalidInputError("a configuration q (nq,) is needed with a ClosedLoopModel")
-    return Configuration(model, q, length=length)
+    return Configuration(model, q, length=length, check_limits=check_limits)
 
 
 def accepts_configuration(func):

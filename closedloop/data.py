@@ -21,9 +21,17 @@ from pathlib import Path
 from .exceptions import ModelFileError
 
 #: Bundled models by name: robot file and closure file (None: none) in :func:`data_dir`.
+#: ``NAME`` is the URDF ``NAME.urdf`` with its closure file ``NAME.yaml``, ``NAME_mjcf``
+#: the same machine written for MuJoCo, ``NAME.xml`` (loops and actuators in the file).
 BUNDLED_MODELS: dict[str, tuple[str, str | None]] = {
-    "fourbar": ("fourbar.urdf", "fourbar.yaml"),
-    "fourbar_mjcf": ("fourbar.xml", None),
+    **{
+        name: (f"{name}.urdf", f"{name}.yaml")
+        for name in ("fourbar", "fivebar5", "rrr3", "delta", "stewart", "cahyman")
+    },
+    **{
+        f"{name}_mjcf": (f"{name}.xml", None)
+        for name in ("fourbar", "fivebar5", "rrr3", "delta", "stewart")
+    },
 }
 #: example-robot-data robots by name: URDF under :func:`robot_data_dir`.
 ROBOTS: dict[str, str] = {

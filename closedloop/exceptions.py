@@ -6,26 +6,49 @@ front end can print it on one line.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Iterable
+
+#: Most names a :class:`NameNotFoundError` lists (every one of a robot's joints and frames;
+#: beyond, ``closedloop info MODEL`` lists them).
+LISTED_NAMES = 100
+#: Similarity (difflib's ratio) from which a name is offered as "did you mean".
+CLOSE_NAME_RATIO = 0.6
 
 
 class ClosedLoopError(Exception):
     """Base class of every error raised by :mod:`closedloop`."""
 
 
-def _choices(names: Iterable[str], limit: int = 12) -> str:
-    names = list(names)
+def _choices(names: list[str], limit: int = LISTED_NAMES) -> str:
     shown = ", ".join(repr(n) for n in names[:limit])
-    return shown + (f", ... ({len(names)} in all)" if len(names) > limit else "")
+    return shown + (
+        f", ... ({len(names)} in all; closedloop info MODEL lists them)"
+        if len(names) > limit
+        else ""
+    )
 
 
 class NameNotFoundError(ClosedLoopError, KeyError):
-    """A joint or frame name that the model does not have."""
+    """A joint or frame name that the model does not have; the message offers the closest
+    names (``did you mean``) and lists the valid ones.
+
+    Attributes:
+        kind, name: what was looked for (``"frame"``, ``"joint"``) and the name given.
+        close: the valid names closest to ``name``, closest first (difflib).
+    """
 
     def __init__(self, kind: str, name: str, valid: Iterable[str], hint: str = ""):
         self.kind, self.name = kind, name
+        valid = list(dict.fromkeys(valid))  # once each, in the model's order
+        self.close = (
+            difflib.get_close_matches(name, valid, n=3, cutoff=CLOSE_NAME_RATIO)
+            if isinstance(name, str)
+            else []
+        )
         hint = f" ({hint})" if hint else ""
-        super().__init__(f"unknown {kind} {name!r}{hint}; expected one of: {_choices(valid)}")
+        near = f" (did you mean {' or '.join(map(repr, self.close))}?)" if self.close else ""
+        super().__init__(f"unknown {kind} {name!r}{hint}{near}; expected one of: {_choices(valid)}")
 
     def __str__(self) -> str:  # KeyError would quote the message
         return self.args[0]
@@ -66,6 +89,20 @@ class OpenLoopError(InvalidInputError):
 
     def __init__(self, message: str, residual: float, tolerance: float):
         self.residual, self.tolerance = residual, tolerance
+        super().__init__(message)
+
+
+class OutsideLimitsError(InvalidInputError):
+    """A configuration given for a query with joints outside their position limits (the
+    limits of :func:`closedloop.limits.joints_outside_limits`); ``check_limits=False``
+    (command line: ``--no-limits``) queries it anyway.
+
+    Attributes:
+        joints: joint name -> (value, lower, upper) [rad or m] of each joint outside.
+    """
+
+    def __init__(self, message: str, joints: dict):
+        self.joints = dict(joints)
         super().__init__(message)
 
 

@@ -175,7 +175,8 @@ def preloaded_compliance(
     """
     eq = equilibrium
     frame, w0 = eq.frame, check_wrench(eq.wrench)
-    state = Configuration(clm, eq.q, length=length)
+    # the statics flag or refuse an equilibrium outside the limits (JointLimitWarning)
+    state = Configuration(clm, eq.q, length=length, check_limits=False)
     J = state.frame_jacobian(frame, axes)
     f = spring_factor(state, J, frame)
     Kt = tangent_stiffness(clm, state.q, eq.q_rest, frame, w0, eq.multipliers, gravity=eq.load)

@@ -532,7 +532,7 @@ def spring_subspace(
     Raises:
         MechanismError: a spring-free motion moves the frame (no static equilibrium).
     """
-    f = spring_factor(Configuration(clm, q), J, frame)
+    f = spring_factor(Configuration(clm, q, check_limits=False), J, frame)
     return f.N, f.V, f.sigma**2, f.n_internal
 
 

@@ -390,7 +390,8 @@ def solve_equilibrium(
         )
     weight = None if gravity is None else GravityLoad(clm, gravity, payloads)
     w = Load(check_wrench(wrench), weight)
-    rest = Configuration(clm, q_rest).require_closed()  # the one closure tolerance
+    # the one closure tolerance; the limits: flagged or enforced on the equilibrium below
+    rest = Configuration(clm, q_rest, check_limits=False).require_closed()
     q_rest = _closed_rest(clm, rest)
     _check_spread(clm)
     if clm.closures or np.any(clm.stiffness == 0.0):  # else every free motion has a spring

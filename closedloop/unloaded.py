@@ -95,6 +95,7 @@ class ComplianceResult(ReadOnlyArrays):
             None; read it as :attr:`K`, which explains a missing K.
         path: how the admissible motions were found (:class:`SpringFactor`):
             ``"serial"``, ``"partitioned"`` or ``"null-space"``.
+        note: why C = 0 when no wrench moves the frame (:func:`spring_note`), else "".
     """
 
     C: np.ndarray
@@ -112,6 +113,7 @@ class ComplianceResult(ReadOnlyArrays):
     condition_number: float = field(kw_only=True)
     stiffness_matrix: np.ndarray | None = field(kw_only=True, repr=False)
     path: str = field(kw_only=True, default="null-space")
+    note: str = field(kw_only=True, default="", repr=False)
 
     @property
     def is_full_rank(self) -> bool:
@@ -134,7 +136,8 @@ class ComplianceResult(ReadOnlyArrays):
         if not self.is_full_rank or self.stiffness_matrix is None:
             raise RigidDirectionsError(
                 f"compliance at frame {self.frame!r} has rank {self.rank} < 6: the stiffness "
-                f"is infinite along {describe_directions(self.rigid_directions)}",
+                f"is infinite along {describe_directions(self.rigid_directions)}"
+                + (f"; {self.note}" if self.note else ""),
                 self.rigid_directions,
             )
         return self.stiffness_matrix
@@ -167,6 +170,7 @@ class ComplianceResult(ReadOnlyArrays):
             "mobility": self.mobility,
             "internal_mobilities": self.internal_mobilities,
             "path": self.path,
+            "note": self.note,
             "units": UNITS,
         }
 
@@ -324,12 +328,33 @@ def _result(
         condition_number=spectrum.condition_number,
         stiffness_matrix=K,
         path=path,
+        note=spring_note(state.model) if spectrum.rank == 0 else "",
     )
     if cls is None:  # every field given, checked above: set without the dataclass __init__
         result = object.__new__(ComplianceResult)
         result.__dict__.update(fields)
         return result
     return cls(**fields, **extra)
+
+
+#: How to give springs, in every API and command-line message that finds none.
+HOW_TO_GIVE_SPRINGS = (
+    "give springs: command line --joint-stiffness K (every actuated joint) or --springs FILE "
+    "(joint -> stiffness), Python load_model(..., joint_stiffness=K) or springs={...}"
+)
+
+
+def spring_note(clm: ClosedLoopModel) -> str:
+    """Why no wrench moves a frame (C = 0) of ``clm``: the model has no spring at all (no
+    joint, beam or closure: every actuated joint without one is rigid), or none of its
+    springs moves the frame; with :data:`HOW_TO_GIVE_SPRINGS` in the first case."""
+    k = clm.stiffness
+    if not np.any((k > 0) & np.isfinite(k)):
+        return (
+            "no joint, beam or closure of the model has a spring (an actuated joint without "
+            "one is rigid), so nothing deflects; " + HOW_TO_GIVE_SPRINGS
+        )
+    return "none of the model's springs moves this frame (the frame is not beyond them)"
 
 
 def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dict[str, float]:

@@ -413,6 +413,7 @@ def run_view(
     pose: str | None = None,
     out: Callable[[str], None] = print,
     warn: Callable[[str], None] | None = None,
+    check_limits: bool = True,
 ) -> DeflectionScene:
     """Compute and show a deflection; write the page to ``html`` or serve it live.
 
@@ -427,6 +428,7 @@ def run_view(
         pose: the pose as the legend writes it (default: q, rad or m).
         out: receives the lines to print (summary, file or URL).
         warn: receives a warning line (a zero wrench: the view shows the unloaded pose).
+        check_limits: as in :func:`closedloop.viewer_scene.deflection_scene`.
 
     Returns:
         The scene drawn.
@@ -444,10 +446,12 @@ def run_view(
         nonlinear=nonlinear,
         close_loops=close_loops,
         rotational=rotational,
+        check_limits=check_limits,
     )
     if warn is not None and not np.any(scene.wrench):
         warn("no load (--force, --torque): the view shows the unloaded pose")
-    options = {"nonlinear": nonlinear, "close_loops": close_loops, "rotational": rotational}
+    options = {"nonlinear": nonlinear, "close_loops": close_loops, "rotational": rotational,
+               "check_limits": check_limits}  # fmt: skip
     with DeflectionViewer(clm) as viewer:
         viewer.show(scene, autoplay=autoplay, legend=legend, pose_text=pose)
         out(scene.summary())

@@ -380,6 +380,7 @@ def deflection_scene(
     close_loops: bool = False,
     rotational: bool = False,
     frames: int = ANIMATION_FRAMES,
+    check_limits: bool = True,
 ) -> DeflectionScene:
     """Poses, amplification, ellipsoids and load ramp for a wrench at ``frame``.
 
@@ -394,6 +395,8 @@ def deflection_scene(
         close_loops: re-assemble each amplified pose (module docstring).
         rotational: also the rotational compliance ellipsoid.
         frames: number of poses of the load ramp (>= 2).
+        check_limits: refuse a q outside the joints' limits (as
+            :func:`closedloop.compliance.compliance`; False draws it as it is).
 
     Raises:
         InvalidInputError: bad wrench, scale or frame count; a wrench whose deflection
@@ -410,7 +413,7 @@ def deflection_scene(
         raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
     if int(frames) != frames or frames < 2:
         raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
-    res = compliance(clm, q, frame, "world")
+    res = compliance(clm, q, frame, "world", check_limits=check_limits)
     q = res.q
     ramp = np.linspace(0.0, 1.0, int(frames))
     if nonlinear:  # the whole wrench first: an EquilibriumError names it, not a fraction

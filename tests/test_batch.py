@@ -158,7 +158,7 @@ def test_many_passive_coordinates_take_the_single_query():
 def test_an_open_configuration_is_the_single_query_error_naming_it(fourbar):
     clm, q = fourbar
     Q = np.array([q, q])
-    Q[1, 1] += 0.1  # a passive joint moved: the loop opens
+    Q[1, 2] += 0.1  # a passive joint moved: the loop opens
     with pytest.raises(OpenLoopError) as info:
         cl.compliances(clm, Q, "P")
     assert "at configuration 1 of Q" in info.value.__notes__

@@ -321,7 +321,7 @@ def test_help_lists_every_subcommand_without_importing_them(capsys):
 # ------------------------------------------------------------------ report parameters
 def parameter_rows(markdown: str) -> dict[str, tuple[str, str]]:
     """name -> (value, source) of the report's parameter table (first, second, last cell)."""
-    table = markdown.split("| parameter |", 1)[1].split("\n\n", 1)[0]
+    table = markdown.split("| parameter | value (SI) |", 1)[1].split("\n\n", 1)[0]
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in table.splitlines()[2:]]
     return {c[0]: (c[1], c[-1]) for c in cells}
 

@@ -172,7 +172,10 @@ def test_fourbar_urdf_and_mjcf_agree_through_the_cli(capsys):
 # Command lines ({ur5}, {fourbar}, {tmp} substituted) and a part of the expected message.
 ERRORS = {
     "missing-file": ("{tmp}/none.urdf --frame P", "robot file '{tmp}/none.urdf' does not exist"),
-    "unknown-frame": ("{ur5} --frame tool9", "unknown frame 'tool9'; expected one of:"),
+    "unknown-frame": (
+        "{ur5} --frame tool9",
+        "unknown frame 'tool9' (did you mean 'tool0'?); expected one of:",
+    ),
     "malformed-closures": ("{fourbar} --closures {tmp}/bad.yaml --frame P", "bad.yaml': type '4d'"),
     "unknown-joint": ("{ur5} --frame tool0 --springs {tmp}/k.yaml", "unknown joint 'elbow'"),
     "q-count": ("{ur5} --frame tool0 --q 0 0 0 0 0", "q has 5 values; expected nq=6"),

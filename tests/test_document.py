@@ -88,7 +88,7 @@ def test_html_embeds_every_figure_and_refers_to_nothing_outside(doc):
         prefix = "data:image/png;base64,"
         assert src.startswith(prefix)
         assert base64.b64decode(src[len(prefix) :]) == path.read_bytes()
-    assert all(url.startswith("data:") for url in page.urls), page.urls
+    assert all(url.startswith(("data:", "#")) for url in page.urls), page.urls
     assert not page.tags & {"link", "script", "iframe", "object"}
     assert not re.search(r"url\(", text)  # no stylesheet resource either
 
@@ -97,7 +97,7 @@ def test_html_keeps_the_text_headings_and_captions(doc):
     d, _, _ = doc
     text = d.to_html()
     assert "<title>A title</title>" in text and "<h1>A title</h1>" in text
-    assert "<h2>Section</h2>" in text and "<h3>Sub</h3>" in text
+    assert '<h2 id="section">Section</h2>' in text and '<h3 id="sub">Sub</h3>' in text
     assert "x &lt; 1e-6 and K_s, K_T4 and b_k = d_k." in text
     assert "Fig. 1: first" in text and "Second table" in text
 
@@ -109,3 +109,41 @@ def test_markdown_links_figures_relative_to_the_report(doc, tmp_path):
     assert "![Fig. 2: second](figs/fig_b.png)" in md
     assert "| row | a [mm] | \\|dC\\| / \\|C\\| |" in md
     assert str(tmp_path) not in md
+
+
+def test_contents_link_to_every_heading_in_both_outputs(tmp_path):
+    """A table of contents after the title, nested by level; each link's target is the id
+    of its heading in the HTML, and GitHub's anchor of it in the Markdown (lower case,
+    punctuation dropped, spaces as '-', repeats numbered)."""
+    d = Document("T")
+    d.add(
+        Heading("Summary"),
+        Paragraph("text"),
+        Heading("Tables 1-3: displacement of M"),
+        Heading("Table 1 (phi = 90 deg)", 3),
+        Heading("Summary"),
+    )
+    md = d.to_markdown(tmp_path)
+    contents = md.split("**Contents**")[1].split("## ")[0].strip().splitlines()
+    assert contents == [
+        "- [Summary](#summary)",
+        "- [Tables 1-3: displacement of M](#tables-1-3-displacement-of-m)",
+        "    - [Table 1 (phi = 90 deg)](#table-1-phi--90-deg)",
+        "- [Summary](#summary-1)",
+    ]
+    assert md.index("**Contents**") < md.index("## Summary")
+    page = d.to_html()
+    ids = re.findall(r'<h[23] id="([^"]+)"', page)
+    links = re.findall(r'<a href="#([^"]+)"', page)
+    assert (
+        ids
+        == links
+        == ["summary", "tables-1-3-displacement-of-m", "table-1-phi--90-deg", "summary-1"]
+    )
+    assert "<ul>\n<li><a" in page and page.count("<ul>") == 2  # one nested list
+
+
+def test_a_document_without_headings_has_no_contents(tmp_path):
+    d = Document("T")
+    d.add(Paragraph("only text"))
+    assert "Contents" not in d.to_markdown(tmp_path) and "Contents" not in d.to_html()

@@ -554,7 +554,8 @@ def test_measurements_that_do_not_fit_the_model_are_named(fourbar):
     short = Measurement.of(q=q[:3], wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.InvalidInputError, match=r"measurement 1: q has 3 values; expected nq=5"):
         identify(clm, [good, short], "P", ["crank"])
-    open_loop = Measurement.of(q=q + 0.1, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
+    opened = q + np.array([0.0, 0.0, 0.1, 0.0, 0.0])  # the coupler turned: the loop opens
+    open_loop = Measurement.of(q=opened, wrench=np.ones(6), twist=np.zeros(6), sd=1.0)
     with pytest.raises(cl.OpenLoopError, match=r"^measurement 1: .*close"):
         identify(clm, [good, open_loop], "P", ["crank"])
     with pytest.raises(cl.InvalidInputError, match=r"q must be finite values"):

@@ -129,9 +129,9 @@ def rebuilt(clm: ClosedLoopModel, model: pin.Model, closures, springs=None) -> C
 
 def length_scaled(clm: ClosedLoopModel, q, s: float):
     """Every length times s (joint, frame and closure placements, prismatic and free-flyer
-    translation coordinates); the springs of the linear coordinates divided by s^2 (blocks:
-    S^-1 K S^-1), so that the energy of a motion is that of the unscaled one and
-    C = D C_1 D, D = diag(s, s, s, 1, 1, 1). Returns (model, q)."""
+    translation coordinates, prismatic position limits); the springs of the linear
+    coordinates divided by s^2 (blocks: S^-1 K S^-1), so that the energy of a motion is
+    that of the unscaled one and C = D C_1 D, D = diag(s, s, s, 1, 1, 1). Returns (model, q)."""
     m = pin.Model(clm.model)
     for j in range(1, m.njoints):
         m.jointPlacements[j] = _scaled_placement(m.jointPlacements[j], s)
@@ -152,8 +152,11 @@ def length_scaled(clm: ClosedLoopModel, q, s: float):
     q = np.array(q, dtype=float)
     for jm in m.joints[1:]:
         kind = jm.shortname()
-        if kind.startswith("JointModelP"):  # prismatic
+        if kind.startswith("JointModelP"):  # prismatic, and its position limits
             q[jm.idx_q : jm.idx_q + jm.nq] *= s
+            for limit in (m.lowerPositionLimit, m.upperPositionLimit):
+                with np.errstate(over="ignore"):  # unbounded (1.8e308) stays unbounded: inf
+                    limit[jm.idx_q : jm.idx_q + jm.nq] *= s
         elif kind == "JointModelFreeFlyer":
             q[jm.idx_q : jm.idx_q + 3] *= s
         else:  # a rotation joint

@@ -74,18 +74,21 @@ def test_sliders_far_beyond_the_mechanism_close_no_loop():
     (crank 0.3 rad): both closure anchors move by s along one direction, so the residual
     is that at s = 0, a loop open by 0.65 L. Placed 1e17 m from the origin, the anchors
     are known to ~16 m: the residual rounded to exactly 0, the loop counted as closed
-    and both queries answered (rank 1, C of 1e32 m/N)."""
+    and both queries answered (rank 1, C of 1e32 m/N). The sliders' limits (+-0.01 m)
+    would refuse these q first: not checked here."""
     clm, q_ok, frame = fourbar_case()
     at = lambda s: np.array([0.3, s, 0.3, 0.3, s])  # noqa: E731
     assert cl.Configuration(clm, at(0.0)).closure_error > 0.1  # the loop is open
-    far = cl.Configuration(clm, at(1e17))
+    far = cl.Configuration(clm, at(1e17), check_limits=False)
     assert not far.is_closed
     with pytest.raises(cl.OpenLoopError, match=r"joints up to 2e\+17 m from the world origin"):
         far.require_closed()
     with pytest.raises(cl.OpenLoopError, match="closure residual is known to"):
-        cl.compliance(clm, at(1e17), frame)
+        cl.compliance(clm, at(1e17), frame, check_limits=False)
     with pytest.raises(cl.OpenLoopError) as info:
-        cl.compliances(clm, np.array([q_ok, at(1e17)]), frame)
+        cl.compliances(clm, np.array([q_ok, at(1e17)]), frame, check_limits=False)
+    with pytest.raises(cl.OutsideLimitsError, match="crank_axial = 1e"):
+        cl.compliance(clm, at(1e17), frame)
     assert "at configuration 1 of Q" in info.value.__notes__
 
 

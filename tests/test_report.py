@@ -9,7 +9,7 @@ from cahyman_pin.cli import main
 from cahyman_pin.paper import data as paper_data
 from cahyman_pin.paper import report
 from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES
-from cahyman_pin.paper.document import Figure, Paragraph, Table
+from cahyman_pin.paper.document import Figure, Heading, Paragraph, Table
 from cahyman_pin.params import DEFAULT_PARAMS, SOURCES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -51,6 +51,20 @@ def test_html_is_self_contained(built):
     n_figures = sum(isinstance(b, Figure) for b in doc.blocks)
     assert html.count('src="data:image/png;base64,') == n_figures
     assert not re.search(r"""(src|href)=["']https?://""", html)
+
+
+def test_findings_come_first_and_the_contents_reach_every_section(built):
+    """The summary and the figures before the tables, the parameters at the end; the
+    contents after the title link to the id of every heading of report.html."""
+    out, doc = built
+    headings = [b.text for b in doc.blocks if isinstance(b, Heading) and b.level == 2]
+    assert headings[:3] == ["Summary", "Figures", "Tables 1-3: displacement of M"]
+    assert headings[-1] == "Parameters and conventions"
+    html = (out / "report.html").read_text()
+    ids = re.findall(r'<h[2-6] id="([^"]+)"', html)
+    links = re.findall(r'<a href="#([^"]+)"', html)
+    assert ids == links and len(ids) == sum(isinstance(b, Heading) for b in doc.blocks)
+    assert html.index("<strong>Contents</strong>") < html.index('<h2 id="summary">')
 
 
 def test_every_table_cell_present(built):
@@ -143,7 +157,8 @@ def test_rotation_median_ratio_against_the_generic_backend(built):
 
 def test_assumed_parameters_flagged(built):
     _, doc = built
-    table = next(b for b in doc.blocks if isinstance(b, Table) and b.header[0] == "parameter")
+    after = doc.blocks[doc.blocks.index(Heading("Parameters", 3)) :]
+    table = next(b for b in after if isinstance(b, Table))
     assert table.header == ("parameter", "value (SI)", "assumed", "source")
     flags = {r[0]: r[2] for r in table.rows}
     for name, flag in flags.items():

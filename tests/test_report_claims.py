@@ -37,8 +37,9 @@ def _text(doc: Document) -> str:
 
 
 def _intro_text(params=DEFAULT_PARAMS) -> str:
+    """The text of the section 'Parameters and conventions' on the parameters."""
     doc = Document("t")
-    report._intro(doc, params)
+    report._parameters(doc, params)
     return _text(doc)
 
 
@@ -57,7 +58,7 @@ def test_masses_act_only_through_the_weight():
         )
     np.testing.assert_array_equal(model_values(heavy), model_values(DEFAULT_PARAMS))  # fits
     text = _intro_text()
-    assert "they shape every number below, except the beam fields" in text
+    assert "they shape every number of this report, except the beam fields" in text
     assert "and the masses (m_HQ, m_QM, m_MM2, m_M4, m_M5, m_b, m_c, m_d, m_h), " in text
     assert "the consistent and generic columns and the fits do not depend on them" in text
 

@@ -16,7 +16,9 @@ from cahyman_pin.cli.options import (
     stiffness_from_args,
 )
 from closedloop.cli_common import EXIT_HELP, check_finite, print_json
+from closedloop.conditioning import twist_scaling
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
+from closedloop.rounding import without_rounding
 
 
 def _matrix(name: str, A: np.ndarray, unit: str, axes: str = "world") -> str:
@@ -29,7 +31,10 @@ def _vec(v, scale: float = 1.0, fmt: str = "{: .6g}") -> str:
     return "(" + ", ".join(fmt.format(x * scale) for x in v) + ")"
 
 
-def _twist_lines(name: str, t: np.ndarray) -> list[str]:
+def _twist_lines(name: str, t: np.ndarray, length: float) -> list[str]:
+    """A twist (6,) [m, rad] in mm and deg; rounding next to its largest component
+    (unit-free, lengths per ``length`` L [m]) shown as 0."""
+    t = without_rounding(t, twist_scaling(length))
     return [
         f"{name}: displacement {_vec(t[:3], 1e3)} mm = {_vec(t[:3])} m",
         f"{' ' * len(name)}  rotation {_vec(t[3:], 180 / math.pi)} deg = {_vec(t[3:])} rad",
@@ -38,14 +43,15 @@ def _twist_lines(name: str, t: np.ndarray) -> list[str]:
 
 def _pose_lines(r: CaHyManStiffness) -> list[str]:
     """The pose (the sagged one with --gravity) and, with --gravity, the sag of M."""
-    p = r.pose
+    p, L = r.pose, r.params.length
+    angles = without_rounding([p.phi, p.theta, p.psi])  # rounding next to 90 deg: 0
     lines = [
-        f"platform H = {_vec(p.H, 1e3)} mm; phi, theta, psi = "
-        f"{_vec([p.phi, p.theta, p.psi], 180 / math.pi)} deg",
-        f"extremity M = {_vec(p.M, 1e3)} mm",
+        f"platform H = {_vec(without_rounding(p.H), 1e3)} mm; phi, theta, psi = "
+        f"{_vec(angles, 180 / math.pi)} deg",
+        f"extremity M = {_vec(without_rounding(p.M), 1e3)} mm",
     ]
     if r.sag_M is not None:
-        lines += _twist_lines("sag of M under the weight (world axes)", r.sag_M)
+        lines += _twist_lines("sag of M under the weight (world axes)", r.sag_M, L)
     return lines
 
 
@@ -130,7 +136,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
         print(f"the twists below are in the coordinates of the {r.axes}")
     rows = [("M (arm extremity)", d.M)] + ([] if d.H is None else [("H (platform)", d.H)])
     for name, t in rows:
-        print("\n".join(_twist_lines(name, t)))
+        print("\n".join(_twist_lines(name, t, r.params.length)))
     return 0
 
 

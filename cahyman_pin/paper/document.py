@@ -3,7 +3,8 @@
 A report is a :class:`Document` of headings, paragraphs, tables and figures. The same
 blocks give ``report.md`` (figures linked as files next to it) and ``report.html``: that
 Markdown rendered by Python-Markdown (``tables`` extension), every figure embedded as a
-base64 data URI, so the page needs no other file and no network.
+base64 data URI, so the page needs no other file and no network. Both start with a table
+of contents whose links reach the section headings (their anchors: :func:`anchors`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import base64
 import html
 import mimetypes
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,9 +71,41 @@ class _EmbedImages(Treeprocessor):
             img.set("src", f"data:{mime};base64,{data}")
 
 
+class _HeadingIds(Treeprocessor):
+    """Give the section headings (h2 and below, in order) the ids of :func:`anchors`, the
+    targets of the contents' links."""
+
+    def __init__(self, md: markdown.Markdown, ids: list[str]):
+        super().__init__(md)
+        self.ids = ids
+
+    def run(self, root: Element) -> None:
+        headings = [e for e in root.iter() if e.tag in ("h2", "h3", "h4", "h5", "h6")]
+        for element, anchor in zip(headings, self.ids, strict=True):
+            element.set("id", anchor)
+
+
 class _Embed(Extension):
+    def __init__(self, ids: list[str]):
+        super().__init__()
+        self.ids = ids
+
     def extendMarkdown(self, md: markdown.Markdown) -> None:
         md.treeprocessors.register(_EmbedImages(md), "embed_images", 0)
+        md.treeprocessors.register(_HeadingIds(md, self.ids), "heading_ids", 1)
+
+
+def anchors(texts: list[str]) -> list[str]:
+    """Anchor of each heading text, as GitHub makes them (so that the contents' links work
+    in report.md there and in report.html): lower case, punctuation dropped, spaces as
+    ``-``; a repeated anchor gets ``-1``, ``-2``, ... ."""
+    out, seen = [], {}
+    for text in texts:
+        base = re.sub(r"[^\w\- ]", "", text.lower()).replace(" ", "-")
+        n = seen.get(base, 0)
+        seen[base] = n + 1
+        out.append(base if n == 0 else f"{base}-{n}")
+    return out
 
 
 @dataclass
@@ -90,10 +124,11 @@ class Document:
         return self._markdown(lambda p: Path(p).resolve().relative_to(base).as_posix())
 
     def to_html(self) -> str:
-        """A self-contained HTML page: the Markdown rendered, every figure embedded."""
+        """A self-contained HTML page: the Markdown rendered, every figure embedded, the
+        section headings with the ids the contents link to."""
         body = markdown.markdown(
             self._markdown(lambda p: Path(p).resolve().as_posix()),
-            extensions=["tables", _Embed()],
+            extensions=["tables", _Embed(anchors([h.text for h in self._headings()]))],
             output_format="html",
         )
         return (
@@ -102,8 +137,24 @@ class Document:
             f"<body>\n{body}\n</body></html>\n"
         )
 
+    def _headings(self) -> list[Heading]:
+        return [b for b in self.blocks if isinstance(b, Heading)]
+
+    def _contents(self) -> list[str]:
+        """The table of contents: a nested list of links to the section headings (none
+        for a document without any)."""
+        headings = self._headings()
+        if not headings:
+            return []
+        top = min(h.level for h in headings)
+        out = ["**Contents**", ""]
+        for h, anchor in zip(headings, anchors([h.text for h in headings]), strict=True):
+            text = h.text.replace("[", "\\[").replace("]", "\\]")
+            out.append("    " * (h.level - top) + f"- [{text}](#{anchor})")
+        return [*out, ""]
+
     def _markdown(self, link: Callable[[Path], str]) -> str:
-        out = [f"# {self.title}", ""]
+        out = [f"# {self.title}", "", *self._contents()]
         for b in self.blocks:
             if isinstance(b, Heading):
                 out += ["#" * b.level + " " + b.text, ""]

@@ -88,10 +88,7 @@ def _matrix_rows(K: np.ndarray) -> tuple[tuple[str, ...], ...]:
     )
 
 
-def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None) -> None:
-    given = f"the parameter file {str(params_file)!r}" if params_file else "no parameter file"
-    fields = params_file_fields(params_file) if params_file else frozenset()
-    assumed = [f.name for f in dataclasses.fields(params) if _assumed(params, f.name, fields)]
+def _intro(doc: Document) -> None:
     doc.add(
         Paragraph(
             "This report compares the displacements published for CaHyMan (Tables 1-3, "
@@ -103,13 +100,24 @@ def _intro(doc: Document, params: CaHyManParams, params_file: Path | None = None
             "SI; tables are in the paper's units (mm, deg)."
         ),
         Paragraph("The paper: " + citation()),
+    )
+
+
+def _parameters(doc: Document, params: CaHyManParams, params_file: Path | None = None) -> None:
+    """The parameter table (values, sources, what is assumed) and the published backend's
+    choices."""
+    given = f"the parameter file {str(params_file)!r}" if params_file else "no parameter file"
+    fields = params_file_fields(params_file) if params_file else frozenset()
+    assumed = [f.name for f in dataclasses.fields(params) if _assumed(params, f.name, fields)]
+    doc.add(
+        Heading("Parameters and conventions"),
         Heading("Parameters", 3),
         Paragraph(
             f"The parameters used, from the defaults of cahyman_pin/params.py and {given}. "
             "'paper' marks a value printed in the paper, 'given' a value of the parameter "
             "file; the values flagged ASSUMED are not in the paper "
             f"({', '.join(assumed) if assumed else 'none here'}); they shape every number "
-            "below, except the beam fields ("
+            "of this report, except the beam fields ("
             f"{', '.join(BEAM_FIELDS)}), which act only where links are beams (with "
             "links_as_beams, and in the section 'Lumped springs vs beam links'), and the "
             f"masses ({', '.join(WEIGHT_FIELDS[:-1])}), which act only through the weight: "
@@ -488,7 +496,8 @@ def _matrices(doc: Document, params: CaHyManParams) -> None:
             "generic backend (a matrix acts on small rotation vectors rx, ry, rz about the "
             "world axes: the paper's angles, singular at the level plate, cannot be its "
             "coordinates); eigenvalues and determinant for every backend (the published "
-            "K is in its own mixed coordinates, see the choices above). Every number is that "
+            "K is in its own mixed coordinates, see the choices under 'Parameters and "
+            "conventions'). Every number is that "
             "of cahyman_pin.api.stiffness (the consistent and generic K from a square-root "
             "factor of C, not inv(C)); 'n/a' where the API gives none, for the reason stated."
         ),
@@ -587,9 +596,9 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
     out.mkdir(parents=True, exist_ok=True)
     doc = Document("CaHyMan stiffness: the published tables against three backends")
     tables = [table_values(pose, params) for pose in TABLE_POSES]
-    _intro(doc, params, params_file)
-    _conventions(doc, params, tables)
-    _summary(doc, params, tables)
+    _intro(doc)
+    _summary(doc, params, tables)  # the findings first, then the figures (placed here,
+    at = len(doc.blocks)  # computed last: a section that fails stops the run before them)
     _tables(doc, tables)
     _linearity(doc)
     floor_section(doc, params)
@@ -600,6 +609,18 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
     _weight(doc, params)
     beams_section(doc, params)
     _matrices(doc, params)
+    _parameters(doc, params, params_file)
+    _conventions(doc, params, tables)
+    figures = Document(doc.title)
+    _figures(figures, out, params)
+    doc.blocks[at:at] = figures.blocks
+    for name, text in (("report.md", doc.to_markdown(out)), ("report.html", doc.to_html())):
+        write_atomically(out / name, lambda f, text=text: f.write(text), text=True)
+    return doc
+
+
+def _figures(doc: Document, out: Path, params: CaHyManParams) -> None:
+    """Figs. 5-7, written into ``out``."""
     doc.add(
         Heading("Figures"),
         Paragraph(
@@ -615,6 +636,3 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
         Figure(figure_load(out, params, torque=False), "Fig. 6: displacements versus force"),
         Figure(figure_load(out, params, torque=True), "Fig. 7: displacements versus moment"),
     )
-    for name, text in (("report.md", doc.to_markdown(out)), ("report.html", doc.to_html())):
-        write_atomically(out / name, lambda f, text=text: f.write(text), text=True)
-    return doc
