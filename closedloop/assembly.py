@@ -21,7 +21,7 @@ from .model import ClosedLoopModel
 #: size of the mechanism (an absolute 1e-12 m is 3e-3 of the size of a nanometre one).
 ASSEMBLY_TOL = 1e-12
 #: Step of a sweep: the largest change of an actuated value per step of
-#: :func:`closedloop.limits.assemble_connected` [rad, and lengths in units of the model's
+#: :func:`closedloop.driving.assemble_connected` [rad, and lengths in units of the model's
 #: characteristic length L]; :func:`close_loops` follows the branch of a start's origin to
 #: first order up to twice as far (a step of INPUT_STEP whatever its rounding).
 INPUT_STEP = 0.05

@@ -62,10 +62,10 @@ from .compliance import (
 from .conditioning import ILL_CONDITIONED, twist_scaling
 from .configuration import Configuration
 from .data import BUNDLED_MODELS, ROBOTS, resolve
+from .driving import assemble_connected
 from .exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, InvalidInputError, OpenLoopError
 from .gravity import Payload
 from .io import load_model, read_springs_file, reference_configuration
-from .limits import assemble_connected
 from .model import ClosedLoopModel
 from .rounding import without_rounding
 

@@ -28,6 +28,7 @@ from .closures import check_name
 from .conditioning import check_length
 from .exceptions import InvalidInputError, OpenLoopError, OutsideLimitsError
 from .kinematics import frame_jacobian_rows, jacobian_rows, residual_rows
+from .limits import describe_limits, joints_outside_limits
 from .model import ClosedLoopModel
 
 #: Largest scaled closure residual (infinity norm: metres / L, radians) at which a
@@ -81,9 +82,6 @@ def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
     names each joint, its value and its limits, and asks "degrees?" when a revolute value
     exceeds 2 pi in magnitude.
     """
-    # limits builds on the assembly, which builds on this module: imported here
-    from .limits import describe_limits, joints_outside_limits
-
     bad = joints_outside_limits(model, q)
     if not bad:
         return

@@ -66,6 +66,7 @@ import scipy.special
 from .arrays import readonly
 from .compliance import compliance
 from .conditioning import rule_rank
+from .driving import assemble_connected
 from .exceptions import (
     InvalidInputError,
     MechanismError,
@@ -74,7 +75,6 @@ from .exceptions import (
     SingularConfigurationError,
 )
 from .io import reference_configuration
-from .limits import assemble_connected
 from .measurements import Measurement
 from .model import ClosedLoopModel
 

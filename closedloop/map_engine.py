@@ -57,6 +57,7 @@ from .batch import QUERY_ERRORS, STACK, answered
 from .blas import single_threaded_blas
 from .compliance import compliance
 from .conditioning import ILL_CONDITIONED, SCALED_TOL, Spectrum, batch_rank, scaled_asymmetry
+from .driving import INPUT_STEP, assemble_connected, assemble_within_limits, input_scale
 from .exceptions import (
     AssemblyError,
     ClusterError,
@@ -67,7 +68,6 @@ from .exceptions import (
 )
 from .indices import StiffnessIndices, batch_indices
 from .io import load_model, reference_configuration
-from .limits import INPUT_STEP, assemble_connected, assemble_within_limits, input_scale
 from .model import ClosedLoopModel
 from .progress import progress
 
@@ -399,8 +399,8 @@ class MapChunk:
 def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started, and
     their indices. Each point starts from the last one assembled, and is driven there in
-    steps of at most :data:`closedloop.limits.INPUT_STEP` where it is further
-    (:func:`closedloop.limits.assemble_connected`); with a start provider, from its start
+    steps of at most :data:`closedloop.driving.INPUT_STEP` where it is further
+    (:func:`closedloop.driving.assemble_connected`); with a start provider, from its start
     in one solve."""
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
@@ -429,7 +429,7 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
 
 def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
     """(nq,) start of a map's path: its first point assembled on the mode of the file's
-    configuration (:func:`closedloop.limits.assemble_connected`), as ``closedloop
+    configuration (:func:`closedloop.driving.assemble_connected`), as ``closedloop
     stiffness --actuated`` assembles it; the file's configuration where that fails (the
     point's own assembly then reports why)."""
     reference = reference_configuration(clm)
@@ -443,9 +443,9 @@ def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
 
 def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | None, *,
           jacobian: bool = True):  # fmt: skip
-    """:func:`closedloop.limits.assemble_within_limits` of ``actuated`` (n_act,) from q0
+    """:func:`closedloop.driving.assemble_within_limits` of ``actuated`` (n_act,) from q0
     (nq,), whose inputs are ``start`` (None: unknown, solved at once); driven there in
-    steps of at most INPUT_STEP (:func:`closedloop.limits.assemble_connected`) where it
+    steps of at most INPUT_STEP (:func:`closedloop.driving.assemble_connected`) where it
     is further than that and the assembly moves a coordinate (a passive joint)."""
     far = start is not None and (
         np.max(np.abs(actuated - start) / input_scale(clm), initial=0.0) > INPUT_STEP
@@ -464,7 +464,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     """Start configuration of each chunk, by a serial continuation along the path.
 
     The pass assembles the points of :func:`continuation_points` (steps of at most
-    :data:`closedloop.limits.INPUT_STEP` along the path, as :func:`path_start` is reached,
+    :data:`closedloop.driving.INPUT_STEP` along the path, as :func:`path_start` is reached,
     and at most :data:`BORDER_STRIDE` points) and the chunk borders ``firsts``, each from
     the previous one (the first from :func:`path_start`), and keeps the configurations at
     the borders: the first point of a chunk then starts on the assembly mode the path
@@ -521,9 +521,9 @@ def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:
     from 0; the same whatever the chunks).
 
     From each, the next is the farthest point along the path within
-    :data:`closedloop.limits.INPUT_STEP` of path length (the largest change of an actuated
+    :data:`closedloop.driving.INPUT_STEP` of path length (the largest change of an actuated
     value, lengths in units of the characteristic length L, summed over the path's steps:
-    the step of :func:`closedloop.limits.assemble_connected`), at most
+    the step of :func:`closedloop.driving.assemble_connected`), at most
     :data:`BORDER_STRIDE` points on and at least the next point (a step longer than
     INPUT_STEP is driven in steps of INPUT_STEP, as a chunk drives it). A model whose
     assembly moves no coordinate (no passive joint) has one configuration per point,

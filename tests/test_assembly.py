@@ -249,7 +249,7 @@ def test_actuated_values_are_assembled_on_the_mode_of_the_start(crank, capsys):
     import json
 
     from closedloop.cli import main
-    from closedloop.limits import assemble_connected
+    from closedloop.driving import assemble_connected
 
     clm = fourbar()
     q = pin.neutral(clm.model)

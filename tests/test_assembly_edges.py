@@ -20,8 +20,8 @@ from mechanisms import FIVEBAR_BASE, FIVEBAR_LENGTHS, fivebar, fourbar_chain, sc
 
 import closedloop as cl
 from closedloop.assembly import ASSEMBLY_TOL, assemble
+from closedloop.driving import assemble_connected, assemble_within_limits
 from closedloop.exceptions import AssemblyError, InvalidInputError
-from closedloop.limits import assemble_connected, assemble_within_limits
 
 #: A point closure met to ASSEMBLY_TOL in the max norm of its 3 rows (metres / L) leaves
 #: a world gap of at most sqrt(3) times that.

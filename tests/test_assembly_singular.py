@@ -15,8 +15,8 @@ from mechanisms import fourbar_chain
 
 import closedloop as cl
 from closedloop.cli import main
+from closedloop.driving import assemble_connected, assemble_within_limits
 from closedloop.exceptions import EXIT_FAILED, SingularConfigurationError
-from closedloop.limits import assemble_connected, assemble_within_limits
 
 #: The bundled four-bar's closure file without its loop, the crank actuated and sprung.
 NO_LOOP = "closed_loop: []\nname_mot: [crank]\nsprings:\n  crank: 50.0\n  crank_axial: 1.0e+5\n"

@@ -322,7 +322,7 @@ def test_a_map_starts_on_the_mode_of_the_single_query(fourbar_urdf, fourbar_yaml
     """The first point of a map is assembled as `closedloop stiffness --actuated` assembles
     it, on the mode of the file's configuration: at crank 1.0 the map's C was 176 % off
     the command's (the map solved it at once from the file's configuration)."""
-    from closedloop.limits import assemble_connected
+    from closedloop.driving import assemble_connected
 
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
     single = cl.compliance(clm, assemble_connected(clm, [1.0], reference_configuration(clm)).q,

@@ -18,7 +18,7 @@ from closedloop.io import reference_configuration
 from closedloop.maps import grid_points, stiffness_map
 
 #: Largest input step [rad] of the driven reference: 5 times below the map's continuation
-#: step (closedloop.limits.INPUT_STEP, 0.05 rad) and about 16 times below the grids' steps
+#: step (closedloop.driving.INPUT_STEP, 0.05 rad) and about 16 times below the grids' steps
 #: here, so that it does not leave the assembly mode where the grid steps do not.
 DRIVE_STEP = 0.01
 #: A map point on the driven mode: the same configuration to the assembly tolerance

@@ -8,8 +8,8 @@ import pytest
 from helpers import assert_close_in_norm
 
 import closedloop as cl
+from closedloop.driving import assemble_connected
 from closedloop.io import reference_configuration
-from closedloop.limits import assemble_connected
 from closedloop.map_engine import ModelSource
 from closedloop.maps import INDICES, grid_points, stiffness_map
 
