@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from helpers import REPO
 
 from closedloop.map_engine import STATUS, ChunkResult, Interrupted, ModelSource, gather, run_tasks
 from closedloop.maps import StiffnessMap, stiffness_map
 
-REPO = Path(__file__).resolve().parents[1]
 #: The tests of worker processes: a map's pool has at most one process a core.
 two_cores = pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs 2 cores for 2 workers")
 #: Seconds a command may take to start computing (imports, the estimate, the border pass).
