@@ -12,9 +12,9 @@ Matrices are 6x6 at the reference point M (the arm extremity), in world axes, or
 is the small rotation vector of the arm link that carries M.
 
 Backends compute the matrices: ``"generic"`` (default) is the Pinocchio model of
-:mod:`cahyman_pin.model` with :func:`closedloop.compliance.compliance`; ``"consistent"`` is
-the closed form of :mod:`cahyman_pin.backends.consistent`; ``"published"`` the paper's
-matrices as printed (:mod:`cahyman_pin.backends.published`, its own coordinates, not
+:mod:`cahyman_pin.model` with :func:`closedloop.elastostatics.compliance.compliance`;
+``"consistent"`` is the closed form of :mod:`cahyman_pin.backends.consistent`; ``"published"`` the
+paper's matrices as printed (:mod:`cahyman_pin.backends.published`, its own coordinates, not
 symmetric) with the parameters' K_s (``params.with_ks("printed")`` for the printed 0.697
 N/m; every other damaged place as published). Another backend is a function
 ``f(params, alpha, alpha4, s4) -> BackendResult`` registered with
@@ -31,17 +31,17 @@ import numpy as np
 from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from cahyman_pin.params import DEFAULT_PARAMS, SPRING_FIELDS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
-from closedloop.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
-from closedloop.compliance import TWIST_LABELS, UNITS, compliance, finite_product
-from closedloop.conditioning import (
+from closedloop.analysis.indices import StiffnessIndices, lu_determinant
+from closedloop.common.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
+from closedloop.common.conditioning import (
     SCALED_TOL,
     scaled_asymmetry,
     spectrum_from_factor,
     twist_scaling,
 )
-from closedloop.configuration import Configuration
+from closedloop.elastostatics.compliance import TWIST_LABELS, UNITS, compliance, finite_product
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
-from closedloop.indices import StiffnessIndices, lu_determinant
+from closedloop.kinematics.configuration import Configuration
 
 
 @dataclass(frozen=True)
@@ -105,10 +105,12 @@ def generic_backend(
     With ``weight``, the assembled configuration is the springs' rest configuration: the
     machine settles under the weight of its masses (``params.m_*``, gravity
     ``params.gravity`` along -z) and the result is the tangent compliance there
-    (:func:`closedloop.compliance.compliance` with ``gravity``); its ``sag`` is that of M.
+    (:func:`closedloop.elastostatics.compliance.compliance` with ``gravity``); its ``sag`` is that
+    of M.
 
     ``details`` holds ``q`` (nq,), the configuration of the result (the sagged one with
-    ``weight``), and ``compliance``, the :class:`closedloop.compliance.ComplianceResult`.
+    ``weight``), and ``compliance``, the
+    :class:`closedloop.elastostatics.compliance.ComplianceResult`.
     """
     model = cahyman_model(params)
     q = model.assemble(alpha, alpha4, s4)
@@ -246,7 +248,7 @@ class CaHyManStiffness(ReadOnlyArrays):
         C: (6, 6) compliance at M, world axes [m/N, m/(N m) = rad/N, rad/(N m)].
         C_platform: (6, 6) twist of the plate at H per wrench at M, or None.
         pose: plate and arm pose.
-        indices: :class:`closedloop.indices.StiffnessIndices` of C, or None when C is not
+        indices: :class:`closedloop.analysis.indices.StiffnessIndices` of C, or None when C is not
             symmetric (the published backend): K, det_K, eigenvalues and condition
             number are then those of the plain inverse of C.
         details: backend extras (generic: ``q``, ``compliance``).

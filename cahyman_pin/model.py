@@ -1,4 +1,5 @@
-"""CaHyMan as a :class:`closedloop.model.ClosedLoopModel`: build, assemble, read the pose.
+"""CaHyMan as a :class:`closedloop.model.closed_loop.ClosedLoopModel`: build, assemble, read the
+pose.
 
 The model is built in memory from :mod:`cahyman_pin.urdf_builder` (URDF text parsed by
 Pinocchio, closures and springs from the same builder), so a parameter sweep rebuilds it
@@ -28,13 +29,13 @@ from cahyman_pin.urdf_builder import (
     build_urdf,
     closure_spec,
 )
-from closedloop.arrays import readonly, real_array
-from closedloop.assembly import close_loops
-from closedloop.beams import apply_beams
-from closedloop.closures import closure_between_frames
+from closedloop.common.arrays import readonly, real_array
 from closedloop.exceptions import InvalidInputError
-from closedloop.kinematics import closure_residual, update_kinematics
-from closedloop.model import ClosedLoopModel
+from closedloop.kinematics.assembly import close_loops
+from closedloop.kinematics.constraints import closure_residual, update_kinematics
+from closedloop.model.beams import apply_beams
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closures import closure_between_frames
 
 #: Below this value of cos(phi) the plate normal is vertical and only theta + psi is
 #: defined: :func:`paper_angles` then reports psi = 0 and theta = the yaw.
@@ -271,10 +272,10 @@ class CaHyManModel:
             s4: telescope stroke [m].
             q0: (nq,) warm start (e.g. a neighbouring pose); default: the closed-form
                 guess, which picks the branch of the closed-form geometry.
-            full_output: return the :class:`closedloop.assembly.Assembly` (q, residual,
+            full_output: return the :class:`closedloop.kinematics.assembly.Assembly` (q, residual,
                 iterations) instead of q.
             jacobian: with ``full_output``, the Assembly also holds the closure residuals
-                and Jacobian at q (:attr:`closedloop.assembly.Assembly.closure`).
+                and Jacobian at q (:attr:`closedloop.kinematics.assembly.Assembly.closure`).
 
         Returns:
             (nq,) read-only configuration q, or the Assembly.
@@ -291,15 +292,15 @@ class CaHyManModel:
 
     def assemble_validated(self, inputs: np.ndarray, q0: np.ndarray | None = None, *,
                            jacobian: bool = False):  # fmt: skip
-        """:meth:`assemble` (its :class:`closedloop.assembly.Assembly`) of inputs and a start
-        that the caller has checked: the sweeps validate a chunk's inputs at once.
+        """:meth:`assemble` (its :class:`closedloop.kinematics.assembly.Assembly`) of inputs and a
+        start that the caller has checked: the sweeps validate a chunk's inputs at once.
 
         Args:
             inputs: (5,) alpha_1..3 [rad], alpha_4 [rad], s_4 [m], as :func:`check_inputs`
                 accepts them.
-            q0: (nq,) start, as :meth:`closedloop.model.ClosedLoopModel.check_configuration`
-                returns it (finite, quaternion normalised; not modified), or None: the
-                closed-form guess.
+            q0: (nq,) start, as
+                :meth:`closedloop.model.closed_loop.ClosedLoopModel.check_configuration` returns it
+                (finite, quaternion normalised; not modified), or None: the closed-form guess.
             jacobian: as :meth:`assemble`.
 
         Raises:
@@ -326,7 +327,8 @@ class CaHyManModel:
 
     def pose_from(self, q: np.ndarray, data: pin.Data) -> CaHyManPose:
         """:meth:`pose` from the frame placements of q (nq,) already in ``data`` (e.g. a
-        :class:`closedloop.configuration.Configuration`'s), without computing them again."""
+        :class:`closedloop.kinematics.configuration.Configuration`'s), without computing them
+        again."""
         oMf, (plate, arm, pivot, *balls) = data.oMf, self._pose_frames
         plate, arm = oMf[plate], oMf[arm]
         R = readonly(plate.rotation)

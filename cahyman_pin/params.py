@@ -63,7 +63,7 @@ class CaHyManParams:
         gravity: gravitational acceleration [m/s^2], acting along -z.
         s4_max: stroke of the linear motor, s_4 in [0, s4_max] [m].
         links_as_beams: model each leg's links (b, c, d, h) and the arm's links (QM2,
-            MM2) as beams (:mod:`closedloop.beams`, :func:`cahyman_pin.urdf_builder.beams`)
+            MM2) as beams (:mod:`closedloop.model.beams`, :func:`cahyman_pin.urdf_builder.beams`)
             instead of the paper's lumped axial springs K_b, K_d, K_4 (default False: the
             paper's model). The motor springs K_T, K_T4, K_s stay.
         E_beam, G_beam: Young's and shear moduli of the links as beams [Pa] (assumed:
@@ -150,7 +150,7 @@ class CaHyManParams:
     @property
     def length(self) -> float:
         """Characteristic length of the machine [m], the scale of the unit-free rank rule
-        (:mod:`closedloop.conditioning`) for every backend: base diameter plus the heights
+        (:mod:`closedloop.common.conditioning`) for every backend: base diameter plus the heights
         of a leg and of the arm, 2 r_e + a + b + h + HQ + L + s4_max."""
         return 2 * self.r_e + self.a + self.b + self.h + self.HQ + self.L + self.s4_max
 
@@ -241,7 +241,7 @@ def _params_file_values(path: str | Path) -> dict:
     """field -> value of a parameter file, numbers written as YAML 1.1 strings converted."""
     import yaml  # only when a file is read
 
-    from closedloop import strict_yaml
+    from closedloop.io import strict_yaml
 
     path = Path(path)
     try:

@@ -45,7 +45,7 @@ crank ``crank_d_k`` (to
 ``d_k_axial``, length b) and connecting bar ``bar_k`` (to H_k, length h) are tubes
 (d_leg, t_leg), the arm ``arm`` (QM2, to ``arm_axial``, length L) a tube (d_arm, t_arm),
 of material E_beam, G_beam, each a cantilever from its link frame (Euler-Bernoulli,
-:mod:`closedloop.beams`). The sliding tube MM2 is a tube (d_MM2, t_MM2) of constant length
+:mod:`closedloop.model.beams`). The sliding tube MM2 is a tube (d_MM2, t_MM2) of constant length
 L_MM2 clamped at its driven end: ``s_4`` then moves a link ``telescope_root`` at
 M - L_MM2 w (the s_4 joint's origin moves back by L_MM2 along the arm, M stays at
 Q + (L + s_4) w) carrying the telescope on the fixed joint ``telescope_fixed``. The
@@ -53,7 +53,7 @@ virtual joints of K_b, K_d and K_4 are locked (the beams carry the links' axial
 stiffness); the motors' K_T, K_T4, K_s stay.
 
 Closure file: the "Extended URDF" keys ``closed_loop``, ``type``, ``name_mot`` plus the
-``springs`` extension read by :func:`closedloop.closure_file.read_closure_file` (and ``locked``,
+``springs`` extension read by :func:`closedloop.io.closure_file.read_closure_file` (and ``locked``,
 ``beams`` with links as beams).
 """
 
@@ -65,7 +65,7 @@ import numpy as np
 
 from cahyman_pin.geometry import DELTA, T, U
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
-from closedloop.io import ClosureSpec
+from closedloop.io.loader import ClosureSpec
 
 LEGS = (1, 2, 3)
 #: Actuated joints, in the order of the inputs (alpha_1, alpha_2, alpha_3, alpha_4, s_4).
@@ -108,7 +108,7 @@ def springs(p: CaHyManParams) -> dict[str, float]:
 
 
 def beams(p: CaHyManParams) -> dict[str, dict]:
-    """Link name -> beam (:mod:`closedloop.beams`) of the links as beams (module docstring);
+    """Link name -> beam (:mod:`closedloop.model.beams`) of the links as beams (module docstring);
     empty unless ``p.links_as_beams``."""
     if not p.links_as_beams:
         return {}
@@ -369,7 +369,9 @@ def build_closure_yaml(p: CaHyManParams = DEFAULT_PARAMS) -> str:
     springs_text = yaml.safe_dump({"springs": spec.springs}, sort_keys=False)
     beams_text = ""
     if spec.beams:
-        beams_text = "# Links as beams (closedloop.beams), their lumped axial springs locked.\n"
+        beams_text = (
+            "# Links as beams (closedloop.model.beams), their lumped axial springs locked.\n"
+        )
         beams_text += yaml.safe_dump({"beams": spec.beams}, sort_keys=False)
     locked = yaml.safe_dump({"locked": list(spec.locked)}, default_flow_style=None)
     return (

@@ -11,14 +11,18 @@ The whole workflow from one import::
     cl.compliances(robot, Q, "P").C            # (n, 6, 6) for n configurations Q (n, nq)
     cl.StiffnessIndices.from_result(res).min_translational_stiffness
 
-The modules (``closedloop.compliance``, ``closedloop.assembly``, ...) stay importable.
+The package is laid out in layers, each importing only those below it:
+:mod:`closedloop.common` (shared utilities) -> :mod:`closedloop.model` (the closed-loop
+model, beams, gravity) -> :mod:`closedloop.io` (model files) and
+:mod:`closedloop.kinematics` (configurations, assembly, limits) ->
+:mod:`closedloop.elastostatics` (compliance, statics) -> :mod:`closedloop.analysis`
+(indices, identification, maps, natural frequencies) -> :mod:`closedloop.viewer` ->
+:mod:`closedloop.cli`.
 """
 
 from __future__ import annotations
 
 import importlib
-import sys
-from types import ModuleType
 from typing import TYPE_CHECKING
 
 #: Public name -> the module that defines it; imported on first use (module-level
@@ -26,12 +30,12 @@ from typing import TYPE_CHECKING
 #: few modules does not load scipy, yaml or every other module. The submodules among them:
 #: :data:`_SUBMODULES`.
 _EXPORTS = {
-    "data": ".data",
-    **dict.fromkeys(("Assembly", "assemble"), ".assembly"),
-    **dict.fromkeys(("BatchCompliance", "compliances"), ".batch"),
-    **dict.fromkeys(("ComplianceResult", "compliance"), ".compliance"),
-    **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".conditioning"),
-    **dict.fromkeys(("CLOSURE_TOL", "Configuration"), ".configuration"),
+    "data": ".io.data",
+    **dict.fromkeys(("Assembly", "assemble"), ".kinematics.assembly"),
+    **dict.fromkeys(("BatchCompliance", "compliances"), ".elastostatics.batch"),
+    **dict.fromkeys(("ComplianceResult", "compliance"), ".elastostatics.compliance"),
+    **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".common.conditioning"),
+    **dict.fromkeys(("CLOSURE_TOL", "Configuration"), ".kinematics.configuration"),
     **dict.fromkeys(
         (
             "AssemblyError",
@@ -56,27 +60,34 @@ _EXPORTS = {
         ),
         ".exceptions",
     ),
-    **dict.fromkeys(("STANDARD_GRAVITY", "GravityLoad", "Payload"), ".gravity"),
-    "StiffnessIndices": ".indices",
-    "load_model": ".io",
-    "robot_data_dir": ".data",
-    "ClosedLoopModel": ".model",
-    **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".preload"),
-    **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".statics"),
-    **dict.fromkeys(("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".tangent"),
-    **dict.fromkeys(("ModesResult", "batch_modes", "modes"), ".vibration"),
+    **dict.fromkeys(("STANDARD_GRAVITY", "GravityLoad", "Payload"), ".model.gravity"),
+    "StiffnessIndices": ".analysis.indices",
+    "load_model": ".io.loader",
+    "robot_data_dir": ".io.data",
+    "ClosedLoopModel": ".model.closed_loop",
+    **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".elastostatics.preload"),
+    **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".elastostatics.statics"),
+    **dict.fromkeys(
+        ("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".elastostatics.tangent"
+    ),
+    **dict.fromkeys(("ModesResult", "batch_modes", "modes"), ".analysis.vibration"),
 }
 _SUBMODULES = frozenset({"data"})
 
 if TYPE_CHECKING:  # the names as static analysis sees them
-    from . import data
-    from .assembly import Assembly, assemble
-    from .batch import BatchCompliance, compliances
-    from .compliance import ComplianceResult, compliance
-    from .conditioning import ILL_CONDITIONED, RANK_RTOL
-    from .configuration import CLOSURE_TOL, Configuration
-    from .data import robot_data_dir
-    from .exceptions import (
+    from closedloop.analysis.indices import StiffnessIndices
+    from closedloop.analysis.vibration import ModesResult, batch_modes, modes
+    from closedloop.common.conditioning import ILL_CONDITIONED, RANK_RTOL
+    from closedloop.elastostatics.batch import BatchCompliance, compliances
+    from closedloop.elastostatics.compliance import ComplianceResult, compliance
+    from closedloop.elastostatics.preload import PreloadedCompliance, preloaded_compliance
+    from closedloop.elastostatics.statics import Equilibrium, solve_equilibrium
+    from closedloop.elastostatics.tangent import (
+        closure_curvature,
+        geometric_stiffness,
+        tangent_stiffness,
+    )
+    from closedloop.exceptions import (
         AssemblyError,
         BeamError,
         ClosedLoopError,
@@ -97,14 +108,13 @@ if TYPE_CHECKING:  # the names as static analysis sees them
         SingularConfigurationError,
         ViewerError,
     )
-    from .gravity import STANDARD_GRAVITY, GravityLoad, Payload
-    from .indices import StiffnessIndices
-    from .io import load_model
-    from .model import ClosedLoopModel
-    from .preload import PreloadedCompliance, preloaded_compliance
-    from .statics import Equilibrium, solve_equilibrium
-    from .tangent import closure_curvature, geometric_stiffness, tangent_stiffness
-    from .vibration import ModesResult, batch_modes, modes
+    from closedloop.io import data
+    from closedloop.io.data import robot_data_dir
+    from closedloop.io.loader import load_model
+    from closedloop.kinematics.assembly import Assembly, assemble
+    from closedloop.kinematics.configuration import CLOSURE_TOL, Configuration
+    from closedloop.model.closed_loop import ClosedLoopModel
+    from closedloop.model.gravity import STANDARD_GRAVITY, GravityLoad, Payload
 
 
 def __getattr__(name: str):
@@ -115,23 +125,6 @@ def __getattr__(name: str):
     value = mod if name in _SUBMODULES else getattr(mod, name)
     globals()[name] = value  # once: later lookups do not come here
     return value
-
-
-class _Package(ModuleType):
-    """The package, which keeps ``closedloop.compliance`` the function.
-
-    Importing a submodule binds it to its name in the package: ``closedloop.compliance``
-    would become the module once anything imported ``closedloop.compliance``. As when the
-    package imported every name eagerly, the exported function of that name wins.
-    """
-
-    def __setattr__(self, name: str, value) -> None:
-        if isinstance(value, ModuleType) and name in _EXPORTS and name not in _SUBMODULES:
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 def __dir__() -> list[str]:

@@ -1,7 +1,7 @@
-"""``python -m closedloop``: the ``closedloop`` command (see :mod:`closedloop.cli`)."""
+"""``python -m closedloop``: the ``closedloop`` command (see :mod:`closedloop.cli.app`)."""
 
 import sys
 
-from .cli import main
+from closedloop.cli.app import main
 
 sys.exit(main())

@@ -84,7 +84,8 @@ class OpenLoopError(InvalidInputError):
     Attributes:
         residual: scaled closure residual (infinity norm; metres divided by the
             characteristic length, radians as they are).
-        tolerance: the tolerance it exceeds (:data:`closedloop.configuration.CLOSURE_TOL`).
+        tolerance: the tolerance it exceeds
+            (:data:`closedloop.kinematics.configuration.CLOSURE_TOL`).
     """
 
     def __init__(self, message: str, residual: float, tolerance: float):
@@ -94,7 +95,7 @@ class OpenLoopError(InvalidInputError):
 
 class OutsideLimitsError(InvalidInputError):
     """A configuration given for a query with joints outside their position limits (the
-    limits of :func:`closedloop.limits.joints_outside_limits`); ``check_limits=False``
+    limits of :func:`closedloop.kinematics.limits.joints_outside_limits`); ``check_limits=False``
     (command line: ``--no-limits``) queries it anyway.
 
     Attributes:
@@ -190,7 +191,7 @@ class IgnoredFeatureWarning(UserWarning):
 
 
 class ModelMisfitWarning(UserWarning):
-    """:func:`closedloop.identification.identify`: the model does not fit the
+    """:func:`closedloop.analysis.identification.identify`: the model does not fit the
     measurements (a weighted residual RMS far above what their sd allow, ``Fit.consistent``
     False): the standard errors, which assume a fit, do not hold."""
 

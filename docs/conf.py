@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import closedloop  # noqa: E402
-from closedloop.blas import single_threaded_blas  # noqa: E402
+from closedloop.common.blas import single_threaded_blas  # noqa: E402
 
 single_threaded_blas()  # the examples run many small queries in this process
 
@@ -35,6 +35,7 @@ version = ".".join(release.split(".")[:2])
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",

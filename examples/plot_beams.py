@@ -4,15 +4,15 @@ Which link limits my stiffness? Links as beams
 
 A link can be flexible: a rigid body with a 6-dof virtual spring at its end whose 6x6
 stiffness comes from beam theory. Here the six links of a UR5 become aluminium tubes
-(d = 60 mm, t = 4 mm), and :func:`~closedloop.compliance.energy_shares` splits the
+(d = 60 mm, t = 4 mm), and :func:`~closedloop.elastostatics.compliance.energy_shares` splits the
 deflection energy of a load at the tool among the joint springs and the beams.
 """
 
 import matplotlib.pyplot as plt
 
 import closedloop as cl
-from closedloop.beams import map_configuration
-from closedloop.compliance import energy_shares
+from closedloop.elastostatics.compliance import energy_shares
+from closedloop.model.beams import map_configuration
 
 ur5 = cl.load_model(cl.data.robot_file("ur5"), joint_stiffness=1e4)
 tube = {"E": 7.0e10, "G": 2.6e10, "section": {"shape": "tube", "d": 0.06, "t": 0.004}}

@@ -12,8 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.compliance import energy_shares
-from closedloop.io import reference_configuration
+from closedloop.elastostatics.compliance import energy_shares
+from closedloop.io.loader import reference_configuration
 
 sdf = cl.robot_data_dir() / "cassie_description/robots/cassie_v2.sdf"
 motors = ["left-roll-op", "left-yaw-op", "left-pitch-op", "left-knee-op", "left-foot-op"]

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.identification import Measurement, identify
+from closedloop.analysis.identification import Measurement, identify
 
 robot = cl.load_model(cl.data.path("fourbar.urdf"), cl.data.path("fourbar.yaml"))
 names = ["crank", "crank_axial", "rocker_axial"]

@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.io import reference_configuration
+from closedloop.io.loader import reference_configuration
 
 robot = cl.load_model(cl.data.path("rrr3.xml"))
 q = cl.assemble(robot, None, reference_configuration(robot)).q

@@ -2,7 +2,7 @@
 A stiffness map over two actuated joints
 ========================================
 
-:func:`closedloop.maps.stiffness_map` computes stiffness indices at every point of a grid
+:func:`closedloop.analysis.maps.stiffness_map` computes stiffness indices at every point of a grid
 of actuated values, closing the loops from the previous point. Here the five-bar's two
 motors are swept, and the smallest translational stiffness of its end point is drawn.
 A point that fails (a singular pose, loops that do not close) is recorded with its status,
@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.maps import stiffness_map
+from closedloop.analysis.maps import stiffness_map
 
 robot = cl.load_model(cl.data.path("fivebar5.xml"))
 legs = {"leg0": np.linspace(-0.5, 0.5, 21), "leg1": np.linspace(-0.5, 0.5, 21)}  # rad

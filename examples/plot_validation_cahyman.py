@@ -5,7 +5,7 @@ Validation: two implementations of CaHyMan agree
 The ``generic`` backend analyses the Pinocchio model of CaHyMan with ``closedloop``; the
 ``consistent`` backend is the paper's closed form with its damaged places resolved. They
 share no code, so their agreement checks both. At 100 random poses (the sampling of the
-test suite's ``tests/test_backends_agree.py``, which requires 1e-8 entry by entry), the
+test suite's ``tests/cahyman/test_backends_agree.py``, which requires 1e-8 entry by entry), the
 figure shows the Frobenius norm of the difference of their compliances relative to that of
 the generic one.
 """

@@ -19,13 +19,13 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.sweep import grid, sweep
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
-from closedloop import lapack
-from closedloop.assembly import ASSEMBLY_TOL, free_coordinates, min_norm_solve
-from closedloop.batch import compliances
-from closedloop.compliance import compliance
-from closedloop.configuration import Configuration
-from closedloop.indices import StiffnessIndices
-from closedloop.kinematics import jacobian_rows, residual_rows
+from closedloop.analysis.indices import StiffnessIndices
+from closedloop.common import lapack
+from closedloop.elastostatics.batch import compliances
+from closedloop.elastostatics.compliance import compliance
+from closedloop.kinematics.assembly import ASSEMBLY_TOL, free_coordinates, min_norm_solve
+from closedloop.kinematics.configuration import Configuration
+from closedloop.kinematics.constraints import jacobian_rows, residual_rows
 
 #: Table 3's pose (alpha [rad], alpha_4 [rad], s_4 [m]), where single queries are timed.
 POSE = (np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.0)
@@ -147,7 +147,7 @@ def warm_starts(model: CaHyManModel, side: int) -> list[tuple]:
     """(alpha, alpha_4, s_4, q0) of every point of the side x side grid of row 3a after
     the first three of its row: the start of its assembly there (the quadratic
     extrapolation of the last three assembled configurations,
-    :func:`closedloop.map_engine.assemble_points`)."""
+    :func:`closedloop.analysis.map_engine.assemble_points`)."""
     clm, points = model.clm, leg_grid((side, side, 1))
     inputs = list(zip(points.alpha, points.alpha4, points.s4, strict=True))
     out = []
@@ -161,7 +161,7 @@ def warm_starts(model: CaHyManModel, side: int) -> list[tuple]:
 
 
 def lean_assembly(clm, actuated: np.ndarray, q0: np.ndarray, free: np.ndarray) -> int:
-    """The floor of :func:`closedloop.assembly.assemble` as row 3a calls it: its
+    """The floor of :func:`closedloop.kinematics.assembly.assemble` as row 3a calls it: its
     Gauss-Newton loop on the same pieces (closure rows, minimum-norm solve), and the
     closure Jacobian at the solution handed to the query, without any check, copy or
     result object; returns the iterations."""

@@ -9,12 +9,12 @@ import numpy as np
 import pinocchio as pin
 from benchtools import Mode, Table, fmt_time, growth_exponent, interleaved, parse_mode
 
-from closedloop import lapack
-from closedloop.batch import compliances
-from closedloop.compliance import compliance
-from closedloop.io import load_urdf, robot_data_dir
-from closedloop.model import ClosedLoopModel
-from closedloop.vibration import batch_modes, modes
+from closedloop.analysis.vibration import batch_modes, modes
+from closedloop.common import lapack
+from closedloop.elastostatics.batch import compliances
+from closedloop.elastostatics.compliance import compliance
+from closedloop.io.loader import load_urdf, robot_data_dir
+from closedloop.model.closed_loop import ClosedLoopModel
 
 #: UR5 pose of the serial query [rad].
 UR5_Q = np.array([0.3, -1.2, 1.4, -0.6, 1.1, 0.2])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from helpers import REPO, UR5_JOINTS, UR5_Q
 
-from closedloop.assembly import assemble
-from closedloop.io import load_urdf, robot_data_dir
+from closedloop.io.loader import load_urdf, robot_data_dir
+from closedloop.kinematics.assembly import assemble
 
 
 @pytest.fixture(scope="session")

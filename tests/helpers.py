@@ -18,9 +18,9 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 
-from closedloop.assembly import assemble
-from closedloop.kinematics import closure_jacobian, closure_residual, frame_jacobian
-from closedloop.model import ClosedLoopModel, Closure
+from closedloop.kinematics.assembly import assemble
+from closedloop.kinematics.constraints import closure_jacobian, closure_residual, frame_jacobian
+from closedloop.model.closed_loop import ClosedLoopModel, Closure
 
 REPO = Path(__file__).resolve().parent.parent
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
@@ -44,7 +44,7 @@ def browser() -> str:
     )
 
 
-#: The per-point indices of a map (closedloop.indices.batch_indices names) as a single
+#: The per-point indices of a map (closedloop.analysis.indices.batch_indices names) as a single
 #: query's StiffnessIndices gives them.
 INDEX_GETTERS = {
     "det_K": lambda s: s.determinant,
@@ -249,7 +249,7 @@ def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]
 
 def tangent_differences(model, fun, q, h=1e-6):
     """(n, nv) central differences of fun (n,) along pin.integrate(q, h e_b): the tests'
-    own, independent of the library's closedloop.derivatives."""
+    own, independent of the library's closedloop.common.derivatives."""
     cols = []
     for b in range(model.nv):
         e = np.zeros(model.nv)

@@ -20,9 +20,9 @@ from helpers import REPO
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
-from closedloop.closures import closure_between_frames
-from closedloop.io import load_urdf, robot_data_dir
-from closedloop.model import ClosedLoopModel
+from closedloop.io.loader import load_urdf, robot_data_dir
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closures import closure_between_frames
 
 EZ = np.array([0.0, 0.0, 1.0])
 #: Inertia of every body (0.1 kg, 1e-4 kg m^2): only needs to be nonzero.
@@ -463,7 +463,7 @@ def serial_with_block(
 
     Pinocchio's kinematic Hessians (the geometric stiffness of a preload) assume a
     constant joint motion subspace, which the universal joint does not have: the library
-    takes its second derivatives by central differences (closedloop.derivatives).
+    takes its second derivatives by central differences (closedloop.common.derivatives).
     """
     rng = np.random.default_rng(seed)
     m = pin.Model()

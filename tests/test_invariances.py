@@ -22,7 +22,7 @@ Tolerances. Matrices are compared in the unit-free coordinates of the rank rule
 A change that only reorders or rescales floating point operations moves C by a few
 eps (the springs, the lengths) times the sensitivity of the problem: the square-root
 factor gives every quantity to about eps sqrt(cond(K_s)) relative
-(:mod:`closedloop.conditioning`), so the bound is ``tol(cond)`` = 64 eps max(1, sqrt(cond)).
+(:mod:`closedloop.common.conditioning`), so the bound is ``tol(cond)`` = 64 eps max(1, sqrt(cond)).
 K C - I carries eps cond(K_s) (K and C are inverses: their product sees the whole spread).
 """
 
@@ -44,10 +44,10 @@ from mechanisms import (
 )
 
 import closedloop as cl
-from closedloop.batch import QUERY_ERRORS, answered
-from closedloop.compliance import energy_shares
-from closedloop.conditioning import twist_scaling
-from closedloop.model import ClosedLoopModel, Closure
+from closedloop.common.conditioning import twist_scaling
+from closedloop.elastostatics.batch import QUERY_ERRORS, answered
+from closedloop.elastostatics.compliance import energy_shares
+from closedloop.model.closed_loop import ClosedLoopModel, Closure
 
 EPS = np.finfo(float).eps
 PATHS = ("auto", "null-space")
@@ -531,8 +531,8 @@ def test_a_failing_row_is_the_single_query_error_naming_the_row():
 
 
 def test_every_row_answered_or_its_own_error():
-    """The per-configuration record of the maps (closedloop.batch.answered): each row is
-    the single query's answer, or its error (same type and message), the others kept."""
+    """The per-configuration record of the maps (closedloop.elastostatics.batch.answered): each row
+    is the single query's answer, or its error (same type and message), the others kept."""
     m, Q, f = _failing_rows()
     C, G, rank, cond, _, errors, L = answered(m, Q, f, "world", None, QUERY_ERRORS)
     assert L == m.length

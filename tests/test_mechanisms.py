@@ -17,11 +17,11 @@ import scipy.optimize
 from helpers import assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
-from closedloop.assembly import assemble, free_coordinates
-from closedloop.compliance import compliance
+from closedloop.elastostatics.compliance import compliance
+from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import EquilibriumError, MechanismError
-from closedloop.kinematics import closure_residual, update_kinematics
-from closedloop.statics import solve_equilibrium
+from closedloop.kinematics.assembly import assemble, free_coordinates
+from closedloop.kinematics.constraints import closure_residual, update_kinematics
 
 # Engine vs hand formula: the engine goes through a QR null space of 3 to 18 closure rows
 # (nv 4 to 33) and an eigen-decomposition, the reference through one 6x6 (or 3x3)

@@ -21,7 +21,7 @@ B = [T A_d blockdiag(F_leg), F_arm]. Stiffnesses come from the factors, never fr
 the inverse of a formed compliance: C sums the springs' compliances, and its smallest
 eigenvalues, hence K and det K, lose cond(K) times the rounding when the springs are many
 orders apart. K at M comes from the SVD of B (K = U diag(1/s^2) U^T,
-:func:`closedloop.conditioning.spectrum_from_factor`, in :mod:`cahyman_pin.api`), whose
+:func:`closedloop.common.conditioning.spectrum_from_factor`, in :mod:`cahyman_pin.api`), whose
 singular values keep the small eigenvalues of C to sqrt(cond(K)) times the rounding; the
 2x2 leg stiffnesses of K_H come from the minors of their factors (:func:`plate_stiffness`).
 
@@ -310,7 +310,7 @@ class ConsistentCompliance:
             (K_T, K_b, K_d) of legs 1, 2, 3, then (K_4, K_s, K_T4):
             [T A_d blockdiag(F_leg), A_s diag(K_4, K_s, K_T4)^-1/2]
             (:func:`leg_factor`, :func:`arm_factor`). K and det K at M come from its SVD
-            (:func:`closedloop.conditioning.spectrum_from_factor`), never from inv(C).
+            (:func:`closedloop.common.conditioning.spectrum_from_factor`), never from inv(C).
         C: (..., 6, 6) total compliance T C_H T^T + C_ser = B B^T at M, world axes.
     """
 

@@ -16,7 +16,7 @@ Exit status (as for ``closedloop``, :func:`closedloop.exceptions.exit_status`): 
 compliance is rank deficient (K does not exist); 2 bad input; 3 the computation failed on
 valid input (an unreachable pose, a singular configuration); 141 standard output closed
 early (``| head``). Errors are one line ``cahyman: error: ...`` on stderr. Parser, usage
-error, number type, JSON writer and entry point are those of :mod:`closedloop.cli_common`.
+error, number type, JSON writer and entry point are those of :mod:`closedloop.cli.common`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from collections.abc import Sequence
 
 from cahyman_pin.cli.stiffness import add_deflect, add_stiffness
 from closedloop import __version__
-from closedloop.cli_common import EXIT_HELP, Parser, add_subcommands, command_of, run_main
+from closedloop.cli.common import EXIT_HELP, Parser, add_subcommands, command_of, run_main
 
 PROG = "cahyman"
 #: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).

@@ -43,7 +43,10 @@ from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, WEIGHT_FIELDS, CaHyM
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
-from closedloop.cli_common import (
+from closedloop.analysis.cluster import add_worker_timeout, dask_executor
+from closedloop.analysis.map_engine import Interrupted, stop_on_signals
+from closedloop.analysis.maps import load_text
+from closedloop.cli.common import (
     SpecError,
     check_map_size,
     index_line,
@@ -54,11 +57,8 @@ from closedloop.cli_common import (
     positive_int,
     quoted,
 )
-from closedloop.cluster import add_worker_timeout, dask_executor
+from closedloop.common.files import save_figure
 from closedloop.exceptions import InvalidInputError
-from closedloop.files import save_figure
-from closedloop.map_engine import Interrupted, stop_on_signals
-from closedloop.maps import load_text
 
 DEFAULT_OUT = Path("cahyman-map")
 #: Failed points printed one by one; the others are counted ("... and N more").
@@ -199,7 +199,7 @@ def _label(name: str, unit: str) -> str:
 
 def map_title(result: SweepResult, index: str, fixed: dict) -> str:
     """Title of the picture: the index, the backend, the fixed inputs with their units and
-    the load (:func:`closedloop.maps.load_text`), in lines of at most 80 characters.
+    the load (:func:`closedloop.analysis.maps.load_text`), in lines of at most 80 characters.
 
     Args:
         fixed: input name -> (value, unit) of the inputs not swept, in the units shown.

@@ -1,5 +1,5 @@
 """``cahyman modes``: natural frequencies and mode shapes of CaHyMan at a pose, with the
-effective masses at M (:func:`closedloop.vibration.modes` on the generic model).
+effective masses at M (:func:`closedloop.analysis.vibration.modes` on the generic model).
 
 The paper names no masses and CaHyMan's default ones are 0: give them with ``--mass
 NAME=KG`` (a machine without mass has no natural frequency: a one-line error).
@@ -19,7 +19,7 @@ from cahyman_pin.cli.options import (
     add_pose_arguments,
     inputs_echo,
 )
-from closedloop.cli_common import print_json
+from closedloop.cli.common import print_json
 from closedloop.exceptions import EXIT_OK
 
 
@@ -42,8 +42,8 @@ def add_parser(subparsers) -> None:
 
 def _run_modes(args: argparse.Namespace) -> int:
     from cahyman_pin.model import cahyman_model
-    from closedloop.cli_modes import format_modes
-    from closedloop.vibration import modes
+    from closedloop.analysis.vibration import modes
+    from closedloop.cli.modes import format_modes
 
     params = DEFAULT_PARAMS.with_ks(args.ks)
     masses = _masses(args, weight=False)

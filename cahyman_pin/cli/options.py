@@ -1,7 +1,7 @@
 """Options shared by the ``cahyman`` subcommands: the pose in the paper's units (deg, mm)
 converted once to SI, the backend and K_s choices, masses. The conventions both command
 lines share (parser, usage error, finite numbers, JSON, exit statuses) are
-:mod:`closedloop.cli_common`'s."""
+:mod:`closedloop.cli.common`'s."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
-from closedloop.cli_common import UsageError, finite_float, needs_gravity
+from closedloop.cli.common import UsageError, finite_float, needs_gravity
 
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}
@@ -125,7 +125,7 @@ def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
 
     Raises:
         EquilibriumError: with ``--gravity``, an unstable equilibrium
-            (:func:`closedloop.preload.require_stable`).
+            (:func:`closedloop.elastostatics.preload.require_stable`).
     """
     params = DEFAULT_PARAMS.with_ks(args.ks)
     masses = _masses(args)
@@ -143,7 +143,7 @@ def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
         weight=weight,
     )
     if weight:  # a command line answers at stable equilibria only
-        from closedloop.preload import require_stable
+        from closedloop.elastostatics.preload import require_stable
 
         require_stable(result.details["compliance"])
     return result

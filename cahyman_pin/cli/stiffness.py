@@ -15,10 +15,10 @@ from cahyman_pin.cli.options import (
     inputs_echo,
     stiffness_from_args,
 )
-from closedloop.cli_common import EXIT_HELP, check_finite, print_json
-from closedloop.conditioning import twist_scaling
+from closedloop.cli.common import EXIT_HELP, check_finite, print_json
+from closedloop.common.conditioning import twist_scaling
+from closedloop.common.rounding import without_rounding
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
-from closedloop.rounding import without_rounding
 
 
 def _matrix(name: str, A: np.ndarray, unit: str, axes: str = "world") -> str:

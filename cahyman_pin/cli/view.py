@@ -10,7 +10,7 @@ Examples::
 
 The drawing (ghost of the nominal pose, amplified deflected pose, arrows, compliance
 ellipsoids, grid, HTML legend with the pose below, load-ramp animation) is
-:mod:`closedloop.viewer`'s; the model is the Pinocchio
+:mod:`closedloop.viewer.viewer`'s; the model is the Pinocchio
 model of :mod:`cahyman_pin.model`, hence ``--backend`` has the one choice ``generic``. With
 ``--json`` the summary is printed as one JSON object and the other lines go to stderr.
 """
@@ -27,8 +27,8 @@ from cahyman_pin.cli.options import add_pose_arguments
 from cahyman_pin.model import cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import FRAME_M
-from closedloop.cli import add_view_arguments, view_from_args
-from closedloop.cli_common import print_json
+from closedloop.cli.app import add_view_arguments, view_from_args
+from closedloop.cli.common import print_json
 
 
 def _stderr(line: str) -> None:

@@ -7,7 +7,7 @@ the assumed sizes and material of :class:`cahyman_pin.params.CaHyManParams`,
 :mod:`cahyman_pin.urdf_builder`); both keep the motors' K_T, K_T4, K_s. For each: the
 diagonal of C and the shares of the deflection energy under the vertical force
 :data:`SHARE_LOAD` at M held by the motors, the legs' links and the arm's links
-(:func:`closedloop.compliance.energy_shares`).
+(:func:`closedloop.elastostatics.compliance.energy_shares`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from cahyman_pin.paper.data import TABLE_POSES
 from cahyman_pin.paper.document import Document, Heading, Paragraph, Table
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import ACTUATED, FRAME_M
-from closedloop.compliance import compliance, energy_shares
+from closedloop.elastostatics.compliance import compliance, energy_shares
 
 #: The load of the energy shares: a vertical force at M (f [N], n [N m], world axes).
 SHARE_LOAD = np.array([0.0, 0.0, -1.0, 0.0, 0.0, 0.0])
@@ -74,7 +74,7 @@ def beams_section(doc: Document, params: CaHyManParams) -> None:
             "With links_as_beams each leg's cranks b and d, its coupler c (two tubes of "
             "length a/2 meeting at the slider, so that the connecting bar's load bends a "
             "coupler held at both ends) and its connecting bar h, the arm QM2 and the "
-            "sliding tube MM2 are instead clamped tubes (closedloop.beams: axial, bending "
+            "sliding tube MM2 are instead clamped tubes (closedloop.model.beams: axial, bending "
             "and torsion from beam theory) of the sizes and material of the parameters, "
             "assumed (the paper gives no sections): "
             f"E = {params.E_beam / 1e9:g} GPa, G = {params.G_beam / 1e9:g} GPa, legs' tubes "

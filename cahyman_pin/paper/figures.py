@@ -34,9 +34,9 @@ from cahyman_pin.paper.fit import (
     dimension_sensitivity,
 )
 from cahyman_pin.params import CaHyManParams
+from closedloop.common.files import save_figure
+from closedloop.common.progress import progress
 from closedloop.exceptions import ClosedLoopError
-from closedloop.files import save_figure
-from closedloop.progress import progress
 
 STYLES = {"published": ("tab:red", "--"), "consistent": ("tab:blue", "-"),
           "generic": ("k", ":")}  # fmt: skip

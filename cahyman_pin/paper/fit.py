@@ -34,7 +34,7 @@ from cahyman_pin.paper.cells import (
     standard_deviations,
 )
 from cahyman_pin.params import SOURCES, CaHyManParams
-from closedloop.conditioning import rule_rank
+from closedloop.common.conditioning import rule_rank
 from closedloop.exceptions import ClosedLoopError
 
 #: Fitted stiffness groups (name -> the parameters tied to one value).
@@ -61,7 +61,7 @@ FIT_TOL = 1e-8
 #: instead (measured: 1.1 s in all at the report's parameters, to a local optimum).
 DIMENSION_EVALUATIONS = 60
 #: Singular values of the weighted sensitivity below this share of the largest: not
-#: identified (the rank rule of closedloop.conditioning, on a well-scaled matrix).
+#: identified (the rank rule of closedloop.common.conditioning, on a well-scaled matrix).
 IDENTIFIABLE_RTOL = 1e-6
 #: Distance in log space from a bound below which the active set puts a value on it.
 SNAP = 1e-3

@@ -70,9 +70,9 @@ from cahyman_pin.params import (
     params_file_fields,
     source,
 )
-from closedloop.compliance import TWIST_LABELS
+from closedloop.common.files import write_atomically
+from closedloop.elastostatics.compliance import TWIST_LABELS
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, JointLimitWarning
-from closedloop.files import write_atomically
 
 
 def _diff(v: float, ref: float) -> str:

@@ -1,5 +1,5 @@
 """CaHyMan over many poses and designs, on the project's one sweep engine
-(:mod:`closedloop.maps`): points (:mod:`.points`), the kernel of a chunk for each backend
+(:mod:`closedloop.analysis.maps`): points (:mod:`.points`), the kernel of a chunk for each backend
 (:mod:`.execution`), and the driver with its result and files (:mod:`.engine`)."""
 
 from cahyman_pin.sweep.engine import INDEX_UNITS, SweepResult, sweep

@@ -23,9 +23,9 @@ into chunks of contiguous points, one task each for a ``concurrent.futures.Execu
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
 (``pip install .[dask]``). Results do not depend on the executor. The path, the
 chunks, the executors, the per-point arrays and the indices are those of every map of the
-project (:mod:`closedloop.maps`, :func:`closedloop.indices.batch_indices`; at a point of
-cond(K_s) above 1e8, det K and the condition numbers of :func:`cahyman_pin.api.stiffness`,
-:func:`closedloop.map_engine.resolve_ill_conditioned`): the ``condition_number`` is the
+project (:mod:`closedloop.analysis.maps`, :func:`closedloop.analysis.indices.batch_indices`; at a
+point of cond(K_s) above 1e8, det K and the condition numbers of :func:`cahyman_pin.api.stiffness`,
+:func:`closedloop.analysis.map_engine.resolve_ill_conditioned`): the ``condition_number`` is the
 unit-free one of the scaled K, ``condition_number_si`` that of the SI matrix
 (:attr:`cahyman_pin.api.CaHyManStiffness.condition_number`). Only the kernels are
 CaHyMan's (:mod:`cahyman_pin.sweep.execution`).
@@ -55,11 +55,7 @@ from cahyman_pin.sweep.points import (
     param_unit,
     pose_list,
 )
-from closedloop.arrays import check_wrench, frozen, readonly
-from closedloop.compliance import UNITS
-from closedloop.exceptions import InvalidInputError
-from closedloop.files import write_atomically
-from closedloop.map_engine import (
+from closedloop.analysis.map_engine import (
     OK,
     RANK_DEFICIENT,
     STATUS,
@@ -68,7 +64,11 @@ from closedloop.map_engine import (
     gather,
     run_tasks_by_point,
 )
-from closedloop.maps import INDICES, column_name
+from closedloop.analysis.maps import INDICES, column_name
+from closedloop.common.arrays import check_wrench, frozen, readonly
+from closedloop.common.files import write_atomically
+from closedloop.elastostatics.compliance import UNITS
+from closedloop.exceptions import InvalidInputError
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
@@ -96,8 +96,8 @@ class SweepResult:
         wrench: (6,) wrench at M for the deflection [N, N m], or None.
         indices: name -> (n,) value [SI] (units in :data:`INDEX_UNITS`), NaN where it does
             not exist; ``deflection`` (n, 6) when a wrench was given.
-        data: the per-point arrays (:class:`closedloop.map_engine.PointData`: C, rank, status
-            and reason codes, assembly iterations).
+        data: the per-point arrays (:class:`closedloop.analysis.map_engine.PointData`: C, rank,
+            status and reason codes, assembly iterations).
         seconds: wall time of the computation [s].
     """
 
@@ -123,9 +123,9 @@ class SweepResult:
 
     @property
     def status(self) -> np.ndarray:
-        """(n,) status names (:data:`closedloop.map_engine.STATUS`): ``ok``, ``rank_deficient``
-        (C exists, K does not), ``invalid``, ``unreachable``, ``singular``, ``failed``,
-        ``not_computed`` (the sweep was interrupted first)."""
+        """(n,) status names (:data:`closedloop.analysis.map_engine.STATUS`): ``ok``,
+        ``rank_deficient`` (C exists, K does not), ``invalid``, ``unreachable``, ``singular``,
+        ``failed``, ``not_computed`` (the sweep was interrupted first)."""
         return np.asarray(STATUS)[self.data.codes]
 
     @property
@@ -165,7 +165,7 @@ class SweepResult:
     # ------------------------------------------------------------------ files
     def columns(self) -> dict[str, np.ndarray]:
         """Flat table: inputs, design values, status, indices (SI; names carry the unit,
-        :func:`closedloop.maps.column_name`)."""
+        :func:`closedloop.analysis.maps.column_name`)."""
         p = self.points
         cols = {f"alpha{k + 1}_rad": p.alpha[:, k] for k in range(3)}
         cols.update(alpha4_rad=p.alpha4, s4_m=p.s4)
@@ -310,7 +310,7 @@ def default_chunk_size(n: int, backend: str, workers: int) -> int:
 
 
 def _executor(executor, workers: int | None) -> tuple[Executor | None, int]:
-    """(executor, local processes) of :func:`closedloop.map_engine.run_tasks`."""
+    """(executor, local processes) of :func:`closedloop.analysis.map_engine.run_tasks`."""
     if executor == "serial":
         return None, 1
     if executor == "processes":
@@ -373,7 +373,7 @@ def sweep(
             A point that cannot be computed does not raise: it is marked in ``status`` and
             ``reasons``.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the sweep
-            (:class:`closedloop.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
+            (:class:`closedloop.analysis.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
             the worker processes are ended at once (none is left), and the sweep so far is
             its ``partial``: a :class:`SweepResult` whose points not computed have status
             ``not_computed`` and reason ``interrupted by SIGINT`` (or ``SIGTERM``), values

@@ -1,4 +1,5 @@
-"""The kernel of CaHyMan's sweeps: one chunk of points, for :func:`closedloop.map_engine.run_tasks`.
+"""The kernel of CaHyMan's sweeps: one chunk of points, for
+:func:`closedloop.analysis.map_engine.run_tasks`.
 
 A sweep is cut into chunks of points that are contiguous along its path (see
 :mod:`cahyman_pin.sweep.engine`); each chunk is one task, computed by :func:`run_chunk`
@@ -6,23 +7,23 @@ per run of consecutive points that share one parameter set (a design sweep chang
 model, rebuilt once per run and cached per thread):
 
 * ``"generic"``: per point, :meth:`CaHyManModel.assemble` then
-  :func:`closedloop.compliance.compliance` at M, world axes (the code path of
-  :func:`cahyman_pin.api.generic_backend`), by :func:`closedloop.map_engine.assemble_points`.
-  The assembly starts (``start``) from CaHyMan's closed-form geometry, computed for the
-  whole run at once (``"closed_form"``: exact, so the Gauss-Newton loop only checks it),
-  or from the previous point's configuration (``"neighbour"``, the generic way: extrapolated
-  along the path when the last two steps are equal; the first point of a chunk and a
-  point after a failed start start from the closed form);
+  :func:`closedloop.elastostatics.compliance.compliance` at M, world axes (the code path of
+  :func:`cahyman_pin.api.generic_backend`), by
+  :func:`closedloop.analysis.map_engine.assemble_points`. The assembly starts (``start``) from
+  CaHyMan's closed-form geometry, computed for the whole run at once (``"closed_form"``: exact, so
+  the Gauss-Newton loop only checks it), or from the previous point's configuration
+  (``"neighbour"``, the generic way: extrapolated along the path when the last two steps are equal;
+  the first point of a chunk and a point after a failed start start from the closed form);
 * ``"consistent"``: the closed form on the whole run at once (one call, no loop over
   points); a failing batch is bisected to isolate the failing points;
 * any other registered backend: its function, point by point.
 
 A point that fails is recorded with a status and the error message; it never stops the
 sweep. The rank, the status from C and the indices are computed at the end of the chunk,
-for all its points at once (:func:`closedloop.map_engine.complete`). A point whose scaled
+for all its points at once (:func:`closedloop.analysis.map_engine.complete`). A point whose scaled
 condition number exceeds ``ILL_CONDITIONED`` (1e8) takes its single query's C and K (K
 from a square-root factor where the query has one: the formed C loses cond(K_s) times the
-rounding): the generic kernel's in :func:`closedloop.map_engine.assemble_points`, the
+rounding): the generic kernel's in :func:`closedloop.analysis.map_engine.assemble_points`, the
 others' :func:`cahyman_pin.api.stiffness` (:func:`_single_queries`), so that its indices
 are that query's.
 """
@@ -42,9 +43,7 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_M, REVOLUTE_LIMIT
-from closedloop.conditioning import ILL_CONDITIONED, SCALED_TOL, batch_rank, scaled_asymmetry
-from closedloop.exceptions import AssemblyError, InvalidInputError
-from closedloop.map_engine import (
+from closedloop.analysis.map_engine import (
     OK,
     POINT_ERRORS,
     RANK_DEFICIENT,
@@ -53,6 +52,8 @@ from closedloop.map_engine import (
     assemble_points,
     complete,
 )
+from closedloop.common.conditioning import ILL_CONDITIONED, SCALED_TOL, batch_rank, scaled_asymmetry
+from closedloop.exceptions import AssemblyError, InvalidInputError
 
 #: Starts of the generic assembly: the previous point's configuration, or the closed-form
 #: geometry of CaHyMan, computed for a whole run of points at once.
@@ -212,11 +213,11 @@ def _single_queries(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: C
     """The single query :func:`cahyman_pin.api.stiffness` at the points ``idx`` of a
     closed form whose compliance is symmetric and ill-conditioned (cond(K_s) above
     ``ILL_CONDITIONED`` or rank < 6 by the eigenvalues of C,
-    :func:`closedloop.conditioning.batch_rank`):
+    :func:`closedloop.common.conditioning.batch_rank`):
     its C, rank, condition number and K (from the backend's square-root factor where it
     has one) into ``out``; its error, if any, is the point's (at a point of rank < 6 by
-    C, the refusal of that rank in :func:`closedloop.map_engine.complete`). (The backend must be
-    registered in the process, as for :func:`cahyman_pin.api.stiffness`.)"""
+    C, the refusal of that rank in :func:`closedloop.analysis.map_engine.complete`). (The backend
+    must be registered in the process, as for :func:`cahyman_pin.api.stiffness`.)"""
     idx = idx[(out.status[idx] == OK) & np.isfinite(out.C[idx]).all(axis=(1, 2))]
     idx = idx[scaled_asymmetry(out.C[idx], params.length) <= SCALED_TOL]
     rank, condition, _ = batch_rank(out.C[idx], params.length)

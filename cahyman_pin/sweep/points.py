@@ -2,7 +2,7 @@
 
 Inputs are SI: crank angles alpha_1..3 and arm angle alpha_4 in rad, stroke s_4 in m,
 design values in the units of :class:`~cahyman_pin.params.CaHyManParams`. A grid is
-computed along a path of unit steps (:func:`closedloop.map_engine.path_order`) so that each
+computed along a path of unit steps (:func:`closedloop.analysis.map_engine.path_order`) so that each
 point can start from its neighbour's configuration.
 """
 
@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
-from closedloop.arrays import readonly
+from closedloop.analysis.map_engine import path_order
+from closedloop.common.arrays import readonly
 from closedloop.exceptions import InvalidInputError
-from closedloop.map_engine import path_order
 
 #: Pose inputs a grid axis can sweep ("alpha": alpha_1 = alpha_2 = alpha_3 together).
 POSE_AXES = ("alpha", "alpha1", "alpha2", "alpha3", "alpha4", "s4")

@@ -1,0 +1,772 @@
+"""Stiffness indices of a 6x6 Cartesian stiffness K or compliance C.
+
+Conventions (those of :mod:`closedloop.elastostatics.compliance`): SI units; twists ordered
+(dx, dy, dz [m], rx, ry, rz [rad]) and wrenches (fx, fy, fz [N], nx, ny, nz [N m]), both
+at one reference point and in one set of axes; ``w = K x`` and ``x = C w`` (x: twist).
+Subscripts ``t`` and ``r`` name the translational and rotational 3x3 blocks.
+
+Units matter for some indices and not for others:
+
+* ``determinant`` (det K, [N^6/rad^3]) and the eigenscrews (eigenvalue [N/rad], pitch
+  [m/rad], axis line) do not depend on the length unit, the reference point or the axes.
+* ``eigenvalues`` and ``condition_number`` of the SI matrix mix N/m with N m/rad: they
+  change with the length unit (m vs mm) and with the reference point, and only compare
+  matrices given in the same units at the same point. With a characteristic length L the
+  twist (d, L r) and the wrench (f, n / L) share units, ``K_h = T^-1 K T^-1`` with
+  ``T = diag(1, 1, 1, L, L, L)`` is uniform in N/m, and its eigenvalues and condition
+  number (``homogenised_*``) read as "stiffnesses of points at distance L" (L: e.g. the
+  tool size or the workspace radius; the number still depends on L and on the point).
+
+Translational and rotational parts (Schur complements). "Free": no load on the other
+part, which moves as it likes; "blocked": the other part is held still.
+
+* ``translational_stiffness`` (rotations free) ``K_tt - K_tr K_rr^-1 K_rt = C_tt^-1``
+  [N/m], exists when C_tt is invertible; ``translational_stiffness_blocked`` (rotations
+  blocked) ``K_tt = (C_tt - C_tr C_rr^-1 C_rt)^-1``, needs K.
+* ``rotational_stiffness`` (translations free) ``K_rr - K_rt K_tt^-1 K_tr = C_rr^-1``
+  [N m/rad], exists when C_rr is invertible and does not depend on the reference point;
+  ``rotational_stiffness_blocked`` (translations blocked) ``K_rr``, needs K.
+* ``min/max_translational_stiffness``: extreme eigenvalues of the "free" translational
+  stiffness and their unit directions (axes of C); the minimum exists whenever C_tt is
+  nonzero. Likewise for rotations.
+
+Eigenscrews (Lipkin and Patterson's decomposition of K): with the reciprocal product
+matrix ``Delta = [[0, I], [I, 0]]`` (``x^T Delta w`` is the work of wrench w on twist x),
+the symmetric-definite pencil ``K x = lambda Delta x`` has six real eigenpairs. The twist
+x and the wrench ``K x = lambda Delta x`` then lie on the same screw: a rotation about the
+screw axis with pitch h meets a force along the same axis with the same pitch. Every x has
+a rotation part (``x^T K x = 2 lambda w.v > 0``), so each eigenscrew has a finite nonzero
+pitch h (same sign as lambda) and an axis; ``K = sum_i k_i W_i W_i^T`` with ``W_i`` the
+unit wrench on screw i and ``k_i = lambda_i / (2 h_i) > 0`` [N/m].
+
+A rank-deficient C (rigid directions) has no K; indices that need K raise
+:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned. A
+non-symmetric C (a tangent compliance under a preload moment, :meth:`StiffnessIndices.
+from_result`) has K = C^-1, its determinant and 2-norm condition numbers (as
+:func:`batch_indices`); the indices of a symmetric matrix (eigenvalues, principal
+stiffnesses, eigenscrews) raise :class:`~closedloop.exceptions.InvalidInputError`, as do
+the eigenscrews of a K that is not positive definite (an unstable equilibrium).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from closedloop.common.arrays import readonly
+from closedloop.common.conditioning import (
+    RANK_RTOL,
+    SCALED_TOL,
+    Spectrum,
+    batch_rank,
+    check_length,
+    scaled_asymmetry,
+    spectrum_from_compliance,
+    spectrum_from_factor,
+    twist_scaling,
+    twist_scalings,
+)
+from closedloop.elastostatics.compliance import TWIST_LABELS, UNITS, describe_directions
+from closedloop.exceptions import (
+    InvalidInputError,
+    RigidDirectionsError,
+    SingularConfigurationError,
+)
+
+T, R = slice(0, 3), slice(3, 6)
+#: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
+DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """v normalised, sign fixed so that its largest-magnitude component is positive."""
+    v = v / np.linalg.norm(v)
+    return readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
+
+
+class PrincipalStiffness(NamedTuple):
+    """A principal stiffness of a 3x3 block and its direction.
+
+    Attributes:
+        value: stiffness [N/m (translation) or N m/rad (rotation)].
+        direction: (3,) unit vector (translation direction or rotation axis), in the axes
+            of C; sign fixed so that its largest component is positive.
+    """
+
+    value: float
+    direction: np.ndarray
+
+
+@dataclass(frozen=True)
+class Eigenscrew:
+    """One eigenscrew of K (see the module docstring).
+
+    Attributes:
+        eigenvalue: lambda [N/rad], ``K twist = lambda Delta twist``; sign of the pitch.
+        pitch: h [m/rad], nonzero.
+        direction: (3,) unit axis direction, in the axes of C.
+        point: (3,) [m] point of the axis nearest to the reference point, relative to it.
+        spring: k = lambda / (2 h) [N/m] > 0, weight of the screw in ``K = sum k W W^T``.
+    """
+
+    eigenvalue: float
+    pitch: float
+    direction: np.ndarray
+    point: np.ndarray
+    spring: float
+
+    @property
+    def twist(self) -> np.ndarray:
+        """(6,) unit rotation about the screw: (h u + p x u [m], u [rad]) at the point."""
+        u, p = self.direction, self.point
+        return np.concatenate([self.pitch * u + np.cross(p, u), u])
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """(6,) unit force on the screw: (u [N], h u + p x u [N m]); ``K twist = lambda wrench``."""
+        return DELTA @ self.twist
+
+
+def _check_matrix(M, what: str) -> np.ndarray:
+    M = np.array(M, dtype=float)
+    if M.shape != (6, 6):
+        raise InvalidInputError(f"{what} must be a (6, 6) matrix, got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise InvalidInputError(f"{what} contains non-finite values")
+    return M
+
+
+def _check_length(length) -> float | None:
+    return None if length is None else check_length(length)
+
+
+@dataclass(frozen=True)
+class StiffnessIndices:
+    """Stiffness indices of one Cartesian compliance (see the module docstring).
+
+    Build with :meth:`from_compliance`, :meth:`from_stiffness` or :meth:`from_result`.
+    The rank, the rigid directions, K and the scaled condition number follow the one rule
+    of :mod:`closedloop.common.conditioning`.
+
+    Attributes:
+        C: (6, 6) compliance [m/N, rad/N, m/(N m), rad/(N m)], symmetric PSD, read-only.
+        rank: rank of C.
+        rigid_directions: (6, 6 - rank) orthonormal basis of the twists no wrench produces.
+        length: characteristic length [m] of the ``homogenised_*`` indices, or None.
+        spectrum: the rank decision, scaled condition number and K (with the length of
+            the scaling: ``length``, or 1 m when None).
+    """
+
+    C: np.ndarray
+    rank: int
+    rigid_directions: np.ndarray
+    length: float | None = None
+    spectrum: Spectrum | None = field(default=None, repr=False)
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def _of(cls, C, spectrum: Spectrum, length: float | None) -> StiffnessIndices:
+        return cls(readonly(C), spectrum.rank, spectrum.rigid_directions, length, spectrum)
+
+    @classmethod
+    def from_compliance(cls, C, *, length: float | None = None) -> StiffnessIndices:
+        """Indices of compliance C (6, 6) [SI]; it may be rank deficient.
+
+        Args:
+            C: symmetric positive semi-definite compliance.
+            length: characteristic length [m] of the mechanism: the scaling of the rank
+                rule and the length of the homogenised indices (optional; the rank rule
+                then uses 1 m, and depends on the length unit).
+
+        Raises:
+            InvalidInputError: C is not a finite symmetric PSD (6, 6) matrix.
+        """
+        C = _check_matrix(C, "compliance")
+        length = _check_length(length)
+        spectrum = spectrum_from_compliance(C, 1.0 if length is None else length)
+        return cls._of(0.5 * (C + C.T), spectrum, length)
+
+    @classmethod
+    def from_stiffness(cls, K, *, length: float | None = None) -> StiffnessIndices:
+        """Indices of stiffness K (6, 6) [SI], symmetric positive definite.
+
+        Raises:
+            InvalidInputError: K is not a finite symmetric positive definite (6, 6) matrix.
+        """
+        K = _check_matrix(K, "stiffness")
+        length = _check_length(length)
+        scale = 1.0 if length is None else length
+        d = twist_scaling(scale)
+        # symmetric and positive definite as judged on the scaled K_s = D^-1 K D^-1 (the
+        # rule of the compliances, unit-free: entries that vanish but for rounding count
+        # like the others), not by whether a Cholesky factorisation happens to fail
+        with np.errstate(over="ignore", invalid="ignore"):
+            K_s = K / np.outer(d, d)
+        if not np.isfinite(K_s).all():
+            raise InvalidInputError(
+                f"stiffness scaled to the length L = {scale:g} m (K L^2 for translations) "
+                f"leaves the float range (largest entry {np.abs(K).max():.3g}); give a "
+                "smaller length or a smaller stiffness"
+            )
+        asymmetry = scaled_asymmetry(K_s, 1.0)  # K_s is scaled already
+        if asymmetry > SCALED_TOL:
+            raise InvalidInputError(
+                f"stiffness is not symmetric: scaled asymmetry max|K_s - K_s^T| / max|K_s| "
+                f"= {asymmetry:.2e} > {SCALED_TOL:g}"
+            )
+        K_s = 0.5 * (K_s + K_s.T)
+        kappa, U = np.linalg.eigh(K_s)
+        if not kappa[-1] > 0.0 or kappa[0] <= RESOLVED_RTOL * kappa[-1]:
+            raise InvalidInputError(
+                f"stiffness is not positive definite to working precision: the eigenvalues "
+                f"of the scaled K run from {kappa[0]:.3g} to {kappa[-1]:.3g} (the smallest "
+                f"must exceed {RESOLVED_RTOL:g} times the largest)"
+            )
+        B_s = U / np.sqrt(kappa)  # C_s = K_s^-1 = B_s B_s^T
+        B = B_s / d[:, None]
+        return cls._of(B @ B.T, spectrum_from_factor(B_s, scale), length)
+
+    @classmethod
+    def from_result(cls, result, *, length: float | None = None) -> StiffnessIndices:
+        """Indices of a :class:`closedloop.elastostatics.compliance.ComplianceResult`, same point
+        and axes.
+
+        Its rank, rigid directions, K and scaled condition number are kept: they come
+        from a square-root factor of C, which resolves near-singular poses better than C
+        itself, and so ``K`` exists here exactly when ``result.K`` does.
+        """
+        spectrum = Spectrum(
+            int(result.rank),
+            readonly(result.rigid_directions),
+            float(result.condition_number),
+            float(result.length),
+            result.stiffness_matrix if result.is_full_rank else None,
+        )
+        return cls._of(result.C, spectrum, _check_length(length))
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def is_full_rank(self) -> bool:
+        """True when the stiffness K exists."""
+        return self.rank == 6
+
+    def _require_full_rank(self, what: str) -> None:
+        if not self.is_full_rank:
+            raise RigidDirectionsError(
+                f"{what}: the compliance has rank {self.rank} < 6, the stiffness does not "
+                f"exist (infinitely stiff along {describe_directions(self.rigid_directions)})",
+                self.rigid_directions,
+            )
+
+    @property
+    def is_symmetric(self) -> bool:
+        """True when C is symmetric to :data:`SCALED_TOL` (judged on the scaled C_s); a
+        preload moment makes a tangent compliance non-symmetric (:meth:`from_result`)."""
+        return scaled_asymmetry(self.C, self._spectrum.length) <= SCALED_TOL
+
+    def _require_symmetric(self, what: str) -> None:
+        if not self.is_symmetric:
+            asymmetry = scaled_asymmetry(self.C, self._spectrum.length)
+            raise InvalidInputError(
+                f"{what}: defined for a symmetric compliance only, and this one is not (scaled "
+                f"asymmetry {asymmetry:.2e} > {SCALED_TOL:g}: a "
+                "preload moment makes the tangent compliance non-symmetric)"
+            )
+
+    def _length(self, length: float | None) -> float:
+        length = _check_length(self.length if length is None else length)
+        if length is None:
+            raise InvalidInputError("a characteristic length [m] is needed: pass length=...")
+        return length
+
+    def _block_eig(self, block: slice, what: str, need_full: bool):
+        """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked
+        (:func:`_block_spectrum`)."""
+        c, V, rigid = (a[0] for a in _block_spectrum(self.C[None], block, self._spectrum.length))
+        if rigid.all() or (need_full and rigid.any()):
+            directions = np.zeros((6, int(rigid.sum())))
+            directions[block] = V[:, rigid]
+            raise RigidDirectionsError(
+                f"{what} does not exist: the compliance block has rank {3 - rigid.sum()} < 3, "
+                f"infinitely stiff along {describe_directions(directions)}",
+                directions,
+            )
+        return c, V
+
+    # ------------------------------------------------------------------ whole matrix
+    @property
+    def K(self) -> np.ndarray:
+        """(6, 6) stiffness C^-1 [N/m, N/rad, N m/m, N m/rad], from a square-root factor."""
+        self._require_full_rank("K")
+        return self._spectrum.K
+
+    @property
+    def _spectrum(self) -> Spectrum:
+        if self.spectrum is None:  # built field by field: the rule on C itself
+            return spectrum_from_compliance(self.C, 1.0 if self.length is None else self.length)
+        return self.spectrum
+
+    @property
+    def scaled_condition_number(self) -> float:
+        """cond(K_s) of the scaled stiffness over the rank
+        (:mod:`closedloop.common.conditioning`)."""
+        return self._spectrum.condition_number
+
+    @property
+    def ill_conditioned(self) -> bool:
+        """True when :attr:`scaled_condition_number` exceeds ``ILL_CONDITIONED``."""
+        return self._spectrum.ill_conditioned
+
+    @property
+    def determinant(self) -> float:
+        """det K [N^6/rad^3], invariant under length unit, reference point and axes.
+
+        det K = det(D)^2 det K_s, the product of the eigenvalues of the scaled K_s
+        (:func:`inverse_pair_eigenvalues` of C_s and K_s): accurate to about
+        eps sqrt(cond(K_s)) relative, where an LU determinant of K errs by eps cond(K_s) (at
+        cond 3e18 it is off by a factor of two or has the wrong sign). A K that is not
+        positive definite (an unstable preloaded equilibrium) has its LU determinant.
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            SingularConfigurationError: det K is beyond the floating point range
+                (:func:`finite_determinant`).
+        """
+        self._require_full_rank("det K")
+        K = self.K
+        d = twist_scaling(self._spectrum.length)
+        dd = np.outer(d, d)
+        lam = inverse_pair_eigenvalues(self.C * dd, K / dd)
+        if lam is None:
+            return lu_determinant(K)
+        # mantissas and exponents apart: det K_s = det K L^6 may leave the float range
+        # where det K does not
+        mantissa, exponent = np.frexp(np.concatenate([lam, d, d]))
+        product, total = np.prod(mantissa), int(np.sum(exponent))
+        with np.errstate(over="ignore", under="ignore"):
+            det = float(np.ldexp(product, total))
+        return finite_determinant(det, (np.log2(abs(product)) + total) * np.log10(2.0))
+
+    def _eigenvalues(self, t: np.ndarray, what: str) -> np.ndarray:
+        """(6,) eigenvalues of T^-1 K T^-1 (t: (6,) diagonal of T^-1), ascending, each from
+        whichever of T C T and T^-1 K T^-1 resolves it (:func:`inverse_pair_eigenvalues`)."""
+        self._require_full_rank(what)
+        self._require_symmetric(what)
+        tt = np.outer(t, t)
+        K = self.K * tt
+        lam = inverse_pair_eigenvalues(self.C / tt, K)
+        return readonly(np.linalg.eigvalsh(K) if lam is None else lam)
+
+    def _condition(self, t: np.ndarray) -> float:
+        """cond(T^-1 K T^-1): max |lambda| / min |lambda| of a symmetric C, the 2-norm
+        condition number of a non-symmetric one (as :func:`batch_indices`)."""
+        self._require_full_rank("the condition number of K")
+        if not self.is_symmetric:
+            return float(np.linalg.cond(self.K * np.outer(t, t)))
+        lam = np.abs(self._eigenvalues(t, "the condition number of K"))
+        return float(lam.max() / lam.min())
+
+    def _homogenising(self, length: float | None) -> np.ndarray:
+        """(6,) diagonal of T^-1 = diag(1, 1, 1, 1/L, 1/L, 1/L), L = ``length`` [m]."""
+        return np.r_[np.ones(3), np.full(3, 1.0 / self._length(length))]
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """(6,) eigenvalues of the SI matrix K, ascending (mixed units: module docstring),
+        each from whichever of C and K resolves it (:func:`inverse_pair_eigenvalues`).
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            InvalidInputError: C is not symmetric (a preload moment).
+        """
+        return self._eigenvalues(np.ones(6), "the eigenvalues of K")
+
+    @property
+    def compliance_eigenvalues(self) -> np.ndarray:
+        """(6,) eigenvalues of the SI matrix C, ascending (mixed units); exist at any rank."""
+        return readonly(np.linalg.eigvalsh(self.C))
+
+    @property
+    def condition_number(self) -> float:
+        """cond(K) = cond(C) of the SI matrix, max abs(lambda) / min abs(lambda) (positive also for
+        an indefinite K, at an unstable preloaded equilibrium; the 2-norm condition number
+        of a non-symmetric K): depends on the length unit and the point."""
+        return self._condition(np.ones(6))
+
+    def homogenised_stiffness(self, length: float | None = None) -> np.ndarray:
+        """(6, 6) K_h = T^-1 K T^-1 [N/m], T = diag(1, 1, 1, L, L, L), L = ``length`` [m]
+        (default: the instance's ``length``)."""
+        t = self._homogenising(length)
+        return readonly(self.K * np.outer(t, t))
+
+    def homogenised_eigenvalues(self, length: float | None = None) -> np.ndarray:
+        """(6,) eigenvalues of K_h [N/m], ascending, each from whichever of K_h and
+        C_h = T C T resolves it (as :attr:`eigenvalues`); at L equal to the length of the
+        scaling they are those of K_s / L^2 (K_s: :mod:`closedloop.common.conditioning`)."""
+        return self._eigenvalues(self._homogenising(length), "the homogenised eigenvalues")
+
+    def homogenised_condition_number(self, length: float | None = None) -> float:
+        """cond(K_h), dimensionless, as :attr:`condition_number`; depends on L and on the
+        reference point (at the length of the scaling, :attr:`scaled_condition_number`)."""
+        return self._condition(self._homogenising(length))
+
+    # ------------------------------------------------------------------ blocks
+    @property
+    def translational_stiffness(self) -> np.ndarray:
+        """(3, 3) [N/m], rotations free: K_tt - K_tr K_rr^-1 K_rt = C_tt^-1."""
+        self._block_eig(T, "translational stiffness (rotations free)", True)
+        return readonly(np.linalg.inv(self.C[T, T]))
+
+    @property
+    def translational_stiffness_blocked(self) -> np.ndarray:
+        """(3, 3) [N/m], rotations blocked: K_tt."""
+        return readonly(self.K[T, T])
+
+    @property
+    def rotational_stiffness(self) -> np.ndarray:
+        """(3, 3) [N m/rad], translations free: K_rr - K_rt K_tt^-1 K_tr = C_rr^-1."""
+        self._block_eig(R, "rotational stiffness (translations free)", True)
+        return readonly(np.linalg.inv(self.C[R, R]))
+
+    @property
+    def rotational_stiffness_blocked(self) -> np.ndarray:
+        """(3, 3) [N m/rad], translations blocked: K_rr."""
+        return readonly(self.K[R, R])
+
+    def _principal(self, block: slice, which: str) -> PrincipalStiffness:
+        kind = "translational" if block == T else "rotational"
+        self._require_symmetric(f"the {which} {kind} stiffness")
+        c, V = self._block_eig(block, f"{which} {kind} stiffness", which == "max")
+        i = -1 if which == "min" else 0
+        return PrincipalStiffness(float(1.0 / c[i]), _unit(V[:, i]))
+
+    @property
+    def min_translational_stiffness(self) -> PrincipalStiffness:
+        """Smallest eigenvalue of the translational stiffness (rotations free) [N/m]."""
+        return self._principal(T, "min")
+
+    @property
+    def max_translational_stiffness(self) -> PrincipalStiffness:
+        """Largest eigenvalue of the translational stiffness (rotations free) [N/m]."""
+        return self._principal(T, "max")
+
+    @property
+    def min_rotational_stiffness(self) -> PrincipalStiffness:
+        """Smallest eigenvalue of the rotational stiffness (translations free) [N m/rad]."""
+        return self._principal(R, "min")
+
+    @property
+    def max_rotational_stiffness(self) -> PrincipalStiffness:
+        """Largest eigenvalue of the rotational stiffness (translations free) [N m/rad]."""
+        return self._principal(R, "max")
+
+    # ------------------------------------------------------------------ eigenscrews
+    @property
+    def eigenscrews(self) -> tuple[Eigenscrew, ...]:
+        """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first).
+
+        With factors K = F F^T and C = B B^T, ``F^T Delta F`` has the eigenvalues lambda
+        (twist ``Delta F z``) and ``B^T Delta B`` their inverses (twist ``B z``): each
+        screw is taken from the one that resolves it, the stiff ones from K and the soft
+        ones from C (about eps sqrt(cond) relative, where a Cholesky factorisation of K
+        loses the soft ones at eps cond, and fails near a singular pose).
+
+        Raises:
+            RigidDirectionsError: C is rank deficient.
+            InvalidInputError: C is not symmetric, or K not positive definite (a preloaded
+                equilibrium): the decomposition does not exist.
+        """
+        what = "the eigenscrews of K"
+        self._require_full_rank(what)
+        self._require_symmetric(what)
+        C, K = 0.5 * (self.C + self.C.T), 0.5 * (self.K + self.K.T)
+        (mu, V), (kappa, U) = np.linalg.eigh(C), np.linalg.eigh(K)
+        if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
+            raise InvalidInputError(
+                f"{what} need a positive definite K; its eigenvalues run from {kappa[0]:.3g} "
+                f"to {kappa[-1]:.3g} (an unstable preloaded equilibrium)"
+            )
+        F, B = U * np.sqrt(np.clip(kappa, 0.0, None)), V * np.sqrt(np.clip(mu, 0.0, None))
+        lam_K, Z_K = np.linalg.eigh(F.T @ DELTA @ F)  # ascending: 3 negative, 3 positive
+        nu, Z_C = np.linalg.eigh(B.T @ DELTA @ B)  # 1 / lambda, ascending
+        # the lambda_K of the same screw: the inertia of Delta decides the positions
+        pair = [2, 1, 0, 5, 4, 3]
+        nu, Z_C = nu[pair], Z_C[:, pair]
+        with np.errstate(divide="ignore"):
+            lam_C = 1.0 / nu
+        # soft screws (|lambda| below the geometric mean of the extremes) from C
+        soft = np.abs(lam_C) <= np.sqrt(np.abs(lam_K).max() / np.abs(nu).max())
+        lam = np.where(soft, lam_C, lam_K)
+        X = np.where(soft, B @ Z_C, DELTA @ F @ Z_K)  # twists, each to a scale
+        screws = []
+        for i in np.argsort(lam, kind="stable"):
+            v, w = X[:3, i], X[3:, i]
+            n2 = float(w @ w)
+            pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
+            lam_i = float(lam[i])
+            screws.append(Eigenscrew(lam_i, pitch, _unit(w), point, lam_i / (2.0 * pitch)))
+        return tuple(screws)
+
+    # ------------------------------------------------------------------ export
+    def to_dict(self) -> dict:
+        """JSON-ready summary; an index that does not exist is None, its reason in ``missing``."""
+        out: dict = {"rank": self.rank, "rigid_directions": self.rigid_directions.T}
+        missing: dict = {}
+        names = list(_EXPORTED) + (
+            ["homogenised_eigenvalues", "homogenised_condition_number"]
+            if self.length is not None
+            else []
+        )
+        for name in names:
+            try:
+                value = getattr(self, name)
+                out[name] = _jsonable(value() if callable(value) else value)
+            except (RigidDirectionsError, SingularConfigurationError, InvalidInputError) as e:
+                out[name], missing[name] = None, str(e)
+        out["rigid_directions"] = _jsonable(out["rigid_directions"])
+        out.update(missing=missing, order=list(TWIST_LABELS), units=INDEX_UNITS)
+        return out
+
+
+def lu_determinant(K: np.ndarray) -> float:
+    """det K [N^6/rad^3] of a (6, 6) stiffness from its LU factors (logarithms: no overflow
+    on the way), or :func:`finite_determinant`'s error."""
+    sign, log_det = np.linalg.slogdet(K)
+    with np.errstate(over="ignore", under="ignore"):
+        return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
+
+
+def finite_determinant(det: float, log10: float) -> float:
+    """``det`` [N^6/rad^3] when it is a finite non-zero float (K is full rank here).
+
+    Raises:
+        SingularConfigurationError: it overflowed or underflowed; the message gives its
+            size 10^``log10``.
+    """
+    if det != 0.0 and np.isfinite(det):
+        return float(det)
+    raise SingularConfigurationError(
+        f"det K = 1e{log10:.1f} N^6/rad^3 is beyond the floating point range (1e-308 to "
+        "1e308); the other indices stand (springs far from 1 N/m or N m/rad make it so: "
+        "each enters at the power of its directions)"
+    )
+
+
+#: Indices exported by :meth:`StiffnessIndices.to_dict` (besides rank and rigid directions).
+_EXPORTED = (
+    "length", "C", "compliance_eigenvalues", "K", "determinant", "eigenvalues",
+    "condition_number", "scaled_condition_number", "ill_conditioned", "translational_stiffness",
+    "translational_stiffness_blocked",
+    "rotational_stiffness", "rotational_stiffness_blocked", "min_translational_stiffness",
+    "max_translational_stiffness", "min_rotational_stiffness", "max_rotational_stiffness",
+    "eigenscrews",
+)  # fmt: skip
+
+#: Units of the exported indices.
+INDEX_UNITS = {
+    **UNITS,
+    "determinant": "N^6/rad^3",
+    "translational": "N/m",
+    "rotational": "N m/rad",
+    "eigenscrews": "eigenvalue N/rad, pitch m/rad, point m, spring N/m",
+    "homogenised": "N/m",
+}
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, PrincipalStiffness):
+        return {"value": value.value, "direction": value.direction.tolist()}
+    if isinstance(value, tuple):
+        return [{k: _jsonable(v) for k, v in vars(screw).items()} for screw in value]
+    return float(value) if isinstance(value, np.floating) else value
+
+
+#: Indices of many compliances at once (:func:`batch_indices`), and their units (SI).
+BATCH_INDICES = {
+    "det_K": "N^6/rad^3",
+    "condition_number": "1 (cond of the scaled K_s: unit-free, see closedloop.common.conditioning)",
+    "condition_number_si": "1 (cond of the SI matrix K: depends on the length unit)",
+    "min_translational": "N/m",
+    "max_translational": "N/m",
+    "min_rotational": "N m/rad",
+    "max_rotational": "N m/rad",
+    "deflection_translation": "m",
+    "deflection_rotation": "rad",
+}
+
+
+def _block_spectrum(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, ...]:
+    """Eigenvalues c (n, 3) ascending and vectors V (n, 3, 3) of a 3x3 block of n
+    compliances C (n, 6, 6) [SI], and which directions are rigid (n, 3): those whose
+    scaled compliance is at most ``RANK_RTOL``^2 of the largest diagonal entry of the
+    scaled C_s (lengths L (n,) or one [m]; the rank rule on eigenvalues, on the scale of
+    C_s: its largest eigenvalue is 1 to 6 times that entry), so that a block of rounding
+    beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside 1e-4, read
+    as stiffnesses of 1e31 N m/rad when judged on the block alone)."""
+    c, V = np.linalg.eigh(C[:, block, block])
+    d = twist_scalings(np.broadcast_to(np.asarray(length, dtype=float), (len(C),)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        top = np.max(np.diagonal(C, axis1=1, axis2=2) * d**2, axis=1)
+        rigid = c * d[:, block.start, None] ** 2 <= RANK_RTOL**2 * top[:, None]
+    return c, V, rigid | (c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0))
+
+
+def _block_extremes(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) min and max principal stiffness of a 3x3 block of symmetric compliances (the
+    rule of :meth:`StiffnessIndices.min_translational_stiffness`: the minimum exists
+    unless the block is rigid, the maximum only when no direction of it is), NaN else;
+    lengths L (n,) or one [m] of the scaling (:func:`_block_spectrum`)."""
+    c, _, rigid = _block_spectrum(C, block, length)
+    with np.errstate(divide="ignore"):
+        low = np.where(rigid.all(axis=1), np.nan, 1.0 / c[:, -1])
+        high = np.where(rigid.any(axis=1), np.nan, 1.0 / c[:, 0])
+    return low, high
+
+
+#: Largest condition number of a formed C or C_s (n, 6, 6) whose eigenvalues (the SI
+#: condition number) or determinant (det K, from C_s) are taken: they
+#: err by about 1e-16 of the largest, so the smallest is known to 1e-4 relative at 1e12,
+#: and not at all towards 1e16 (a map showed 1.5e17 where K's own was 3.8e16).
+SI_RESOLVED = 1e12
+
+
+def batch_indices(
+    C: np.ndarray,
+    rank: np.ndarray,
+    length,
+    wrench: np.ndarray | None = None,
+    symmetric: np.ndarray | None = None,
+    condition: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """The indices of :data:`BATCH_INDICES` for n compliances at once (NaN where one does
+    not exist), by the definitions of :class:`StiffnessIndices`.
+
+    * ``det_K``: det K = 1 / det C, full rank only, from the scaled C_s: NaN where its
+      condition number exceeds :data:`SI_RESOLVED`.
+    * ``condition_number``: cond(K_s) of the scaled stiffness over the rank, at the
+      characteristic length L (as :attr:`StiffnessIndices.scaled_condition_number`):
+      unit-free, the one to compare. ``condition`` where given (the solver's, from the
+      square-root factor), else from the eigenvalues of C
+      (:func:`closedloop.common.conditioning.batch_rank`), which resolve it up to about 1e12.
+    * ``condition_number_si``: cond(K) of the SI matrix, full rank only (as
+      :attr:`StiffnessIndices.condition_number`): changes with the length unit. From the
+      eigenvalues of C: NaN above :data:`SI_RESOLVED`, where they do not resolve it.
+    * ``min/max_translational``, ``min/max_rotational``: extreme principal stiffnesses of
+      the 3x3 blocks of C [N/m, N m/rad].
+    * ``deflection_translation``, ``deflection_rotation``: |d| [m], |r| [rad] of the twist
+      C w under ``wrench`` (only with a wrench).
+
+    A non-symmetric C (a closed form in its own coordinates, e.g. CaHyMan's published
+    matrices) has K = C^-1, det K = det(C^-1), the 2-norm condition numbers of K and of
+    K_s = D^-1 K D^-1, and no principal stiffnesses.
+
+    Args:
+        C: (n, 6, 6) compliances [SI] at one reference point; rows with a NaN are skipped.
+        rank: (n,) rank of each C (6: K exists).
+        length: characteristic length L [m], one or (n,).
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]) at the same point, or None.
+        symmetric: (n,) bool, which C are symmetric (default: all).
+        condition: (n,) cond(K_s) from the solver, NaN where unknown (or None).
+
+    Returns:
+        name -> (n,) array (units in :data:`BATCH_INDICES`; no deflections without wrench).
+    """
+    n = len(C)
+    L = np.broadcast_to(np.asarray(length, dtype=float), (n,))
+    out = {name: np.full(n, np.nan) for name in BATCH_INDICES}
+    finite = np.all(np.isfinite(C), axis=(1, 2))
+    sym = finite if symmetric is None else finite & symmetric
+    full = finite & (np.asarray(rank) == 6)
+    known = np.zeros(n, dtype=bool)
+    if condition is not None:
+        known = finite & np.isfinite(condition)
+        out["condition_number"][known] = condition[known]
+    rest = sym & ~known  # from the eigenvalues of C only where the solver's is not known
+    if np.any(rest):
+        _, out["condition_number"][rest], _ = batch_rank(C[rest], L[rest])
+    if np.any(sym):
+        for kind, block in (("translational", T), ("rotational", R)):
+            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(
+                C[sym], block, L[sym]
+            )
+    both = sym & full
+    if np.any(both):
+        c = np.abs(np.linalg.eigvalsh(C[both]))  # an indefinite C (unstable preload) too
+        with np.errstate(divide="ignore", over="ignore"):
+            cond_si = c.max(axis=1) / c.min(axis=1)
+        cond_si[~(cond_si <= SI_RESOLVED)] = np.nan
+        out["condition_number_si"][both] = cond_si
+        cond_s = out["condition_number"][both]
+        out["det_K"][both] = _scaled_determinants(C[both], L[both], cond_s)
+    other = ~sym & full
+    if np.any(other):
+        K = np.linalg.inv(C[other])
+        d = twist_scalings(L[other])
+        out["det_K"][other] = np.linalg.det(K)
+        out["condition_number_si"][other] = np.linalg.cond(K)
+        out["condition_number"][other] = np.linalg.cond(K / d[:, :, None] / d[:, None, :])
+    if wrench is None:
+        del out["deflection_translation"], out["deflection_rotation"]
+        return out
+    w = np.asarray(wrench, dtype=float)
+    scale = np.max(np.abs(w))  # C (w / s) then times s: no overflow or underflow of |C w|
+    twist = C[finite] @ (w / scale) if scale > 0 else np.zeros((int(finite.sum()), 6))
+    out["deflection_translation"][finite] = scale * row_norms(twist[:, :3])
+    out["deflection_rotation"][finite] = scale * row_norms(twist[:, 3:])
+    return out
+
+
+def _scaled_determinants(C: np.ndarray, L: np.ndarray, condition: np.ndarray) -> np.ndarray:
+    """(n,) det K = det(D)^2 / det(C_s) [N^6/rad^3] of symmetric compliances C (n, 6, 6)
+    from the LU factors of the scaled C_s = D C D (D = diag(1/L, 1/L, 1/L, 1, 1, 1), L
+    (n,) [m]), logarithms against under- and overflow; NaN where ``condition`` (n,)
+    (cond(K_s)) exceeds :data:`SI_RESOLVED`. Unlike 1 / det(C), the error follows the
+    scaled condition, not the SI one, which a length unit alone makes large (a mechanism
+    of 1e-4 m has an SI condition number 1e8 times its scaled one)."""
+    d = twist_scalings(L)
+    sign, log_det = np.linalg.slogdet(C * d[:, :, None] * d[:, None, :])
+    with np.errstate(over="ignore", invalid="ignore"):
+        det = sign * np.exp(-log_det - 6.0 * np.log(L))
+    return np.where(condition <= SI_RESOLVED, det, np.nan)
+
+
+#: Smallest eigenvalue of a formed scaled stiffness, relative to its largest, that it
+#: resolves (a few eps): below, rounding decides whether it is positive.
+RESOLVED_RTOL = 1e-15
+#: Largest negative eigenvalue, relative to the largest, that rounding gives a formed
+#: symmetric positive definite 6x6 matrix (a few eps; 1e-13 leaves a factor of 100).
+ROUNDING_RTOL = 1e-13
+
+
+def inverse_pair_eigenvalues(C: np.ndarray, K: np.ndarray) -> np.ndarray | None:
+    """(6,) eigenvalues of K = C^-1 ascending, from C and K (6, 6) both formed, or None
+    when C is not symmetric (to SCALED_TOL) or K not positive definite.
+
+    An eigenvalue of a formed symmetric matrix is known to about eps times its largest
+    one; so 1/mu, mu an eigenvalue of C, is taken from C where mu >= sqrt(mu_min mu_max)
+    and from K below (mu_min = 1 / kappa_max, from K): each to about eps sqrt(cond)
+    relative, where the eigenvalues of K alone lose its smallest ones at eps cond.
+    """
+    if np.max(np.abs(C - C.T)) > SCALED_TOL * np.max(np.abs(C)):
+        return None
+    mu, kappa = np.linalg.eigvalsh(0.5 * (C + C.T)), np.linalg.eigvalsh(K)  # ascending
+    # indefinite (an unstable preloaded equilibrium): an eigenvalue negative beyond the
+    # rounding of a formed matrix (a positive definite one may show -eps times its largest)
+    if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
+        return None
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        lam = np.where(mu >= np.sqrt(mu[-1] / kappa[-1]), 1.0 / mu, kappa[::-1])
+    return np.sort(lam) if np.all(lam > 0.0) else None
+
+
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """(n,) Euclidean norms of the rows of v (n, k), without overflow or underflow of the
+    squares (inf only where a norm exceeds 1.8e308, NaN where a row is not finite)."""
+    big = np.max(np.abs(v), axis=1)
+    safe = np.where(big > 0, big, 1.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return big * np.linalg.norm(v / safe[:, None], axis=1)

@@ -1,0 +1,193 @@
+"""Measured deflections for the identification of springs
+(:mod:`closedloop.analysis.identification`): one :class:`Measurement` (configuration, wrench, twist
+and its standard deviation) each, given in Python or read from a YAML or CSV file
+(:func:`read_measurements`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from closedloop.common.arrays import check_wrench, decimal, readonly, real_array
+from closedloop.exceptions import (
+    InvalidInputError,
+    ModelFileError,
+)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One measured deflection (arrays read-only, SI).
+
+    Attributes:
+        q: (nq,) configuration, or None when ``actuated`` is given.
+        actuated: (n_act,) actuated joint values [rad, m] to assemble, or None.
+        wrench: (6,) applied wrench (fx, fy, fz [N], nx, ny, nz [N m]), world axes.
+        twist: (6,) measured twist (dx, dy, dz [m], rx, ry, rz [rad]), world axes.
+        sd: (6,) standard deviation of the twist, > 0 (same units); inf for a component
+            not measured (its twist is then 0 here, whatever was given: NaN or a value).
+    """
+
+    q: np.ndarray | None
+    actuated: np.ndarray | None
+    wrench: np.ndarray
+    twist: np.ndarray
+    sd: np.ndarray
+
+    @classmethod
+    def of(cls, *, wrench, twist, sd, q=None, actuated=None) -> Measurement:
+        """A validated measurement (see the attributes).
+
+        Raises:
+            InvalidInputError: wrong shapes, a NaN or inf (in any array), sd <= 0, neither or
+                both of q/actuated.
+        """
+        if (q is None) == (actuated is None):
+            raise InvalidInputError("a measurement needs exactly one of q and actuated")
+        given = real_array(sd, "sd")
+        sd_ = np.full(6, float(given)) if given.ndim == 0 else given.reshape(-1)
+        if sd_.shape != (6,) or np.any(np.isnan(sd_)) or np.any(sd_ <= 0.0):
+            raise InvalidInputError(
+                f"sd must be one or 6 values > 0 (units of the twist; inf for a component not "
+                f"measured), got {given.tolist()}"
+            )
+        measured = np.isfinite(sd_)
+        if not measured.any():
+            raise InvalidInputError("sd is inf for every component: nothing is measured")
+        twist_ = real_array(twist, "measured twist").reshape(-1)
+        if twist_.shape != (6,) or not np.all(np.isfinite(twist_[measured])):
+            raise InvalidInputError(
+                f"measured twist must be 6 values (dx dy dz [m], rx ry rz [rad]), finite where "
+                f"sd is, got {twist_.tolist()}"
+            )
+        twist_ = np.where(measured, twist_, 0.0)
+        name = "q" if q is not None else "actuated"
+        values = real_array(q if q is not None else actuated, name).reshape(-1)
+        if not np.all(np.isfinite(values)):
+            raise InvalidInputError(f"{name} must be finite values, got {values.tolist()}")
+        vector, act = (readonly(values), None) if q is not None else (None, readonly(values))
+        return cls(vector, act, readonly(check_wrench(wrench)), readonly(twist_), readonly(sd_))
+
+
+#: Columns of a measurement CSV file (besides ``frame`` and q_i or actuated_i).
+CSV_WRENCH = ("fx", "fy", "fz", "nx", "ny", "nz")
+CSV_TWIST = ("dx", "dy", "dz", "rx", "ry", "rz")
+CSV_SD = tuple(f"sd_{c}" for c in CSV_TWIST)
+_KEYS = ("q", "actuated", "wrench", "twist", "sd")
+
+
+def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
+    """(frame, measurements) from a YAML or CSV file, every value in SI units (q and
+    actuated in rad and m, wrench in N and N m, twist and sd in m and rad): nothing is
+    converted, so mm or deg must be converted before (a twist in mm fits springs 1000
+    times too soft, or does not fit at all).
+
+    YAML (module docstring): keys ``frame`` and ``measurements``, each a mapping with
+    ``q`` or ``actuated``, ``wrench``, ``twist`` and ``sd``. CSV (``.csv``): a header, one
+    measurement per row, the columns ``frame`` (the same in every row), ``q_0`` ..
+    ``q_{nq-1}`` or ``actuated_0`` .., :data:`CSV_WRENCH`, :data:`CSV_TWIST`, and ``sd``
+    or :data:`CSV_SD`.
+
+    Raises:
+        ModelFileError: missing or unreadable file, wrong structure (a missing column or
+            key, several frames).
+        InvalidInputError: a bad measurement (its index is named).
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")  # a spreadsheet's BOM, if any
+        if Path(path).suffix.lower() == ".csv":
+            frame, items = _csv_items(str(path), text)
+        else:
+            frame, items = _yaml_items(str(path), yaml.safe_load(text))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, csv.Error) as e:
+        raise ModelFileError(f"cannot read measurement file {str(path)!r}: {e}") from None
+    out = []
+    for i, item in enumerate(items):
+        missing = [k for k in ("wrench", "twist", "sd") if k not in item]
+        if missing or not set(item) <= set(_KEYS):
+            raise ModelFileError(
+                f"{str(path)!r}: measurement {i} has {sorted(map(str, item))}; expected q or "
+                "actuated, wrench, twist, sd"
+            )
+        try:
+            out.append(Measurement.of(**{k: _number(v) for k, v in item.items()}))
+        except (InvalidInputError, TypeError, ValueError) as e:
+            raise InvalidInputError(f"measurement {i} of {str(path)!r}: {e}") from None
+    return frame, out
+
+
+def _yaml_items(path: str, doc) -> tuple[str, list[dict]]:
+    if not isinstance(doc, dict) or not isinstance(doc.get("frame"), str):
+        raise ModelFileError(f"{path!r}: expected a mapping with 'frame' and 'measurements'")
+    items = doc.get("measurements")
+    if not isinstance(items, list) or not items:
+        raise ModelFileError(f"{path!r}: 'measurements' must be a non-empty list")
+    for i, item in enumerate(items):
+        if not isinstance(item, dict):
+            raise ModelFileError(f"{path!r}: measurement {i} must be a mapping of {_KEYS}")
+    return doc["frame"], items
+
+
+def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
+    reader = csv.DictReader(io.StringIO(text), skipinitialspace=True)
+    # columns aligned by hand: names and the frame may carry spaces on either side
+    reader.fieldnames = header = [c.strip() for c in reader.fieldnames or []]
+    rows = list(reader)
+    repeated = sorted({c for c in header if header.count(c) > 1})
+    if repeated:
+        raise ModelFileError(f"{path!r}: column(s) {repeated} given twice; expected each once")
+    for i, row in enumerate(rows):
+        if None in row or None in row.values():
+            raise ModelFileError(f"{path!r}: row {i} has not one value per column")
+        empty = [c for c, v in row.items() if not v.strip()]
+        if empty:
+            raise ModelFileError(f"{path!r}: row {i} has no value in column(s) {empty}")
+    sd = ["sd"] if "sd" in header else list(CSV_SD)
+    config = [c for c in header if c.startswith(("q_", "actuated_"))]
+    kind = config[0].split("_")[0] if config else "q"
+    config = [f"{kind}_{i}" for i in range(len(config))]
+    wanted = ("frame", *config, *CSV_WRENCH, *CSV_TWIST, *sd)
+    missing, unknown = [c for c in wanted if c not in header], sorted(set(header) - set(wanted))
+    if missing or unknown or not config:
+        raise ModelFileError(
+            f"{path!r}: expected a header and rows with frame, q_0.. or actuated_0.., "
+            f"{', '.join(CSV_WRENCH + CSV_TWIST)}, sd or sd_dx..sd_rz (missing {missing}, "
+            f"unknown {unknown})"
+        )
+    if not rows:
+        raise ModelFileError(f"{path!r} has a header and no measurement rows; expected one "
+                             "row a measurement")  # fmt: skip
+    frames = sorted({row["frame"].strip() for row in rows})
+    if len(frames) != 1:
+        raise ModelFileError(f"{path!r}: one frame expected in every row, got {frames}")
+    items = [
+        {kind: [row[c] for c in config], "wrench": [row[c] for c in CSV_WRENCH],
+         "twist": [row[c] for c in CSV_TWIST],
+         "sd": [row[c] for c in sd] if len(sd) > 1 else row["sd"]}
+        for row in rows
+    ]  # fmt: skip
+    return frames[0], items
+
+
+def _number(value, depth: int = 0):
+    """YAML 1.1 reads 1e-6 as a string, CSV gives strings: numbers, and lists of them, as
+    floats (a string in ASCII decimal notation, :func:`closedloop.common.arrays.decimal`, with
+    the spaces of an aligned column around it).
+
+    Raises:
+        ValueError: a boolean (YAML's true/false), a string that is not such a number, or
+            a list inside a list.
+    """
+    if isinstance(value, list):
+        if depth:
+            raise ValueError(f"{value!r} is a list inside a list; expected numbers")
+        return [_number(v, 1) for v in value]
+    if isinstance(value, bool):
+        raise ValueError(f"{value!r} is not a number")
+    return decimal(value.strip()) if isinstance(value, str) else value

@@ -1,0 +1,189 @@
+"""``closedloop info``: what a model holds, before any query.
+
+    closedloop info MODEL [--closures F] [--joint-stiffness K | --springs FILE] [--json]
+
+Prints the sizes (nq, nv), the characteristic length L, every joint (type, position limits,
+role: actuated, passive, locked or sprung, its spring), the beams, the closures with their
+types, the mimic joints and every frame: the names that ``--frame``, ``--springs`` and the
+closure files take. The springs are those of the model with the options given, as a query
+would use them. Exit status: 0; 2 bad input (a missing file, an unknown name).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from closedloop.cli.common import print_json
+from closedloop.exceptions import EXIT_OK
+from closedloop.kinematics.limits import UNBOUNDED_LIMIT
+from closedloop.model.closed_loop import ClosedLoopModel
+
+#: Joint kinds by the start of Pinocchio's short name (after ``JointModel``), first match.
+JOINT_KINDS = (
+    ("RUB", "continuous"),
+    ("R", "revolute"),
+    ("P", "prismatic"),
+    ("Spherical", "spherical"),
+    ("FreeFlyer", "free-flyer"),
+    ("Planar", "planar"),
+    ("Translation", "translation"),
+    ("Mimic", "mimic"),
+    ("Composite", "composite"),
+)
+#: Suffix of the virtual joint that carries a beam (:mod:`closedloop.model.beams`).
+BEAM_SUFFIX = "_beam"
+
+
+def add_parser(sub, source_arguments) -> None:
+    """The ``info`` subparser; ``source_arguments(p, frame=False)`` adds MODEL, --closures
+    and the springs options."""
+    p = sub.add_parser(
+        "info",
+        help="joints, frames, closures, springs and sizes of a model",
+        description=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    source_arguments(p, frame=False)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run_info)
+
+
+def joint_kind(short_name: str) -> str:
+    """Readable kind of a Pinocchio joint from its short name (``JointModelRZ``:
+    ``revolute``); the short name without ``JointModel`` when none matches."""
+    name = short_name.removeprefix("JointModel")
+    return next((kind for start, kind in JOINT_KINDS if name.startswith(start)), name)
+
+
+def _bound(value: float) -> float | None:
+    return value if math.isfinite(value) and abs(value) < UNBOUNDED_LIMIT else None
+
+
+def _joint(clm: ClosedLoopModel, j: int) -> dict:
+    """One joint's entry of :func:`model_info`."""
+    pm = clm.model
+    jm, name = pm.joints[j], pm.names[j]
+    kind = joint_kind(jm.shortname())
+    k = clm.stiffness[jm.idx_v : jm.idx_v + jm.nv]
+    entry: dict = {"name": name, "type": kind, "nq": jm.nq, "nv": jm.nv}
+    if jm.nq == 1 and kind in ("revolute", "prismatic"):
+        lo, hi = float(pm.lowerPositionLimit[jm.idx_q]), float(pm.upperPositionLimit[jm.idx_q])
+        entry["limits"] = [_bound(lo), _bound(hi)] if lo < hi else [None, None]
+    if kind == "mimic":
+        leader = [pm.names[i] for i in range(1, pm.njoints)
+                  if pm.joints[i].nv and pm.joints[i].idx_q == jm.idx_q]  # fmt: skip
+        entry["role"], entry["follows"] = "mimic", leader[0] if leader else None
+        return entry
+    finite = k[np.isfinite(k)]
+    if name in clm.spring_blocks:
+        entry["role"] = "beam" if name.endswith(BEAM_SUFFIX) else "sprung"
+        entry["spring"] = np.asarray(clm.spring_blocks[name]).tolist()
+        return entry
+    if name in clm.actuated:
+        entry["role"] = "actuated"
+    elif name in clm.locked or (k.size and np.isinf(k).all()):
+        entry["role"] = "locked"
+    elif finite.size and np.any(finite > 0):
+        entry["role"] = "sprung"
+    else:
+        entry["role"] = "passive"
+    # per coordinate [N m/rad, N/m]; None: rigid (an actuated joint without spring, locked)
+    entry["spring"] = [float(v) if math.isfinite(v) else None for v in k]
+    return entry
+
+
+def model_info(clm: ClosedLoopModel) -> dict:
+    """JSON-ready description of ``clm``: name, nq, nv, length L [m], joints (name, type,
+    nq, nv, limits [rad or m; None: unbounded], role, spring [SI per coordinate; None:
+    rigid; a matrix for a block]), closures (name, type ``3d``/``6d``), beams, mimic
+    joints, frames (name, type, parent joint), in the model's order."""
+    pm = clm.model
+    joints = [_joint(clm, j) for j in range(1, pm.njoints)]
+    return {
+        "model": clm.name,
+        "nq": pm.nq,
+        "nv": pm.nv,
+        "length": clm.length,
+        "actuated": list(clm.actuated),
+        "joints": joints,
+        "closures": [{"name": c.name, "type": c.kind} for c in clm.closures],
+        "beams": [j["name"] for j in joints if j["role"] == "beam"],
+        "mimic": [j["name"] for j in joints if j["role"] == "mimic"],
+        "frames": [
+            {
+                "name": f.name,
+                "type": str(f.type).rsplit(".", 1)[-1].lower(),
+                "joint": pm.names[f.parentJoint],
+            }
+            for f in pm.frames
+        ],
+    }
+
+
+def _spring_text(entry: dict) -> str:
+    spring = entry.get("spring")
+    if entry["role"] == "mimic":
+        return f"follows {entry['follows']}"
+    if spring is None or entry["role"] == "locked":
+        return ""
+    if spring and isinstance(spring[0], list):
+        return f"block {len(spring)}x{len(spring)}, diagonal " + " ".join(
+            f"{row[i]:.4g}" for i, row in enumerate(spring)
+        )
+    if entry["role"] == "actuated" and all(v is None for v in spring):
+        return "rigid (no spring)"
+    if all(v in (None, 0.0) for v in spring):
+        return ""
+    return " ".join("rigid" if v is None else f"{v:.4g}" for v in spring)
+
+
+def _limits_text(entry: dict) -> str:
+    if "limits" not in entry:
+        return ""
+    lo, hi = entry["limits"]
+    return f"[{'-inf' if lo is None else f'{lo:.6g}'}, {'inf' if hi is None else f'{hi:.6g}'}]"
+
+
+def format_info(info: dict) -> str:
+    """Text of :func:`model_info`: sizes, a table of the joints, closures, frames."""
+    lines = [
+        f"model {info['model']!r}: nq {info['nq']}, nv {info['nv']}, "
+        f"L = {info['length']:.4g} m (characteristic length)",
+        f"actuated: {', '.join(info['actuated']) or 'none'}",
+        "",
+        f"joints ({len(info['joints'])}; limits [rad or m], springs [N m/rad or N/m]):",
+        f"  {'name':<24} {'type':<11} {'role':<9} {'limits':<24} spring",
+    ]
+    lines += [
+        f"  {j['name']:<24} {j['type']:<11} {j['role']:<9} {_limits_text(j):<24} "
+        f"{_spring_text(j)}".rstrip()
+        for j in info["joints"]
+    ]
+    if not any(j["role"] in ("sprung", "beam") or
+               (j["role"] == "actuated" and any(v is not None for v in j["spring"]))
+               for j in info["joints"]):  # fmt: skip
+        lines.append("  no spring: every query finds C = 0 (--joint-stiffness K or --springs FILE)")
+    closures = ", ".join(f"{c['name']} ({c['type']})" for c in info["closures"])
+    lines += ["", f"closures ({len(info['closures'])}): {closures or 'none (a serial robot)'}"]
+    lines.append(f"beams: {', '.join(info['beams']) or 'none'}")
+    lines.append(f"mimic joints: {', '.join(info['mimic']) or 'none'}")
+    lines += ["", f"frames ({len(info['frames'])}; name, type, on joint):"]
+    lines += [f"  {f['name']:<32} {f['type']:<12} {f['joint']}" for f in info["frames"]]
+    return "\n".join(lines)
+
+
+def run_info(args) -> int:
+    """Run ``closedloop info``; returns the exit code (0)."""
+    from closedloop.cli.app import (
+        load_from_args,  # the command line's loader (which imports this module)
+    )
+
+    info = model_info(load_from_args(args))
+    if args.json:
+        print_json(info)
+    else:
+        print(format_info(info))
+    return EXIT_OK

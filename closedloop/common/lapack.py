@@ -1,0 +1,95 @@
+"""The LAPACK routines of the library, SciPy's compiled wrappers without ``scipy.linalg``.
+
+The queries call LAPACK directly on small matrices (SVD ``dgesdd``/``dgesvd``, QR
+``dgeqrf`` and with column pivoting ``dgeqp3``, ``dorgqr``, triangular ``dtrcon``,
+``dtrtri``, ``dtrtrs`` and rank-revealing least squares ``dgelsy``), which numpy does not
+expose. ``scipy.linalg.lapack`` re-exports them from the extension module
+``scipy.linalg._flapack``, but importing it first runs the package ``scipy.linalg``, which
+loads all of SciPy's linear algebra and, through it, numpy's f2py, testing and masked
+arrays: a few hundred milliseconds, most of a command line's start-up beyond Pinocchio
+and numpy. The extension module itself loads in a few milliseconds, so it is loaded from
+its file in SciPy's folder; where that is not possible (SciPy already imported, another
+layout of SciPy, a failed load) the routines come from ``scipy.linalg.lapack``. Either
+way they are the same compiled functions with the same signatures, each behind a check
+that raises ``numpy.linalg.LinAlgError`` for a zero-size array, which LAPACK would refuse
+with a message printed on the process's output.
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+#: The routines the library calls (``tests/common/test_lapack.py`` checks them against SciPy's).
+ROUTINES = ("dgesdd", "dgesvd", "dgeqrf", "dgeqp3", "dorgqr", "dtrcon", "dtrtri", "dtrtrs",
+            "dgelsy")  # fmt: skip
+
+
+def _from_file() -> ModuleType | None:
+    """``scipy.linalg._flapack`` loaded from its file, without its packages' code."""
+    spec = importlib.util.find_spec("scipy")  # a top-level package: found, not imported
+    for folder in (spec.submodule_search_locations or []) if spec is not None else []:
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = Path(folder, "linalg", "_flapack" + suffix)
+            if not path.is_file():
+                continue
+            try:
+                found = importlib.util.spec_from_file_location("scipy.linalg._flapack", path)
+                module = importlib.util.module_from_spec(found)
+                found.loader.exec_module(module)
+            except ImportError:
+                return None
+            return module if all(hasattr(module, name) for name in ROUTINES) else None
+    return None
+
+
+def _load() -> ModuleType:
+    if "scipy.linalg" not in sys.modules:
+        module = _from_file()
+        if module is not None:
+            return module
+    from scipy.linalg import lapack
+
+    return lapack
+
+
+_lapack = _load()
+
+
+def _refusing_empty(name: str):
+    """LAPACK routine ``name`` that raises instead of being handed a zero-size array.
+
+    LAPACK refuses a leading dimension of 0 (an empty matrix): it prints
+    ``** On entry to ... had an illegal value`` on the process's output and returns a
+    negative ``info``. The callers treat empty matrices themselves (an empty least-squares
+    problem, no rows to factor); one that does not gets this error instead of the print.
+    """
+    routine = getattr(_lapack, name)
+
+    def call(*args, **kwargs):
+        for a in args:
+            if type(a) is np.ndarray and a.size == 0:
+                raise np.linalg.LinAlgError(
+                    f"{name} called with an empty array of shape {a.shape} (LAPACK refuses it)"
+                )
+        return routine(*args, **kwargs)
+
+    call.__name__ = call.__qualname__ = name
+    call.__doc__ = routine.__doc__
+    return call
+
+
+dgesdd = _refusing_empty("dgesdd")
+dgesvd = _refusing_empty("dgesvd")
+dgeqrf = _refusing_empty("dgeqrf")
+dgeqp3 = _refusing_empty("dgeqp3")
+dorgqr = _refusing_empty("dorgqr")
+dtrcon = _refusing_empty("dtrcon")
+dtrtri = _refusing_empty("dtrtri")
+dtrtrs = _refusing_empty("dtrtrs")
+dgelsy = _refusing_empty("dgelsy")

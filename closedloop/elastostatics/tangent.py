@@ -1,0 +1,614 @@
+"""Closure residual of the statics and the tangent stiffness of the equilibrium equations.
+
+The static equilibrium of a mechanism with joint springs under a dead-load wrench w at a
+frame (see :mod:`closedloop.elastostatics.statics`) solves
+
+    F(q, lambda) = g(q) - J(q)^T w + J_c(q)^T lambda = 0,   c(q) = 0,
+
+with g the spring forces, J (6, nv) the frame Jacobian (world-aligned axes, at the frame
+origin) and c (m,) the stacked closure residuals of :func:`closure_gap`:
+
+* a point closure (ball joint) contributes the **world gap** c = p2 - p1 [m] between its
+  two anchor points, Jacobian J_p2 - J_p1 (point Jacobians, world axes). Unlike
+  Pinocchio's ``R1^T (p2 - p1)`` (axes of side 1), it does not change when either body
+  spins about an axis through the anchor, so the equations, hence Newton's iterates, do
+  not depend on which body is written first; its multipliers lambda are world-axes forces
+  [N] (the force that side 2 exerts on side 1 at the anchor);
+* a weld contributes Pinocchio's log6 residual [m, rad] (:func:`closure_residual`), its
+  multipliers the conjugate wrench [N, N m].
+
+Linearising F along the admissible motions N (nv, d) gives the tangent stiffness
+
+    K_t = K_q - K_G + sum_j lambda_j Hess c_j        (nv, nv), restricted as N^T K_t N,
+
+(Chen and Kao's conservative congruence transformation, extended to loop closures) where
+
+* ``K_G[i, k] = d(J^T w)_i / dq_k = sum_r w_r dJ[r, i]/dq_k`` is the geometric (load)
+  stiffness, J with Pinocchio's LOCAL_WORLD_ALIGNED axes; it enters with a minus sign;
+* ``Hess c_j`` is the second derivative of closure row j (the loop curvature), weighted by
+  the internal force lambda_j of the loop. With redundant closure rows lambda is known
+  only up to a self-stress mu (J_c^T mu = 0); differentiating c = 0 twice along the
+  closure manifold gives mu^T Hess c [v, v] = 0 for every admissible v, so it does not
+  matter on N.
+
+Derivatives with respect to q are taken along ``pin.integrate(model, q, v)``. A
+world-fixed moment is not conservative under finite rotations: its K_G, hence K_t, is
+then not symmetric.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.common.arrays import check_wrench
+from closedloop.common.conditioning import RANK_RTOL, rule_rank
+from closedloop.common.derivatives import (
+    DIFFERENCE_STEP,
+    central_differences,
+    pinocchio_second_order_exact,
+)
+from closedloop.elastostatics.springs import spring_split
+from closedloop.exceptions import InvalidInputError
+from closedloop.kinematics.constraints import (
+    closure_jacobian,
+    closure_residual,
+    frame_jacobian,
+    update_kinematics,
+)
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.elastic import (
+    beam_joints,
+    deflection,
+    deflection_jacobian,
+    spring_law,
+    spring_stiffness,
+)
+from closedloop.model.gravity import Load, as_load
+
+#: Step [rad or m] of the central differences that give the curvature of weld closures
+#: (and every second derivative where Pinocchio's are wrong, :mod:`closedloop.common.derivatives`):
+#: the error is ~1e-10 relative to the closure Jacobian for links of metre scale; that
+#: curvature enters K_t multiplied by lambda, so its relative error in K_t stays ~1e-10.
+WELD_CURVATURE_STEP = DIFFERENCE_STEP
+
+#: Smallest singular value of the scaled tangent stiffness (1 without preload: the scale
+#: of the springs) below which it counts as singular (critical preload). A stiffening
+#: preload that makes it span more than the rank rule resolves (1 / RANK_RTOL^2) is
+#: refused as such, not as a critical load.
+CRITICAL_RTOL = 1e-12
+
+#: A spring-free admissible motion counts as acted on by the preload (stiffened by the
+#: weight, coupled to the sprung motions) when its rows of the scaled tangent stiffness
+#: (:func:`settled_tangent`, on the scale of the stiffest spring) exceed this; below, the
+#: preload terms are rounding (measured 1e-16 on the spinning rods of a Delta; the weld
+#: curvature by central differences carries ~1e-10 of them).
+SPRING_FREE_RTOL = 1e-9
+
+
+def _hessian(raw: np.ndarray, nv: int) -> np.ndarray:
+    """(6, nv, nv) tensor H[r, i, k] = dJ[r, i]/dq_k from a Pinocchio kinematic Hessian.
+
+    Pinocchio returns the tensor with a memory layout that numpy reads transposed; the
+    column-major reshape restores it (see the Pinocchio notes of the project).
+    """
+    return np.asarray(raw).ravel().reshape((6, nv, nv), order="F")
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _anchor_point(clm: ClosedLoopModel, joint: int, placement: pin.SE3, hessian: bool = False):
+    """Position p (3,) [m], point Jacobian J_p (3, nv) and, with ``hessian``, its derivative
+    H_p (3, nv, nv) (H_p[:, a, b] = dJ_p[:, a]/dq_b) of an anchor point fixed on ``joint``.
+
+    World axes (Pinocchio's LOCAL_WORLD_ALIGNED for a point). From the spatial (WORLD)
+    Jacobian [v0; w] of the joint, the point moves at v0 + w x p, so J_p = J_v - [p]x J_w
+    and dJ_p[:, a]/dq_b = H_v - [p]x H_w - [J_p b]x J_w a. Expects the joint Jacobians
+    (and, with ``hessian``, ``pin.computeJointKinematicHessians``) of the current q.
+    """
+    model, data = clm.model, clm.data
+    p = data.oMi[joint].act(placement.translation)
+    JW = np.asarray(pin.getJointJacobian(model, data, joint, pin.WORLD)).reshape(6, model.nv)
+    Jp = JW[:3] - _skew(p) @ JW[3:]
+    if not hessian:
+        return p, Jp, None
+    HW = _hessian(pin.getJointKinematicHessian(model, data, joint, pin.WORLD), model.nv)
+    Hp = HW[:3] - np.einsum("ij,jab->iab", _skew(p), HW[3:])
+    Hp -= np.cross(Jp.T[None, :, :], JW[3:].T[:, None, :]).transpose(2, 0, 1)
+    return p, Jp, Hp
+
+
+def _rows(clm: ClosedLoopModel):
+    """(closure, row slice) of every closure in the stacked residual."""
+    row = 0
+    for c in clm.closures:
+        yield c, slice(row, row + c.size)
+        row += c.size
+
+
+def closure_gap(
+    clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closure residual c (m,) of the statics and its Jacobian (m, nv) at q.
+
+    Point closures: the world gap p2 - p1 [m] between the anchor points of side 2 and
+    side 1, world axes, Jacobian J_p2 - J_p1 [m/rad or m/m]; it is invariant under a spin
+    of either body about an axis through its anchor. Welds: the log6 rows [m, rad] of
+    :func:`closedloop.kinematics.constraints.closure_residual` and their Jacobian. Rows are stacked
+    in the order of ``clm.closures``, 3 per point and 6 per weld.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    if update:
+        update_kinematics(clm, q)
+    m, nv = clm.n_constraints, clm.model.nv
+    c, A = np.zeros(m), np.zeros((m, nv))
+    if any(cl.kind == "6d" for cl in clm.closures):
+        c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
+    for cl, rows in _rows(clm):
+        if cl.kind == "3d":
+            k = cl.constraint
+            p1, J1, _ = _anchor_point(clm, k.joint1_id, k.joint1_placement)
+            p2, J2, _ = _anchor_point(clm, k.joint2_id, k.joint2_placement)
+            c[rows], A[rows] = p2 - p1, J2 - J1
+    return c, A
+
+
+def geometric_stiffness(
+    clm: ClosedLoopModel, q: np.ndarray, frame: str, wrench: np.ndarray, *, update: bool = True
+) -> np.ndarray:
+    """(nv, nv) geometric stiffness K_G of a dead-load wrench at a frame.
+
+    ``K_G[i, k] = d(J^T w)_i / dq_k`` with J (6, nv) the Jacobian of ``frame`` (twist at the
+    frame origin, world-aligned axes) and w held fixed in world axes. Units: N m per rad or
+    N per m, per the units of coordinates i and k. It enters the tangent stiffness with a
+    minus sign; it is symmetric when w has no moment.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        frame: name of the loaded frame.
+        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    w = check_wrench(wrench)
+    fid = clm.frame_id(frame)
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q = clm.check_configuration(q)
+    if not _exact_hessians(clm):
+        K_G = central_differences(clm.model, q, lambda x: frame_jacobian(clm, x, frame).T @ w)
+        update_kinematics(clm, q)
+        return K_G
+    if update:
+        update_kinematics(clm, q)
+    pin.computeJointKinematicHessians(clm.model, clm.data)
+    raw = pin.getFrameKinematicHessian(clm.model, clm.data, fid, pin.LOCAL_WORLD_ALIGNED)
+    return np.einsum("r,rik->ik", w, _hessian(raw, clm.model.nv))
+
+
+def closure_curvature(
+    clm: ClosedLoopModel, q: np.ndarray, multipliers: np.ndarray, *, update: bool = True
+) -> np.ndarray:
+    """(nv, nv) loop curvature sum_j lambda_j Hess c_j of the rows of :func:`closure_gap`.
+
+    Entry [a, b] = d(J_c^T lambda)_a / dq_b [N m/rad, N/m...]. Point closures: exact,
+    sum_r lambda_r (H_p2 - H_p1)[r] from Pinocchio's kinematic Hessians of the two anchor
+    joints. Weld closures (log6 residual): central differences of the exact closure
+    Jacobian with step :data:`WELD_CURVATURE_STEP` (error ~1e-10 relative).
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration.
+        multipliers: (m,) lambda, one per closure row, in the units conjugate to the rows:
+            world-axes forces [N] for point rows, N and N m for weld rows.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    model = clm.model
+    lam = np.asarray(multipliers, dtype=float).reshape(-1)
+    if lam.shape != (clm.n_constraints,):
+        raise InvalidInputError(
+            f"{lam.size} multipliers given; expected one per closure row ({clm.n_constraints})"
+        )
+    if not np.all(np.isfinite(lam)):
+        raise InvalidInputError(f"multipliers must be finite, got {lam.tolist()}")
+    if not np.any(lam):
+        return np.zeros((model.nv, model.nv))
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q = clm.check_configuration(q)
+    if not _exact_hessians(clm):
+        out = central_differences(model, q, lambda x: closure_gap(clm, x)[1].T @ lam)
+        update_kinematics(clm, q)
+        return out
+    if update:
+        update_kinematics(clm, q)
+    out = np.zeros((model.nv, model.nv))
+    pin.computeJointKinematicHessians(model, clm.data)
+    lam_w = np.zeros_like(lam)
+    for cl, rows in _rows(clm):
+        if cl.kind == "6d":
+            lam_w[rows] = lam[rows]
+        elif np.any(lam[rows]):
+            k = cl.constraint
+            _, _, H1 = _anchor_point(clm, k.joint1_id, k.joint1_placement, hessian=True)
+            _, _, H2 = _anchor_point(clm, k.joint2_id, k.joint2_placement, hessian=True)
+            out += np.einsum("r,rab->ab", lam[rows], H2 - H1)
+    if np.any(lam_w):
+        out += central_differences(model, q, lambda x: closure_jacobian(clm, x).T @ lam_w)
+        update_kinematics(clm, q)
+    return out
+
+
+def _exact_hessians(clm: ClosedLoopModel) -> bool:
+    """Whether Pinocchio's kinematic Hessians hold for the model (once per model)."""
+    return clm.memo("exact_hessians", lambda: pinocchio_second_order_exact(clm.model))
+
+
+def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
+    """(nv, nv) stiffness of the springs' energy at q (:mod:`closedloop.model.elastic`).
+
+    ``Je^T K_e Je + sum_i (f_e)_i Hess e_i`` with e the springs' deflection (dq =
+    difference(q_rest, q), a beam's tip displacement and rotation), Je = de/dq (
+    ``pin.dDifference``, ARG1, for the ordinary joints), f_e the springs' forces and K_e
+    their stiffness (``clm.spring_matrix``: diag(k), or a block for the coupled spring of
+    a multi-dof joint; on a beam with its geometric stiffness). For 1-dof joints
+    (revolute, prismatic) and the other vector-space joints Je is constant and the second
+    term vanishes; for a sprung joint on a Lie group (free flyer, spherical, planar:
+    nq != nv) it is the derivative of Je^T f_e at fixed f_e, by central differences with
+    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f_e|), zero at zero deflection.
+    Locked coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
+    """
+    model = clm.model
+    Jd, e = deflection_jacobian(clm, q_rest, q), deflection(clm, q_rest, q)
+    if clm.spring_blocks or beam_joints(clm):
+        H = Jd.T @ spring_stiffness(clm, e) @ Jd
+    else:
+        k = np.where(np.isinf(clm.stiffness), 0.0, clm.stiffness)
+        H = (Jd.T * k) @ Jd
+    curved = clm.memo("lie_group_springs", lambda: _lie_group_springs(clm))
+    if curved.size:
+        f = spring_law(clm, e)[0]
+        if np.any(f[curved]):
+            H += central_differences(
+                model, q, lambda x: deflection_jacobian(clm, q_rest, x).T @ f, curved
+            )
+    return H
+
+
+def _lie_group_springs(clm: ClosedLoopModel) -> np.ndarray:
+    """Velocity indices of the sprung coordinates of joints with nq != nv (Lie groups)."""
+    k, out = clm.stiffness, []
+    for jm in clm.model.joints[1:]:
+        v = slice(jm.idx_v, jm.idx_v + jm.nv)
+        if jm.nq != jm.nv and np.any((k[v] > 0) & np.isfinite(k[v])):
+            out.extend(range(v.start, v.stop))
+    return np.array(out, dtype=int)
+
+
+def tangent_stiffness(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    q_rest: np.ndarray,
+    frame: str,
+    wrench: np.ndarray,
+    multipliers: np.ndarray,
+    *,
+    gravity: Load | None = None,
+    update: bool = True,
+) -> np.ndarray:
+    """(nv, nv) tangent stiffness in joint space, K_q - K_G(w) + sum_j lambda_j Hess c_j
+    (+ dG/dq of the weight).
+
+    Entry [a, b] is the derivative of equilibrium equation a (generalised force on
+    coordinate a [N m or N]) with respect to coordinate b of q [rad or m]. Locked
+    coordinates have zero spring terms; restrict the matrix to the admissible motions.
+
+    Args:
+        clm: the model.
+        q: (nq,) configuration (an equilibrium).
+        q_rest: (nq,) rest configuration of the springs.
+        frame: name of the loaded frame.
+        wrench: (6,) dead-load wrench (f [N], n [N m]), world axes, at the frame origin.
+        multipliers: (m,) closure multipliers lambda at q, conjugate to the rows of
+            :func:`closure_gap` (``Equilibrium.multipliers``).
+        gravity: a :class:`closedloop.model.gravity.Load` whose weight (scaled) adds dG/dq.
+        update: recompute the kinematics of q first (else they must be current).
+    """
+    if update:  # a q of the caller's: its quaternions checked and normalised
+        q, q_rest = clm.check_configuration(q), clm.check_configuration(q_rest)
+        update_kinematics(clm, q)
+    K = spring_hessian(clm, q, q_rest)
+    K -= geometric_stiffness(clm, q, frame, wrench, update=False)
+    K += closure_curvature(clm, q, multipliers, update=False)
+    if gravity is not None:
+        K += gravity.stiffness(q, clm.model.nv)
+    return K
+
+
+def scaled_tangent(
+    clm: ClosedLoopModel, Kt: np.ndarray, N: np.ndarray, V: np.ndarray, ls: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tangent stiffness on the sprung admissible motions, scaled by the springs.
+
+    Args:
+        clm: the model.
+        Kt: (nv, nv) tangent stiffness (:func:`tangent_stiffness`).
+        N: (nv, d) admissible motions; V (d, s), ls (s,): eigenvectors and eigenvalues of
+            their spring stiffness N^T K_q N with a restoring spring
+            (:func:`closedloop.elastostatics.compliance.spring_subspace`).
+
+    Returns:
+        M: (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I), dimensionless:
+            the identity without preload, singular at a critical load.
+        P: (d, d) preload part N^T (K_t - K_q) N of the restricted tangent stiffness.
+        T: (d, s) the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
+    """
+    P = N.T @ (Kt - clm.spring_matrix) @ N
+    T = V / np.sqrt(ls)
+    return np.eye(T.shape[1]) + T.T @ P @ T, P, T
+
+
+def settled_tangent(
+    M: np.ndarray, H: np.ndarray, T: np.ndarray, Z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled tangent stiffness extended to the spring-free motions the preload acts on.
+
+    A spring-free admissible motion that does not move the loaded frame (a link hanging
+    on a passive joint, a rod spinning about its axis) has no spring; the preload may
+    still stiffen it (the weight of the hanging link) or couple it to the sprung motions.
+    Those it acts on settle with them, and enter the compliance and the stability
+    margin; the others (every row of theirs below :data:`SPRING_FREE_RTOL`) are internal
+    mobilities, left out.
+
+    Args:
+        M: (s, s) T^T H T (:func:`scaled_tangent`).
+        H: (d, d) the tangent stiffness on the admissible motions (any coordinates).
+        T: (d, s) the sprung motions, T^T K_r T = I.
+        Z: (d, z) the spring-free motions, orthonormal (unit-free) and divided by the
+            square root of the stiffest spring (so that their rows of M are on its scale).
+
+    Returns:
+        (M, T) extended: M (s + a, s + a) on the motions T (d, s + a), the sprung ones
+        first, then the a spring-free ones the preload acts on (unchanged when a = 0).
+    """
+    if not Z.shape[1]:
+        return M, T
+    HZ = H @ Z
+    Mtz, Mzt, Mzz = T.T @ HZ, Z.T @ H @ T, Z.T @ HZ
+    U, sv, _ = np.linalg.svd(np.hstack([Mzt, Mzz, Mtz.T, Mzz.T]), full_matrices=False)
+    W = U[:, : int(np.count_nonzero(sv > SPRING_FREE_RTOL))]
+    if not W.shape[1]:
+        return M, T
+    extended = np.block([[M, Mtz @ W], [W.T @ Mzt, W.T @ Mzz @ W]])
+    return extended, np.hstack([T, Z @ W])
+
+
+def stability_margin(M: np.ndarray, sprung: int | None = None) -> float:
+    """Smallest eigenvalue of the symmetric part of M (:func:`scaled_tangent`); 1 if empty
+    (no sprung motion: the unloaded value). Above 1 when the preload stiffens every motion
+    (a hanging weight, tension).
+
+    With ``sprung`` < M's size (:func:`settled_tangent`: the spring-free motions the
+    preload acts on come last), those settle at each sprung motion: the margin is that
+    of the Schur complement of their block S_zz in the symmetric part S, still 1
+    unloaded and 0 where K_t turns singular; the smallest eigenvalue of S_zz (<= 0, on the
+    scale of the stiffest spring) when the preload leaves one of them unstable or neutral
+    (a link balanced upright on a passive joint).
+    """
+    if not M.size:
+        return 1.0
+    S = 0.5 * (M + M.T)
+    s = S.shape[0] if sprung is None else sprung
+    if s < S.shape[0]:
+        low = float(np.linalg.eigvalsh(S[s:, s:])[0])
+        if low <= 0.0 or s == 0:
+            return low
+        S = S[:s, :s] - S[:s, s:] @ np.linalg.solve(S[s:, s:], S[s:, :s])
+    return float(np.linalg.eigvalsh(S)[0])
+
+
+@dataclass(frozen=True)
+class SolverUnits:
+    """Per-entry scales that make the equilibrium solver unit-free: L [m] (the model's
+    characteristic length) for the closure rows in metres and the translational
+    coordinates, 1 for the others (rad). The solver's rank decisions, tolerances and step
+    limits then do not depend on the length unit or the size of the mechanism.
+
+    Attributes:
+        rows: (m,) scale of each closure row; coords: (nv,) of each tangent coordinate;
+        q: (nq,) of each configuration entry (the translations of a free flyer or planar
+        joint, the coordinate of a prismatic one).
+    """
+
+    rows: np.ndarray
+    coords: np.ndarray
+    q: np.ndarray
+
+    @classmethod
+    def of(cls, clm: ClosedLoopModel) -> SolverUnits:
+        L, model = clm.length, clm.model
+        coords = np.where(clm.linear_coordinates, L, 1.0)
+        q = np.ones(model.nq)
+        for jm in model.joints[1:]:
+            if jm.nq == jm.nv:
+                q[jm.idx_q : jm.idx_q + jm.nq] = coords[jm.idx_v : jm.idx_v + jm.nv]
+            else:  # free flyer, planar: translations first, alike in q and v
+                t = int(clm.linear_coordinates[jm.idx_v : jm.idx_v + jm.nv].sum())
+                q[jm.idx_q : jm.idx_q + t] = L
+        return cls(np.where(clm.linear_rows, L, 1.0), coords, q)
+
+    def limit(self, value: float | None, default: float) -> np.ndarray:
+        """(nv,) per-coordinate bound: ``value`` [rad or m] as given, or ``default`` in
+        rad and units of L."""
+        return self.coords * default if value is None else np.full(self.coords.size, value)
+
+
+class EquilibriumEquations:
+    """The equilibrium equations F = 0, c = 0 of one model, loaded frame and rest q.
+
+    Works on the free coordinates (finite stiffness); locked ones keep their rest values.
+    Used by :func:`closedloop.elastostatics.statics.solve_equilibrium`.
+    """
+
+    def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
+        self.clm, self.q_rest, self.frame = clm, q_rest, frame
+        self.free = np.flatnonzero(np.isfinite(clm.stiffness))
+        self.units = SolverUnits.of(clm)
+        #: (n_free,) scale of each free coordinate [m or rad per unit]: dq_free = free_scales * y
+        self.free_scales = self.units.coords[self.free]
+        #: the free coordinates with a spring (k > 0), indices into the free ones
+        self.sprung = np.flatnonzero(clm.stiffness[self.free] > 0.0)
+        # square root of their springs on y: sqrt(k) per coordinate, or the columns of the
+        # root factor K_q = R^T R of the spring blocks
+        coords, scales = self.free[self.sprung], self.free_scales[self.sprung]
+        self.root = (
+            clm.spring_root[:, coords] * scales
+            if clm.spring_blocks
+            else np.sqrt(clm.stiffness[coords]) * scales
+        )
+
+    def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
+        """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
+        multipliers, SVD of J_c.
+
+        Keys: ``c`` (m,) closure residual; ``closure`` its infinity norm [m, rad]; ``F``
+        the generalised force g + G - J^T w on the free coordinates [N m, N] (G: the
+        weight, if any); ``force`` the
+        infinity norm of its unbalanced part F + J_c^T lambda (the vector: ``unbalanced``);
+        ``spring``, ``load`` the spring and load generalised forces on the free
+        coordinates; ``lam`` (m,) least-squares multipliers; ``Ur``,
+        ``sr``, ``R``, ``N``: the SVD of the unit-free J_c on the free coordinates (row
+        space, null space), rows in metres over L and translational coordinates y = x / L
+        (:class:`SolverUnits`), so that its rank rule does not depend on the size.
+        Leaves the kinematics of q in ``clm.data``.
+        """
+        clm, free = self.clm, self.free
+        c, A = closure_gap(clm, q)
+        A = A[:, free]
+        J = frame_jacobian(clm, q, self.frame, "world", update=False)
+        e = deflection(clm, self.q_rest, q)
+        g = deflection_jacobian(clm, self.q_rest, q).T @ spring_law(clm, e)[0]
+        load = self.generalised_load(q, w, J)
+        F = (g - load)[free]
+        rows, cols = self.units.rows, self.free_scales
+        if A.size:  # unit-free: A_s = diag(1 / rows) A diag(cols), F_y = diag(cols) F
+            U, s, Vt = np.linalg.svd(A / rows[:, None] * cols, full_matrices=True)
+            r = rule_rank(s)
+        else:
+            U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0
+        Ur, sr, R, N = U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
+        F_y = cols * F
+        lam = -Ur @ ((R.T @ F_y) / sr) / rows
+        unbalanced = (F_y - R @ (R.T @ F_y)) / cols  # F + A^T lam, its component along N
+        return {
+            "c": c,
+            "closure": float(np.max(np.abs(c), initial=0.0)),
+            "F": F,
+            "force": float(np.max(np.abs(unbalanced), initial=0.0)),
+            "unbalanced": unbalanced,
+            "spring": g[free],
+            "load": load[free],
+            "lam": lam,
+            "Ur": Ur,
+            "sr": sr,
+            "R": R,
+            "N": N,
+        }
+
+    def generalised_load(self, q: np.ndarray, w: Load | np.ndarray, J: np.ndarray) -> np.ndarray:
+        """(nv,) J^T w - G(q): the wrench and the weight as generalised forces [N m, N]."""
+        w = as_load(w)
+        return J.T @ w.wrench - w.forces(q, self.clm.model.nv)
+
+    def _restricted(self, q, w, st: dict) -> np.ndarray:
+        w = as_load(w)
+        H = tangent_stiffness(
+            self.clm, q, self.q_rest, self.frame, w.wrench, st["lam"], gravity=w, update=False
+        )
+        return H[np.ix_(self.free, self.free)]
+
+    def step(self, q, w, st: dict, load: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """(nv,) tangent step at q (state ``st`` of :meth:`evaluate` under w), and the number
+        of admissible directions it left out (a stiffness below RANK_RTOL^2 of the largest:
+        spring-free, or beyond the resolution of the solve).
+
+        Without ``load``: the Newton step, a minimum-norm Gauss-Newton correction of the
+        closures plus the Newton step of N^T F on the admissible motions. With ``load``
+        (a :class:`Load` or a wrench (6,)): the rate dq/ds of the equilibrium when the
+        load grows by s ``load``. NaN when the equations overflow the double range (a
+        load near 1e308 N).
+        """
+        free, cols = self.free, self.free_scales
+        H = cols[:, None] * self._restricted(q, w, st) * cols  # on y = x / cols
+        R = st["R"]
+        if load is None:  # restores the closures
+            dy = -R @ ((st["Ur"].T @ (st["c"] / self.units.rows)) / st["sr"])
+            rhs = -(cols * st["F"] + H @ dy)
+        else:
+            J = frame_jacobian(self.clm, q, self.frame, "world", update=False)
+            dy, rhs = np.zeros(free.size), cols * self.generalised_load(q, load, J)[free]
+        # on the admissible motions: the sprung ones normalised by their springs and set on
+        # the scale of the stiffest (a soft spring beside a stiff one is solved for, however
+        # far apart), the spring-free ones as they are; a direction resisted less than
+        # RANK_RTOL^2 of that scale is left out (spring-free, or beyond the solve)
+        T, Z, top = self._sprung_motions(st)
+        B = np.hstack([T * top, Z])
+        with np.errstate(over="ignore", invalid="ignore"):  # a load beyond the doubles
+            lhs, rhs = B.T @ H @ B, B.T @ rhs
+        if not (np.all(np.isfinite(lhs)) and np.all(np.isfinite(rhs))):
+            return np.full(self.clm.model.nv, np.nan), B.shape[1]  # the callers stop on NaN
+        x, _, rank, _ = np.linalg.lstsq(lhs, rhs, rcond=RANK_RTOL**2)
+        dy += B @ x
+        v = np.zeros(self.clm.model.nv)
+        v[free] = cols * dy
+        return v, B.shape[1] - rank
+
+    def _sprung_motions(self, st: dict) -> tuple[np.ndarray, np.ndarray, float]:
+        """The admissible motions of ``st`` (on y = x / cols) split as the spring factor of
+        :func:`closedloop.elastostatics.springs.spring_factor` splits them: T (n_free, r) those that
+        move a sprung coordinate, with T^T K_q T = I; Z (n_free, d - r) orthonormal, the
+        spring-free ones (by the rank rule on the sprung rows, not on the springs' values);
+        and the largest singular value of the spring factor [sqrt(N m)]."""
+        N = st["N"]
+        V, sig, Z = spring_split(N[self.sprung], self.root)
+        return N @ (V / sig), N @ Z, float(sig[0]) if sig.size else 1.0
+
+    def margin(self, q: np.ndarray, w: Load | np.ndarray) -> float:
+        """Stability margin at an equilibrium q (nq,) under the load w (the first value of
+        :meth:`stability`)."""
+        return self.stability(q, w)[0]
+
+    def stability(self, q: np.ndarray, w: Load | np.ndarray) -> tuple[float, float]:
+        """(margin, tau) at an equilibrium q (nq,) under the load w, both dimensionless.
+
+        tau is the smallest singular value of the spring-scaled tangent stiffness M (the
+        matrix whose symmetric part gives the margin) with the sign of det M: 1 unloaded,
+        0 where K_t turns singular (a limit load or a bifurcation), and it changes sign
+        only there; also for a world-fixed moment, whose M is not symmetric and whose
+        margin may turn negative while M stays regular. Near a limit load it falls like
+        the square root of the load still to go.
+
+        The margin, as in :class:`closedloop.elastostatics.preload.PreloadedCompliance`: the
+        smallest eigenvalue of the symmetric part of N^T K_t N on the motions with a restoring
+        spring, scaled by their spring stiffness; 1 unloaded, 0 where K_t turns singular,
+        < 0 if unstable. Spring-free motions the load does not act on (a rod spinning about
+        its axis) are left out; the sprung ones are those that move a sprung coordinate
+        (:meth:`_sprung_motions`). The spring-free ones that the load acts on (a link
+        hanging on a passive joint) settle with them (:func:`settled_tangent`,
+        :func:`stability_margin`).
+        """
+        st = self.evaluate(q, w)
+        T, Z, top = self._sprung_motions(st)
+        T, Z = self.free_scales[:, None] * T, self.free_scales[:, None] * Z / top  # on x
+        H = self._restricted(q, w, st)
+        M = settled_tangent(T.T @ H @ T, H, T, Z)[0]  # T^T K_q T = I on the sprung ones
+        if not M.size:
+            return 1.0, 1.0
+        tau = np.linalg.slogdet(M)[0] * np.linalg.svd(M, compute_uv=False)[-1]
+        return stability_margin(M, T.shape[1]), float(tau)

@@ -1,0 +1,408 @@
+"""Compliance and stiffness about an unloaded configuration: the result type and its kernel.
+
+Method (the Jacobian method K = J^-T K_q J^-1 generalised to loops). Let N (nv, d) span
+the tangent motions dq that keep every closure and locked joint (``J_c N = 0``), K_q the
+joint stiffness (0 for passive joints; diagonal, or block diagonal with the coupled
+springs of multi-dof joints, ``ClosedLoopModel.spring_blocks``) and J (6, nv) the frame
+Jacobian. With dq = N y, the potential energy of the springs is 1/2 y^T (N^T K_q N) y
+and a wrench w at the frame does the work w^T J N y, so at equilibrium
+
+    K_r y = N^T J^T w,   K_r = N^T K_q N   (d, d)
+    dq = G w,            G = N K_r^+ N^T J^T   (nv, 6)
+    C = J G = (J N) K_r^+ (J N)^T   (6, 6)
+
+Passive joints and redundant closure rows need no special case: they only shape N.
+A null direction z of K_r is a motion without any restoring spring. If it moves the
+frame (J N z != 0) there is no equilibrium (:class:`MechanismError`); if not, it is an
+internal mobility (e.g. a link spinning about its own axis) and is left out.
+
+Numerics (:mod:`closedloop.common.conditioning`). Everything is computed in unit-free
+coordinates: lengths divided by the characteristic length L of the configuration, in
+joint space (prismatic coordinates dq / L, their springs k L^2 [N m]) as in Cartesian
+space. K_r is never formed: the SVD of its square-root factor S = R N (K_q = R^T R; R is
+sqrt(k), or the transposed Cholesky factor of a block) gives K_r = V diag(sigma^2) V^T to
+the precision of S. A motion is spring-free when the sprung rows of N see it less than
+``RANK_RTOL`` times the motion they see most (the rule of the rank of C, on the
+kinematics: the springs' values, however far apart, do not decide it).
+C = B B^T with B = J N V diag(1/sigma), and K comes from the SVD of B, never from
+inv(C), which would lose cond(C) = cond(J)^2 digits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from closedloop.common.arrays import ReadOnlyArrays, check_wrench, frozen, readonly
+from closedloop.common.conditioning import (
+    ILL_CONDITIONED,
+    RANK_RTOL,
+    Spectrum,
+    spectrum_from_factor,
+    twist_scaling,
+)
+from closedloop.elastostatics.springs import (
+    SpringFactor,
+    kinematic_factor,
+    partition,
+    scaling,
+    spring_factor,
+)
+from closedloop.exceptions import (
+    InvalidInputError,
+    RigidDirectionsError,
+    SingularConfigurationError,
+)
+from closedloop.kinematics.configuration import Configuration
+from closedloop.model.closed_loop import ClosedLoopModel
+
+#: Labels of the twist / wrench coordinates, in order.
+TWIST_LABELS = ("dx", "dy", "dz", "rx", "ry", "rz")
+UNITS = {
+    "twist": "dx, dy, dz [m]; rx, ry, rz [rad] (small rotation vector)",
+    "wrench": "fx, fy, fz [N]; nx, ny, nz [N m]",
+    "C": "m/N, m/(N m) = rad/N, rad/(N m)",
+    "K": "N/m, N/rad, N m/m, N m/rad",
+    "length": "m",
+    "condition_number": "1 (scaled stiffness K_s, twists (d/L, r), wrenches (f L, n))",
+}
+
+
+@dataclass(frozen=True)
+class ComplianceResult(ReadOnlyArrays):
+    """Compliance of a mechanism at one frame and configuration (arrays read-only).
+
+    Attributes:
+        C: (6, 6) compliance [SI], twist (dx, dy, dz, rx, ry, rz) per wrench
+            (fx, fy, fz, nx, ny, nz), both at ``point``, in ``axes``.
+        frame: name of the loaded frame.
+        axes: ``"world"`` (world-aligned) or ``"local"`` (the frame's own axes).
+        point: (3,) reference point [m], world frame: the frame origin.
+        q: (nq,) configuration.
+        rank: rank of C (unit-free rule of :mod:`closedloop.common.conditioning`).
+        rigid_directions: (6, 6 - rank) orthonormal basis of the twists that no wrench
+            produces (empty when C is full rank).
+        closure_residual: infinity norm of the loop-closure residual at q [m, rad].
+        mobility: dimension d of the admissible motions (closures and locks kept).
+        internal_mobilities: spring-free motions that do not move the frame.
+        G: (nv, 6) map from wrench to joint deflection dq (tangent of q) [rad or m per N, N m].
+        length: characteristic length L [m] of the unit-free scaling.
+        condition_number: cond(K_s) of the scaled stiffness over the rank of C,
+            dimensionless; above ``ILL_CONDITIONED`` (1e8) the result is ill-conditioned.
+        stiffness_matrix: (6, 6) K [SI] from the square-root factor when rank is 6, else
+            None; read it as :attr:`K`, which explains a missing K.
+        path: how the admissible motions were found (:class:`SpringFactor`):
+            ``"serial"``, ``"partitioned"`` or ``"null-space"``.
+        note: why C = 0 when no wrench moves the frame (:func:`spring_note`), else "".
+    """
+
+    C: np.ndarray
+    frame: str
+    axes: str
+    point: np.ndarray
+    q: np.ndarray
+    rank: int
+    rigid_directions: np.ndarray
+    closure_residual: float
+    mobility: int
+    internal_mobilities: int
+    G: np.ndarray = field(repr=False)
+    length: float = field(kw_only=True)
+    condition_number: float = field(kw_only=True)
+    stiffness_matrix: np.ndarray | None = field(kw_only=True, repr=False)
+    path: str = field(kw_only=True, default="null-space")
+    note: str = field(kw_only=True, default="", repr=False)
+
+    @property
+    def is_full_rank(self) -> bool:
+        """True when C is invertible (the stiffness exists)."""
+        return self.rank == 6
+
+    @property
+    def ill_conditioned(self) -> bool:
+        """True when cond(K_s) exceeds ``ILL_CONDITIONED``: near a singular configuration,
+        the stiffest direction of K is known to about 1e-16 sqrt(cond) relative."""
+        return self.condition_number > ILL_CONDITIONED
+
+    @property
+    def K(self) -> np.ndarray:
+        """(6, 6) stiffness C^-1 [SI], same point and axes as C.
+
+        Raises:
+            RigidDirectionsError: C is rank deficient; the error lists the rigid directions.
+        """
+        if not self.is_full_rank or self.stiffness_matrix is None:
+            raise RigidDirectionsError(
+                f"compliance at frame {self.frame!r} has rank {self.rank} < 6: the stiffness "
+                f"is infinite along {describe_directions(self.rigid_directions)}"
+                + (f"; {self.note}" if self.note else ""),
+                self.rigid_directions,
+            )
+        return self.stiffness_matrix
+
+    def deflection(self, wrench: np.ndarray) -> np.ndarray:
+        """(6,) twist (dx, dy, dz [m], rx, ry, rz [rad]) of the frame under ``wrench`` (6,)."""
+        w = check_wrench(wrench)
+        return finite_product(lambda: self.C @ w, "deflection", wrench)
+
+    def joint_deflection(self, wrench: np.ndarray) -> np.ndarray:
+        """(nv,) joint deflection dq (tangent of q) [rad or m] under ``wrench`` (6,)."""
+        w = check_wrench(wrench)
+        return finite_product(lambda: self.G @ w, "joint deflection", wrench)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary: K (or None), C, frame, axes, point, rank, conditioning, units."""
+        return {
+            "K": self.K.tolist() if self.is_full_rank else None,
+            "C": self.C.tolist(),
+            "frame": self.frame,
+            "axes": self.axes,
+            "point": self.point.tolist(),
+            "order": list(TWIST_LABELS),
+            "rank": self.rank,
+            "rigid_directions": self.rigid_directions.T.tolist(),
+            "condition_number": self.condition_number,
+            "ill_conditioned": self.ill_conditioned,
+            "length": self.length,
+            "closure_residual": self.closure_residual,
+            "mobility": self.mobility,
+            "internal_mobilities": self.internal_mobilities,
+            "path": self.path,
+            "note": self.note,
+            "units": UNITS,
+        }
+
+
+def finite_product(product, what: str, wrench) -> np.ndarray:
+    """``product()`` (a map applied to the wrench), read-only, or :class:`InvalidInputError`
+    if it overflows (the message names ``what`` and the wrench)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = product()
+    if not np.isfinite(x).all():
+        raise InvalidInputError(
+            f"the {what} under wrench {np.asarray(wrench).tolist()} overflows the floating "
+            "point range; give a smaller load"
+        )
+    return readonly(x)
+
+
+def describe_directions(V: np.ndarray) -> str:
+    """Readable list of twist directions, e.g. ``[+0.71 dx +0.71 rz]``."""
+    parts = []
+    for v in np.asarray(V).T:
+        v = v * np.sign(v[np.argmax(np.abs(v))])
+        terms = [f"{c:+.2f} {lab}" for c, lab in zip(v, TWIST_LABELS, strict=True) if abs(c) > 5e-3]
+        parts.append("[" + " ".join(terms) + "]")
+    return ", ".join(parts)
+
+
+def unloaded_compliance(state: Configuration, frame: str, axes: str, path: str) -> ComplianceResult:
+    """Compliance of a closed configuration without preload: the kernel of
+    :func:`closedloop.elastostatics.compliance.compliance` without gravity, payloads or preload, its
+    arguments already checked.
+
+    Args:
+        state: a closed configuration.
+        frame: name of the loaded frame.
+        axes: ``"world"`` or ``"local"``.
+        path: ``"auto"`` (the partitioned fast path where it applies) or ``"nullspace"``.
+    """
+    J = state.frame_jacobian(frame, axes)
+    sc = scaling(state)
+    fast = partition(state, sc) if path == "auto" else None
+    if fast is not None:
+        return _fast_compliance(state, frame, axes, J, sc, *fast)
+    f = spring_factor(state, J, frame)
+    NV = f.NV
+    JNV = (J @ NV) * sc.d[:, None]  # scaled, kinematic
+    B_s = JNV / f.sigma  # C_s = B_s B_s^T
+    spread = f.sigma.max() / f.sigma.min() if f.sigma.size else 1.0
+    spectrum = spectrum_from_factor(B_s, state.length, range_factor=JNV, spread=spread)
+    P = NV / f.sigma
+    B = J @ P  # C = B B^T
+    return compliance_result(state, frame, axes, B @ B.T, P @ B.T, f, spectrum)
+
+
+def _fast_compliance(
+    state: Configuration, frame: str, axes: str, J: np.ndarray, sc, path: str, X
+) -> ComplianceResult:
+    """The serial and partitioned paths without forming N (nv, s).
+
+    In the scaled spring coordinates y = dq_s / s_q the joints move by dq = T y, with
+    T = diag(s_q) on the sprung coordinates and s_p X on the passive ones
+    (:func:`closedloop.elastostatics.springs.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k),
+    or V diag(1/sigma) with spring blocks). With P = T W (nv, s): C = B B^T, B = J P (6, s),
+    and G = P B^T, the same factor as the null-space path's (module docstring) on the same
+    spectrum rule. The rank rule reads J on an orthonormal basis of the admissible
+    motions, as the null-space path's J N V does: B diag(sigma) = J T V when T selects
+    the sprung coordinates (serial), else :func:`closedloop.elastostatics.springs.kinematic_factor`
+    (the singular values of J T V differ from those by up to cond(T), which would move
+    the rank decision of a pose near the threshold; the spread of the full-rank test
+    widens by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
+    """
+    if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
+        B = J * sc.P_diagonal
+        G = B.T * sc.P_diagonal[:, None]
+    else:
+        P = sc.P0.copy()
+        if X is not None:  # dq_p = s_p X y
+            P[sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
+        B = J @ P
+        G = P @ B.T
+    B_s = B * sc.d[:, None]
+    if X is None:  # T selects the sprung coordinates: J T V is the orthonormal-basis factor
+        kinematic, spread = (lambda: B_s * sc.sigma), sc.spread
+    else:  # T = [I; X] is not orthonormal: cond(T) <= sqrt(1 + |X|_F^2) widens the spread
+        cond_T = math.sqrt(1.0 + float(np.vdot(X, X)))
+        kinematic = lambda: kinematic_factor(J, sc, X, B_s * sc.sigma, cond_T)  # noqa: E731
+        spread = sc.spread * cond_T
+    spectrum = spectrum_from_factor(B_s, state.length, kinematic, spread, scales=(sc.d, sc.dd))
+    return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
+
+
+def compliance_result(
+    state: Configuration,
+    frame: str,
+    axes: str,
+    C: np.ndarray,
+    G: np.ndarray,
+    f: SpringFactor,
+    spectrum: Spectrum,
+    cls: type[ComplianceResult] | None = None,
+    **extra,
+) -> ComplianceResult:
+    """A checked :class:`ComplianceResult` (or subclass, with ``extra`` fields) of the
+    general path's factor ``f`` (:func:`closedloop.elastostatics.springs.spring_factor`).
+
+    Raises:
+        SingularConfigurationError: C, G or K are not finite (overflow).
+    """
+    mobility, internal = f.N.shape[1], f.n_internal
+    return _result(
+        state, frame, axes, C, G, spectrum, mobility, internal, "null-space", cls, **extra
+    )
+
+
+def _result(
+    state: Configuration,
+    frame: str,
+    axes: str,
+    C: np.ndarray,
+    G: np.ndarray,
+    spectrum: Spectrum,
+    mobility: int,
+    n_internal: int,
+    path: str,
+    cls: type[ComplianceResult] | None = None,
+    **extra,
+) -> ComplianceResult:
+    """:func:`compliance_result` from the numbers of the spring factor."""
+    K, add = spectrum.K, np.add.reduce
+    total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
+    if not math.isfinite(total) and not (  # a NaN or inf anywhere; or a sum that overflows
+        np.isfinite(C).all() and np.isfinite(G).all() and (K is None or np.isfinite(K).all())
+    ):
+        k = state.model.stiffness
+        k = k[(k > 0) & np.isfinite(k)]
+        springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"
+        raise SingularConfigurationError(
+            f"the compliance or stiffness at frame {frame!r} of {state.model.name!r} overflows "
+            f"the floating point range ({springs}; expected springs well within 1e-300..1e300, "
+            "away from a singular configuration)"
+        )
+    fields = dict(
+        C=frozen(C),
+        frame=frame,
+        axes=axes,
+        point=readonly(state.data.oMf[state.model.frame_id(frame)].translation),
+        q=state.q,
+        rank=spectrum.rank,
+        rigid_directions=spectrum.rigid_directions,
+        closure_residual=state.residual_norm,
+        mobility=mobility,
+        internal_mobilities=n_internal,
+        G=frozen(G),
+        length=spectrum.length,
+        condition_number=spectrum.condition_number,
+        stiffness_matrix=K,
+        path=path,
+        note=spring_note(state.model) if spectrum.rank == 0 else "",
+    )
+    if cls is None:  # every field given, checked above: set without the dataclass __init__
+        result = object.__new__(ComplianceResult)
+        result.__dict__.update(fields)
+        return result
+    return cls(**fields, **extra)
+
+
+#: How to give springs, in every API and command-line message that finds none.
+HOW_TO_GIVE_SPRINGS = (
+    "give springs: command line --joint-stiffness K (every actuated joint) or --springs FILE "
+    "(joint -> stiffness), Python load_model(..., joint_stiffness=K) or springs={...}"
+)
+
+
+def spring_note(clm: ClosedLoopModel) -> str:
+    """Why no wrench moves a frame (C = 0) of ``clm``: the model has no spring at all (no
+    joint, beam or closure: every actuated joint without one is rigid), or none of its
+    springs moves the frame; with :data:`HOW_TO_GIVE_SPRINGS` in the first case."""
+    k = clm.stiffness
+    if not np.any((k > 0) & np.isfinite(k)):
+        return (
+            "no joint, beam or closure of the model has a spring (an actuated joint without "
+            "one is rigid), so nothing deflects; " + HOW_TO_GIVE_SPRINGS
+        )
+    return "none of the model's springs moves this frame (the frame is not beyond them)"
+
+
+def energy_shares(clm: ClosedLoopModel, result: ComplianceResult, wrench) -> dict[str, float]:
+    """Share of the deflection energy under ``wrench`` stored in each spring and each beam:
+    "which element limits the stiffness at this frame for this load?".
+
+    The joint deflection dq = G w stores 1/2 dq_j^T K_j dq_j in the spring of joint j (a
+    number per coordinate or a block; a beam's is its virtual joint ``<link>_beam``,
+    :mod:`closedloop.model.beams`); at equilibrium the energies sum to the work 1/2 w^T C w, so
+    the shares sum to 1. For the unloaded compliance only: a preloaded one adds the
+    preload's own energy terms, which are not split (InvalidInputError).
+
+    Args:
+        clm: the model of ``result``.
+        result: a compliance of ``clm`` (:func:`closedloop.elastostatics.compliance.compliance`).
+        wrench: (6,) (f [N], n [N m]) at the result's point, in its axes.
+
+    Returns:
+        joint name -> share (dimensionless, >= 0), every joint with a finite spring, in
+        the model's order; empty when the wrench does no work: a zero wrench, or one along
+        the rigid directions, whose work w^T C w is rounding (in the scaled coordinates of
+        the rank rule, at most ``RANK_RTOL**2 * norm(C_s) * norm(w_s)**2``, Frobenius norm:
+        about the most that a wrench along a direction the rank leaves out could do).
+    """
+    if hasattr(result, "equilibrium"):  # a PreloadedCompliance
+        raise InvalidInputError(
+            "energy_shares splits the energy of an unloaded compliance; this one is under a "
+            "preload, whose own energy terms are not split (compute the shares without it)"
+        )
+    w = check_wrench(wrench)
+    size = float(np.max(np.abs(w)))
+    if size == 0.0:
+        return {}
+    w = w / size  # the shares do not depend on the size of the load: no overflow
+    total = float(w @ result.C @ w)
+    d = twist_scaling(result.length)  # scaled twists D t, scaled wrenches D^-1 w
+    with np.errstate(over="ignore", invalid="ignore"):
+        C_s, w_s = result.C * d[:, None] * d, w / d
+        rounding = RANK_RTOL**2 * np.linalg.norm(C_s) * float(w_s @ w_s)  # |C_s|_F >= |C_s|_2
+    if total <= (rounding if math.isfinite(rounding) else 0.0):  # C_s may overflow: then w^T C w
+        return {}
+    dq = result.G @ w
+    f = clm.spring_forces(dq)
+    out = {}
+    k = clm.stiffness
+    for j in range(1, clm.model.njoints):
+        jm = clm.model.joints[j]
+        v = slice(jm.idx_v, jm.idx_v + jm.nv)
+        if jm.nv and np.any((k[v] > 0) & np.isfinite(k[v])):
+            out[clm.model.names[j]] = float(dq[v] @ f[v])
+    return {n: e / total for n, e in out.items()}

@@ -1,0 +1,2 @@
+"""Model files in: URDF + closure files, MJCF, SDF, bundled and example-robot-data
+models, strict YAML."""

@@ -1,0 +1,246 @@
+"""Closure files: the YAML file beside a URDF (loop closures, actuated joints, springs,
+locked joints, beams, ball joints), the side file of an MJCF or SDF model (actuated joints,
+springs, locked joints, beams) and the springs file, read strictly
+(:mod:`closedloop.io.strict_yaml`) with errors that name the file and the key.
+
+Closure file (YAML), after the "Extended URDF" convention, extended with springs::
+
+    closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
+    type: ['3d' | '6d', ...]               # point or weld, one per pair
+    name_mot: [joint, ...]                 # actuated joints
+    springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
+    locked: [joint, ...]                   # optional rigid joints
+    beams: {link: {end: joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}
+                                           # optional flexible links (closedloop.model.beams);
+                                           # section: geometry = the link's URDF shape
+
+A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
+number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pinocchio as pin
+
+from closedloop.common.arrays import decimal
+from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
+from closedloop.model.closed_loop import check_locked_springs
+from closedloop.model.closures import joint_id
+
+CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
+SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
+Stiffness = float | list[float]
+
+
+@dataclass(frozen=True)
+class ClosureSpec:
+    """Contents of a closure file (see the module docstring).
+
+    ``actuated`` is ``None`` when the file has no ``name_mot`` key.
+    """
+
+    pairs: tuple[tuple[str, str], ...] = ()
+    types: tuple[str, ...] = ()
+    actuated: tuple[str, ...] | None = None
+    springs: dict[str, Stiffness] = field(default_factory=dict)
+    locked: tuple[str, ...] = ()
+    beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.model.beams)
+    balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.model.balls)
+
+
+def existing_path(path: str | Path, what: str) -> Path:
+    """``path`` as a Path, once it is a file that can be opened (Pinocchio's readers say
+    "does not exist" of a file they cannot read)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{what} {str(path)!r} does not exist or is not a file")
+    try:
+        path.open("rb").close()
+    except OSError as e:
+        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e.strerror}") from None
+    return path
+
+
+def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
+    import yaml  # on demand, as below: a model without such a file reads no YAML
+
+    from closedloop.io import strict_yaml
+
+    path = existing_path(path, what)
+    try:
+        doc = strict_yaml.load(path.read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e}") from None
+    except yaml.YAMLError as e:
+        msg = " ".join(str(e).split())
+        raise ModelFileError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
+    if not isinstance(doc, dict):
+        raise ModelFileError(
+            f"{what} {str(path)!r}: expected a mapping at top level, got "
+            + ("an empty file" if doc is None else type(doc).__name__)
+        )
+    return path, doc
+
+
+def file_number(value, where: str, name: str) -> float:
+    if isinstance(value, str):
+        from closedloop.io.strict_yaml import (
+            overflowing,  # loaded with the file that holds the value
+        )
+
+        if overflowing(value):
+            raise ModelFileError(
+                f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
+                "range (about 1.8e308); expected a number, or .inf to lock the joint"
+            )
+        try:
+            value = decimal(value.strip())
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ModelFileError(
+            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number"
+        )
+    if math.isnan(value) or value < 0:
+        raise ModelFileError(
+            f"{where}: stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
+            "(0 = passive, .inf = locked)"
+        )
+    return float(value)
+
+
+def _check_springs(springs, where: str) -> dict[str, Stiffness]:
+    """Validated joint -> stiffness mapping (a number or a list of numbers per joint)."""
+    if not isinstance(springs, dict) or not all(isinstance(k, str) for k in springs):
+        raise ModelFileError(f"{where}: springs must be a mapping joint name -> stiffness")
+    out: dict[str, Stiffness] = {}
+    for name, value in springs.items():
+        if isinstance(value, list) and value:
+            out[name] = [file_number(v, where, name) for v in value]
+        else:
+            out[name] = file_number(value, where, name)
+    return out
+
+
+def _value(doc: dict, key: str, empty):
+    """``doc[key]``, or ``empty`` when it is absent or null (a ``0`` or ``false`` stays, for
+    the type check to refuse)."""
+    value = doc.get(key)
+    return empty if value is None else value
+
+
+def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
+    if key not in doc:
+        return None
+    names = doc[key] if doc[key] is not None else []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ModelFileError(f"{where}: {key} must be a list of joint names, got {names!r}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ModelFileError(f"{where}: {key} names {twice} more than once; expected each once")
+    return tuple(names)
+
+
+def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> ClosureSpec:
+    """Parse and validate a closure file.
+
+    Args:
+        path: YAML file (see the module docstring).
+        keys: keys allowed at top level (:data:`SIDE_FILE_KEYS` for an MJCF side file).
+
+    Raises:
+        ModelFileError: missing or unreadable file, invalid YAML, unknown key, malformed
+            value; the message names the file and the fault.
+    """
+    path, doc = _read_yaml_mapping(path, "closure file")
+    where = f"closure file {str(path)!r}"
+    unknown = set(doc) - set(keys)
+    if unknown:
+        raise ModelFileError(
+            f"{where}: unknown key(s) {sorted(map(str, unknown))}; expected {', '.join(keys)}"
+        )
+    pairs, types = _value(doc, "closed_loop", []), _value(doc, "type", [])
+    if not isinstance(pairs, list) or any(
+        not isinstance(p, list) or len(p) != 2 or not all(isinstance(n, str) for n in p)
+        for p in pairs
+    ):
+        raise ModelFileError(
+            f"{where}: closed_loop must be a list of [frameA, frameB] name pairs, got {pairs!r}"
+        )
+    if not isinstance(types, list) or len(types) != len(pairs):
+        raise ModelFileError(
+            f"{where}: type must list one of '3d'/'6d' per closed_loop pair "
+            f"({len(pairs)}), got {types!r}"
+        )
+    bad = [t for t in types if t not in ("3d", "6d")]
+    if bad:
+        raise ModelFileError(f"{where}: type {bad[0]!r}; expected '3d' or '6d'")
+    return ClosureSpec(
+        pairs=tuple((a, b) for a, b in pairs),
+        types=tuple(types),
+        actuated=_name_list(doc, "name_mot", where),
+        springs=_check_springs(_value(doc, "springs", {}), where),
+        locked=_name_list(doc, "locked", where) or (),
+        beams=_check_beams(_value(doc, "beams", {}), where),
+        balls=_name_list(doc, "balls", where) or (),
+    )
+
+
+def _check_beams(beams, where: str) -> dict[str, dict]:
+    """``beams:`` mapping link name -> beam mapping; the beams module checks the contents."""
+    if not isinstance(beams, dict) or not all(
+        isinstance(k, str) and isinstance(v, dict) for k, v in beams.items()
+    ):
+        raise ModelFileError(
+            f"{where}: beams must be a mapping link name -> {{end, E, G, section, theory}} "
+            f"or {{end, stiffness_6x6}}, got {beams!r}"
+        )
+    return beams
+
+
+@contextmanager
+def in_file(where: str) -> Iterator[None]:
+    """Put ``where`` (the file that gave the names) first in the message of a name or value
+    error raised inside; the error keeps its type."""
+    try:
+        yield
+    except (NameNotFoundError, InvalidInputError) as e:
+        e.args = (f"{where}: {e.args[0]}", *e.args[1:])
+        raise
+
+
+def check_spec_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
+    """:class:`NameNotFoundError` or :class:`InvalidInputError`, naming the file ``where``,
+    for a joint of the file's ``name_mot``, ``springs`` or ``locked`` that ``model`` lacks,
+    or one both locked and given a spring there."""
+    with in_file(where):
+        for name in (*(spec.actuated or ()), *spec.springs, *spec.locked):
+            joint_id(model, name)
+        check_locked_springs(spec.springs, spec.locked)
+
+
+def read_side_file(model: pin.Model, side_file, springs: dict) -> tuple[ClosureSpec, dict]:
+    """(the side file's contents, its joint names checked; the robot file's ``springs``
+    with those of the side file merged over them, those of the joints it locks removed)."""
+    if side_file is None:
+        return ClosureSpec(), springs
+    spec = read_closure_file(side_file, SIDE_FILE_KEYS)
+    check_spec_names(model, spec, f"closure file {str(side_file)!r}")
+    kept = {n: k for n, k in springs.items() if n not in spec.locked}
+    return spec, {**kept, **spec.springs}
+
+
+def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
+    """Joint -> stiffness mapping [N m/rad or N/m] from a YAML file ``{joint: value}``.
+
+    Raises:
+        ModelFileError: missing file, invalid YAML, a value that is not a number >= 0.
+    """
+    path, doc = _read_yaml_mapping(path, "springs file")
+    return _check_springs(doc, f"springs file {str(path)!r}")

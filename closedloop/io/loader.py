@@ -1,0 +1,431 @@
+"""Loading models: URDF + closure file, MJCF with equality constraints, serial robots.
+
+The closure file and the side file: :mod:`closedloop.io.closure_file`.
+
+Sources of actuated joints and springs, later ones overriding earlier ones:
+
+* URDF with a closure file: the file (no ``name_mot``: nothing actuated).
+* URDF without closure file (serial robot): the 1-dof joints of the main chain, from
+  the root to the first joint with several child joints, are actuated; the 1-dof joints
+  beyond that branching (the Panda's fingers) are locked, so that a gripper neither adds
+  inputs nor takes a joint spring, unless the keyword ``springs`` or ``actuated`` names
+  them. A tree that branches at its root needs a closure file.
+* MJCF: every ``<actuator>`` child with a ``joint`` attribute makes that joint actuated;
+  a joint ``stiffness`` attribute > 0 (``<default>`` classes resolved) is a spring.
+  Pinocchio's model does not keep either, so they are read from the XML here. A side
+  file in the closure-file format with only ``name_mot``/``springs``/``locked`` overrides
+  them (``name_mot`` replaces the actuator list; springs are merged; locked added, a joint
+  it locks losing the robot file's spring). An SDF's side file likewise.
+* Keyword ``springs``: merged over all of the above.
+* Keyword ``joint_stiffness``: given to every actuated joint that has no spring yet.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import tempfile
+import threading
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.exceptions import InvalidInputError, ModelFileError
+from closedloop.io.closure_file import (
+    SIDE_FILE_KEYS,
+    ClosureSpec,
+    Stiffness,
+    check_spec_names,
+    existing_path,
+    file_number,
+    in_file,
+    read_closure_file,
+    read_side_file,
+)
+from closedloop.io.closure_file import (
+    read_springs_file as read_springs_file,  # importable from here too
+)
+from closedloop.io.data import BUNDLED_MODELS, ROBOTS
+from closedloop.io.data import (
+    robot_data_dir as robot_data_dir,  # its former home; cl.robot_data_dir
+)
+from closedloop.io.mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
+from closedloop.io.sdf import REST, load_sdf
+from closedloop.model.balls import ball_springs, urdf_with_balls
+from closedloop.model.beams import apply_beams
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closures import Closure, closure_between_frames, joint_names
+
+#: Model-file suffixes and their format.
+MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
+
+
+def _by_name_hint(path: str | os.PathLike) -> str:
+    """Where a robot named like the command line's MODEL (``"ur5"``, ``"fourbar"``) is
+    found from Python, for the message of a path without a suffix; else ""."""
+    name = os.fspath(path)
+    if name in ROBOTS:
+        return f"; the robot {name!r} by name is cl.load_model(cl.data.robot_file({name!r}))"
+    if name in BUNDLED_MODELS:
+        files = ", ".join(f"cl.data.path({f!r})" for f in BUNDLED_MODELS[name] if f)
+        return f"; the bundled model {name!r} is cl.load_model({files})"
+    return ""
+
+
+# ------------------------------------------------------------------------ model files
+#: Held while a parser's native output is captured (:func:`_parse`).
+_PARSE_LOCK = threading.Lock()
+
+
+def _parse(build: Callable, path: Path, what: str):
+    """Run a Pinocchio parser; a failure becomes a one-line :class:`ModelFileError`.
+
+    What the parser's native code writes on file descriptor 2 is captured. urdfdom's
+    "Error:" lines are folded into the message of a failure, and make one of a success
+    (urdfdom then has dropped the element, e.g. an inertial whose mass is not a number);
+    other lines are passed on to ``sys.stderr``.
+    """
+    sys.stderr.flush()
+    failure = None
+    # file descriptor 2 is the process's: one parser at a time redirects it (two threads
+    # loading models at once would each restore the other's file, leaving it in place)
+    with _PARSE_LOCK, tempfile.TemporaryFile() as tmp:
+        saved = os.dup(2)
+        os.dup2(tmp.fileno(), 2)
+        try:
+            result = build()
+        except (RuntimeError, ValueError, IndexError) as e:  # IndexError: a missing map key
+            failure = e
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        tmp.seek(0)
+        native = tmp.read().decode(errors="replace")
+    details = [ln.strip() for ln in native.splitlines() if ln.strip().startswith("Error:")]
+    detail = "; ".join(ln.removeprefix("Error:").strip() for ln in details[-2:])
+    if failure is None and not details:
+        sys.stderr.write(native)
+        return result
+    msg = " ".join(f"{failure or 'an element is dropped:'} {detail}".split())
+    raise ModelFileError(f"{what} {str(path)!r} cannot be parsed: {msg}")
+
+
+def _geometry(wanted: bool, build: Callable, path: Path) -> pin.GeometryModel | None:
+    return _parse(build, path, "geometry of robot file") if wanted else None
+
+
+def _package_dirs(path: Path) -> list[str]:
+    # ``package://pkg/...`` resolves against any folder that holds ``pkg``: try every
+    # ancestor of the file (example-robot-data uses package://example-robot-data/robots/...).
+    return [str(p) for p in path.resolve().parents]
+
+
+def _serial_defaults(model: pin.Model, path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(actuated, locked) joints of a robot file without closures (module docstring)."""
+    chain, j = [], 0
+    while len(model.children[j]) == 1:
+        j = model.children[j][0]
+        chain.append(j)
+    if model.njoints > 1 and not chain:
+        raise ModelFileError(
+            f"robot file {str(path)!r} branches at its root: give a closure file that lists "
+            "the actuated joints (name_mot)"
+        )
+    one_dof = [k for k in range(1, model.njoints) if model.joints[k].nv == 1]  # continuous too
+    actuated = tuple(model.names[k] for k in one_dof if k in chain)
+    locked = tuple(model.names[k] for k in one_dof if k not in chain)
+    return actuated, locked
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """What a robot file gives before the keyword overrides of :func:`load_model`."""
+
+    model: pin.Model
+    loops: list[Closure]
+    actuated: tuple[str, ...]
+    springs: dict[str, Stiffness]
+    locked: tuple[str, ...]
+    visual: pin.GeometryModel | None
+    undriven: tuple[str, ...] = ()  # MJCF actuators that name no joint
+    by_default: bool = False  # locked by the serial robot's default, not by a file
+    beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
+    balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
+    beam_masses: tuple = ()  # (virtual joint name, closedloop.model.beams.BeamMass) of the beams
+
+
+def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
+    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
+    if spec.balls:
+        copy = urdf_with_balls(path, spec.balls)
+        try:
+            return _read_urdf_tree(copy, spec, closures, geometry, beams, shown=path)
+        finally:
+            copy.unlink()
+    return _read_urdf_tree(path, spec, closures, geometry, beams)
+
+
+def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=None) -> _Tree:
+    # mimic joints follow their leader (nq = nv = 0), as the file says
+    build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
+    model = _parse(build, shown or path, "robot file")
+    _check_connected(model, path, shown or path)
+    _check_masses(model, shown or path)
+    _check_limits(model, shown or path)
+    visual = _geometry(
+        geometry,
+        lambda: pin.buildGeomFromUrdf(
+            model, str(path), pin.GeometryType.VISUAL, package_dirs=_package_dirs(path)
+        ),
+        path,
+    )
+    tree, blocks, masses = model, {}, {}
+    if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
+        both = {**spec.beams, **beams}
+        model, (visual,), blocks, _, masses = apply_beams(model, [visual], both, urdf=path)
+    clash = sorted(set(spec.springs) & set(blocks))
+    if clash:
+        raise ModelFileError(
+            f"closure file {str(closures)!r}: springs name the beam joint(s) {clash}, whose "
+            "stiffness is their beam's (E, G and section, or stiffness_6x6, under beams:)"
+        )
+    if closures is None:
+        actuated, locked = _serial_defaults(tree, path)
+        return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
+                     beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
+    where = f"closure file {str(closures)!r}"
+    check_spec_names(model, spec, where)
+    with in_file(where):
+        loops = [
+            closure_between_frames(model, a, b, t)
+            for (a, b), t in zip(spec.pairs, spec.types, strict=True)
+        ]
+    return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks}, spec.locked,
+                 visual, beam_joints=tuple(blocks), balls=spec.balls,
+                 beam_masses=tuple(masses.items()))  # fmt: skip
+
+
+def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
+    """:class:`ModelFileError` for links of the URDF file ``path`` that the model lacks:
+    those whose parent joints form a cycle away from the root (Pinocchio drops them)."""
+    links = [link.get("name") for link in ET.parse(path).getroot().iter("link")]
+    lost = [name for name in links if name and not model.existBodyName(name)]
+    if lost:
+        raise ModelFileError(
+            f"robot file {str(shown)!r}: links {lost} are not connected to the root (their "
+            "parent joints form a cycle); expected a tree, loops closed by a closure file"
+        )
+
+
+def _check_masses(model: pin.Model, path: Path) -> None:
+    """:class:`ModelFileError` for a body of negative mass (the links a joint carries,
+    merged by Pinocchio; the ground's too): the weight would pull it up."""
+    for j in range(model.njoints):
+        mass = model.inertias[j].mass
+        if not mass >= 0.0:
+            raise ModelFileError(
+                f"robot file {str(path)!r}: the links of joint {model.names[j]!r} have mass "
+                f"{mass:.6g} kg; expected masses >= 0"
+            )
+
+
+def _check_limits(model: pin.Model, path: Path) -> None:
+    """:class:`ModelFileError` for a joint whose lower position limit exceeds its upper one."""
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        q = slice(jm.idx_q, jm.idx_q + jm.nq)
+        if np.any(lower[q] > upper[q]):
+            raise ModelFileError(
+                f"robot file {str(path)!r}: joint {model.names[j]!r} has lower limit "
+                f"{lower[q].tolist()} above its upper limit {upper[q].tolist()}; expected "
+                "lower <= upper"
+            )
+
+
+def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+    try:
+        return _read_mjcf_tree(path, side_file, geometry)
+    except RecursionError:  # the readers follow the bodies and defaults recursively
+        raise ModelFileError(
+            f"MJCF file {str(path)!r}: its elements (bodies, default classes) are nested too "
+            f"deep for the reader (Python's recursion limit, {sys.getrecursionlimit()}); "
+            "expected a shallower tree"
+        ) from None
+
+
+def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+    extras = read_mjcf_extras(path)  # the file checked before Pinocchio reads it
+    with tempfile.TemporaryDirectory() as folder:  # Pinocchio reads a copy (closedloop.io.mjcf)
+        parsed = str(pinocchio_copy(path, Path(folder)))
+        model, points, welds = _parse(
+            lambda: pin.buildModelAndConstraintsFromMJCF(parsed), path, "robot file"
+        )
+        match_parsed(model, len(points) + len(welds), extras, path)
+        _check_masses(model, path)
+        constraints = place_free_joints(model, [*points, *welds])
+        visual = _geometry(
+            geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
+        )
+    where = f"robot file {str(path)!r}"
+    springs = {n: k for n, v in extras.stiffness.items() if (k := file_number(v, where, n)) > 0}
+    spec, springs = read_side_file(model, side_file, springs)
+    if spec.actuated is None:  # the actuators' joints
+        check_spec_names(model, ClosureSpec(actuated=extras.actuated), where)
+    return _Tree(
+        model,
+        [Closure(c, n) for c, n in zip(constraints, extras.closures, strict=True)],
+        extras.actuated if spec.actuated is None else spec.actuated,
+        springs,
+        spec.locked,
+        visual,
+        extras.undriven if spec.actuated is None else (),
+    )
+
+
+def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
+    robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.io.sdf
+    _check_masses(robot.model, path)
+    spec, springs = read_side_file(robot.model, side_file, robot.springs)
+    return _Tree(
+        robot.model, robot.closures, spec.actuated or (), springs, spec.locked, robot.visual
+    )
+
+
+def load_model(
+    path: str | Path,
+    closures: str | Path | None = None,
+    *,
+    springs: Mapping[str, Stiffness] | None = None,
+    joint_stiffness: float | None = None,
+    actuated: Sequence[str] | None = None,
+    geometry: bool = True,
+    file_format: str | None = None,
+    free_base: bool = False,
+    beams: Mapping[str, Mapping] | None = None,
+) -> ClosedLoopModel:
+    """Load a URDF (``.urdf``), MJCF (``.xml``, ``.mjcf``) or SDF (``.sdf``) model.
+
+    An SDF model's loops are its loop-closing joints and its springs the joints'
+    ``spring_stiffness`` (:mod:`closedloop.io.sdf`; it names no actuated joint: give them as
+    ``actuated`` or springs); its rest configuration puts the springs at their
+    ``spring_reference`` (:func:`reference_configuration`).
+
+    An MJCF model's loops are its ``<equality><connect|weld>`` constraints. Pinocchio
+    computes the ``<connect>`` anchor on the second body at ``qpos0``, so the file's
+    reference pose must be assembled; :func:`reference_configuration` returns it.
+
+    Args:
+        path: robot file.
+        closures: closure file (URDF; ``None`` for a serial robot) or side file (MJCF,
+            only ``name_mot``, ``springs``, ``locked``).
+        springs: joint -> stiffness [N m/rad or N/m], merged over the files' springs.
+        joint_stiffness: stiffness [N m/rad or N/m] of every actuated joint that has no
+            spring otherwise.
+        actuated: actuated joints, replacing those of the files or the serial default.
+        geometry: also load the visual geometry (meshes must be found).
+        file_format: ``"urdf"``, ``"mjcf"`` or ``"sdf"``; default: from the file suffix.
+        free_base: SDF only: a free-flyer root joint instead of the root link fixed.
+        beams: flexible links, link name -> beam (:mod:`closedloop.model.beams`), merged over
+            the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (map a
+            configuration with :func:`closedloop.model.beams.map_configuration`).
+
+    Raises:
+        ModelFileError: missing or unparsable robot or closure file, unknown format; the
+            message names the file and the fault.
+        NameNotFoundError: a frame or joint name that the model does not have.
+        InvalidInputError: a negative or NaN stiffness given as keyword; a path that is
+            not a str or os.PathLike.
+    """
+    for name, value in (("path", path), ("closures", closures)):
+        if not isinstance(value, str | os.PathLike) and (name == "path" or value is not None):
+            raise InvalidInputError(
+                f"load_model: {name} must be a file path (str or os.PathLike), got {value!r}"
+            )
+    for name, value, what in (("springs", springs, "joint name -> stiffness"),
+                              ("beams", beams, "link name -> beam")):  # fmt: skip
+        if value is not None and not isinstance(value, Mapping):
+            raise InvalidInputError(
+                f"load_model: {name} must be a mapping {what}, got {type(value).__name__}"
+            )
+    kind = file_format or MODEL_SUFFIXES.get(Path(path).suffix.lower())
+    if kind not in ("urdf", "mjcf", "sdf") or (free_base and kind != "sdf"):
+        raise ModelFileError(
+            f"robot file {str(path)!r}: unknown format {kind or Path(path).suffix!r}; expected "
+            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf' or 'sdf' "
+            "(free_base: SDF only)" + _by_name_hint(path)
+        )
+    path = existing_path(path, "robot file")
+    if kind == "sdf":
+        tree = _read_sdf(path, closures, geometry, free_base)
+    else:
+        tree = (
+            _read_urdf(path, closures, geometry, beams or {})
+            if kind == "urdf"
+            else _read_mjcf(path, closures, geometry)
+        )
+    if actuated is None and tree.undriven:
+        raise ModelFileError(
+            f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
+            "directly; list the actuated joints (name_mot in a side file, or actuated=)"
+        )
+    locked = tree.locked
+    if tree.by_default:  # a joint named by a keyword is no longer locked by the default
+        named = {*(springs or {}), *(() if actuated is None else actuated)}
+        locked = tuple(n for n in locked if n not in named)
+    clash = sorted(set(springs or {}) & set(tree.beam_joints))
+    if clash:
+        raise InvalidInputError(
+            f"load_model: springs name the beam joint(s) {clash}, whose stiffness is their "
+            "beam's (give E, G and section, or stiffness_6x6, in beams=)"
+        )
+    actuated = tree.actuated if actuated is None else joint_names("actuated", actuated)
+    given = tuple(springs or ())
+    springs = {**tree.springs, **(springs or {})}
+    if joint_stiffness is not None:
+        try:
+            k = math.nan if isinstance(joint_stiffness, bool) else float(joint_stiffness)
+        except (TypeError, ValueError):
+            k = math.nan
+        if math.isnan(k) or k < 0:
+            raise InvalidInputError(
+                f"joint stiffness {joint_stiffness!r}; expected a number >= 0 "
+                "[N m/rad or N/m] (0 = passive, inf = locked)"
+            )
+        for name in actuated:
+            springs.setdefault(name, k)
+    if tree.balls:  # the keyword's springs of a ball too: on its rotations, as the file's
+        springs = ball_springs(springs, tree.balls, locked=locked, keyword=given, file=closures)
+    clm = ClosedLoopModel(
+        tree.model,
+        tree.loops,
+        actuated,
+        springs,
+        locked,
+        visual_model=tree.visual,
+        beam_masses=dict(tree.beam_masses),
+    )
+    if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
+        side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
+        if side or beams:
+            clm = clm.with_beams({**side, **(beams or {})})
+    return clm
+
+
+def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:
+    """:func:`load_model` for a URDF file, whatever its suffix (same keyword options)."""
+    return load_model(urdf, closures, file_format="urdf", **options)
+
+
+def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
+    """(nq,) start configuration: the MJCF ``qpos0`` or the SDF rest configuration
+    (springs at their ``spring_reference``) if the model has one, else neutral."""
+    refs = clm.model.referenceConfigurations
+    key = next((k for k in ("qpos0", REST) if k in refs), None)
+    q = refs[key] if key else pin.neutral(clm.model)
+    return np.array(q, dtype=float)

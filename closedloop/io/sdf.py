@@ -1,0 +1,353 @@
+"""Reading SDFormat robot files (the subset robot files use) into a model with closures.
+
+Used when Pinocchio has no SDFormat support (``pin.WITH_SDFORMAT`` False, as in the PyPI
+wheel). Read: one ``<model>`` of ``<link>``, ``<frame>`` and ``<joint>`` (revolute,
+continuous, prismatic, ball, universal, fixed; ``<include>`` and nested models refused);
+``<pose>`` (x y z roll pitch yaw, R = Rz Ry Rx; ``rotation_format="quat_xyzw"``,
+``degrees="true"``) relative to ``relative_to`` (SDF >= 1.7) or ``frame`` (1.5/1.6), by
+default a link's to the model, a joint's to its child link, a frame's to ``attached_to``;
+``<axis><xyz>`` in the joint frame, or the model frame (``use_parent_model_frame``, SDF
+<= 1.6; by default in SDF <= 1.4), or ``expressed_in`` a frame; ``<limit>`` (|value| >= 1e16: none);
+``<dynamics><spring_stiffness>`` and ``<spring_reference>``; ``<inertial>``; ``<visual>``
+mesh / box / cylinder / sphere, ``model://NAME/...`` found under the file's ancestors,
+``$GZ_SIM_RESOURCE_PATH``, ``$SDF_PATH``, ``$GAZEBO_MODEL_PATH`` or example-robot-data.
+
+A ``<frame>`` becomes a frame of the model (a loaded frame), fixed to the link it is
+attached to: its ``attached_to`` link, the child link of its ``attached_to`` joint, the link
+of its ``attached_to`` frame, or by default the canonical link (``canonical_link``, else the
+first link).
+
+Tree and loops: a link's tree joint is the first joint in file order naming it as child
+(as in Pinocchio's parser); every later one closes a loop where the file draws it (the
+joint frame is fixed to the child link; q = 0 is the drawing):
+
+* ball: one point closure (3 rows) at the joint origin, every rotation free;
+* revolute / continuous: two point closures, at the joint origin and a distance ``L``
+  along the axis (``L``: the diameter of the link origins,
+  :func:`closedloop.common.conditioning.characteristic_length`): 6 rows of rank 5, only the
+  rotation about the axis free, rows in metres / ``L`` scaled like radians;
+* fixed: a weld. A prismatic or universal joint, or one with a spring, cannot close one.
+
+The root link (no joint names it as child) is fixed to the world at its pose, or carried
+by a free flyer ``root_joint`` (``free_base``); a joint with parent ``world`` fixes its child.
+
+Springs: ``spring_stiffness`` > 0 [N m/rad, N/m]. The model's springs are at rest at the
+configuration analysed, so the rest configuration ``model.referenceConfigurations[REST]``
+puts each spring joint at its ``spring_reference`` (others at the drawing, 0); assembly
+from it keeps the springs at rest (:func:`closedloop.io.loader.reference_configuration`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.common.conditioning import characteristic_length
+from closedloop.exceptions import ModelFileError
+from closedloop.io.data import robot_data_dir
+from closedloop.io.sdf_reader import SdfReader
+from closedloop.model.closures import Closure
+
+#: Joint types read.
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
+#: Name of the rest configuration (springs at their spring_reference) in the model.
+REST = "spring_rest"
+
+
+@dataclass(frozen=True)
+class SdfRobot:
+    """What :func:`read_sdf` returns.
+
+    Attributes:
+        model: the kinematic tree; frames named after the links (BODY) and joints.
+        closures: loop closures of the loop-closing joints (module docstring).
+        springs: joint name -> stiffness [N m/rad or N/m] (one value, or one per coordinate).
+        rest: (nq,) rest configuration (also ``model.referenceConfigurations[REST]``).
+        visual: visual geometry, or None when not asked for.
+        closing_joints: names of the joints that close loops, in file order.
+    """
+
+    model: pin.Model
+    closures: list[Closure]
+    springs: dict[str, float | list[float]]
+    rest: np.ndarray
+    visual: pin.GeometryModel | None
+    closing_joints: tuple[str, ...]
+
+
+def _joint_model(r: SdfReader, name: str, kind: str):
+    """(Pinocchio joint model, spring stiffness per coordinate, rest per q, limits)."""
+    if kind == "ball":
+        return pin.JointModelSpherical(), None, None, None
+    if kind == "universal":
+        (a1, e1), (a2, e2) = r.axis(name), r.axis(name, "axis2")
+        if abs(a1 @ a2) > 1e-9:
+            r.fail(f"universal joint {name!r} has axes {a1} and {a2}; expected orthogonal axes")
+        springs = [r.spring(e, f"joint {name!r}") for e in (e1, e2)]
+        limits = [r.limits(e, f"joint {name!r}") for e in (e1, e2)]
+        return pin.JointModelUniversal(a1, a2), *zip(*springs, strict=True), limits
+    a, elem = r.axis(name)
+    k, ref = r.spring(elem, f"joint {name!r}")
+    limit = r.limits(elem, f"joint {name!r}") if kind != "continuous" else (-math.inf, math.inf)
+    prismatic = kind == "prismatic"
+    joint = (pin.JointModelPrismaticUnaligned if prismatic else pin.JointModelRevoluteUnaligned)(a)
+    return joint, (k,), (ref,), [limit]
+
+
+def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True) -> SdfRobot:
+    """Read an SDF robot file (module docstring) into a Pinocchio tree with closures.
+
+    Args:
+        path: the ``.sdf`` file.
+        free_base: carry the root link by a free-flyer joint ``root_joint`` instead of
+            fixing it to the world.
+        geometry: also build the visual geometry (mesh files must be found).
+
+    Raises:
+        ModelFileError: invalid XML, unknown joint type, missing parent or child, a pose
+            or axis with the wrong number of values, an axis with a ``<mimic>``, a loop that
+            cannot be closed, a mesh not found; one line naming the element and what was
+            expected.
+    """
+    r = SdfReader(Path(path))
+    tree: dict[str, str] = {}  # child link -> its tree joint
+    closing: list[str] = []
+    for name, e in r.joints.items():
+        kind, what = e.get("type"), f"joint {name!r}"
+        if kind not in JOINT_TYPES:
+            r.fail(f"{what} has type {kind!r}; expected one of {', '.join(JOINT_TYPES)}")
+        parent, child = r.text(e, "parent", what), r.text(e, "child", what)
+        for role, link in (("parent", parent), ("child", child)):
+            if link not in r.links and not (role == "parent" and link == "world"):
+                r.fail(f"{what} has {role} {link!r}; expected one of the links {list(r.links)}")
+        if parent == child:
+            r.fail(f"{what} joins link {child!r} to itself; expected two different links")
+        if child in tree:
+            closing.append(name)
+        else:
+            tree[child] = name
+    roots = [link for link in r.links if link not in tree]
+    children: dict[str, list[str]] = {}  # link -> its tree joints, file order
+    for j in tree.values():
+        children.setdefault(r.text(r.joints[j], "parent", j), []).append(j)
+    grounded = children.get("world", [])
+    if len(roots) != (0 if grounded else 1):
+        found = f"links {roots} have no parent joint" if roots else "every link has a parent"
+        r.fail(f"{found}; expected exactly one root link (none with a joint to 'world')")
+    for name in (*r.links, *r.joints):  # Pinocchio's names of the world and the free base
+        if name == "universe" or (name == "root_joint" and free_base):
+            role = "world" if name == "universe" else "free base joint"
+            r.fail(f"name {name!r} is taken by Pinocchio's {role}; expected another name")
+    model = pin.Model()
+    model.name = r.elem.get("name") or r.path.stem
+    world_of_model = r.local_pose(r.elem, "model")[0]
+    # placement of each Pinocchio joint in the model frame at q = 0 (the universe first)
+    W = [world_of_model.inverse()]
+    body: dict[str, tuple[int, pin.SE3]] = {}  # link -> (joint id, placement in that joint)
+    springs: dict[str, float | list[float]] = {}
+    rest_values: dict[int, float] = {}  # q index -> spring reference
+    bounds: dict[int, tuple[float, float]] = {}  # q index -> (lower, upper) limits
+
+    def attach(link: str, jid: int, frame: int) -> None:
+        placement = W[jid].inverse() * r.pose(link)
+        body[link] = (jid, placement)
+        model.appendBodyToJoint(jid, r.inertia(link), placement)
+        model.addFrame(pin.Frame(link, jid, frame, placement, pin.FrameType.BODY))
+        for j in children.get(link, ()):
+            add_joint(j, link)
+
+    def add_joint(name: str, parent: str) -> None:
+        kind = r.joints[name].get("type")
+        pj, _ = body[parent] if parent in body else (0, None)
+        parent_frame = model.getFrameId(parent) if parent in body else 0
+        X = r.pose(name)
+        child = r.text(r.joints[name], "child", name)
+        if kind == "fixed":
+            model.addFrame(
+                pin.Frame(name, pj, parent_frame, W[pj].inverse() * X, pin.FrameType.FIXED_JOINT)
+            )
+            return attach(child, pj, model.getFrameId(name))
+        joint, k, ref, limits = _joint_model(r, name, kind)
+        jid = model.addJoint(pj, joint, (W[pj].inverse() * X), name)
+        W.append(X)
+        jm = model.joints[jid]
+        for i, limit in enumerate(limits or ()):
+            bounds[jm.idx_q + i] = limit
+        if k is not None and any(v > 0 for v in k):
+            springs[name] = k[0] if len(k) == 1 else list(k)
+            rest_values.update({jm.idx_q + i: v for i, v in enumerate(ref)})
+        attach(child, jid, model.addJointFrame(jid, parent_frame))
+
+    if grounded and free_base:
+        r.fail(f"joints {grounded} fix the model to the world; expected no free base")
+    for j in grounded:
+        add_joint(j, "world")
+    if free_base:
+        X = world_of_model * r.pose(roots[0])
+        jid = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "root_joint")
+        W.append(r.pose(roots[0]))
+        attach(roots[0], jid, model.addJointFrame(jid, 0))
+        free_q = pin.SE3ToXYZQUAT(X)
+    elif not grounded:
+        attach(roots[0], 0, 0)
+    lost = [link for link in r.links if link not in body]
+    if lost:
+        r.fail(f"links {lost} are not connected to the root (their parent joints form a cycle)")
+    for name in r.frames:  # loaded frames, like a URDF's fixed joints
+        link = r.frame_link(name)
+        if model.existFrame(name):  # "universe", "root_joint"
+            r.fail(f"frame {name!r} has the name of a frame of the model; expected another")
+        jid = body[link][0]
+        placement = W[jid].inverse() * r.pose(name)
+        model.addFrame(
+            pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
+        )
+    closures = _closures(r, model, body, closing, W)
+    rest = pin.neutral(model)
+    for i, v in rest_values.items():
+        rest[i] = v
+    if free_base:
+        rest[:7] = free_q
+    model.referenceConfigurations[REST] = rest
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    for i, (lo, hi) in bounds.items():
+        lower[i], upper[i] = lo, hi
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+    visual = _visuals(r, model, body) if geometry else None
+    return SdfRobot(model, closures, springs, rest, visual, tuple(closing))
+
+
+def _closures(r: SdfReader, model, body, closing, W) -> list[Closure]:
+    L = characteristic_length([r.pose(link).translation for link in r.links])
+    out = []
+    for name in closing:
+        e, what = r.joints[name], f"loop-closing joint {name!r}"
+        kind, X = e.get("type"), r.pose(name)
+        if kind in ("prismatic", "universal"):
+            r.fail(
+                f"{what} is {kind}: such a loop cannot be closed by point or weld closures; "
+                "expected ball, revolute or fixed (or list it first so it is a tree joint)"
+            )
+        if kind in ("revolute", "continuous") and r.spring(r.axis(name)[1], what)[0] > 0:
+            r.fail(f"{what} has a spring, which needs a coordinate; list it first (tree joint)")
+        parent, child = r.text(e, "parent", what), r.text(e, "child", what)
+        if parent == "world":
+            r.fail(f"{what} has parent 'world'; expected a link of the model")
+        (j1, _), (j2, _) = body[parent], body[child]
+        M1, M2 = W[j1].inverse() * X, W[j2].inverse() * X
+        if kind == "fixed":
+            c = pin.FrameAnchorConstraintModel(model, j1, M1, j2, M2)
+            out.append(Closure(c, name))
+            continue
+        offsets = [np.zeros(3)] + ([L * r.axis(name)[0]] if kind != "ball" else [])
+        for i, d in enumerate(offsets):
+            P = pin.SE3(np.eye(3), d)
+            c = pin.PointAnchorConstraintModel(model, j1, M1 * P, j2, M2 * P)
+            out.append(Closure(c, name if len(offsets) == 1 else f"{name}[{i}]"))
+    return out
+
+
+def model_dirs(path: Path) -> list[Path]:
+    """Folders searched for ``model://NAME/...`` (module docstring), in order."""
+    dirs = list(path.resolve().parents)
+    for var in ("GZ_SIM_RESOURCE_PATH", "SDF_PATH", "GAZEBO_MODEL_PATH"):
+        dirs += [Path(p) for p in os.environ.get(var, "").split(os.pathsep) if p]
+    try:
+        share = [robot_data_dir().parent.parent]  # share/ holds example-robot-data/robots
+    except ModelFileError:  # example-robot-data not installed: not searched
+        share = []
+    return dirs + share
+
+
+def _mesh_file(r: SdfReader, uri: str, what: str) -> str:
+    if uri.startswith("file://"):
+        candidates = [Path(uri[7:])]
+    elif uri.startswith("model://"):
+        candidates = [d / uri[8:] for d in model_dirs(r.path)]
+    else:
+        candidates = [r.path.parent / uri]
+    for c in candidates:
+        if c.is_file():
+            return str(c)
+    return r.fail(f"{what}: mesh {uri!r} not found (looked in {len(candidates)} folders)")
+
+
+def _visuals(r: SdfReader, model: pin.Model, body) -> pin.GeometryModel:
+    import coal  # only when geometry is asked for
+
+    gm = pin.GeometryModel()
+    for link, (jid, M) in body.items():
+        for i, v in enumerate(r.links[link].findall("visual")):
+            what = f"visual {i} of link {link!r}"
+            local, ref = r.local_pose(v, what)
+            X = M * local if not ref else M * r.pose(link).inverse() * r.pose(ref) * local
+            shape, scale, mesh = v.find("geometry/*"), np.ones(3), ""
+            if shape is None:
+                r.fail(f"{what} has no <geometry>")
+            size = {t: r.number(shape, t, 1.0, what) for t in ("radius", "length")}
+            if shape.tag == "mesh":
+                mesh = _mesh_file(r, r.text(shape, "uri", what), what)
+                if shape.find("scale") is not None:
+                    scale = r.floats(shape.find("scale"), f"{what} scale", (3,))
+                try:
+                    geom = coal.MeshLoader().load(mesh, scale)
+                except ValueError as e:  # a file that is not a mesh, a zero scale
+                    r.fail(f"{what}: mesh {mesh!r} cannot be loaded ({' '.join(str(e).split())})")
+            elif shape.tag == "box":
+                geom = coal.Box(*r.floats(shape.find("size"), f"{what} size", (3,)))
+            elif shape.tag == "cylinder":
+                geom = coal.Cylinder(size["radius"], size["length"])
+            elif shape.tag == "sphere":
+                geom = coal.Sphere(size["radius"])
+            else:
+                continue  # planes, heightmaps...: nothing a robot's links show
+            colour = v.find("material/ambient")
+            rgba = r.floats(colour, f"{what} ambient", (4,)) if colour is not None else None
+            fid = model.getFrameId(link)
+            obj = pin.GeometryObject(f"{link}_{i}", jid, fid, X, geom, mesh, scale)
+            if rgba is not None:
+                obj.meshColor, obj.overrideMaterial = rgba, True
+            gm.addGeometryObject(obj)
+    return gm
+
+
+def load_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True) -> SdfRobot:
+    """:func:`read_sdf`, or Pinocchio's own SDF parser when it has one (``pin.WITH_SDFORMAT``).
+
+    Pinocchio's parser gives the tree, its point closures and the geometry; the springs
+    and their rest configuration, which it does not read, are read from the XML here.
+    """
+    if not getattr(pin, "WITH_SDFORMAT", False):
+        try:
+            return read_sdf(path, free_base=free_base, geometry=geometry)
+        except RecursionError:  # the reader follows the tree and the poses recursively
+            raise ModelFileError(
+                f"SDF file {str(path)!r}: its links (or its poses relative_to one another) are "
+                "nested too deep for the reader (Python's recursion limit, "
+                f"{sys.getrecursionlimit()}); expected a shallower tree"
+            ) from None
+    r = SdfReader(Path(path))
+    root = pin.JointModelFreeFlyer() if free_base else None
+    types = [pin.GeometryType.VISUAL] if geometry else None
+    dirs = [str(d) for d in model_dirs(r.path)]
+    model, points, *geometries = pin.buildModelsAndConstraintsFromSdf(
+        str(path), package_dirs=dirs, root_joint=root, geometry_types=types
+    )
+    springs, rest = {}, pin.neutral(model)
+    for name, e in r.joints.items():
+        if e.get("type") in ("revolute", "prismatic") and model.existJointName(name):
+            k, ref = r.spring(r.axis(name)[1], f"joint {name!r}")
+            if k > 0:
+                springs[name] = k
+                rest[model.joints[model.getJointId(name)].idx_q] = ref
+    model.referenceConfigurations[REST] = rest
+    closures = [Closure(c, f"closure{i}") for i, c in enumerate(points)]
+    closing = tuple(n for n in r.joints if not (model.existJointName(n) or model.existFrame(n)))
+    visual = geometries[-1] if geometry and geometries else None
+    return SdfRobot(model, closures, springs, rest, visual, closing)

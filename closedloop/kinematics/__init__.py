@@ -1,0 +1,2 @@
+"""Kinematics of closed loops: closure rows and Jacobians, configurations,
+assembly, joint limits."""

@@ -1,0 +1,311 @@
+"""Flexible links as 6-dof virtual springs from beam theory (the Virtual Joint Method).
+
+A flexible link is a rigid body with a 6-dof virtual spring at its end (Pashkevich,
+Klimchik and Chablat's Virtual Joint Method). A *beam* on a link is straight, from the
+origin of the link's frame (its start, clamped) to the origin of its ``end`` joint (the
+tip): its length is that distance. The tip carries the ``end`` joint and everything beyond
+it; the link's other child joints stay rigid with the start. :func:`apply_beams` puts a
+6-dof virtual joint (a Pinocchio free flyer named ``<link>_beam``) between the link and
+its ``end``, placed at the end joint's origin with the end joint's axes, and gives it the
+beam's tip stiffness as an SPD block spring (:mod:`closedloop.model.closed_loop`). Its coordinates
+dq = (v, w) are the twist of the tip (translation [m], small rotation [rad]) in the end
+joint's axes, so the block is the tip stiffness in that frame, wrench (f [N], n [N m]).
+
+The tip stiffness from beam theory, the sections and ``section: geometry``:
+:mod:`closedloop.model.beam_theory`.
+
+Inertia: the link's own inertia stays at the beam's start (on the link's parent joint);
+bodies beyond a ``fixed`` end (merged by Pinocchio's URDF parser into the link's joint)
+move with the tip. Frames keep their indices (the virtual joint's frame is appended);
+joints from the virtual joint on get new indices; frames, geometry objects and closure
+anchors beyond the tip follow it.
+
+Elements and mass: ``elements: N`` (default 1) splits the beam into N equal elements, a
+6-dof virtual joint at each node, ``<link>_beam_1`` .. ``<link>_beam_{N-1}``, then
+``<link>_beam`` at the tip, all in the end joint's axes, each with the clamped stiffness of
+length L / N (:func:`inserted_beams` lists the elements, each from its start node).
+``density`` [kg/m^3] gives the beam a mass of its own (:class:`BeamMass`, the consistent
+mass of :mod:`closedloop.analysis.vibration`), with a section only.
+
+Preload: the beam's energy is that of beam theory on the tip's displacement and rotation
+in its rest axes, with the shortening of the bent beam in its axial elongation
+(:mod:`closedloop.model.elastic`): an axial force softens (compression) or stiffens (tension) its
+bending as the one-element beam-column does (0.2 % from the closed form at P = EI / L^2;
+buckling of a clamped rod at 2.486 EI / L^2, Euler's pi^2 / 4 = 2.467). At zero deflection
+it is the block above: the unloaded compliance does not depend on it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.exceptions import BeamError, InvalidInputError
+from closedloop.model.beam_theory import (
+    GEOMETRY,
+    BeamSite,
+    beam_site,
+    beam_stiffness,
+    element_count,
+    urdf_shapes,
+)
+
+
+def _descendant_frames(model: pin.Model, root: int) -> set[int]:
+    """``root`` and the frames after it in the frame tree that are on its joint: those the
+    beam's tip carries. A moving joint after it (its JOINT frame, on that joint) ends the
+    walk: the frames after that joint are placed in it and move with it."""
+    joint = model.frames[root].parentJoint
+    out, grew = {root}, True
+    while grew:
+        new = {
+            i for i, f in enumerate(model.frames)
+            if f.parentFrame in out and i not in out and f.parentJoint == joint
+        }  # fmt: skip
+        new.discard(0)
+        out |= new
+        grew = bool(new)
+    return out
+
+
+#: Per-velocity-coordinate fields of a Pinocchio model carried over to the new model.
+_NV_ATTRIBUTES = (
+    "lowerEffortLimit", "upperEffortLimit", "lowerVelocityLimit", "upperVelocityLimit",
+    "armature", "damping", "rotorInertia", "rotorGearRatio", "lowerDryFrictionLimit",
+    "upperDryFrictionLimit",
+)  # fmt: skip
+
+
+def _insert(model, geometries, site: BeamSite, name: str):
+    """A copy of ``model`` (and of the geometry models) with a free-flyer ``name`` between
+    the site's joint and its end; returns (model, geometries, old -> new joint index)."""
+    if site.end_joint is not None:
+        moved_frames = set()
+        moved_joints = {site.end_joint}
+    else:
+        moved_frames = _descendant_frames(model, site.end_frame)
+        moved_joints = {
+            f.parentJoint for f in model.frames if f.type == pin.JOINT
+            and f.parentJoint > 0 and f.parentFrame in moved_frames
+        }  # fmt: skip
+    Mv = site.placement
+    children = {j: [] for j in range(model.njoints)}
+    for j in range(1, model.njoints):
+        children[model.parents[j]].append(j)
+    siblings = children[site.joint]
+    at = min((siblings.index(j) for j in moved_joints), default=len(siblings))
+    siblings.insert(at, "V")
+    children["V"] = sorted(moved_joints)
+    for j in moved_joints:
+        children[site.joint].remove(j)
+    order, stack = [], list(reversed(children[0]))
+    while stack:  # depth first, children in their original order
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(children[j]))
+    new, index = pin.Model(), {0: 0}
+    new.name, new.gravity, new.inertias[0] = model.name, model.gravity, model.inertias[0]
+    inertia_tip = pin.Inertia.Zero()
+    for i in moved_frames:
+        f = model.frames[i]
+        inertia_tip = inertia_tip + Mv.actInv(f.placement).act(f.inertia)
+    for j in order:
+        if j == "V":
+            index["V"] = new.addJoint(index[site.joint], pin.JointModelFreeFlyer(), Mv, name)
+            new.inertias[index["V"]] = inertia_tip
+            continue
+        parent = "V" if j in moved_joints else model.parents[j]
+        M = Mv.actInv(model.jointPlacements[j]) if j in moved_joints else model.jointPlacements[j]
+        jm = model.joints[j]
+        q, v = slice(jm.idx_q, jm.idx_q + jm.nq), slice(jm.idx_v, jm.idx_v + jm.nv)
+        index[j] = jn = new.addJoint(index[parent], jm, M, model.names[j])
+        new.inertias[jn] = model.inertias[j]
+        nm = new.joints[jn]
+        nq, nv = slice(nm.idx_q, nm.idx_q + nm.nq), slice(nm.idx_v, nm.idx_v + nm.nv)
+        for attr in ("lowerPositionLimit", "upperPositionLimit"):
+            getattr(new, attr)[nq] = getattr(model, attr)[q]
+        for attr in _NV_ATTRIBUTES:
+            if hasattr(model, attr):
+                getattr(new, attr)[nv] = getattr(model, attr)[v]
+    if moved_frames:  # their inertias move from the start to the tip
+        dyn = model.inertias[site.joint].toDynamicParameters()
+        dyn -= Mv.act(inertia_tip).toDynamicParameters()
+        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint].mass)
+    for i, f in enumerate(model.frames):
+        if i == 0:
+            continue
+        joint, M = index[f.parentJoint], f.placement
+        if i in moved_frames:
+            joint, M = index["V"], Mv.actInv(f.placement)
+        new.addFrame(pin.Frame(f.name, joint, f.parentFrame, M, f.type, f.inertia), False)
+    new.addFrame(pin.Frame(name, index["V"], site.link_frame, pin.SE3.Identity(), pin.JOINT),
+                 False)  # fmt: skip
+    for entry in model.referenceConfigurations:
+        new.referenceConfigurations[entry.key()] = map_configuration(model, new, entry.data())
+    out = []
+    for geo in geometries:
+        if geo is None:
+            out.append(None)
+            continue
+        g = geo.copy()
+        for obj in g.geometryObjects:
+            if obj.parentFrame in moved_frames:
+                obj.parentJoint, obj.placement = index["V"], Mv.actInv(obj.placement)
+            else:
+                obj.parentJoint = index[obj.parentJoint]
+        out.append(g)
+    return new, out, index
+
+
+@dataclass(frozen=True)
+class InsertedBeam:
+    """A beam of a model built by :func:`apply_beams`: its virtual joint ``joint`` (index)
+    named ``name``, the link's frame ``link_frame`` (index, the beam's clamped start), and
+    ``rest`` the virtual joint's placement at rest in the link frame (its translation, (3,)
+    [m], is the undeflected beam from start to tip)."""
+
+    name: str
+    link_frame: int
+    joint: int
+    rest: pin.SE3
+
+
+def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
+    """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: its
+    ``<link>_beam`` joint frames whose parent frame is the link's body frame, on the
+    joint's parent joint; of a beam split into n elements, ``<link>_beam_1`` so, then
+    ``<link>_beam_k`` (and last ``<link>_beam``) whose parent frame is the joint frame of
+    ``<link>_beam_{k-1}``, on its joint (``link_frame``: the element's start)."""
+    out = []
+    for f in model.frames:
+        start = model.frames[f.parentFrame]
+        j = f.parentJoint
+        if f.type != pin.JOINT or start.parentJoint != model.parents[j]:
+            continue
+        if start.type == pin.BODY:
+            names = (f"{start.name}_beam", f"{start.name}_beam_1")
+        else:
+            head, _, k = start.name.rpartition("_beam_")
+            names = (f"{head}_beam", f"{head}_beam_{int(k) + 1}") if k.isdigit() else ()
+        if start.type in (pin.BODY, pin.JOINT) and f.name in names:
+            rest = start.placement.actInv(model.jointPlacements[j])
+            out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
+    return out
+
+
+#: Mass left on a beam's start after its tip's share moved, relative to the link's mass,
+#: below which it is rounding of a massless remainder.
+MASSLESS_RTOL = 1e-12
+
+
+def _inertia(dyn: np.ndarray, link_mass: float) -> pin.Inertia:
+    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
+    rotational inertia about the frame's origin [kg m^2]); a massless remainder keeps its
+    rotational part and a zero lever (Pinocchio would divide the first moment by 0)."""
+    if abs(dyn[0]) > MASSLESS_RTOL * max(link_mass, 1.0):
+        return pin.Inertia.FromDynamicParameters(dyn)
+    ixx, ixy, iyy, ixz, iyz, izz = dyn[4:]
+    rotational = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    return pin.Inertia(0.0, np.zeros(3), rotational)
+
+
+def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:
+    """(new.nq,) configuration of ``new`` with the values of ``q`` (old.nq,) on the joints
+    of the same name, neutral on the others (the beams' virtual joints: undeflected)."""
+    q, out = np.asarray(q, float), pin.neutral(new)
+    for j in range(1, old.njoints):
+        jo = old.joints[j]
+        jn = new.joints[new.getJointId(old.names[j])]
+        out[jn.idx_q : jn.idx_q + jn.nq] = q[jo.idx_q : jo.idx_q + jo.nq]
+    return out
+
+
+TIP_RTOL = 1e-9
+
+
+def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None,
+                anchors=()):  # fmt: skip
+    """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
+    inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
+
+    Args:
+        model: the kinematic tree (not modified).
+        geometries: geometry models (or None) of ``model``, carried over.
+        beams: link name -> specification.
+        urdf: the URDF file of ``model``, for ``section: geometry`` (None: not allowed).
+        anchors: (joint index, placement in the joint's frame) of points of ``model``
+            (the closures' anchors), carried over: an anchor at a beam's tip (to
+            :data:`TIP_RTOL` of its length) moves with the tip, the others stay on their
+            joints.
+
+    Returns:
+        (model, geometries, springs, anchors, masses): the new model, its geometry models,
+        the block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]}, the
+        anchors on the new model and the sections of the beams that have one {virtual
+        joint name: :class:`BeamMass`}.
+
+    Raises:
+        BeamError: a bad specification (the message names the beam and the value).
+    """
+    if not isinstance(beams, Mapping):
+        raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
+    springs, masses = {}, {}
+    anchors = [(int(j), pin.SE3(M)) for j, M in anchors]
+    geometries = list(geometries)
+    wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
+    shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
+    for beam, spec in beams.items():
+        name = f"{beam}_beam"
+        if model.existJointName(name):  # before the stiffness, which would measure the link
+            # from the existing beam's joint (a length of 0)
+            raise BeamError(beam, f"the link already has a beam (or the model a joint named "
+                            f"{name!r}): one beam a link")  # fmt: skip
+        link_shapes = None if shapes is None else shapes.get(beam, [])
+        end, K, mass = beam_stiffness(model, beam, spec, link_shapes)
+        site = beam_site(model, beam, end)
+        tip, start = site.placement, model.frames[site.link_frame].placement
+        length = float(np.linalg.norm(tip.translation - start.translation))
+        model, geometries, step = _insert(model, geometries, site, name)
+        anchors = [
+            (model.getJointId(name), tip.actInv(M))
+            if j == site.joint
+            and np.linalg.norm(M.translation - tip.translation) <= TIP_RTOL * length
+            else (step[j], M)
+            for j, M in anchors
+        ]
+        elements = [name] + [f"{name}_{k}" for k in range(1, element_count(beam, spec))]
+        if len(elements) > 1:
+            model, geometries, anchors = _split(model, geometries, anchors, name, len(elements))
+        for element in elements:
+            springs[element] = K
+            if mass is not None:
+                masses[element] = mass
+    return model, geometries, springs, anchors, masses
+
+
+def _split(model, geometries, anchors, name: str, n: int):
+    """``model`` with the beam of virtual joint ``name`` split into n equal elements: the
+    virtual joints ``name_1`` .. ``name_{n-1}`` inserted at its nodes (k / n of the way
+    from the start, in the tip's axes), each the start of the next element, ``name`` the
+    last; returns (model, geometries, anchors) (:func:`apply_beams`)."""
+    tip = model.getJointId(name)
+    frame = model.getFrameId(name, pin.JOINT)
+    start = model.frames[model.frames[frame].parentFrame].placement  # in the parent joint
+    rest = model.jointPlacements[tip]  # the tip in the parent joint
+    step = (rest.translation - start.translation) / n
+    node = pin.SE3(rest.rotation, start.translation + step)  # the first node, parent joint
+    parent_joint, parent_frame = model.parents[tip], model.frames[frame].parentFrame
+    for k in range(1, n):
+        site = BeamSite(parent_frame, parent_joint, name, tip, frame, node)
+        element = f"{name}_{k}"
+        model, geometries, index = _insert(model, geometries, site, element)
+        anchors = [(index[j], M) for j, M in anchors]
+        parent_joint = model.getJointId(element)
+        parent_frame = model.getFrameId(element, pin.JOINT)
+        tip, frame = model.getJointId(name), model.getFrameId(name, pin.JOINT)
+        node = pin.SE3(np.eye(3), rest.rotation.T @ step)  # the next node, in this one
+    model.frames[frame].parentFrame = parent_frame  # the last element starts at its node
+    return model, geometries, anchors

@@ -1,0 +1,543 @@
+"""A Pinocchio model with loop closures, actuated joints and a spring specification.
+
+The kinematic tree is an ordinary :class:`pinocchio.Model`; every loop is closed by a
+Pinocchio 4 anchor constraint (:class:`pinocchio.PointAnchorConstraintModel` for a 3D
+point, :class:`pinocchio.FrameAnchorConstraintModel` for a 6D weld). Elasticity is
+lumped into the joint coordinates: each velocity coordinate carries a stiffness that is
+
+* ``0``      - passive (no spring, the default for every coordinate);
+* ``k > 0``  - a linear spring [N m/rad for a revolute, N/m for a prismatic coordinate];
+  "virtual" joints standing for link compliance are ordinary joints with a spring;
+* ``inf``    - locked (rigid).
+
+A spring may also couple the coordinates of one multi-dof joint: its stiffness is then a
+symmetric positive definite (nv_j, nv_j) matrix (a *block*, e.g. the 6x6 tip stiffness of
+a flexible link on a 6-dof virtual joint, :mod:`closedloop.model.beams`), its energy
+1/2 dq_j^T K_j dq_j. The per-coordinate vector :attr:`ClosedLoopModel.stiffness` then
+holds the block's diagonal (finite and > 0, so the 0/inf rules are unchanged) and
+:attr:`ClosedLoopModel.spring_blocks` the blocks; :attr:`ClosedLoopModel.spring_matrix`
+is the whole joint stiffness K_q (nv, nv), block diagonal.
+
+Actuated joints are the inputs of :func:`closedloop.kinematics.assembly.assemble`. An actuated joint
+without a spring is a rigid actuator (locked).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Iterable, Mapping, Sequence
+from types import MappingProxyType
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.common.arrays import frozen, real_array
+from closedloop.common.conditioning import characteristic_length
+from closedloop.exceptions import InvalidInputError
+from closedloop.model.beams import apply_beams
+from closedloop.model.closures import (
+    AnchorConstraint,
+    Closure,
+    checked_closures,
+    frame_id,
+    joint_id,
+    joint_names,
+)
+
+#: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
+POOL_SIZE = 4
+#: Entries of :meth:`ClosedLoopModel.memo` past which those whose key carries a
+#: parameter are dropped (a few tens of kB each on CaHyMan: the scaling at a length L).
+MEMO_SIZE = 64
+#: Largest change of a coordinate when the quaternions and unit complex numbers of q are
+#: normalised: a q further from the configuration manifold is refused, a nearer one
+#: normalised (7 typed digits are within it).
+UNIT_NORM_TOL = 1e-6
+
+
+def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
+    """What a model's neutral configuration tells, from one forward kinematics:
+
+    * (nv,) read-only mask of the translational velocity coordinates (prismatic, the
+      linear part of a free flyer...), read off the joint motion subspaces: a coordinate
+      is linear when it moves its joint without rotating it;
+    * the characteristic length [m]: the diameter of the mechanism at the neutral
+      configuration, the largest distance between two of its joint origins and frames
+      (links, tools), not the world origin (the universe frame), so that moving the
+      mechanism in the world leaves it unchanged
+      (:func:`closedloop.common.conditioning.characteristic_length`).
+    """
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    pin.updateFramePlacements(model, data)
+    mask = np.zeros(model.nv, dtype=bool)
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.nv:
+            S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
+            if not np.all(np.any(S != 0.0, axis=0)):
+                raise InvalidInputError(
+                    f"joint {model.names[j]!r} ({jm.shortname()}) has a coordinate that moves "
+                    "nothing (a zero axis in the robot file?); expected an axis of non-zero length"
+                )
+            mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
+    points = [data.oMi[j].translation for j in range(1, model.njoints)]
+    points += [data.oMf[i].translation for i in range(1, model.nframes)]  # 0: the universe
+    return frozen(mask), characteristic_length(points)
+
+
+def check_locked_springs(springs: Mapping, locked: Iterable[str]) -> None:
+    """InvalidInputError for joints both ``locked`` and given ``springs`` (names)."""
+    both = sorted(set(locked) & set(springs))
+    if both:
+        raise InvalidInputError(
+            f"joints {both} are both locked and given springs; expected one or the other "
+            "(a lock is an infinite stiffness)"
+        )
+
+
+#: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
+#: read from 36 printed numbers is symmetric to their ~1e-16 rounding).
+BLOCK_SYMMETRY_RTOL = 1e-9
+
+
+def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
+    """Validated read-only (nv, nv) symmetric positive definite block of joint ``name``."""
+    if K.shape != (nv, nv):
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} has shape {K.shape}; expected ({nv}, {nv})"
+        )
+    if not np.all(np.isfinite(K)):
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} has non-finite entries: {K.tolist()}"
+        )
+    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
+    if skew > BLOCK_SYMMETRY_RTOL * scale:
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} is not symmetric (max |K - K^T| = {skew:.3g}, "
+            f"max |K| = {scale:.3g}); expected a symmetric positive definite matrix"
+        )
+    K = 0.5 * (K + K.T)
+    try:
+        np.linalg.cholesky(K)
+    except np.linalg.LinAlgError:
+        raise InvalidInputError(
+            f"stiffness block of joint {name!r} is not positive definite (eigenvalues "
+            f"{np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive definite matrix"
+        ) from None
+    return frozen(K)
+
+
+class ClosedLoopModel:
+    """Kinematic tree + loop closures + actuated joints + per-coordinate stiffness.
+
+    Args:
+        model: Pinocchio model of the kinematic tree (frames included).
+        closures: loop closures (:class:`Closure` or bare anchor constraints).
+        actuated: names of the actuated joints (one coordinate each).
+        springs: joint name -> stiffness, a number, one value per velocity coordinate of
+            the joint [N m/rad or N/m] (``0`` makes it passive, ``inf`` locks it), or a
+            symmetric positive definite (nv_j, nv_j) matrix coupling the joint's
+            coordinates (units of coordinate i times coordinate j: N/m, N, N m/rad).
+        locked: names of joints held rigid.
+        visual_model, collision_model: optional geometry for viewers.
+        name: display name.
+        beam_masses: virtual beam joint name -> :class:`closedloop.model.beams.BeamMass`, the
+            sections (and densities) of the beams for their own mass
+            (:mod:`closedloop.analysis.vibration`); filled by the loaders.
+
+    Attributes:
+        stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf);
+            the diagonal of a block.
+        spring_blocks: read-only mapping joint name -> (nv_j, nv_j) read-only SPD block
+            (empty when every spring is per coordinate).
+        linear_coordinates: (nv,) read-only bool, True for translational coordinates [m]
+            (prismatic, linear part of a free flyer), False for rotations [rad].
+        linear_rows: (m,) read-only bool, True for the closure rows in metres (point
+            closures, translation of welds), False for the rotation rows of welds [rad].
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        closures: Iterable[Closure | AnchorConstraint] = (),
+        actuated: Sequence[str] = (),
+        springs: Mapping[str, float | Sequence[float]] | None = None,
+        locked: Iterable[str] = (),
+        visual_model: pin.GeometryModel | None = None,
+        collision_model: pin.GeometryModel | None = None,
+        name: str = "",
+        *,
+        beam_masses: Mapping | None = None,
+        _neutral: tuple[np.ndarray, float] | None = None,  # with_springs: the same model
+    ):
+        if not isinstance(model, pin.Model):
+            raise InvalidInputError(
+                f"ClosedLoopModel: model must be a pinocchio.Model, got {type(model).__name__}"
+            )
+        self.model = model
+        self._local = threading.local()
+        self._pool: list[tuple[pin.Data, list]] = []
+        self._memo: dict = {}
+        self._frame_ids: dict[str, int] = {}
+        self.closures = checked_closures(model, closures)
+        self.visual_model = visual_model
+        self.collision_model = collision_model
+        self.name = name or model.name
+        self.beam_masses = MappingProxyType(dict(beam_masses or {}))
+        self.actuated = joint_names("actuated", actuated)
+        self.actuated_ids = tuple(joint_id(model, n) for n in self.actuated)
+        for n, j in zip(self.actuated, self.actuated_ids, strict=True):
+            if model.joints[j].nv != 1 or model.joints[j].nq not in (1, 2):
+                raise InvalidInputError(
+                    f"actuated joint {n!r} must have one coordinate (revolute, continuous or "
+                    f"prismatic), it has nq={model.joints[j].nq}, nv={model.joints[j].nv}"
+                )
+        locked = joint_names("locked", locked)
+        self._spec = (dict(springs or {}), locked)
+        self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
+        self.stiffness = self._stiffness_vector(springs or {}, locked)
+        self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
+        rows = [i < 3 for c in self.closures for i in range(c.size)]
+        self.linear_rows = frozen(np.array(rows, dtype=bool))
+
+    # ------------------------------------------------------------------ workspaces
+    @property
+    def data(self) -> pin.Data:
+        """This thread's Pinocchio Data of the model (one per thread, never shared).
+
+        Functions that take ``(model, q)`` compute their kinematics here; a
+        :class:`closedloop.kinematics.configuration.Configuration` owns a Data of its own.
+        """
+        return self.workspace()[0]
+
+    @property
+    def constraint_datas(self) -> list:
+        """This thread's constraint datas of the closures (see :attr:`data`)."""
+        return self.workspace()[1]
+
+    def workspace(self) -> tuple[pin.Data, list]:
+        """This thread's (:attr:`data`, :attr:`constraint_datas`), created on first use."""
+        try:
+            return self._local.workspace
+        except AttributeError:
+            pair = self.model.createData(), [c.constraint.createData() for c in self.closures]
+            self._local.workspace = pair
+            return pair
+
+    def acquire_workspace(self) -> tuple[pin.Data, list]:
+        """A (Data, constraint datas) pair for the exclusive use of one owner.
+
+        Taken from a pool of released workspaces (creating a Data costs more than a whole
+        stiffness query); give it back with :meth:`release_workspace` when the owner is
+        gone. ``list.pop`` and ``list.append`` are atomic, so owners in different threads
+        never get the same pair.
+        """
+        try:
+            return self._pool.pop()
+        except IndexError:
+            return self.model.createData(), [c.constraint.createData() for c in self.closures]
+
+    def release_workspace(self, workspace: tuple[pin.Data, list]) -> None:
+        """Return a workspace of :meth:`acquire_workspace` to the pool (at most
+        :data:`POOL_SIZE` kept: a Data grows like nv^2 and more)."""
+        if len(self._pool) < POOL_SIZE:
+            self._pool.append(workspace)
+
+    def memo(self, key, factory):
+        """``factory()``, computed once per ``key`` for this model (immutable results only).
+
+        A key with a parameter is a tuple (e.g. ``("scaling", L)``): past
+        :data:`MEMO_SIZE` entries those are dropped, so that a sweep of the parameter does
+        not keep one entry a value.
+        """
+        try:
+            return self._memo[key]
+        except KeyError:
+            pass
+        value = factory()  # outside the handler: its errors without the KeyError
+        if isinstance(key, tuple) and len(self._memo) >= MEMO_SIZE:
+            # a new dict, swapped in at once: a thread that reads the old one meanwhile
+            # only computes its entry again
+            self._memo = {k: v for k, v in list(self._memo.items()) if not isinstance(k, tuple)}
+        return self._memo.setdefault(key, value)
+
+    @property
+    def length(self) -> float:
+        """Characteristic length L [m]: the largest distance between two of the joint
+        origins and frames (not the world origin) at the neutral configuration (1 m if they
+        coincide), whatever the mechanism's place in the world; the default scale of the
+        unit-free rules (:mod:`closedloop.common.conditioning`)."""
+        return self._length
+
+    def _stiffness_vector(self, springs, locked) -> np.ndarray:
+        k = np.zeros(self.model.nv)
+        for j in self.actuated_ids:
+            k[self.model.joints[j].idx_v] = np.inf
+        for name in locked:
+            jm = self.model.joints[joint_id(self.model, name)]
+            k[jm.idx_v : jm.idx_v + jm.nv] = np.inf
+        if not isinstance(springs, Mapping):
+            raise InvalidInputError(
+                f"springs must be a mapping joint name -> stiffness, got {type(springs).__name__}"
+            )
+        check_locked_springs(springs, locked)
+        blocks = {}
+        for name, value in springs.items():
+            jm = self.model.joints[joint_id(self.model, name)]
+            if not jm.nv:
+                raise InvalidInputError(
+                    f"joint {name!r} ({jm.shortname()}) has no coordinate of its own (a mimic "
+                    "joint follows its leader): give the spring to the joint it follows"
+                )
+            if isinstance(value, bool | np.bool_) or np.asarray(value).dtype == bool:
+                raise InvalidInputError(
+                    f"stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
+                    "[N m/rad or N/m], not a bool"
+                )
+            value = real_array(value, f"stiffness of joint {name!r}")
+            if value.ndim == 2 and value.size > 1:
+                blocks[name] = _spd_block(name, value, jm.nv)
+                k[jm.idx_v : jm.idx_v + jm.nv] = np.diag(blocks[name])
+                continue
+            if value.ndim == 2:  # a 1x1 block is a number
+                value = value.reshape(-1)
+            values = np.broadcast_to(value, (jm.nv,)) if value.ndim == 0 else value
+            if values.shape != (jm.nv,):
+                raise InvalidInputError(
+                    f"stiffness of joint {name!r} has {values.size} values; expected "
+                    + ("1" if jm.nv == 1 else f"1 or {jm.nv}")
+                )
+            if np.any(np.isnan(values)) or np.any(values < 0):
+                raise InvalidInputError(
+                    f"stiffness of joint {name!r} is {values.tolist()}; expected values >= 0 "
+                    "(0 = passive, inf = locked)"
+                )
+            k[jm.idx_v : jm.idx_v + jm.nv] = values
+        k.flags.writeable = False
+        self.spring_blocks = MappingProxyType(blocks)
+        return k
+
+    # ------------------------------------------------------------------ joint stiffness
+    @property
+    def springs(self) -> dict:
+        """The spring specification given (joint name -> number, list or block), a copy."""
+        return dict(self._spec[0])
+
+    @property
+    def locked(self) -> tuple[str, ...]:
+        """Names of the joints given as locked."""
+        return self._spec[1]
+
+    @property
+    def spring_matrix(self) -> np.ndarray:
+        """(nv, nv) read-only joint stiffness K_q of the finite springs: the blocks and
+        diag(k) elsewhere, 0 on passive and locked coordinates [N m/rad, N/m, N]."""
+        return self.memo("spring_matrix", self._spring_matrix)
+
+    def _spring_matrix(self) -> np.ndarray:
+        k = self.stiffness
+        K = np.diag(np.where(np.isinf(k), 0.0, k))
+        for name, block in self.spring_blocks.items():
+            v = self.joint_v_slice(name)
+            K[v, v] = block
+        return frozen(K)
+
+    @property
+    def spring_root(self) -> np.ndarray:
+        """(nv, nv) read-only square root R of :attr:`spring_matrix`, K_q = R^T R: sqrt(k)
+        on the diagonal, the transposed Cholesky factor (upper triangular) of each block
+        [sqrt(N m), per the joint units]."""
+        return self.memo("spring_root", self._spring_root)
+
+    def _spring_root(self) -> np.ndarray:
+        k = self.stiffness
+        R = np.diag(np.sqrt(np.where(np.isinf(k), 0.0, k)))
+        for name, block in self.spring_blocks.items():
+            v = self.joint_v_slice(name)
+            R[v, v] = np.linalg.cholesky(block).T
+        return frozen(R)
+
+    def spring_forces(self, dq: np.ndarray) -> np.ndarray:
+        """(nv,) generalised spring forces K_q dq [N m, N] of a deflection dq (nv,)
+        (tangent of q [rad, m]); 0 on passive and locked coordinates."""
+        if not self.spring_blocks:
+            k = self.stiffness
+            return np.where(np.isinf(k), 0.0, k) * dq
+        return self.spring_matrix @ dq
+
+    # ------------------------------------------------------------------ naming helpers
+    def frame_id(self, name: str) -> int:
+        """Index of frame ``name`` (raises :class:`NameNotFoundError`); remembered."""
+        try:
+            return self._frame_ids[name]
+        except (KeyError, TypeError):  # TypeError: an unhashable name, refused below
+            fid = frame_id(self.model, name)
+            self._frame_ids[name] = fid
+            return fid
+
+    def joint_id(self, name: str) -> int:
+        """Index of joint ``name`` (raises :class:`NameNotFoundError`)."""
+        return joint_id(self.model, name)
+
+    def coordinate_joint(self, i: int) -> str:
+        """Name of the joint whose velocity coordinates include i (0 <= i < nv)."""
+        model = self.model
+        return next(
+            model.names[j] for j in range(1, model.njoints)
+            if model.joints[j].idx_v <= i < model.joints[j].idx_v + model.joints[j].nv
+        )  # fmt: skip
+
+    def joint_v_slice(self, name: str) -> slice:
+        """Slice of joint ``name`` in the velocity (tangent) vector."""
+        jm = self.model.joints[self.joint_id(name)]
+        return slice(jm.idx_v, jm.idx_v + jm.nv)
+
+    @property
+    def actuated_q_indices(self) -> np.ndarray:
+        """(n_act,) read-only indices of the actuated coordinates in q."""
+        return self.memo("actuated_q", lambda: self._joint_indices("idx_q"))
+
+    @property
+    def actuated_v_indices(self) -> np.ndarray:
+        """(n_act,) read-only indices of the actuated coordinates in the tangent vector."""
+        return self.memo("actuated_v", lambda: self._joint_indices("idx_v"))
+
+    def set_actuated(self, q: np.ndarray, values: np.ndarray) -> None:
+        """Write the actuated joints' values (n_act,) [rad or m] into q (nq,) in place: the
+        coordinate, or (cos, sin) for a continuous (unbounded revolute) joint."""
+        idx = self.actuated_q_indices
+        if not self.memo("any_unbounded_actuated", lambda: bool(self._unbounded_actuated().any())):
+            q[idx] = values
+            return
+        unbounded = self._unbounded_actuated()
+        values = np.asarray(values, dtype=float)
+        q[idx[~unbounded]] = values[~unbounded]
+        q[idx[unbounded]], q[idx[unbounded] + 1] = (
+            np.cos(values[unbounded]),
+            np.sin(values[unbounded]),
+        )
+
+    def actuated_values(self, q: np.ndarray) -> np.ndarray:
+        """(n_act,) the actuated joints' values [rad or m] in q (nq,) (the angle of a
+        continuous joint from its (cos, sin))."""
+        unbounded, idx = self._unbounded_actuated(), self.actuated_q_indices
+        values = np.array(q[idx], dtype=float)
+        values[unbounded] = np.arctan2(q[idx[unbounded] + 1], q[idx[unbounded]])
+        return values
+
+    def _unbounded_actuated(self) -> np.ndarray:
+        """(n_act,) bool: the actuated joint is continuous (nq = 2: cos, sin)."""
+        joints = self.model.joints
+        return self.memo(
+            "unbounded_actuated",
+            lambda: frozen(np.array([joints[j].nq == 2 for j in self.actuated_ids], dtype=bool)),
+        )
+
+    def _joint_indices(self, kind: str) -> np.ndarray:
+        joints = self.model.joints
+        return frozen(np.array([getattr(joints[j], kind) for j in self.actuated_ids], dtype=int))
+
+    @property
+    def n_constraints(self) -> int:
+        """Total number of closure residual rows (redundant ones included)."""
+        return self.linear_rows.size
+
+    def with_springs(
+        self, springs: Mapping[str, float | Sequence[float]], locked: Iterable[str] = ()
+    ) -> ClosedLoopModel:
+        """Same model and closures with another spring specification (blocks included)."""
+        return ClosedLoopModel(
+            self.model,
+            self.closures,
+            self.actuated,
+            springs,
+            locked,
+            self.visual_model,
+            self.collision_model,
+            self.name,
+            beam_masses=self.beam_masses,
+            _neutral=(self.linear_coordinates, self._length),
+        )
+
+    def with_beams(self, beams: Mapping[str, Mapping]) -> ClosedLoopModel:
+        """This model with flexible links: each beam (link name -> specification: end, E,
+        G, section, theory, or stiffness_6x6) becomes a 6-dof virtual joint
+        ``<link>_beam`` with its tip stiffness as a block spring
+        (:func:`closedloop.model.beams.apply_beams`). The new model has more coordinates: map a
+        configuration with :func:`closedloop.model.beams.map_configuration`.
+
+        Actuated joints, springs and locked joints keep their names; closure anchors are
+        carried over on their joints, those at a beam's tip with the tip (a loop of an MJCF
+        or SDF file closed at the end of a link that becomes a beam); an anchor elsewhere on
+        the beam's link stays with the beam's start.
+
+        Raises:
+            BeamError: a bad specification (the message names the beam and the value).
+        """
+        geoms = [self.visual_model, self.collision_model]
+        ends = [(k.joint1_id, k.joint1_placement) for c in self.closures for k in [c.constraint]]
+        ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
+        model, geoms, springs, ends, masses = apply_beams(self.model, geoms, beams, anchors=ends)
+        n = len(self.closures)
+        closures = [
+            Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
+            for i, c in enumerate(self.closures)
+        ]
+        return ClosedLoopModel(
+            model,
+            closures,
+            self.actuated,
+            {**self.springs, **springs},
+            self.locked,
+            geoms[0],
+            geoms[1],
+            self.name,
+            beam_masses={**self.beam_masses, **masses},
+        )
+
+    def check_configuration(self, q: np.ndarray) -> np.ndarray:
+        """Validated copy of a configuration vector q (nq,)."""
+        if type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1:
+            q = q.copy()  # the common case, without the conversions of real_array
+        else:
+            q = real_array(q, "q")
+            if q.ndim > 1:  # a (1, nq) row or a stack of configurations is not one q
+                raise InvalidInputError(
+                    f"q must be one configuration, shape (nq,) = ({self.model.nq},), got shape "
+                    f"{q.shape} (many configurations: closedloop.compliances)"
+                )
+            q = q.reshape(-1)
+        if q.shape != (self.model.nq,):
+            raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
+        # a sum of floats is finite when every one is (it may overflow: then look at each)
+        if not math.isfinite(sum(q.tolist())) and not np.isfinite(q).all():
+            raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
+        if self.memo("unit_coordinates", lambda: self.model.nq != self.model.nv):
+            q = self._unit_norms(q)
+        return q
+
+    def _unit_norms(self, q: np.ndarray) -> np.ndarray:
+        """q with its quaternions and unit complex numbers (free-flyer, spherical, planar,
+        unbounded revolute joints) normalised, or :class:`InvalidInputError` naming the
+        joint of one whose norm is off 1 by more than :data:`UNIT_NORM_TOL`."""
+        model = self.model
+        if not pin.isNormalized(model, q, UNIT_NORM_TOL):
+            for j, jm in enumerate(model.joints):  # the first joint whose part is off
+                part = slice(jm.idx_q, jm.idx_q + jm.nq)
+                alone = pin.neutral(model)
+                alone[part] = q[part]
+                if jm.nq != jm.nv and not pin.isNormalized(model, alone, UNIT_NORM_TOL):
+                    raise InvalidInputError(
+                        f"q of joint {model.names[j]!r} ({jm.shortname()}) is "
+                        f"{q[part].tolist()}: its quaternion or unit complex number is not of "
+                        f"norm 1 (to {UNIT_NORM_TOL:g}); normalise it (pinocchio.normalize)"
+                    )
+        return pin.normalize(model, q)
+
+    def __repr__(self) -> str:
+        return (
+            f"ClosedLoopModel({self.name!r}, nq={self.model.nq}, nv={self.model.nv}, "
+            f"closures={len(self.closures)}, actuated={list(self.actuated)})"
+        )

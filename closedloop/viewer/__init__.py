@@ -1,0 +1,1 @@
+"""The meshcat viewer of a mechanism's deflection, and its static export."""
