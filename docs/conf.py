@@ -20,6 +20,7 @@ matplotlib.use("Agg")
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "docs"))  # gallery_order, the gallery's sort key
 
 import closedloop  # noqa: E402
 from closedloop.common.blas import single_threaded_blas  # noqa: E402
@@ -68,7 +69,7 @@ sphinx_gallery_conf = {
     "filename_pattern": r"/plot_",
     "download_all_examples": False,
     "remove_config_comments": True,
-    "within_subsection_order": "FileNameSortKey",
+    "within_subsection_order": "gallery_order.TeachingOrder",  # for teaching
     "plot_gallery": "False" if os.environ.get("CLOSEDLOOP_DOCS_NO_GALLERY") else "True",
     "image_scrapers": ("matplotlib",),
     "matplotlib_animations": False,

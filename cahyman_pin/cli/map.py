@@ -2,8 +2,8 @@
 
 Pose inputs are in the paper's units (deg, mm), like the other ``cahyman`` subcommands;
 design parameters (``--param``) are CaHyManParams fields in their SI units (m, N/m,
-N m/rad); not the masses, g or the beams' fields, which a map (weightless, rigid links)
-does not read. A value is one of
+N m/rad); not g or the beams' fields, which a map (weightless, rigid links) does not read,
+nor the masses but for the index ``lowest_frequency``. A value is one of
 
 * ``V``: a single value (fixed);
 * ``START:STOP:NUM``: NUM evenly spaced values, both ends included (swept);
@@ -16,6 +16,7 @@ Examples::
     cahyman map --alpha 60 --alpha4 60 --s4 50 --param b=0.04:0.12:9      # design sweep
     cahyman map --alpha 30:90:31 --param b=0.04:0.12:9 --backend consistent --out fig5b
     cahyman map --s4 0:50:21 --alpha4 0:90:19 --force 1 1 1 --index deflection_translation
+    cahyman map --alpha4 0:90:19 --index lowest_frequency --mass m_HQ=2 --mass m_M4=1
 
 ``--alpha`` takes one value (alpha_1 = alpha_2 = alpha_3, swept together when a range) or
 three (alpha_1, alpha_2, alpha_3). A value starting with a minus sign needs ``=``:
@@ -23,6 +24,8 @@ three (alpha_1, alpha_2, alpha_3). A value starting with a minus sign needs ``=`
 receives ``map.npz`` (everything, SI), ``map.csv`` when the map is small and
 ``map_<index>.png``. ``--start closed_form`` starts every generic assembly from CaHyMan's
 closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep.engine`).
+``--index lowest_frequency`` (generic backend) also computes the lowest natural frequency
+[Hz] at every point, of the masses given with ``--mass NAME=KG`` (0 by default: give some).
 SIGINT (Ctrl-C) or SIGTERM stops the map at once, its workers with it, writes the points
 computed (the others with status ``not_computed``) and ends with one line, exit 130
 (SIGINT) or 143 (SIGTERM).
@@ -37,7 +40,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cahyman_pin.cli.options import DEFAULT_POSE, UsageError, add_backend_arguments, finite_float
+from cahyman_pin.cli.options import (
+    DEFAULT_POSE,
+    MASS_NAMES,
+    UsageError,
+    _masses,
+    add_backend_arguments,
+    finite_float,
+)
 from cahyman_pin.model import check_inputs
 from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, WEIGHT_FIELDS, CaHyManParams
 from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
@@ -119,8 +129,11 @@ def add_parser(subparsers) -> None:
                    help=f"telescope stroke s_4 [mm] (default {d['s4']:g})")  # fmt: skip
     p.add_argument("--param", type=parse_param, action="append", default=[],
                    metavar="NAME=SPEC", help="design parameter in SI, e.g. b=0.04:0.12:9 "
-                   "(repeatable; not the masses, gravity or the beams' fields: a map is "
-                   "weightless, with rigid links)")  # fmt: skip
+                   "(repeatable; not gravity or the beams' fields: a map is weightless, with "
+                   "rigid links; the masses only for --index lowest_frequency)")  # fmt: skip
+    p.add_argument("--mass", action="append", default=[], metavar="NAME=KG",
+                   help=f"a mass [kg] of --index lowest_frequency, NAME one of "
+                   f"{', '.join(MASS_NAMES)} (default 0)")  # fmt: skip
     add_backend_arguments(p)
     p.add_argument("--start", choices=STARTS, default="closed_form",
                    help="generic backend: assembly from the closed-form geometry "
@@ -169,22 +182,24 @@ def _inputs(args: argparse.Namespace) -> dict[str, tuple[np.ndarray, str, float]
         if name in out:
             raise UsageError(f"--param {name} given twice")
         out[name] = (values, param_unit(name), 1.0)
-    _check_read(out)
+    _check_read(out, args.index == "lowest_frequency")
     return out
 
 
-def _check_read(inputs: dict) -> None:
-    """Refuse a design parameter that no point of the map reads: a mass or g (a map has no
-    weight), the beams' material and sections (a map's links are rigid, as by default).
+def _check_read(inputs: dict, modes: bool) -> None:
+    """Refuse a design parameter that no point of the map reads: g (a map has no weight),
+    a mass but with ``modes`` (the index lowest_frequency), the beams' material and
+    sections (a map's links are rigid, as by default).
 
     Raises:
         UsageError: names the parameter and why it is not read.
     """
     for name in inputs:
-        if name in WEIGHT_FIELDS:
+        if name in WEIGHT_FIELDS and not (modes and name in MASS_NAMES):
             raise UsageError(
-                f"--param {name}: a map has no weight, so {name} changes no point; the "
-                "weight is in cahyman stiffness --gravity --mass NAME=KG, at one pose"
+                f"--param {name}: a map has no weight, so {name} changes no point but for "
+                "--index lowest_frequency; the weight is in cahyman stiffness --gravity "
+                "--mass NAME=KG, at one pose"
             )
         if name in BEAM_FIELDS or name == "links_as_beams":
             raise UsageError(
@@ -323,6 +338,12 @@ def _run(args: argparse.Namespace) -> int:
     check_map_size(math.prod(v[0].size for v in swept.values()))
     wrench = map_wrench(args.index, args.force, args.torque)
     params = DEFAULT_PARAMS.with_ks(args.ks)
+    modes = args.index == "lowest_frequency"
+    masses = _masses(args, weight=False)
+    if masses and not modes:
+        raise UsageError("--mass: a map has no weight; the masses count only for --index "
+                         "lowest_frequency")  # fmt: skip
+    params = params.replace(**masses) if masses else params
     fixed = {k: float(v[0][0] * v[2]) for k, v in inputs.items() if k not in swept}
     design = {k: fixed.pop(k) for k in list(fixed) if k in CaHyManParams.field_names()}
     params = params.replace(**design) if design else params
@@ -359,6 +380,7 @@ def _run(args: argparse.Namespace) -> int:
                 workers=args.workers,
                 chunk_size=args.chunk_size,
                 show_progress=True,
+                modes=modes,
             )
         except Interrupted as stop:  # the points computed, written before the one line
             stop.write(save, out)

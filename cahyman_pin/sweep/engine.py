@@ -45,7 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from cahyman_pin.api import check_closed_form, get_backend
-from cahyman_pin.params import CaHyManParams
+from cahyman_pin.model import CaHyManModel
+from cahyman_pin.params import WEIGHT_FIELDS, CaHyManParams
 from cahyman_pin.sweep.execution import STARTS, Chunk, run_chunk
 from cahyman_pin.sweep.points import (
     INPUT_UNITS,
@@ -64,7 +65,7 @@ from closedloop.analysis.map_engine import (
     gather,
     run_tasks_by_point,
 )
-from closedloop.analysis.maps import INDICES, column_name
+from closedloop.analysis.maps import ALL_INDICES, column_name
 from closedloop.common.arrays import check_wrench, frozen, readonly
 from closedloop.common.files import write_atomically
 from closedloop.elastostatics.compliance import UNITS
@@ -72,9 +73,9 @@ from closedloop.exceptions import InvalidInputError
 
 #: Largest sweep that :meth:`SweepResult.save` also writes as CSV.
 CSV_MAX_POINTS = 20_000
-#: Indices of a sweep and their units (SI), as every map of the project; with a wrench,
-#: also ``deflection`` (n, 6), the twist of M [m, rad].
-INDEX_UNITS = INDICES
+#: Indices of a sweep and their units (SI), as every map of the project (``lowest_frequency``
+#: with ``modes``); with a wrench, also ``deflection`` (n, 6), the twist of M [m, rad].
+INDEX_UNITS = ALL_INDICES
 #: Chunk size limits: long chunks amortise a task's overhead, many chunks balance the load.
 MAX_CHUNK = {"consistent": 20_000}
 DEFAULT_MAX_CHUNK = 1_000
@@ -278,7 +279,8 @@ class SweepResult:
         return paths
 
 
-def _chunks(points: SweepPoints, backend: str, start: str, pieces: list, wrench) -> list[Chunk]:
+def _chunks(points: SweepPoints, backend: str, start: str, pieces: list, wrench,
+            modes: bool) -> list[Chunk]:  # fmt: skip
     func = get_backend(backend)
     names = tuple(points.design)
     design = np.column_stack([points.design[k] for k in names]) if names else None
@@ -294,6 +296,7 @@ def _chunks(points: SweepPoints, backend: str, start: str, pieces: list, wrench)
             s4=points.s4[idx],
             design=np.zeros((idx.size, 0)) if design is None else design[idx],
             wrench=wrench,
+            modes=modes,
         )
         for idx in pieces
     ]
@@ -340,6 +343,7 @@ def sweep(
     workers: int | None = None,
     chunk_size: int | None = None,
     show_progress: bool = False,
+    modes: bool = False,
 ) -> SweepResult:
     """Compliance and stiffness indices of CaHyMan at every point of a sweep.
 
@@ -366,10 +370,17 @@ def sweep(
             ``start="neighbour"`` each chunk's first point starts from the closed form, so
             the results depend on it (within the assembly tolerance), not on the executor.
         show_progress: progress bar on stderr.
+        modes: also the index ``lowest_frequency`` [Hz]: the lowest nonzero natural
+            frequency at every point (:func:`closedloop.analysis.vibration.modes` at M's
+            assembled configuration, rigid-body modes skipped; NaN where it has none),
+            generic backend only; the masses are the parameters' ``m_*`` (give them: they
+            are 0 by default).
 
     Raises:
         InvalidInputError: unknown backend or start, bad wrench or executor, links as
-            beams with a closed-form backend (:func:`cahyman_pin.api.check_closed_form`).
+            beams with a closed-form backend (:func:`cahyman_pin.api.check_closed_form`),
+            ``modes`` with another backend than ``"generic"``.
+        ModesError: ``modes`` and no mass at any point.
             A point that cannot be computed does not raise: it is marked in ``status`` and
             ``reasons``.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the sweep
@@ -386,6 +397,8 @@ def sweep(
     if start not in STARTS:
         raise InvalidInputError(f"start {start!r}; expected one of {list(STARTS)}")
     check_closed_form(points.params, backend)
+    if modes:
+        _check_modes(points, backend)
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
     pool, n_workers = _executor(executor, workers)
@@ -395,7 +408,7 @@ def sweep(
     t0 = time.perf_counter()
     n = len(points)
     pieces = [points.order[f : f + size] for f in range(0, n, size)]
-    chunks = _chunks(points, backend, start, pieces, w)
+    chunks = _chunks(points, backend, start, pieces, w, modes)
 
     results = run_tasks_by_point(run_chunk, chunks, [len(p) for p in pieces], pool, n_workers,
                                  label=f"{backend} sweep", show_progress=show_progress)  # fmt: skip
@@ -403,9 +416,25 @@ def sweep(
         data = gather(n, pieces, results, w)
     except Interrupted as stop:
         if stop.data is not None:  # else stopped before gather began
+            if modes:  # its index even when no chunk came back
+                stop.data.indices.setdefault("lowest_frequency", np.full(n, np.nan))
             stop.partial = _result(points, backend, w, stop.data, time.perf_counter() - t0)
         raise
     return _result(points, backend, w, data, time.perf_counter() - t0)
+
+
+def _check_modes(points: SweepPoints, backend: str) -> None:
+    """Refuse ``modes`` with a closed form (no masses) or a sweep without any mass."""
+    if backend != "generic":
+        raise InvalidInputError(
+            f"the index lowest_frequency needs the generic backend (the closed forms have no "
+            f"masses), got backend {backend!r}"
+        )
+    from closedloop.analysis.vibration import check_massive  # on demand, as the maps'
+
+    swept = [points.design[k] for k in WEIGHT_FIELDS if k in points.design and k != "gravity"]
+    if not any(np.any(values > 0.0) for values in swept):  # the masses: the fixed ones
+        check_massive(CaHyManModel(points.params).clm)
 
 
 def _result(points: SweepPoints, backend: str, w, data: PointData, seconds: float) -> SweepResult:

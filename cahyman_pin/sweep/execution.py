@@ -20,12 +20,15 @@ model, rebuilt once per run and cached per thread):
 
 A point that fails is recorded with a status and the error message; it never stops the
 sweep. The rank, the status from C and the indices are computed at the end of the chunk,
-for all its points at once (:func:`closedloop.analysis.map_engine.complete`). A point whose scaled
-condition number exceeds ``ILL_CONDITIONED`` (1e8) takes its single query's C and K (K
-from a square-root factor where the query has one: the formed C loses cond(K_s) times the
-rounding): the generic kernel's in :func:`closedloop.analysis.map_engine.assemble_points`, the
-others' :func:`cahyman_pin.api.stiffness` (:func:`_single_queries`), so that its indices
-are that query's.
+for all its points at once (:func:`closedloop.analysis.map_engine.complete`), and with
+``modes`` (generic backend) the lowest natural frequency at each assembled configuration
+(:func:`closedloop.analysis.vibration.lowest_frequencies`, as every map of the project). A
+point whose scaled condition number exceeds ``ILL_CONDITIONED`` (1e8) takes its single
+query's C and K (K from a square-root factor where the query has one: the formed C loses
+cond(K_s) times the rounding): the generic kernel's in
+:func:`closedloop.analysis.map_engine.assemble_points`, the others'
+:func:`cahyman_pin.api.stiffness` (:func:`_single_queries`), so that its indices are that
+query's.
 """
 
 from __future__ import annotations
@@ -77,6 +80,8 @@ class Chunk:
         alpha: (c, 3) crank angles [rad]; alpha4: (c,) arm angle [rad]; s4: (c,) stroke [m].
         design: (c, len(design_names)) values of the design fields [SI].
         wrench: (6,) wrench at M of the deflection indices [N, N m], world axes, or None.
+        modes: also the index ``lowest_frequency`` [Hz] of every point (generic backend;
+            :func:`closedloop.analysis.vibration.lowest_frequencies`).
     """
 
     backend: str
@@ -89,6 +94,7 @@ class Chunk:
     s4: np.ndarray
     design: np.ndarray
     wrench: np.ndarray | None = None
+    modes: bool = False
 
     def __len__(self) -> int:
         return len(self.alpha4)
@@ -162,8 +168,11 @@ def _model(params: CaHyManParams) -> CaHyManModel:
     return model
 
 
-def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkResult) -> None:
+def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkResult):
+    """The generic kernel on the run ``idx``; returns (its model, {position: q} of the
+    points assembled)."""
     model = _model(params)
+    configurations: dict[int, np.ndarray] = {}
     starts: dict[int, np.ndarray] = {}
     if chunk.start == "closed_form":
 
@@ -180,16 +189,19 @@ def _generic(chunk: Chunk, idx: np.ndarray, params: CaHyManParams, out: ChunkRes
         """Assembly from ``q0`` (None: the closed form); a failed warm start once more
         from the closed form."""
         try:
-            return model.assemble_validated(inputs[i], q0, jacobian=True)
+            a = model.assemble_validated(inputs[i], q0, jacobian=True)
         except AssemblyError:
             if q0 is None:
                 raise
-            return model.assemble_validated(inputs[i], jacobian=True)
+            a = model.assemble_validated(inputs[i], jacobian=True)
+        configurations[i] = a.q
+        return a
 
     # neighbour start: the first point of the run from the closed form (q0 None)
     per_point = [starts[i] for i in idx] if chunk.start == "closed_form" else None
     assemble_points(model.clm, FRAME_M, out, idx, solve, starts=per_point, length=params.length,
                     inputs=inputs)  # fmt: skip
+    return model.clm, configurations
 
 
 # ------------------------------------------------------------------ other kernels
@@ -243,12 +255,24 @@ def run_chunk(chunk: Chunk) -> ChunkResult:
     executor)."""
     out = ChunkResult.empty(len(chunk))
     kernel = _KERNELS.get(chunk.backend, _pointwise)
+    assembled = []  # the generic kernel's (model, {position: q}) of each run
     for idx, params in _runs(chunk, out):
         out.length[idx] = params.length
-        kernel(chunk, _prevalidate(chunk, idx, params, out), params, out)
-        if kernel is not _generic:
+        ran = kernel(chunk, _prevalidate(chunk, idx, params, out), params, out)
+        if kernel is _generic:
+            assembled.append(ran)
+        else:
             _single_queries(chunk, idx, params, out)
     complete(out, chunk.wrench, functools.partial(_singular_poses, chunk.backend))
+    if chunk.modes:  # the vibration module on demand
+        from closedloop.analysis.vibration import lowest_frequencies
+
+        done = np.isin(out.status, (OK, RANK_DEFICIENT))
+        frequencies = np.full(len(chunk), np.nan)
+        for clm, configurations in assembled:
+            rows = list(configurations)
+            frequencies[rows] = lowest_frequencies(clm, configurations, done)[rows]
+        out.indices["lowest_frequency"] = frequencies
     return out
 
 

@@ -2,13 +2,14 @@
 shapes at a pose (:func:`closedloop.analysis.vibration.modes`).
 
 The pose and springs options are those of ``closedloop stiffness``; ``--density`` weighs
-the beams that have no ``density:`` key, ``--gravity`` adds the weight's tangent
-stiffness about the equilibrium where the mechanism settles (``--payload``: a point mass
-at the frame, with it). Prints the frequencies [Hz], ascending, rigid-body modes as 0, and
-with ``--frame`` each mode's effective masses at the frame; ``--json`` one object whose
-``frequencies`` are those [Hz]. ``--html FILE`` (with ``--frame``) writes a self-contained
-page that plays mode ``--mode K`` (1: the lowest), its shape amplified ``--scale`` times
-(default: automatic), the legend giving its frequency and the amplification.
+the beams that have no ``density:`` key, ``--gravity`` adds the weight's tangent stiffness
+about the equilibrium where the mechanism settles; ``--payload`` puts a point mass at the
+frame, with or without ``--gravity`` (its mass counts without its weight). Prints the
+frequencies [Hz], ascending, rigid-body modes as 0, and with ``--frame`` each mode's
+effective masses at the frame; ``--json`` one object whose ``frequencies`` are those [Hz].
+``--html FILE`` (with ``--frame``) writes a self-contained page that plays mode ``--mode
+K`` (1: the lowest), its shape amplified ``--scale`` times (default: automatic), the
+legend giving its frequency and the amplification.
 """
 
 from __future__ import annotations
@@ -41,6 +42,10 @@ def add_parser(sub, model_arguments) -> None:
         help="density [kg/m^3] of the beams without a density: key",
     )  # fmt: skip
     add_preload_arguments(p)
+    p._option_string_actions["--payload"].help = (  # argparse has no public setter
+        "MASS [kg] [X Y Z]: a point mass at --frame, offset in its axes [m] (its weight "
+        "too with --gravity)"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--html", metavar="FILE", help="write a page that plays mode --mode")
     p.add_argument("--mode", type=int, default=1, metavar="K", help="mode to play (1: lowest)")
@@ -60,7 +65,12 @@ def run_modes(args: argparse.Namespace) -> int:
         raise UsageError("--payload needs --frame (the payload sits at that frame)")
     if args.html is not None and args.frame is None:
         raise UsageError("--html needs --frame (the played mode is scaled and drawn there)")
-    options = preload_from_args(args)
+    # a payload's mass counts without gravity: its option read as with a weight, which is
+    # then left out (the preload options are the stiffness command's, where it is one)
+    weighed = argparse.Namespace(**{**vars(args), "gravity": args.gravity or []})
+    options = preload_from_args(weighed)
+    if args.gravity is None:
+        del options["gravity"]
     page = None
     if args.html is not None:
         from closedloop.viewer.viewer import check_output_path

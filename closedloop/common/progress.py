@@ -3,7 +3,10 @@
 * On a terminal: tqdm's bar, redrawn in place, with the rate and the time left.
 * Elsewhere (logs, CI, a pipe): one plain line a :data:`LOG_PERIOD` seconds, the first as
   soon as the first items are done (the estimate of the whole run before it is well under
-  way), and a last line at the end. Never a carriage return. Items that come in bursts
+  way), and a last line at the end, unless the run was interrupted (a
+  ``KeyboardInterrupt``, e.g. Ctrl-C or a map's SIGTERM, raised in the items or while the
+  consumer closes the iteration): then the interruption has the last word. Never a
+  carriage return. Items that come in bursts
   (a sweep's chunks) are counted a whole burst at a time: a line that falls due is written
   at the first item :data:`BURST` seconds later or more, so that the rate (items done over
   time elapsed) is not that of the first item of a burst.
@@ -36,6 +39,8 @@ class _LogLines(tqdm):
     """tqdm writing whole lines (no carriage return, no padding) for logs and pipes."""
 
     shown = 0
+    #: The iteration was interrupted: no last line on closing.
+    stopped = False
 
     def display(self, msg=None, pos=None):
         if msg is not None or self.n == 0:  # msg="": tqdm clearing the bar; n=0: no news
@@ -46,7 +51,7 @@ class _LogLines(tqdm):
         return True
 
     def close(self):
-        if not self.disable and self.n != self.shown:
+        if not self.disable and self.n != self.shown and not self.stopped:
             self.display()  # the last line, unless the last one already showed it
         super().close()
 
@@ -99,14 +104,21 @@ def _log_lines(items: Iterable[T], total: int | None, label: str, out: TextIO) -
                     bar_format=_LOG_FORMAT if total else _LOG_FORMAT_NO_TOTAL)  # fmt: skip
     due, pending = time.perf_counter(), None  # when a line falls due; since when it waits
     with bar:
-        for item in items:
-            yield item
-            bar.update()  # counts only: mininterval=inf, the lines are drawn here
-            now = time.perf_counter()
-            if now < due:
-                continue
-            if pending is None:
-                pending = now
-            elif now - pending >= BURST:
-                bar.refresh()
-                due, pending = now + LOG_PERIOD, None
+        try:
+            for item in items:
+                yield item
+                bar.update()  # counts only: mininterval=inf, the lines are drawn here
+                now = time.perf_counter()
+                if now < due:
+                    continue
+                if pending is None:
+                    pending = now
+                elif now - pending >= BURST:
+                    bar.refresh()
+                    due, pending = now + LOG_PERIOD, None
+        except KeyboardInterrupt:  # raised in items
+            bar.stopped = True
+            raise
+        except GeneratorExit as closing:  # closed at a yield: by a KeyboardInterrupt?
+            bar.stopped = isinstance(closing.__context__, KeyboardInterrupt)
+            raise

@@ -373,3 +373,47 @@ def test_angles_beyond_one_turn_are_invalid_points_and_refused_alone(backend):
     res = sweep(pts, backend=backend, executor="serial")
     assert list(res.status) == ["ok", "invalid"]
     assert "beyond the joints' limits of one turn" in res.reasons[1]
+
+
+#: The lowest frequency of a sweep against cl.modes at the API's assembly of each pose: the
+#: same eigenproblem on configurations that agree within the assembly tolerance (1e-12 m),
+#: the frequencies' sensitivity to q being of order one: 1e-9 leaves a wide margin.
+FREQUENCY_RTOL = 1e-9
+
+
+def test_lowest_frequency_of_a_sweep_is_that_of_the_modes():
+    import closedloop as cl
+    from cahyman_pin.model import cahyman_model
+
+    params = DEFAULT_PARAMS.replace(m_HQ=2.0, m_M4=1.0, m_b=0.3)
+    alpha4 = np.deg2rad([20.0, 50.0, 80.0])
+    pts = grid({"alpha4": alpha4}, alpha=np.deg2rad([80.0, 90.0, 100.0]), s4=0.03,
+               params=params)  # fmt: skip
+    res = sweep(pts, executor="serial", modes=True, start="neighbour")
+    machine = cahyman_model(params)
+    expected = [cl.modes(machine.clm, machine.assemble(np.deg2rad([80.0, 90.0, 100.0]), a, 0.03))
+                .lowest_elastic_frequency for a in alpha4]  # fmt: skip
+    np.testing.assert_allclose(res.indices["lowest_frequency"], expected, rtol=FREQUENCY_RTOL)
+
+
+def test_lowest_frequency_scales_as_one_over_the_root_of_the_masses(tmp_path):
+    """Every mass times 4 (the model has no other inertia): every frequency halves."""
+    pts = grid({"m_HQ": np.array([1.0, 4.0]), "m_M4": np.array([0.5, 2.0])},
+               alpha=np.deg2rad([80.0, 90.0, 100.0]), alpha4=0.7, s4=0.02)  # fmt: skip
+    res = sweep(pts, executor="serial", modes=True)
+    f = res.grid_values("lowest_frequency")
+    np.testing.assert_allclose(f[1, 1], f[0, 0] / 2.0, rtol=1e-12)  # rounding of the solves
+    assert np.isfinite(f).all() and f[0, 1] != f[1, 0]
+    back = SweepResult.load_npz(res.save(tmp_path, "map")[0])
+    np.testing.assert_array_equal(back.indices["lowest_frequency"], res.indices["lowest_frequency"])
+
+
+@pytest.mark.parametrize(
+    ("params", "backend", "message"),
+    [(DEFAULT_PARAMS, "generic", "no mass"),
+     (DEFAULT_PARAMS.replace(m_HQ=1.0), "consistent", "generic backend")],
+)  # fmt: skip
+def test_lowest_frequency_needs_masses_and_the_generic_backend(params, backend, message):
+    pts = grid({"alpha4": np.array([0.2, 0.4])}, alpha=np.full(3, 1.5), s4=0.02, params=params)
+    with pytest.raises(ClosedLoopError, match=message):
+        sweep(pts, backend=backend, executor="serial", modes=True)

@@ -121,3 +121,83 @@ def test_page_needs_a_frame(capsys, tmp_path):
     code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", "--html",
                          str(tmp_path / "x.html"))  # fmt: skip
     assert code == 2 and out == "" and err.count("\n") == 1 and "--html needs --frame" in err
+
+
+def test_payload_without_gravity_adds_its_mass(capsys):
+    code, out, err = run(capsys, main, "modes", "fourbar", "--actuated", "0.3", "--frame", "P",
+                         "--payload", "2", "0.01", "0", "0", "--json")  # fmt: skip
+    assert code == 0, err
+    clm = cl.load_model(REPO / "urdf/fourbar.urdf", REPO / "urdf/fourbar.yaml")
+    q = cl.assemble(clm, actuated=[0.3]).q
+    loaded = cl.modes(clm, q, payloads=[cl.Payload(2.0, "P", (0.01, 0.0, 0.0))])
+    frequencies = json.loads(out)["frequencies"]
+    np.testing.assert_allclose(frequencies, loaded.frequencies, rtol=1e-12)
+    np.testing.assert_allclose(json.loads(out)["q"], q, rtol=0, atol=1e-12)  # no weight, no sag
+    assert frequencies[0] < 0.5 * cl.modes(clm, q).frequencies[0]  # 2 kg on a light linkage
+
+
+def test_cahyman_modes_under_gravity(capsys):
+    code, out, err = run(capsys, cahyman_main, "modes", "--mass", "m_HQ=2", "--mass", "m_M4=1",
+                         "--gravity", "--json")  # fmt: skip
+    assert code == 0, err
+    doc = json.loads(out)
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    machine = cahyman_model(DEFAULT_PARAMS.replace(m_HQ=2.0, m_M4=1.0))
+    rest = machine.assemble(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(90.0), 0.05)
+    res = cl.modes(machine.clm, rest, frame="M", gravity=(0.0, 0.0, -9.81))
+    np.testing.assert_allclose(doc["frequencies"], res.frequencies, rtol=1e-9)
+    np.testing.assert_allclose(doc["q"], res.q, rtol=0, atol=1e-12)
+    assert doc["gravity_m_per_s2"] == [0.0, 0.0, -9.81]
+    assert np.max(np.abs(np.asarray(doc["q"]) - rest)) > 1e-6  # it settled: not the rest pose
+
+
+def test_cahyman_modes_of_the_links_as_beams(capsys):
+    code, out, err = run(capsys, cahyman_main, "modes", "--links-as-beams", "--density", "2700",
+                         "--n", "3", "--json")  # fmt: skip
+    assert code == 0, err
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    machine = cahyman_model(DEFAULT_PARAMS.replace(links_as_beams=True))
+    q = machine.assemble(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(90.0), 0.05)
+    res = cl.modes(machine.clm, q, n=3, density=2700.0)
+    np.testing.assert_allclose(json.loads(out)["frequencies"], res.frequencies, rtol=1e-9)
+
+
+def test_cahyman_density_needs_the_links_as_beams(capsys):
+    code, out, err = run(capsys, cahyman_main, "modes", "--density", "2700")
+    assert code == 2 and out == "" and err.count("\n") == 1 and "--links-as-beams" in err
+
+
+def test_cahyman_map_of_the_lowest_frequency(capsys, tmp_path):
+    code, out, err = run(capsys, cahyman_main, "map", "--alpha4", "30,60", "--index",
+                         "lowest_frequency", "--mass", "m_HQ=2", "--mass", "m_M4=1",
+                         "--workers", "1", "--out", str(tmp_path))  # fmt: skip
+    assert code == 0, err
+    assert "lowest_frequency: min" in out and (tmp_path / "map_lowest_frequency.png").exists()
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+
+    machine = cahyman_model(DEFAULT_PARAMS.replace(m_HQ=2.0, m_M4=1.0))
+    q = machine.assemble(np.deg2rad([90.0, 90.0, 90.0]), np.deg2rad(60.0), 0.05)  # defaults
+    data = np.load(tmp_path / "map.npz")
+    expected = cl.modes(machine.clm, q).lowest_elastic_frequency
+    np.testing.assert_allclose(data["index_lowest_frequency"][1], expected, rtol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (("--mass", "m_HQ=1"), "--index lowest_frequency"),
+        (("--param", "m_HQ=1,2"), "--index lowest_frequency"),
+        (("--index", "lowest_frequency"), "no mass"),
+        (("--index", "lowest_frequency", "--mass", "m_HQ=1", "--backend", "consistent"),
+         "generic backend"),
+    ],
+)  # fmt: skip
+def test_cahyman_map_masses_are_for_the_frequency_only(capsys, tmp_path, argv, message):
+    code, out, err = run(capsys, cahyman_main, "map", "--alpha4", "30,60", "--out",
+                         str(tmp_path), *argv)  # fmt: skip
+    assert code == 2 and out == "" and err.count("\n") == 1 and message in err

@@ -107,6 +107,43 @@ def test_stopping_early_ends_quietly(monkeypatch):
     assert stream.getvalue().splitlines()[-1].startswith("sweep: 2/100, ")
 
 
+def interrupted(n: int, error: BaseException):
+    """n items, then ``error`` raised (a signal's KeyboardInterrupt, or a failure)."""
+    yield from range(n)
+    raise error
+
+
+@pytest.mark.parametrize(
+    ("error", "last"), [(KeyboardInterrupt(), None), (ValueError("bad"), "sweep: 3/100, ")]
+)
+def test_an_interrupt_leaves_no_last_line_an_error_does(monkeypatch, error, last):
+    monkeypatch.setattr(progress_module, "LOG_PERIOD", 3600.0)
+    stream = io.StringIO()
+    with pytest.raises(type(error)):
+        for _ in progress(interrupted(3, error), total=100, label="sweep", stream=stream):
+            pass
+    if last is None:
+        assert stream.getvalue() == ""  # the interruption's own line comes next
+    else:
+        assert stream.getvalue().splitlines()[-1].startswith(last)
+
+
+def test_closed_while_interrupted_leaves_no_last_line(monkeypatch):
+    """A consumer that closes the iteration on a KeyboardInterrupt (a map's gather)."""
+    monkeypatch.setattr(progress_module, "LOG_PERIOD", 0.0)
+    monkeypatch.setattr(progress_module, "BURST", 0.0)
+    stream = io.StringIO()
+    it = progress(range(100), label="sweep", stream=stream)
+    assert [next(it) for _ in range(4)] == [0, 1, 2, 3]
+    shown = stream.getvalue()
+    assert shown.startswith("sweep: 2/100, ") and "3/100" not in shown  # lines while it ran
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        it.close()
+    assert stream.getvalue() == shown
+
+
 def test_in_a_jupyter_kernel_tqdm_auto_draws_it(monkeypatch, capsys):
     # A kernel's stderr is no terminal; there tqdm.auto chooses (a widget with ipywidgets
     # in a notebook front end, else its text bar): here the text bar, on stderr.
