@@ -49,6 +49,7 @@ def _run_modes(args: argparse.Namespace) -> int:
     masses = _masses(args, weight=False)
     machine = cahyman_model(params.replace(**masses) if masses else params)
     q = machine.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    machine.require_within_limits(q)
     res = modes(machine.clm, q, n=args.n, frame="M")
     if args.json:
         print_json({"model": "cahyman", "inputs": inputs_echo(args), "masses_kg": masses,
