@@ -24,15 +24,13 @@ values, assembled from two starts (equal to within :data:`SAME_BRANCH` on one br
   its neighbour's assembled configuration, the neighbours the edges of the shortest tree
   joining the measurements' actuated values (scaled as
   :func:`closedloop.kinematics.driving.input_scale`; in one input, the next value up or
-  down). The tree cut where two neighbours differ leaves groups of one mode each, and
-  groups whose first measurements agree (driven from one to the other) are joined; the
-  measurements outside the largest group are named (a tie: the group of the first
-  measurement is kept).
+  down). The tree cut where two neighbours differ leaves groups of one mode each; a group
+  joins the mode of a larger one whose first measurement agrees with its own (driven from
+  one to the other); the measurements outside the mode of the most measurements are named
+  (a tie: the mode of the first measurement is kept).
 """
 
 from __future__ import annotations
-
-import itertools
 
 import numpy as np
 import pinocchio as pin
@@ -142,11 +140,11 @@ def other_modes(
     if len(driven) < 2:
         return out
     points = np.array([measurements[i].actuated for i in driven]) / input_scale(clm)
-    group = list(range(len(driven)))  # union-find over the tree's edges of one mode
+    link = list(range(len(driven)))  # union-find over the tree's edges of one mode
 
     def root(a):
-        while group[a] != a:
-            group[a] = a = group[group[a]]
+        while link[a] != a:
+            link[a] = a = link[link[a]]
         return a
 
     def same(a, b) -> bool:  # a's values driven from b's configuration: a's?
@@ -160,18 +158,20 @@ def other_modes(
 
     for a, b in _tree(points):
         if same(a, b):
-            group[root(a)] = root(b)
-    firsts = {}  # the groups the tree cut: one of a mode when their first members are
+            link[root(a)] = root(b)
+    members: dict = {}  # the groups the tree cut, each one mode
     for a in range(len(driven)):
-        firsts.setdefault(root(a), a)
-    for a, b in itertools.combinations(firsts.values(), 2):
-        if root(a) != root(b) and same(a, b):
-            group[root(a)] = root(b)
-    roots = [root(a) for a in range(len(driven))]
-    sizes = {r: roots.count(r) for r in roots}
-    kept = max(roots, key=lambda r: (sizes[r], -roots.index(r)))
-    for a, r in enumerate(roots):
-        if r != kept:
+        members.setdefault(root(a), []).append(a)
+    modes: list = []  # (first member, its members) of each mode, the largest group first
+    for group in sorted(members.values(), key=lambda g: (-len(g), g[0])):
+        mode = next((m for m in modes if same(group[0], m[0])), None)
+        if mode is None:
+            modes.append((group[0], list(group)))
+        else:
+            mode[1].extend(group)
+    kept = set(max(modes, key=lambda m: (len(m[1]), -m[0]))[1])
+    for a in range(len(driven)):
+        if a not in kept:
             out.setdefault(driven[a], "neighbours")
     return dict(sorted(out.items()))
 
