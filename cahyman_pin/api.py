@@ -114,6 +114,7 @@ def generic_backend(
     """
     model = cahyman_model(params)
     q = model.assemble(alpha, alpha4, s4)
+    model.require_within_limits(q)  # refused in CaHyMan's words, before Configuration does
     state = Configuration(model.clm, q, length=params.length)
     gravity = (0.0, 0.0, -params.gravity) if weight else None
     result = compliance(state, FRAME_M, gravity=gravity)

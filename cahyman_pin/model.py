@@ -30,9 +30,10 @@ from cahyman_pin.urdf_builder import (
     closure_spec,
 )
 from closedloop.common.arrays import readonly, real_array
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import InvalidInputError, OutsideLimitsError
 from closedloop.kinematics.assembly import close_loops
 from closedloop.kinematics.constraints import closure_residual, update_kinematics
+from closedloop.kinematics.limits import describe_limits, joints_outside_limits
 from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import closure_between_frames
@@ -313,6 +314,20 @@ class CaHyManModel:
         q[self._virtual_index] = 0.0  # virtual springs at rest
         self.clm.set_actuated(q, inputs)
         return close_loops(self.clm, q, jacobian=jacobian)
+
+    def require_within_limits(self, q) -> None:
+        """:class:`OutsideLimitsError` when joints of an assembled configuration q (nq,)
+        are outside their limits (:func:`closedloop.kinematics.limits.joints_outside_limits`),
+        in CaHyMan's words: its inputs are checked (:func:`check_inputs`) and the
+        ``cahyman`` command has no way past the limits, hence no ``--no-limits`` hint.
+        """
+        bad = joints_outside_limits(self.clm, self.clm.check_configuration(q))
+        if bad:
+            raise OutsideLimitsError(
+                f"the pose assembles with joints outside their limits: {describe_limits(bad)}; "
+                "CaHyMan is analysed within its joints' limits: choose another pose",
+                bad,
+            )
 
     def residual(self, q) -> float:
         """Infinity norm of the closure residual at q (nq,) [m]."""

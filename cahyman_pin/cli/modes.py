@@ -70,6 +70,7 @@ def _run_modes(args: argparse.Namespace) -> int:
     params = params.replace(**masses, links_as_beams=args.links_as_beams)
     machine = cahyman_model(params)
     q = machine.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    machine.require_within_limits(q)
     gravity = (0.0, 0.0, -params.gravity) if args.gravity else None
     res = modes(machine.clm, q, n=args.n, frame="M", gravity=gravity, density=args.density)
     if args.json:

@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``cahyman view``; returns the exit status (0)."""
     model = cahyman_model(DEFAULT_PARAMS.with_ks(args.ks))
     q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    model.require_within_limits(q)
     pose = (
         f"alpha = ({', '.join(f'{a:g}' for a in args.alpha)}) deg, alpha4 = {args.alpha4:g} deg, "
         f"s4 = {args.s4:g} mm, K_s {args.ks}"

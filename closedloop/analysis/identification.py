@@ -31,16 +31,16 @@ U_j the identity (a number) or K_0 (a block), and d(C w)/d theta_g = k_g dC/dk_g
 Standard errors come from the covariance (S^T S)^+ of theta at the solution (S the
 sensitivity matrix of the weighted residuals: the sd are taken as known), by the delta
 method se(k) = k se(theta). A parameter the data cannot identify (its column of S is
-rounding, below ``DEAD_RTOL`` of the largest, or it takes part in a null direction of S
-with unit-norm columns, by the rank rule of :mod:`closedloop.common.conditioning`, at the
-solution), or whose log has a standard error above ``LOG_SE_MAX`` (the data do not bound
-it), is named in ``unidentifiable``, its estimate and standard error are None, never
-an arbitrary value (the fit moves it only along what the data see: two springs in series
-keep the sum of their compliances; a small weight on the offsets from the start keeps the
-unseen directions there); ``confounded`` names the parameters of each null direction. The
-errors of the identified parameters, outside every null direction, are exact. Before the
-fit, one common log offset brings the start to the scale of the data
-(:func:`_common_offset`).
+rounding, below ``fit_statistics.DEAD_RTOL`` of the largest, or it takes part in a null
+direction of S with unit-norm columns, by the rank rule of
+:mod:`closedloop.common.conditioning`, at the solution), or whose log has a standard
+error above ``LOG_SE_MAX`` (the data do not bound it), is named in ``unidentifiable``,
+its estimate and standard error are None, never an arbitrary value (the fit moves it
+only along what the data see: two springs in series keep the sum of their compliances; a
+small weight on the offsets from the start keeps the unseen directions there);
+``confounded`` names the parameters of each null direction. The errors of the identified
+parameters, outside every null direction, are exact. Before the fit, one common log
+offset brings the start to the scale of the data (:func:`_common_offset`).
 
 The standard errors assume that the model fits the data: the weighted residuals are then
 draws of a unit normal, and their sum of squares a chi-square variable of n_c - rank(S)
@@ -49,7 +49,9 @@ quantile of significance :data:`FIT_SIGNIFICANCE` of that distribution (a residu
 above what the stated sd allow: measurements taken on another assembly mode than the
 model's, another frame, a unit slip, sd stated too small) is flagged (``Fit.consistent``
 False, :class:`ModelMisfitWarning`): its estimates are the best compromise of a model that
-does not describe the data, and its standard errors do not hold.
+does not describe the data, and its standard errors do not hold. The warning and the fit
+then name the measurements that misfit most and those whose actuated values were assembled
+on another assembly mode than the robot was in (:mod:`closedloop.analysis.misfit`).
 """
 
 from __future__ import annotations
@@ -57,24 +59,38 @@ from __future__ import annotations
 import numbers
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
 import scipy.special
 
+from closedloop.analysis.fit_result import Fit
+from closedloop.analysis.fit_statistics import (
+    FIT_SIGNIFICANCE,
+    chi_square_rms_limit,
+    covariance,
+    null_directions,
+    smallest_seen,
+)
 from closedloop.analysis.measurements import Measurement
+from closedloop.analysis.misfit import (
+    describe,
+    measurement_rms,
+    other_modes,
+    worst_measurements,
+)
 from closedloop.common.arrays import readonly
-from closedloop.common.conditioning import rule_rank
 from closedloop.elastostatics.compliance import compliance
 from closedloop.exceptions import (
     InvalidInputError,
     MechanismError,
     ModelMisfitWarning,
     OpenLoopError,
+    OutsideLimitsError,
     SingularConfigurationError,
 )
 from closedloop.io.loader import reference_configuration
+from closedloop.kinematics.configuration import require_within_limits
 from closedloop.kinematics.driving import assemble_connected
 from closedloop.model.closed_loop import ClosedLoopModel
 
@@ -82,13 +98,6 @@ from closedloop.model.closed_loop import ClosedLoopModel
 #: identified parameter: beyond it the data do not bound k (e.g. twists that a rigid spring
 #: explains best: the optimiser stops at an arbitrary large k, its error 1e3-1e5 times k).
 LOG_SE_MAX = 1.0
-#: Relative share of a null vector of S above which a parameter takes part in it.
-NULL_SHARE = 0.1
-#: A column of S below this share of the largest is rounding (the parameter is not seen):
-#: the rank rule's RANK_RTOL^2, its threshold on eigenvalue ratios. A column above
-#: it, however small, stays in the rank test: a stiff spring in series with a soft one is
-#: confounded with it, not "not seen" while the soft one is "identified".
-DEAD_RTOL = 1e-14
 #: Most steps of the common log offset that brings a start to the scale of the data.
 MAX_OFFSET_STEPS = 5
 #: Scale of the log-stiffness unknowns [-]: the first step changes k by at most e^1.
@@ -101,74 +110,8 @@ PRIOR = 1e-9
 #: their sums of squares stay finite (1e200 a term); beyond, a twist, a wrench or an sd is
 #: out of scale (a unit slip), not data.
 LARGEST_WEIGHTED = 1e100
-#: Significance of the chi-square test of the fit (module docstring): a data set that the
-#: model fits, with Gaussian errors of the stated sd, is flagged once in a million fits.
-#: This small a value flags what the sd cannot explain (an RMS above 1.5 from 50
-#: components, above 1.11 from 1000), not a few outliers or sd known to within 10 %.
-FIT_SIGNIFICANCE = 1e-6
 #: Longest text of a bad argument shown in an error message; a longer one is cut.
 SHOWN_REPR = 80
-
-
-@dataclass(frozen=True)
-class Fit:
-    """Result of :func:`identify` (SI: N m/rad or N/m per stiffness, 1 per block factor).
-
-    Attributes:
-        names: parameter names (a group "a+b" for joints tied to one value).
-        estimates: name -> fitted value, or None when unidentifiable.
-        std_errors: name -> standard error, or None when unidentifiable.
-        correlations: (n_id, n_id) correlation matrix of the identified log-values
-            (n_id = len(identified)), rows and columns in the order of ``identified``.
-        identified: names of the identified parameters, in order.
-        unidentifiable: names the data cannot identify (estimate and error None).
-        confounded: the names taking part in each null direction of the sensitivities.
-        residuals: (n, 6) weighted residuals (C w - d) / sd at the solution (per
-            measurement, components dx dy dz rx ry rz).
-        residual_rms: RMS of the weighted residuals (about 1 for consistent data).
-        rms_limit: largest residual RMS that the chi-square test at
-            :data:`FIT_SIGNIFICANCE` accepts for these data, or None when no component is
-            left to test it (as many informative components as the rank of S).
-        consistent: False when ``residual_rms`` exceeds ``rms_limit`` (the model does not
-            fit the data: the standard errors do not hold; :class:`ModelMisfitWarning`).
-        units: name -> unit of its estimate and error ("N m/rad", "N/m", or "1" for a
-            block's factor).
-        n_measurements: number of measurements.
-        success: whether the optimiser reports convergence.
-    """
-
-    names: tuple[str, ...]
-    estimates: dict
-    std_errors: dict
-    correlations: np.ndarray
-    identified: tuple[str, ...]
-    unidentifiable: tuple[str, ...]
-    confounded: tuple[tuple[str, ...], ...]
-    residuals: np.ndarray
-    residual_rms: float
-    rms_limit: float | None
-    consistent: bool
-    units: dict
-    n_measurements: int
-    success: bool
-
-    def to_dict(self) -> dict:
-        """JSON-ready summary."""
-        return {
-            "estimates": self.estimates,
-            "std_errors": self.std_errors,
-            "identified": list(self.identified),
-            "unidentifiable": list(self.unidentifiable),
-            "confounded": [list(c) for c in self.confounded],
-            "correlations": self.correlations.tolist(),
-            "residual_rms": self.residual_rms,
-            "rms_limit": self.rms_limit,
-            "consistent": self.consistent,
-            "units": self.units,
-            "residuals": self.residuals.tolist(),
-            "n_measurements": self.n_measurements,
-            "success": self.success,
-        }
 
 
 def _groups(clm: ClosedLoopModel, fit) -> list[tuple[str, ...]]:
@@ -249,8 +192,10 @@ def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
     return theta0
 
 
-def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
-    """The configuration of each measurement (its index named in an error)."""
+def _configurations(clm: ClosedLoopModel, measurements, check_limits: bool) -> list[np.ndarray]:
+    """The configuration of each measurement (its index named in an error): its actuated
+    values driven from the file's configuration, else its q (within the limits, with
+    ``check_limits``)."""
     if isinstance(measurements, Measurement | str) or not isinstance(measurements, Sequence):
         raise InvalidInputError(
             f"measurements must be a list of Measurement, got {_shown(measurements)}"
@@ -260,10 +205,15 @@ def _configurations(clm: ClosedLoopModel, measurements) -> list[np.ndarray]:
     out, start = [], reference_configuration(clm)  # the file's, as the command line's
     for i, m in enumerate(measurements):
         try:  # actuated values: their count and values checked by the assembly
-            if m.q is not None:
-                out.append(clm.check_configuration(m.q))
-            else:
-                out.append(assemble_connected(clm, m.actuated, start, jacobian=False).q)
+            q = None if m.q is None else clm.check_configuration(m.q)
+            if m.actuated is not None:
+                q = assemble_connected(clm, m.actuated, start, jacobian=False,
+                                       check_limits=check_limits).q  # fmt: skip
+            elif check_limits:
+                require_within_limits(clm, q)
+            out.append(q)
+        except OutsideLimitsError as e:
+            raise OutsideLimitsError(f"measurement {i}: {e}", e.joints) from None
         except InvalidInputError as e:
             raise InvalidInputError(f"measurement {i}: {e}") from None
     return out
@@ -276,6 +226,7 @@ def identify(
     fit: Sequence[str | Sequence[str]],
     *,
     start: Mapping[str, float] | None = None,
+    check_limits: bool = True,
 ) -> Fit:
     """Fit spring values to measured deflections (see the module docstring).
 
@@ -288,11 +239,14 @@ def identify(
             every velocity coordinate of its joints, or a factor of their blocks).
         start: parameter name ("a+b" for a group) -> start value [N m/rad, N/m, or a
             block's factor], overriding the model's.
+        check_limits: refuse a measurement outside the joints' position limits (a q, or
+            actuated values); False: take them as they are (``--no-limits``).
 
     Warns:
         ModelMisfitWarning: the model does not fit the data (``Fit.consistent`` False:
             the chi-square test of the module docstring); the message gives the residual
-            RMS and the largest the sd allow.
+            RMS and the largest the sd allow, the measurements that misfit most and those
+            assembled on another assembly mode (``Fit.worst``, ``Fit.other_mode``).
 
     Raises:
         InvalidInputError: no parameter, a parameter without a start value > 0, a start
@@ -302,6 +256,8 @@ def identify(
             out of scale, its index and the culprit named).
         NameNotFoundError: unknown joint or frame.
         OpenLoopError: a measurement's q does not close the loops (its index named).
+        OutsideLimitsError: ``check_limits`` and a measurement's q outside the joints'
+            limits (its index named; actuated values outside: InvalidInputError).
         MechanismError, SingularConfigurationError: no compliance at a measurement's
             configuration with the start springs (its index named).
     """
@@ -309,7 +265,7 @@ def identify(
     if not groups:
         raise InvalidInputError("nothing to fit: give at least one joint name")
     names = tuple("+".join(g) for g in groups)
-    configs = _configurations(clm, measurements)
+    configs = _configurations(clm, measurements, check_limits)
     clm.frame_id(frame)  # NameNotFoundError listing the frames
     n_measured = sum(int(np.isfinite(m.sd).sum()) for m in measurements)
     if n_measured < len(groups):
@@ -333,7 +289,7 @@ def identify(
         pred, sens = np.empty((len(configs), 6)), np.empty((len(configs), 6, len(groups)))
         for m, q in enumerate(configs):
             try:
-                res = compliance(model, q, frame)
+                res = compliance(model, q, frame, check_limits=False)  # checked above
             except OpenLoopError as e:
                 raise OpenLoopError(f"measurement {m}: {e}", e.residual, e.tolerance) from None
             except (MechanismError, SingularConfigurationError) as e:
@@ -348,9 +304,9 @@ def identify(
         _check_scale(*evaluate(theta0), d, w, sd)
     theta, success = _solve(evaluate, _common_offset(evaluate, theta0, d / sd))
     r, S = evaluate(theta)
-    unidentifiable, confounded, rank = _unidentifiable(S, names)
+    unidentifiable, confounded, rank = null_directions(S, names)
     free = [i for i, n in enumerate(names) if n not in unidentifiable]
-    cov = _covariance(S)[np.ix_(free, free)]
+    cov = covariance(S)[np.ix_(free, free)]
     se = np.sqrt(np.diag(cov))
     vague = se > LOG_SE_MAX  # the data do not bound it: the fit stopped anywhere
     if vague.any():
@@ -363,14 +319,19 @@ def identify(
     for j, i in enumerate(free):
         estimates[names[i]], ses[names[i]] = float(k[i]), float(k[i] * se[j])
     rms = float(np.sqrt(np.mean(r**2)))
-    rms_limit = _rms_limit(r, S, rank)
+    rms_limit = chi_square_rms_limit(r, S, rank)
     consistent = rms_limit is None or rms <= rms_limit
+    worst, other = (), {}
     if not consistent:
+        worst = worst_measurements(r, sd, FIT_SIGNIFICANCE)
+        other = other_modes(clm, measurements, configs, check_limits=check_limits)
+        diagnosis = describe(measurements, measurement_rms(r), worst, other)
         warnings.warn(
             f"the model does not fit the data: weighted residual RMS {rms:.3g}, where "
             f"errors of the stated sd give at most {rms_limit:.3g} (chi-square test at "
             f"significance {FIT_SIGNIFICANCE:g}); the standard errors assume a fit and do "
-            "not hold (check the configurations' assembly mode, the frame, the units, the sd)",
+            "not hold (check the configurations' assembly mode, the frame, the units, the sd)"
+            + (f"; {diagnosis}" if diagnosis else ""),
             ModelMisfitWarning,
             stacklevel=2,
         )
@@ -386,29 +347,13 @@ def identify(
         residual_rms=rms,
         rms_limit=rms_limit,
         consistent=consistent,
+        measurement_rms=readonly(measurement_rms(r)),
+        worst=worst,
+        other_mode=other,
         units={name: _unit(clm, g) for name, g in zip(names, groups, strict=True)},
         n_measurements=len(configs),
         success=success,
     )
-
-
-def _rms_limit(r: np.ndarray, S: np.ndarray, rank: int) -> float | None:
-    """Largest weighted residual RMS of r (n, 6) that the chi-square test at
-    :data:`FIT_SIGNIFICANCE` accepts, S (6 n, p) of rank ``rank``; None when no degree of
-    freedom is left.
-
-    The components that carry no noise are not counted: those whose sensitivities vanish
-    and whose residual is exactly zero (a planar mechanism's out-of-plane twist, zero in
-    the model whatever the springs and measured as 0): their residual is 0 for any fit,
-    and counting them would loosen the test. The limit is then on the RMS over all n 6
-    components, as ``Fit.residual_rms``.
-    """
-    flat = r.reshape(-1)
-    noisy = int(np.count_nonzero((flat != 0.0) | np.any(S != 0.0, axis=1)))
-    dof = noisy - rank
-    if dof <= 0:
-        return None
-    return float(np.sqrt(scipy.special.chdtri(dof, FIT_SIGNIFICANCE) / flat.size))
 
 
 def _check_scale(r, S, d, w, sd) -> None:
@@ -484,7 +429,7 @@ def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
     a stiff spring in series then drifting to infinity.)
     """
     r0, S0 = evaluate(theta0)
-    weight = PRIOR * _smallest_seen(S0)
+    weight = PRIOR * smallest_seen(S0)
     rejected = (np.full(r0.size, REJECTED), np.zeros_like(S0))
     last = {}
 
@@ -511,28 +456,6 @@ def _solve(evaluate, theta0: np.ndarray) -> tuple[np.ndarray, bool]:
     return theta0 + out.x, bool(out.success)
 
 
-def _smallest_seen(S: np.ndarray) -> float:
-    """Smallest singular value of S (6 n, p) among its rank(S) largest, the rank by the
-    rule on unit-norm columns (:func:`_unidentifiable`); 0 when S sees nothing."""
-    rank = _unidentifiable(S, tuple(map(str, range(S.shape[1]))))[2]
-    return float(np.linalg.svd(S, compute_uv=False)[rank - 1]) if rank else 0.0
-
-
-def _covariance(S: np.ndarray) -> np.ndarray:
-    """(p, p) covariance of theta, (S^T S)^+ by the rank rule on S with unit-norm columns
-    (an SVD: no squared condition). Its rows of the parameters outside every null
-    direction are their covariance; the other rows (vanishing columns: zero) are not used.
-    """
-    norms = np.linalg.norm(S, axis=0)
-    live = norms > 0.0
-    cov = np.zeros((S.shape[1], S.shape[1]))
-    if live.any():
-        _, s, Vt = np.linalg.svd(S[:, live] / norms[live], full_matrices=False)
-        root = Vt[: rule_rank(s)].T / s[: rule_rank(s)]
-        cov[np.ix_(live, live)] = (root @ root.T) / np.outer(norms[live], norms[live])
-    return cov
-
-
 def _common_offset(evaluate, theta0: np.ndarray, data: np.ndarray) -> np.ndarray:
     """theta0 shifted by one common log offset t that fits the scale of the data: the
     predictions are about exp(-t) times those at theta0 (exactly when the fitted springs
@@ -552,23 +475,3 @@ def _common_offset(evaluate, theta0: np.ndarray, data: np.ndarray) -> np.ndarray
             break
         theta, r = theta - np.log(a), trial
     return theta
-
-
-def _unidentifiable(S: np.ndarray, names: tuple[str, ...]) -> tuple[list[str], list[tuple], int]:
-    """(names, confounded, rank): the names whose column of S vanishes or that take part
-    in a null direction of S (columns scaled to unit norm; the rank rule), the names of
-    each null direction, and the rank of S by that rule."""
-    norms = np.linalg.norm(S, axis=0)
-    dead = norms <= DEAD_RTOL * max(norms.max(initial=0.0), 1e-300)
-    out = {names[i] for i in np.flatnonzero(dead)}
-    live = np.flatnonzero(~dead)
-    confounded, rank = [], 0
-    if live.size:
-        _, s, Vt = np.linalg.svd(S[:, live] / norms[live], full_matrices=True)
-        rank = rule_rank(s)
-        for v in Vt[rank:]:
-            part = tuple(sorted((names[live[i]] for i in np.flatnonzero(np.abs(v) > NULL_SHARE)),
-                                key=names.index))  # fmt: skip
-            confounded.append(part)
-            out |= set(part)
-    return sorted(out, key=names.index), confounded, rank

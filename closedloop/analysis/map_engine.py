@@ -239,7 +239,7 @@ def resolve_ill_conditioned(out: ChunkResult, symmetric: np.ndarray) -> None:
 
 
 def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes="world",
-                    length=None, inputs=None):  # fmt: skip
+                    length=None, inputs=None, check_limits=True):  # fmt: skip
     """Assemble the points ``rows`` of a chunk in order (warm-started), then query them.
 
     The compliances of the assembled points are computed together, :data:`STACK` at a
@@ -264,6 +264,7 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
             from the last point repeats the step before (to :data:`EQUAL_STEP_RTOL`)
             starts from an extrapolation of the last points (:func:`_extrapolated`)
             instead of the last one (fewer Gauss-Newton iterations along a grid line).
+        check_limits: as for :func:`closedloop.elastostatics.compliance.compliance`.
     """
     history: list = []  # q of the last three assembled points, in a row
     q_prev, assembled = first, []
@@ -281,12 +282,12 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
         assembled.append((i, a))
         q_prev, history = a.q, [*history[-2:], a.q]
         if len(assembled) == STACK:  # queried a stack at a time: the closure Jacobians
-            _query_points(clm, frame, out, assembled, axes, length)  # they hold are let go
-            assembled = []
-    _query_points(clm, frame, out, assembled, axes, length)
+            _query_points(clm, frame, out, assembled, axes, length, check_limits)  # they hold
+            assembled = []  # are let go
+    _query_points(clm, frame, out, assembled, axes, length, check_limits)
 
 
-def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
+def _query_points(clm, frame, out, assembled: list, axes: str, length, check_limits) -> None:
     """The compliance of each assembled point ``(position, Assembly)`` into ``out``."""
     if not assembled:
         return
@@ -296,7 +297,8 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
     if all(a.closure is not None for _, a in assembled):  # evaluated by the assemblies
         closure = tuple(np.array(c) for c in zip(*(a.closure for _, a in assembled), strict=True))
     C, _, rank, cond, _, errors, L = answered(clm, Q, frame, axes, length, POINT_ERRORS,
-                                              closure=closure)  # fmt: skip
+                                              closure=closure,
+                                              check_limits=check_limits)  # fmt: skip
     ok = rank >= 0
     done = positions[ok]
     out.C[done], out.rank[done], out.condition[done], out.length[done] = (
@@ -311,7 +313,7 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length) -> None:
     for k in np.flatnonzero(ok & (cond > ILL_CONDITIONED)):  # the single query's K (and C)
         i = positions[k]
         try:
-            r = compliance(clm, Q[k], frame, axes, length=length)
+            r = compliance(clm, Q[k], frame, axes, length=length, check_limits=check_limits)
         except POINT_ERRORS as e:
             out.fail(i, e)
             continue
@@ -393,6 +395,7 @@ class MapChunk:
         wrench: (6,) wrench of the deflection indices [N, N m] at the frame, or None.
         modes: also the index ``lowest_frequency`` [Hz] of every point
             (:func:`closedloop.analysis.vibration.lowest_frequencies`).
+        check_limits: False: points outside the joints' limits are computed too.
     """
 
     model: ClosedLoopModel | ModelSource
@@ -402,6 +405,7 @@ class MapChunk:
     start: Callable | None = None
     wrench: np.ndarray | None = None
     modes: bool = False
+    check_limits: bool = True
 
     def __len__(self) -> int:
         return len(self.points)
@@ -418,17 +422,19 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)
     first = chunk.first
     if first is None and starts is None:  # the path's first chunk (a start provider: unused)
-        first = path_start(clm, chunk.points)
+        first = path_start(clm, chunk.points, chunk.check_limits)
     last = [None]  # the inputs of the last point assembled (q0: its configuration)
     configurations = {}  # position -> q of the assembled points
 
     def solve(i: int, q0):
-        a = drive(clm, chunk.points[i], q0, last[0] if starts is None else None)
+        a = drive(clm, chunk.points[i], q0, last[0] if starts is None else None,
+                  check_limits=chunk.check_limits)  # fmt: skip
         last[0] = chunk.points[i]
         configurations[i] = a.q
         return a
 
-    assemble_points(clm, chunk.frame, out, range(len(chunk)), solve, first, starts)
+    assemble_points(clm, chunk.frame, out, range(len(chunk)), solve, first, starts,
+                    check_limits=chunk.check_limits)  # fmt: skip
     complete(out, chunk.wrench)
     if chunk.modes:  # the vibration module on demand
         from closedloop.analysis.vibration import lowest_frequencies
@@ -438,7 +444,7 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     return out
 
 
-def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
+def path_start(clm: ClosedLoopModel, points: np.ndarray, check_limits: bool = True) -> np.ndarray:
     """(nq,) start of a map's path: its first point assembled on the mode of the file's
     configuration (:func:`closedloop.kinematics.driving.assemble_connected`), as ``closedloop
     stiffness --actuated`` assembles it; the file's configuration where that fails (the
@@ -447,13 +453,14 @@ def path_start(clm: ClosedLoopModel, points: np.ndarray) -> np.ndarray:
     if not len(points):
         return reference
     try:
-        return np.array(assemble_connected(clm, points[0], reference, jacobian=False).q)
+        return np.array(assemble_connected(clm, points[0], reference, jacobian=False,
+                                           check_limits=check_limits).q)  # fmt: skip
     except POINT_ERRORS:
         return reference
 
 
 def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | None, *,
-          jacobian: bool = True):  # fmt: skip
+          jacobian: bool = True, check_limits: bool = True):  # fmt: skip
     """:func:`closedloop.kinematics.driving.assemble_within_limits` of ``actuated`` (n_act,) from q0
     (nq,), whose inputs are ``start`` (None: unknown, solved at once); driven there in
     steps of at most INPUT_STEP (:func:`closedloop.kinematics.driving.assemble_connected`) where it
@@ -462,8 +469,8 @@ def drive(clm: ClosedLoopModel, actuated: np.ndarray, q0, start: np.ndarray | No
         np.max(np.abs(actuated - start) / input_scale(clm), initial=0.0) > INPUT_STEP
     )
     if far and _free(clm):
-        return assemble_connected(clm, actuated, q0, jacobian=jacobian)
-    return assemble_within_limits(clm, actuated, q0, jacobian=jacobian)
+        return assemble_connected(clm, actuated, q0, jacobian=jacobian, check_limits=check_limits)
+    return assemble_within_limits(clm, actuated, q0, jacobian=jacobian, check_limits=check_limits)
 
 
 def _free(clm: ClosedLoopModel) -> bool:
@@ -471,7 +478,8 @@ def _free(clm: ClosedLoopModel) -> bool:
     return bool(clm.memo("free_coordinates", lambda: free_coordinates(clm)).size)
 
 
-def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int]) -> list:
+def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int],
+                  check_limits: bool = True) -> list:  # fmt: skip
     """Start configuration of each chunk, by a serial continuation along the path.
 
     The pass assembles the points of :func:`continuation_points` (steps of at most
@@ -497,7 +505,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     Returns:
         One (nq,) configuration, or None for the first chunk (the reference), per border.
     """
-    q = path_start(clm, points)
+    q = path_start(clm, points, check_limits)
     wanted = set(firsts[1:])
     last = max(wanted, default=-1)
     visit = sorted(wanted | set(continuation_points(clm, points[: last + 1])))
@@ -507,7 +515,8 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     while p <= last:
         try:
             start = points[done] if done >= 0 else None  # q's inputs, as the kernel's
-            q, ok = drive(clm, points[p], q, start, jacobian=False).q, True
+            q = drive(clm, points[p], q, start, jacobian=False, check_limits=check_limits).q
+            ok = True
         except POINT_ERRORS:
             ok = False
         found[p] = q

@@ -297,6 +297,7 @@ def stiffness_map(
     chunk: int = CHUNK,
     show_progress: bool = False,
     modes: bool = False,
+    check_limits: bool = True,
 ) -> StiffnessMap:
     """Stiffness indices at many configurations (see the module docstring).
 
@@ -321,6 +322,9 @@ def stiffness_map(
         modes: also the index ``lowest_frequency`` [Hz]: the lowest nonzero natural
             frequency of every point (:func:`closedloop.analysis.vibration.modes`, rigid-body modes
             skipped; NaN where it has none).
+        check_limits: a point whose actuated values are outside their joints' limits is
+            ``invalid`` (the robot cannot be driven there); False: computed as any other
+            (the command line's ``--no-limits``).
 
     Raises:
         InvalidInputError: bad grid, points, wrench, workers or chunk.
@@ -367,8 +371,9 @@ def stiffness_map(
     pieces = [order[f : f + chunk] for f in firsts]
 
     def results():
-        borders = [None] * len(firsts) if start else border_starts(clm, pts[order], firsts)
-        tasks = [MapChunk(model, frame, pts[p], q, start, w, modes)
+        borders = ([None] * len(firsts) if start
+                   else border_starts(clm, pts[order], firsts, check_limits))  # fmt: skip
+        tasks = [MapChunk(model, frame, pts[p], q, start, w, modes, check_limits)
                  for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
         sizes = [len(piece) for piece in pieces]
         yield from run_tasks_by_point(assemble_chunk, tasks, sizes, executor, workers,

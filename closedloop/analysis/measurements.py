@@ -26,8 +26,12 @@ class Measurement:
     """One measured deflection (arrays read-only, SI).
 
     Attributes:
-        q: (nq,) configuration, or None when ``actuated`` is given.
-        actuated: (n_act,) actuated joint values [rad, m] to assemble, or None.
+        q: (nq,) configuration [rad, m]: the one the deflection is computed at; with
+            ``actuated``, the configuration the robot was in, only to check the assembly
+            mode of the actuated values (its branch; see
+            :mod:`closedloop.analysis.misfit`); or None.
+        actuated: (n_act,) actuated joint values [rad, m] to assemble (driven from the
+            model file's configuration, as the command line does), or None.
         wrench: (6,) applied wrench (fx, fy, fz [N], nx, ny, nz [N m]), world axes.
         twist: (6,) measured twist (dx, dy, dz [m], rx, ry, rz [rad]), world axes.
         sd: (6,) standard deviation of the twist, > 0 (same units); inf for a component
@@ -45,11 +49,11 @@ class Measurement:
         """A validated measurement (see the attributes).
 
         Raises:
-            InvalidInputError: wrong shapes, a NaN or inf (in any array), sd <= 0, neither or
-                both of q/actuated.
+            InvalidInputError: wrong shapes, a NaN or inf (in any array), sd <= 0, neither
+                q nor actuated.
         """
-        if (q is None) == (actuated is None):
-            raise InvalidInputError("a measurement needs exactly one of q and actuated")
+        if q is None and actuated is None:
+            raise InvalidInputError("a measurement needs q or actuated (or both)")
         given = real_array(sd, "sd")
         sd_ = np.full(6, float(given)) if given.ndim == 0 else given.reshape(-1)
         if sd_.shape != (6,) or np.any(np.isnan(sd_)) or np.any(sd_ <= 0.0):
@@ -67,12 +71,17 @@ class Measurement:
                 f"sd is, got {twist_.tolist()}"
             )
         twist_ = np.where(measured, twist_, 0.0)
-        name = "q" if q is not None else "actuated"
-        values = real_array(q if q is not None else actuated, name).reshape(-1)
-        if not np.all(np.isfinite(values)):
-            raise InvalidInputError(f"{name} must be finite values, got {values.tolist()}")
-        vector, act = (readonly(values), None) if q is not None else (None, readonly(values))
+        vector, act = (None if v is None else _finite(v, name)
+                       for v, name in ((q, "q"), (actuated, "actuated")))  # fmt: skip
         return cls(vector, act, readonly(check_wrench(wrench)), readonly(twist_), readonly(sd_))
+
+
+def _finite(value, name: str) -> np.ndarray:
+    """(k,) read-only finite values of ``name``."""
+    values = real_array(value, name).reshape(-1)
+    if not np.all(np.isfinite(values)):
+        raise InvalidInputError(f"{name} must be finite values, got {values.tolist()}")
+    return readonly(values)
 
 
 #: Columns of a measurement CSV file (besides ``frame`` and q_i or actuated_i).
@@ -89,10 +98,11 @@ def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
     times too soft, or does not fit at all).
 
     YAML (module docstring): keys ``frame`` and ``measurements``, each a mapping with
-    ``q`` or ``actuated``, ``wrench``, ``twist`` and ``sd``. CSV (``.csv``): a header, one
-    measurement per row, the columns ``frame`` (the same in every row), ``q_0`` ..
-    ``q_{nq-1}`` or ``actuated_0`` .., :data:`CSV_WRENCH`, :data:`CSV_TWIST`, and ``sd``
-    or :data:`CSV_SD`.
+    ``q`` or ``actuated`` (or both: q is then the configuration the robot was in, which
+    checks the actuated values' assembly mode; :class:`Measurement`), ``wrench``,
+    ``twist`` and ``sd``. CSV (``.csv``): a header, one measurement per row, the columns
+    ``frame`` (the same in every row), ``q_0`` .. ``q_{nq-1}`` or ``actuated_0`` .. (or
+    both), :data:`CSV_WRENCH`, :data:`CSV_TWIST`, and ``sd`` or :data:`CSV_SD`.
 
     Raises:
         ModelFileError: missing or unreadable file, wrong structure (a missing column or
@@ -113,7 +123,7 @@ def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
         if missing or not set(item) <= set(_KEYS):
             raise ModelFileError(
                 f"{str(path)!r}: measurement {i} has {sorted(map(str, item))}; expected q or "
-                "actuated, wrench, twist, sd"
+                "actuated (or both), wrench, twist, sd"
             )
         try:
             out.append(Measurement.of(**{k: _number(v) for k, v in item.items()}))
@@ -149,10 +159,11 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
         if empty:
             raise ModelFileError(f"{path!r}: row {i} has no value in column(s) {empty}")
     sd = ["sd"] if "sd" in header else list(CSV_SD)
-    config = [c for c in header if c.startswith(("q_", "actuated_"))]
-    kind = config[0].split("_")[0] if config else "q"
-    config = [f"{kind}_{i}" for i in range(len(config))]
-    wanted = ("frame", *config, *CSV_WRENCH, *CSV_TWIST, *sd)
+    config = {kind: [f"{kind}_{i}" for i in range(sum(c.startswith(f"{kind}_") for c in header))]
+              for kind in ("q", "actuated")}  # fmt: skip
+    config = {kind: columns for kind, columns in config.items() if columns}
+    wanted = ("frame", *(c for columns in config.values() for c in columns), *CSV_WRENCH,
+              *CSV_TWIST, *sd)  # fmt: skip
     missing, unknown = [c for c in wanted if c not in header], sorted(set(header) - set(wanted))
     if missing or unknown or not config:
         raise ModelFileError(
@@ -167,7 +178,8 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
     if len(frames) != 1:
         raise ModelFileError(f"{path!r}: one frame expected in every row, got {frames}")
     items = [
-        {kind: [row[c] for c in config], "wrench": [row[c] for c in CSV_WRENCH],
+        {**{kind: [row[c] for c in columns] for kind, columns in config.items()},
+         "wrench": [row[c] for c in CSV_WRENCH],
          "twist": [row[c] for c in CSV_TWIST],
          "sd": [row[c] for c in sd] if len(sd) > 1 else row["sd"]}
         for row in rows

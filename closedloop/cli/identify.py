@@ -1,7 +1,7 @@
 """``closedloop identify``: spring stiffnesses fitted to measured deflections.
 
     closedloop identify MODEL [--closures F] --measurements FILE --fit NAME [NAME ...]
-        [--joint-stiffness K | --springs FILE] [--json]
+        [--joint-stiffness K | --springs FILE] [--no-limits] [--json]
 
 ``--fit`` names joints; ``a+b`` ties joints a and b to one value; a joint with a block
 spring (a beam's ``<link>_beam``) is fitted as a factor of its block. Start values come
@@ -10,8 +10,10 @@ YAML or CSV of :func:`closedloop.analysis.measurements.read_measurements`. Each 
 printed with its unit (N m/rad, N/m, or 1 for a block's factor). Exit status: 0 every
 parameter identified and the model fits the data, 1 some cannot be identified from these
 data (named, no value) or the model does not fit them (a residual RMS above what the sd
-allow: one warning line, the standard errors do not hold), 2 bad input, 3 the computation
-failed.
+allow: one warning line, which names the measurements that misfit most and those
+assembled on another assembly mode, the standard errors do not hold), 2 bad input, 3 the
+computation failed. A measurement outside the joints' limits is bad input, unless
+``--no-limits``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,9 @@ def add_parser(sub, model_arguments) -> None:
     p.add_argument("--measurements", required=True, type=path_text, metavar="FILE",
                    help="YAML or CSV")  # fmt: skip
     p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")
+    p.add_argument("--no-limits", action="store_true",
+                   help="accept measurements outside the joints' position limits (refused by "
+                   "default: an angle in degrees is the usual cause)")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run_identify)
 
@@ -52,7 +57,7 @@ def run_identify(args) -> int:
     clm = model_source(args).load()
     frame, data = read_measurements(args.measurements)
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
-    fit = identify(clm, data, frame, groups)
+    fit = identify(clm, data, frame, groups, check_limits=not args.no_limits)
     status = EXIT_RANK_DEFICIENT if fit.unidentifiable or not fit.consistent else EXIT_OK
     if not fit.success:
         raise NumericalError(

@@ -3,10 +3,12 @@
     closedloop map MODEL [--closures F] --frame NAME --sweep JOINT=START:STOP:NUM
         [--sweep ...] [--fixed JOINT=VALUE ...] | --points FILE
         [--index NAME] [--force FX FY FZ] [--torque NX NY NZ]
-        [--workers N | --scheduler ADDRESS [--worker-timeout S]] [--out DIR]
+        [--workers N | --scheduler ADDRESS [--worker-timeout S]] [--no-limits] [--out DIR]
 
 Values are SI (rad, m). ``--points`` reads a text file of actuated values, one point a row
-(whitespace or comma separated, the model's actuated order). The files are written by
+(whitespace or comma separated, the model's actuated order). A point whose actuated values
+are outside their joints' limits has the status ``invalid``; ``--no-limits`` computes it
+as any other. The files are written by
 :meth:`closedloop.analysis.maps.StiffnessMap.save`. ``--scheduler`` runs the chunks on a Dask
 distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
 ``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
@@ -93,6 +95,9 @@ def add_parser(sub, parent_arguments) -> None:
     run.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786")
     add_worker_timeout(p)
     p.add_argument("--chunk", type=positive_int, default=CHUNK, metavar="N", help="points per task")
+    p.add_argument("--no-limits", action="store_true",
+                   help="compute the points outside the joints' position limits too (invalid "
+                   "by default)")  # fmt: skip
     p.add_argument("--out", type=path_text, default="closedloop-map", metavar="DIR",
                    help="output folder (default: ./%(default)s)")  # fmt: skip
     p.set_defaults(func=run_map)
@@ -164,7 +169,8 @@ def run_map(args) -> int:
     clm.frame_id(args.frame)
     out = output_folder(args.out)  # before any computation
     options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk,
-               "modes": args.index == "lowest_frequency"}  # fmt: skip
+               "modes": args.index == "lowest_frequency",
+               "check_limits": not args.no_limits}  # fmt: skip
     with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)

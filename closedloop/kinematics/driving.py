@@ -36,15 +36,17 @@ def assemble_within_limits(
     q0: np.ndarray | None = None,
     *,
     jacobian: bool = True,
+    check_limits: bool = True,
 ) -> Assembly:
     """:func:`closedloop.kinematics.assembly.assemble` of actuated values (n_act,) [rad, m] inside
     the position limits of their joints (the rule of :func:`joints_outside_limits`), from q0
-    (nq,; default: neutral, as ``assemble``); ``jacobian`` as for ``assemble``.
+    (nq,; default: neutral, as ``assemble``); ``jacobian`` as for ``assemble``;
+    ``check_limits`` False: wherever the values are (the command line's ``--no-limits``).
 
     Raises:
         InvalidInputError: bad ``actuated`` or ``q0`` (as for ``assemble``), or an
-            actuated value outside its joint's limits (an ``invalid`` point of a map: the
-            robot cannot be driven there).
+            actuated value outside its joint's limits with ``check_limits`` (an ``invalid``
+            point of a map: the robot cannot be driven there).
         AssemblyError: the loops cannot be closed.
         SingularConfigurationError: they close at a singular configuration only.
     """
@@ -52,7 +54,7 @@ def assemble_within_limits(
     origin = None if q0 is None else q.copy()  # an assembled q0: its branch is followed
     clm.set_actuated(q, check_actuated(clm, actuated))
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
-    if bad:
+    if bad and check_limits:
         raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
     return close_loops(clm, q, jacobian=jacobian, origin=origin)
 
@@ -74,6 +76,7 @@ def assemble_connected(
     q0: np.ndarray | None = None,
     *,
     jacobian: bool = True,
+    check_limits: bool = True,
 ) -> Assembly:
     """:func:`assemble_within_limits` on the assembly mode of q0 (default: neutral): the
     actuated values go from q0's to ``actuated`` (n_act,) [rad, m] in steps of at most
@@ -84,6 +87,7 @@ def assemble_connected(
     cannot be assembled (q0's mode ends on the way, at a singular position, or the way
     leaves the limits), the direct assembly from q0 is taken. A model without loops has
     its actuated values set (:func:`closedloop.kinematics.assembly.assemble`).
+    ``check_limits`` as for :func:`assemble_within_limits`, on the way too.
 
     Raises:
         As :func:`assemble_within_limits`.
@@ -98,7 +102,7 @@ def assemble_connected(
     try:
         for k in range(1, n):
             path = assemble_within_limits(clm, start + k / n * (target - start), path,
-                                          jacobian=False).q  # fmt: skip
+                                          jacobian=False, check_limits=check_limits).q  # fmt: skip
     except (AssemblyError, InvalidInputError, SingularConfigurationError):
         path = q
-    return assemble_within_limits(clm, target, path, jacobian=jacobian)
+    return assemble_within_limits(clm, target, path, jacobian=jacobian, check_limits=check_limits)

@@ -394,3 +394,27 @@ def test_view_bad_html_path_is_one_line_before_any_work(capsys, tmp_path, monkey
     status, out, err = run(capsys, "view", "--html", str(tmp_path / "none" / "v.html"))
     assert (status, out) == (2, "") and err.count("\n") == 1
     assert f"--html '{tmp_path / 'none' / 'v.html'}': folder" in err and "does not exist" in err
+
+
+@pytest.mark.parametrize("command", [["stiffness"], ["view", "--html", "{tmp}/v.html"],
+                                     ["modes", "--mass", "m_HQ=1"]])  # fmt: skip
+def test_a_pose_outside_the_limits_names_no_option_cahyman_lacks(command, tmp_path, capsys):
+    """A virtual joint's limits moved off its rest value 0 (the pose then assembles outside
+    them): one line that names the joint and no --no-limits (cahyman has none)."""
+    from cahyman_pin.model import cahyman_model
+    from cahyman_pin.params import DEFAULT_PARAMS
+    from cahyman_pin.urdf_builder import VIRTUAL_JOINTS
+
+    params = DEFAULT_PARAMS.with_ks("assumed")  # the command's model (cached: the same)
+    clm = cahyman_model(params.replace(m_HQ=1.0) if "modes" in command else params).clm
+    i = clm.model.joints[clm.joint_id(VIRTUAL_JOINTS[0])].idx_q
+    lower, upper = clm.model.lowerPositionLimit.copy(), clm.model.upperPositionLimit.copy()
+    clm.model.lowerPositionLimit[i], clm.model.upperPositionLimit[i] = 0.001, 0.002
+    try:
+        code = main([c.format(tmp=tmp_path) for c in command])
+    finally:
+        clm.model.lowerPositionLimit, clm.model.upperPositionLimit = lower, upper
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "joints outside their limits" in err and VIRTUAL_JOINTS[0] in err, err
+    assert "--no-limits" not in err and "check_limits" not in err, err

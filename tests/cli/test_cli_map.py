@@ -150,3 +150,22 @@ def test_identify_bad_measurement_files(tmp_path, fourbar_urdf, fourbar_yaml, ca
                  "--measurements", str(tmp_path / "m.yaml"), "--fit", "crank"])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and match in err and "Traceback" not in err
+
+
+def test_map_no_limits_computes_the_points_outside_the_limits(tmp_path, fourbar_urdf,
+                                                               fourbar_yaml, capsys):  # fmt: skip
+    """Cranks of 6.5 and 7 rad (its limit 6.3): invalid, or with --no-limits computed, and
+    the same as a whole turn less (the crank turns fully: the same mechanism)."""
+    base = ["map", str(fourbar_urdf), "--closures", str(fourbar_yaml), "--frame", "P",
+            "--index", "min_translational", "--force", "3", "0", "-2"]  # fmt: skip
+    assert main([*base, "--sweep", "crank=6.0,6.5,7.0", "--out", str(tmp_path / "a")]) == 0
+    assert "3 points: 2 invalid, 1 rank_deficient" in capsys.readouterr().out
+    assert main([*base, "--sweep", "crank=6.0,6.5,7.0", "--no-limits",
+                 "--out", str(tmp_path / "b")]) == 0  # fmt: skip
+    assert "3 points: 3 rank_deficient" in capsys.readouterr().out
+    turned = ",".join(repr(c - 2 * np.pi) for c in (6.0, 6.5, 7.0))
+    assert main([*base, "--sweep", f"crank={turned}", "--out", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    b, c = np.load(tmp_path / "b" / "map.npz"), np.load(tmp_path / "c" / "map.npz")
+    # two assemblies to 1e-12 of one pose (angles 2 pi apart: rounding 1e-15): 1e-9 holds
+    np.testing.assert_allclose(b["min_translational"], c["min_translational"], rtol=1e-9)
