@@ -44,7 +44,7 @@ from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.map_engine import Interrupted, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.maps import load_text
 from closedloop.cli.common import (
     SpecError,

@@ -428,7 +428,7 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
     pipe, a typed error or a LAPACK failure end as one line and the documented status
     (:func:`closedloop.exceptions.exit_status`; a :class:`ClusterError` is a failed
     computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``);
-    a Ctrl-C, or a map stopped by a signal (:class:`closedloop.analysis.map_engine.Interrupted`),
+    a Ctrl-C, or a map stopped by a signal (:class:`closedloop.analysis.interrupts.Interrupted`),
     ends as ``prog: interrupted (SIGNAL)...`` and 128 + the signal's number (130, 143).
     Shared by both command lines."""
     _CREATED.clear()
@@ -451,7 +451,7 @@ def run_command(prog: str, args: argparse.Namespace) -> int:
         _remove_empty_outputs()
         print(error_line(prog, f"numerical failure: {e}"), file=sys.stderr)
         return EXIT_FAILED
-    except KeyboardInterrupt as e:  # Ctrl-C; a map's SIGINT or SIGTERM: map_engine.Interrupted
+    except KeyboardInterrupt as e:  # Ctrl-C; a map's SIGINT or SIGTERM: interrupts.Interrupted
         _remove_empty_outputs()
         print(f"{prog}: {str(e) or 'interrupted (SIGINT)'}", file=sys.stderr)
         return 128 + getattr(e, "signum", signal.SIGINT)

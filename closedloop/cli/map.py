@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.map_engine import CHUNK, Interrupted, ModelSource, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.maps import ALL_INDICES, stiffness_map
+from closedloop.analysis.model_source import ModelSource
+from closedloop.analysis.tasks import CHUNK
 from closedloop.cli.common import (
     SpecError,
     UsageError,
