@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from closedloop.analysis.indices import StiffnessIndices, batch_indices
+from closedloop.analysis.batch_indices import batch_indices
+from closedloop.analysis.indices import StiffnessIndices
 from closedloop.analysis.map_results import FAILED, OK, RANK_DEFICIENT, ChunkResult
 from closedloop.common.conditioning import (
     ILL_CONDITIONED,
@@ -25,12 +26,11 @@ from closedloop.exceptions import RigidDirectionsError, SingularConfigurationErr
 
 
 def complete(out: ChunkResult, wrench: np.ndarray | None, relabel=None) -> None:
-    """Rank, status and stiffness indices of a chunk's points, in place (in the kernel, so
-    that the workers of a map compute them in parallel): :func:`classify`, then
-    ``relabel(out, from_C)`` if given (a caller's own statuses; from_C (c,) bool: the
-    rank came from C, not from the solver), then
-    :func:`closedloop.analysis.indices.batch_indices` into ``out.indices``, the ill-conditioned
-    points' by :func:`resolve_ill_conditioned`."""
+    """Rank, status and stiffness indices of a chunk's points, in place (in the kernel, so that the
+    workers of a map compute them in parallel): :func:`classify`, then ``relabel(out, from_C)`` if
+    given (a caller's own statuses; from_C (c,) bool: the rank came from C, not from the solver),
+    then :func:`closedloop.analysis.batch_indices.batch_indices` into ``out.indices``, the
+    ill-conditioned points' by :func:`resolve_ill_conditioned`."""
     from_C = out.rank < 0
     symmetric = classify(out)
     if relabel is not None:
@@ -56,8 +56,8 @@ def resolve_ill_conditioned(out: ChunkResult, symmetric: np.ndarray) -> None:
     computes them (:attr:`closedloop.analysis.indices.StiffnessIndices.determinant`,
     ``.condition_number``, ``.scaled_condition_number``), in ``out.indices`` (in place).
 
-    Those are the points of cond(K_s) above ``ILL_CONDITIONED`` (1e8) or of an SI
-    condition number that :func:`closedloop.analysis.indices.batch_indices` leaves NaN (above its
+    Those are the points of cond(K_s) above ``ILL_CONDITIONED`` (1e8) or of an SI condition number
+    that :func:`closedloop.analysis.batch_indices.batch_indices` leaves NaN (above its
     ``SI_RESOLVED``, 1e12). From the formed C, det K and the SI condition number err by
     about eps cond(K_s) relative (2e-8 at 1e8, 2e-4 at 1e12, nothing left at 1e16); from
     the solver's square-root factor, by about eps sqrt(cond(K_s)) (2e-8 at 1e16). K is the

@@ -3,8 +3,8 @@
 A map computes the compliance at a frame for many inputs (actuated values, SI), on the sweep engine
 of :mod:`closedloop.analysis.map_engine` (path, chunks, kernel; executors in
 :mod:`closedloop.analysis.tasks`), with the indices of each chunk's points at once
-(:func:`closedloop.analysis.indices.batch_indices`; det K and the condition numbers of a point of
-cond(K_s) above 1e8 are its single query's,
+(:func:`closedloop.analysis.batch_indices.batch_indices`; det K and the condition numbers of a point
+of cond(K_s) above 1e8 are its single query's,
 :func:`closedloop.analysis.complete.resolve_ill_conditioned`): :func:`grid_points` makes the inputs,
 :func:`stiffness_map` runs the map, :class:`StiffnessMap` holds it and writes its files (NPZ, CSV,
 PNG; each whole or not at all: :func:`closedloop.common.files.write_atomically`).
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.analysis.indices import BATCH_INDICES
+from closedloop.analysis.batch_indices import BATCH_INDICES
 from closedloop.analysis.interrupts import Interrupted
 from closedloop.analysis.map_engine import MapChunk, assemble_chunk, border_starts, path_order
 from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointData
