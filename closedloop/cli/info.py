@@ -177,9 +177,7 @@ def format_info(info: dict) -> str:
 
 def run_info(args) -> int:
     """Run ``closedloop info``; returns the exit code (0)."""
-    from closedloop.cli.app import (
-        load_from_args,  # the command line's loader (which imports this module)
-    )
+    from closedloop.cli.options import load_from_args  # the command line's loader
 
     info = model_info(load_from_args(args))
     if args.json:
