@@ -19,7 +19,7 @@ from cahyman_pin.cli.options import (
     add_pose_arguments,
     inputs_echo,
 )
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
 from closedloop.exceptions import EXIT_OK
 
 

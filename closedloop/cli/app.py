@@ -21,7 +21,7 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
   number of values, NaN, negative stiffness, joints outside their limits, an output
   path that cannot be written, a ``--q`` that does not close the loops): one line
   ``closedloop: error: <message>`` on stderr, a command-line syntax error included
-  (:class:`closedloop.cli.common.UsageError`).
+  (:class:`closedloop.cli.parser.UsageError`).
 * ``3`` - the computation failed on valid input (loops that cannot be closed for these
   actuated values, no static equilibrium, a singular configuration or a mechanism, a result
   that is not finite): one line on stderr.
@@ -35,20 +35,14 @@ import sys
 from collections.abc import Sequence
 
 from closedloop import __version__
-from closedloop.cli.common import (
-    EXIT_HELP,
-    Parser,
-    add_subcommands,
-    command_of,
-    finite_float,
-    run_main,
-)
+from closedloop.cli.common import EXIT_HELP, add_subcommands, command_of, run_main
 from closedloop.cli.options import (
     PROG,
     add_model_arguments,
     add_preload_arguments,
     add_source_arguments,
 )
+from closedloop.cli.parser import Parser, finite_float
 from closedloop.cli.stiffness import stiffness
 from closedloop.cli.view import add_view_arguments, view
 

@@ -18,7 +18,7 @@ import argparse
 
 import numpy as np
 
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
 from closedloop.common.conditioning import twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.elastostatics.compliance import TWIST_LABELS, describe_directions, energy_shares

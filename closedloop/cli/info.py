@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
 from closedloop.exceptions import EXIT_OK
 from closedloop.kinematics.limits import UNBOUNDED_LIMIT
 from closedloop.model.closed_loop import ClosedLoopModel

@@ -31,19 +31,16 @@ from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.maps import ALL_INDICES, stiffness_map
 from closedloop.analysis.model_source import ModelSource
 from closedloop.analysis.tasks import CHUNK
-from closedloop.cli.common import (
+from closedloop.cli.map_options import (
     SpecError,
-    UsageError,
     check_map_size,
-    finite_float,
     index_line,
     map_wrench,
-    output_folder,
     parse_values,
-    path_text,
-    positive_int,
     quoted,
 )
+from closedloop.cli.outputs import output_folder
+from closedloop.cli.parser import UsageError, finite_float, path_text, positive_int
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError
 

@@ -17,7 +17,8 @@ import argparse
 
 import numpy as np
 
-from closedloop.cli.common import UsageError, finite_float, print_json
+from closedloop.cli.outputs import print_json
+from closedloop.cli.parser import UsageError, finite_float
 from closedloop.exceptions import EXIT_OK
 
 

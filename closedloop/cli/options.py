@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from closedloop.cli.common import finite_float, needs_gravity, number, path_text
+from closedloop.cli.parser import finite_float, needs_gravity, number, path_text
 from closedloop.exceptions import InvalidInputError, OpenLoopError
 from closedloop.io.data import BUNDLED_MODELS, ROBOTS, resolve
 from closedloop.io.loader import load_model, read_springs_file, reference_configuration

@@ -9,8 +9,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from closedloop.cli.common import UsageError, print_json
 from closedloop.cli.options import model_from_args, preload_from_args
+from closedloop.cli.outputs import print_json
+from closedloop.cli.parser import UsageError
 from closedloop.common.conditioning import ILL_CONDITIONED, twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.elastostatics.compliance import (

@@ -9,8 +9,8 @@ import sys
 
 import numpy as np
 
-from closedloop.cli.common import finite_float, path_text
 from closedloop.cli.options import PROG, add_wrench_arguments, model_from_args
+from closedloop.cli.parser import finite_float, path_text
 from closedloop.exceptions import EXIT_OK
 from closedloop.model.closed_loop import ClosedLoopModel
 
