@@ -31,7 +31,8 @@ import numpy as np
 from cahyman_pin.model import CaHyManPose, cahyman_model, check_inputs, closed_form_pose
 from cahyman_pin.params import DEFAULT_PARAMS, SPRING_FIELDS, CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_H, FRAME_M
-from closedloop.analysis.indices import StiffnessIndices, lu_determinant
+from closedloop.analysis.indices import StiffnessIndices
+from closedloop.analysis.spectra import lu_determinant
 from closedloop.common.arrays import ReadOnlyArrays, check_wrench, readonly, real_array
 from closedloop.common.conditioning import (
     SCALED_TOL,

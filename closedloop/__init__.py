@@ -66,7 +66,8 @@ _EXPORTS = {
     "robot_data_dir": ".io.data",
     "ClosedLoopModel": ".model.closed_loop",
     **dict.fromkeys(("PreloadedCompliance", "preloaded_compliance"), ".elastostatics.preload"),
-    **dict.fromkeys(("Equilibrium", "solve_equilibrium"), ".elastostatics.statics"),
+    "Equilibrium": ".elastostatics.equilibrium",
+    "solve_equilibrium": ".elastostatics.statics",
     **dict.fromkeys(
         ("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".elastostatics.tangent"
     ),
@@ -80,8 +81,9 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from closedloop.common.conditioning import ILL_CONDITIONED, RANK_RTOL
     from closedloop.elastostatics.batch import BatchCompliance, compliances
     from closedloop.elastostatics.compliance import ComplianceResult, compliance
+    from closedloop.elastostatics.equilibrium import Equilibrium
     from closedloop.elastostatics.preload import PreloadedCompliance, preloaded_compliance
-    from closedloop.elastostatics.statics import Equilibrium, solve_equilibrium
+    from closedloop.elastostatics.statics import solve_equilibrium
     from closedloop.elastostatics.tangent import (
         closure_curvature,
         geometric_stiffness,

@@ -44,8 +44,8 @@ def browser() -> str:
     )
 
 
-#: The per-point indices of a map (closedloop.analysis.indices.batch_indices names) as a single
-#: query's StiffnessIndices gives them.
+#: The per-point indices of a map (closedloop.analysis.batch_indices.batch_indices names) as a
+#: single query's StiffnessIndices gives them.
 INDEX_GETTERS = {
     "det_K": lambda s: s.determinant,
     "condition_number": lambda s: s.scaled_condition_number,

@@ -26,7 +26,8 @@ from collections.abc import Sequence
 
 from cahyman_pin.cli.stiffness import add_deflect, add_stiffness
 from closedloop import __version__
-from closedloop.cli.common import EXIT_HELP, Parser, add_subcommands, command_of, run_main
+from closedloop.cli.common import EXIT_HELP, add_subcommands, command_of, run_main
+from closedloop.cli.parser import Parser
 
 PROG = "cahyman"
 #: Further subcommands: name -> (module defining ``add_parser(subparsers)``, help line).

@@ -54,19 +54,18 @@ from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.map_engine import Interrupted, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.maps import load_text
-from closedloop.cli.common import (
+from closedloop.cli.map_options import (
     SpecError,
     check_map_size,
     index_line,
     map_wrench,
-    output_folder,
     parse_values,
-    path_text,
-    positive_int,
     quoted,
 )
+from closedloop.cli.outputs import output_folder
+from closedloop.cli.parser import path_text, positive_int
 from closedloop.common.files import save_figure
 from closedloop.exceptions import InvalidInputError
 

@@ -24,7 +24,8 @@ from cahyman_pin.cli.options import (
     add_pose_arguments,
     inputs_echo,
 )
-from closedloop.cli.common import finite_float, print_json
+from closedloop.cli.outputs import print_json
+from closedloop.cli.parser import finite_float
 from closedloop.exceptions import EXIT_OK
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
-from closedloop.cli.common import UsageError, finite_float, needs_gravity
+from closedloop.cli.parser import UsageError, finite_float, needs_gravity
 
 #: Table 1's configuration, the default pose: alpha_k [deg], alpha_4 [deg], s_4 [mm].
 DEFAULT_POSE = {"alpha": (90.0, 90.0, 90.0), "alpha4": 90.0, "s4": 50.0}

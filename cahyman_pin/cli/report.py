@@ -13,7 +13,8 @@ from pathlib import Path
 
 from cahyman_pin.paper.report import build_report
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams, read_params_file
-from closedloop.cli.common import output_folder, path_text
+from closedloop.cli.outputs import output_folder
+from closedloop.cli.parser import path_text
 
 DEFAULT_OUT = Path("cahyman-report")
 

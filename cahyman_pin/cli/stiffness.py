@@ -15,7 +15,8 @@ from cahyman_pin.cli.options import (
     inputs_echo,
     stiffness_from_args,
 )
-from closedloop.cli.common import EXIT_HELP, check_finite, print_json
+from closedloop.cli.common import EXIT_HELP
+from closedloop.cli.outputs import check_finite, print_json
 from closedloop.common.conditioning import twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT

@@ -27,8 +27,8 @@ from cahyman_pin.cli.options import add_pose_arguments
 from cahyman_pin.model import cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import FRAME_M
-from closedloop.cli.app import add_view_arguments, view_from_args
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
+from closedloop.cli.view import add_view_arguments, view_from_args
 
 
 def _stderr(line: str) -> None:

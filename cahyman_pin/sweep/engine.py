@@ -56,16 +56,10 @@ from cahyman_pin.sweep.points import (
     param_unit,
     pose_list,
 )
-from closedloop.analysis.map_engine import (
-    OK,
-    RANK_DEFICIENT,
-    STATUS,
-    Interrupted,
-    PointData,
-    gather,
-    run_tasks_by_point,
-)
+from closedloop.analysis.interrupts import Interrupted
+from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointData
 from closedloop.analysis.maps import ALL_INDICES, column_name
+from closedloop.analysis.tasks import gather, run_tasks_by_point
 from closedloop.common.arrays import check_wrench, frozen, readonly
 from closedloop.common.files import write_atomically
 from closedloop.elastostatics.compliance import UNITS

@@ -46,15 +46,9 @@ from cahyman_pin.backends.consistent import consistent_compliance
 from cahyman_pin.model import CaHyManModel, check_inputs
 from cahyman_pin.params import CaHyManParams
 from cahyman_pin.urdf_builder import FRAME_M, REVOLUTE_LIMIT
-from closedloop.analysis.map_engine import (
-    OK,
-    POINT_ERRORS,
-    RANK_DEFICIENT,
-    SINGULAR,
-    ChunkResult,
-    assemble_points,
-    complete,
-)
+from closedloop.analysis.complete import complete
+from closedloop.analysis.map_engine import assemble_points
+from closedloop.analysis.map_results import OK, POINT_ERRORS, RANK_DEFICIENT, SINGULAR, ChunkResult
 from closedloop.common.conditioning import ILL_CONDITIONED, SCALED_TOL, batch_rank, scaled_asymmetry
 from closedloop.exceptions import AssemblyError, InvalidInputError
 

@@ -30,43 +30,44 @@ part, which moves as it likes; "blocked": the other part is held still.
   stiffness and their unit directions (axes of C); the minimum exists whenever C_tt is
   nonzero. Likewise for rotations.
 
-Eigenscrews (Lipkin and Patterson's decomposition of K): with the reciprocal product
-matrix ``Delta = [[0, I], [I, 0]]`` (``x^T Delta w`` is the work of wrench w on twist x),
-the symmetric-definite pencil ``K x = lambda Delta x`` has six real eigenpairs. The twist
-x and the wrench ``K x = lambda Delta x`` then lie on the same screw: a rotation about the
-screw axis with pitch h meets a force along the same axis with the same pitch. Every x has
-a rotation part (``x^T K x = 2 lambda w.v > 0``), so each eigenscrew has a finite nonzero
-pitch h (same sign as lambda) and an axis; ``K = sum_i k_i W_i W_i^T`` with ``W_i`` the
-unit wrench on screw i and ``k_i = lambda_i / (2 h_i) > 0`` [N/m].
+Principal stiffnesses and eigenscrews (Lipkin and Patterson's decomposition of K): see
+:mod:`closedloop.analysis.screws`. Many compliances at once (a map's): see
+:mod:`closedloop.analysis.batch_indices`.
 
 A rank-deficient C (rigid directions) has no K; indices that need K raise
-:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned. A
-non-symmetric C (a tangent compliance under a preload moment, :meth:`StiffnessIndices.
-from_result`) has K = C^-1, its determinant and 2-norm condition numbers (as
-:func:`batch_indices`); the indices of a symmetric matrix (eigenvalues, principal
-stiffnesses, eigenscrews) raise :class:`~closedloop.exceptions.InvalidInputError`, as do
-the eigenscrews of a K that is not positive definite (an unstable equilibrium).
+:class:`~closedloop.exceptions.RigidDirectionsError`, the others are still returned. A non-symmetric
+C (a tangent compliance under a preload moment, :meth:`StiffnessIndices.from_result`) has K = C^-1,
+its determinant and 2-norm condition numbers (as
+:func:`~closedloop.analysis.batch_indices.batch_indices`); the indices of a symmetric matrix
+(eigenvalues, principal stiffnesses, eigenscrews) raise
+:class:`~closedloop.exceptions.InvalidInputError`, as do the eigenscrews of a K that is not positive
+definite (an unstable equilibrium).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
+from closedloop.analysis.batch_indices import R, T, block_spectrum
+from closedloop.analysis.screws import DELTA, Eigenscrew, PrincipalStiffness, unit_direction
+from closedloop.analysis.spectra import (
+    RESOLVED_RTOL,
+    ROUNDING_RTOL,
+    finite_determinant,
+    inverse_pair_eigenvalues,
+    lu_determinant,
+)
 from closedloop.common.arrays import readonly
 from closedloop.common.conditioning import (
-    RANK_RTOL,
     SCALED_TOL,
     Spectrum,
-    batch_rank,
     check_length,
     scaled_asymmetry,
     spectrum_from_compliance,
     spectrum_from_factor,
     twist_scaling,
-    twist_scalings,
 )
 from closedloop.elastostatics.compliance import TWIST_LABELS, UNITS, describe_directions
 from closedloop.exceptions import (
@@ -74,59 +75,6 @@ from closedloop.exceptions import (
     RigidDirectionsError,
     SingularConfigurationError,
 )
-
-T, R = slice(0, 3), slice(3, 6)
-#: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
-DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    """v normalised, sign fixed so that its largest-magnitude component is positive."""
-    v = v / np.linalg.norm(v)
-    return readonly(v * np.sign(v[np.argmax(np.abs(v))]) + 0.0)
-
-
-class PrincipalStiffness(NamedTuple):
-    """A principal stiffness of a 3x3 block and its direction.
-
-    Attributes:
-        value: stiffness [N/m (translation) or N m/rad (rotation)].
-        direction: (3,) unit vector (translation direction or rotation axis), in the axes
-            of C; sign fixed so that its largest component is positive.
-    """
-
-    value: float
-    direction: np.ndarray
-
-
-@dataclass(frozen=True)
-class Eigenscrew:
-    """One eigenscrew of K (see the module docstring).
-
-    Attributes:
-        eigenvalue: lambda [N/rad], ``K twist = lambda Delta twist``; sign of the pitch.
-        pitch: h [m/rad], nonzero.
-        direction: (3,) unit axis direction, in the axes of C.
-        point: (3,) [m] point of the axis nearest to the reference point, relative to it.
-        spring: k = lambda / (2 h) [N/m] > 0, weight of the screw in ``K = sum k W W^T``.
-    """
-
-    eigenvalue: float
-    pitch: float
-    direction: np.ndarray
-    point: np.ndarray
-    spring: float
-
-    @property
-    def twist(self) -> np.ndarray:
-        """(6,) unit rotation about the screw: (h u + p x u [m], u [rad]) at the point."""
-        u, p = self.direction, self.point
-        return np.concatenate([self.pitch * u + np.cross(p, u), u])
-
-    @property
-    def wrench(self) -> np.ndarray:
-        """(6,) unit force on the screw: (u [N], h u + p x u [N m]); ``K twist = lambda wrench``."""
-        return DELTA @ self.twist
 
 
 def _check_matrix(M, what: str) -> np.ndarray:
@@ -283,8 +231,8 @@ class StiffnessIndices:
 
     def _block_eig(self, block: slice, what: str, need_full: bool):
         """Eigen-decomposition (c ascending, V) of a 3x3 compliance block, checked
-        (:func:`_block_spectrum`)."""
-        c, V, rigid = (a[0] for a in _block_spectrum(self.C[None], block, self._spectrum.length))
+        (:func:`block_spectrum`)."""
+        c, V, rigid = (a[0] for a in block_spectrum(self.C[None], block, self._spectrum.length))
         if rigid.all() or (need_full and rigid.any()):
             directions = np.zeros((6, int(rigid.sum())))
             directions[block] = V[:, rigid]
@@ -360,8 +308,9 @@ class StiffnessIndices:
         return readonly(np.linalg.eigvalsh(K) if lam is None else lam)
 
     def _condition(self, t: np.ndarray) -> float:
-        """cond(T^-1 K T^-1): max |lambda| / min |lambda| of a symmetric C, the 2-norm
-        condition number of a non-symmetric one (as :func:`batch_indices`)."""
+        """cond(T^-1 K T^-1): max |lambda| / min |lambda| of a symmetric C, the 2-norm condition
+        number of a non-symmetric one (as
+        :func:`~closedloop.analysis.batch_indices.batch_indices`)."""
         self._require_full_rank("the condition number of K")
         if not self.is_symmetric:
             return float(np.linalg.cond(self.K * np.outer(t, t)))
@@ -440,7 +389,7 @@ class StiffnessIndices:
         self._require_symmetric(f"the {which} {kind} stiffness")
         c, V = self._block_eig(block, f"{which} {kind} stiffness", which == "max")
         i = -1 if which == "min" else 0
-        return PrincipalStiffness(float(1.0 / c[i]), _unit(V[:, i]))
+        return PrincipalStiffness(float(1.0 / c[i]), unit_direction(V[:, i]))
 
     @property
     def min_translational_stiffness(self) -> PrincipalStiffness:
@@ -506,7 +455,7 @@ class StiffnessIndices:
             n2 = float(w @ w)
             pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
             lam_i = float(lam[i])
-            screws.append(Eigenscrew(lam_i, pitch, _unit(w), point, lam_i / (2.0 * pitch)))
+            screws.append(Eigenscrew(lam_i, pitch, unit_direction(w), point, lam_i / (2.0 * pitch)))
         return tuple(screws)
 
     # ------------------------------------------------------------------ export
@@ -530,30 +479,6 @@ class StiffnessIndices:
         return out
 
 
-def lu_determinant(K: np.ndarray) -> float:
-    """det K [N^6/rad^3] of a (6, 6) stiffness from its LU factors (logarithms: no overflow
-    on the way), or :func:`finite_determinant`'s error."""
-    sign, log_det = np.linalg.slogdet(K)
-    with np.errstate(over="ignore", under="ignore"):
-        return finite_determinant(sign * np.exp(log_det), log_det / np.log(10.0))
-
-
-def finite_determinant(det: float, log10: float) -> float:
-    """``det`` [N^6/rad^3] when it is a finite non-zero float (K is full rank here).
-
-    Raises:
-        SingularConfigurationError: it overflowed or underflowed; the message gives its
-            size 10^``log10``.
-    """
-    if det != 0.0 and np.isfinite(det):
-        return float(det)
-    raise SingularConfigurationError(
-        f"det K = 1e{log10:.1f} N^6/rad^3 is beyond the floating point range (1e-308 to "
-        "1e308); the other indices stand (springs far from 1 N/m or N m/rad make it so: "
-        "each enters at the power of its directions)"
-    )
-
-
 #: Indices exported by :meth:`StiffnessIndices.to_dict` (besides rank and rigid directions).
 _EXPORTED = (
     "length", "C", "compliance_eigenvalues", "K", "determinant", "eigenvalues",
@@ -563,6 +488,7 @@ _EXPORTED = (
     "max_translational_stiffness", "min_rotational_stiffness", "max_rotational_stiffness",
     "eigenscrews",
 )  # fmt: skip
+
 
 #: Units of the exported indices.
 INDEX_UNITS = {
@@ -583,190 +509,3 @@ def _jsonable(value):
     if isinstance(value, tuple):
         return [{k: _jsonable(v) for k, v in vars(screw).items()} for screw in value]
     return float(value) if isinstance(value, np.floating) else value
-
-
-#: Indices of many compliances at once (:func:`batch_indices`), and their units (SI).
-BATCH_INDICES = {
-    "det_K": "N^6/rad^3",
-    "condition_number": "1 (cond of the scaled K_s: unit-free, see closedloop.common.conditioning)",
-    "condition_number_si": "1 (cond of the SI matrix K: depends on the length unit)",
-    "min_translational": "N/m",
-    "max_translational": "N/m",
-    "min_rotational": "N m/rad",
-    "max_rotational": "N m/rad",
-    "deflection_translation": "m",
-    "deflection_rotation": "rad",
-}
-
-
-def _block_spectrum(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, ...]:
-    """Eigenvalues c (n, 3) ascending and vectors V (n, 3, 3) of a 3x3 block of n
-    compliances C (n, 6, 6) [SI], and which directions are rigid (n, 3): those whose
-    scaled compliance is at most ``RANK_RTOL``^2 of the largest diagonal entry of the
-    scaled C_s (lengths L (n,) or one [m]; the rank rule on eigenvalues, on the scale of
-    C_s: its largest eigenvalue is 1 to 6 times that entry), so that a block of rounding
-    beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside 1e-4, read
-    as stiffnesses of 1e31 N m/rad when judged on the block alone)."""
-    c, V = np.linalg.eigh(C[:, block, block])
-    d = twist_scalings(np.broadcast_to(np.asarray(length, dtype=float), (len(C),)))
-    with np.errstate(over="ignore", invalid="ignore"):
-        top = np.max(np.diagonal(C, axis1=1, axis2=2) * d**2, axis=1)
-        rigid = c * d[:, block.start, None] ** 2 <= RANK_RTOL**2 * top[:, None]
-    return c, V, rigid | (c <= RANK_RTOL**2 * np.maximum(c[:, -1:], 0.0))
-
-
-def _block_extremes(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) min and max principal stiffness of a 3x3 block of symmetric compliances (the
-    rule of :meth:`StiffnessIndices.min_translational_stiffness`: the minimum exists
-    unless the block is rigid, the maximum only when no direction of it is), NaN else;
-    lengths L (n,) or one [m] of the scaling (:func:`_block_spectrum`)."""
-    c, _, rigid = _block_spectrum(C, block, length)
-    with np.errstate(divide="ignore"):
-        low = np.where(rigid.all(axis=1), np.nan, 1.0 / c[:, -1])
-        high = np.where(rigid.any(axis=1), np.nan, 1.0 / c[:, 0])
-    return low, high
-
-
-#: Largest condition number of a formed C or C_s (n, 6, 6) whose eigenvalues (the SI
-#: condition number) or determinant (det K, from C_s) are taken: they
-#: err by about 1e-16 of the largest, so the smallest is known to 1e-4 relative at 1e12,
-#: and not at all towards 1e16 (a map showed 1.5e17 where K's own was 3.8e16).
-SI_RESOLVED = 1e12
-
-
-def batch_indices(
-    C: np.ndarray,
-    rank: np.ndarray,
-    length,
-    wrench: np.ndarray | None = None,
-    symmetric: np.ndarray | None = None,
-    condition: np.ndarray | None = None,
-) -> dict[str, np.ndarray]:
-    """The indices of :data:`BATCH_INDICES` for n compliances at once (NaN where one does
-    not exist), by the definitions of :class:`StiffnessIndices`.
-
-    * ``det_K``: det K = 1 / det C, full rank only, from the scaled C_s: NaN where its
-      condition number exceeds :data:`SI_RESOLVED`.
-    * ``condition_number``: cond(K_s) of the scaled stiffness over the rank, at the
-      characteristic length L (as :attr:`StiffnessIndices.scaled_condition_number`):
-      unit-free, the one to compare. ``condition`` where given (the solver's, from the
-      square-root factor), else from the eigenvalues of C
-      (:func:`closedloop.common.conditioning.batch_rank`), which resolve it up to about 1e12.
-    * ``condition_number_si``: cond(K) of the SI matrix, full rank only (as
-      :attr:`StiffnessIndices.condition_number`): changes with the length unit. From the
-      eigenvalues of C: NaN above :data:`SI_RESOLVED`, where they do not resolve it.
-    * ``min/max_translational``, ``min/max_rotational``: extreme principal stiffnesses of
-      the 3x3 blocks of C [N/m, N m/rad].
-    * ``deflection_translation``, ``deflection_rotation``: |d| [m], |r| [rad] of the twist
-      C w under ``wrench`` (only with a wrench).
-
-    A non-symmetric C (a closed form in its own coordinates, e.g. CaHyMan's published
-    matrices) has K = C^-1, det K = det(C^-1), the 2-norm condition numbers of K and of
-    K_s = D^-1 K D^-1, and no principal stiffnesses.
-
-    Args:
-        C: (n, 6, 6) compliances [SI] at one reference point; rows with a NaN are skipped.
-        rank: (n,) rank of each C (6: K exists).
-        length: characteristic length L [m], one or (n,).
-        wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]) at the same point, or None.
-        symmetric: (n,) bool, which C are symmetric (default: all).
-        condition: (n,) cond(K_s) from the solver, NaN where unknown (or None).
-
-    Returns:
-        name -> (n,) array (units in :data:`BATCH_INDICES`; no deflections without wrench).
-    """
-    n = len(C)
-    L = np.broadcast_to(np.asarray(length, dtype=float), (n,))
-    out = {name: np.full(n, np.nan) for name in BATCH_INDICES}
-    finite = np.all(np.isfinite(C), axis=(1, 2))
-    sym = finite if symmetric is None else finite & symmetric
-    full = finite & (np.asarray(rank) == 6)
-    known = np.zeros(n, dtype=bool)
-    if condition is not None:
-        known = finite & np.isfinite(condition)
-        out["condition_number"][known] = condition[known]
-    rest = sym & ~known  # from the eigenvalues of C only where the solver's is not known
-    if np.any(rest):
-        _, out["condition_number"][rest], _ = batch_rank(C[rest], L[rest])
-    if np.any(sym):
-        for kind, block in (("translational", T), ("rotational", R)):
-            out[f"min_{kind}"][sym], out[f"max_{kind}"][sym] = _block_extremes(
-                C[sym], block, L[sym]
-            )
-    both = sym & full
-    if np.any(both):
-        c = np.abs(np.linalg.eigvalsh(C[both]))  # an indefinite C (unstable preload) too
-        with np.errstate(divide="ignore", over="ignore"):
-            cond_si = c.max(axis=1) / c.min(axis=1)
-        cond_si[~(cond_si <= SI_RESOLVED)] = np.nan
-        out["condition_number_si"][both] = cond_si
-        cond_s = out["condition_number"][both]
-        out["det_K"][both] = _scaled_determinants(C[both], L[both], cond_s)
-    other = ~sym & full
-    if np.any(other):
-        K = np.linalg.inv(C[other])
-        d = twist_scalings(L[other])
-        out["det_K"][other] = np.linalg.det(K)
-        out["condition_number_si"][other] = np.linalg.cond(K)
-        out["condition_number"][other] = np.linalg.cond(K / d[:, :, None] / d[:, None, :])
-    if wrench is None:
-        del out["deflection_translation"], out["deflection_rotation"]
-        return out
-    w = np.asarray(wrench, dtype=float)
-    scale = np.max(np.abs(w))  # C (w / s) then times s: no overflow or underflow of |C w|
-    twist = C[finite] @ (w / scale) if scale > 0 else np.zeros((int(finite.sum()), 6))
-    out["deflection_translation"][finite] = scale * row_norms(twist[:, :3])
-    out["deflection_rotation"][finite] = scale * row_norms(twist[:, 3:])
-    return out
-
-
-def _scaled_determinants(C: np.ndarray, L: np.ndarray, condition: np.ndarray) -> np.ndarray:
-    """(n,) det K = det(D)^2 / det(C_s) [N^6/rad^3] of symmetric compliances C (n, 6, 6)
-    from the LU factors of the scaled C_s = D C D (D = diag(1/L, 1/L, 1/L, 1, 1, 1), L
-    (n,) [m]), logarithms against under- and overflow; NaN where ``condition`` (n,)
-    (cond(K_s)) exceeds :data:`SI_RESOLVED`. Unlike 1 / det(C), the error follows the
-    scaled condition, not the SI one, which a length unit alone makes large (a mechanism
-    of 1e-4 m has an SI condition number 1e8 times its scaled one)."""
-    d = twist_scalings(L)
-    sign, log_det = np.linalg.slogdet(C * d[:, :, None] * d[:, None, :])
-    with np.errstate(over="ignore", invalid="ignore"):
-        det = sign * np.exp(-log_det - 6.0 * np.log(L))
-    return np.where(condition <= SI_RESOLVED, det, np.nan)
-
-
-#: Smallest eigenvalue of a formed scaled stiffness, relative to its largest, that it
-#: resolves (a few eps): below, rounding decides whether it is positive.
-RESOLVED_RTOL = 1e-15
-#: Largest negative eigenvalue, relative to the largest, that rounding gives a formed
-#: symmetric positive definite 6x6 matrix (a few eps; 1e-13 leaves a factor of 100).
-ROUNDING_RTOL = 1e-13
-
-
-def inverse_pair_eigenvalues(C: np.ndarray, K: np.ndarray) -> np.ndarray | None:
-    """(6,) eigenvalues of K = C^-1 ascending, from C and K (6, 6) both formed, or None
-    when C is not symmetric (to SCALED_TOL) or K not positive definite.
-
-    An eigenvalue of a formed symmetric matrix is known to about eps times its largest
-    one; so 1/mu, mu an eigenvalue of C, is taken from C where mu >= sqrt(mu_min mu_max)
-    and from K below (mu_min = 1 / kappa_max, from K): each to about eps sqrt(cond)
-    relative, where the eigenvalues of K alone lose its smallest ones at eps cond.
-    """
-    if np.max(np.abs(C - C.T)) > SCALED_TOL * np.max(np.abs(C)):
-        return None
-    mu, kappa = np.linalg.eigvalsh(0.5 * (C + C.T)), np.linalg.eigvalsh(K)  # ascending
-    # indefinite (an unstable preloaded equilibrium): an eigenvalue negative beyond the
-    # rounding of a formed matrix (a positive definite one may show -eps times its largest)
-    if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
-        return None
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        lam = np.where(mu >= np.sqrt(mu[-1] / kappa[-1]), 1.0 / mu, kappa[::-1])
-    return np.sort(lam) if np.all(lam > 0.0) else None
-
-
-def row_norms(v: np.ndarray) -> np.ndarray:
-    """(n,) Euclidean norms of the rows of v (n, k), without overflow or underflow of the
-    squares (inf only where a norm exceeds 1.8e308, NaN where a row is not finite)."""
-    big = np.max(np.abs(v), axis=1)
-    safe = np.where(big > 0, big, 1.0)
-    with np.errstate(invalid="ignore", over="ignore"):
-        return big * np.linalg.norm(v / safe[:, None], axis=1)

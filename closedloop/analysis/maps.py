@@ -1,13 +1,13 @@
 """Stiffness maps of any robot over its workspace.
 
-A map computes the compliance at a frame for many inputs (actuated values, SI), on the
-sweep engine of :mod:`closedloop.analysis.map_engine` (path, chunks, kernels, executors), with the
-indices of each chunk's points at once (:func:`closedloop.analysis.indices.batch_indices`; det K
-and the condition numbers of a point of cond(K_s) above 1e8 are its single query's,
-:func:`closedloop.analysis.map_engine.resolve_ill_conditioned`):
-:func:`grid_points` makes the inputs, :func:`stiffness_map` runs the map,
-:class:`StiffnessMap` holds it and writes its files (NPZ, CSV, PNG; each whole or not at
-all: :func:`closedloop.common.files.write_atomically`).
+A map computes the compliance at a frame for many inputs (actuated values, SI), on the sweep engine
+of :mod:`closedloop.analysis.map_engine` (path, chunks, kernel; executors in
+:mod:`closedloop.analysis.tasks`), with the indices of each chunk's points at once
+(:func:`closedloop.analysis.batch_indices.batch_indices`; det K and the condition numbers of a point
+of cond(K_s) above 1e8 are its single query's,
+:func:`closedloop.analysis.complete.resolve_ill_conditioned`): :func:`grid_points` makes the inputs,
+:func:`stiffness_map` runs the map, :class:`StiffnessMap` holds it and writes its files (NPZ, CSV,
+PNG; each whole or not at all: :func:`closedloop.common.files.write_atomically`).
 """
 
 from __future__ import annotations
@@ -22,23 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.analysis.indices import BATCH_INDICES
-from closedloop.analysis.map_engine import (
-    CHUNK,
-    OK,
-    RANK_DEFICIENT,
-    STATUS,
-    Interrupted,
-    MapChunk,
-    ModelSource,
-    PointData,
-    assemble_chunk,
-    border_starts,
-    gather,
-    model_of,
-    path_order,
-    run_tasks_by_point,
-)
+from closedloop.analysis.batch_indices import BATCH_INDICES
+from closedloop.analysis.interrupts import Interrupted
+from closedloop.analysis.map_engine import MapChunk, assemble_chunk, border_starts, path_order
+from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointData
+from closedloop.analysis.model_source import ModelSource, model_of
+from closedloop.analysis.tasks import CHUNK, gather, run_tasks_by_point
 from closedloop.common.arrays import ReadOnlyArrays
 from closedloop.common.files import save_figure, write_atomically
 from closedloop.elastostatics.compliance import UNITS
@@ -331,7 +320,7 @@ def stiffness_map(
         NameNotFoundError: unknown frame.
         ModesError: ``modes`` on a model without any mass.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the map
-            (:class:`closedloop.analysis.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
+            (:class:`closedloop.analysis.interrupts.Interrupted`, itself a ``KeyboardInterrupt``):
             the worker processes are ended at once (none is left), and the map so far is
             its ``partial``: a :class:`StiffnessMap` whose points not computed (their
             chunk not finished) have status ``not_computed`` and reason ``interrupted by

@@ -18,7 +18,7 @@ import argparse
 
 import numpy as np
 
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
 from closedloop.common.conditioning import twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.elastostatics.compliance import TWIST_LABELS, describe_directions, energy_shares
@@ -27,7 +27,8 @@ from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
 
 def add_parser(sub, source_arguments) -> None:
     """The ``deflect`` subparser, with the pose options of ``stiffness``."""
-    from closedloop.cli.app import EPILOG, add_model_arguments, add_wrench_arguments
+    from closedloop.cli.app import EPILOG
+    from closedloop.cli.options import add_model_arguments, add_wrench_arguments
 
     p = sub.add_parser(
         "deflect",
@@ -113,7 +114,7 @@ def format_deflection(doc: dict) -> str:
 
 def run_deflect(args) -> int:
     """Run ``closedloop deflect``; returns the exit code (0, or 1 when K does not exist)."""
-    from closedloop.cli.app import model_from_args
+    from closedloop.cli.options import model_from_args
     from closedloop.elastostatics.compliance import compliance
 
     clm, state = model_from_args(args)

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import argparse
 
-from closedloop.cli.common import path_text, print_json
+from closedloop.cli.outputs import print_json
+from closedloop.cli.parser import path_text
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, NumericalError
 
 

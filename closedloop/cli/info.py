@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from closedloop.cli.common import print_json
+from closedloop.cli.outputs import print_json
 from closedloop.exceptions import EXIT_OK
 from closedloop.kinematics.limits import UNBOUNDED_LIMIT
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -177,9 +177,7 @@ def format_info(info: dict) -> str:
 
 def run_info(args) -> int:
     """Run ``closedloop info``; returns the exit code (0)."""
-    from closedloop.cli.app import (
-        load_from_args,  # the command line's loader (which imports this module)
-    )
+    from closedloop.cli.options import load_from_args  # the command line's loader
 
     info = model_info(load_from_args(args))
     if args.json:

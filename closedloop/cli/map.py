@@ -29,21 +29,20 @@ from pathlib import Path
 import numpy as np
 
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.map_engine import CHUNK, Interrupted, ModelSource, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.maps import ALL_INDICES, stiffness_map
-from closedloop.cli.common import (
+from closedloop.analysis.model_source import ModelSource
+from closedloop.analysis.tasks import CHUNK
+from closedloop.cli.map_options import (
     SpecError,
-    UsageError,
     check_map_size,
-    finite_float,
     index_line,
     map_wrench,
-    output_folder,
     parse_values,
-    path_text,
-    positive_int,
     quoted,
 )
+from closedloop.cli.outputs import output_folder
+from closedloop.cli.parser import UsageError, finite_float, path_text, positive_int
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError
 

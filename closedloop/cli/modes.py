@@ -18,14 +18,15 @@ import argparse
 
 import numpy as np
 
-from closedloop.cli.common import UsageError, finite_float, print_json
+from closedloop.cli.outputs import print_json
+from closedloop.cli.parser import UsageError, finite_float
 from closedloop.exceptions import EXIT_OK
 
 
 def add_parser(sub, model_arguments) -> None:
     """The ``modes`` subparser (``model_arguments`` unused: the pose options of
     ``closedloop stiffness`` are added)."""
-    from closedloop.cli.app import add_model_arguments, add_preload_arguments
+    from closedloop.cli.options import add_model_arguments, add_preload_arguments
 
     p = sub.add_parser(
         "modes",
@@ -57,7 +58,7 @@ def add_parser(sub, model_arguments) -> None:
 def run_modes(args: argparse.Namespace) -> int:
     """Run ``closedloop modes``; returns the exit code (0)."""
     from closedloop.analysis.vibration import modes
-    from closedloop.cli.app import model_from_args, preload_from_args
+    from closedloop.cli.options import model_from_args, preload_from_args
 
     if args.preload is not None:
         raise UsageError("--preload: modes take the weight (--gravity), not a dead load")

@@ -1,6 +1,6 @@
 """Option types of command-line arguments that modules below the command lines also add
 to a parser (the Dask executor's ``--worker-timeout``), so that they need not import
-:mod:`closedloop.cli.common`."""
+:mod:`closedloop.cli.parser`."""
 
 from __future__ import annotations
 

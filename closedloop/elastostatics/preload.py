@@ -31,8 +31,8 @@ from closedloop.common.conditioning import (
     spectrum_of_matrix,
     twist_scaling,
 )
+from closedloop.elastostatics.equilibrium import Equilibrium
 from closedloop.elastostatics.springs import spring_factor
-from closedloop.elastostatics.statics import Equilibrium
 from closedloop.elastostatics.tangent import (
     CRITICAL_RTOL,
     WELD_CURVATURE_STEP,

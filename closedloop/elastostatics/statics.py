@@ -40,57 +40,54 @@ steps across (a bifurcation) or stops at a limit load (a fold) bracketed to
 an :class:`EquilibriumError` that says which: a limit load, or a failure of the
 iterations.
 
-Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and
-prismatic joints) are not part of the equations: an equilibrium outside them is flagged
-(:attr:`Equilibrium.limits_violated`, :class:`JointLimitWarning`) or refused
-(``enforce_limits=True``, :class:`JointLimitError`).
+Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and prismatic
+joints) are not part of the equations: an equilibrium outside them is flagged
+(:attr:`~closedloop.elastostatics.equilibrium.Equilibrium.limits_violated`,
+:class:`JointLimitWarning`) or refused (``enforce_limits=True``, :class:`JointLimitError`).
 
-For a pure force the equilibrium is a stationary point of :func:`potential_energy` on the
-closure manifold, an independent check.
+For a pure force the equilibrium is a stationary point of
+:func:`~closedloop.elastostatics.equilibrium.potential_energy` on the closure manifold, an
+independent check.
 """
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import (
-    ReadOnlyArrays,
-    check_count,
-    check_positive,
-    check_wrench,
-    readonly,
-    real_array,
+from closedloop.common.arrays import check_count, check_positive, check_wrench, readonly
+from closedloop.elastostatics.continuation import (
+    JUMP_FLOOR,
+    allowed_corrector,
+    branch_rate,
+    failure,
+    fold_distance,
+    jump,
 )
+from closedloop.elastostatics.equilibrium import Equilibrium, frame_displacement
+from closedloop.elastostatics.newton import distance, newton
 from closedloop.elastostatics.springs import check_spread, spring_factor
 from closedloop.elastostatics.tangent import EquilibriumEquations
 from closedloop.exceptions import (
     AssemblyError,
-    EquilibriumError,
     InvalidInputError,
     JointLimitError,
     JointLimitWarning,
 )
 from closedloop.kinematics.assembly import close_loops
 from closedloop.kinematics.configuration import Configuration, accepts_configuration
-from closedloop.kinematics.constraints import update_kinematics
 from closedloop.kinematics.limits import describe_limits, joints_outside_limits
 from closedloop.model.closed_loop import ClosedLoopModel
-from closedloop.model.elastic import deflection, spring_law
 from closedloop.model.gravity import GravityLoad, Load, Payload
 
 #: Closure tolerance of the equilibrium (infinity norm) [rad, and lengths in units of the
 #: characteristic length L: 1e-12 L for point rows].
 CLOSURE_TOL = 1e-12
-#: Relative tolerance on the unbalanced generalised force (see :func:`solve_equilibrium`).
-FORCE_RTOL = 1e-11
-#: Newton step [rad, and lengths in units of L], relative to max(1, |q|) (q in the same
-#: units), after which q counts as converged.
-STEP_TOL = 1e-12
+
+
 #: Default largest Newton step and largest predicted motion per load increment (infinity
 #: norm) [rad, and lengths in units of L].
 MAX_STEP, MAX_INCREMENT = 0.5, 0.1
@@ -108,194 +105,21 @@ MAX_LOAD_STEPS = 1000
 #: across (a bifurcation, where the branch goes on) or finds no equilibrium on the branch:
 #: the fold then lies in [t, (1 + FOLD_RTOL) t] (``EquilibriumError.fold_bracket``).
 FOLD_RTOL = 1e-6
-#: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences
-#: carries 1e-10 of it): a fall of tau^2 below TAU_NOISE (2 |tau| + TAU_NOISE) is rounding,
-#: not a trend to extrapolate.
-TAU_NOISE = 1e-9
+
+
 #: Fraction of the extrapolated distance to a singularity that one increment may cover:
 #: at a fold, where the branch goes like the square root of the remaining load, the
 #: corrector of such an increment is at most 0.17 of its predictor.
 FOLD_APPROACH = 0.5
-#: An increment is refused as a jump to another branch when Newton's answer lies further
-#: than JUMP_RATIO times the predicted motion from the prediction (the corrector of a step
-#: on a smooth branch is second order), or when the prediction back from the answer, along
-#: its own tangent, misses the last equilibrium by as much (the unstable twin of a fold
-#: has its tangent reversed). Infinity norms, lengths in units of L.
-JUMP_RATIO = 0.5
-#: Corrector below which an increment is not refused, whatever its predictor: JUMP_FLOOR
-#: [rad, and lengths in units of L] (a load with no first-order motion along the branch)
-#: plus JUMP_RTOL times the deflection from rest, the resolution of the equilibria under
-#: huge loads (1e16 N on the UR5's 1e4 N m/rad springs: correctors of 5e-8 rad at
-#: predictors of 1e-10 rad, at deflections of 1.5 rad). A jump to another branch moves
-#: the joints by a part of the deflection itself (8 times it in CaHyMan near a leg
-#: singularity).
-JUMP_FLOOR, JUMP_RTOL = 1e-9, 1e-6
-#: Newton's iterations for an increment stop when they leave WANDER times the largest
-#: corrector allowed (:func:`_allowed`): bound for another branch, or nowhere.
+
+
+#: Newton's iterations for an increment stop when they leave WANDER times the largest corrector
+#: allowed (:func:`~closedloop.elastostatics.continuation.allowed_corrector`): bound for another
+#: branch, or nowhere.
 WANDER = 4.0
 #: Ratio of corrector to predictor that the next increment aims at (the increments follow
 #: the curvature of the branch, within JUMP_RATIO).
 CORRECTOR_AIM = 0.25
-
-
-@dataclass(frozen=True)
-class Equilibrium(ReadOnlyArrays):
-    """A static equilibrium under a dead-load wrench (arrays read-only).
-
-    Attributes:
-        q: (nq,) equilibrium configuration.
-        q_rest: (nq,) rest configuration of the springs (unloaded, assembled).
-        frame: name of the loaded frame.
-        wrench: (6,) applied wrench (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the
-            frame origin.
-        translation: (3,) displacement of the frame origin from its unloaded position [m],
-            world axes.
-        rotation: (3,) rotation vector of the frame from its unloaded orientation [rad],
-            world axes: R = exp(rotation) R_rest.
-        joint_deflection: (nv,) difference(q_rest, q) [rad or m].
-        multipliers: (m,) closure multipliers lambda, one per row of
-            :func:`closedloop.elastostatics.tangent.closure_gap`; for a point closure, the force [N]
-            that side 2 exerts on side 1 at the anchor, in world axes; for a weld, the wrench
-            [N, N m] conjugate to its log6 residual rows. Minimum-norm when closure rows
-            are redundant (no self-stress).
-        closure_residual: infinity norm of the closure residual at q [m, rad].
-        force_residual: infinity norm of the unbalanced generalised force
-            (g - J^T w + J_c^T lambda on the free coordinates) [N m, N].
-        iterations: Newton iterations, all load increments together.
-        load_steps: load increments used (1 when the full load converged at once).
-        limits_violated: names of the joints outside their position limits at q (see
-            :func:`closedloop.kinematics.limits.joints_outside_limits`); empty when every limit
-            holds.
-        gravity: the weight of the links and payloads that acts with the wrench
-            (:class:`closedloop.model.gravity.GravityLoad`), or None.
-    """
-
-    q: np.ndarray
-    q_rest: np.ndarray
-    frame: str
-    wrench: np.ndarray
-    translation: np.ndarray
-    rotation: np.ndarray
-    joint_deflection: np.ndarray
-    multipliers: np.ndarray
-    closure_residual: float
-    force_residual: float
-    iterations: int
-    load_steps: int
-    limits_violated: tuple[str, ...] = ()
-    gravity: GravityLoad | None = None
-
-    @property
-    def displacement(self) -> np.ndarray:
-        """(6,) (translation [m], rotation vector [rad]) of the frame, world axes."""
-        return np.concatenate([self.translation, self.rotation])
-
-    @property
-    def load(self) -> Load:
-        """The full load: the wrench and the weight."""
-        return Load(self.wrench, self.gravity)
-
-
-def frame_displacement(
-    clm: ClosedLoopModel, q: np.ndarray, q_ref: np.ndarray, frame: str
-) -> np.ndarray:
-    """(6,) displacement of ``frame`` from its pose at q_ref to its pose at q, world axes.
-
-    Translation p(q) - p(q_ref) [m] of the frame origin, then the rotation vector
-    log3(R(q) R(q_ref)^T) [rad]; to first order the frame twist J dq.
-    """
-    fid = clm.frame_id(frame)
-    update_kinematics(clm, q_ref)
-    ref = clm.data.oMf[fid].copy()
-    update_kinematics(clm, q)
-    cur = clm.data.oMf[fid]
-    return np.concatenate(
-        [cur.translation - ref.translation, pin.log3(cur.rotation @ ref.rotation.T)]
-    )
-
-
-def potential_energy(
-    clm: ClosedLoopModel,
-    q: np.ndarray,
-    q_rest: np.ndarray,
-    frame: str,
-    force: np.ndarray,
-    gravity: GravityLoad | None = None,
-) -> float:
-    """Potential energy [J] of the springs, a dead-load force at a frame origin, the weight.
-
-    ``1/2 dq^T K_q dq - f . (p(q) - p(q_rest)) + V_g(q) - V_g(q_rest)`` over the spring
-    coordinates (0 < k < inf; K_q = ``clm.spring_matrix``, diag(k) or with blocks),
-    dq = difference(q_rest, q); a beam's energy is that of :mod:`closedloop.model.elastic`
-    (its tip displacement and rotation, with the shortening of the bent beam). A
-    world-fixed moment has no potential.
-
-    Args:
-        force: (3,) force [N], world axes, at the origin of ``frame``.
-        gravity: the weight (:class:`closedloop.model.gravity.GravityLoad`), or None.
-    """
-    f = real_array(force, "force").reshape(-1)
-    if f.shape != (3,) or not np.isfinite(f).all():
-        raise InvalidInputError(f"force must be 3 finite values (fx fy fz) [N], got {f.tolist()}")
-    springs = spring_law(clm, deflection(clm, q_rest, q))[1]
-    dp = frame_displacement(clm, q, q_rest, frame)[:3]
-    weight = 0.0 if gravity is None else gravity.potential(q) - gravity.potential(q_rest)
-    return float(springs - f @ dp + weight)
-
-
-def _newton(eqs: EquilibriumEquations, q, w, *, row_tol, max_iter: int, step_limit, radius):
-    """Newton iterations at a fixed wrench; returns (q or None, state, iterations).
-
-    Args:
-        row_tol: (m,) closure tolerance of each row [m, rad]; step_limit: (nv,) largest
-            step of each coordinate [rad, m]; radius: the iterations stop (None) when they
-            leave this distance from the start (:func:`_distance`): bound for another
-            branch.
-    """
-    units, start = eqs.units, q
-    st = eqs.evaluate(q, w)
-    for it in range(max_iter + 1):
-        if _closed(st, row_tol) and _balanced(st, eqs.free_scales):
-            return q, st, it
-        if it == max_iter:
-            break
-        v, dropped = eqs.step(q, w, st)
-        ratio = np.max(np.abs(v) / step_limit, initial=0.0)
-        if not np.isfinite(ratio):
-            break
-        capped = ratio > 1.0  # a cut step says nothing of the distance to the solution
-        if capped:
-            v /= ratio
-        q = pin.integrate(eqs.clm.model, q, v)
-        if _distance(eqs, start, q) > radius:
-            break
-        st = eqs.evaluate(q, w)
-        if not (np.isfinite(st["closure"]) and np.isfinite(st["force"])):
-            break
-        size = np.max(np.abs(v) / units.coords, initial=0.0)
-        if (
-            not capped
-            and _closed(st, row_tol)
-            and size <= STEP_TOL * max(1.0, np.max(np.abs(q) / units.q))
-            and not dropped  # a step that resolved every direction: q is at rounding
-        ):  # level (Newton converges quadratically); else the force test decides
-            return q, st, it + 1
-    return None, st, max_iter
-
-
-def _closed(st: dict, row_tol: np.ndarray) -> bool:
-    """Every closure row within its tolerance."""
-    return bool(np.all(np.abs(st["c"]) <= row_tol))
-
-
-def _balanced(st: dict, coords: np.ndarray) -> bool:
-    """The unbalanced generalised force below FORCE_RTOL times the largest spring or load
-    one, each a force times the scale of its coordinate (N m, N L)."""
-    scale = max(
-        np.max(np.abs(st["spring"]) * coords, initial=0.0),
-        np.max(np.abs(st["load"]) * coords, initial=0.0),
-    )
-    return bool(np.max(np.abs(st["unbalanced"]) * coords, initial=0.0) <= FORCE_RTOL * scale)
 
 
 def _check_options(tol, max_iter, max_halvings, max_step, max_increment) -> None:
@@ -367,7 +191,7 @@ def solve_equilibrium(
 
     Warns:
         JointLimitWarning: the equilibrium lies outside joint limits (also listed in
-            :attr:`Equilibrium.limits_violated`).
+            :attr:`~closedloop.elastostatics.equilibrium.Equilibrium.limits_violated`).
 
     Raises:
         InvalidInputError: a wrench that is not 6 finite values, or so large that the
@@ -416,12 +240,12 @@ def solve_equilibrium(
     st = eqs.evaluate(q, 0.0 * w)
     if enforce_limits:
         _enforce_limits(clm, q, st, 0.0, where)
-    rate = _rate(eqs, q, 0.0, w, st)
+    rate = branch_rate(eqs, q, 0.0, w, st)
     # (load fraction, tau) of the last three equilibria (tau of
     # EquilibriumEquations.stability: 1 at rest)
     history = [(0.0, 1.0)]
     while t < 1.0:
-        fold = _fold_distance(history)
+        fold = fold_distance(history)
         probe = fold <= 0.25 * FOLD_RTOL * t  # a singularity within reach: across, or stop
         speed = float(np.max(np.abs(rate) / increment_limit, initial=0.0))
         if not np.isfinite(speed):  # the rate is that of the full load
@@ -438,17 +262,17 @@ def solve_equilibrium(
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not s_try > t:
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
-            raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
+            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
         if steps >= MAX_LOAD_STEPS:  # a deflection of thousands of increments: hours
             detail = (
                 f"{steps} load increments reached only {t:.3g} of the load (each moving the "
                 f"joints by at most max_increment, now {ds:.3g} of the load): a deflection "
                 "far beyond the mechanism's size; give a smaller load or a larger max_increment"
             )
-            raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
+            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
-        allowed = _allowed(eqs, q, guess)
-        q_new, st_try, it = _newton(
+        allowed = allowed_corrector(eqs, q, guess)
+        q_new, st_try, it = newton(
             eqs,
             guess,
             s_try * w,
@@ -461,20 +285,20 @@ def solve_equilibrium(
         why = "Newton failed"
         if q_new is not None:
             tau_new = eqs.stability(q_new, s_try * w)[1]
-            rate_new = _rate(eqs, q_new, s_try, w, st_try)  # also the kinematics of q_new
+            rate_new = branch_rate(eqs, q_new, s_try, w, st_try)  # also the kinematics of q_new
             back = pin.integrate(clm.model, q_new, (t - s_try) * rate_new)
             # unloaded, M = I; a spring-free motion that any load destabilises (a link
             # upright on a passive joint) flips the sign of det M at once, at t = 0
             across = probe or t == 0.0
             points = (q, guess, q_new, back)
-            why = _jump(eqs, points, (history[-1][1], tau_new), allowed, across)
+            why = jump(eqs, points, (history[-1][1], tau_new), allowed, across)
         if why:
             if probe or halvings >= max_halvings:
                 detail = (
                     f"{why} at {s_try:.9g} of the load, {iterations} iterations in all "
                     f"({steps} increments, {halvings} halvings)"
                 )
-                raise _failure(eqs, q, t, s_try, w, where, detail, iterations, st_try, history)
+                raise failure(eqs, q, t, s_try, w, where, detail, iterations, st_try, history)
             halvings += 1
             dt = 0.5 * ds
             continue
@@ -482,7 +306,7 @@ def solve_equilibrium(
             _enforce_limits(clm, q_new, st_try, t, where)
         # the corrector grows like the square of the increment: the next one aims at
         # CORRECTOR_AIM of its predictor (at most doubled, at least halved)
-        ratio = _distance(eqs, guess, q_new) / max(_distance(eqs, q, guess), JUMP_FLOOR)
+        ratio = distance(eqs, guess, q_new) / max(distance(eqs, q, guess), JUMP_FLOOR)
         dt = ds * min(2.0, max(0.5, CORRECTOR_AIM / max(ratio, 1e-300)))
         q, st, rate, t, steps = q_new, st_try, rate_new, s_try, steps + 1
         history = [*history[-2:], (t, tau_new)]
@@ -554,118 +378,3 @@ def _check_spread(clm: ClosedLoopModel) -> None:
     """
     if clm.closures:
         check_spread(clm, clm.length, "the statics of a mechanism with closures")
-
-
-def _advice(eqs: EquilibriumEquations, q) -> str:
-    """What to try after a failed continuation: a smaller step, unless the part of the
-    load reached already turns a joint coordinate by a radian or more (a load far beyond
-    the springs, which no step size helps)."""
-    clm = eqs.clm
-    turn = np.where(clm.linear_coordinates, 0.0, np.abs(pin.difference(clm.model, eqs.q_rest, q)))
-    i = int(np.argmax(turn)) if turn.size else 0
-    if turn.size and turn[i] >= 1.0:
-        return (
-            f"the part of the load reached already turns joint {clm.coordinate_joint(i)!r} by "
-            f"{turn[i]:.3g} rad from rest: the load is far beyond what the springs hold; "
-            "expected a smaller load"
-        )
-    return "try a smaller max_increment or a larger max_iter"
-
-
-def _rate(eqs: EquilibriumEquations, q, t: float, w, st: dict) -> np.ndarray:
-    """(nv,) dq/ds at the equilibrium q under t w (state ``st``) as the load grows by s w
-    [rad or m per unit of load fraction]; zero without load."""
-    return eqs.step(q, t * w, st, load=w)[0] if w.any() else np.zeros(eqs.clm.model.nv)
-
-
-def _fold_distance(history) -> float:
-    """Load fraction still to go to where tau (:meth:`EquilibriumEquations.stability`)
-    vanishes: a Newton step on tau^2, its slope at the last equilibrium that of the parabola
-    through the last three (t, tau) pairs of ``history`` (the chord through two if only
-    two); inf when |tau| does not fall (beyond its rounding, TAU_NOISE) or has changed
-    sign."""
-    if len(history) < 2:
-        return np.inf
-    t, tau = np.array(history[-3:]).T
-    if np.any(tau[:-1] * tau[-1] <= 0.0):
-        return np.inf
-    y = tau * tau
-    if y[-2] - y[-1] <= TAU_NOISE * (2.0 * abs(tau[-2]) + TAU_NOISE):  # rounding, or rising
-        return np.inf
-    slope = (y[-1] - y[-2]) / (t[-1] - t[-2])
-    if t.size == 3:  # add the curvature term of the parabola, at t[-1]
-        slope += (t[-1] - t[-2]) * (slope - (y[1] - y[0]) / (t[1] - t[0])) / (t[2] - t[0])
-    return y[-1] / -slope if slope < 0.0 else np.inf
-
-
-def _distance(eqs: EquilibriumEquations, a: np.ndarray, b: np.ndarray) -> float:
-    """Infinity norm of difference(a, b) [rad, and lengths in units of L]."""
-    d = pin.difference(eqs.clm.model, a, b) / eqs.units.coords
-    return float(np.max(np.abs(d), initial=0.0))
-
-
-def _allowed(eqs: EquilibriumEquations, q: np.ndarray, guess: np.ndarray) -> float:
-    """Largest corrector of an increment from the equilibrium q predicted at ``guess``
-    (both (nq,)) [rad, and lengths in units of L]: JUMP_RATIO of the predictor, plus the
-    resolution of the equilibria (JUMP_FLOOR, JUMP_RTOL)."""
-    rounding = JUMP_FLOOR + JUMP_RTOL * _distance(eqs, eqs.q_rest, guess)
-    return JUMP_RATIO * _distance(eqs, q, guess) + rounding
-
-
-def _jump(eqs: EquilibriumEquations, points, taus, allowed: float, across: bool) -> str:
-    """Why an increment that converged is refused ('' when it is not).
-
-    Args:
-        points: (q, guess, q_new, back): the last equilibrium, the prediction Newton
-            started from, its answer, and the prediction from q_new back to the last load
-            fraction along its own tangent, (nq,) each.
-        allowed: the largest corrector (:func:`_allowed`).
-        taus: tau at q and at q_new; across: whether the increment may step across a
-            singularity (one extrapolated within it): a sign change of det M is allowed
-            only then.
-    """
-    q, guess, q_new, back = points
-    if _distance(eqs, guess, q_new) > allowed or _distance(eqs, back, q) > allowed:
-        return "Newton converged away from the predicted equilibrium (on another branch)"
-    if taus[0] * taus[1] <= 0.0 and not across:
-        return "the tangent stiffness turned singular within the increment"
-    return ""
-
-
-def _failure(eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iterations, state, history):
-    """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
-
-    (q, t): the last equilibrium and its load fraction; ``s_fail`` the load fraction that
-    failed; ``state``: the :meth:`evaluate` state whose residuals the error reports;
-    ``history``: (t, tau) of the last three equilibria. A limit load when tau extrapolates
-    to zero within the failed increment: the fold is bracketed by [t, s_fail].
-    """
-    margin, tau = eqs.stability(q, t * w)
-    fold = _fold_distance(history)
-    limit = fold <= s_fail - t
-    if limit:
-        reason = (
-            f"no static equilibrium found {where} beyond {t:.9g} of the load: a limit load "
-            f"(fold) between {t:.9g} and {s_fail:.9g} of the load ends the branch that starts "
-            f"at q_rest (the spring-scaled tangent stiffness turns singular there: its "
-            f"smallest singular value {abs(tau):.3g}, extrapolated to 0 at {t + fold:.9g}; "
-            f"stability margin {margin:.3g}); {detail}"
-        )
-    else:
-        near = "" if not np.isfinite(fold) else f", extrapolated to 0 at {t + fold:.6g}"
-        reason = (
-            f"the solver failed to converge {where}: {detail}; not a limit load (the "
-            f"spring-scaled tangent stiffness is regular at {t:.6g} of the load: smallest "
-            f"singular value {abs(tau):.3g}{near}, stability margin {margin:.3g}): "
-            f"{_advice(eqs, q)}"
-        )
-    return EquilibriumError(
-        reason,
-        state["closure"],
-        state["force"],
-        t,
-        limit_load=limit,
-        stability_margin=margin,
-        iterations=iterations,
-        fold_bracket=(float(t), float(s_fail)) if limit else None,
-    )

@@ -33,7 +33,7 @@ import pinocchio as pin
 from pinocchio.visualize import MeshcatVisualizer
 from pinocchio.visualize.meshcat_visualizer import loadMesh
 
-from closedloop.analysis.indices import row_norms
+from closedloop.analysis.batch_indices import row_norms
 from closedloop.exceptions import InvalidInputError
 from closedloop.viewer.scene import joint_jacobian
 

@@ -62,10 +62,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.analysis.indices import row_norms
+from closedloop.analysis.batch_indices import row_norms
 from closedloop.common.arrays import check_wrench, readonly
 from closedloop.elastostatics.compliance import ComplianceResult, compliance
-from closedloop.elastostatics.statics import Equilibrium, solve_equilibrium
+from closedloop.elastostatics.equilibrium import Equilibrium
+from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.configuration import accepts_configuration

@@ -12,7 +12,8 @@ import pytest
 from helpers import INDEX_GETTERS, REPO, assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
-from closedloop.analysis.indices import BATCH_INDICES, StiffnessIndices, batch_indices
+from closedloop.analysis.batch_indices import BATCH_INDICES, batch_indices
+from closedloop.analysis.indices import StiffnessIndices
 from closedloop.elastostatics.compliance import compliance
 from closedloop.exceptions import InvalidInputError, RigidDirectionsError
 from closedloop.io.loader import load_urdf, robot_data_dir

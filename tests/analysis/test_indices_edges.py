@@ -14,7 +14,9 @@ import pytest
 from test_indices import DET_RTOL_PER_SQRT_COND
 
 import closedloop as cl
-from closedloop.analysis.indices import DELTA, StiffnessIndices, batch_indices
+from closedloop.analysis.batch_indices import batch_indices
+from closedloop.analysis.indices import StiffnessIndices
+from closedloop.analysis.screws import DELTA
 from closedloop.common.derivatives import central_differences
 from closedloop.elastostatics.compliance import compliance
 from closedloop.exceptions import InvalidInputError

@@ -10,8 +10,11 @@ import pytest
 from helpers import REPO, assert_close_in_norm
 
 import closedloop as cl
-from closedloop.analysis.map_engine import OK, ChunkResult, ModelSource, classify, run_tasks
+from closedloop.analysis.complete import classify
+from closedloop.analysis.map_results import OK, ChunkResult
 from closedloop.analysis.maps import INDICES, column_name, stiffness_map
+from closedloop.analysis.model_source import ModelSource
+from closedloop.analysis.tasks import run_tasks
 from closedloop.io.loader import reference_configuration
 
 #: The four-bar of urdf/fourbar.urdf with its ground link 0.42 m instead of 0.3 m: crank

@@ -19,15 +19,11 @@ import psutil
 import pytest
 from helpers import REPO
 
-from closedloop.analysis.map_engine import (
-    STATUS,
-    ChunkResult,
-    Interrupted,
-    ModelSource,
-    gather,
-    run_tasks,
-)
+from closedloop.analysis.interrupts import Interrupted
+from closedloop.analysis.map_results import STATUS, ChunkResult
 from closedloop.analysis.maps import StiffnessMap, stiffness_map
+from closedloop.analysis.model_source import ModelSource
+from closedloop.analysis.tasks import gather, run_tasks
 
 #: The tests of worker processes: a map's pool has at most one process a core.
 two_cores = pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs 2 cores for 2 workers")

@@ -8,8 +8,8 @@ import pytest
 from helpers import assert_close_in_norm
 
 import closedloop as cl
-from closedloop.analysis.map_engine import ModelSource
 from closedloop.analysis.maps import INDICES, grid_points, stiffness_map
+from closedloop.analysis.model_source import ModelSource
 from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.driving import assemble_connected
 

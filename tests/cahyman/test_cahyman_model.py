@@ -15,7 +15,8 @@ from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import build_closure_yaml, build_urdf
 from closedloop.elastostatics.compliance import compliance
-from closedloop.elastostatics.statics import frame_displacement, solve_equilibrium
+from closedloop.elastostatics.equilibrium import frame_displacement
+from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import InvalidInputError, JointLimitWarning
 from closedloop.io.loader import load_urdf
 from closedloop.kinematics.assembly import assemble

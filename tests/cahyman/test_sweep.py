@@ -10,7 +10,8 @@ from cahyman_pin import api
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, pose_list, sweep
 from cahyman_pin.sweep import execution as sweep_exec
-from closedloop.analysis.map_engine import STATUS, path_order, status_code
+from closedloop.analysis.map_engine import path_order
+from closedloop.analysis.map_results import STATUS, status_code
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, SingularConfigurationError
 
 #: Sweep against point-by-point api.stiffness. Both run the same functions on the same

@@ -306,7 +306,7 @@ def test_unknown_model_name_lists_the_names(capsys):
 )
 def test_bad_html_path_exits_2_before_any_work(tmp_path, capsys, monkeypatch, html, match):
     (tmp_path / "file.txt").write_text("")
-    import closedloop.cli.app as cli
+    import closedloop.cli.options as cli
 
     def no_work(*args, **kwargs):
         raise AssertionError("the model was loaded before the output path was checked")
@@ -324,7 +324,7 @@ def test_a_read_only_html_file_exits_2_before_any_work(tmp_path, capsys, monkeyp
     write any file: the check is os.access, patched here."""
     import os
 
-    import closedloop.cli.app as cli
+    import closedloop.cli.options as cli
 
     path = tmp_path / "view.html"
     path.write_text("old")

@@ -13,16 +13,10 @@ from helpers import closed_pipe_run
 
 from cahyman_pin.cli import main as cahyman_main
 from closedloop.cli.app import main as closedloop_main
-from closedloop.cli.common import (
-    EXIT_PIPE,
-    SpecError,
-    UsageError,
-    finite_float,
-    parse_values,
-    positive_int,
-    print_json,
-    run_command,
-)
+from closedloop.cli.common import run_command
+from closedloop.cli.map_options import SpecError, parse_values
+from closedloop.cli.outputs import EXIT_PIPE, print_json
+from closedloop.cli.parser import UsageError, finite_float, positive_int
 from closedloop.exceptions import EXIT_BAD_INPUT, EXIT_FAILED, NumericalError
 
 MAINS = {"closedloop": closedloop_main, "cahyman": cahyman_main}

@@ -23,7 +23,7 @@ from cahyman_pin.sweep import grid, sweep
 from closedloop.analysis.maps import grid_points
 from closedloop.analysis.measurements import read_measurements
 from closedloop.cli.app import main
-from closedloop.cli.common import MAX_MAP_POINTS, index_line
+from closedloop.cli.map_options import MAX_MAP_POINTS, index_line
 from closedloop.elastostatics.compliance import energy_shares
 from closedloop.exceptions import InvalidInputError
 

@@ -28,7 +28,8 @@ from scipy.optimize import brentq, minimize
 
 import closedloop as cl
 from closedloop.elastostatics.compliance import compliance
-from closedloop.elastostatics.statics import potential_energy, solve_equilibrium
+from closedloop.elastostatics.equilibrium import potential_energy
+from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.constraints import closure_jacobian, closure_residual, frame_jacobian
 

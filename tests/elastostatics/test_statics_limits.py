@@ -15,14 +15,10 @@ import pytest
 from helpers import assert_balanced, pendulum
 
 from closedloop import data
-from closedloop.elastostatics.statics import (
-    EquilibriumError,
-    JointLimitError,
-    JointLimitWarning,
-    potential_energy,
-    solve_equilibrium,
-)
+from closedloop.elastostatics.equilibrium import potential_energy
+from closedloop.elastostatics.statics import JointLimitError, JointLimitWarning, solve_equilibrium
 from closedloop.exceptions import (
+    EquilibriumError,
     InvalidInputError,
     MechanismError,
     NameNotFoundError,

@@ -10,7 +10,7 @@ import scipy.optimize
 from helpers import assert_close_in_norm
 
 import closedloop as cl
-from closedloop.elastostatics.statics import frame_displacement
+from closedloop.elastostatics.equilibrium import frame_displacement
 from closedloop.io.loader import load_urdf
 from closedloop.model.gravity import GravityLoad, Payload
 
@@ -182,7 +182,7 @@ def test_energy_of_the_weight_is_minimal_at_the_equilibrium(fourbar):
 
     def energy(x):
         q = pin.integrate(clm.model, q0, _embed(clm, free, x))
-        return cl.elastostatics.statics.potential_energy(clm, q, q0, "P", np.zeros(3), weight)
+        return cl.elastostatics.equilibrium.potential_energy(clm, q, q0, "P", np.zeros(3), weight)
 
     # the loop is planar: its out-of-plane closure row is identically zero, left out
     in_plane = np.abs(cl.kinematics.constraints.closure_jacobian(clm, q0)).max(axis=1) > 1e-12

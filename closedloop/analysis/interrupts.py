@@ -1,0 +1,134 @@
+"""A map stopped by SIGINT (Ctrl-C) or SIGTERM, and what the signals do in its workers.
+
+Inside :func:`stop_on_signals` (in :func:`closedloop.analysis.tasks.gather`) the first
+signal raises :class:`Interrupted` (a ``KeyboardInterrupt``), which carries what was
+computed; the worker processes of :func:`closedloop.analysis.tasks.run_tasks` are started
+with the signals blocked (:func:`signals_blocked`) and ignore SIGINT themselves, ending with
+their parent (:func:`start_worker`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable
+
+import numpy as np
+
+from closedloop.analysis.map_results import NOT_COMPUTED, PointData
+from closedloop.common.blas import single_threaded_blas
+
+#: Signals that stop a map (:func:`stop_on_signals`).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: ``prctl`` option: the signal a process receives when its parent ends (Linux).
+PR_SET_PDEATHSIG = 1
+
+
+class Interrupted(KeyboardInterrupt):
+    """A map stopped by SIGINT (Ctrl-C) or SIGTERM: its workers ended, what it computed kept.
+
+    A ``KeyboardInterrupt``, so that code that catches Ctrl-C catches it.
+    :func:`~closedloop.analysis.tasks.gather` raises it with ``data``;
+    :func:`closedloop.analysis.maps.stiffness_map` and :func:`cahyman_pin.sweep.sweep` attach
+    their result as ``partial`` and re-raise it.
+
+    Attributes:
+        signum: the signal (SIGINT, also for a plain ``KeyboardInterrupt``, or SIGTERM).
+        data: the :class:`~closedloop.analysis.map_results.PointData` so far, or None
+            (stopped outside a map): the points of the chunks not received have status
+            ``not_computed`` and the reason :attr:`reason`, NaN values.
+        partial: the map's result built on ``data`` (a
+            :class:`~closedloop.analysis.maps.StiffnessMap` or a
+            :class:`~cahyman_pin.sweep.SweepResult`), or None.
+        written: the folder ``partial`` was written to (:meth:`write`), or None.
+    """
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signum)
+        self.signum = signal.Signals(signum)
+        self.data: PointData | None = None
+        self.partial = None
+        self.written = None
+
+    @property
+    def reason(self) -> str:
+        """The reason of the points not computed, e.g. ``interrupted by SIGINT``."""
+        return f"interrupted by {self.signum.name}"
+
+    def write(self, save: Callable, folder) -> None:
+        """Write ``partial`` (if any) by ``save(partial)`` into ``folder``, and say so in
+        the message."""
+        if self.partial is not None:
+            save(self.partial)
+            self.written = folder
+
+    def __str__(self) -> str:
+        text = f"interrupted ({self.signum.name})"
+        if self.data is None or self.written is None:
+            return f"{text}; nothing written"
+        done = int(np.count_nonzero(self.data.codes != NOT_COMPUTED))
+        return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+    """Inside the block, SIGINT and SIGTERM raise :class:`Interrupted`, once: a later one is
+    ignored until the block ends, so that the clean-up after the first (workers ended, a
+    partial map written) is not cut short. Only in the main thread (where Python runs its
+    signal handlers), and only for a signal whose handler is Python's default (SIGINT:
+    ``KeyboardInterrupt``; SIGTERM: the end of the process): an ignored signal, a
+    handler of the program's own or of an enclosing block stay as they are."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    received: list[int] = []
+
+    def stop(signum, frame):
+        if not received:
+            received.append(signum)
+            raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, stop) for s, h in defaults.items() if signal.getsignal(s) is h}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def start_worker() -> None:
+    """Initializer of a map's worker processes (started with SIGINT and SIGTERM blocked,
+    :func:`~closedloop.analysis.tasks.run_tasks`): SIGINT ignored (a Ctrl-C reaches the whole
+    process group; the parent ends the workers), SIGTERM ends the process, the process ends
+    with its parent (Linux: even a parent killed by SIGKILL), one BLAS thread."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        parent = os.getppid()
+        ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:  # ended before prctl
+            os._exit(1)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+    single_threaded_blas()
+
+
+@contextlib.contextmanager
+def signals_blocked():
+    """SIGINT and SIGTERM blocked in this thread inside the block, and so in the processes
+    it starts until their initializer (:func:`start_worker`) has set what the signals do
+    there; a signal received meanwhile is handled at the end of the block. Nothing where
+    Python cannot block signals (Windows)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)

@@ -1,0 +1,41 @@
+"""Where a map's model comes from, so that worker processes can load it themselves."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+from closedloop.io.loader import load_model
+from closedloop.model.closed_loop import ClosedLoopModel
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """Where a model comes from, so that worker processes can load it themselves.
+
+    Attributes: the arguments of :func:`closedloop.io.loader.load_model` (paths as strings).
+    """
+
+    path: str
+    closures: str | None = None
+    springs: tuple = ()
+    joint_stiffness: float | None = None
+
+    def load(self) -> ClosedLoopModel:
+        """The model (loaded once per process)."""
+        return _load(self)
+
+
+@functools.lru_cache(maxsize=8)
+def _load(source: ModelSource) -> ClosedLoopModel:
+    springs = {k: list(v) if isinstance(v, tuple) else v for k, v in source.springs}
+    return load_model(
+        source.path,
+        source.closures,
+        springs=springs or None,
+        joint_stiffness=source.joint_stiffness,
+    )
+
+
+def model_of(model: ClosedLoopModel | ModelSource) -> ClosedLoopModel:
+    return model.load() if isinstance(model, ModelSource) else model
