@@ -139,6 +139,7 @@ def legend_info(
         "max_rotation": scene.max_rotation,
         "rotation_cap": ROTATION_CAP,
         "auto_fraction": AUTO_FRACTION,
+        "reassembled": scene.reassembled,
         "size": scene.size,
         "frame_twist": scene.frame_twist.tolist(),
         "ghost_rgba": GHOST_RGBA,

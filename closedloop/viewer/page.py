@@ -186,11 +186,16 @@ def _amplification_rows(info: dict) -> list[str]:
     caps of the automatic amplification (:mod:`closedloop.viewer.motion`)."""
     w_deg, cap = np.rad2deg(info["max_rotation"]), np.rad2deg(info["rotation_cap"])
     shown = 1e3 * info["auto_fraction"] * info["size"]
+    if info.get("reassembled"):
+        drawn = "; drawn: the amplified joint deflection, its loops re-closed"
+    else:
+        drawn = (
+            f", drawn as {info['scale'] * w_deg:.4g} deg; each link drawn rigidly along its "
+            "own twist"
+        )
     return [
-        f"largest link rotation {w_deg:.4g} deg (real), drawn as {info['scale'] * w_deg:.4g} "
-        "deg; each link drawn as a rigid motion along its own twist",
-        f"automatic amplification caps: displacement {shown:.4g} mm "
-        f"({info['auto_fraction']:g} of the model size), rotation {cap:.3g} deg",
+        f"largest link rotation {w_deg:.4g} deg (real){drawn}; automatic caps: {shown:.4g} mm "
+        f"({info['auto_fraction']:g} of the model size) and {cap:.3g} deg"
     ]
 
 

@@ -106,6 +106,8 @@ class DeflectionScene:
         mode: for a natural mode (:func:`mode_scene`; then no wrench, no compliance):
             {"number": its rank from the lowest (1), "frequency_hz": its frequency}; None
             for a deflection.
+        reassembled: True when the drawn poses are the re-assembled :attr:`ramp_q`
+            (``close_loops``), False when each link moves along its twist.
     """
 
     frame: str
@@ -131,6 +133,7 @@ class DeflectionScene:
     equilibrium: Equilibrium | None
     beams: tuple[BeamCurve, ...] = ()
     mode: dict | None = None
+    reassembled: bool = False
 
     @property
     def nonlinear(self) -> bool:
@@ -300,7 +303,8 @@ def deflection_scene(
             "automatic)"
         )
     ramp_q = [pin.integrate(clm.model, q, s * v) for v in steps]
-    if close_loops and clm.closures:
+    reassembled = bool(close_loops and clm.closures)
+    if reassembled:
         ramp_q = [assemble(clm, None, q_s).q for q_s in ramp_q]
         ramp_poses = [model_poses(clm, q_s) for q_s in ramp_q]
     else:
@@ -331,6 +335,7 @@ def deflection_scene(
         ramp_q=readonly(np.array(ramp_q)),
         equilibrium=equilibrium,
         beams=beam_curves(clm.model, ramp_poses[-1]),
+        reassembled=reassembled,
     )
 
 

@@ -91,8 +91,8 @@ def second_order(gaps_of_scale, a: float, size: float) -> None:
     "robot, frame, wrench", [("ur5", "tool0", UR5_WRENCH), ("fourbar", "P", FOURBAR_WRENCH)]
 )
 def test_a_joint_shared_by_two_links_stays_together_to_second_order(robot, frame, wrench, request):
-    """(CaHyMan's revolute joints on a moving parent turn with it: their gaps vanish; its
-    loops are checked below.)"""
+    """(CaHyMan's few revolute joints on a moving parent show gaps of rounding only, 1e-17
+    m: nothing to compare; its loops are checked below.)"""
     clm, q = request.getfixturevalue(robot)
     auto = deflection_scene(clm, q, frame, wrench)
 
@@ -182,3 +182,26 @@ def test_cahyman_plates_do_not_pass_through_each_other_or_the_ghost(cahyman_pose
     plate = clm.model.getJointId("plate")
     turn = pin.log3(drawn[plate][:3, :3] @ nominal[plate][:3, :3].T)
     assert np.linalg.norm(turn) <= ROTATION_CAP * (1 + CAP_RTOL)
+
+
+def test_a_finite_deflection_drawn_at_unit_scale_is_the_equilibrium(fourbar):
+    """--nonlinear: each link's twist is its finite motion, log6(oMi(q_eq) oMi(q)^-1), so
+    at s = 1 the drawn placements are the equilibrium's forward kinematics."""
+    clm, q = fourbar
+    w = [0.0, 0.0, -200.0, 0.0, 0.0, 0.0]
+    scene = deflection_scene(clm, q, "P", w, nonlinear=True, scale=1.0, frames=2)
+    data = clm.model.createData()
+    pin.forwardKinematics(clm.model, data, scene.equilibrium.q)
+    expected = np.array([M.homogeneous for M in data.oMi])
+    np.testing.assert_allclose(scene.poses_deflected, expected, rtol=0, atol=1e-12)
+    assert not scene.reassembled
+
+
+def test_close_loops_draws_the_reassembled_configuration(fourbar):
+    clm, q = fourbar
+    scene = deflection_scene(clm, q, "P", FOURBAR_WRENCH, scale=150.0, close_loops=True)
+    data = clm.model.createData()
+    pin.forwardKinematics(clm.model, data, scene.q_deflected)
+    expected = np.array([M.homogeneous for M in data.oMi])
+    np.testing.assert_allclose(scene.poses_deflected, expected, rtol=0, atol=1e-12)
+    assert scene.reassembled
