@@ -15,11 +15,10 @@ drawn at
 
 a rigid motion of the link. Two links that share a joint point p move it by the same
 first-order displacement (v_i + w_i x p), so the joint stays together, and a closed loop
-stays closed, to first order in a, however deep the chain; the gap, of second order, is
-about a^2 |w_i - w_j| |v| at most. Amplifying the joint deflection instead,
-integrate(q, a dq), turns a small rotation near the root into a large one at every link
-beyond it, and a closed loop's passive joints into large swings (the CaHyMan plates
-swung through each other at x853).
+stays closed, to first order in a, however deep the chain (the gap is of second order).
+Amplifying the joint deflection instead, integrate(q, a dq), turns a small rotation near
+the root into a large one, which swings every link beyond it; here each link turns by a
+times its own rotation, which the cap below keeps readable.
 
 Amplification (``scale=None``): the largest of the first-order displacements |J_p dq| of
 the joint origins and the loaded frame's origin, d_max [m], drawn at most
@@ -143,6 +142,7 @@ def auto_scale(size: float, d_max: float, w_max: float, fraction: float = AUTO_F
 
 
 def model_poses(clm: ClosedLoopModel, q: np.ndarray) -> np.ndarray:
-    """(njoints, 4, 4) :func:`joint_poses` of ``clm`` at q (its own data updated to q)."""
+    """(njoints, 4, 4) world placements oMi of the joints of ``clm`` at q (index 0: the
+    world), from its own data, which is updated to q."""
     update_kinematics(clm, clm.check_configuration(q))
     return np.array([M.homogeneous for M in clm.data.oMi])
