@@ -2,8 +2,9 @@
 
 The legend (a fixed ``<div id="closedloop-legend">`` over the WebGL canvas, so it reads
 the same from any view point) gives the model and pose, the wrench components, the
-amplification, the real largest displacement and the loaded frame's displacement (mm,
-deg), and the colour key of ghost, deflected robot, arrows, ellipsoids and grid.
+amplification, the real largest displacement and link rotation with the caps of the
+automatic amplification, the loaded frame's displacement (mm, deg), and the colour key
+of ghost, deflected robot, arrows, ellipsoids and grid.
 
 The page script waits until the scene has loaded (both robots' meshes and the load-ramp
 animation are in the page), then arms the animation: it loops (ping-pong: load, unload),
