@@ -144,6 +144,28 @@ def frame_placement(clm: ClosedLoopModel, q, frame: str) -> pin.SE3:
     return d.oMf[clm.frame_id(frame)].copy()
 
 
+def rigid_link_poses(model: pin.Model, q, dq, a: float, step: float = 1e-6) -> np.ndarray:
+    """(njoints, 4, 4) joint placements with each joint body moved rigidly by exp6(a xi_j),
+    xi_j its world-frame twist under dq from central differences of the forward kinematics
+    (log6 of the body's motion along q + t dq, t = +-step / max|dq|): the viewer's drawing
+    (:mod:`closedloop.viewer.motion`) along a route of its own. Truncation ~ step^2 and
+    rounding ~ 1e-16 / step, relative to the twist."""
+    data = model.createData()
+    dq = np.asarray(dq, dtype=float)
+    t = step / max(float(np.max(np.abs(dq))), 1e-300)
+
+    def placements(eps):
+        pin.forwardKinematics(model, data, pin.integrate(model, q, eps * dq))
+        return [m.copy() for m in data.oMi]
+
+    nominal, plus, minus = placements(0.0), placements(t), placements(-t)
+    out = []
+    for M0, Mp, Mm in zip(nominal, plus, minus, strict=True):
+        xi = (pin.log6(Mp * M0.inverse()).vector - pin.log6(Mm * M0.inverse()).vector) / (2 * t)
+        out.append((pin.exp6(a * xi) * M0).homogeneous)
+    return np.array(out)
+
+
 # ---------------------------------------------------------------------------- mechanisms
 def _z_to(a: np.ndarray) -> np.ndarray:
     """Rotation matrix taking the z axis to the unit vector a."""

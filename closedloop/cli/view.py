@@ -23,7 +23,8 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         type=finite_float,
         metavar="S",
         help="amplification of the deflection (default: automatic, the largest "
-        "point displacement shown as 10%% of the model size)",
+        "point displacement shown as at most 10%% of the model size and the largest link "
+        "rotation as at most 20 deg)",
     )
     p.add_argument(
         "--nonlinear", action="store_true", help="nonlinear static equilibrium along the load ramp"
@@ -31,7 +32,8 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--close-loops",
         action="store_true",
-        help="re-close the loops of the amplified pose with the passive joints",
+        help="draw the amplified joint deflection with its loops re-closed by the passive "
+        "joints, instead of each link moved along its own twist",
     )
     p.add_argument(
         "--rotational", action="store_true", help="also the rotational compliance ellipsoid"

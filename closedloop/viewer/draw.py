@@ -13,13 +13,10 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.model.closed_loop import ClosedLoopModel
-from closedloop.viewer.scene import (
-    LEVER_FRACTION,
-    BeamCurve,
-    DeflectionScene,
-    Ellipsoid,
-    unit_vector,
-)
+from closedloop.viewer.beam_curves import BeamCurve
+from closedloop.viewer.ellipsoids import LEVER_FRACTION, Ellipsoid, unit_vector
+from closedloop.viewer.motion import AUTO_FRACTION, ROTATION_CAP
+from closedloop.viewer.scene import DeflectionScene
 
 LOAD, COMPLIANCE, GRID, BEAMS = "load", "compliance", "grid", "beams"
 #: meshcat path of the camera (three.js, y up), placed by the viewer.
@@ -41,7 +38,7 @@ GRID_DIVISIONS, GRID_EXTENT = 8, 0.9
 #: Camera: direction from the scene centre (world axes); distance per radius of the drawn
 #: bounding sphere (meshcat's vertical field of view is 75 deg: 1 / sin(37.5 deg) = 1.64;
 #: more, so that the near side does not fill the view).
-CAMERA_DIRECTION, CAMERA_MARGIN = (0.45, -1.0, 0.5), 2.4
+CAMERA_DIRECTION, CAMERA_MARGIN = (0.45, -1.0, 0.5), 2.0
 #: Camera's near and far clipping distances per radius of the drawn bounding sphere
 #: (meshcat's fixed 0.01 m and 100 m at a radius of 1 m): a model of a few millimetres,
 #: closer than 0.01 m, or of a hundred metres, farther than 100 m, is not clipped away.
@@ -139,6 +136,11 @@ def legend_info(
         "auto_scaled": scene.auto_scaled,
         "kind": "nonlinear" if scene.nonlinear else "linear",
         "max_displacement": scene.max_displacement,
+        "max_rotation": scene.max_rotation,
+        "rotation_cap": ROTATION_CAP,
+        "auto_fraction": AUTO_FRACTION,
+        "reassembled": scene.reassembled,
+        "size": scene.size,
         "frame_twist": scene.frame_twist.tolist(),
         "ghost_rgba": GHOST_RGBA,
         "deflected_rgba": colours,

@@ -35,7 +35,7 @@ from pinocchio.visualize.meshcat_visualizer import loadMesh
 
 from closedloop.analysis.batch_indices import row_norms
 from closedloop.exceptions import InvalidInputError
-from closedloop.viewer.scene import joint_jacobian
+from closedloop.viewer.motion import joint_jacobian
 
 ROBOTS, GHOST, DEFLECTED = "robots", "nominal", "deflected"
 #: meshcat path of the animated object (meshcat puts an object under ``<object>``).
@@ -110,11 +110,15 @@ def _geometry(g: pin.GeometryObject) -> tuple[dict, np.ndarray, bool, np.ndarray
     )
 
 
-def _mesh_key(g: pin.GeometryObject):
-    """Geometry objects that show the same mesh file at the same scale share one buffer."""
+def _mesh_key(index: int, g: pin.GeometryObject):
+    """Geometry objects that show the same mesh file at the same scale share one buffer;
+    a primitive (or a mesh without a file) is its own, keyed by its index ``index`` in the
+    geometry model (not by ``id(g)``: Pinocchio hands out a new wrapper of the object at
+    each access, and a freed wrapper's id is reused, which gave every primitive the
+    geometry of the first one)."""
     if g.meshPath and isinstance(g.geometry, (coal.BVHModelBase, coal.ConvexBase)):
         return (g.meshPath, tuple(np.round(np.asarray(g.meshScale, dtype=float), 12)))
-    return id(g)
+    return index
 
 
 class RobotPair:
@@ -133,24 +137,27 @@ class RobotPair:
         self.data, self.geometry_data = model.createData(), visual_model.createData()
         self.geometries: dict = {}  # mesh key -> three.js geometry
         self.parts = []  # per geometry object: (geometry, mesh matrix, flat, vertices)
-        for g in visual_model.geometryObjects:
-            key = _mesh_key(g)
+        for i, g in enumerate(visual_model.geometryObjects):
+            key = _mesh_key(i, g)
             if key not in self.geometries:
                 self.geometries[key] = _geometry(g)
             self.parts.append(self.geometries[key])
         self.corners = [_corners(g.geometry) for g in visual_model.geometryObjects]
 
-    def placements(self, q: np.ndarray) -> list[np.ndarray]:
-        """(4, 4) world placement of each geometry object at configuration q."""
-        pin.forwardKinematics(self.model, self.data, q)
-        pin.updateGeometryPlacements(self.model, self.data, self.visual_model, self.geometry_data)
-        return [M.homogeneous for M in self.geometry_data.oMg]
+    def placements(self, poses: np.ndarray) -> list[np.ndarray]:
+        """(4, 4) world placement of each geometry object, carried rigidly by its parent
+        joint placed at ``poses`` (njoints, 4, 4) (world frame)."""
+        return [
+            poses[g.parentJoint] @ g.placement.homogeneous
+            for g in self.visual_model.geometryObjects
+        ]
 
-    def bounds(self, q: np.ndarray) -> np.ndarray:
-        """(2, 3) lowest and highest corner [m], world frame, of the geometry at q."""
+    def bounds(self, poses: np.ndarray) -> np.ndarray:
+        """(2, 3) lowest and highest corner [m], world frame, of the geometry with the
+        joints at ``poses`` (njoints, 4, 4)."""
         points = [  # the boxes are in the geometry object's frame (coal's, z-axis shapes)
             c @ T[:3, :3].T + T[:3, 3]
-            for T, c in zip(self.placements(q), self.corners, strict=True)
+            for T, c in zip(self.placements(poses), self.corners, strict=True)
             if c is not None
         ]
         p = np.vstack(points)
@@ -177,12 +184,13 @@ class RobotPair:
         return out
 
     def command(
-        self, q_nominal: np.ndarray, q_deflected: np.ndarray, colours: list | None = None
+        self, nominal: np.ndarray, deflected: np.ndarray, colours: list | None = None
     ) -> dict:
-        """The meshcat ``set_object`` command of both robots at their configurations.
+        """The meshcat ``set_object`` command of both robots at their joint placements.
 
         Args:
-            q_nominal, q_deflected: (nq,) configurations of the ghost and deflected robot.
+            nominal, deflected: (njoints, 4, 4) joint placements (world frame) of the ghost
+                and of the deflected robot.
             colours: per geometry object, RGB (0..1) of the deflected robot: (n, 3) at the
                 mesh vertices or (3,) for a primitive; None: the model's colours. A mesh
                 with vertex colours gets its own buffer (still shared with its ghost).
@@ -214,17 +222,17 @@ class RobotPair:
                 shown.append((geometry["uuid"], material(g.meshColor, flat)))
         used = {uid for uid, _ in shown}
 
-        def group(root: str, vm: pin.GeometryModel, q: np.ndarray) -> dict:
+        def group(root: str, vm: pin.GeometryModel, poses: np.ndarray) -> dict:
             children = []
-            for g, T, (_, matrix, flat, _), (geometry, deflected) in zip(
-                vm.geometryObjects, self.placements(q), self.parts, shown, strict=True
+            for g, T, (_, matrix, flat, _), (geometry, drawn) in zip(
+                vm.geometryObjects, self.placements(poses), self.parts, shown, strict=True
             ):
                 mesh = {
                     "uuid": str(uuid.uuid1()),
                     "type": "Mesh",
                     "name": "mesh",
                     "geometry": geometry,
-                    "material": deflected if root == DEFLECTED else material(g.meshColor, flat),
+                    "material": drawn if root == DEFLECTED else material(g.meshColor, flat),
                     "matrix": _column_major(matrix),
                 }
                 children.append(_group(node_name(root, g.name), T, [mesh]))
@@ -234,8 +242,8 @@ class RobotPair:
             ROBOTS,
             np.eye(4),
             [
-                group(GHOST, self.ghost_model, q_nominal),
-                group(DEFLECTED, self.visual_model, q_deflected),
+                group(GHOST, self.ghost_model, nominal),
+                group(DEFLECTED, self.visual_model, deflected),
             ],
         )
         return {
@@ -249,11 +257,13 @@ class RobotPair:
             },
         }
 
-    def clip(self, ramp_q: np.ndarray, fps: float) -> dict:
-        """Animation clip (three.js JSON, times in frames) moving the deflected groups."""
+    def clip(self, ramp_poses: np.ndarray, fps: float) -> dict:
+        """Animation clip (three.js JSON, times in frames) moving the deflected groups, one
+        key a set of joint placements of ``ramp_poses`` (n, njoints, 4, 4)."""
         tracks = {}
-        for k, q in enumerate(ramp_q):
-            for g, T in zip(self.visual_model.geometryObjects, self.placements(q), strict=True):
+        for k, poses in enumerate(ramp_poses):
+            placed = self.placements(poses)
+            for g, T in zip(self.visual_model.geometryObjects, placed, strict=True):
                 name = node_name(DEFLECTED, g.name)
                 quat = pin.Quaternion(T[:3, :3]).coeffs()  # x, y, z, w as three.js
                 for prop, kind, value in (

@@ -2,8 +2,9 @@
 
 The legend (a fixed ``<div id="closedloop-legend">`` over the WebGL canvas, so it reads
 the same from any view point) gives the model and pose, the wrench components, the
-amplification, the real largest displacement and the loaded frame's displacement (mm,
-deg), and the colour key of ghost, deflected robot, arrows, ellipsoids and grid.
+amplification, the real largest displacement and link rotation with the caps of the
+automatic amplification, the loaded frame's displacement (mm, deg), and the colour key
+of ghost, deflected robot, arrows, ellipsoids and grid.
 
 The page script waits until the scene has loaded (both robots' meshes and the load-ramp
 animation are in the page), then arms the animation: it loops (ping-pong: load, unload),
@@ -25,7 +26,7 @@ import json
 
 import numpy as np
 
-from closedloop.viewer.scene import vector_norm
+from closedloop.viewer.ellipsoids import vector_norm
 
 #: three.js loop mode of the ramp (THREE.LoopPingPong: 0 -> 1 -> 0 -> ...).
 LOOP_PING_PONG = 2202
@@ -171,6 +172,7 @@ def legend_rows(info: dict) -> list[str]:
     rows.append(
         f"largest point displacement {d_mm:.4g} mm (real), drawn as {info['scale'] * d_mm:.4g} mm"
     )
+    rows += _amplification_rows(info)
     rows.append(
         f"{frame} moves {_vector(1e3 * t[:3])} mm (norm {1e3 * vector_norm(t[:3]):.4g} mm) "
         f"and turns {_vector(np.rad2deg(t[3:]))} deg (norm "
@@ -178,6 +180,24 @@ def legend_rows(info: dict) -> list[str]:
         + ("first order" if info["kind"] == "linear" else "nonlinear equilibrium")
     )
     return [html.escape(r) for r in rows]
+
+
+def _amplification_rows(info: dict) -> list[str]:
+    """How the deflected pose is drawn: the largest link rotation, real and drawn, and the
+    caps of the automatic amplification (:mod:`closedloop.viewer.motion`)."""
+    w_deg, cap = np.rad2deg(info["max_rotation"]), np.rad2deg(info["rotation_cap"])
+    shown = 1e3 * info["auto_fraction"] * info["size"]
+    if info.get("reassembled"):
+        drawn = "; drawn: the amplified joint deflection, its loops re-closed"
+    else:
+        drawn = (
+            f", drawn as {info['scale'] * w_deg:.4g} deg; each link drawn rigidly along its "
+            "own twist"
+        )
+    return [
+        f"largest link rotation {w_deg:.4g} deg (real){drawn}; automatic caps: {shown:.4g} mm "
+        f"({info['auto_fraction']:g} of the model size) and {cap:.3g} deg"
+    ]
 
 
 def _mode_rows(info: dict) -> list[str]:
@@ -194,6 +214,7 @@ def _mode_rows(info: dict) -> list[str]:
         f"{info['scale'] * d_mm:.4g} mm",
         f"{frame} moves {_vector(1e3 * t[:3])} mm and turns {_vector(np.rad2deg(t[3:]))} deg "
         "per unit modal amplitude, world axes",
+        *_amplification_rows(info),
     ]
 
 

@@ -4,50 +4,24 @@ A wrench w = (f [N], n [N m]) acts at the origin of a frame, world axes. The joi
 deflection dq (nv,) (tangent of q) is the linear one, ``G w`` of
 :func:`closedloop.elastostatics.compliance.compliance`, or, with ``nonlinear=True``, the finite one
 ``difference(q, q_eq)`` of the static equilibrium q_eq of
-:func:`closedloop.elastostatics.statics.solve_equilibrium` (a dead load followed from zero). The
-deflected pose is drawn amplified:
+:func:`closedloop.elastostatics.statics.solve_equilibrium` (a dead load followed from zero).
 
-    q_s = integrate(q, s dq)
+The deflected pose is drawn amplified link by link (:mod:`closedloop.viewer.motion`): each
+joint body moves rigidly along its own twist xi_i = J_i dq amplified by s (the finite
+displacement of the link for a nonlinear deflection), exp6(s xi_i) oMi(q), so that joints
+stay together and closed loops stay closed to first order; the automatic s keeps the
+largest drawn point displacement at most ``AUTO_FRACTION`` of the model size L and the
+largest drawn link rotation at most ``ROTATION_CAP``. The model size L [m] is the diagonal
+of the bounding box of the origins of all joints and frames at q.
 
-A loop closure holds q_s only to first order in s dq: a large s visibly opens the loops.
-With ``close_loops=True`` each amplified pose is re-assembled instead
-(:func:`closedloop.kinematics.assembly.assemble` from q_s): the spring and locked coordinates keep
-their amplified values and the passive joints close the loops.
+With ``close_loops=True`` the amplified configuration integrate(q, s dq) is re-assembled
+instead (:func:`closedloop.kinematics.assembly.assemble`: the spring and locked coordinates
+keep their amplified values and the passive joints close the loops) and drawn by forward
+kinematics: the loops close exactly, but a small rotation near the root is amplified at
+every link beyond it.
 
-Amplification (``scale=None``): the first-order displacement of a point p under dq is
-``J_p dq`` (J_p the translational rows of its Jacobian, world axes); over the origins of all
-joints (the link frames) and of the loaded frame, the largest one, d_max [m], is made
-``AUTO_FRACTION`` of the model size L [m], the diagonal of the bounding box of the origins
-of all joints and frames at q:
-
-    s = AUTO_FRACTION * L / d_max     (s = 1 when d_max = 0: nothing deflects)
-
-Compliance ellipsoids, centred at the loaded frame origin at q, world axes. With C_tt,
-C_rr the (3, 3) translational and rotational diagonal blocks of the compliance C (world
-axes, at the frame origin), eigenvalues lambda_i and unit eigenvectors v_i:
-
-* translation: semi-axes ``s F lambda_i`` [m] along v_i, F = |f| [N] (|n| / L when f = 0):
-  the set {s C_tt u : |u| = F}, the amplified displacements of the frame origin under all
-  forces of the applied magnitude. Under a pure force the amplified first-order
-  displacement ``s C_tt f`` of the frame origin lies on its surface.
-* rotation (on request): semi-axes ``rho s N mu_i`` [m] along v_i, N = |n| [N m]
-  (|f| rho when n = 0), mu_i the eigenvalues of C_rr [rad/(N m)], rho = ``LEVER_FRACTION``
-  L (the length of the drawn arrows): the amplified rotations under all moments of the
-  applied magnitude, drawn as the arc length [m] they give at radius rho.
-
-No ellipsoid is drawn for a zero wrench. An ellipsoid larger than the model is drawn
-shrunk: its radii times ``shrink`` = min(1, ``ELLIPSOID_MAX_FRACTION`` L / largest radius)
-(:attr:`Ellipsoid.drawn_radii`; the viewer's legend shows the factor).
-
-Flexible links (the beams of :mod:`closedloop.model.beams`) are drawn bent: the link's mesh
-stays rigid with the beam's clamped start and its ``end`` rides on the tip, and between
-them the beam's axis is the cubic Hermite curve of :func:`beam_curves` from the start
-(the link frame origin, tangent along the undeflected beam) to the tip (the virtual
-joint's origin, tangent along the undeflected beam turned by the tip's rotation), both
-tangents of the beam's length L. To first order in the tip's deflection this is the
-Euler-Bernoulli deflection line of a clamped beam loaded at its tip (a cubic: it has the
-tip's displacement and slope), e.g. 5 F L^3 / (48 E I) at mid-length under a tip force F;
-an unloaded beam is the straight segment from start to tip.
+Compliance ellipsoids: :mod:`closedloop.viewer.ellipsoids`; flexible links drawn bent:
+:mod:`closedloop.viewer.beam_curves`.
 
 Norms are taken without under- or overflow: a load of any finite magnitude gives the same
 automatic picture; one whose deflection or ellipsoid is not a finite number (``--force
@@ -62,7 +36,6 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.analysis.batch_indices import row_norms
 from closedloop.common.arrays import check_wrench, readonly
 from closedloop.elastostatics.compliance import ComplianceResult, compliance
 from closedloop.elastostatics.equilibrium import Equilibrium
@@ -71,78 +44,27 @@ from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.configuration import accepts_configuration
 from closedloop.kinematics.constraints import frame_jacobian, update_kinematics
-from closedloop.model.beams import inserted_beams
 from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.viewer.beam_curves import BeamCurve, beam_curves
+from closedloop.viewer.ellipsoids import Ellipsoid, wrench_ellipsoids
+from closedloop.viewer.motion import (
+    ROTATION_CAP,
+    auto_scale,
+    drawn_poses,
+    finite_twists,
+    frame_pose,
+    largest_displacement,
+    largest_rotation,
+    link_twists,
+    model_poses,
+)
 
-#: Largest amplified first-order point displacement, as a fraction of the model size.
-AUTO_FRACTION = 0.1
-#: Lever arm rho of the rotational ellipsoid (and arrow length), per model size L.
-LEVER_FRACTION = 0.25
 #: Number of poses of the load-ramp animation (load fractions 0 .. 1, evenly spaced).
 ANIMATION_FRAMES = 25
-#: Largest drawn ellipsoid semi-axis, per model size L.
-ELLIPSOID_MAX_FRACTION = 0.25
 #: Largest amplified point displacement s d_max a given scale may draw, per model size L
-#: (the automatic one draws AUTO_FRACTION): beyond, the picture is of nothing, and the
-#: drawing (float32 in the page) overflows.
+#: (the automatic one draws at most AUTO_FRACTION): beyond, the picture is of nothing, and
+#: the drawing (float32 in the page) overflows.
 MAX_SHOWN_FRACTION = 100.0
-#: Points of each drawn beam curve, start and tip included (evenly spaced parameter).
-BEAM_POINTS = 13
-
-
-@dataclass(frozen=True)
-class BeamCurve:
-    """A flexible link's axis as drawn: ``name`` its virtual joint, ``points`` (n, 3) [m],
-    world frame, from the clamped start to the tip (the curve of :func:`beam_curves`)."""
-
-    name: str
-    points: np.ndarray
-
-
-def beam_curves(clm: ClosedLoopModel, q: np.ndarray, n: int = BEAM_POINTS) -> tuple:
-    """The beams of ``clm`` at q (nq,) as :class:`BeamCurve` of n points: the cubic Hermite
-    curve p(u) = h00 p0 + h10 d0 + h01 p1 + h11 d1, u in [0, 1] (module docstring), with
-    p0, p1 the start and tip [m] and d0, d1 the tangents [m] (world frame)."""
-    update_kinematics(clm, clm.check_configuration(q))
-    u = np.linspace(0.0, 1.0, n)[:, None]
-    h00, h10, h01, h11 = (
-        2 * u**3 - 3 * u**2 + 1,
-        u**3 - 2 * u**2 + u,
-        3 * u**2 - 2 * u**3,
-        u**3 - u**2,
-    )
-    out = []
-    for b in inserted_beams(clm.model):
-        start, tip = clm.data.oMf[b.link_frame], clm.data.oMi[b.joint]
-        d0 = start.rotation @ b.rest.translation
-        d1 = tip.rotation @ (b.rest.rotation.T @ b.rest.translation)
-        p = h00 * start.translation + h10 * d0 + h01 * tip.translation + h11 * d1
-        out.append(BeamCurve(b.name, readonly(p)))
-    return tuple(out)
-
-
-@dataclass(frozen=True)
-class Ellipsoid:
-    """An ellipsoid to draw (arrays read-only).
-
-    Attributes:
-        kind: ``"translation"`` or ``"rotation"``.
-        centre: (3,) centre [m], world frame.
-        radii: (3,) semi-axes [m] (see the module docstring), ascending.
-        axes: (3, 3) unit directions of the semi-axes (columns), world axes.
-        shrink: factor (0, 1] of the drawn radii (module docstring).
-    """
-
-    kind: str
-    centre: np.ndarray
-    radii: np.ndarray
-    axes: np.ndarray
-    shrink: float = 1.0
-
-    @property
-    def drawn_radii(self) -> np.ndarray:
-        """(3,) semi-axes drawn [m]: ``shrink * radii``."""
-        return self.shrink * self.radii
 
 
 @dataclass(frozen=True)
@@ -155,13 +77,23 @@ class DeflectionScene:
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
         dq: (nv,) joint deflection (tangent of q) [rad or m], not amplified.
         scale: amplification s (dimensionless).
-        auto_scaled: True when s was chosen by :func:`auto_scale`.
+        auto_scaled: True when s was chosen by :func:`closedloop.viewer.motion.auto_scale`.
         size: model size L [m] (:func:`model_size`).
         max_displacement: d_max [m], largest first-order point displacement under dq
             (origins of the joints and of the loaded frame), not amplified.
-        q_deflected: (nq,) integrate(q, s dq).
+        max_rotation: w_max [rad], largest link rotation |w_i| of :attr:`twists`, not
+            amplified.
+        poses: (njoints, 4, 4) nominal joint placements oMi(q), world frame (0: the world).
+        twists: (njoints, 6) twist xi_i of each joint body (v [m] of its point at the world
+            origin, rotation vector w [rad]), world axes, not amplified
+            (:mod:`closedloop.viewer.motion`).
+        ramp_poses: (n, njoints, 4, 4) drawn joint placements for each load fraction t:
+            exp6(s xi_i(t)) oMi(q) (with ``close_loops``: the forward kinematics of
+            :attr:`ramp_q`).
+        q_deflected: (nq,) integrate(q, s dq), the amplified configuration (re-assembled
+            with ``close_loops``); drawn only with ``close_loops``.
         point: (3,) loaded frame origin at q [m], world frame.
-        point_deflected: (3,) loaded frame origin at q_deflected [m], world frame.
+        point_deflected: (3,) loaded frame origin as drawn at the full load [m], world frame.
         frame_twist: (6,) displacement of the loaded frame (translation of its origin [m],
             rotation vector [rad]), world axes, not amplified: the first-order J dq = C w if
             linear, the finite ``equilibrium.displacement`` if nonlinear.
@@ -170,10 +102,13 @@ class DeflectionScene:
         ramp: (n,) load fractions of the animation, 0 .. 1.
         ramp_q: (n, nq) amplified configurations integrate(q, s dq(t)) for each fraction t.
         equilibrium: the nonlinear equilibrium under the full wrench, or None (linear).
-        beams: the flexible links at q_deflected (:func:`beam_curves`; () without beams).
+        beams: the flexible links as drawn at the full load (:func:`beam_curves`; () without
+            beams).
         mode: for a natural mode (:func:`mode_scene`; then no wrench, no compliance):
             {"number": its rank from the lowest (1), "frequency_hz": its frequency}; None
             for a deflection.
+        reassembled: True when the drawn poses are the re-assembled :attr:`ramp_q`
+            (``close_loops``), False when each link moves along its twist.
     """
 
     frame: str
@@ -184,31 +119,44 @@ class DeflectionScene:
     auto_scaled: bool
     size: float
     max_displacement: float
+    max_rotation: float
+    poses: np.ndarray
+    twists: np.ndarray
+    ramp_poses: np.ndarray
     q_deflected: np.ndarray
     point: np.ndarray
     point_deflected: np.ndarray
     frame_twist: np.ndarray
-    compliance: ComplianceResult
+    compliance: ComplianceResult | None
     ellipsoids: tuple[Ellipsoid, ...]
     ramp: np.ndarray
     ramp_q: np.ndarray
     equilibrium: Equilibrium | None
     beams: tuple[BeamCurve, ...] = ()
     mode: dict | None = None
+    reassembled: bool = False
 
     @property
     def nonlinear(self) -> bool:
         """True when dq is the finite deflection of the nonlinear equilibrium."""
         return self.equilibrium is not None
 
+    @property
+    def poses_deflected(self) -> np.ndarray:
+        """(njoints, 4, 4) drawn joint placements at the full load, world frame."""
+        return self.ramp_poses[-1]
+
     def summary(self) -> str:
-        """One line: amplification, largest displacement and model size."""
+        """One line: amplification, largest displacement and rotation, model size."""
         how = "automatic" if self.auto_scaled else "given"
         kind = "nonlinear" if self.nonlinear else "linear"
+        w_deg = np.rad2deg(self.max_rotation)
         return (
             f"deflection amplified x{self.scale:.4g} ({how}; {kind} deflection): largest "
             f"point displacement {self.max_displacement:.3e} m, shown as "
-            f"{self.scale * self.max_displacement:.3e} m; model size {self.size:.3g} m"
+            f"{self.scale * self.max_displacement:.3e} m; largest link rotation "
+            f"{w_deg:.3e} deg, shown as {self.scale * w_deg:.3g} deg (at most "
+            f"{np.rad2deg(ROTATION_CAP):.3g} deg when automatic); model size {self.size:.3g} m"
         )
 
     def to_dict(self) -> dict:
@@ -222,6 +170,7 @@ class DeflectionScene:
             "nonlinear": self.nonlinear,
             "model_size_m": self.size,
             "max_displacement_m": self.max_displacement,
+            "max_rotation_rad": self.max_rotation,
             "wrench": self.wrench.tolist(),
             "point_m": self.point.tolist(),
             # the origin moved by the deflection itself; the drawn, amplified one apart
@@ -261,105 +210,6 @@ def model_size(clm: ClosedLoopModel, q: np.ndarray) -> float:
     return size if size > 0.0 else 1.0
 
 
-def joint_jacobian(model: pin.Model, data: pin.Data, joint: int) -> np.ndarray:
-    """(6, nv) Jacobian of ``joint``'s origin (velocity [m], angular velocity [rad]), world
-    axes (LOCAL_WORLD_ALIGNED), from the joint Jacobians already computed in ``data``
-    (Pinocchio gives a one-dof model's as a (6,) vector)."""
-    J = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
-    return np.asarray(J).reshape(6, model.nv)
-
-
-def point_displacements(
-    clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray
-) -> np.ndarray:
-    """First-order displacements J_p dq [m] of the origins of the joints and of ``frame``.
-
-    Args:
-        q: (nq,) configuration.
-        frame: name of the loaded frame.
-        dq: (nv,) joint deflection (tangent of q) [rad or m].
-
-    Returns:
-        (njoints - 1 + 1, 3) displacements, world axes: joints 1..njoints-1, then the frame.
-    """
-    q = clm.check_configuration(q)
-    dq = np.asarray(dq, dtype=float).reshape(-1)
-    if dq.shape != (clm.model.nv,) or not np.all(np.isfinite(dq)):
-        raise InvalidInputError(f"dq must be {clm.model.nv} finite values, got {dq.size}")
-    J_f = frame_jacobian(clm, q, frame, "world")  # also the joint Jacobians of q
-    rows = [joint_jacobian(clm.model, clm.data, j)[:3] @ dq for j in range(1, clm.model.njoints)]
-    return np.array([*rows, J_f[:3] @ dq]).reshape(-1, 3)
-
-
-def largest_displacement(clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np.ndarray) -> float:
-    """d_max [m]: largest norm of :func:`point_displacements` (without under- or overflow
-    of the squares: a load of any magnitude gives the same picture; NaN when one is
-    not finite)."""
-    return float(np.max(row_norms(point_displacements(clm, q, frame, dq))))
-
-
-def auto_scale(
-    clm: ClosedLoopModel,
-    q: np.ndarray,
-    frame: str,
-    dq: np.ndarray,
-    fraction: float = AUTO_FRACTION,
-) -> float:
-    """Amplification s = fraction L / d_max (module docstring); 1 when nothing deflects."""
-    d_max = largest_displacement(clm, q, frame, dq)
-    return fraction * model_size(clm, q) / d_max if d_max > 0.0 else 1.0
-
-
-def compliance_ellipsoid(
-    block: np.ndarray, magnitude: float, length: float, centre: np.ndarray, kind: str
-) -> Ellipsoid:
-    """Ellipsoid {length * magnitude * block u : |u| = 1} of a symmetric (3, 3) block.
-
-    Args:
-        block: (3, 3) symmetric positive semi-definite compliance block [SI].
-        magnitude: load magnitude [N or N m].
-        length: factor turning the block's output into metres (s, or s L for rotations).
-        centre: (3,) centre [m], world frame.
-        kind: ``"translation"`` or ``"rotation"``.
-    """
-    lam, V = np.linalg.eigh(0.5 * (block + block.T))
-    with np.errstate(over="ignore", invalid="ignore"):
-        radii = length * magnitude * np.clip(lam, 0.0, None)  # rounding may leave -1e-20
-    return Ellipsoid(kind, readonly(centre), readonly(radii), readonly(V))
-
-
-def capped(e: Ellipsoid, size: float, fraction: float = ELLIPSOID_MAX_FRACTION) -> Ellipsoid:
-    """``e`` with ``shrink`` so that its largest drawn radius is at most fraction * size."""
-    largest = float(np.max(e.radii))
-    shrink = min(1.0, fraction * size / largest) if largest > 0.0 else 1.0
-    return Ellipsoid(e.kind, e.centre, e.radii, e.axes, shrink)
-
-
-def _ellipsoids(res: ComplianceResult, w: np.ndarray, s: float, size: float, rotational: bool):
-    f, n = vector_norm(w[:3]), vector_norm(w[3:])
-    if f == 0.0 and n == 0.0:
-        return ()
-    force = f if f > 0.0 else n / size
-    out = [compliance_ellipsoid(res.C[:3, :3], force, s, res.point, "translation")]
-    if rotational:
-        rho = LEVER_FRACTION * size
-        moment = n if n > 0.0 else f * rho
-        out.append(compliance_ellipsoid(res.C[3:, 3:], moment, s * rho, res.point, "rotation"))
-    return tuple(capped(e, size) for e in out)
-
-
-def vector_norm(v: np.ndarray) -> float:
-    """Euclidean norm of v (k,) at any magnitude (:func:`closedloop.analysis.indices.row_norms`)."""
-    return float(row_norms(np.asarray(v, dtype=float)[None])[0])
-
-
-def unit_vector(v: np.ndarray) -> np.ndarray:
-    """v (k,) nonzero, finite, divided by its norm, at any magnitude (a load's direction)."""
-    v = np.asarray(v, dtype=float)
-    m = np.max(np.abs(v))
-    return (v / m) / np.linalg.norm(v / m)
-
-
 def _check_finite(w: np.ndarray, **values) -> None:
     for name, value in values.items():
         if not np.all(np.isfinite(value)):
@@ -367,6 +217,13 @@ def _check_finite(w: np.ndarray, **values) -> None:
                 f"load {w.tolist()} too large: the {name.replace('_', ' ')} overflows "
                 "(not a finite number); give a smaller wrench"
             )
+
+
+def _check_counts(scale, frames) -> None:
+    if scale is not None and not (np.isfinite(scale) and scale >= 0.0):
+        raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
+    if int(frames) != frames or frames < 2:
+        raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
 
 
 @accepts_configuration
@@ -390,10 +247,11 @@ def deflection_scene(
         q: (nq,) assembled configuration (the unloaded pose, rest of the springs).
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.
-        scale: amplification s >= 0; None chooses it (:func:`auto_scale`).
+        scale: amplification s >= 0; None chooses it
+            (:func:`closedloop.viewer.motion.auto_scale`).
         nonlinear: solve the static equilibrium at each load fraction
             (:func:`closedloop.elastostatics.statics.solve_equilibrium`) instead of the linear map.
-        close_loops: re-assemble each amplified pose (module docstring).
+        close_loops: draw the re-assembled amplified configurations (module docstring).
         rotational: also the rotational compliance ellipsoid.
         frames: number of poses of the load ramp (>= 2).
         check_limits: refuse a q outside the joints' limits (as
@@ -410,22 +268,25 @@ def deflection_scene(
             (a smaller scale can).
     """
     w = check_wrench(wrench)
-    if scale is not None and not (np.isfinite(scale) and scale >= 0.0):
-        raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
-    if int(frames) != frames or frames < 2:
-        raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
+    _check_counts(scale, frames)
     res = compliance(clm, q, frame, "world", check_limits=check_limits)
     q = res.q
+    poses = model_poses(clm, q)
     ramp = np.linspace(0.0, 1.0, int(frames))
     if nonlinear:  # the whole wrench first: an EquilibriumError names it, not a fraction
         equilibrium = solve_equilibrium(clm, q, frame, w)
-        equilibria = [solve_equilibrium(clm, q, frame, t * w) for t in ramp[1:-1]]
-        steps = [np.zeros(clm.model.nv), *(e.joint_deflection for e in equilibria)]
-        steps.append(equilibrium.joint_deflection)
+        solved = [solve_equilibrium(clm, q, frame, t * w) for t in ramp[1:-1]]
+        solved = [*solved, equilibrium]
+        steps = [np.zeros(clm.model.nv), *(e.joint_deflection for e in solved)]
+        ramp_twists = [np.zeros((clm.model.njoints, 6))]
+        ramp_twists += [finite_twists(poses, model_poses(clm, e.q)) for e in solved]
     else:
         dq_lin = res.joint_deflection(w)
         steps, equilibrium = [t * dq_lin for t in ramp], None
-    dq = steps[-1]
+        with np.errstate(over="ignore", invalid="ignore"):
+            xi = link_twists(clm, q, dq_lin)
+        ramp_twists = [t * xi for t in ramp]
+    dq, twists = steps[-1], ramp_twists[-1]
     size = model_size(clm, q)
     with np.errstate(over="ignore", invalid="ignore"):
         twist = frame_jacobian(clm, q, frame, "world") @ dq
@@ -433,7 +294,8 @@ def deflection_scene(
             twist = equilibrium.displacement
         d_max = largest_displacement(clm, q, frame, dq)
     _check_finite(w, joint_deflection=dq, frame_displacement=twist, largest_displacement=d_max)
-    s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
+    w_max = largest_rotation(twists)
+    s = auto_scale(size, d_max, w_max) if scale is None else float(scale)
     if s * d_max > MAX_SHOWN_FRACTION * size:
         raise InvalidInputError(
             f"--scale {s:g} draws the largest point displacement {d_max:.3g} m as "
@@ -442,14 +304,14 @@ def deflection_scene(
             "automatic)"
         )
     ramp_q = [pin.integrate(clm.model, q, s * v) for v in steps]
-    if close_loops and clm.closures:
+    reassembled = bool(close_loops and clm.closures)
+    if reassembled:
         ramp_q = [assemble(clm, None, q_s).q for q_s in ramp_q]
-    ramp_q = np.array(ramp_q)
-    update_kinematics(clm, ramp_q[-1])
-    point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
-    beams = beam_curves(clm, ramp_q[-1])
+        ramp_poses = [model_poses(clm, q_s) for q_s in ramp_q]
+    else:
+        ramp_poses = [drawn_poses(poses, xi, s) for xi in ramp_twists]
     update_kinematics(clm, q)
-    ellipsoids = _ellipsoids(res, w, s, size, rotational)
+    ellipsoids = wrench_ellipsoids(res, w, s, size, rotational)
     _check_finite(w, compliance_ellipsoid=[e.radii for e in ellipsoids])
     return DeflectionScene(
         frame=frame,
@@ -460,17 +322,27 @@ def deflection_scene(
         auto_scaled=scale is None,
         size=size,
         max_displacement=d_max,
+        max_rotation=w_max,
+        poses=readonly(poses),
+        twists=readonly(twists),
+        ramp_poses=readonly(np.array(ramp_poses)),
         q_deflected=readonly(ramp_q[-1]),
         point=res.point,
-        point_deflected=readonly(point_deflected),
+        point_deflected=readonly(_frame_origin(clm, ramp_poses[-1], frame)),
         frame_twist=readonly(twist),
         compliance=res,
         ellipsoids=ellipsoids,
         ramp=readonly(ramp),
-        ramp_q=readonly(ramp_q),
+        ramp_q=readonly(np.array(ramp_q)),
         equilibrium=equilibrium,
-        beams=beams,
+        beams=beam_curves(clm.model, ramp_poses[-1]),
+        reassembled=reassembled,
     )
+
+
+def _frame_origin(clm: ClosedLoopModel, poses: np.ndarray, frame: str) -> np.ndarray:
+    """(3,) origin [m], world frame, of ``frame`` with the joints at ``poses``."""
+    return frame_pose(clm.model, poses, clm.frame_id(frame))[:3, 3].copy()
 
 
 def mode_scene(
@@ -484,8 +356,8 @@ def mode_scene(
     scale: float | None = None,
     frames: int = ANIMATION_FRAMES,
 ) -> DeflectionScene:
-    """A natural mode as a scene: the pose swinging harmonically between -s shape and
-    +s shape (the animation, played back and forth), drawn at +s shape.
+    """A natural mode as a scene: each link swinging harmonically along its twist between
+    -s and +s times the shape's (the animation, played back and forth), drawn at +s.
 
     Args:
         clm: the model; q: (nq,) the configuration of the modes
@@ -494,28 +366,25 @@ def mode_scene(
         frequency: its natural frequency [Hz], for the legend; number: its rank (1: the
             lowest).
         frame: the frame whose origin counts among the displaced points.
-        scale: amplification s >= 0 of the shape; None chooses it (:func:`auto_scale`).
+        scale: amplification s >= 0 of the shape; None chooses it
+            (:func:`closedloop.viewer.motion.auto_scale`).
         frames: number of poses of the swing (>= 2).
 
     Raises:
         InvalidInputError: bad scale or frame count, a shape that is not (nv,) finite.
     """
-    if scale is not None and not (np.isfinite(scale) and scale >= 0.0):
-        raise InvalidInputError(f"scale must be a finite number >= 0, got {scale!r}")
-    if int(frames) != frames or frames < 2:
-        raise InvalidInputError(f"frames must be an integer >= 2, got {frames!r}")
+    _check_counts(scale, frames)
     dq = np.asarray(shape, dtype=float)
     if dq.shape != (clm.model.nv,) or not np.all(np.isfinite(dq)):
         raise InvalidInputError(f"mode shape of shape {dq.shape}; expected ({clm.model.nv},)")
     q = clm.check_configuration(q)
     size = model_size(clm, q)
-    d_max = largest_displacement(clm, q, frame, dq)
-    s = auto_scale(clm, q, frame, dq) if scale is None else float(scale)
+    poses, twists = model_poses(clm, q), link_twists(clm, q, dq)
+    d_max, w_max = largest_displacement(clm, q, frame, dq), largest_rotation(twists)
+    s = auto_scale(size, d_max, w_max) if scale is None else float(scale)
     ramp = np.sin(np.linspace(-0.5 * np.pi, 0.5 * np.pi, int(frames)))  # harmonic
     ramp_q = np.array([pin.integrate(clm.model, q, s * t * dq) for t in ramp])
-    update_kinematics(clm, ramp_q[-1])
-    point_deflected = clm.data.oMf[clm.frame_id(frame)].translation.copy()
-    beams = beam_curves(clm, ramp_q[-1])
+    ramp_poses = np.array([drawn_poses(poses, twists, s * t) for t in ramp])
     update_kinematics(clm, q)
     point = clm.data.oMf[clm.frame_id(frame)].translation.copy()
     return DeflectionScene(
@@ -527,15 +396,19 @@ def mode_scene(
         auto_scaled=scale is None,
         size=size,
         max_displacement=d_max,
+        max_rotation=w_max,
+        poses=readonly(poses),
+        twists=readonly(twists),
+        ramp_poses=readonly(ramp_poses),
         q_deflected=readonly(ramp_q[-1]),
         point=readonly(point),
-        point_deflected=readonly(point_deflected),
+        point_deflected=readonly(_frame_origin(clm, ramp_poses[-1], frame)),
         frame_twist=readonly(frame_jacobian(clm, q, frame, "world") @ dq),
         compliance=None,
         ellipsoids=(),
         ramp=readonly(ramp),
         ramp_q=readonly(ramp_q),
         equilibrium=None,
-        beams=beams,
+        beams=beam_curves(clm.model, ramp_poses[-1]),
         mode={"number": int(number), "frequency_hz": float(frequency)},
     )

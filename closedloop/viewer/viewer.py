@@ -5,8 +5,9 @@ One meshcat scene, served by :mod:`closedloop.viewer.server` (the meshcat server
 
 * ``robots`` (:mod:`closedloop.viewer.mesh`, each mesh sent once): ``nominal``, the
   unloaded pose q as a translucent ghost (material overridden on a copy of the visual
-  model, for every mesh type), and ``deflected``, the amplified deflected pose
-  integrate(q, s dq), coloured by the magnitude of the real first-order displacement of
+  model, for every mesh type), and ``deflected``, the amplified deflected pose, each link
+  moved rigidly along its own twist amplified by s (:mod:`closedloop.viewer.motion`),
+  coloured by the magnitude of the real first-order displacement of
   its surface at the full load (meshes per vertex, primitives at their origin; colour bar
   in mm in the legend), or in the model's colours; the amplification s is the property
   ``amplification`` of ``/meshcat/robots``;
@@ -17,7 +18,7 @@ One meshcat scene, served by :mod:`closedloop.viewer.server` (the meshcat server
   :mod:`closedloop.viewer.scene`, at most ``ELLIPSOID_MAX_FRACTION`` L (the legend shows
   the shrink factor) and at least ``ELLIPSOID_MIN_FRACTION`` L (a rigid direction shows
   as a flat disc);
-* ``beams``: each flexible link's axis bent (:func:`closedloop.viewer.scene.beam_curves`),
+* ``beams``: each flexible link's axis bent (:func:`closedloop.viewer.beam_curves.beam_curves`),
   a chain of thin cylinders from the beam's clamped start to its deflected tip;
 * ``grid``: a square grid in the plane of the model's lowest point, its step a round
   length near L / ``GRID_DIVISIONS`` (meshcat's 20 m grid is hidden);
@@ -28,12 +29,13 @@ One meshcat scene, served by :mod:`closedloop.viewer.server` (the meshcat server
   chosen value to a callback that redraws the scene (:func:`run_view` does), and the page
   reloads with it.
 
-The scene is translated so that the centre of everything drawn (both robots' geometry,
-arrows, ellipsoids) is at the origin of the three.js world (the camera orbits about it)
-and the camera placed so that all of it is in view, its clipping distances per its size
-(``CAMERA_NEAR``, ``CAMERA_FAR``: a model of millimetres or of hundreds of metres is
-drawn); meshcat's axes follow, so they still mark the world origin. An unbounded visual
-object (an MJCF floor plane) is not drawn: the grid stands for it.
+The scene is translated so that the centre of the robot (the box of both robots'
+geometry) is at the origin of the three.js world (the camera orbits about it) and the
+camera placed so that everything drawn (robots, arrows, ellipsoids, beams) is in view,
+its clipping distances per its size (``CAMERA_NEAR``, ``CAMERA_FAR``: a model of
+millimetres or of hundreds of metres is drawn); meshcat's axes follow, so they still
+mark the world origin. An unbounded visual object (an MJCF floor plane) is not drawn: the
+grid stands for it.
 
 Example::
 
@@ -62,6 +64,7 @@ from closedloop.common.files import write_atomically
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, ViewerError
 from closedloop.kinematics.configuration import accepts_configuration
 from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.viewer.beam_curves import beam_curves
 from closedloop.viewer.draw import (  # noqa: F401  (constants: part of this module's interface)
     ANIMATION_DURATION,
     BACKGROUND,
@@ -92,15 +95,11 @@ from closedloop.viewer.draw import (  # noqa: F401  (constants: part of this mod
     legend_info,
     look_at,
 )
+from closedloop.viewer.ellipsoids import LEVER_FRACTION, unit_vector
 from closedloop.viewer.mesh import ROBOTS, RobotPair, drawn_model
+from closedloop.viewer.motion import frame_pose
 from closedloop.viewer.page import overlay
-from closedloop.viewer.scene import (
-    LEVER_FRACTION,
-    DeflectionScene,
-    beam_curves,
-    deflection_scene,
-    unit_vector,
-)
+from closedloop.viewer.scene import DeflectionScene, deflection_scene
 from closedloop.viewer.server import (
     GET_CONTROL,
     SET_OVERLAY,
@@ -199,12 +198,15 @@ class DeflectionViewer:
                 colours = [
                     c if len(m) > 1 else c[0] for m in magnitudes for c in [colormap(m / top)]
                 ]
-        command = self.robots.command(scene.q, scene.q_deflected, colours)
+        command = self.robots.command(scene.poses, scene.poses_deflected, colours)
         self.viewer.window.send(_Command(command))
         self.viewer[ROBOTS].set_property("amplification", scene.scale)
         floor = ELLIPSOID_MIN_FRACTION * scene.size
         lo, hi = self._bounds(scene, floor)
-        centre = 0.5 * (lo + hi)
+        robot = np.array(
+            [self.robots.bounds(scene.poses), self.robots.bounds(scene.poses_deflected)]
+        )
+        centre = 0.5 * (robot[:, 0].min(axis=0) + robot[:, 1].max(axis=0))  # on the robot
         for node in ("/meshcat", "/Axes"):
             self.viewer[node].set_transform(homogeneous(p=-centre))
         self.viewer["/Grid"].set_property("visible", False)
@@ -212,7 +214,8 @@ class DeflectionViewer:
         self.viewer["/Background"].set_property("bottom_color", list(BACKGROUND[1]))
         step = grid_step(scene.size)
         draw_grid(self.viewer, centre, lo[2], step, scene.size)
-        radius = 0.5 * float(np.linalg.norm(hi - lo)) or 0.5 * scene.size
+        # the sphere about the robot's centre that holds everything drawn
+        radius = float(np.linalg.norm(np.maximum(hi - centre, centre - lo))) or 0.5 * scene.size
         camera = CAMERA_MARGIN * radius * np.array(CAMERA_DIRECTION)
         camera /= np.linalg.norm(CAMERA_DIRECTION)
         eye = np.array([camera[0], camera[2], -camera[1]])  # world (z up) -> three.js (y up)
@@ -241,7 +244,7 @@ class DeflectionViewer:
 
     def _bounds(self, scene: DeflectionScene, floor: float) -> np.ndarray:
         """(2, 3) world box [m] of both robots' geometry, the arrows and the ellipsoids."""
-        boxes = [self.robots.bounds(scene.q), self.robots.bounds(scene.q_deflected)]
+        boxes = [self.robots.bounds(scene.poses), self.robots.bounds(scene.poses_deflected)]
         length = LEVER_FRACTION * scene.size
         for v in (scene.wrench[:3], scene.wrench[3:]):
             if np.any(v):
@@ -257,22 +260,21 @@ class DeflectionViewer:
         frames = len(scene.ramp)
         fps = (frames - 1) / ANIMATION_DURATION
         fid = self.clm.frame_id(scene.frame)
-        model, data = self.clm.model, self.clm.model.createData()
         load = {"fps": fps, "name": "default", "tracks": []}
         position = {"name": ".position", "type": "vector3", "keys": []}
         grow = {"name": ".scale", "type": "vector3", "keys": []}
-        for k, (t, q) in enumerate(zip(scene.ramp, scene.ramp_q, strict=True)):
-            pin.framesForwardKinematics(model, data, q)
-            position["keys"].append({"time": k, "value": data.oMf[fid].translation.tolist()})
+        for k, (t, poses) in enumerate(zip(scene.ramp, scene.ramp_poses, strict=True)):
+            origin = frame_pose(self.clm.model, poses, fid)[:3, 3]
+            position["keys"].append({"time": k, "value": origin.tolist()})
             g = max(float(t), 1e-3)  # a zero scale makes three.js normals singular
             grow["keys"].append({"time": k, "value": [g, g, g]})
         load["tracks"] = [position, grow]
         animations = [
-            {"path": f"/meshcat/{ROBOTS}", "clip": self.robots.clip(scene.ramp_q, fps)},
+            {"path": f"/meshcat/{ROBOTS}", "clip": self.robots.clip(scene.ramp_poses, fps)},
             {"path": f"/meshcat/{LOAD}", "clip": load},
         ]
         if scene.beams:
-            curves = [beam_curves(self.clm, q) for q in scene.ramp_q]
+            curves = [beam_curves(self.clm.model, poses) for poses in scene.ramp_poses]
             animations.append({"path": f"/meshcat/{BEAMS}", "clip": beam_clip(curves, fps)})
         command = {
             "type": "set_animation",

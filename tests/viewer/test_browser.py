@@ -19,10 +19,12 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 import urllib.request
 from concurrent.futures import ThreadPoolExecutor
 
+import coal
 import meshcat
 import numpy as np
 import pinocchio as pin
@@ -74,17 +76,20 @@ PROBE = """new Promise(function (resolve) {
     node = node && node.children["robots"];
     node = node && node.children["<object>"];
     if (node) {
-      var root = node.object, pos = {}, ghost = [];
+      var root = node.object, pos = {}, quat = {}, ghost = [];
       root.updateMatrixWorld(true);
       root.traverse(function (o) {
         if (!o.isMesh) return;
-        var p = new o.position.constructor();
+        var p = new o.position.constructor(), r = new o.quaternion.constructor();
         o.parent.getWorldPosition(p);
+        o.parent.getWorldQuaternion(r);
         pos[o.parent.name] = p.toArray();
+        quat[o.parent.name] = r.toArray();
         if (o.parent.parent.name === "GHOST")
           materials(o).forEach(function (m) { ghost.push([m.opacity, m.transparent]); });
       });
       out.positions = pos;
+      out.quaternions = quat;
       out.ghost = ghost;
     }
     var slider = document.getElementById("closedloop-slider");
@@ -138,6 +143,7 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
             (page,) = [t for t in json.load(f) if t["type"] == "page"]
         ws = await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
         ids = iter(range(1, 1 << 30))
+        errors = []  # the page's JavaScript errors (Log.entryAdded), from its start
 
         async def call(method: str, **params) -> dict:
             n = next(ids)
@@ -146,6 +152,10 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
                 message = json.loads(await ws.read_message())
                 if message.get("id") == n:
                     return message
+                entry = message.get("params", {}).get("entry", {})
+                if message.get("method") == "Log.entryAdded" and entry.get("level") == "error":
+                    if entry.get("source") == "javascript":
+                        errors.append(entry.get("text"))
 
         async def evaluate(expression: str):
             """Value of ``expression`` (a promise is awaited) in the loaded page."""
@@ -159,6 +169,7 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
                 assert time.monotonic() < deadline, f"Chromium: {message}"
                 await asyncio.sleep(0.05)
 
+        await call("Log.enable")  # sends the entries logged so far, then each new one
         await call(  # the page's viewport, whatever the headless window's decorations
             "Emulation.setDeviceMetricsOverride",
             width=VIEWPORT[0],
@@ -171,6 +182,7 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
             assert time.monotonic() < deadline, f"{target} did not load"
             await asyncio.sleep(0.05)
         report = json.loads(await evaluate(PROBE.replace("WAIT", str(wait_ms))))
+        report["errors"] = errors
         if actions is not None:
             return await actions(evaluate, deadline)
         shot = await call("Page.captureScreenshot", format="png")
@@ -220,13 +232,14 @@ def group_distances(report: dict) -> dict[str, float]:
 
 
 def expected_distances(clm, scene) -> dict[str, float]:
-    """The same distances from Pinocchio (geometry placements at q and q_deflected)."""
+    """The same distances from the scene (geometry placements carried by the nominal and
+    the drawn joint placements)."""
     out = {}
-    for q_name, q in (("nominal", scene.q), ("deflected", scene.q_deflected)):
-        data, gdata = clm.model.createData(), clm.visual_model.createData()
-        pin.forwardKinematics(clm.model, data, q)
-        pin.updateGeometryPlacements(clm.model, data, clm.visual_model, gdata)
-        out[q_name] = [m.translation.copy() for m in gdata.oMg]
+    for name, poses in (("nominal", scene.poses), ("deflected", scene.poses_deflected)):
+        out[name] = [
+            (poses[g.parentJoint] @ g.placement.homogeneous)[:3, 3]
+            for g in clm.visual_model.geometryObjects
+        ]
     names = [g.name for g in clm.visual_model.geometryObjects]
     return {
         n: float(np.linalg.norm(a - b))
@@ -401,6 +414,56 @@ def test_ramp_waits_for_the_scene_and_loops(robot_pages, robot):
     np.testing.assert_allclose(still["animation"]["times"], still["animation"]["duration"])
     assert playing["animation"]["playing"] is True
     assert all(0.0 < t <= playing["animation"]["duration"] for t in playing["animation"]["times"])
+
+
+# ------------------------------------------------------------------ CaHyMan, from its CLI
+#: The guide's CaHyMan page (docs/guide/viewer.md).
+CAHYMAN_VIEW = ("--alpha", "45", "60", "75", "--alpha4", "45", "--torque", "0", "0", "5")
+
+
+def browser_placement(report: dict, group: str) -> coal.Transform3s:
+    """The world placement of a drawn group as three.js holds it (quaternion x, y, z, w)."""
+    x, y, z, w = report["quaternions"][group]
+    R = pin.Quaternion(w, x, y, z).toRotationMatrix()
+    return coal.Transform3s(R, np.array(report["positions"][group], dtype=float))
+
+
+def test_cahyman_view_keeps_its_plates_apart_in_the_browser(tmp_path):
+    """``cahyman view`` at the guide's load: the page loads without a JavaScript error,
+    shows each mesh where the scene puts it, and the mobile plate's disc as drawn by
+    three.js keeps clear of the fixed plate's (deflected and ghost; coal's distance)."""
+    browser()
+    page = tmp_path / "cahyman.html"
+    run = subprocess.run(
+        [sys.executable, "-m", "cahyman_pin", "view", *CAHYMAN_VIEW, "--rotational",
+         "--html", str(page)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    _, report = render(page.as_uri(), tmp_path / "cahyman.png", tmp_path / "p")
+    assert report["ready"] == "ready" and report["errors"] == []
+    model = cahyman_model()
+    q = model.assemble(np.deg2rad([45.0, 60.0, 75.0]), np.deg2rad(45.0), 0.05)
+    scene = deflection_scene(model.clm, q, "M", CAHYMAN_WRENCH, rotational=True)
+    assert f"\u00d7{scene.scale:.4g}" in report["legend"]["text"]
+    seen, expected = group_distances(report), expected_distances(model.clm, scene)
+    for name, distance in expected.items():
+        key = node_name(DEFLECTED, name)[len(DEFLECTED) + 1 :]
+        np.testing.assert_allclose(seen[key], distance, atol=ATOL_BROWSER)
+    shapes = {g.name: g.geometry for g in model.clm.visual_model.geometryObjects}
+
+    def gap(a: str, b: str) -> float:
+        return coal.distance(
+            shapes[a[a.index("_") + 1 :]], browser_placement(report, a),
+            shapes[b[b.index("_") + 1 :]], browser_placement(report, b),
+            coal.DistanceRequest(), coal.DistanceResult(),
+        )  # fmt: skip
+
+    mobile, fixed = "mobile_plate_0", "fixed_plate_0"
+    apart = gap(node_name(GHOST, mobile), node_name(GHOST, fixed))
+    assert apart > 0.05  # [m] the nominal plates
+    for root in (DEFLECTED, GHOST):
+        assert gap(node_name(DEFLECTED, mobile), node_name(root, fixed)) > 0.5 * apart
 
 
 # ------------------------------------------------------------------ live slider

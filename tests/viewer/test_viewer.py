@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
-from helpers import UR5_BEAM_ENDS, UR5_Q
+from helpers import UR5_BEAM_ENDS, UR5_Q, rigid_link_poses
 from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
@@ -31,14 +31,11 @@ from closedloop.io.loader import load_model
 from closedloop.kinematics.assembly import ASSEMBLY_TOL, assemble
 from closedloop.kinematics.constraints import closure_residual
 from closedloop.model.beams import map_configuration
+from closedloop.viewer.ellipsoids import ELLIPSOID_MAX_FRACTION, LEVER_FRACTION
 from closedloop.viewer.mesh import node_name
+from closedloop.viewer.motion import AUTO_FRACTION, ROTATION_CAP
 from closedloop.viewer.page import legend_rows
-from closedloop.viewer.scene import (
-    AUTO_FRACTION,
-    ELLIPSOID_MAX_FRACTION,
-    LEVER_FRACTION,
-    deflection_scene,
-)
+from closedloop.viewer.scene import deflection_scene
 from closedloop.viewer.viewer import (
     CAMERA_MARGIN,
     ELLIPSOID_MIN_FRACTION,
@@ -57,6 +54,9 @@ FD_STEP, FD_RTOL = 1e-6, 1e-7
 RTOL_EXACT = 1e-9
 #: Placements sent to meshcat go through msgpack as float64: exact to rounding.
 ATOL_PLACEMENT = 1e-12
+#: Drawn placements [m] against :func:`helpers.rigid_link_poses` (twists from central
+#: differences, relative error ~ 1e-10, on drawn motions of at most a model size).
+ATOL_DRAWN = 1e-8
 #: Closure gap [m] that the first-order amplified four-bar pose at scale 150 exceeds: the
 #: gap is of second order, ~ (s |dq|)^2 / L, some centimetres here (0.095 m measured).
 OPEN_GAP = 1e-3
@@ -97,6 +97,27 @@ def geometry_placements(clm, q) -> dict[str, np.ndarray]:
     return {
         g.name: gdata.oMg[i].homogeneous for i, g in enumerate(clm.visual_model.geometryObjects)
     }
+
+
+def drawn_placements(clm, scene, poses=None) -> dict[str, np.ndarray]:
+    """Geometry name -> (4, 4) world placement as drawn: carried by its joint body moved
+    rigidly along its twist (:func:`helpers.rigid_link_poses`), or at the given ``poses``."""
+    if poses is None:
+        poses = rigid_link_poses(clm.model, scene.q, scene.dq, scene.scale)
+    return {
+        g.name: poses[g.parentJoint] @ g.placement.homogeneous
+        for g in clm.visual_model.geometryObjects
+    }
+
+
+def rotation_angles(poses, nominal) -> np.ndarray:
+    """(njoints,) angle [rad] of each drawn joint body's rotation from its nominal one."""
+    return np.array(
+        [
+            np.linalg.norm(pin.log3(P[:3, :3] @ N[:3, :3].T))
+            for P, N in zip(poses, nominal, strict=True)
+        ]
+    )
 
 
 def export(clm, scene, tmp_path, name="scene.html", **show) -> tuple[str, list[dict]]:
@@ -157,18 +178,28 @@ def bbox_diagonal(clm, q) -> float:
 
 
 @pytest.mark.parametrize("robot", ["fourbar", "ur5"])
-def test_auto_scale_makes_the_largest_displacement_a_tenth_of_the_size(robot, request):
+def test_auto_scale_caps_the_drawn_displacement_and_rotation(robot, request):
+    """s = min(AUTO_FRACTION L / d_max, ROTATION_CAP / w_max), d_max and w_max from
+    central differences of the forward kinematics (the four-bar's rotation cap binds, the
+    UR5's displacement cap)."""
     clm, q = request.getfixturevalue(robot)
     frame, w = ("P", FOURBAR_WRENCH) if robot == "fourbar" else ("tool0", UR5_WRENCH)
     scene = deflection_scene(clm, q, frame, w)
     dq = compliance(clm, q, frame).G @ np.array(w)
     np.testing.assert_allclose(scene.dq, dq, rtol=RTOL_EXACT, atol=0.0)
     d_max = np.max(np.linalg.norm(fd_displacements(clm, q, frame, dq), axis=1))
+    nominal = rigid_link_poses(clm.model, q, dq, 0.0)
+    w_max = np.max(rotation_angles(rigid_link_poses(clm.model, q, dq, 1.0), nominal))
     size = bbox_diagonal(clm, q)
     np.testing.assert_allclose(scene.size, size, rtol=RTOL_EXACT)
     np.testing.assert_allclose(scene.max_displacement, d_max, rtol=FD_RTOL)
-    np.testing.assert_allclose(scene.scale, AUTO_FRACTION * size / d_max, rtol=FD_RTOL)
+    np.testing.assert_allclose(scene.max_rotation, w_max, rtol=FD_RTOL)
+    expected = min(AUTO_FRACTION * size / d_max, ROTATION_CAP / w_max)
+    np.testing.assert_allclose(scene.scale, expected, rtol=FD_RTOL)
+    assert (ROTATION_CAP / w_max < AUTO_FRACTION * size / d_max) == (robot == "fourbar")
     assert scene.auto_scaled
+    drawn = rotation_angles(scene.poses_deflected, nominal)
+    assert np.max(drawn) <= ROTATION_CAP * (1 + FD_RTOL)
     np.testing.assert_allclose(
         scene.q_deflected, pin.integrate(clm.model, q, scene.scale * dq), rtol=0, atol=1e-15
     )
@@ -318,12 +349,14 @@ def test_page_holds_ghost_and_deflected_poses(fourbar, fourbar_export):
     scene, _, cmds = fourbar_export
     obj = robots_object(cmds)
     materials = {m["uuid"]: m for m in obj["materials"]}
-    for root, q_root in (("nominal", q), ("deflected", scene.q_deflected)):
+    for root, placements, atol in (
+        ("nominal", geometry_placements(clm, q), ATOL_PLACEMENT),
+        ("deflected", drawn_placements(clm, scene), ATOL_DRAWN),
+    ):
         groups = robot_groups(obj, root)
         for g in clm.visual_model.geometryObjects:
             group = groups[node_name(root, g.name)]
-            placement = geometry_placements(clm, q_root)[g.name]
-            np.testing.assert_allclose(json_matrix(group), placement, atol=ATOL_PLACEMENT)
+            np.testing.assert_allclose(json_matrix(group), placements[g.name], atol=atol)
             (mesh,) = group["children"]
             m = materials[mesh["material"]]
             if root == "nominal":
@@ -470,6 +503,34 @@ def test_page_holds_arrows_ellipsoids_grid_and_legend(fourbar, fourbar_export):
     assert "force arrow (one head)" in html and "moment arrow" not in html
 
 
+def test_each_primitive_is_drawn_with_its_own_shape(cahyman, tmp_path):
+    """CaHyMan's page drew every cylinder with the fixed plate's disc (primitives keyed by
+    the id of a freed Python wrapper, which the next one reused): each group's geometry
+    has its own object's dimensions."""
+    clm, q = cahyman
+    _, cmds = export(clm, deflection_scene(clm, q, "M", [0, 0, 0, 0, 0, 5.0]), tmp_path)
+    obj = robots_object(cmds)
+    geometries = {g["uuid"]: g for g in obj["geometries"]}
+    shapes = Counter()
+    for root in ("nominal", "deflected"):
+        groups = robot_groups(obj, root)
+        for g in clm.visual_model.geometryObjects:
+            (mesh,) = groups[node_name(root, g.name)]["children"]
+            drawn, shape = geometries[mesh["geometry"]], g.geometry
+            kind = type(shape).__name__
+            shapes[kind] += 1
+            if kind == "Cylinder":
+                got = (drawn["radiusTop"], drawn["radiusBottom"], drawn["height"])
+                want = (shape.radius, shape.radius, 2 * shape.halfLength)
+            elif kind == "Sphere":
+                got, want = (drawn["radius"],), (shape.radius,)
+            else:
+                got = sorted((drawn["width"], drawn["height"], drawn["depth"]))
+                want = sorted(2 * np.asarray(shape.halfSide))
+            np.testing.assert_allclose(got, want, rtol=RTOL_EXACT, err_msg=g.name)
+    assert shapes == {"Cylinder": 2 * 17, "Sphere": 2 * 17, "Box": 2 * 6}
+
+
 def test_camera_frames_robots_arrows_and_ellipsoids(cahyman, tmp_path):
     clm, q = cahyman
     scene = deflection_scene(clm, q, "M", [0.0, 0.0, 0.0, 0.0, 0.0, 5.0], rotational=True)
@@ -496,13 +557,13 @@ def test_page_holds_the_load_ramp_animation(fourbar, fourbar_export):
     assert anim["options"]["play"] is False  # the page script plays it once loaded
     clips = {a["path"]: a["clip"] for a in anim["animations"]}
     for g in clm.visual_model.geometryObjects:
-        last = geometry_placements(clm, scene.ramp_q[-1])[g.name]
+        last = drawn_placements(clm, scene)[g.name]
         name = node_name("deflected", g.name)
         (position,) = [
             t for t in clips["/meshcat/robots"]["tracks"] if t["name"] == f"{name}.position"
         ]
         assert len(position["keys"]) == len(scene.ramp)
-        np.testing.assert_allclose(position["keys"][-1]["value"], last[:3, 3], atol=ATOL_PLACEMENT)
+        np.testing.assert_allclose(position["keys"][-1]["value"], last[:3, 3], atol=ATOL_DRAWN)
     (grow,) = [t for t in clips["/meshcat/load"]["tracks"] if t["name"] == ".scale"]
     np.testing.assert_allclose(grow["keys"][-1]["value"], [1.0, 1.0, 1.0])
     assert '"autoplay": false' in html and '"meshes": 14' in html  # 2 x 7 geometry objects
@@ -627,17 +688,22 @@ def test_unloaded_beams_are_straight_from_start_to_tip(ur5_flex):
         np.testing.assert_allclose(curve.points, a + u * (b - a), rtol=0, atol=ATOL_PLACEMENT)
 
 
-def test_loaded_beam_tips_follow_their_end_joints(ur5_flex):
+def test_loaded_beam_tips_follow_their_virtual_joints(ur5_flex):
     rigid, flex = ur5_flex
     q = map_configuration(rigid.model, flex.model, UR5_Q)
     scene = deflection_scene(flex, q, "ee_link", UR5_WRENCH)
-    data = flex.model.createData()
-    pin.framesForwardKinematics(flex.model, data, scene.q_deflected)
-    for curve, (link, end) in zip(scene.beams, UR5_BEAM_ENDS.items(), strict=True):
-        start = data.oMf[flex.model.getFrameId(link)].translation
-        tip = data.oMf[flex.model.getFrameId(end)].translation
-        np.testing.assert_allclose(curve.points[0], start, rtol=0, atol=ATOL_PLACEMENT)
-        np.testing.assert_allclose(curve.points[-1], tip, rtol=0, atol=ATOL_PLACEMENT)
+    poses = rigid_link_poses(flex.model, q, scene.dq, scene.scale)  # the drawn links
+
+    def origin(name):
+        f = flex.model.frames[flex.model.getFrameId(name)]
+        return (poses[f.parentJoint] @ f.placement.homogeneous)[:3, 3]
+
+    for curve, link in zip(scene.beams, UR5_BEAM_ENDS, strict=True):
+        # the tip rides on the beam's virtual joint (the end joint's body shares its origin
+        # to first order: tests of the joints staying together)
+        start, tip = origin(link), origin(f"{link}_beam")
+        np.testing.assert_allclose(curve.points[0], start, rtol=0, atol=ATOL_DRAWN)
+        np.testing.assert_allclose(curve.points[-1], tip, rtol=0, atol=ATOL_DRAWN)
         chord = tip - start
         off = (
             curve.points
@@ -728,7 +794,7 @@ def test_picture_of_a_load_is_the_same_at_any_magnitude(oblique_rod):
 
 @pytest.mark.parametrize("magnitude", [1e-300, 1.0, 1e300])
 def test_load_arrows_point_along_loads_of_any_magnitude(magnitude):
-    from closedloop.viewer.scene import unit_vector, vector_norm
+    from closedloop.viewer.ellipsoids import unit_vector, vector_norm
 
     v = magnitude * np.array([3.0, 0.0, -4.0])
     np.testing.assert_allclose(unit_vector(v), [0.6, 0.0, -0.8], rtol=1e-15)

@@ -23,9 +23,10 @@ from closedloop.io.loader import load_model
 from closedloop.kinematics.assembly import assemble
 from closedloop.viewer import server as viewer_server
 from closedloop.viewer.mesh import DEFLECTED, ROBOTS
+from closedloop.viewer.motion import point_displacements
 from closedloop.viewer.page import legend_rows
-from closedloop.viewer.scene import deflection_scene, point_displacements
-from closedloop.viewer.viewer import DeflectionViewer, legend_info
+from closedloop.viewer.scene import deflection_scene
+from closedloop.viewer.viewer import CAMERA_MARGIN, DeflectionViewer, legend_info
 
 CAMERA = "/Cameras/default/rotated/<object>"  # meshcat's camera (three.js, y up)
 #: float32 / float64 array extension types of meshcat's msgpack (meshcat.geometry).
@@ -159,7 +160,7 @@ def test_camera_clipping_follows_the_size_of_the_model(fourbar_urdf, fourbar_yam
     _, cmds = export(clm, scene, tmp_path)
     camera = [c for c in cmds if c["type"] == "set_transform" and c["path"] == CAMERA][-1]
     distance = float(np.linalg.norm(matrix(camera)[:3, 3]))
-    radius = distance / 2.4  # CAMERA_MARGIN: the sphere about everything drawn
+    radius = distance / CAMERA_MARGIN  # the sphere about everything drawn
     assert radius == pytest.approx(0.5 * 0.367 * factor, rel=0.5)  # it is the model's size
     clip = {"near": 0.01, "far": 100.0, **properties(cmds, CAMERA)}  # meshcat's defaults
     assert clip["near"] < distance - radius and clip["far"] > distance + radius
