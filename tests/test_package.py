@@ -84,3 +84,16 @@ def test_the_closedloop_stiffness_command_loads_no_map_machinery():
         "tqdm",
         "scipy.linalg",
     }
+
+
+def test_the_api_layout_page_lists_every_module_of_every_layer():
+    from helpers import REPO
+
+    page = (REPO / "docs/api/layout.md").read_text()
+    for init in sorted((REPO / "closedloop").glob("*/__init__.py")):
+        layer = init.parent.name
+        section = page.split(f".. automodule:: closedloop.{layer}\n", 1)
+        assert len(section) == 2, f"docs/api/layout.md has no section for closedloop.{layer}"
+        listed = section[1].split("```", 1)[0].split()
+        modules = sorted(p.stem for p in init.parent.glob("*.py") if p.stem != "__init__")
+        assert [m for m in listed if m in modules] == modules, f"closedloop.{layer}"
