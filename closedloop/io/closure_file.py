@@ -6,7 +6,8 @@ springs, locked joints, beams) and the springs file, read strictly
 Closure file (YAML), after the "Extended URDF" convention, extended with springs::
 
     closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
-    type: ['3d' | '6d', ...]               # point or weld, one per pair
+    type: ['3d' | '6d' | 'revolute' | 'prismatic' | 'cylindrical' | 'universal', ...]
+                                           # one per pair (closedloop.model.closures)
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
@@ -31,7 +32,7 @@ import pinocchio as pin
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from closedloop.model.closed_loop import check_locked_springs
-from closedloop.model.closures import joint_id
+from closedloop.model.closures import CLOSURE_TYPES, joint_id
 
 CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
@@ -175,12 +176,12 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         )
     if not isinstance(types, list) or len(types) != len(pairs):
         raise ModelFileError(
-            f"{where}: type must list one of '3d'/'6d' per closed_loop pair "
+            f"{where}: type must list one of {'/'.join(CLOSURE_TYPES)} per closed_loop pair "
             f"({len(pairs)}), got {types!r}"
         )
-    bad = [t for t in types if t not in ("3d", "6d")]
+    bad = [t for t in types if not isinstance(t, str) or t not in CLOSURE_TYPES]
     if bad:
-        raise ModelFileError(f"{where}: type {bad[0]!r}; expected '3d' or '6d'")
+        raise ModelFileError(f"{where}: type {bad[0]!r}; expected one of {list(CLOSURE_TYPES)}")
     return ClosureSpec(
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),

@@ -1,0 +1,228 @@
+"""Typed loop closures (revolute, prismatic, cylindrical, universal), each against an
+independent description: its rows' Jacobian against finite differences, a four-bar cut at
+a revolute closure against the same four-bar written with two point closures and with
+the cut joint kept in the tree (the loop welded elsewhere)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from helpers import assert_close_in_norm, tangent_differences
+
+import closedloop as cl
+from closedloop.io.loader import load_model
+from closedloop.kinematics.constraints import closure_jacobian, closure_residual
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closures import CLOSURE_TYPES, Closure
+
+#: Central differences with step 1e-6: truncation ~1e-12, rounding ~1e-10 of the rows.
+RTOL_DIFFERENCES = 1e-7
+#: Two descriptions of one mechanism, each solved to rounding (assembly to 1e-12 L, the
+#: compliance by factorisations of condition ~1e6 at most).
+RTOL_SAME = 1e-8
+
+TYPED = ("revolute", "prismatic", "cylindrical", "universal")
+ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4}
+
+
+def _sample(kind: str, seed: int) -> tuple[ClosedLoopModel, np.ndarray]:
+    """Pinocchio's 6R sample manipulator with a ``kind`` closure between random frames on
+    joints 2 and 6, at a random configuration (not closed: the rows away from zero)."""
+    rng = np.random.default_rng(seed)
+    model = pin.buildSampleModelManipulator()
+    M1 = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2)
+    M2 = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2)
+    c = Closure(CLOSURE_TYPES[kind](model, 2, M1, 6, M2), f"{kind} cut", kind)
+    clm = ClosedLoopModel(model, [c], [])
+    return clm, rng.uniform(-2.0, 2.0, model.nq)
+
+
+@pytest.mark.parametrize("kind", TYPED)
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_rows_jacobian_is_their_derivative(kind, seed):
+    clm, q = _sample(kind, seed)
+    J = closure_jacobian(clm, q)
+    assert J.shape == (ROWS[kind], clm.model.nv) and clm.n_constraints == ROWS[kind]
+    expected = tangent_differences(clm.model, lambda x: closure_residual(clm, x).copy(), q)
+    assert_close_in_norm(J, expected, RTOL_DIFFERENCES)
+
+
+@pytest.mark.parametrize("kind", TYPED)
+def test_each_type_vanishes_on_what_it_constrains_and_only_there(kind):
+    """Rows of B placed against A by hand: zero exactly on the allowed relative motions."""
+    from closedloop.kinematics.constraints import typed_residual
+
+    along_z, turn_z = (
+        pin.SE3(np.eye(3), np.array([0, 0, 0.3])),
+        pin.SE3(pin.exp3(np.array([0, 0, 0.7])), np.zeros(3)),
+    )
+    tilt = pin.SE3(pin.exp3(np.array([0.7, 0, 0])), np.zeros(3))  # z_B turned off z_A
+    side = pin.SE3(np.eye(3), np.array([0.3, 0, 0]))
+    allowed = {
+        "revolute": [turn_z],
+        "prismatic": [along_z],
+        "cylindrical": [turn_z, along_z, turn_z * along_z],
+        "universal": [pin.SE3(pin.exp3(np.array([math.pi / 2, 0, 0])), np.zeros(3))],
+    }[kind]
+    refused = {
+        "revolute": [along_z, tilt, side],
+        "prismatic": [turn_z, tilt, side],
+        "cylindrical": [tilt, side],
+        "universal": [pin.SE3.Identity(), side],
+    }[kind]
+    for M in allowed:
+        np.testing.assert_allclose(typed_residual(kind, M), 0.0, atol=1e-15)
+    for M in refused:
+        assert np.max(np.abs(typed_residual(kind, M))) > 0.1
+
+
+# --------------------------------------------------------- a four-bar cut at its pin C
+HALF_PI = math.pi / 2
+SPRINGS = {"crank": 50.0, "crank_axial": 1e5, "crank_tilt": 20.0, "coupler_twist": 30.0,
+           "rocker_tilt": 25.0, "crank_yaw": 15.0, "rocker_yaw": 18.0}  # fmt: skip
+#: The four-bar of urdf/fourbar.urdf (ground pivots A = 0, D = (0.3, 0, 0), crank 0.1 m,
+#: rocker 0.15 m) made spatial: sprung tilts of the crank and rocker about x and a twist of
+#: the coupler, sprung turns of both about z, so that the pin at C holds moments, not
+#: only forces, and P moves out of the plane.
+SHARED = [
+    ("crank", "ground", "crank_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("crank_axial", "crank_link", "crank_end", (0, 0, 0.1), (0, 0, 0), "prismatic", (0, 0, 1)),
+    ("crank_yaw", "crank_end", "yaw_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
+    ("crank_tilt", "yaw_link", "tilt_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+    ("coupler", "tilt_link", "coupler_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("coupler_twist", "coupler_link", "coupler_body", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+    ("P_joint", "coupler_body", "P", (0.15, 0, 0.08), (0, 0, 0), "fixed", None),
+    ("rocker", "ground", "rocker_base", (0.3, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("rocker_yaw", "rocker_base", "rocker_turn", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
+    ("rocker_tilt", "rocker_turn", "rocker_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+]
+C_COUPLER, C_ROCKER = (0.3, 0, 0.05), (0, 0, 0.15)  # the pin C on either side, z along -y
+DESCRIPTIONS = {
+    "revolute closure": (
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
+        [["cA", "cB"]], ["revolute"],
+    ),
+    "two point closures": (
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (0, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, 0, 0), "fixed", None),
+         ("cA2_joint", "coupler_body", "cA2", (0.3, 0.02, 0.05), (0, 0, 0), "fixed", None),
+         ("cB2_joint", "rocker_link", "cB2", (0, 0.02, 0.15), (0, 0, 0), "fixed", None)],
+        [["cA", "cB"], ["cA2", "cB2"]], ["3d", "3d"],
+    ),
+    "pin in the tree, rocker welded": (  # the rocker cut in two at its middle
+        [("pin_C", "coupler_body", "rocker_top", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
+}  # fmt: skip
+
+
+def _urdf(joints) -> str:
+    links = {"ground"} | {j[2] for j in joints}
+    inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
+    body = ['<robot name="spatial_fourbar">']
+    body += [f'<link name="{n}">{inertial}</link>' for n in sorted(links)]
+    for name, parent, child, xyz, rpy, kind, axis in joints:
+        body.append(
+            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/><origin xyz="{" ".join(map(str, xyz))}" '
+            f'rpy="{" ".join(map(str, rpy))}"/>'
+            + (f'<axis xyz="{" ".join(map(str, axis))}"/>' if axis else "")
+            + ('<limit lower="-3" upper="3" effort="1" velocity="1"/>' if kind != "fixed" else "")
+            + "</joint>"
+        )
+    return "\n".join([*body, "</robot>"])
+
+
+def fourbar_as(tmp_path, description: str, *, flip: bool = False) -> ClosedLoopModel:
+    """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
+    B's frame of the revolute closure over (its z axis opposite A's)."""
+    extra, pairs, types = DESCRIPTIONS[description]
+    if flip:
+        extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
+    stem = description.replace(" ", "_") + ("_flipped" if flip else "")
+    (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
+    quoted = ", ".join(f"'{t}'" for t in types)
+    (tmp_path / f"{stem}.yaml").write_text(
+        f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\nsprings: {SPRINGS}\n"
+    )
+    return load_model(tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml", geometry=False)
+
+
+SHARED_JOINTS = tuple(j[0] for j in SHARED if j[5] != "fixed")
+
+
+def _shared(clm: ClosedLoopModel, q: np.ndarray) -> np.ndarray:
+    """The values of the joints every description has, in one order."""
+    return np.array([q[clm.model.joints[clm.model.getJointId(n)].idx_q] for n in SHARED_JOINTS])
+
+
+@pytest.fixture(scope="module")
+def fourbars(tmp_path_factory):
+    """{description: (model, q assembled at crank = 0.4 rad)}."""
+    tmp = tmp_path_factory.mktemp("fourbars")
+    out = {}
+    for d in DESCRIPTIONS:
+        clm = fourbar_as(tmp, d)
+        out[d] = clm, np.array(cl.assemble(clm, [0.4]).q)
+    return out
+
+
+def test_a_revolute_closure_assembles_as_the_other_descriptions(fourbars):
+    clm, q = fourbars["revolute closure"]
+    assert [c.kind for c in clm.closures] == ["revolute"] and clm.n_constraints == 5
+    for d in ("two point closures", "pin in the tree, rocker welded"):
+        np.testing.assert_allclose(_shared(clm, q), _shared(*fourbars[d]), atol=1e-10)
+
+
+@pytest.mark.parametrize("other", ["two point closures", "pin in the tree, rocker welded"])
+def test_a_revolute_closure_has_the_compliance_of_the_other_descriptions(fourbars, other):
+    clm, q = fourbars["revolute closure"]
+    C = cl.compliance(clm, q, "P").C
+    assert np.linalg.matrix_rank(C, tol=1e-9 * np.abs(C).max()) >= 2  # not a trivial answer
+    expected = cl.compliance(*fourbars[other], "P").C
+    assert_close_in_norm(C, expected, RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+    Q = np.array([q, cl.assemble(clm, [0.2], q).q])
+    Q_other = np.array([fourbars[other][1], cl.assemble(fourbars[other][0], [0.2]).q])
+    batch, batch_other = (
+        cl.compliances(clm, Q, "P").C,
+        cl.compliances(fourbars[other][0], Q_other, "P").C,
+    )
+    assert_close_in_norm(batch[0], C, RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+    assert_close_in_norm(batch[1], batch_other[1], RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+
+
+@pytest.mark.parametrize("gravity", [None, (0.0, 0.0, -9.81)])
+def test_a_revolute_closure_has_the_statics_of_the_pin_in_the_tree(fourbars, gravity):
+    """Nonlinear equilibrium under a load with moments (and the links' weight), and the
+    preloaded compliance there (the closure rows' curvature, weighted by their forces)."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved, preloaded = {}, {}
+    for d in ("revolute closure", "pin in the tree, rocker welded"):
+        clm, q = fourbars[d]
+        eq = cl.solve_equilibrium(clm, q, "P", wrench, gravity=gravity)
+        moved[d] = frame_displacement(clm, eq.q, q, "P")
+        preloaded[d] = cl.preloaded_compliance(clm, eq).C
+    assert np.abs(moved["revolute closure"][:3]).min() > 5e-6  # in and out of the plane
+    assert_close_in_norm(moved["revolute closure"], moved["pin in the tree, rocker welded"],
+                         RTOL_SAME)  # fmt: skip
+    C, C_tree = preloaded["revolute closure"], preloaded["pin in the tree, rocker welded"]
+    unloaded = cl.compliance(*fourbars["revolute closure"], "P").C
+    assert np.abs(C - unloaded).max() > 1e-4 * np.abs(unloaded).max()  # the preload counts
+    # the curvature of either closure by central differences: ~1e-10 relative (tangent.py)
+    assert_close_in_norm(C, C_tree, 1e-6, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+
+
+def test_a_revolute_closure_closed_with_its_z_axes_opposite_is_refused(tmp_path):
+    """Its rows vanish with z_B = -z_A too: the assembly tells that branch apart."""
+    clm = fourbar_as(tmp_path, "revolute closure", flip=True)
+    with pytest.raises(cl.AssemblyError, match=r"z axes of closures \['cA<->cB'\] pointing"):
+        cl.assemble(clm, [0.4])
