@@ -176,7 +176,8 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         )
     if not isinstance(types, list) or len(types) != len(pairs):
         raise ModelFileError(
-            f"{where}: type must list one of {'/'.join(CLOSURE_TYPES)} per closed_loop pair "
+            f"{where}: type must list one of {', '.join(map(repr, CLOSURE_TYPES))} per "
+            "closed_loop pair "
             f"({len(pairs)}), got {types!r}"
         )
     bad = [t for t in types if not isinstance(t, str) or t not in CLOSURE_TYPES]
