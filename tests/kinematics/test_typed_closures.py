@@ -119,6 +119,30 @@ DESCRIPTIONS = {
          ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
         [["wA", "wB"]], ["6d"],
     ),
+    "universal closure": (  # the pin C replaced by a universal joint: axes y, then x
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, HALF_PI, 0), "fixed", None)],
+        [["cA", "cB"]], ["universal"],
+    ),
+    "universal in the tree, rocker welded": (
+        [("u1", "coupler_body", "u_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("u2", "u_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
+    "cylindrical closure": (  # the pin C replaced by a cylindrical joint along y
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
+        [["cA", "cB"]], ["cylindrical"],
+    ),
+    "cylindrical in the tree, rocker welded": (
+        [("c1", "coupler_body", "c_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("c2", "c_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, 1, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
 }  # fmt: skip
 
 
@@ -127,7 +151,8 @@ def _urdf(joints) -> str:
     inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
                 'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
     body = ['<robot name="spatial_fourbar">']
-    body += [f'<link name="{n}">{inertial}</link>' for n in sorted(links)]
+    heavy = {j[2] for j in SHARED if j[5] != "fixed"}  # the frames and cut halves weigh 0
+    body += [f'<link name="{n}">{inertial if n in heavy else ""}</link>' for n in sorted(links)]
     for name, parent, child, xyz, rpy, kind, axis in joints:
         body.append(
             f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
@@ -226,3 +251,34 @@ def test_a_revolute_closure_closed_with_its_z_axes_opposite_is_refused(tmp_path)
     clm = fourbar_as(tmp_path, "revolute closure", flip=True)
     with pytest.raises(cl.AssemblyError, match=r"z axes of closures \['cA<->cB'\] pointing"):
         cl.assemble(clm, [0.4])
+
+
+@pytest.mark.parametrize(
+    ("closure", "tree"),
+    [("universal closure", "universal in the tree, rocker welded"),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded")],
+)  # fmt: skip
+def test_a_universal_or_cylindrical_closure_equals_its_joint_in_the_tree(fourbars, closure, tree):
+    """The pin C of the spatial four-bar replaced by a universal or a cylindrical joint,
+    written as a closure or kept in the tree as two joints (the loop welded in the
+    rocker): the same assembly, compliance (single and batch) and nonlinear statics."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    (clm, q), (twin, q_twin) = fourbars[closure], fourbars[tree]
+    assert clm.n_constraints == 4
+    np.testing.assert_allclose(_shared(clm, q), _shared(twin, q_twin), atol=1e-10)
+    scale = [1, 1, 1, 0.1, 0.1, 0.1]
+    C = cl.compliance(clm, q, "P").C
+    assert np.linalg.matrix_rank(C, tol=1e-9 * np.abs(C).max()) >= 3
+    assert_close_in_norm(C, cl.compliance(twin, q_twin, "P").C, RTOL_SAME, scale=scale)
+    batch = cl.compliances(clm, np.array([q, cl.assemble(clm, [0.2], q).q]), "P").C
+    batch_twin = cl.compliances(twin, np.array([q_twin, cl.assemble(twin, [0.2], q_twin).q]), "P")
+    assert_close_in_norm(batch[1], batch_twin.C[1], RTOL_SAME, scale=scale)
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved = []
+    for m, x in ((clm, q), (twin, q_twin)):
+        eq = cl.solve_equilibrium(m, x, "P", wrench, gravity=(0.0, 0.0, -9.81))
+        moved.append((frame_displacement(m, eq.q, x, "P"), cl.preloaded_compliance(m, eq).C))
+    assert np.abs(moved[0][0][:3]).min() > 5e-6
+    assert_close_in_norm(moved[0][0], moved[1][0], RTOL_SAME)
+    assert_close_in_norm(moved[0][1], moved[1][1], 1e-6, scale=scale)
