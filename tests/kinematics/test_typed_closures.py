@@ -282,3 +282,14 @@ def test_a_universal_or_cylindrical_closure_equals_its_joint_in_the_tree(fourbar
     assert np.abs(moved[0][0][:3]).min() > 5e-6
     assert_close_in_norm(moved[0][0], moved[1][0], RTOL_SAME)
     assert_close_in_norm(moved[0][1], moved[1][1], 1e-6, scale=scale)
+
+
+def test_a_revolute_closure_is_driven_as_the_pin_in_the_tree(fourbars):
+    """assemble_connected: the crank driven from the drawing in steps, on one branch."""
+    from closedloop.kinematics.driving import assemble_connected
+
+    (clm, _), (twin, _) = fourbars["revolute closure"], fourbars["pin in the tree, rocker welded"]
+    q = assemble_connected(clm, np.array([1.2])).q
+    np.testing.assert_allclose(_shared(clm, q), _shared(twin, assemble_connected(twin, [1.2]).q),
+                               atol=1e-10)  # fmt: skip
+    assert _shared(clm, q)[0] == pytest.approx(1.2)
