@@ -293,3 +293,22 @@ def test_a_revolute_closure_is_driven_as_the_pin_in_the_tree(fourbars):
     np.testing.assert_allclose(_shared(clm, q), _shared(twin, assemble_connected(twin, [1.2]).q),
                                atol=1e-10)  # fmt: skip
     assert _shared(clm, q)[0] == pytest.approx(1.2)
+
+
+def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError, ModelFileError
+
+    model = pin.buildSampleModelManipulator()
+    point = pin.PointAnchorConstraintModel(model, 2, pin.SE3.Identity(), 6, pin.SE3.Identity())
+    frame = pin.FrameAnchorConstraintModel(model, 2, pin.SE3.Identity(), 6, pin.SE3.Identity())
+    with pytest.raises(InvalidInputError, match=r"type 'revolute' holds a PointAnchorConstraint"):
+        Closure(point, "c", "revolute")
+    with pytest.raises(InvalidInputError, match=r"type 'hinge'; expected one of \['3d', '6d', "):
+        Closure(frame, "c", "hinge")
+    assert (Closure(point, "c").kind, Closure(frame, "c").kind) == ("3d", "6d")
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    closures.write_text("closed_loop: [[cA, cB]]\ntype: ['hinge']\nname_mot: [crank]\n")
+    with pytest.raises(ModelFileError, match=r"type 'hinge'; expected one of \['3d', '6d', 're"):
+        load_model(urdf, closures, geometry=False)
