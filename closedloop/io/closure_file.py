@@ -8,6 +8,8 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
     type: ['3d' | '6d' | 'revolute' | 'prismatic' | 'cylindrical' | 'universal', ...]
                                            # one per pair (closedloop.model.closures)
+    closure_springs: [k | [k_rot, k_lin] | null, ...]  # optional, one per pair: a spring at
+                                           # a revolute, prismatic or cylindrical cut
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
@@ -34,7 +36,9 @@ from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoun
 from closedloop.model.closed_loop import check_locked_springs
 from closedloop.model.closures import CLOSURE_TYPES, joint_id
 
-CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
+CLOSURE_KEYS = (
+    "closed_loop", "type", "closure_springs", "name_mot", "springs", "locked", "beams", "balls"
+)  # fmt: skip
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
 Stiffness = float | list[float]
 
@@ -48,6 +52,7 @@ class ClosureSpec:
 
     pairs: tuple[tuple[str, str], ...] = ()
     types: tuple[str, ...] = ()
+    closure_springs: tuple = ()  # per pair: None, a stiffness, or a list (cylindrical)
     actuated: tuple[str, ...] | None = None
     springs: dict[str, Stiffness] = field(default_factory=dict)
     locked: tuple[str, ...] = ()
@@ -186,12 +191,36 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
     return ClosureSpec(
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),
+        closure_springs=_closure_springs(doc, len(pairs), where),
         actuated=_name_list(doc, "name_mot", where),
         springs=_check_springs(_value(doc, "springs", {}), where),
         locked=_name_list(doc, "locked", where) or (),
         beams=_check_beams(_value(doc, "beams", {}), where),
         balls=_name_list(doc, "balls", where) or (),
     )
+
+
+def _closure_springs(doc: dict, n: int, where: str) -> tuple:
+    """``closure_springs:``: one entry per pair (None, a stiffness, or a list of them);
+    () when absent. The model checks which closure types take which count."""
+    springs = _value(doc, "closure_springs", None)
+    if springs is None:
+        return ()
+    if not isinstance(springs, list) or len(springs) != n:
+        raise ModelFileError(
+            f"{where}: closure_springs must list one stiffness (or null) per closed_loop "
+            f"pair ({n}), got {springs!r}"
+        )
+    out = []
+    for i, value in enumerate(springs):
+        name = f"closure_springs[{i}]"
+        if value is None:
+            out.append(None)
+        elif isinstance(value, list) and value:
+            out.append([file_number(v, where, name) for v in value])
+        else:
+            out.append(file_number(value, where, name))
+    return tuple(out)
 
 
 def _check_beams(beams, where: str) -> dict[str, dict]:

@@ -173,6 +173,76 @@ def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: s
     return Closure(constraint, f"{frame_a}<->{frame_b}", kind)
 
 
+#: The joints that a spring at a closure cut stands for (``closure_springs``), along A's z
+#: axis: a rotation, a slide, or both; their spring values in this order.
+CUT_JOINTS = {
+    "revolute": (("rz", pin.JointModelRZ),),
+    "prismatic": (("pz", pin.JointModelPZ),),
+    "cylindrical": (("rz", pin.JointModelRZ), ("pz", pin.JointModelPZ)),
+}
+
+
+def with_sprung_cuts(
+    model: pin.Model, closures: list[Closure], stiffness: list
+) -> tuple[pin.Model, list[Closure], dict[str, float]]:
+    """The model with a spring at the cut of each closure given one.
+
+    A spring at a revolute (prismatic) cut is a sprung revolute (prismatic) joint about
+    (along) frame A's z axis, on A's body, whose child is welded (``6d``) to frame B; a
+    cylindrical cut has both, the rotation first. The joints are named after the closure
+    (``"<name>_rz"``, ``"<name>_pz"``) and are at rest where A and B coincide. The other
+    closures are carried over unchanged.
+
+    Args:
+        model: the kinematic tree (not modified).
+        closures: its closures.
+        stiffness: one entry per closure: None or 0 (no spring), a number > 0 [N m/rad or
+            N/m] for a revolute or prismatic closure, two [N m/rad, N/m] for a cylindrical
+            one.
+
+    Returns:
+        (the model with the cut joints appended, the closures on it, the springs of the
+        cut joints {joint name: stiffness}).
+
+    Raises:
+        InvalidInputError: a spring at a closure of another type, or the wrong count.
+    """
+    if len(stiffness) != len(closures):
+        raise InvalidInputError(
+            f"{len(stiffness)} closure springs given; expected one per closure "
+            f"({len(closures)}, None for none)"
+        )
+    if not any(stiffness):
+        return model, list(closures), {}
+    out_model = pin.Model(model)
+    ends, springs = [], {}
+    for c, k in zip(closures, stiffness, strict=True):
+        k1, M1 = c.constraint.joint1_id, c.constraint.joint1_placement
+        end2 = (c.constraint.joint2_id, c.constraint.joint2_placement)
+        if not k:
+            ends.append((c.name, c.kind, (k1, M1), end2))
+            continue
+        joints = CUT_JOINTS.get(c.kind)
+        values = list(k) if isinstance(k, list | tuple) else [k]
+        if joints is None or len(values) != len(joints):
+            expected = {"revolute": "1 value", "prismatic": "1 value", "cylindrical": "2 values"}
+            raise InvalidInputError(
+                f"closure {c.name!r} of type {c.kind!r} given the spring {k!r}; expected "
+                f"a spring only at a closure of type {expected}"
+            )
+        for (suffix, joint), value in zip(joints, values, strict=True):
+            name = f"{c.name}_{suffix}"
+            k1 = out_model.addJoint(k1, joint(), M1, name)
+            out_model.addJointFrame(k1)
+            M1 = pin.SE3.Identity()
+            springs[name] = float(value)
+        ends.append((c.name, "6d", (k1, M1), end2))
+    closures = [
+        Closure(CLOSURE_TYPES[kind](out_model, *e1, *e2), name, kind) for name, kind, e1, e2 in ends
+    ]
+    return out_model, closures, springs
+
+
 def joint_names(what: str, names) -> tuple[str, ...]:
     """``names`` (an iterable of str, not a str) as a tuple; repeated names refused."""
     if isinstance(names, str) or not isinstance(names, Iterable):

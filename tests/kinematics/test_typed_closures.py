@@ -165,18 +165,24 @@ def _urdf(joints) -> str:
     return "\n".join([*body, "</robot>"])
 
 
-def fourbar_as(tmp_path, description: str, *, flip: bool = False) -> ClosedLoopModel:
+def fourbar_as(
+    tmp_path, description: str, *, flip: bool = False, closure_springs=None, springs=None
+) -> ClosedLoopModel:
     """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
-    B's frame of the revolute closure over (its z axis opposite A's)."""
+    B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
+    (the file's list), ``springs`` (added to :data:`SPRINGS`)."""
     extra, pairs, types = DESCRIPTIONS[description]
     if flip:
         extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
-    stem = description.replace(" ", "_") + ("_flipped" if flip else "")
+    stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
+    stem += "_sprung" if closure_springs or springs else ""
     (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
     quoted = ", ".join(f"'{t}'" for t in types)
-    (tmp_path / f"{stem}.yaml").write_text(
-        f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\nsprings: {SPRINGS}\n"
-    )
+    text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
+    text += f"springs: {({**SPRINGS, **(springs or {})})}\n"
+    if closure_springs is not None:
+        text += f"closure_springs: {[None if k is None else k for k in closure_springs]}\n"
+    (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
     return load_model(tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml", geometry=False)
 
 
@@ -312,3 +318,43 @@ def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
     closures.write_text("closed_loop: [[cA, cB]]\ntype: ['hinge']\nname_mot: [crank]\n")
     with pytest.raises(ModelFileError, match=r"type 'hinge'; expected one of \['3d', '6d', 're"):
         load_model(urdf, closures, geometry=False)
+
+
+# ------------------------------------------------------------- springs at a loop cut
+@pytest.mark.parametrize(
+    ("closure", "tree", "springs", "tree_springs"),
+    [("revolute closure", "pin in the tree, rocker welded", 7.0, {"pin_C": 7.0}),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded", [7.0, 900.0],
+      {"c1": 7.0, "c2": 900.0})],
+)  # fmt: skip
+def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
+    tmp_path, closure, tree, springs, tree_springs
+):
+    """closure_springs: a torsion (and axial) spring at the cut C, against the same springs
+    on the joints kept in the tree; at the drawing, where every spring is at rest (a
+    sprung joint at C holds the crank where it is drawn)."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    clm = fourbar_as(tmp_path, closure, closure_springs=[springs])
+    cut = [n for n in clm.model.names if n.startswith("cA<->cB_")]
+    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_rz", "cA<->cB_pz"])
+    assert [c.kind for c in clm.closures] == ["6d"]
+    twin = fourbar_as(tmp_path, tree, springs=tree_springs)
+    q, q_twin = pin.neutral(clm.model), pin.neutral(twin.model)
+    C = cl.compliance(clm, q, "P").C
+    assert_close_in_norm(C, cl.compliance(twin, q_twin, "P").C, RTOL_SAME,
+                         scale=[1, 1, 1, 0.1, 0.1, 0.1])  # fmt: skip
+    # the spring counts: without it the rotation at the cut is free
+    free = cl.compliance(fourbar_as(tmp_path, closure), q[: clm.model.nq - len(cut)], "P").C
+    assert abs(free[0, 0] - C[0, 0]) > 0.01 * C[0, 0]  # along x at P: 6% for the rotation
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved = [frame_displacement(m, cl.solve_equilibrium(m, x, "P", wrench).q, x, "P")
+             for m, x in ((clm, q), (twin, q_twin))]  # fmt: skip
+    assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
+
+
+def test_a_spring_at_a_point_closure_is_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match=r"closure 'cA<->cB' of type '3d' given the "):
+        fourbar_as(tmp_path, "two point closures", closure_springs=[5.0, None])
