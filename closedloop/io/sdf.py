@@ -29,8 +29,10 @@ joint frame is fixed to the child link; q = 0 is the drawing):
   ``axis``, the child's along ``axis2``;
 * fixed: a weld (``6d``).
 
-(:mod:`closedloop.model.closures`.) A loop-closing joint with a spring cannot close one (a
-spring needs a coordinate: list the joint first, so that it is a tree joint).
+(:mod:`closedloop.model.closures`.) A revolute, continuous or prismatic loop-closing joint
+with a spring becomes a spring at the cut
+(:func:`closedloop.model.closures.with_sprung_cuts`), at rest at its ``spring_reference``; a
+universal one with a spring is refused (list it first, so that it is a tree joint).
 
 The root link (no joint names it as child) is fixed to the world at its pose, or carried
 by a free flyer ``root_joint`` (``free_base``); a joint with parent ``world`` fixes its child.
@@ -55,7 +57,7 @@ import pinocchio as pin
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
-from closedloop.model.closures import CLOSURE_TYPES, Closure
+from closedloop.model.closures import CLOSURE_TYPES, Closure, with_sprung_cuts
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
@@ -211,10 +213,17 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
         model.addFrame(
             pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
         )
-    closures = _closures(r, model, body, closing, W)
+    closures, cut_springs = _closures(r, model, body, closing, W)
+    cut = {}
+    if any(k for k, _ in cut_springs.values()):
+        ks = [k for k, _ in cut_springs.values()]
+        model, closures, cut = with_sprung_cuts(model, closures, ks)
     rest = pin.neutral(model)
     for i, v in rest_values.items():
         rest[i] = v
+    for name, k in cut.items():  # a spring at a loop cut, at rest at its spring_reference
+        springs[name] = k
+        rest[model.joints[model.getJointId(name)].idx_q] = cut_springs[name.rsplit("_", 1)[0]][1]
     if free_base:
         rest[:7] = free_q
     model.referenceConfigurations[REST] = rest
@@ -237,8 +246,10 @@ LOOP_TYPES = {"ball": "3d", "fixed": "6d", "revolute": "revolute", "continuous":
               "prismatic": "prismatic", "universal": "universal"}  # fmt: skip
 
 
-def _closures(r: SdfReader, model, body, closing, W) -> list[Closure]:
-    out = []
+def _closures(r: SdfReader, model, body, closing, W) -> tuple[list[Closure], dict]:
+    """(the closures of the loop-closing joints, {joint: (spring stiffness or None,
+    spring reference)} in their order)."""
+    out, springs = [], {}
     for name in closing:
         e, what = r.joints[name], f"loop-closing joint {name!r}"
         kind, X = e.get("type"), r.pose(name)
@@ -246,8 +257,11 @@ def _closures(r: SdfReader, model, body, closing, W) -> list[Closure]:
         found = [r.axis(name, a) for a in axes]
         if len(found) == 2 and abs(found[0][0] @ found[1][0]) > 1e-9:
             r.fail(f"{what} has axes {found[0][0]} and {found[1][0]}; expected orthogonal axes")
-        if any(r.spring(elem, what)[0] > 0 for _, elem in found):
-            r.fail(f"{what} has a spring, which needs a coordinate; list it first (tree joint)")
+        k, ref = r.spring(found[0][1], what) if len(found) == 1 else (0.0, 0.0)
+        if len(found) == 2 and any(r.spring(elem, what)[0] > 0 for _, elem in found):
+            r.fail(f"{what} is universal with a spring, which is not read at a loop cut; "
+                   "expected it listed first (a tree joint)")  # fmt: skip
+        springs[name] = (k or None, ref)
         parent, child = r.text(e, "parent", what), r.text(e, "child", what)
         if parent == "world":
             r.fail(f"{what} has parent 'world'; expected a link of the model")
@@ -258,7 +272,7 @@ def _closures(r: SdfReader, model, body, closing, W) -> list[Closure]:
         kind = LOOP_TYPES[kind]
         c = CLOSURE_TYPES[kind](model, j1, M1, j2, M2)
         out.append(Closure(c, name, kind))
-    return out
+    return out, springs
 
 
 def model_dirs(path: Path) -> list[Path]:

@@ -517,16 +517,33 @@ def test_a_side_file_locks_a_joint_the_sdf_gives_a_spring(tmp_path):
     assert robot.springs == {"crank": 50.0, "rocker_axial": 2e5}
 
 
-def test_loop_closing_joint_with_a_spring_is_refused(tmp_path):
-    text = fourbar_sdf("1.7", closing="revolute")
-    old = "<axis><xyz>0 1 0</xyz></axis></joint></model>"
-    assert old in text
-    text = text.replace(
-        old,
-        "<axis><xyz>0 1 0</xyz><dynamics><spring_stiffness>3</spring_stiffness></dynamics>"
-        "</axis></joint></model>",
+def test_loop_closing_pin_with_a_spring_equals_the_sprung_pin_in_the_tree(tmp_path):
+    """The slider-crank's pin C with a 300 N m/rad spring, closing the loop (a spring at the
+    cut) or in the tree (the slide closing it): the same compliance at the drawing."""
+    cut = load_model(write(tmp_path, slider_crank_sdf(False, pin_k=300.0), "c.sdf"),
+                     geometry=False)  # fmt: skip
+    tree = load_model(write(tmp_path, slider_crank_sdf(True, pin_k=300.0), "t.sdf"),
+                      geometry=False)  # fmt: skip
+    assert cut.springs["pin_rz"] == 300.0 and tree.springs["pin"] == 300.0
+    a = cl.Configuration(cut, reference_configuration(cut))
+    b = cl.Configuration(tree, reference_configuration(tree))
+    for frame in ("slider", "rod_end"):
+        assert_close_in_norm(cl.compliance(a, frame).C, cl.compliance(b, frame).C, RTOL_TWIN)
+    free = load_model(write(tmp_path, slider_crank_sdf(False), "f.sdf"), geometry=False)
+    C_free = cl.compliance(cl.Configuration(free, reference_configuration(free)), "rod_end").C
+    # the spring counts: the rod's rotation at C, 0.4% stiffer than without it
+    assert abs(C_free[4, 4] - cl.compliance(a, "rod_end").C[4, 4]) > 1e-3 * C_free[4, 4]
+
+
+def test_loop_closing_universal_joint_with_a_spring_is_refused(tmp_path):
+    text = (
+        '<sdf version="1.7"><model name="m"><link name="g"/><link name="b"/>'
+        '<joint name="hang" type="ball"><parent>g</parent><child>b</child></joint>'
+        '<joint name="u" type="universal"><parent>g</parent><child>b</child>'
+        "<axis><xyz>1 0 0</xyz><dynamics><spring_stiffness>3</spring_stiffness></dynamics>"
+        "</axis><axis2><xyz>0 1 0</xyz></axis2></joint></model></sdf>"
     )
-    with pytest.raises(ModelFileError, match=r"loop-closing joint 'C_joint' has a spring"):
+    with pytest.raises(ModelFileError, match=r"loop-closing joint 'u' is universal with a spr"):
         load_model(write(tmp_path, text), geometry=False)
 
 
@@ -812,12 +829,12 @@ def test_model_pose_and_joint_to_world(tmp_path):
 ROD = np.array([math.sqrt(0.3**2 - 0.1**2), 0.0, -0.1])  # from the crank's end B to C
 
 
-def slider_crank_sdf(slide_closes: bool, pin_type: str = "revolute") -> str:
+def slider_crank_sdf(slide_closes: bool, pin_type: str = "revolute", pin_k=None) -> str:
     """A slider-crank drawn assembled: crank (0.1 m, along z, spring 50 N m/rad) at the
     origin, rod (0.3 m, with a sprung axial joint) from B = (0, 0, 0.1) to the slider at
     C on the x axis, slider on a prismatic joint along x. The slider's prismatic joint
     closes the loop (``slide_closes``, listed last) or is a tree joint and the pin
-    (``pin_type``) at C closes it."""
+    (``pin_type``, with a spring ``pin_k``) at C closes it."""
 
     def joint(name, kind, parent, child, axis=None, k=None):
         dyn = f"<dynamics><spring_stiffness>{k}</spring_stiffness></dynamics>" if k else ""
@@ -840,7 +857,8 @@ def slider_crank_sdf(slide_closes: bool, pin_type: str = "revolute") -> str:
         joint("rod_axial", "prismatic", "rod_link", "rod_end", axial, 1e5),
     ]
     slide = joint("slide", "prismatic", "ground", "slider", "1 0 0")
-    pin_c = joint("pin", pin_type, "rod_end", "slider", "0 1 0" if pin_type != "ball" else None)
+    pin_c = joint("pin", pin_type, "rod_end", "slider", "0 1 0" if pin_type != "ball" else None,
+                  pin_k)  # fmt: skip
     order = [*tree, pin_c, slide] if slide_closes else [*tree, slide, pin_c]
     body = "".join([*links, *order])
     return f'<sdf version="1.6"><model name="slider_crank">{body}</model></sdf>'

@@ -179,7 +179,7 @@ def fourbar_as(
     (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
     quoted = ", ".join(f"'{t}'" for t in types)
     text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
-    text += f"springs: {({**SPRINGS, **(springs or {})})}\n"
+    text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
     if closure_springs is not None:
         text += f"closure_springs: {[None if k is None else k for k in closure_springs]}\n"
     (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
@@ -358,3 +358,20 @@ def test_a_spring_at_a_point_closure_is_refused(tmp_path):
 
     with pytest.raises(InvalidInputError, match=r"closure 'cA<->cB' of type '3d' given the "):
         fourbar_as(tmp_path, "two point closures", closure_springs=[5.0, None])
+
+
+def test_closure_springs_must_list_one_entry_per_pair(tmp_path):
+    from closedloop.exceptions import ModelFileError
+
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    for springs, message in (
+        ("[1.0, 2.0]", r"closure_springs must list one stiffness \(or null"),
+        ("[-1.0]", r"closure_springs\[0\]' is -1.0; expected a number >= 0"),
+    ):
+        closures.write_text(
+            f"closed_loop: [[cA, cB]]\ntype: [revolute]\nclosure_springs: {springs}\n"
+        )
+        with pytest.raises(ModelFileError, match=message):
+            load_model(urdf, closures, geometry=False)
