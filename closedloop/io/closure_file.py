@@ -52,12 +52,12 @@ class ClosureSpec:
 
     pairs: tuple[tuple[str, str], ...] = ()
     types: tuple[str, ...] = ()
-    closure_springs: tuple = ()  # per pair: None, a stiffness, or a list (cylindrical)
     actuated: tuple[str, ...] | None = None
     springs: dict[str, Stiffness] = field(default_factory=dict)
     locked: tuple[str, ...] = ()
     beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.model.beams)
     balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.model.balls)
+    closure_springs: tuple = ()  # per pair: None, a stiffness, or a list (cylindrical)
 
 
 def existing_path(path: str | Path, what: str) -> Path:
