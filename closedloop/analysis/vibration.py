@@ -203,7 +203,7 @@ def _beam_sites(clm: ClosedLoopModel) -> tuple:
             if section is None:
                 continue
             tip = beam.rest.translation
-            R_LB = beam_axes(beam.name, tip, None)  # x along the beam
+            R_LB = beam_axes(beam.name, tip, None, axisymmetric=True)  # x along the beam, Ip only
             frame = clm.model.getFrameId(beam.name, pin.JOINT)
             axes = (R_LB, beam.rest.rotation.T @ R_LB)
             out.append((beam.link_frame, frame, axes, float(np.linalg.norm(tip)), section))

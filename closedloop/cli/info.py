@@ -98,7 +98,8 @@ def _joint(clm: ClosedLoopModel, j: int) -> dict:
 def model_info(clm: ClosedLoopModel) -> dict:
     """JSON-ready description of ``clm``: name, nq, nv, length L [m], joints (name, type,
     nq, nv, limits [rad or m; None: unbounded], role, spring [SI per coordinate; None:
-    rigid; a matrix for a block]), closures (name, type ``3d``/``6d``), beams, mimic
+    rigid; a matrix for a block]), closures (name, type: one of
+    :data:`closedloop.model.closures.CLOSURE_TYPES`), beams, mimic
     joints, frames (name, type, parent joint), in the model's order."""
     pm = clm.model
     joints = [_joint(clm, j) for j in range(1, pm.njoints)]

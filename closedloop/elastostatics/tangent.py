@@ -14,8 +14,9 @@ origin) and c (m,) the stacked closure residuals of :func:`closure_gap`:
   spins about an axis through the anchor, so the equations, hence Newton's iterates, do
   not depend on which body is written first; its multipliers lambda are world-axes forces
   [N] (the force that side 2 exerts on side 1 at the anchor);
-* a weld contributes Pinocchio's log6 residual [m, rad] (:func:`closure_residual`), its
-  multipliers the conjugate wrench [N, N m].
+* a weld, and a revolute, prismatic, cylindrical or universal closure, contributes its
+  rows of :func:`closure_residual` [m, rad] (:mod:`closedloop.kinematics.constraints`),
+  its multipliers the conjugate forces and moments [N, N m].
 
 Linearising F along the admissible motions N (nv, d) gives the tangent stiffness
 
@@ -68,8 +69,9 @@ from closedloop.model.elastic import (
 )
 from closedloop.model.gravity import Load, as_load
 
-#: Step [rad or m] of the central differences that give the curvature of weld closures
-#: (and every second derivative where Pinocchio's are wrong, :mod:`closedloop.common.derivatives`):
+#: Step [rad or m] of the central differences that give the curvature of the closures
+#: other than points (and every second derivative where Pinocchio's are wrong,
+#: :mod:`closedloop.common.derivatives`):
 #: the error is ~1e-10 relative to the closure Jacobian for links of metre scale; that
 #: curvature enters K_t multiplied by lambda, so its relative error in K_t stays ~1e-10.
 WELD_CURVATURE_STEP = DIFFERENCE_STEP
@@ -137,9 +139,10 @@ def closure_gap(
 
     Point closures: the world gap p2 - p1 [m] between the anchor points of side 2 and
     side 1, world axes, Jacobian J_p2 - J_p1 [m/rad or m/m]; it is invariant under a spin
-    of either body about an axis through its anchor. Welds: the log6 rows [m, rad] of
-    :func:`closedloop.kinematics.constraints.closure_residual` and their Jacobian. Rows are stacked
-    in the order of ``clm.closures``, 3 per point and 6 per weld.
+    of either body about an axis through its anchor. The other types (welds, revolute,
+    prismatic, cylindrical, universal): their rows [m, rad] of
+    :func:`closedloop.kinematics.constraints.closure_residual` and their Jacobian. Rows are
+    stacked in the order of ``clm.closures``, ``Closure.size`` per closure.
 
     Args:
         clm: the model.
@@ -150,7 +153,7 @@ def closure_gap(
         update_kinematics(clm, q)
     m, nv = clm.n_constraints, clm.model.nv
     c, A = np.zeros(m), np.zeros((m, nv))
-    if any(cl.kind == "6d" for cl in clm.closures):
+    if any(cl.kind != "3d" for cl in clm.closures):
         c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
     for cl, rows in _rows(clm):
         if cl.kind == "3d":
@@ -200,14 +203,15 @@ def closure_curvature(
 
     Entry [a, b] = d(J_c^T lambda)_a / dq_b [N m/rad, N/m...]. Point closures: exact,
     sum_r lambda_r (H_p2 - H_p1)[r] from Pinocchio's kinematic Hessians of the two anchor
-    joints. Weld closures (log6 residual): central differences of the exact closure
-    Jacobian with step :data:`WELD_CURVATURE_STEP` (error ~1e-10 relative).
+    joints. The other types (welds, revolute, prismatic, cylindrical, universal): central
+    differences of their exact Jacobian rows with step :data:`WELD_CURVATURE_STEP` (error
+    ~1e-10 relative).
 
     Args:
         clm: the model.
         q: (nq,) configuration.
         multipliers: (m,) lambda, one per closure row, in the units conjugate to the rows:
-            world-axes forces [N] for point rows, N and N m for weld rows.
+            world-axes forces [N] for point rows, N and N m for the others'.
         update: recompute the kinematics of q first (else they must be current).
     """
     model = clm.model
@@ -232,7 +236,7 @@ def closure_curvature(
     pin.computeJointKinematicHessians(model, clm.data)
     lam_w = np.zeros_like(lam)
     for cl, rows in _rows(clm):
-        if cl.kind == "6d":
+        if cl.kind != "3d":
             lam_w[rows] = lam[rows]
         elif np.any(lam[rows]):
             k = cl.constraint

@@ -6,7 +6,10 @@ springs, locked joints, beams) and the springs file, read strictly
 Closure file (YAML), after the "Extended URDF" convention, extended with springs::
 
     closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
-    type: ['3d' | '6d', ...]               # point or weld, one per pair
+    type: ['3d' | '6d' | 'revolute' | 'prismatic' | 'cylindrical' | 'universal', ...]
+                                           # one per pair (closedloop.model.closures)
+    closure_springs: [k | [k_rot, k_lin] | null, ...]  # optional, one per pair: a spring at
+                                           # a revolute, prismatic or cylindrical cut
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
@@ -31,9 +34,11 @@ import pinocchio as pin
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from closedloop.model.closed_loop import check_locked_springs
-from closedloop.model.closures import joint_id
+from closedloop.model.closures import CLOSURE_TYPES, joint_id
 
-CLOSURE_KEYS = ("closed_loop", "type", "name_mot", "springs", "locked", "beams", "balls")
+CLOSURE_KEYS = (
+    "closed_loop", "type", "closure_springs", "name_mot", "springs", "locked", "beams", "balls"
+)  # fmt: skip
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
 Stiffness = float | list[float]
 
@@ -52,6 +57,7 @@ class ClosureSpec:
     locked: tuple[str, ...] = ()
     beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.model.beams)
     balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.model.balls)
+    closure_springs: tuple = ()  # per pair: None, a stiffness, or a list (cylindrical)
 
 
 def existing_path(path: str | Path, what: str) -> Path:
@@ -175,21 +181,46 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         )
     if not isinstance(types, list) or len(types) != len(pairs):
         raise ModelFileError(
-            f"{where}: type must list one of '3d'/'6d' per closed_loop pair "
+            f"{where}: type must list one of {', '.join(map(repr, CLOSURE_TYPES))} per "
+            "closed_loop pair "
             f"({len(pairs)}), got {types!r}"
         )
-    bad = [t for t in types if t not in ("3d", "6d")]
+    bad = [t for t in types if not isinstance(t, str) or t not in CLOSURE_TYPES]
     if bad:
-        raise ModelFileError(f"{where}: type {bad[0]!r}; expected '3d' or '6d'")
+        raise ModelFileError(f"{where}: type {bad[0]!r}; expected one of {list(CLOSURE_TYPES)}")
     return ClosureSpec(
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),
+        closure_springs=_closure_springs(doc, len(pairs), where),
         actuated=_name_list(doc, "name_mot", where),
         springs=_check_springs(_value(doc, "springs", {}), where),
         locked=_name_list(doc, "locked", where) or (),
         beams=_check_beams(_value(doc, "beams", {}), where),
         balls=_name_list(doc, "balls", where) or (),
     )
+
+
+def _closure_springs(doc: dict, n: int, where: str) -> tuple:
+    """``closure_springs:``: one entry per pair (None, a stiffness, or a list of them);
+    () when absent. The model checks which closure types take which count."""
+    springs = _value(doc, "closure_springs", None)
+    if springs is None:
+        return ()
+    if not isinstance(springs, list) or len(springs) != n:
+        raise ModelFileError(
+            f"{where}: closure_springs must list one stiffness (or null) per closed_loop "
+            f"pair ({n}), got {springs!r}"
+        )
+    out = []
+    for i, value in enumerate(springs):
+        name = f"closure_springs[{i}]"
+        if value is None:
+            out.append(None)
+        elif isinstance(value, list) and value:
+            out.append([file_number(v, where, name) for v in value])
+        else:
+            out.append(file_number(value, where, name))
+    return tuple(out)
 
 
 def _check_beams(beams, where: str) -> dict[str, dict]:

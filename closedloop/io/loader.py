@@ -59,7 +59,12 @@ from closedloop.io.sdf import REST, load_sdf
 from closedloop.model.balls import ball_springs, urdf_with_balls
 from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
-from closedloop.model.closures import Closure, closure_between_frames, joint_names
+from closedloop.model.closures import (
+    Closure,
+    closure_between_frames,
+    joint_names,
+    with_sprung_cuts,
+)
 
 #: Model-file suffixes and their format.
 MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
@@ -205,7 +210,10 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
             closure_between_frames(model, a, b, t)
             for (a, b), t in zip(spec.pairs, spec.types, strict=True)
         ]
-    return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks}, spec.locked,
+        cuts = {}
+        if spec.closure_springs:
+            model, loops, cuts = with_sprung_cuts(model, loops, list(spec.closure_springs))
+    return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks, **cuts}, spec.locked,
                  visual, beam_joints=tuple(blocks), balls=spec.balls,
                  beam_masses=tuple(masses.items()))  # fmt: skip
 

@@ -21,12 +21,18 @@ Tree and loops: a link's tree joint is the first joint in file order naming it a
 (as in Pinocchio's parser); every later one closes a loop where the file draws it (the
 joint frame is fixed to the child link; q = 0 is the drawing):
 
-* ball: one point closure (3 rows) at the joint origin, every rotation free;
-* revolute / continuous: two point closures, at the joint origin and a distance ``L``
-  along the axis (``L``: the diameter of the link origins,
-  :func:`closedloop.common.conditioning.characteristic_length`): 6 rows of rank 5, only the
-  rotation about the axis free, rows in metres / ``L`` scaled like radians;
-* fixed: a weld. A prismatic or universal joint, or one with a spring, cannot close one.
+* ball: a ``3d`` closure (3 rows) at the joint origin, every rotation free;
+* revolute / continuous: a ``revolute`` closure (5 rows) at the joint origin, its z axes
+  along the joint axis;
+* prismatic: a ``prismatic`` closure (5 rows), its z axes along the joint axis;
+* universal: a ``universal`` closure (4 rows) at the joint origin, the parent's z along
+  ``axis``, the child's along ``axis2``;
+* fixed: a weld (``6d``).
+
+(:mod:`closedloop.model.closures`.) A revolute, continuous or prismatic loop-closing joint
+with a spring becomes a spring at the cut
+(:func:`closedloop.model.closures.with_sprung_cuts`), at rest at its ``spring_reference``; a
+universal one with a spring is refused (list it first, so that it is a tree joint).
 
 The root link (no joint names it as child) is fixed to the world at its pose, or carried
 by a free flyer ``root_joint`` (``free_base``); a joint with parent ``world`` fixes its child.
@@ -48,11 +54,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.conditioning import characteristic_length
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
-from closedloop.model.closures import Closure
+from closedloop.model.closures import CLOSURE_TYPES, Closure, with_sprung_cuts
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
@@ -208,10 +213,17 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
         model.addFrame(
             pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
         )
-    closures = _closures(r, model, body, closing, W)
+    closures, cut_springs = _closures(r, model, body, closing, W)
+    cut = {}
+    if any(k for k, _ in cut_springs.values()):
+        ks = [k for k, _ in cut_springs.values()]
+        model, closures, cut = with_sprung_cuts(model, closures, ks)
     rest = pin.neutral(model)
     for i, v in rest_values.items():
         rest[i] = v
+    for name, k in cut.items():  # a spring at a loop cut, at rest at its spring_reference
+        springs[name] = k
+        rest[model.joints[model.getJointId(name)].idx_q] = cut_springs[name.rsplit("_", 1)[0]][1]
     if free_base:
         rest[:7] = free_q
     model.referenceConfigurations[REST] = rest
@@ -223,34 +235,44 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
     return SdfRobot(model, closures, springs, rest, visual, tuple(closing))
 
 
-def _closures(r: SdfReader, model, body, closing, W) -> list[Closure]:
-    L = characteristic_length([r.pose(link).translation for link in r.links])
-    out = []
+def _z_along(axis: np.ndarray) -> pin.SE3:
+    """A rotation (no translation) that takes z to the unit vector ``axis``."""
+    q = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), axis / np.linalg.norm(axis))
+    return pin.SE3(q.matrix(), np.zeros(3))
+
+
+#: The closure type of each loop-closing joint type (module docstring).
+LOOP_TYPES = {"ball": "3d", "fixed": "6d", "revolute": "revolute", "continuous": "revolute",
+              "prismatic": "prismatic", "universal": "universal"}  # fmt: skip
+
+
+def _closures(r: SdfReader, model, body, closing, W) -> tuple[list[Closure], dict]:
+    """(the closures of the loop-closing joints, {joint: (spring stiffness or None,
+    spring reference)} in their order)."""
+    out, springs = [], {}
     for name in closing:
         e, what = r.joints[name], f"loop-closing joint {name!r}"
         kind, X = e.get("type"), r.pose(name)
-        if kind in ("prismatic", "universal"):
-            r.fail(
-                f"{what} is {kind}: such a loop cannot be closed by point or weld closures; "
-                "expected ball, revolute or fixed (or list it first so it is a tree joint)"
-            )
-        if kind in ("revolute", "continuous") and r.spring(r.axis(name)[1], what)[0] > 0:
-            r.fail(f"{what} has a spring, which needs a coordinate; list it first (tree joint)")
+        axes = {"ball": (), "fixed": (), "universal": ("axis", "axis2")}.get(kind, ("axis",))
+        found = [r.axis(name, a) for a in axes]
+        if len(found) == 2 and abs(found[0][0] @ found[1][0]) > 1e-9:
+            r.fail(f"{what} has axes {found[0][0]} and {found[1][0]}; expected orthogonal axes")
+        k, ref = r.spring(found[0][1], what) if len(found) == 1 else (0.0, 0.0)
+        if len(found) == 2 and any(r.spring(elem, what)[0] > 0 for _, elem in found):
+            r.fail(f"{what} is universal with a spring, which is not read at a loop cut; "
+                   "expected it listed first (a tree joint)")  # fmt: skip
+        springs[name] = (k or None, ref)
         parent, child = r.text(e, "parent", what), r.text(e, "child", what)
         if parent == "world":
             r.fail(f"{what} has parent 'world'; expected a link of the model")
         (j1, _), (j2, _) = body[parent], body[child]
         M1, M2 = W[j1].inverse() * X, W[j2].inverse() * X
-        if kind == "fixed":
-            c = pin.FrameAnchorConstraintModel(model, j1, M1, j2, M2)
-            out.append(Closure(c, name))
-            continue
-        offsets = [np.zeros(3)] + ([L * r.axis(name)[0]] if kind != "ball" else [])
-        for i, d in enumerate(offsets):
-            P = pin.SE3(np.eye(3), d)
-            c = pin.PointAnchorConstraintModel(model, j1, M1 * P, j2, M2 * P)
-            out.append(Closure(c, name if len(offsets) == 1 else f"{name}[{i}]"))
-    return out
+        if found:  # z of either frame along its axis (the child's along axis2)
+            M1, M2 = M1 * _z_along(found[0][0]), M2 * _z_along(found[-1][0])
+        kind = LOOP_TYPES[kind]
+        c = CLOSURE_TYPES[kind](model, j1, M1, j2, M2)
+        out.append(Closure(c, name, kind))
+    return out, springs
 
 
 def model_dirs(path: Path) -> list[Path]:

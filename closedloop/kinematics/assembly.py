@@ -12,7 +12,7 @@ from closedloop.common.arrays import ReadOnlyArrays, check_count, check_positive
 from closedloop.common.conditioning import rule_rank, svd
 from closedloop.exceptions import AssemblyError, InvalidInputError, SingularConfigurationError
 from closedloop.kinematics.configuration import CLOSURE_TOL
-from closedloop.kinematics.constraints import jacobian_rows, residual_rows
+from closedloop.kinematics.constraints import flipped_closures, jacobian_rows, residual_rows
 from closedloop.model.closed_loop import ClosedLoopModel
 
 #: Default closure tolerance: infinity norm of the residual with its rows in metres divided
@@ -168,7 +168,8 @@ def assemble(
 
     Raises:
         AssemblyError: the closures cannot be satisfied from this start (unreachable
-            input); the message gives the residual reached.
+            input), or close only with the z axes of a revolute or cylindrical closure
+            opposite; the message gives the residual reached.
         SingularConfigurationError: the closures are met at a singular configuration of
             the assembly, where its branches meet (a change point): the passive
             coordinates are not determined there (:func:`close_loops`).
@@ -291,6 +292,13 @@ def close_loops(
                "a loop that needs them to move cannot close)" if held else ""),
             err,
         )  # fmt: skip
+    if flipped := flipped_closures(clm, datas):
+        raise AssemblyError(
+            f"the loops of {clm.name!r} close with the z axes of closures {flipped} pointing "
+            "opposite ways, which is not the joint they stand for; start from a configuration "
+            "nearer the drawing (q0) or check the frames' z axes",
+            err,
+        )
     q.flags.writeable = False
     closure = None
     if jacobian:  # the datas are those of q's residual evaluation, the last one

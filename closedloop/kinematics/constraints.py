@@ -38,49 +38,125 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
-def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[int, ...]]:
-    """(the constraints of the closures, the positions of the welds), once per model."""
+def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[str, ...]]:
+    """(the constraints of the closures, their types), once per model."""
     closures = clm.closures
     return clm.memo(
         "closures",
-        lambda: (
-            tuple(c.constraint for c in closures),
-            tuple(k for k, c in enumerate(closures) if c.kind == "6d"),
-        ),
+        lambda: (tuple(c.constraint for c in closures), tuple(c.kind for c in closures)),
     )
 
 
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def typed_residual(kind: str, c1Mc2: pin.SE3) -> np.ndarray:
+    """Residual rows of a joint-type closure from the placement of B in A (``c1Mc2``).
+
+    With R = R_A^T R_B, t = R_A^T (p_B - p_A) (B's origin in A's axes) [m] and z = R e_z
+    (B's z axis in A's axes):
+
+    * ``revolute``: (t, z_x, z_y) [m, m, m, rad, rad];
+    * ``prismatic``: (log3 R, t_x, t_y) [rad x 3, m, m];
+    * ``cylindrical``: (z_x, z_y, t_x, t_y) [rad, rad, m, m];
+    * ``universal``: (t, z_z) [m x 3, rad] (z_z = z_A . z_B).
+
+    The z rows of ``revolute`` and ``cylindrical`` also vanish with the z axes opposite:
+    :func:`flipped_closures` tells that branch apart.
+    """
+    R, t = c1Mc2.rotation, c1Mc2.translation
+    z = R[:, 2]
+    if kind == "revolute":
+        return np.concatenate([t, z[:2]])
+    if kind == "prismatic":
+        return np.concatenate([pin.log3(R), t[:2]])
+    if kind == "cylindrical":
+        return np.concatenate([z[:2], t[:2]])
+    return np.concatenate([t, z[2:]])  # universal
+
+
+def typed_jacobian(kind: str, model: pin.Model, data: pin.Data, constraint, cd) -> np.ndarray:
+    """(n, nv) Jacobian of :func:`typed_residual` from the joint Jacobians in ``data`` and
+    the evaluated constraint data ``cd`` (frames A = side 1, B = side 2).
+
+    From the spatial (WORLD) Jacobians of the two joints, D = J_2 - J_1 [v0; w] is the
+    relative spatial velocity: t moves at R_A^T (D_v - [p_B]x D_w) and B turns relative to A
+    at W = R_A^T D_w (A's axes), so that dR = [W]x R, dz = W x z and
+    d log3 R = Jlog3(R) R^T W.
+    """
+    nv = model.nv
+    J1 = np.asarray(pin.getJointJacobian(model, data, constraint.joint1_id, pin.WORLD))
+    J2 = np.asarray(pin.getJointJacobian(model, data, constraint.joint2_id, pin.WORLD))
+    D = J2.reshape(6, nv) - J1.reshape(6, nv)
+    RA, pB = cd.oMc1.rotation, cd.oMc2.translation
+    T = RA.T @ (D[:3] - _skew(pB) @ D[3:])
+    W = RA.T @ D[3:]
+    R = cd.c1Mc2.rotation
+    Z = -_skew(R[:, 2]) @ W
+    if kind == "revolute":
+        return np.vstack([T, Z[:2]])
+    if kind == "prismatic":
+        return np.vstack([pin.Jlog3(R) @ R.T @ W, T[:2]])
+    if kind == "cylindrical":
+        return np.vstack([Z[:2], T[:2]])
+    return np.vstack([T, Z[2:]])  # universal
+
+
 def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.ndarray:
-    """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]."""
+    """(m,) stacked closure residuals from current kinematics in ``data`` [m; m, rad]:
+    Pinocchio's for points (R_A^T (p_B - p_A)) and welds (log6 of B in A), those of
+    :func:`typed_residual` for the joint types."""
     model = clm.model
-    for c, cd in zip(_closures(clm)[0], constraint_datas, strict=True):
+    constraints, kinds = _closures(clm)
+    parts = []
+    for c, cd, kind in zip(constraints, constraint_datas, kinds, strict=True):
         c.calc(model, data, cd)
-    if not constraint_datas:
+        parts.append(
+            cd.constraint_position_error if kind in ("3d", "6d") else typed_residual(kind, cd.c1Mc2)
+        )
+    if not parts:
         return np.empty(0)
-    return np.concatenate([cd.constraint_position_error for cd in constraint_datas])
+    return np.concatenate(parts)
 
 
 def jacobian_rows(
     clm: ClosedLoopModel, data: pin.Data, constraint_datas, *, calc: bool = True
 ) -> np.ndarray:
-    """(m, nv) Jacobian of :func:`residual_rows` from current kinematics in ``data``.
+    """(m, nv) Jacobian of :func:`residual_rows` from current kinematics in ``data``
+    (joint Jacobians included).
 
     Args:
         calc: evaluate the constraints first (False when :func:`residual_rows` has just
             done it with the same datas).
     """
     model = clm.model
-    constraints, welds = _closures(clm)
+    constraints, kinds = _closures(clm)
     if not constraints:
         return np.empty((0, model.nv))
     if calc:
         residual_rows(clm, data, constraint_datas)
-    pairs = zip(constraints, constraint_datas, strict=True)
-    parts = [c.jacobian(model, data, cd) for c, cd in pairs]
-    for k in welds:  # for a weld, the derivative of log6 of the relative placement
-        parts[k] = pin.Jlog6(constraint_datas[k].c1Mc2.inverse()) @ parts[k]
-    out = np.concatenate(parts)
-    return out.reshape(-1, 1) if model.nv == 1 else out  # a one-dof model gives vectors
+    parts = []
+    for c, cd, kind in zip(constraints, constraint_datas, kinds, strict=True):
+        if kind == "3d":
+            parts.append(c.jacobian(model, data, cd))
+        elif kind == "6d":  # the derivative of log6 of the relative placement
+            parts.append(pin.Jlog6(cd.c1Mc2.inverse()) @ c.jacobian(model, data, cd))
+        else:
+            parts.append(typed_jacobian(kind, model, data, c, cd))
+    out = np.concatenate([np.asarray(p).reshape(-1, model.nv) for p in parts])
+    return out
+
+
+def flipped_closures(clm: ClosedLoopModel, constraint_datas) -> list[str]:
+    """Names of the revolute and cylindrical closures whose z axes point opposite ways
+    (z_A . z_B <= 0) in the evaluated ``constraint_datas``: their rows vanish there too,
+    on a branch that is not the joint."""
+    out = []
+    for cl, cd in zip(clm.closures, constraint_datas, strict=True):
+        if cl.kind in ("revolute", "cylindrical") and cd.c1Mc2.rotation[2, 2] <= 0.0:
+            out.append(cl.name)
+    return out
 
 
 def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: str) -> np.ndarray:
@@ -102,7 +178,7 @@ def frame_jacobian_rows(clm: ClosedLoopModel, data: pin.Data, frame: str, axes: 
 
 
 def closure_residual(clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True) -> np.ndarray:
-    """Stacked closure residuals (m,) at q [m for points, log6 (m, rad) for welds]."""
+    """Stacked closure residuals (m,) at q [m; m, rad] (:func:`residual_rows`)."""
     if update:
         update_kinematics(clm, q)
     return residual_rows(clm, *clm.workspace())

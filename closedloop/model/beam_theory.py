@@ -16,8 +16,15 @@ Sections: ``circle`` (d), ``tube`` (d outer diameter, t wall), Iy = Iz = I, J = 
 ``rectangle`` (b along the section's y axis, h along z): Iy = b h^3/12, Iz = h b^3/12,
 J from Roark's approximation a c^3 (1/3 - 0.21 (c/a) (1 - c^4/(12 a^4))), a >= c the
 sides (within 0.5% of the exact series); or explicit {A, Iy, Iz, J} [m^2, m^4]. The
-section's y axis is ``y_axis`` (a vector in the link frame) made orthogonal to the beam;
-default: the link frame axis most orthogonal to the beam, made orthogonal to it.
+section's y axis is ``y_axis`` (a vector in the link frame) made orthogonal to the beam.
+Default: the link frame axis most orthogonal to the beam (the smallest |component| of the
+beam's unit vector), made orthogonal to it; when the two smallest components are within
+``ALIGN_TOLERANCE`` of each other (a beam along a link axis, such as the z of a cylinder)
+that choice is a tie that rounding would decide, so the default is refused with a
+:class:`BeamError` asking for ``y_axis``, unless the section is axisymmetric in bending
+(circle, tube, square, or explicit with Iy = Iz and equal shear coefficients), whose
+stiffness does not depend on the axes. A beam end at ``0 0 1`` and one at ``1e-17 0 1``
+thus get the same answer or the same refusal.
 
 ``section: geometry`` (URDF files only, :func:`urdf_shapes`) takes the section from the
 link's ``<collision>`` elements, or its ``<visual>`` ones when it has none: they must hold
@@ -82,6 +89,12 @@ class Section:
     kappa_z: float | None = None
     y_axis: tuple[float, float, float] | None = None
     m: float = 0.0
+
+    @property
+    def axisymmetric(self) -> bool:
+        """Whether its stiffness is the same about every axis across the beam (Iy = Iz to
+        rounding and the same shear coefficients): then the section axes do not matter."""
+        return math.isclose(self.Iy, self.Iz, rel_tol=1e-12) and self.kappa_y == self.kappa_z
 
     def kappa(self, nu: float) -> tuple[float, float]:
         """(kappa_y, kappa_z) shear coefficients (dimensionless) at Poisson ratio nu."""
@@ -258,11 +271,38 @@ def clamped_compliance(L: float, E: float, G: float, s: Section, theory: str) ->
     return C
 
 
-def beam_axes(beam: str, axis: np.ndarray, y_axis) -> np.ndarray:
+def beam_axes(beam: str, axis: np.ndarray, y_axis, *, axisymmetric: bool = False) -> np.ndarray:
     """(3, 3) rotation whose columns are the beam axes x (along ``axis``), y, z, in the
-    frame of ``axis`` (the link frame); y from ``y_axis`` or the default rule."""
+    frame of ``axis`` (the link frame); y from ``y_axis`` or the default rule (module
+    docstring).
+
+    Args:
+        beam: the beam's name, for messages.
+        axis: (3,) the beam's direction in the link frame (any length > 0) [m].
+        y_axis: (3,) the section's y axis in the link frame, or None for the default.
+        axisymmetric: the section's stiffness does not depend on its axes
+            (:attr:`Section.axisymmetric`): a tied default is then taken as it comes.
+
+    Raises:
+        BeamError: ``y_axis`` along the beam; or no ``y_axis``, a tied default and a
+            section that is not axisymmetric.
+    """
     x = axis / np.linalg.norm(axis)
-    y = np.eye(3)[np.argmin(np.abs(x))] if y_axis is None else np.asarray(y_axis, float)
+    if y_axis is None:
+        order = np.argsort(np.abs(x), kind="stable")
+        low, second = np.abs(x)[order[:2]]
+        if second - low <= ALIGN_TOLERANCE and not axisymmetric:
+            names = " and ".join("xyz"[i] for i in sorted(order[:2]))
+            raise BeamError(
+                beam,
+                f"the default section axis is ambiguous: the beam {np.round(x, 6).tolist()} "
+                f"(link frame) is as orthogonal to link axes {names} (within "
+                f"{ALIGN_TOLERANCE}) and the section is not axisymmetric; expected a "
+                "section y_axis",
+            )
+        y = np.eye(3)[order[0]]
+    else:
+        y = np.asarray(y_axis, float)
     y = y - (y @ x) * x
     if np.linalg.norm(y) < 1e-9 * np.linalg.norm(y_axis if y_axis is not None else y):
         shown = np.asarray(y_axis, float).tolist()
@@ -434,7 +474,7 @@ def beam_stiffness(
     section = section_from_spec(beam, given)
     if theory == "timoshenko" and None in section.kappa(E / (2 * G) - 1):
         raise BeamError(beam, "an explicit section needs kappa_y and kappa_z for timoshenko")
-    R_LB = beam_axes(beam, M_LE.translation, section.y_axis)
+    R_LB = beam_axes(beam, M_LE.translation, section.y_axis, axisymmetric=section.axisymmetric)
     K = _tip_stiffness(
         beam,
         lambda: transport_stiffness(

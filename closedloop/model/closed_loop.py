@@ -1,8 +1,8 @@
 """A Pinocchio model with loop closures, actuated joints and a spring specification.
 
 The kinematic tree is an ordinary :class:`pinocchio.Model`; every loop is closed by a
-Pinocchio 4 anchor constraint (:class:`pinocchio.PointAnchorConstraintModel` for a 3D
-point, :class:`pinocchio.FrameAnchorConstraintModel` for a 6D weld). Elasticity is
+typed closure between two frames (:mod:`closedloop.model.closures`: a point, a weld, a
+revolute, prismatic, cylindrical or universal joint cut open). Elasticity is
 lumped into the joint coordinates: each velocity coordinate carries a stiffness that is
 
 * ``0``      - passive (no spring, the default for every coordinate);
@@ -154,8 +154,8 @@ class ClosedLoopModel:
             (empty when every spring is per coordinate).
         linear_coordinates: (nv,) read-only bool, True for translational coordinates [m]
             (prismatic, linear part of a free flyer), False for rotations [rad].
-        linear_rows: (m,) read-only bool, True for the closure rows in metres (point
-            closures, translation of welds), False for the rotation rows of welds [rad].
+        linear_rows: (m,) read-only bool, True for the closure rows in metres, False for
+            the dimensionless [rad] ones (:data:`closedloop.model.closures.LINEAR_ROWS`).
     """
 
     def __init__(
@@ -199,7 +199,7 @@ class ClosedLoopModel:
         self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
         self.stiffness = self._stiffness_vector(springs or {}, locked)
         self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
-        rows = [i < 3 for c in self.closures for i in range(c.size)]
+        rows = [r for c in self.closures for r in c.linear_rows]
         self.linear_rows = frozen(np.array(rows, dtype=bool))
 
     # ------------------------------------------------------------------ workspaces
@@ -481,10 +481,7 @@ class ClosedLoopModel:
         ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
         model, geoms, springs, ends, masses = apply_beams(self.model, geoms, beams, anchors=ends)
         n = len(self.closures)
-        closures = [
-            Closure(type(c.constraint)(model, *ends[i], *ends[n + i]), c.name)
-            for i, c in enumerate(self.closures)
-        ]
+        closures = [c.on(model, ends[i], ends[n + i]) for i, c in enumerate(self.closures)]
         return ClosedLoopModel(
             model,
             closures,

@@ -1,6 +1,22 @@
-"""Loop closures and the names they join: a closure is a Pinocchio 4 anchor constraint
-(:class:`pinocchio.PointAnchorConstraintModel` for a 3D point,
-:class:`pinocchio.FrameAnchorConstraintModel` for a 6D weld) with a display name; frames and
+"""Loop closures and the names they join.
+
+A closure constrains the relative placement of two frames A and B on two bodies. It holds
+a Pinocchio 4 anchor constraint (:class:`pinocchio.PointAnchorConstraintModel` for a 3D
+point, :class:`pinocchio.FrameAnchorConstraintModel` otherwise: the joints and placements
+of the two frames), a display name and its type (:data:`CLOSURE_TYPES`):
+
+* ``3d``: the origins coincide (a ball joint; 3 rows [m]);
+* ``6d``: the placements coincide (a weld; 6 rows [m, rad]);
+* ``revolute``: the origins coincide and the z axes are parallel, pointing the same way
+  (5 rows: 3 [m], 2 [rad]);
+* ``prismatic``: the orientations are equal and B's origin is on A's z axis (5 rows:
+  3 [rad], 2 [m]);
+* ``cylindrical``: the z axes are parallel, pointing the same way, and B's origin is on
+  A's z axis (4 rows: 2 [rad], 2 [m]);
+* ``universal``: the origins coincide and A's z axis is perpendicular to B's (4 rows:
+  3 [m], 1 [rad]).
+
+The rows themselves are built in :mod:`closedloop.kinematics.constraints`. Frames and
 joints are looked up by name with errors that list the valid ones.
 """
 
@@ -15,26 +31,74 @@ from closedloop.exceptions import InvalidInputError, NameNotFoundError
 
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
 
-#: Closure types of the closure-file convention and their Pinocchio constraint.
-CLOSURE_TYPES = {"3d": pin.PointAnchorConstraintModel, "6d": pin.FrameAnchorConstraintModel}
+#: Closure types of the closure-file convention and their Pinocchio constraint (the
+#: carrier of the two frames' joints and placements).
+CLOSURE_TYPES = {
+    "3d": pin.PointAnchorConstraintModel,
+    "6d": pin.FrameAnchorConstraintModel,
+    "revolute": pin.FrameAnchorConstraintModel,
+    "prismatic": pin.FrameAnchorConstraintModel,
+    "cylindrical": pin.FrameAnchorConstraintModel,
+    "universal": pin.FrameAnchorConstraintModel,
+}
+
+#: Per closure type, which of its rows are in metres (True) or dimensionless [rad] (False),
+#: in the order of :func:`closedloop.kinematics.constraints.residual_rows`.
+LINEAR_ROWS = {
+    "3d": (True,) * 3,
+    "6d": (True,) * 3 + (False,) * 3,
+    "revolute": (True,) * 3 + (False,) * 2,
+    "prismatic": (False,) * 3 + (True,) * 2,
+    "cylindrical": (False,) * 2 + (True,) * 2,
+    "universal": (True,) * 3 + (False,),
+}
 
 
 @dataclass(frozen=True)
 class Closure:
-    """One loop closure: a Pinocchio anchor constraint and a display name."""
+    """One loop closure: a Pinocchio anchor constraint, a display name and its type.
+
+    Attributes:
+        constraint: the anchor constraint between frame A (side 1) and frame B (side 2).
+        name: display name.
+        kind: one of :data:`CLOSURE_TYPES`; empty: ``"3d"`` for a point anchor, ``"6d"``
+            for a frame anchor.
+    """
 
     constraint: AnchorConstraint
     name: str
+    kind: str = ""
 
-    @property
-    def kind(self) -> str:
-        """``"3d"`` (point) or ``"6d"`` (frame weld)."""
-        return "3d" if isinstance(self.constraint, pin.PointAnchorConstraintModel) else "6d"
+    def __post_init__(self):
+        point = isinstance(self.constraint, pin.PointAnchorConstraintModel)
+        if not self.kind:
+            object.__setattr__(self, "kind", "3d" if point else "6d")
+        if self.kind not in CLOSURE_TYPES:
+            raise InvalidInputError(
+                f"closure {self.name!r} of type {self.kind!r}; expected one of "
+                f"{list(CLOSURE_TYPES)}"
+            )
+        if isinstance(self.constraint, AnchorConstraint) and point != (self.kind == "3d"):
+            raise InvalidInputError(
+                f"closure {self.name!r} of type {self.kind!r} holds a "
+                f"{type(self.constraint).__name__}; expected a "
+                f"{CLOSURE_TYPES[self.kind].__name__}"
+            )
 
     @property
     def size(self) -> int:
-        """Number of residual rows (3 or 6)."""
-        return self.constraint.residualSize()
+        """Number of residual rows (3, 4, 5 or 6)."""
+        return len(LINEAR_ROWS[self.kind])
+
+    @property
+    def linear_rows(self) -> tuple[bool, ...]:
+        """Per row, True when it is in metres, False when dimensionless [rad]."""
+        return LINEAR_ROWS[self.kind]
+
+    def on(self, model: pin.Model, end1: tuple, end2: tuple) -> Closure:
+        """The same closure on ``model`` with its ends at ``end1``, ``end2`` (joint index,
+        placement in that joint's frame)."""
+        return Closure(type(self.constraint)(model, *end1, *end2), self.name, self.kind)
 
 
 def check_name(kind: str, name) -> None:
@@ -93,21 +157,90 @@ def joint_id(model: pin.Model, name: str) -> int:
 
 
 def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: str) -> Closure:
-    """Closure that makes frames ``frame_a`` and ``frame_b`` coincide.
+    """Closure of type ``kind`` between frames ``frame_a`` (A) and ``frame_b`` (B).
 
     Args:
         model: the kinematic tree.
-        frame_a, frame_b: frame names; for ``"3d"`` their origins coincide, for ``"6d"``
-            their whole placements do.
-        kind: ``"3d"`` or ``"6d"``.
+        frame_a, frame_b: frame names (module docstring: what each type makes hold).
+        kind: one of :data:`CLOSURE_TYPES`.
     """
     if kind not in CLOSURE_TYPES:
-        raise InvalidInputError(f"closure type {kind!r}; expected one of {sorted(CLOSURE_TYPES)}")
+        raise InvalidInputError(f"closure type {kind!r}; expected one of {list(CLOSURE_TYPES)}")
     fa, fb = model.frames[frame_id(model, frame_a)], model.frames[frame_id(model, frame_b)]
     constraint = CLOSURE_TYPES[kind](
         model, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement
     )
-    return Closure(constraint, f"{frame_a}<->{frame_b}")
+    return Closure(constraint, f"{frame_a}<->{frame_b}", kind)
+
+
+#: The joints that a spring at a closure cut stands for (``closure_springs``), along A's z
+#: axis: a rotation, a slide, or both; their spring values in this order.
+CUT_JOINTS = {
+    "revolute": (("rz", pin.JointModelRZ),),
+    "prismatic": (("pz", pin.JointModelPZ),),
+    "cylindrical": (("rz", pin.JointModelRZ), ("pz", pin.JointModelPZ)),
+}
+
+
+def with_sprung_cuts(
+    model: pin.Model, closures: list[Closure], stiffness: list
+) -> tuple[pin.Model, list[Closure], dict[str, float]]:
+    """The model with a spring at the cut of each closure given one.
+
+    A spring at a revolute (prismatic) cut is a sprung revolute (prismatic) joint about
+    (along) frame A's z axis, on A's body, whose child is welded (``6d``) to frame B; a
+    cylindrical cut has both, the rotation first. The joints are named after the closure
+    (``"<name>_rz"``, ``"<name>_pz"``) and are at rest where A and B coincide. The other
+    closures are carried over unchanged.
+
+    Args:
+        model: the kinematic tree (not modified).
+        closures: its closures.
+        stiffness: one entry per closure: None or 0 (no spring), a number > 0 [N m/rad or
+            N/m] for a revolute or prismatic closure, two [N m/rad, N/m] for a cylindrical
+            one.
+
+    Returns:
+        (the model with the cut joints appended, the closures on it, the springs of the
+        cut joints {joint name: stiffness}).
+
+    Raises:
+        InvalidInputError: a spring at a closure of another type, or the wrong count.
+    """
+    if len(stiffness) != len(closures):
+        raise InvalidInputError(
+            f"{len(stiffness)} closure springs given; expected one per closure "
+            f"({len(closures)}, None for none)"
+        )
+    if not any(stiffness):
+        return model, list(closures), {}
+    out_model = pin.Model(model)
+    ends, springs = [], {}
+    for c, k in zip(closures, stiffness, strict=True):
+        k1, M1 = c.constraint.joint1_id, c.constraint.joint1_placement
+        end2 = (c.constraint.joint2_id, c.constraint.joint2_placement)
+        if not k:
+            ends.append((c.name, c.kind, (k1, M1), end2))
+            continue
+        joints = CUT_JOINTS.get(c.kind)
+        values = list(k) if isinstance(k, list | tuple) else [k]
+        if joints is None or len(values) != len(joints):
+            expected = {"revolute": "1 value", "prismatic": "1 value", "cylindrical": "2 values"}
+            raise InvalidInputError(
+                f"closure {c.name!r} of type {c.kind!r} given the spring {k!r}; expected "
+                f"a spring only at a closure of type {expected}"
+            )
+        for (suffix, joint), value in zip(joints, values, strict=True):
+            name = f"{c.name}_{suffix}"
+            k1 = out_model.addJoint(k1, joint(), M1, name)
+            out_model.addJointFrame(k1)
+            M1 = pin.SE3.Identity()
+            springs[name] = float(value)
+        ends.append((c.name, "6d", (k1, M1), end2))
+    closures = [
+        Closure(CLOSURE_TYPES[kind](out_model, *e1, *e2), name, kind) for name, kind, e1, e2 in ends
+    ]
+    return out_model, closures, springs
 
 
 def joint_names(what: str, names) -> tuple[str, ...]:

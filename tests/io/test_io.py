@@ -251,7 +251,10 @@ FOURBAR_CLOSURES = (
         ("", "expected a mapping at top level, got an empty file"),
         ("closed_loops: []\n", r"unknown key\(s\) \['closed_loops'\]"),
         ("closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: ['4d']\n", "type '4d'"),
-        ("closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: []\n", "one of '3d'/'6d' per"),
+        (
+            "closed_loop: [[closedloop1_A, closedloop1_B]]\ntype: []\n",
+            "one of '3d', '6d', 'revolute', 'prismatic', 'cylindrical', 'universal' per",
+        ),
         ("closed_loop: [[a, b, c]]\ntype: ['3d']\n", r"list of \[frameA, frameB\]"),
         ("name_mot: crank\n", "name_mot must be a list of joint names"),
         (FOURBAR_CLOSURES + "springs: [crank]\n", "springs must be a mapping"),

@@ -451,7 +451,7 @@ MALFORMED = [
     (
         'name="C_joint" type="ball"',
         'name="C_joint" type="prismatic"',
-        r"loop-closing joint 'C_joint' is prismatic: such a loop cannot be closed",
+        r"joint 'C_joint' has no <axis>; expected <axis><xyz>x y z</xyz>",
     ),
     (
         '<joint name="P_joint"',
@@ -517,16 +517,33 @@ def test_a_side_file_locks_a_joint_the_sdf_gives_a_spring(tmp_path):
     assert robot.springs == {"crank": 50.0, "rocker_axial": 2e5}
 
 
-def test_loop_closing_joint_with_a_spring_is_refused(tmp_path):
-    text = fourbar_sdf("1.7", closing="revolute")
-    old = "<axis><xyz>0 1 0</xyz></axis></joint></model>"
-    assert old in text
-    text = text.replace(
-        old,
-        "<axis><xyz>0 1 0</xyz><dynamics><spring_stiffness>3</spring_stiffness></dynamics>"
-        "</axis></joint></model>",
+def test_loop_closing_pin_with_a_spring_equals_the_sprung_pin_in_the_tree(tmp_path):
+    """The slider-crank's pin C with a 300 N m/rad spring, closing the loop (a spring at the
+    cut) or in the tree (the slide closing it): the same compliance at the drawing."""
+    cut = load_model(write(tmp_path, slider_crank_sdf(False, pin_k=300.0), "c.sdf"),
+                     geometry=False)  # fmt: skip
+    tree = load_model(write(tmp_path, slider_crank_sdf(True, pin_k=300.0), "t.sdf"),
+                      geometry=False)  # fmt: skip
+    assert cut.springs["pin_rz"] == 300.0 and tree.springs["pin"] == 300.0
+    a = cl.Configuration(cut, reference_configuration(cut))
+    b = cl.Configuration(tree, reference_configuration(tree))
+    for frame in ("slider", "rod_end"):
+        assert_close_in_norm(cl.compliance(a, frame).C, cl.compliance(b, frame).C, RTOL_TWIN)
+    free = load_model(write(tmp_path, slider_crank_sdf(False), "f.sdf"), geometry=False)
+    C_free = cl.compliance(cl.Configuration(free, reference_configuration(free)), "rod_end").C
+    # the spring counts: the rod's rotation at C, 0.4% stiffer than without it
+    assert abs(C_free[4, 4] - cl.compliance(a, "rod_end").C[4, 4]) > 1e-3 * C_free[4, 4]
+
+
+def test_loop_closing_universal_joint_with_a_spring_is_refused(tmp_path):
+    text = (
+        '<sdf version="1.7"><model name="m"><link name="g"/><link name="b"/>'
+        '<joint name="hang" type="ball"><parent>g</parent><child>b</child></joint>'
+        '<joint name="u" type="universal"><parent>g</parent><child>b</child>'
+        "<axis><xyz>1 0 0</xyz><dynamics><spring_stiffness>3</spring_stiffness></dynamics>"
+        "</axis><axis2><xyz>0 1 0</xyz></axis2></joint></model></sdf>"
     )
-    with pytest.raises(ModelFileError, match=r"loop-closing joint 'C_joint' has a spring"):
+    with pytest.raises(ModelFileError, match=r"loop-closing joint 'u' is universal with a spr"):
         load_model(write(tmp_path, text), geometry=False)
 
 
@@ -806,3 +823,74 @@ def test_model_pose_and_joint_to_world(tmp_path):
     np.testing.assert_allclose(state.frame_jacobian("b")[:, 0], [0, 0, 0, 0, 0, 1], atol=1e-15)
     with pytest.raises(ModelFileError, match=r"joints \['fix'\] fix the model to the world"):
         load_model(write(tmp_path, text), free_base=True, geometry=False)
+
+
+# ------------------------------------------------ loop-closing prismatic and universal
+ROD = np.array([math.sqrt(0.3**2 - 0.1**2), 0.0, -0.1])  # from the crank's end B to C
+
+
+def slider_crank_sdf(slide_closes: bool, pin_type: str = "revolute", pin_k=None) -> str:
+    """A slider-crank drawn assembled: crank (0.1 m, along z, spring 50 N m/rad) at the
+    origin, rod (0.3 m, with a sprung axial joint) from B = (0, 0, 0.1) to the slider at
+    C on the x axis, slider on a prismatic joint along x. The slider's prismatic joint
+    closes the loop (``slide_closes``, listed last) or is a tree joint and the pin
+    (``pin_type``, with a spring ``pin_k``) at C closes it."""
+
+    def joint(name, kind, parent, child, axis=None, k=None):
+        dyn = f"<dynamics><spring_stiffness>{k}</spring_stiffness></dynamics>" if k else ""
+        ax = f"<axis><xyz>{axis}</xyz>{dyn}</axis>" if axis else ""
+        return (f'<joint name="{name}" type="{kind}"><parent>{parent}</parent>'
+                f"<child>{child}</child>{ax}</joint>")  # fmt: skip
+
+    inertial = "<inertial><mass>0.1</mass></inertial>"
+    C = f"{float(ROD[0])!r} 0 0"
+    links = [
+        f'<link name="ground"/><link name="crank_link">{inertial}</link>',
+        f'<link name="rod_link"><pose>0 0 0.1 0 0 0</pose>{inertial}</link>',
+        f'<link name="rod_end"><pose>{C} 0 0 0</pose>{inertial}</link>',
+        f'<link name="slider"><pose>{C} 0 0 0</pose>{inertial}</link>',
+    ]
+    axial = " ".join(repr(float(v)) for v in ROD / np.linalg.norm(ROD))
+    tree = [
+        joint("crank", "revolute", "ground", "crank_link", "0 1 0", 50.0),
+        joint("rod", "revolute", "crank_link", "rod_link", "0 1 0"),
+        joint("rod_axial", "prismatic", "rod_link", "rod_end", axial, 1e5),
+    ]
+    slide = joint("slide", "prismatic", "ground", "slider", "1 0 0")
+    pin_c = joint("pin", pin_type, "rod_end", "slider", "0 1 0" if pin_type != "ball" else None,
+                  pin_k)  # fmt: skip
+    order = [*tree, pin_c, slide] if slide_closes else [*tree, slide, pin_c]
+    body = "".join([*links, *order])
+    return f'<sdf version="1.6"><model name="slider_crank">{body}</model></sdf>'
+
+
+@pytest.mark.parametrize("pin_type", ["revolute", "ball"])
+def test_a_prismatic_loop_joint_equals_the_slider_in_the_tree(tmp_path, pin_type):
+    """The slider-crank closed at its slider (a prismatic closure) and closed at the pin C
+    with the slider's joint in the tree (a revolute closure, or a ball: the loop is
+    planar): the same compliance at the slider and at the rod's end."""
+    closed = load_model(write(tmp_path, slider_crank_sdf(True), "p.sdf"), geometry=False)
+    tree = load_model(write(tmp_path, slider_crank_sdf(False, pin_type), "t.sdf"),
+                      geometry=False)  # fmt: skip
+    assert [(c.name, c.kind) for c in closed.closures] == [("slide", "prismatic")]
+    assert [c.kind for c in tree.closures] == [{"ball": "3d"}.get(pin_type, pin_type)]
+    a = cl.Configuration(closed, reference_configuration(closed))
+    b = cl.Configuration(tree, reference_configuration(tree))
+    assert a.closure_error <= 1e-15 and b.closure_error <= 1e-15  # drawn assembled
+    for frame in ("slider", "rod_end"):
+        C = cl.compliance(a, frame).C
+        assert C[0, 0] > 0.0
+        assert_close_in_norm(C, cl.compliance(b, frame).C, RTOL_TWIN)
+    # statics under a push along the slide and across it
+    wrench = np.array([40.0, 0.0, 25.0, 0.0, 0.0, 0.0])
+    moved = [sdf_displacement(m, wrench) for m in (closed, tree)]
+    assert abs(moved[0][0]) > 1e-3
+    assert_close_in_norm(moved[0], moved[1], RTOL_TWIN)
+
+
+def sdf_displacement(robot, wrench) -> np.ndarray:
+    from closedloop.elastostatics.statics import frame_displacement
+
+    q = reference_configuration(robot)
+    eq = cl.solve_equilibrium(robot, q, "slider", wrench)
+    return frame_displacement(robot, eq.q, q, "slider")

@@ -845,3 +845,40 @@ def test_a_compressed_beam_loses_stability_at_the_buckling_load(tmp_path):
     below = _across_compliance(clm, q, 0.995 * ONE_ELEMENT_BUCKLING * EI / L**2)[1]
     above = _across_compliance(clm, q, 1.005 * ONE_ELEMENT_BUCKLING * EI / L**2)[1]
     assert below.stability_margin > 0.0 > above.stability_margin
+
+
+# ------------------------------------------------------------ default section axes
+def z_cantilever(tmp_path, end_xyz, section: dict):
+    """A 1 m steel beam on link 'ground' to a fixed joint at ``end_xyz`` (near the z axis)."""
+    path = urdf_of(
+        tmp_path, "zbar", ["ground", "tip"],
+        [("tip_joint", "ground", "tip", end_xyz, (0, 0, 0), "fixed", None)],
+    )  # fmt: skip
+    spec = {"end": "tip_joint", **STEEL, "section": section}
+    clm = load_model(path, beams={"ground": spec}, geometry=False)
+    return cl.compliance(clm, pin.neutral(clm.model), "tip").C
+
+
+@pytest.mark.parametrize("end", [(0, 0, 1), (1e-17, 0, 1), (1e-5, -1e-5, 1)])
+def test_a_rectangle_along_a_link_axis_asks_for_its_y_axis(tmp_path, end):
+    """Along z, x and y tie as 'most orthogonal': rounding (1e-17) used to pick one of them,
+    swapping Iy and Iz (a factor 9 for 10 x 30 mm); now the same refusal either way."""
+    with pytest.raises(BeamError, match=r"ambiguous.*link axes x and y.*expected a section y_axis"):
+        z_cantilever(tmp_path, end, {"shape": "rectangle", "b": 0.01, "h": 0.03})
+
+
+@pytest.mark.parametrize("end", [(0, 0, 1), (1e-17, 0, 1)])
+def test_a_given_y_axis_or_an_axisymmetric_section_needs_no_default(tmp_path, end):
+    b, h, L, E = 0.01, 0.03, 1.0, STEEL["E"]
+    C = z_cantilever(tmp_path, end, {"shape": "rectangle", "b": b, "h": h, "y_axis": [1, 0, 0]})
+    # beam axes: x = link z, y = link x (b along it), z = link y: a force along link x
+    # bends about the section's z axis, Iz = h b^3 / 12
+    np.testing.assert_allclose(C[0, 0], L**3 / (3 * E * h * b**3 / 12), rtol=1e-9)
+    np.testing.assert_allclose(C[1, 1], L**3 / (3 * E * b * h**3 / 12), rtol=1e-9)
+    d = 0.02
+    I = math.pi * d**4 / 64
+    for shape in ({"shape": "circle", "d": d}, {"shape": "tube", "d": d, "t": 0.002},
+                  {"shape": "rectangle", "b": d, "h": d}):  # fmt: skip
+        C = z_cantilever(tmp_path, end, shape)  # no refusal: the axes do not matter
+        if shape["shape"] == "circle":
+            np.testing.assert_allclose(C[0, 0], L**3 / (3 * E * I), rtol=1e-9)

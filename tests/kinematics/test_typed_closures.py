@@ -1,0 +1,377 @@
+"""Typed loop closures (revolute, prismatic, cylindrical, universal), each against an
+independent description: its rows' Jacobian against finite differences, a four-bar cut at
+a revolute closure against the same four-bar written with two point closures and with
+the cut joint kept in the tree (the loop welded elsewhere)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from helpers import assert_close_in_norm, tangent_differences
+
+import closedloop as cl
+from closedloop.io.loader import load_model
+from closedloop.kinematics.constraints import closure_jacobian, closure_residual
+from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closures import CLOSURE_TYPES, Closure
+
+#: Central differences with step 1e-6: truncation ~1e-12, rounding ~1e-10 of the rows.
+RTOL_DIFFERENCES = 1e-7
+#: Two descriptions of one mechanism, each solved to rounding (assembly to 1e-12 L, the
+#: compliance by factorisations of condition ~1e6 at most).
+RTOL_SAME = 1e-8
+
+TYPED = ("revolute", "prismatic", "cylindrical", "universal")
+ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4}
+
+
+def _sample(kind: str, seed: int) -> tuple[ClosedLoopModel, np.ndarray]:
+    """Pinocchio's 6R sample manipulator with a ``kind`` closure between random frames on
+    joints 2 and 6, at a random configuration (not closed: the rows away from zero)."""
+    rng = np.random.default_rng(seed)
+    model = pin.buildSampleModelManipulator()
+    M1 = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2)
+    M2 = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2)
+    c = Closure(CLOSURE_TYPES[kind](model, 2, M1, 6, M2), f"{kind} cut", kind)
+    clm = ClosedLoopModel(model, [c], [])
+    return clm, rng.uniform(-2.0, 2.0, model.nq)
+
+
+@pytest.mark.parametrize("kind", TYPED)
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_rows_jacobian_is_their_derivative(kind, seed):
+    clm, q = _sample(kind, seed)
+    J = closure_jacobian(clm, q)
+    assert J.shape == (ROWS[kind], clm.model.nv) and clm.n_constraints == ROWS[kind]
+    expected = tangent_differences(clm.model, lambda x: closure_residual(clm, x).copy(), q)
+    assert_close_in_norm(J, expected, RTOL_DIFFERENCES)
+
+
+@pytest.mark.parametrize("kind", TYPED)
+def test_each_type_vanishes_on_what_it_constrains_and_only_there(kind):
+    """Rows of B placed against A by hand: zero exactly on the allowed relative motions."""
+    from closedloop.kinematics.constraints import typed_residual
+
+    along_z, turn_z = (
+        pin.SE3(np.eye(3), np.array([0, 0, 0.3])),
+        pin.SE3(pin.exp3(np.array([0, 0, 0.7])), np.zeros(3)),
+    )
+    tilt = pin.SE3(pin.exp3(np.array([0.7, 0, 0])), np.zeros(3))  # z_B turned off z_A
+    side = pin.SE3(np.eye(3), np.array([0.3, 0, 0]))
+    allowed = {
+        "revolute": [turn_z],
+        "prismatic": [along_z],
+        "cylindrical": [turn_z, along_z, turn_z * along_z],
+        "universal": [pin.SE3(pin.exp3(np.array([math.pi / 2, 0, 0])), np.zeros(3))],
+    }[kind]
+    refused = {
+        "revolute": [along_z, tilt, side],
+        "prismatic": [turn_z, tilt, side],
+        "cylindrical": [tilt, side],
+        "universal": [pin.SE3.Identity(), side],
+    }[kind]
+    for M in allowed:
+        np.testing.assert_allclose(typed_residual(kind, M), 0.0, atol=1e-15)
+    for M in refused:
+        assert np.max(np.abs(typed_residual(kind, M))) > 0.1
+
+
+# --------------------------------------------------------- a four-bar cut at its pin C
+HALF_PI = math.pi / 2
+SPRINGS = {"crank": 50.0, "crank_axial": 1e5, "crank_tilt": 20.0, "coupler_twist": 30.0,
+           "rocker_tilt": 25.0, "crank_yaw": 15.0, "rocker_yaw": 18.0}  # fmt: skip
+#: The four-bar of urdf/fourbar.urdf (ground pivots A = 0, D = (0.3, 0, 0), crank 0.1 m,
+#: rocker 0.15 m) made spatial: sprung tilts of the crank and rocker about x and a twist of
+#: the coupler, sprung turns of both about z, so that the pin at C holds moments, not
+#: only forces, and P moves out of the plane.
+SHARED = [
+    ("crank", "ground", "crank_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("crank_axial", "crank_link", "crank_end", (0, 0, 0.1), (0, 0, 0), "prismatic", (0, 0, 1)),
+    ("crank_yaw", "crank_end", "yaw_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
+    ("crank_tilt", "yaw_link", "tilt_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+    ("coupler", "tilt_link", "coupler_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("coupler_twist", "coupler_link", "coupler_body", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+    ("P_joint", "coupler_body", "P", (0.15, 0, 0.08), (0, 0, 0), "fixed", None),
+    ("rocker", "ground", "rocker_base", (0.3, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
+    ("rocker_yaw", "rocker_base", "rocker_turn", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
+    ("rocker_tilt", "rocker_turn", "rocker_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+]
+C_COUPLER, C_ROCKER = (0.3, 0, 0.05), (0, 0, 0.15)  # the pin C on either side, z along -y
+DESCRIPTIONS = {
+    "revolute closure": (
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
+        [["cA", "cB"]], ["revolute"],
+    ),
+    "two point closures": (
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (0, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, 0, 0), "fixed", None),
+         ("cA2_joint", "coupler_body", "cA2", (0.3, 0.02, 0.05), (0, 0, 0), "fixed", None),
+         ("cB2_joint", "rocker_link", "cB2", (0, 0.02, 0.15), (0, 0, 0), "fixed", None)],
+        [["cA", "cB"], ["cA2", "cB2"]], ["3d", "3d"],
+    ),
+    "pin in the tree, rocker welded": (  # the rocker cut in two at its middle
+        [("pin_C", "coupler_body", "rocker_top", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
+    "universal closure": (  # the pin C replaced by a universal joint: axes y, then x
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, HALF_PI, 0), "fixed", None)],
+        [["cA", "cB"]], ["universal"],
+    ),
+    "universal in the tree, rocker welded": (
+        [("u1", "coupler_body", "u_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("u2", "u_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
+    "cylindrical closure": (  # the pin C replaced by a cylindrical joint along y
+        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
+         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
+        [["cA", "cB"]], ["cylindrical"],
+    ),
+    "cylindrical in the tree, rocker welded": (
+        [("c1", "coupler_body", "c_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
+         ("c2", "c_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, 1, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+        [["wA", "wB"]], ["6d"],
+    ),
+}  # fmt: skip
+
+
+def _urdf(joints) -> str:
+    links = {"ground"} | {j[2] for j in joints}
+    inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
+    body = ['<robot name="spatial_fourbar">']
+    heavy = {j[2] for j in SHARED if j[5] != "fixed"}  # the frames and cut halves weigh 0
+    body += [f'<link name="{n}">{inertial if n in heavy else ""}</link>' for n in sorted(links)]
+    for name, parent, child, xyz, rpy, kind, axis in joints:
+        body.append(
+            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/><origin xyz="{" ".join(map(str, xyz))}" '
+            f'rpy="{" ".join(map(str, rpy))}"/>'
+            + (f'<axis xyz="{" ".join(map(str, axis))}"/>' if axis else "")
+            + ('<limit lower="-3" upper="3" effort="1" velocity="1"/>' if kind != "fixed" else "")
+            + "</joint>"
+        )
+    return "\n".join([*body, "</robot>"])
+
+
+def fourbar_as(
+    tmp_path, description: str, *, flip: bool = False, closure_springs=None, springs=None
+) -> ClosedLoopModel:
+    """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
+    B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
+    (the file's list), ``springs`` (added to :data:`SPRINGS`)."""
+    extra, pairs, types = DESCRIPTIONS[description]
+    if flip:
+        extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
+    stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
+    stem += "_sprung" if closure_springs or springs else ""
+    (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
+    quoted = ", ".join(f"'{t}'" for t in types)
+    text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
+    text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
+    if closure_springs is not None:
+        text += f"closure_springs: {[None if k is None else k for k in closure_springs]}\n"
+    (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
+    return load_model(tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml", geometry=False)
+
+
+SHARED_JOINTS = tuple(j[0] for j in SHARED if j[5] != "fixed")
+
+
+def _shared(clm: ClosedLoopModel, q: np.ndarray) -> np.ndarray:
+    """The values of the joints every description has, in one order."""
+    return np.array([q[clm.model.joints[clm.model.getJointId(n)].idx_q] for n in SHARED_JOINTS])
+
+
+@pytest.fixture(scope="module")
+def fourbars(tmp_path_factory):
+    """{description: (model, q assembled at crank = 0.4 rad)}."""
+    tmp = tmp_path_factory.mktemp("fourbars")
+    out = {}
+    for d in DESCRIPTIONS:
+        clm = fourbar_as(tmp, d)
+        out[d] = clm, np.array(cl.assemble(clm, [0.4]).q)
+    return out
+
+
+def test_a_revolute_closure_assembles_as_the_other_descriptions(fourbars):
+    clm, q = fourbars["revolute closure"]
+    assert [c.kind for c in clm.closures] == ["revolute"] and clm.n_constraints == 5
+    for d in ("two point closures", "pin in the tree, rocker welded"):
+        np.testing.assert_allclose(_shared(clm, q), _shared(*fourbars[d]), atol=1e-10)
+
+
+@pytest.mark.parametrize("other", ["two point closures", "pin in the tree, rocker welded"])
+def test_a_revolute_closure_has_the_compliance_of_the_other_descriptions(fourbars, other):
+    clm, q = fourbars["revolute closure"]
+    C = cl.compliance(clm, q, "P").C
+    assert np.linalg.matrix_rank(C, tol=1e-9 * np.abs(C).max()) >= 2  # not a trivial answer
+    expected = cl.compliance(*fourbars[other], "P").C
+    assert_close_in_norm(C, expected, RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+    Q = np.array([q, cl.assemble(clm, [0.2], q).q])
+    Q_other = np.array([fourbars[other][1], cl.assemble(fourbars[other][0], [0.2]).q])
+    batch, batch_other = (
+        cl.compliances(clm, Q, "P").C,
+        cl.compliances(fourbars[other][0], Q_other, "P").C,
+    )
+    assert_close_in_norm(batch[0], C, RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+    assert_close_in_norm(batch[1], batch_other[1], RTOL_SAME, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+
+
+@pytest.mark.parametrize("gravity", [None, (0.0, 0.0, -9.81)])
+def test_a_revolute_closure_has_the_statics_of_the_pin_in_the_tree(fourbars, gravity):
+    """Nonlinear equilibrium under a load with moments (and the links' weight), and the
+    preloaded compliance there (the closure rows' curvature, weighted by their forces)."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved, preloaded = {}, {}
+    for d in ("revolute closure", "pin in the tree, rocker welded"):
+        clm, q = fourbars[d]
+        eq = cl.solve_equilibrium(clm, q, "P", wrench, gravity=gravity)
+        moved[d] = frame_displacement(clm, eq.q, q, "P")
+        preloaded[d] = cl.preloaded_compliance(clm, eq).C
+    assert np.abs(moved["revolute closure"][:3]).min() > 5e-6  # in and out of the plane
+    assert_close_in_norm(moved["revolute closure"], moved["pin in the tree, rocker welded"],
+                         RTOL_SAME)  # fmt: skip
+    C, C_tree = preloaded["revolute closure"], preloaded["pin in the tree, rocker welded"]
+    unloaded = cl.compliance(*fourbars["revolute closure"], "P").C
+    assert np.abs(C - unloaded).max() > 1e-4 * np.abs(unloaded).max()  # the preload counts
+    # the curvature of either closure by central differences: ~1e-10 relative (tangent.py)
+    assert_close_in_norm(C, C_tree, 1e-6, scale=[1, 1, 1, 0.1, 0.1, 0.1])
+
+
+def test_a_revolute_closure_closed_with_its_z_axes_opposite_is_refused(tmp_path):
+    """Its rows vanish with z_B = -z_A too: the assembly tells that branch apart."""
+    clm = fourbar_as(tmp_path, "revolute closure", flip=True)
+    with pytest.raises(cl.AssemblyError, match=r"z axes of closures \['cA<->cB'\] pointing"):
+        cl.assemble(clm, [0.4])
+
+
+@pytest.mark.parametrize(
+    ("closure", "tree"),
+    [("universal closure", "universal in the tree, rocker welded"),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded")],
+)  # fmt: skip
+def test_a_universal_or_cylindrical_closure_equals_its_joint_in_the_tree(fourbars, closure, tree):
+    """The pin C of the spatial four-bar replaced by a universal or a cylindrical joint,
+    written as a closure or kept in the tree as two joints (the loop welded in the
+    rocker): the same assembly, compliance (single and batch) and nonlinear statics."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    (clm, q), (twin, q_twin) = fourbars[closure], fourbars[tree]
+    assert clm.n_constraints == 4
+    np.testing.assert_allclose(_shared(clm, q), _shared(twin, q_twin), atol=1e-10)
+    scale = [1, 1, 1, 0.1, 0.1, 0.1]
+    C = cl.compliance(clm, q, "P").C
+    assert np.linalg.matrix_rank(C, tol=1e-9 * np.abs(C).max()) >= 3
+    assert_close_in_norm(C, cl.compliance(twin, q_twin, "P").C, RTOL_SAME, scale=scale)
+    batch = cl.compliances(clm, np.array([q, cl.assemble(clm, [0.2], q).q]), "P").C
+    batch_twin = cl.compliances(twin, np.array([q_twin, cl.assemble(twin, [0.2], q_twin).q]), "P")
+    assert_close_in_norm(batch[1], batch_twin.C[1], RTOL_SAME, scale=scale)
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved = []
+    for m, x in ((clm, q), (twin, q_twin)):
+        eq = cl.solve_equilibrium(m, x, "P", wrench, gravity=(0.0, 0.0, -9.81))
+        moved.append((frame_displacement(m, eq.q, x, "P"), cl.preloaded_compliance(m, eq).C))
+    assert np.abs(moved[0][0][:3]).min() > 5e-6
+    assert_close_in_norm(moved[0][0], moved[1][0], RTOL_SAME)
+    assert_close_in_norm(moved[0][1], moved[1][1], 1e-6, scale=scale)
+
+
+def test_a_revolute_closure_is_driven_as_the_pin_in_the_tree(fourbars):
+    """assemble_connected: the crank driven from the drawing in steps, on one branch."""
+    from closedloop.kinematics.driving import assemble_connected
+
+    (clm, _), (twin, _) = fourbars["revolute closure"], fourbars["pin in the tree, rocker welded"]
+    q = assemble_connected(clm, np.array([1.2])).q
+    np.testing.assert_allclose(_shared(clm, q), _shared(twin, assemble_connected(twin, [1.2]).q),
+                               atol=1e-10)  # fmt: skip
+    assert _shared(clm, q)[0] == pytest.approx(1.2)
+
+
+def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError, ModelFileError
+
+    model = pin.buildSampleModelManipulator()
+    point = pin.PointAnchorConstraintModel(model, 2, pin.SE3.Identity(), 6, pin.SE3.Identity())
+    frame = pin.FrameAnchorConstraintModel(model, 2, pin.SE3.Identity(), 6, pin.SE3.Identity())
+    with pytest.raises(InvalidInputError, match=r"type 'revolute' holds a PointAnchorConstraint"):
+        Closure(point, "c", "revolute")
+    with pytest.raises(InvalidInputError, match=r"type 'hinge'; expected one of \['3d', '6d', "):
+        Closure(frame, "c", "hinge")
+    assert (Closure(point, "c").kind, Closure(frame, "c").kind) == ("3d", "6d")
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    closures.write_text("closed_loop: [[cA, cB]]\ntype: ['hinge']\nname_mot: [crank]\n")
+    with pytest.raises(ModelFileError, match=r"type 'hinge'; expected one of \['3d', '6d', 're"):
+        load_model(urdf, closures, geometry=False)
+
+
+# ------------------------------------------------------------- springs at a loop cut
+@pytest.mark.parametrize(
+    ("closure", "tree", "springs", "tree_springs"),
+    [("revolute closure", "pin in the tree, rocker welded", 7.0, {"pin_C": 7.0}),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded", [7.0, 900.0],
+      {"c1": 7.0, "c2": 900.0})],
+)  # fmt: skip
+def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
+    tmp_path, closure, tree, springs, tree_springs
+):
+    """closure_springs: a torsion (and axial) spring at the cut C, against the same springs
+    on the joints kept in the tree; at the drawing, where every spring is at rest (a
+    sprung joint at C holds the crank where it is drawn)."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    clm = fourbar_as(tmp_path, closure, closure_springs=[springs])
+    cut = [n for n in clm.model.names if n.startswith("cA<->cB_")]
+    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_rz", "cA<->cB_pz"])
+    assert [c.kind for c in clm.closures] == ["6d"]
+    twin = fourbar_as(tmp_path, tree, springs=tree_springs)
+    q, q_twin = pin.neutral(clm.model), pin.neutral(twin.model)
+    C = cl.compliance(clm, q, "P").C
+    assert_close_in_norm(C, cl.compliance(twin, q_twin, "P").C, RTOL_SAME,
+                         scale=[1, 1, 1, 0.1, 0.1, 0.1])  # fmt: skip
+    # the spring counts: without it the rotation at the cut is free
+    free = cl.compliance(fourbar_as(tmp_path, closure), q[: clm.model.nq - len(cut)], "P").C
+    assert abs(free[0, 0] - C[0, 0]) > 0.01 * C[0, 0]  # along x at P: 6% for the rotation
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved = [frame_displacement(m, cl.solve_equilibrium(m, x, "P", wrench).q, x, "P")
+             for m, x in ((clm, q), (twin, q_twin))]  # fmt: skip
+    assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
+
+
+def test_a_spring_at_a_point_closure_is_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match=r"closure 'cA<->cB' of type '3d' given the "):
+        fourbar_as(tmp_path, "two point closures", closure_springs=[5.0, None])
+
+
+def test_closure_springs_must_list_one_entry_per_pair(tmp_path):
+    from closedloop.exceptions import ModelFileError
+
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    for springs, message in (
+        ("[1.0, 2.0]", r"closure_springs must list one stiffness \(or null"),
+        ("[-1.0]", r"closure_springs\[0\]' is -1.0; expected a number >= 0"),
+    ):
+        closures.write_text(
+            f"closed_loop: [[cA, cB]]\ntype: [revolute]\nclosure_springs: {springs}\n"
+        )
+        with pytest.raises(ModelFileError, match=message):
+            load_model(urdf, closures, geometry=False)
