@@ -191,9 +191,7 @@ def test_index_page_loads_without_errors(site, server, tmp_path):
 
 def test_api_page_of_compliance_loads_and_documents_it(site, server, tmp_path):
     text = (site / "api" / "queries.html").read_text()
-    assert (
-        'id="closedloop.compliance"' in text and 'id="closedloop.compliances"' in text
-    )
+    assert 'id="closedloop.compliance"' in text and 'id="closedloop.compliances"' in text
     url = server + "api/queries.html"
     check_page(visit(url, tmp_path), url)
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from closedloop.elastostatics.equations import EquilibriumEquations
 from closedloop.elastostatics.newton import distance
-from closedloop.elastostatics.tangent import EquilibriumEquations
 from closedloop.exceptions import EquilibriumError
 
 #: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences

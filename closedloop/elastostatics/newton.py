@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from closedloop.elastostatics.tangent import EquilibriumEquations
+from closedloop.elastostatics.equations import EquilibriumEquations
 
 #: Relative tolerance on the unbalanced generalised force (see :func:`solve_equilibrium`).
 FORCE_RTOL = 1e-11

@@ -20,7 +20,7 @@ frame Jacobian (world-aligned axes, at the frame origin), c (m,) the closure res
 of each weld: the iterates do not depend on the order in which a pair is written), J_c their
 Jacobian and lambda (m,) the multipliers. Each Newton step splits the free coordinates by
 an SVD of J_c, unit-free (lengths in units of the mechanism's size L in its rows and
-coordinates, :class:`closedloop.elastostatics.tangent.SolverUnits`), into its row space (a
+coordinates, :class:`closedloop.elastostatics.equations.SolverUnits`), into its row space (a
 minimum-norm Gauss-Newton step that restores the closures; redundant closure rows only lower the
 rank) and its null space N (a Newton step on N^T F with the tangent stiffness of
 :func:`closedloop.elastostatics.tangent.tangent_stiffness`). The multipliers are the least-squares
@@ -67,10 +67,10 @@ from closedloop.elastostatics.continuation import (
     fold_distance,
     jump,
 )
+from closedloop.elastostatics.equations import EquilibriumEquations
 from closedloop.elastostatics.equilibrium import Equilibrium, frame_displacement
 from closedloop.elastostatics.newton import distance, newton
 from closedloop.elastostatics.springs import check_spread, spring_factor
-from closedloop.elastostatics.tangent import EquilibriumEquations
 from closedloop.exceptions import (
     AssemblyError,
     InvalidInputError,
@@ -98,7 +98,7 @@ MAX_LOAD_STEPS = 1000
 
 #: Width of the bracket in which a limit load (fold) is located, relative to its load.
 #: Along the branch the signed smallest singular value tau of the spring-scaled tangent
-#: stiffness (:meth:`closedloop.elastostatics.tangent.EquilibriumEquations.stability`) falls like
+#: stiffness (:meth:`closedloop.elastostatics.equations.EquilibriumEquations.stability`) falls like
 # the  square root of the load still to go; tau^2 extrapolated from the last equilibria gives
 #: the distance to the singularity, which the increments approach by halves. Within
 #: FOLD_RTOL / 4 of the load of the last equilibrium, t, an increment of FOLD_RTOL t steps
@@ -373,8 +373,8 @@ def _check_spread(clm: ClosedLoopModel) -> None:
     spread / L^2, loads of 1e-6 N: up to 1e-3 of their deflection at 1e20, 0.2 at 1e22,
     1 to 4 at 1e24, while the loaded frame's motion keeps 1e-7). Without closures the
     basis is the identity on the free coordinates and each spring is solved for through
-    its own square root (:meth:`closedloop.elastostatics.tangent.EquilibriumEquations.step`), at any
-    spread.
+    its own square root
+    (:meth:`closedloop.elastostatics.equations.EquilibriumEquations.step`), at any spread.
     """
     if clm.closures:
         check_spread(clm, clm.length, "the statics of a mechanism with closures")

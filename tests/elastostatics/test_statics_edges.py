@@ -14,9 +14,9 @@ import pinocchio as pin
 import pytest
 
 import closedloop as cl
+from closedloop.elastostatics.equations import EquilibriumEquations
 from closedloop.elastostatics.preload import require_stable
 from closedloop.elastostatics.statics import solve_equilibrium
-from closedloop.elastostatics.tangent import EquilibriumEquations
 from closedloop.exceptions import EquilibriumError, InvalidInputError
 from closedloop.model.gravity import GravityLoad
 
