@@ -58,7 +58,7 @@ import pinocchio as pin
 
 from closedloop.common.arrays import frozen, readonly
 from closedloop.common.conditioning import RANK_RTOL, twist_scaling
-from closedloop.elastostatics.springs import scaling
+from closedloop.elastostatics.partition import scaling
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, ModesError
 from closedloop.kinematics.configuration import Configuration, as_configuration
 from closedloop.kinematics.constraints import nullspace

@@ -31,7 +31,7 @@ import pinocchio as pin
 from closedloop.common.arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverses
 from closedloop.common.conditioning import RANK_RTOL, check_length
 from closedloop.elastostatics.compliance import compliance
-from closedloop.elastostatics.springs import PARTITION_RCOND, PARTITION_RTOL, model_scaling
+from closedloop.elastostatics.partition import PARTITION_RCOND, PARTITION_RTOL, model_scaling
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, OutsideLimitsError
 from closedloop.kinematics.configuration import (
     CLOSURE_TOL,
@@ -283,7 +283,7 @@ def _stack(clm: ClosedLoopModel, Q: np.ndarray, frame: str, axes: str, L: float,
     sc = model_scaling(clm, L)
     p, s = sc.passive.size, sc.sprung.size
     if not n or not nv or not s or sc.loop_blocks is not None or (m < p if p else m):
-        return C, G, np.full(n, -1), np.full(n, np.nan)  # no fast path (springs.partition)
+        return C, G, np.full(n, -1), np.full(n, np.nan)  # no fast path (partition.partition)
     r, Jc, J = _kinematics(clm, Q, fid, reference, closure)
     ok = MARGIN * np.max(abs(r) * sc.row_scale[:, 0], axis=1, initial=0.0) <= CLOSURE_TOL
     if m:  # the residual resolved to its tolerance (Configuration.require_closed)
@@ -318,9 +318,9 @@ def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc, cond_T: np.ndarray):
     (n,) the condition number cond(K_s) over the rank, as that function's.
 
     The rule reads the kinematic factor on an orthonormal basis of the admissible motions
-    (:func:`closedloop.elastostatics.springs.kinematic_factor`); the factors here are on T = [I; X],
-    whose condition numbers, at most ``cond_T`` (n,) (sqrt(1 + |X|_F^2), 1 for a serial robot),
-    widen the thresholds: a decision taken here is the rule's.
+    (:func:`closedloop.elastostatics.partition.kinematic_factor`); the factors here are on
+    T = [I; X], whose condition numbers, at most ``cond_T`` (n,) (sqrt(1 + |X|_F^2), 1 for a
+    serial robot), widen the thresholds: a decision taken here is the rule's.
 
     Most configurations are clearly full rank: the eigenvalues of C_s = B_s B_s^T (n, 6, 6)
     (formed, a third of the cost of the SVDs) tell them within :data:`GRAM_MARGIN`; the

@@ -43,13 +43,8 @@ from closedloop.common.conditioning import (
     spectrum_from_factor,
     twist_scaling,
 )
-from closedloop.elastostatics.springs import (
-    SpringFactor,
-    kinematic_factor,
-    partition,
-    scaling,
-    spring_factor,
-)
+from closedloop.elastostatics.partition import kinematic_factor, partition, scaling
+from closedloop.elastostatics.springs import SpringFactor, spring_factor
 from closedloop.exceptions import (
     InvalidInputError,
     RigidDirectionsError,
@@ -232,12 +227,13 @@ def _fast_compliance(
 
     In the scaled spring coordinates y = dq_s / s_q the joints move by dq = T y, with
     T = diag(s_q) on the sprung coordinates and s_p X on the passive ones
-    (:func:`closedloop.elastostatics.springs.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k),
+    (:func:`closedloop.elastostatics.partition.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k),
     or V diag(1/sigma) with spring blocks). With P = T W (nv, s): C = B B^T, B = J P (6, s),
     and G = P B^T, the same factor as the null-space path's (module docstring) on the same
     spectrum rule. The rank rule reads J on an orthonormal basis of the admissible
     motions, as the null-space path's J N V does: B diag(sigma) = J T V when T selects
-    the sprung coordinates (serial), else :func:`closedloop.elastostatics.springs.kinematic_factor`
+    the sprung coordinates (serial), else
+    :func:`closedloop.elastostatics.partition.kinematic_factor`
     (the singular values of J T V differ from those by up to cond(T), which would move
     the rank decision of a pose near the threshold; the spread of the full-rank test
     widens by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).

@@ -23,8 +23,9 @@ import pytest
 from helpers import UR5_JOINTS
 
 import closedloop as cl
-import closedloop.elastostatics.springs as springs
+import closedloop.elastostatics.partition as partition
 from closedloop.common.conditioning import ILL_CONDITIONED, twist_scaling
+from closedloop.elastostatics.springs import SPREAD_RESOLVED
 from closedloop.exceptions import SingularConfigurationError
 from closedloop.kinematics.configuration import Configuration
 from closedloop.kinematics.constraints import closure_residual
@@ -149,7 +150,7 @@ def test_threads_on_one_model_give_the_serial_results_bit_for_bit(name):
     clm, poses = POSES[name](2 * N_THREADS)
     frame = FRAMES[name]
     if name == "chain":
-        assert springs.scaling(Configuration(clm, poses[0])).loop_blocks is not None
+        assert partition.scaling(Configuration(clm, poses[0])).loop_blocks is not None
     serial = [cl.compliance(clm, q, frame) for q in poses]
     assert len({round(r.C[0, 0], 12) for r in serial}) == len(poses)  # different poses
     threaded = _threaded(lambda q: cl.compliance(clm, q, frame), poses)
@@ -379,11 +380,11 @@ def test_chain_with_one_loop_towards_its_change_point(monkeypatch):
         a = angles.copy()
         a[3] = t
         dense_clm, q, frame = mech.fourbar_chain(a)
-        assert springs.scaling(Configuration(dense_clm, q)).loop_blocks is None
+        assert partition.scaling(Configuration(dense_clm, q)).loop_blocks is None
         with monkeypatch.context() as mp:
-            mp.setattr(springs, "BLOCK_PASSIVE", 1)
+            mp.setattr(partition, "BLOCK_PASSIVE", 1)
             block_clm, _, _ = mech.fourbar_chain(a)
-            assert springs.scaling(Configuration(block_clm, q)).loop_blocks is not None
+            assert partition.scaling(Configuration(block_clm, q)).loop_blocks is not None
         blocks, err_blocks = _outcome(block_clm, q, frame)
         dense, general = _same_decisions(dense_clm, q, frame)
         if dense is None:
@@ -424,7 +425,7 @@ def test_near_singular_deflections_keep_the_loops_closed(where, monkeypatch):
     from cahyman_pin.model import cahyman_model
 
     if where != "cahyman":  # a new model per step: the cached CaHyMan keeps its scaling
-        monkeypatch.setattr(springs, "BLOCK_PASSIVE", 1)
+        monkeypatch.setattr(partition, "BLOCK_PASSIVE", 1)
     for t in GEOMETRIC[:5]:  # both give a MechanismError from about 1e-6 on
         if where == "cahyman":
             m = cahyman_model()
@@ -434,7 +435,7 @@ def test_near_singular_deflections_keep_the_loops_closed(where, monkeypatch):
         else:
             a = np.array([0.8, -0.7, 0.9, t, -0.6, 0.7, -0.8, 0.6])
             clm, q, frame = mech.fourbar_chain(a)
-            assert springs.scaling(Configuration(clm, q)).loop_blocks is not None
+            assert partition.scaling(Configuration(clm, q)).loop_blocks is not None
         res = cl.compliance(clm, q, frame)
         assert res.path in ("partitioned", "null-space")
         for column in res.G.T:
@@ -575,7 +576,7 @@ def test_springs_far_apart_are_springs_on_both_paths(low, high):
     C_ref = (J / k) @ J.T
     J_inv = np.linalg.inv(J)
     K_ref = J_inv.T @ (k[:, None] * J_inv)
-    resolved = high / low <= springs.SPREAD_RESOLVED
+    resolved = high / low <= SPREAD_RESOLVED
     for path in ("auto", "null-space") if resolved else ("auto",):
         res = cl.compliance(clm, q, frame, path=path)
         _assert_finite(res)

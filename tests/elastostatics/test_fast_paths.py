@@ -16,7 +16,7 @@ from mechanisms import PATH_CASES as CASES
 from mechanisms import serial_with_block
 
 import closedloop as cl
-from closedloop.elastostatics.springs import partition, scaling
+from closedloop.elastostatics.partition import partition, scaling
 from closedloop.kinematics.configuration import Configuration
 from closedloop.kinematics.constraints import closure_residual
 
@@ -146,14 +146,14 @@ def test_closure_error_of_metre_rows_is_the_scaled_residual_norm():
 @pytest.mark.parametrize("name", sorted(n for n, (_, path) in CASES.items() if path != "serial"))
 def test_loop_by_loop_solve_equals_the_dense_one(name, monkeypatch):
     """The block path (for many passive joints) forced on every test mechanism with loops."""
-    import closedloop.elastostatics.springs as springs
+    import closedloop.elastostatics.partition as partition
 
     build, expected_path = CASES[name]
     dense = cl.compliance(*build())
-    monkeypatch.setattr(springs, "BLOCK_PASSIVE", 1)
+    monkeypatch.setattr(partition, "BLOCK_PASSIVE", 1)
     clm, q, frame = build()
     clm = clm.with_springs(clm.springs, clm.locked)  # a new model, scaled with the blocks
-    assert springs.scaling(Configuration(clm, q)).loop_blocks is not None
+    assert partition.scaling(Configuration(clm, q)).loop_blocks is not None
     blocks = cl.compliance(clm, q, frame)
     assert blocks.path == dense.path == expected_path
     general = cl.compliance(clm, q, frame, path="null-space")
@@ -204,7 +204,7 @@ def test_closure_jacobian_vanishes_on_common_ancestors():
 
 def test_chain_of_loops_by_blocks_equals_the_null_space_path():
     clm, q = _fourbar_chain(30)  # 60 passive coordinates: the block path
-    from closedloop.elastostatics.springs import BLOCK_PASSIVE, scaling
+    from closedloop.elastostatics.partition import BLOCK_PASSIVE, scaling
 
     state = Configuration(clm, q)
     assert int(np.sum(clm.stiffness == 0)) >= BLOCK_PASSIVE
