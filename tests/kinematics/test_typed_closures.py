@@ -81,6 +81,7 @@ def test_each_type_vanishes_on_what_it_constrains_and_only_there(kind):
 
 # --------------------------------------------------------- a four-bar cut at its pin C
 HALF_PI = math.pi / 2
+INF = math.inf
 SPRINGS = {"crank": 50.0, "crank_axial": 1e5, "crank_tilt": 20.0, "coupler_twist": 30.0,
            "rocker_tilt": 25.0, "crank_yaw": 15.0, "rocker_yaw": 18.0}  # fmt: skip
 #: The four-bar of urdf/fourbar.urdf (ground pivots A = 0, D = (0.3, 0, 0), crank 0.1 m,
@@ -170,7 +171,7 @@ def fourbar_as(
 ) -> ClosedLoopModel:
     """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
     B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
-    (the file's list), ``springs`` (added to :data:`SPRINGS`)."""
+    (the file's mapping), ``springs`` (added to :data:`SPRINGS`)."""
     extra, pairs, types = DESCRIPTIONS[description]
     if flip:
         extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
@@ -181,9 +182,20 @@ def fourbar_as(
     text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
     text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
     if closure_springs is not None:
-        text += f"closure_springs: {[None if k is None else k for k in closure_springs]}\n"
+        text += f"closure_springs: {yaml_springs(closure_springs)}\n"
     (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
     return load_model(tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml", geometry=False)
+
+
+def yaml_springs(springs: dict) -> str:
+    """A closure_springs mapping written as YAML (``.inf`` for infinity)."""
+
+    def value(v):
+        if isinstance(v, list | tuple | np.ndarray):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return ".inf" if math.isinf(v) else repr(float(v))
+
+    return "{" + ", ".join(f"{i}: {value(v)}" for i, v in springs.items()) + "}"
 
 
 SHARED_JOINTS = tuple(j[0] for j in SHARED if j[5] != "fixed")
@@ -323,9 +335,9 @@ def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
 # ------------------------------------------------------------- springs at a loop cut
 @pytest.mark.parametrize(
     ("closure", "tree", "springs", "tree_springs"),
-    [("revolute closure", "pin in the tree, rocker welded", 7.0, {"pin_C": 7.0}),
-     ("cylindrical closure", "cylindrical in the tree, rocker welded", [7.0, 900.0],
-      {"c1": 7.0, "c2": 900.0})],
+    [("revolute closure", "pin in the tree, rocker welded", [INF] * 5 + [7.0], {"pin_C": 7.0}),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded",
+      [INF, INF, 900.0, INF, INF, 7.0], {"c1": 7.0, "c2": 900.0})],
 )  # fmt: skip
 def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     tmp_path, closure, tree, springs, tree_springs
@@ -335,9 +347,9 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     sprung joint at C holds the crank where it is drawn)."""
     from closedloop.elastostatics.statics import frame_displacement
 
-    clm = fourbar_as(tmp_path, closure, closure_springs=[springs])
+    clm = fourbar_as(tmp_path, closure, closure_springs={0: springs})
     cut = [n for n in clm.model.names if n.startswith("cA<->cB_")]
-    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_rz", "cA<->cB_pz"])
+    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_pz", "cA<->cB_rz"])
     assert [c.kind for c in clm.closures] == ["6d"]
     twin = fourbar_as(tmp_path, tree, springs=tree_springs)
     q, q_twin = pin.neutral(clm.model), pin.neutral(twin.model)
@@ -353,25 +365,47 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
 
 
-def test_a_spring_at_a_point_closure_is_refused(tmp_path):
-    from closedloop.exceptions import InvalidInputError
-
-    with pytest.raises(InvalidInputError, match=r"closure 'cA<->cB' of type '3d' given the "):
-        fourbar_as(tmp_path, "two point closures", closure_springs=[5.0, None])
-
-
-def test_closure_springs_must_list_one_entry_per_pair(tmp_path):
-    from closedloop.exceptions import ModelFileError
+@pytest.mark.parametrize(
+    ("kind", "springs", "error", "message"),
+    [("revolute", "{1: [.inf, .inf, .inf, .inf, .inf, 5.0]}", "ModelFileError",
+      r"closure_springs index 1; expected the 0-based index of a closed_loop pair, 0..0"),
+     ("revolute", "{0: [1.0, 2.0]}", "InvalidInputError",
+      r"closure 'cA<->cB' of type 'revolute' given the spring \[1.0, 2.0\]; expected 6 "),
+     ("revolute", "{0: [.inf, .inf, .inf, .inf, .inf, .inf]}", "InvalidInputError",
+      r"\.inf on \['rz'\], which the type leaves free"),
+     ("6d", "{0: [1.0, 1.0, 1.0, 1.0, 1.0, -1.0]}", "InvalidInputError",
+      r"expected values >= 0"),
+     ("6d", "{0: " + str([[1.0 if i == j else (0.5 if (i, j) == (0, 1) else 0.0)
+                           for j in range(6)] for i in range(6)]) + "}",
+      "InvalidInputError", r"not symmetric .*expected a symmetric positive semi-definite"),
+     ("6d", "{0: " + str([[1.0 if i == j else (2.0 if {i, j} == {0, 1} else 0.0)
+                           for j in range(6)] for i in range(6)]) + "}",
+      "InvalidInputError", r"not positive semi-definite \(eigenvalues \[-1.0"),
+     ("universal", "{0: [.inf, .inf, .inf, .inf, 0.0, 0.0]}", "InvalidInputError",
+      r"type 'universal' given the spring .*expected a spring only at a closure of type")],
+)  # fmt: skip
+def test_bad_closure_springs_are_refused_naming_file_closure_and_value(
+    tmp_path, kind, springs, error, message
+):
+    import closedloop.exceptions as exceptions
 
     urdf = tmp_path / "r.urdf"
     urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
     closures = tmp_path / "c.yaml"
-    for springs, message in (
-        ("[1.0, 2.0]", r"closure_springs must list one stiffness \(or null"),
-        ("[-1.0]", r"closure_springs\[0\]' is -1.0; expected a number >= 0"),
-    ):
-        closures.write_text(
-            f"closed_loop: [[cA, cB]]\ntype: [revolute]\nclosure_springs: {springs}\n"
-        )
-        with pytest.raises(ModelFileError, match=message):
-            load_model(urdf, closures, geometry=False)
+    closures.write_text(f"closed_loop: [[cA, cB]]\ntype: [{kind}]\nclosure_springs: {springs}\n")
+    where = rf"^closure file '{closures}'"
+    with pytest.raises(getattr(exceptions, error), match=where + ".*" + message):
+        load_model(urdf, closures, geometry=False)
+
+
+def test_bad_keyword_closure_springs_are_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError
+
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    closures.write_text("closed_loop: [[cA, cB]]\ntype: [revolute]\n")
+    with pytest.raises(InvalidInputError, match=r"closure_springs index 3; expected"):
+        load_model(urdf, closures, geometry=False, closure_springs={3: [INF] * 6})
+    with pytest.raises(InvalidInputError, match=r"given the spring \[1.0\]; expected 6 numbers"):
+        load_model(urdf, closures, geometry=False, closure_springs={0: [1.0]})
