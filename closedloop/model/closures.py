@@ -16,6 +16,10 @@ of the two frames), a display name and its type (:data:`CLOSURE_TYPES`):
 * ``universal``: the origins coincide and A's z axis is perpendicular to B's (4 rows:
   3 [m], 1 [rad]).
 
+A closure may be made elastic (:func:`with_elastic_closures`): a stiffness of B's motion
+relative to A per direction of A's axes, rigid, elastic or free, carried by joints at the
+cut.
+
 The rows themselves are built in :mod:`closedloop.kinematics.constraints`. Frames and
 joints are looked up by name with errors that list the valid ones.
 """

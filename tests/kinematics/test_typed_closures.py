@@ -407,6 +407,8 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     ("kind", "springs", "error", "message"),
     [("revolute", "{1: [.inf, .inf, .inf, .inf, .inf, 5.0]}", "ModelFileError",
       r"closure_springs index 1; expected the 0-based index of a closed_loop pair, 0..0"),
+     ("revolute", "[5.0]", "ModelFileError",
+      r"closure_springs must be a mapping closed_loop pair index \(0..0\) -> 6 stiff"),
      ("revolute", "{0: [1.0, 2.0]}", "InvalidInputError",
       r"closure 'cA<->cB' of type 'revolute' given the spring \[1.0, 2.0\]; expected 6 "),
      ("revolute", "{0: [.inf, .inf, .inf, .inf, .inf, .inf]}", "InvalidInputError",
