@@ -1,0 +1,303 @@
+"""Closed loops of flexible links against OpenSees' linear statics (openseespy).
+
+Each case is one mechanism written twice: for the library (a URDF tree with its closure
+file, or an MJCF file, the links as Euler-Bernoulli beams) and for OpenSees (nodes,
+``elasticBeamColumn`` elements, multi-point constraints). The library's compliance C
+(6x6, world axes, at the output frame's origin) is compared column by column with the
+displacements of the output node under six unit loads (1 N along x, y, z, then 1 N m
+about x, y, z) in OpenSees.
+
+At the configuration of each case every link frame is world-aligned, so a node's world
+position is its frame's, and every joint axis is a world axis, as ``equalDOF`` needs.
+
+How each library element is modelled in OpenSees:
+
+==============================  ==========================================================
+library                         OpenSees
+==============================  ==========================================================
+beam link (circle, E, G)        one ``elasticBeamColumn`` from the link's origin to its
+                                ``end`` joint, A, E, G, J = 2 I, Iy = Iz = I (exact for
+                                nodal loads: no mesh)
+joint to the ground             a fixed node at the joint, the child's start node tied to
+                                it as below
+revolute joint (free)           two coincident nodes, ``equalDOF`` on the three
+                                translations and the two rotations it does not free
+sprung revolute joint           the same, and a ``zeroLength`` element with a
+                                ``uniaxialMaterial Elastic`` (k) on the free rotation
+fixed joint                     one node shared by both links
+'revolute' closure              ``equalDOF`` between the two tips, all but the rotation
+                                about the closure's axis
+two '3d' closures on one axis   the pin about that axis (see below)
+'prismatic' closure against     the slider's node fixed (``fix``) in all but the
+the ground                      translation along the axis
+'cylindrical' closure           ``equalDOF``, all but the rotation about and the
+                                translation along the axis
+'universal' closure             ``equalDOF``, all but the rotations about its two axes
+'6d' closure (weld)             ``equalDOF`` on all six dofs against a fixed node
+'3d' closure (MJCF connect)     ``equalDOF`` on the three translations
+spring at a loop cut            ``zeroLength`` + ``uniaxialMaterial Elastic`` between the
+                                two tips, on the freed rotation
+rigid offset to the output      ``rigidLink beam`` from the tip (retained) to the output
+                                node (constrained): exact, where a stiff element would
+                                cost accuracy in proportion to its stiffness ratio
+==============================  ==========================================================
+
+OpenSees' ``Transformation`` handler silently drops a constraint when a node is both
+retained by one multi-point constraint and constrained by another; every model is built
+so that no node does both (the direction of each ``equalDOF`` is chosen for it), and
+:class:`Structure` checks that. It also rules out the literal model of two '3d' closures
+(the second point's nodes would be constrained by a rigid link and by the point): two
+points on the y axis hold the same as a pin about y, and OpenSees is given the pin.
+
+Rigid links other than the output's offsets are not used: a rigid ternary link or platform
+needs one node constrained by a rigid link and tied by a joint; the cases use rigid bodies
+only where the joint can retain them (the slider).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from helpers import assert_close_in_norm
+
+import closedloop as cl
+from closedloop.kinematics.constraints import closure_residual
+
+E, G, D = 2.1e11, 8.1e10, 0.01  # steel [Pa], rod diameter [m]
+A_ROD, I_ROD = math.pi * D**2 / 4, math.pi * D**4 / 64
+K_CRANK, K_CUT = 400.0, 20.0  # [N m/rad]
+#: The same linear structure solved by two codes (the library's reduced stiffness and its
+#: transports, OpenSees' assembled stiffness with its constraints transformed out): both
+#: exact for Euler-Bernoulli rods loaded at nodes, so they differ by rounding times the
+#: condition of the stiffness (EA/L over the softest bending or spring term, up to ~1e7
+#: here): ~1e-16 * 1e7 = 1e-9 relative to the largest compliance entry, norm(C).
+RTOL_OPENSEES = 1e-9
+Y, X, Z = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+R_ZY = pin.rpy.rpyToMatrix(math.pi / 2, 0.0, 0.0)  # z along -y
+R_ZX = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)  # z along +x
+
+
+def opensees():
+    """openseespy's module, its bundled BLAS, LAPACK and Fortran runtime loaded first."""
+    spec = importlib.util.find_spec("openseespylinux")
+    if spec is None:
+        pytest.skip("openseespy is not installed (pip install '.[test]')")
+    lib = Path(spec.origin).parent / "lib"
+    for name in ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3",
+                 "liblapack.so.3"):  # fmt: skip
+        ctypes.CDLL(str(lib / name), mode=ctypes.RTLD_GLOBAL)
+    import openseespy.opensees as ops
+
+    return ops
+
+
+# ----------------------------------------------------------------------------- OpenSees
+class Structure:
+    """An OpenSees model (3D, 6 dofs a node) that records its multi-point constraints."""
+
+    def __init__(self, ops):
+        self.ops, self.n, self.retained, self.constrained = ops, 0, set(), set()
+        ops.wipe()
+        ops.model("basic", "-ndm", 3, "-ndf", 6)
+        ops.uniaxialMaterial("Elastic", 1, 1.0)  # a placeholder; springs add their own
+
+    def node(self, xyz, fixed: bool = False) -> int:
+        self.n += 1
+        self.ops.node(self.n, *map(float, xyz))
+        if fixed:
+            self.ops.fix(self.n, 1, 1, 1, 1, 1, 1)
+        return self.n
+
+    def beam(self, i: int, j: int) -> None:
+        """A steel rod from node i to node j."""
+        self.n += 1
+        axis = np.subtract(self.ops.nodeCoord(j), self.ops.nodeCoord(i))
+        vecxz = np.eye(3)[np.argmin(np.abs(axis))]  # any axis off the rod: a round section
+        self.ops.geomTransf("Linear", self.n, *vecxz)
+        self.ops.element("elasticBeamColumn", self.n, i, j, A_ROD, E, G, 2 * I_ROD, I_ROD,
+                         I_ROD, self.n)  # fmt: skip
+
+    def joint(self, r: int, c: int, free=(), springs=None) -> None:
+        """Node c tied to node r in every dof but ``free`` (1-6: ux uy uz rx ry rz, world),
+        with ``springs`` {dof: k} on freed dofs."""
+        self.ops.equalDOF(r, c, *[d for d in range(1, 7) if d not in free])
+        self.retained.add(r)
+        self.constrained.add(c)
+        for dof, k in (springs or {}).items():
+            self.n += 1
+            self.ops.uniaxialMaterial("Elastic", self.n, k)
+            self.ops.element("zeroLength", self.n, r, c, "-mat", self.n, "-dir", dof)
+
+    def rigid(self, r: int, c: int) -> None:
+        self.ops.rigidLink("beam", r, c)
+        self.retained.add(r)
+        self.constrained.add(c)
+
+    def displacement(self, node: int, load) -> np.ndarray:
+        """(6,) displacement [m, rad] of ``node`` under ``load`` (6,) [N, N m] there."""
+        ops = self.ops
+        ops.timeSeries("Linear", 1)
+        ops.pattern("Plain", 1, 1)
+        ops.load(node, *map(float, load))
+        ops.constraints("Transformation")
+        ops.numberer("Plain")
+        ops.system("FullGeneral")
+        ops.algorithm("Linear")
+        ops.integrator("LoadControl", 1.0)
+        ops.analysis("Static")
+        assert ops.analyze(1) == 0
+        return np.array(ops.nodeDisp(node))
+
+
+def opensees_compliance(build) -> np.ndarray:
+    """(6, 6) compliance [m/N, m/(N m), rad/N, rad/(N m)] at the output node, world axes:
+    ``build(structure)`` makes the model and returns the output node."""
+    ops, C = opensees(), np.zeros((6, 6))
+    for k in range(6):
+        s = Structure(ops)
+        out = build(s)
+        both = s.retained & s.constrained
+        assert not both, f"nodes {sorted(both)} both retained and constrained"
+        C[:, k] = s.displacement(out, np.eye(6)[k])
+    ops.wipe()
+    return C
+
+
+# ------------------------------------------------------------------------------ library
+def rod(end: str) -> dict:
+    return {"E": E, "G": G, "section": {"shape": "circle", "d": D}, "end": end}
+
+
+def write_urdf(path: Path, joints) -> None:
+    """A URDF of ``joints``: (name, parent, child, child origin [m] world, child rotation
+    (3, 3) world or None, type, axis world or None), parents before children."""
+    pose = {"ground": pin.SE3.Identity()}
+    body = "".join(f'<link name="{n}"/>' for n in ["ground", *(j[2] for j in joints)])
+    for name, parent, child, xyz, R, kind, axis in joints:
+        pose[child] = pin.SE3(np.eye(3) if R is None else R, np.asarray(xyz, float))
+        local = pose[parent].actInv(pose[child])
+        xyz_text = " ".join(map(repr, map(float, local.translation)))
+        rpy_text = " ".join(map(repr, map(float, pin.rpy.matrixToRpy(local.rotation))))
+        body += (
+            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/><origin xyz="{xyz_text}" rpy="{rpy_text}"/>'
+        )
+        if axis is not None:
+            local_axis = pose[child].rotation.T @ axis
+            body += f'<axis xyz="{" ".join(map(repr, map(float, local_axis)))}"/>'
+            body += '<limit lower="-3" upper="3" effort="1" velocity="1"/>'
+        body += "</joint>"
+    path.write_text(f'<robot name="{path.stem}">{body}</robot>')
+
+
+def library_compliance(clm, frame: str) -> np.ndarray:
+    """(6, 6) compliance of ``frame`` at the neutral configuration, which must be closed
+    and world-aligned."""
+    q = pin.neutral(clm.model)
+    np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-14)
+    data = clm.model.createData()
+    pin.framesForwardKinematics(clm.model, data, q)
+    rotation = data.oMf[clm.model.getFrameId(frame)].rotation
+    np.testing.assert_allclose(rotation, np.eye(3), atol=1e-15)
+    return cl.compliance(clm, q, frame).C
+
+
+def urdf_model(tmp_path, name, joints, closures, beams, springs, closure_springs=None):
+    """The library's model: ``closures`` [(frame A, frame B, type)]."""
+    write_urdf(tmp_path / f"{name}.urdf", joints)
+    pairs = [[a, b] for a, b, _ in closures]
+    types = ", ".join(f"'{t}'" for _, _, t in closures)
+    text = f"closed_loop: {pairs}\ntype: [{types}]\nname_mot: []\nsprings: {springs}\n"
+    if closure_springs is not None:
+        text += f"closure_springs: {closure_springs}\n"
+    (tmp_path / f"{name}.yaml").write_text(text)
+    beams = {link: rod(end) for link, end in beams.items()}
+    return cl.load_model(tmp_path / f"{name}.urdf", tmp_path / f"{name}.yaml", beams=beams)
+
+
+# ----------------------------------------------------------------------------- four-bar
+#: Crank A-B (sprung at A), coupler B-C, rocker D-C, pins about y; the output P on the
+#: coupler's tip, offset from C. "spatial" moves D off the x-z plane.
+A_, B_, C_, P_ = (np.array(p) for p in ((0, 0, 0), (0, 0, 0.12), (0.3, 0, 0.18),
+                                         (0.25, 0, 0.22)))  # fmt: skip
+D_PLANAR, D_SPATIAL = np.array([0.34, 0.0, 0.0]), np.array([0.34, 0.08, 0.0])
+#: closure -> (its frames' rotations A, B; dofs OpenSees frees at the cut).
+FOURBAR_CUTS = {
+    "revolute": ((R_ZY, R_ZY), (5,)),
+    "3d": ((None, None), (5,)),  # two points on the y axis: the pin about y
+    "universal": ((R_ZY, R_ZX), (4, 5)),
+    "cylindrical": ((R_ZY, R_ZY), (2, 5)),
+}
+
+
+def fourbar(tmp_path, kind: str, d, closure_springs=None):
+    (RA, RB), _ = FOURBAR_CUTS[kind]
+    joints = [
+        ("crank", "ground", "crank", A_, None, "revolute", Y),
+        ("coupler", "crank", "coupler", B_, None, "revolute", Y),
+        ("cA_joint", "coupler", "cA", C_, RA, "fixed", None),
+        ("P_joint", "cA", "P", P_, None, "fixed", None),
+        ("rocker", "ground", "rocker", d, None, "revolute", Y),
+        ("cB_joint", "rocker", "cB", C_, RB, "fixed", None),
+    ]
+    closures = [("cA", "cB", kind)]
+    if kind == "3d":  # the second point, 0.02 m along y
+        joints += [("cA2_joint", "cA", "cA2", C_ + 0.02 * Y, None, "fixed", None),
+                   ("cB2_joint", "cB", "cB2", C_ + 0.02 * Y, None, "fixed", None)]  # fmt: skip
+        closures.append(("cA2", "cB2", "3d"))
+    beams = {"crank": "coupler", "coupler": "cA_joint", "rocker": "cB_joint"}
+    name = f"fourbar_{kind}" + ("_sprung" if closure_springs else "")
+    return urdf_model(tmp_path, name, joints, closures, beams, {"crank": K_CRANK},
+                      closure_springs)  # fmt: skip
+
+
+def fourbar_opensees(kind: str, d, cut_springs=None):
+    def build(s: Structure) -> int:
+        a = s.node(A_)
+        s.joint(s.node(A_, fixed=True), a, free=(5,), springs={5: K_CRANK})
+        b_tip, b = s.node(B_), s.node(B_)
+        s.beam(a, b_tip)
+        s.joint(b_tip, b, free=(5,))
+        c_coupler = s.node(C_)
+        s.beam(b, c_coupler)
+        rocker = s.node(d)
+        s.joint(s.node(d, fixed=True), rocker, free=(5,))
+        c_rocker = s.node(C_)
+        s.beam(rocker, c_rocker)
+        s.joint(c_coupler, c_rocker, free=FOURBAR_CUTS[kind][1], springs=cut_springs)
+        p = s.node(P_)
+        s.rigid(c_coupler, p)
+        return p
+
+    return build
+
+
+CASES = {  # name -> (four-bar closure, rocker pivot)
+    "planar four-bar, revolute closure": ("revolute", D_PLANAR),
+    "planar four-bar, two point closures": ("3d", D_PLANAR),
+    "spatial four-bar, universal closure": ("universal", D_SPATIAL),
+    "spatial four-bar, cylindrical closure": ("cylindrical", D_SPATIAL),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_fourbar_against_opensees(tmp_path, case):
+    kind, d = CASES[case]
+    C = library_compliance(fourbar(tmp_path, kind, d), "P")
+    assert_close_in_norm(C, opensees_compliance(fourbar_opensees(kind, d)), RTOL_OPENSEES)
+
+
+def test_torsion_spring_at_a_revolute_cut_against_opensees(tmp_path):
+    """The closure file's ``closure_springs:`` (the list form): K_CUT about the pin at C."""
+    clm = fourbar(tmp_path, "revolute", D_PLANAR, closure_springs=[K_CUT])
+    C = library_compliance(clm, "P")
+    expected = opensees_compliance(fourbar_opensees("revolute", D_PLANAR, {5: K_CUT}))
+    assert_close_in_norm(C, expected, RTOL_OPENSEES)
+    rigid_cut = library_compliance(fourbar(tmp_path, "revolute", D_PLANAR), "P")
+    assert np.linalg.norm(C - rigid_cut) > 1e-3 * np.linalg.norm(C)  # the spring counts
