@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import itertools
 import math
 from pathlib import Path
 
@@ -107,11 +108,13 @@ class Structure:
         ops.model("basic", "-ndm", 3, "-ndf", 6)
         ops.uniaxialMaterial("Elastic", 1, 1.0)  # a placeholder; springs add their own
 
-    def node(self, xyz, fixed: bool = False) -> int:
+    def node(self, xyz, fixed=()) -> int:
+        """A node at ``xyz`` [m], its dofs ``fixed`` (1-6, or True for all) held at zero."""
         self.n += 1
         self.ops.node(self.n, *map(float, xyz))
         if fixed:
-            self.ops.fix(self.n, 1, 1, 1, 1, 1, 1)
+            fixed = range(1, 7) if fixed is True else fixed
+            self.ops.fix(self.n, *[int(d in fixed) for d in range(1, 7)])
         return self.n
 
     def beam(self, i: int, j: int) -> None:
@@ -301,3 +304,59 @@ def test_torsion_spring_at_a_revolute_cut_against_opensees(tmp_path):
     assert_close_in_norm(C, expected, RTOL_OPENSEES)
     rigid_cut = library_compliance(fourbar(tmp_path, "revolute", D_PLANAR), "P")
     assert np.linalg.norm(C - rigid_cut) > 1e-3 * np.linalg.norm(C)  # the spring counts
+
+
+# ------------------------------------------------------------------------- slider-crank
+S_ = np.array([0.3, 0.0, 0.05])  # the slider's pin; it slides along x
+
+
+def test_slider_crank_with_a_prismatic_closure_against_opensees(tmp_path):
+    """Crank A-B sprung at A, coupler B-S, a rigid slider pinned at S and closed against
+    the ground by a prismatic closure along x; the output at B on the coupler."""
+    joints = [
+        ("crank", "ground", "crank", A_, None, "revolute", Y),
+        ("coupler", "crank", "coupler", B_, None, "revolute", Y),
+        ("B_joint", "coupler", "B", B_, None, "fixed", None),  # on the coupler's start
+        ("slider_pin", "coupler", "slider", S_, None, "revolute", Y),
+        ("sA_joint", "slider", "sA", S_, R_ZX, "fixed", None),
+        ("sB_joint", "ground", "sB", S_, R_ZX, "fixed", None),
+    ]
+    clm = urdf_model(tmp_path, "slider_crank", joints, [("sA", "sB", "prismatic")],
+                     {"crank": "coupler", "coupler": "slider_pin"}, {"crank": K_CRANK})  # fmt: skip
+
+    def build(s: Structure) -> int:
+        a, b_tip, b, s_tip = s.node(A_), s.node(B_), s.node(B_), s.node(S_)
+        s.joint(s.node(A_, fixed=True), a, free=(5,), springs={5: K_CRANK})
+        s.beam(a, b_tip)
+        s.joint(b, b_tip, free=(5,))  # the coupler's start retained: it is loaded
+        s.beam(b, s_tip)
+        s.joint(s.node(S_, fixed=(2, 3, 4, 5, 6)), s_tip, free=(5,))  # slider: x only
+        return b
+
+    C = library_compliance(clm, "B")
+    assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES)
+
+
+# ------------------------------------------------------------------------- welded frame
+FRAME_NODES = np.array([[0, 0, 0], [0, 0, 0.4], [0.5, 0, 0.4], [0.5, 0.3, 0.4], [0.5, 0.3, 0]])
+
+
+def test_spatial_frame_closed_by_a_weld_against_opensees(tmp_path):
+    """Four beam links A-B-C-E-D in series, clamped at A, welded to the ground at D by a
+    '6d' closure; the output at C."""
+    links = ["m0", "m1", "m2", "m3", "end"]
+    joints = [(f"j{i}", (["ground", *links])[i], links[i], FRAME_NODES[i], None, "fixed", None)
+              for i in range(5)]  # fmt: skip
+    joints.append(("ja", "ground", "anchor", FRAME_NODES[4], None, "fixed", None))
+    beams = {f"m{i}": f"j{i + 1}" for i in range(4)}
+    clm = urdf_model(tmp_path, "frame", joints, [("end", "anchor", "6d")], beams, {})
+
+    def build(s: Structure) -> int:
+        nodes = [s.node(FRAME_NODES[0], fixed=True)] + [s.node(p) for p in FRAME_NODES[1:]]
+        for i, j in itertools.pairwise(nodes):
+            s.beam(i, j)
+        s.joint(s.node(FRAME_NODES[4], fixed=True), nodes[4])
+        return nodes[2]
+
+    C = library_compliance(clm, "m2")
+    assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES)
