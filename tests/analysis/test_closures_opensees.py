@@ -237,6 +237,7 @@ FOURBAR_CUTS = {
     "universal": ((R_ZY, R_ZX), (4, 5)),
     "cylindrical": ((R_ZY, R_ZY), (2, 5)),
 }
+BALL = (4, 5, 6)  # one point: the three rotations free
 
 
 def fourbar(tmp_path, kind: str, d, closure_springs=None):
@@ -260,7 +261,9 @@ def fourbar(tmp_path, kind: str, d, closure_springs=None):
                       closure_springs)  # fmt: skip
 
 
-def fourbar_opensees(kind: str, d, cut_springs=None):
+def fourbar_opensees(free, d, cut_springs=None):
+    """The four-bar in OpenSees, ``free`` (1-6) the dofs its cut frees."""
+
     def build(s: Structure) -> int:
         a = s.node(A_)
         s.joint(s.node(A_, fixed=True), a, free=(5,), springs={5: K_CRANK})
@@ -273,7 +276,7 @@ def fourbar_opensees(kind: str, d, cut_springs=None):
         s.joint(s.node(d, fixed=True), rocker, free=(5,))
         c_rocker = s.node(C_)
         s.beam(rocker, c_rocker)
-        s.joint(c_coupler, c_rocker, free=FOURBAR_CUTS[kind][1], springs=cut_springs)
+        s.joint(c_coupler, c_rocker, free=free, springs=cut_springs)
         p = s.node(P_)
         s.rigid(c_coupler, p)
         return p
@@ -293,14 +296,16 @@ CASES = {  # name -> (four-bar closure, rocker pivot)
 def test_fourbar_against_opensees(tmp_path, case):
     kind, d = CASES[case]
     C = library_compliance(fourbar(tmp_path, kind, d), "P")
-    assert_close_in_norm(C, opensees_compliance(fourbar_opensees(kind, d)), RTOL_OPENSEES)
+    assert_close_in_norm(
+        C, opensees_compliance(fourbar_opensees(FOURBAR_CUTS[kind][1], d)), RTOL_OPENSEES
+    )
 
 
 def test_torsion_spring_at_a_revolute_cut_against_opensees(tmp_path):
     """The closure file's ``closure_springs:`` (the list form): K_CUT about the pin at C."""
     clm = fourbar(tmp_path, "revolute", D_PLANAR, closure_springs=[K_CUT])
     C = library_compliance(clm, "P")
-    expected = opensees_compliance(fourbar_opensees("revolute", D_PLANAR, {5: K_CUT}))
+    expected = opensees_compliance(fourbar_opensees((5,), D_PLANAR, {5: K_CUT}))
     assert_close_in_norm(C, expected, RTOL_OPENSEES)
     rigid_cut = library_compliance(fourbar(tmp_path, "revolute", D_PLANAR), "P")
     assert np.linalg.norm(C - rigid_cut) > 1e-3 * np.linalg.norm(C)  # the spring counts
@@ -360,3 +365,43 @@ def test_spatial_frame_closed_by_a_weld_against_opensees(tmp_path):
 
     C = library_compliance(clm, "m2")
     assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES)
+
+
+# ------------------------------------------------------------------------------- MJCF
+#: The planar four-bar in MJCF, closed at C by a ``<connect>`` (a '3d' closure, a ball),
+#: the crank's spring as its hinge's ``stiffness``; the anchor is given on the coupler
+#: and rocker bodies, at their beams' tips (bodies with no joint carry the tips and P).
+FOURBAR_MJCF = """<mujoco model="fourbar_beams">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="ground">
+      <body name="crank">
+        <joint name="crank" type="hinge" axis="0 1 0" stiffness="{k}"/>
+        <body name="coupler" pos="{B}">
+          <joint name="coupler" type="hinge" axis="0 1 0"/>
+          <body name="coupler_tip" pos="{BC}"><site name="P" pos="{CP}"/></body>
+        </body>
+      </body>
+      <body name="rocker" pos="{D}">
+        <joint name="rocker" type="hinge" axis="0 1 0"/>
+        <body name="rocker_tip" pos="{DC}"/>
+      </body>
+    </body>
+  </worldbody>
+  <equality>
+    <connect name="C" body1="coupler" body2="rocker" anchor="{BC}"/>
+  </equality>
+</mujoco>"""
+
+
+def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
+    text = " ".join
+    (tmp_path / "fourbar_beams.xml").write_text(FOURBAR_MJCF.format(
+        k=K_CRANK, B=text(map(str, B_)), BC=text(map(str, C_ - B_)), CP=text(map(str, P_ - C_)),
+        D=text(map(str, D_PLANAR)), DC=text(map(str, C_ - D_PLANAR))))  # fmt: skip
+    beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
+             "rocker": rod("rocker_tip_fixed")}  # fmt: skip
+    clm = cl.load_model(tmp_path / "fourbar_beams.xml", beams=beams)
+    assert [c.kind for c in clm.closures] == ["3d"]
+    C = library_compliance(clm, "P")
+    assert_close_in_norm(C, opensees_compliance(fourbar_opensees(BALL, D_PLANAR)), RTOL_OPENSEES)
