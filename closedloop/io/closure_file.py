@@ -8,8 +8,9 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     closed_loop: [[frameA, frameB], ...]   # frame pairs made to coincide
     type: ['3d' | '6d' | 'revolute' | 'prismatic' | 'cylindrical' | 'universal', ...]
                                            # one per pair (closedloop.model.closures)
-    closure_springs: [k | [k_rot, k_lin] | null, ...]  # optional, one per pair: a spring at
-                                           # a revolute, prismatic or cylindrical cut
+    closure_springs: {0: [dx, dy, dz, rx, ry, rz] | 6x6, ...}  # optional, pair index ->
+                                           # stiffness of B's motion in A's axes
+                                           # (closedloop.model.closures.with_elastic_closures)
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
@@ -57,7 +58,7 @@ class ClosureSpec:
     locked: tuple[str, ...] = ()
     beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.model.beams)
     balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.model.balls)
-    closure_springs: tuple = ()  # per pair: None, a stiffness, or a list (cylindrical)
+    closure_springs: dict = field(default_factory=dict)  # pair index -> 6 values or 6x6
 
 
 def existing_path(path: str | Path, what: str) -> Path:
@@ -200,27 +201,38 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
     )
 
 
-def _closure_springs(doc: dict, n: int, where: str) -> tuple:
-    """``closure_springs:``: one entry per pair (None, a stiffness, or a list of them);
-    () when absent. The model checks which closure types take which count."""
-    springs = _value(doc, "closure_springs", None)
-    if springs is None:
-        return ()
-    if not isinstance(springs, list) or len(springs) != n:
+def _closure_springs(doc: dict, n: int, where: str) -> dict:
+    """``closure_springs:``: pair index -> 6 numbers or a 6x6 list of lists (a string
+    that reads as a number accepted); {} when absent. The values' meaning is checked by
+    :func:`closedloop.model.closures.closure_spring`."""
+    springs = _value(doc, "closure_springs", {})
+    if not isinstance(springs, dict):
         raise ModelFileError(
-            f"{where}: closure_springs must list one stiffness (or null) per closed_loop "
-            f"pair ({n}), got {springs!r}"
+            f"{where}: closure_springs must be a mapping closed_loop pair index (0..{n - 1}) "
+            f"-> 6 stiffnesses or a 6x6 matrix, got {springs!r}"
         )
-    out = []
-    for i, value in enumerate(springs):
-        name = f"closure_springs[{i}]"
-        if value is None:
-            out.append(None)
-        elif isinstance(value, list) and value:
-            out.append([file_number(v, where, name) for v in value])
-        else:
-            out.append(file_number(value, where, name))
-    return tuple(out)
+    out = {}
+    for i, value in springs.items():
+        if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < n:
+            raise ModelFileError(
+                f"{where}: closure_springs index {i!r}; expected the 0-based index of a "
+                f"closed_loop pair, 0..{n - 1}"
+            )
+        out[i] = _numbers(value)
+    return out
+
+
+def _numbers(value):
+    """``value`` with its strings that read as numbers (YAML 1.1's ``1e5``) as floats,
+    through nested lists."""
+    if isinstance(value, list):
+        return [_numbers(v) for v in value]
+    if isinstance(value, str):
+        try:
+            return decimal(value.strip())
+        except ValueError:
+            return value
+    return value
 
 
 def _check_beams(beams, where: str) -> dict[str, dict]:

@@ -61,9 +61,10 @@ from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import (
     Closure,
+    check_closure_springs,
     closure_between_frames,
     joint_names,
-    with_sprung_cuts,
+    with_elastic_closures,
 )
 
 #: Model-file suffixes and their format.
@@ -164,18 +165,22 @@ class _Tree:
     beam_masses: tuple = ()  # (virtual joint name, closedloop.model.beams.BeamMass) of the beams
 
 
-def _read_urdf(path: Path, closures: str | Path | None, geometry: bool, beams=None) -> _Tree:
+def _read_urdf(
+    path: Path, closures: str | Path | None, geometry: bool, beams=None, elastic=None
+) -> _Tree:
     spec = read_closure_file(closures) if closures is not None else ClosureSpec()
     if spec.balls:
         copy = urdf_with_balls(path, spec.balls)
         try:
-            return _read_urdf_tree(copy, spec, closures, geometry, beams, shown=path)
+            return _read_urdf_tree(copy, spec, closures, geometry, beams, elastic, shown=path)
         finally:
             copy.unlink()
-    return _read_urdf_tree(path, spec, closures, geometry, beams)
+    return _read_urdf_tree(path, spec, closures, geometry, beams, elastic)
 
 
-def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=None) -> _Tree:
+def _read_urdf_tree(
+    path: Path, spec, closures, geometry: bool, beams, elastic, shown=None
+) -> _Tree:
     # mimic joints follow their leader (nq = nv = 0), as the file says
     build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
     model = _parse(build, shown or path, "robot file")
@@ -200,6 +205,11 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
             "stiffness is their beam's (E, G and section, or stiffness_6x6, under beams:)"
         )
     if closures is None:
+        if elastic:
+            raise InvalidInputError(
+                f"load_model: closure_springs {elastic!r} given to a robot without closure "
+                "file; expected closure springs only for the pairs of a closure file"
+            )
         actuated, locked = _serial_defaults(tree, path)
         return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
                      beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
@@ -210,9 +220,13 @@ def _read_urdf_tree(path: Path, spec, closures, geometry: bool, beams, shown=Non
             closure_between_frames(model, a, b, t)
             for (a, b), t in zip(spec.pairs, spec.types, strict=True)
         ]
-        cuts = {}
-        if spec.closure_springs:
-            model, loops, cuts = with_sprung_cuts(model, loops, list(spec.closure_springs))
+        check_closure_springs(loops, spec.closure_springs)
+    with in_file(f"{where}, closure_springs= of load_model"):
+        check_closure_springs(loops, elastic or {})
+    with in_file(where):
+        model, loops, cuts = with_elastic_closures(
+            model, loops, {**spec.closure_springs, **(elastic or {})}
+        )
     return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks, **cuts}, spec.locked,
                  visual, beam_joints=tuple(blocks), balls=spec.balls,
                  beam_masses=tuple(masses.items()))  # fmt: skip
@@ -316,6 +330,7 @@ def load_model(
     file_format: str | None = None,
     free_base: bool = False,
     beams: Mapping[str, Mapping] | None = None,
+    closure_springs: Mapping[int, Sequence] | None = None,
 ) -> ClosedLoopModel:
     """Load a URDF (``.urdf``), MJCF (``.xml``, ``.mjcf``) or SDF (``.sdf``) model.
 
@@ -342,6 +357,9 @@ def load_model(
         beams: flexible links, link name -> beam (:mod:`closedloop.model.beams`), merged over
             the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (map a
             configuration with :func:`closedloop.model.beams.map_configuration`).
+        closure_springs: URDF only: elastic closures, closure file pair index (0-based) ->
+            6 stiffnesses [N/m, N m/rad] or a 6x6 matrix, merged over the file's
+            ``closure_springs:`` (:func:`closedloop.model.closures.with_elastic_closures`).
 
     Raises:
         ModelFileError: missing or unparsable robot or closure file, unknown format; the
@@ -356,7 +374,8 @@ def load_model(
                 f"load_model: {name} must be a file path (str or os.PathLike), got {value!r}"
             )
     for name, value, what in (("springs", springs, "joint name -> stiffness"),
-                              ("beams", beams, "link name -> beam")):  # fmt: skip
+                              ("beams", beams, "link name -> beam"),
+                              ("closure_springs", closure_springs, "index -> spring")):  # fmt: skip
         if value is not None and not isinstance(value, Mapping):
             raise InvalidInputError(
                 f"load_model: {name} must be a mapping {what}, got {type(value).__name__}"
@@ -369,11 +388,17 @@ def load_model(
             "(free_base: SDF only)" + _by_name_hint(path)
         )
     path = existing_path(path, "robot file")
+    if closure_springs and kind != "urdf":
+        raise InvalidInputError(
+            f"load_model: closure_springs {dict(closure_springs)!r} given to the {kind.upper()} "
+            f"file {str(path)!r}; expected them for a URDF and its closure file only (an SDF "
+            "loop joint takes its spring in the file)"
+        )
     if kind == "sdf":
         tree = _read_sdf(path, closures, geometry, free_base)
     else:
         tree = (
-            _read_urdf(path, closures, geometry, beams or {})
+            _read_urdf(path, closures, geometry, beams or {}, closure_springs)
             if kind == "urdf"
             else _read_mjcf(path, closures, geometry)
         )

@@ -30,8 +30,9 @@ joint frame is fixed to the child link; q = 0 is the drawing):
 * fixed: a weld (``6d``).
 
 (:mod:`closedloop.model.closures`.) A revolute, continuous or prismatic loop-closing joint
-with a spring becomes a spring at the cut
-(:func:`closedloop.model.closures.with_sprung_cuts`), at rest at its ``spring_reference``; a
+with a spring becomes an elastic closure, its free direction sprung
+(:func:`closedloop.model.closures.with_elastic_closures`: the joint ``<name>_rz`` or
+``<name>_pz``), at rest at its ``spring_reference``; a
 universal one with a spring is refused (list it first, so that it is a tree joint).
 
 The root link (no joint names it as child) is fixed to the world at its pose, or carried
@@ -57,7 +58,12 @@ import pinocchio as pin
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
-from closedloop.model.closures import CLOSURE_TYPES, Closure, with_sprung_cuts
+from closedloop.model.closures import (
+    CLOSURE_TYPES,
+    FREE_DIRECTIONS,
+    Closure,
+    with_elastic_closures,
+)
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
@@ -214,10 +220,12 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
             pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
         )
     closures, cut_springs = _closures(r, model, body, closing, W)
-    cut = {}
-    if any(k for k, _ in cut_springs.values()):
-        ks = [k for k, _ in cut_springs.values()]
-        model, closures, cut = with_sprung_cuts(model, closures, ks)
+    elastic = {}  # a sprung revolute or prismatic loop joint: its free direction sprung
+    for i, (c, (k, _)) in enumerate(zip(closures, cut_springs.values(), strict=True)):
+        if k:
+            elastic[i] = [math.inf] * 6
+            elastic[i][FREE_DIRECTIONS[c.kind][0]] = k
+    model, closures, cut = with_elastic_closures(model, closures, elastic)
     rest = pin.neutral(model)
     for i, v in rest_values.items():
         rest[i] = v

@@ -81,6 +81,7 @@ def test_each_type_vanishes_on_what_it_constrains_and_only_there(kind):
 
 # --------------------------------------------------------- a four-bar cut at its pin C
 HALF_PI = math.pi / 2
+INF = math.inf
 SPRINGS = {"crank": 50.0, "crank_axial": 1e5, "crank_tilt": 20.0, "coupler_twist": 30.0,
            "rocker_tilt": 25.0, "crank_yaw": 15.0, "rocker_yaw": 18.0}  # fmt: skip
 #: The four-bar of urdf/fourbar.urdf (ground pivots A = 0, D = (0.3, 0, 0), crank 0.1 m,
@@ -146,6 +147,30 @@ DESCRIPTIONS = {
 }  # fmt: skip
 
 
+#: The four-bar closed at C by other closures (not assembled away from the drawing: a
+#: prismatic closure at C locks the crank) and their tree equivalents.
+_REVOLUTE_AT_C = DESCRIPTIONS["revolute closure"][0]
+_ROCKER_WELDED = [("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)]
+ELASTIC_DESCRIPTIONS = {
+    "weld at C": (_REVOLUTE_AT_C, [["cA", "cB"]], ["6d"]),
+    "prismatic closure": (_REVOLUTE_AT_C, [["cA", "cB"]], ["prismatic"]),
+    "slides in the tree, rocker welded": (  # along A's x (world x) and z (world -y)
+        [("s_x", "coupler_body", "s_mid", C_COUPLER, (0, 0, 0), "prismatic", (1, 0, 0)),
+         ("s_z", "s_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, -1, 0)),
+         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+         *_ROCKER_WELDED],
+        [["wA", "wB"]], ["6d"],
+    ),
+    "bushing in the tree, rocker welded": (  # a free flyer in A's axes (x, -z, y of world)
+        [("bushing", "coupler_body", "rocker_top", C_COUPLER, (HALF_PI, 0, 0), "floating",
+          None),
+         ("wA_joint", "rocker_top", "wA", (0, -0.075, 0), (-HALF_PI, 0, 0), "fixed", None),
+         *_ROCKER_WELDED],
+        [["wA", "wB"]], ["6d"],
+    ),
+}  # fmt: skip
+
+
 def _urdf(joints) -> str:
     links = {"ground"} | {j[2] for j in joints}
     inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
@@ -166,24 +191,49 @@ def _urdf(joints) -> str:
 
 
 def fourbar_as(
-    tmp_path, description: str, *, flip: bool = False, closure_springs=None, springs=None
+    tmp_path,
+    description: str,
+    *,
+    flip: bool = False,
+    closure_springs=None,
+    springs=None,
+    **options,
 ) -> ClosedLoopModel:
     """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
     B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
-    (the file's list), ``springs`` (added to :data:`SPRINGS`)."""
-    extra, pairs, types = DESCRIPTIONS[description]
+    (the file's mapping), ``springs`` (added to :data:`SPRINGS`); ``options`` to
+    :func:`load_model`."""
+    extra, pairs, types = {**DESCRIPTIONS, **ELASTIC_DESCRIPTIONS}[description]
     if flip:
         extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
     stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
-    stem += "_sprung" if closure_springs or springs else ""
+    stem += "_sprung" if closure_springs or springs or options else ""
     (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
     quoted = ", ".join(f"'{t}'" for t in types)
     text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
     text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
     if closure_springs is not None:
-        text += f"closure_springs: {[None if k is None else k for k in closure_springs]}\n"
+        text += f"closure_springs: {yaml_springs(closure_springs)}\n"
     (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
-    return load_model(tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml", geometry=False)
+    keyword = options.pop("springs_keyword", None)
+    return load_model(
+        tmp_path / f"{stem}.urdf",
+        tmp_path / f"{stem}.yaml",
+        geometry=False,
+        **({"springs": keyword} if keyword else {}),
+        **options,
+    )
+
+
+def yaml_springs(springs: dict) -> str:
+    """A closure_springs mapping written as YAML (``.inf`` for infinity)."""
+
+    def value(v):
+        if isinstance(v, list | tuple | np.ndarray):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return ".inf" if math.isinf(v) else repr(float(v))
+
+    return "{" + ", ".join(f"{i}: {value(v)}" for i, v in springs.items()) + "}"
 
 
 SHARED_JOINTS = tuple(j[0] for j in SHARED if j[5] != "fixed")
@@ -323,9 +373,9 @@ def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
 # ------------------------------------------------------------- springs at a loop cut
 @pytest.mark.parametrize(
     ("closure", "tree", "springs", "tree_springs"),
-    [("revolute closure", "pin in the tree, rocker welded", 7.0, {"pin_C": 7.0}),
-     ("cylindrical closure", "cylindrical in the tree, rocker welded", [7.0, 900.0],
-      {"c1": 7.0, "c2": 900.0})],
+    [("revolute closure", "pin in the tree, rocker welded", [INF] * 5 + [7.0], {"pin_C": 7.0}),
+     ("cylindrical closure", "cylindrical in the tree, rocker welded",
+      [INF, INF, 900.0, INF, INF, 7.0], {"c1": 7.0, "c2": 900.0})],
 )  # fmt: skip
 def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     tmp_path, closure, tree, springs, tree_springs
@@ -335,9 +385,9 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     sprung joint at C holds the crank where it is drawn)."""
     from closedloop.elastostatics.statics import frame_displacement
 
-    clm = fourbar_as(tmp_path, closure, closure_springs=[springs])
+    clm = fourbar_as(tmp_path, closure, closure_springs={0: springs})
     cut = [n for n in clm.model.names if n.startswith("cA<->cB_")]
-    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_rz", "cA<->cB_pz"])
+    assert cut == (["cA<->cB_rz"] if closure.startswith("rev") else ["cA<->cB_pz", "cA<->cB_rz"])
     assert [c.kind for c in clm.closures] == ["6d"]
     twin = fourbar_as(tmp_path, tree, springs=tree_springs)
     q, q_twin = pin.neutral(clm.model), pin.neutral(twin.model)
@@ -353,25 +403,205 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
     assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
 
 
-def test_a_spring_at_a_point_closure_is_refused(tmp_path):
-    from closedloop.exceptions import InvalidInputError
-
-    with pytest.raises(InvalidInputError, match=r"closure 'cA<->cB' of type '3d' given the "):
-        fourbar_as(tmp_path, "two point closures", closure_springs=[5.0, None])
-
-
-def test_closure_springs_must_list_one_entry_per_pair(tmp_path):
-    from closedloop.exceptions import ModelFileError
+@pytest.mark.parametrize(
+    ("kind", "springs", "error", "message"),
+    [("revolute", "{1: [.inf, .inf, .inf, .inf, .inf, 5.0]}", "ModelFileError",
+      r"closure_springs index 1; expected the 0-based index of a closed_loop pair, 0..0"),
+     ("revolute", "{0: [1.0, 2.0]}", "InvalidInputError",
+      r"closure 'cA<->cB' of type 'revolute' given the spring \[1.0, 2.0\]; expected 6 "),
+     ("revolute", "{0: [.inf, .inf, .inf, .inf, .inf, .inf]}", "InvalidInputError",
+      r"\.inf on \['rz'\], which the type leaves free"),
+     ("6d", "{0: [1.0, 1.0, 1.0, 1.0, 1.0, -1.0]}", "InvalidInputError",
+      r"expected values >= 0"),
+     ("6d", "{0: " + str([[1.0 if i == j else (0.5 if (i, j) == (0, 1) else 0.0)
+                           for j in range(6)] for i in range(6)]) + "}",
+      "InvalidInputError", r"not symmetric .*expected a symmetric positive semi-definite"),
+     ("6d", "{0: " + str([[1.0 if i == j else (2.0 if {i, j} == {0, 1} else 0.0)
+                           for j in range(6)] for i in range(6)]) + "}",
+      "InvalidInputError", r"not positive semi-definite \(eigenvalues \[-1.0"),
+     ("universal", "{0: [.inf, .inf, .inf, .inf, 0.0, 0.0]}", "InvalidInputError",
+      r"type 'universal' given the spring .*expected a spring only at a closure of type")],
+)  # fmt: skip
+def test_bad_closure_springs_are_refused_naming_file_closure_and_value(
+    tmp_path, kind, springs, error, message
+):
+    import closedloop.exceptions as exceptions
 
     urdf = tmp_path / "r.urdf"
     urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
     closures = tmp_path / "c.yaml"
-    for springs, message in (
-        ("[1.0, 2.0]", r"closure_springs must list one stiffness \(or null"),
-        ("[-1.0]", r"closure_springs\[0\]' is -1.0; expected a number >= 0"),
-    ):
-        closures.write_text(
-            f"closed_loop: [[cA, cB]]\ntype: [revolute]\nclosure_springs: {springs}\n"
-        )
-        with pytest.raises(ModelFileError, match=message):
-            load_model(urdf, closures, geometry=False)
+    closures.write_text(f"closed_loop: [[cA, cB]]\ntype: [{kind}]\nclosure_springs: {springs}\n")
+    where = rf"^closure file '{closures}'"
+    with pytest.raises(getattr(exceptions, error), match=where + ".*" + message):
+        load_model(urdf, closures, geometry=False)
+
+
+def test_bad_keyword_closure_springs_are_refused(tmp_path):
+    from closedloop.exceptions import InvalidInputError
+
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    closures = tmp_path / "c.yaml"
+    closures.write_text("closed_loop: [[cA, cB]]\ntype: [revolute]\n")
+    with pytest.raises(InvalidInputError, match=r"closure_springs index 3; expected"):
+        load_model(urdf, closures, geometry=False, closure_springs={3: [INF] * 6})
+    with pytest.raises(InvalidInputError, match=r"given the spring \[1.0\]; expected 6 numbers"):
+        load_model(urdf, closures, geometry=False, closure_springs={0: [1.0]})
+
+
+# ------------------------------------------------------------------ elastic closures
+SCALE = [1, 1, 1, 0.1, 0.1, 0.1]  # P's twist: rotations weighed by 0.1 m
+PIN = [INF] * 5 + [20.0]  # the issue's example: a pin with a 20 N m/rad torsion spring
+
+
+def _mapped(clm: ClosedLoopModel, tree: ClosedLoopModel, q_tree: np.ndarray, cut: dict):
+    """q of ``clm`` from ``q_tree``: the joints both have by name, ``cut`` {joint of clm:
+    (joint of tree, sign)} for the joints at the cut."""
+    q = pin.neutral(clm.model)
+    for j in range(1, clm.model.njoints):
+        name, jm = clm.model.names[j], clm.model.joints[j]
+        other, sign = cut.get(name, (name, 1.0))
+        if tree.model.existJointName(other):
+            tm = tree.model.joints[tree.model.getJointId(other)]
+            q[jm.idx_q : jm.idx_q + jm.nq] = sign * q_tree[tm.idx_q : tm.idx_q + tm.nq]
+    return q
+
+
+@pytest.fixture(scope="module")
+def pins(tmp_path_factory, fourbars):
+    """{description: (model, Q)}: the issue's pin at C as a spring on a '6d' and on a
+    'revolute' closure, and kept in the tree, at crank 0.4 and 0.2 rad (the tree's
+    assembly, where the pin turns, carried over; the springs at rest there)."""
+    tmp = tmp_path_factory.mktemp("pins")
+    tree0, q0 = fourbars["pin in the tree, rocker welded"]
+    Q_tree = np.array([q0, cl.assemble(tree0, [0.2], q0).q])
+    tree = fourbar_as(tmp, "pin in the tree, rocker welded", springs={"pin_C": 20.0})
+    out = {"tree": (tree, Q_tree)}
+    for d in ("weld at C", "revolute closure"):
+        clm = fourbar_as(tmp, d, closure_springs={0: PIN})
+        # A's z is world -y, the pin's axis +y: the cut's rotation is minus the pin's
+        out[d] = clm, np.array([_mapped(clm, tree, q, {"cA<->cB_rz": ("pin_C", -1.0)})
+                                for q in Q_tree])  # fmt: skip
+    return out
+
+
+def test_the_issue_pin_is_one_rotation_joint_at_the_cut_on_either_type(pins):
+    for d in ("weld at C", "revolute closure"):
+        clm = pins[d][0]
+        assert [n for n in clm.model.names if n.startswith("cA<->cB")] == ["cA<->cB_rz"]
+        assert clm.springs["cA<->cB_rz"] == 20.0 and [c.kind for c in clm.closures] == ["6d"]
+
+
+@pytest.mark.parametrize("description", ["weld at C", "revolute closure"])
+def test_the_issue_pin_has_the_compliance_of_the_sprung_pin_in_the_tree(pins, description):
+    clm, Q = pins[description]
+    tree, Q_tree = pins["tree"]
+    for q, q_tree in zip(Q, Q_tree, strict=True):
+        expected = cl.compliance(tree, q_tree, "P").C
+        assert_close_in_norm(cl.compliance(clm, q, "P").C, expected, RTOL_SAME, scale=SCALE)
+    batch, expected = cl.compliances(clm, Q, "P").C, cl.compliances(tree, Q_tree, "P").C
+    for i in range(len(Q)):
+        assert_close_in_norm(batch[i], expected[i], RTOL_SAME, scale=SCALE)
+    # the spring counts: the unsprung revolute closure is softer
+    free = cl.compliance(*fourbars_free(pins), "P").C
+    assert abs(free[0, 0] - expected[0][0, 0]) > 0.01 * expected[0][0, 0]
+
+
+def fourbars_free(pins):
+    """The revolute closure without spring at the first configuration of ``pins``."""
+    clm, Q = pins["revolute closure"]
+    bare = ClosedLoopModel(clm.model, clm.closures, clm.actuated,
+                           {**clm.springs, "cA<->cB_rz": 0.0}, clm.locked)  # fmt: skip
+    return bare, Q[0]
+
+
+@pytest.mark.parametrize("description", ["weld at C", "revolute closure"])
+def test_the_issue_pin_has_the_equilibrium_of_the_sprung_pin_in_the_tree(pins, description):
+    """Nonlinear statics under a small load (the spring energy on the chain's coordinate,
+    exact for one rotation): the same displacement of P."""
+    from closedloop.elastostatics.statics import frame_displacement
+
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    moved = [frame_displacement(m, cl.solve_equilibrium(m, Q[0], "P", wrench).q, Q[0], "P")
+             for m, Q in (pins[description], pins["tree"])]  # fmt: skip
+    assert np.max(np.abs(moved[1][:3])) > 1e-5  # the load moves P
+    assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
+
+
+def test_the_energy_shares_and_identification_name_the_closure_spring(pins):
+    from closedloop.analysis.identification import identify
+    from closedloop.analysis.measurements import Measurement
+    from closedloop.elastostatics.unloaded import energy_shares
+
+    clm, Q = pins["weld at C"]
+    tree, Q_tree = pins["tree"]
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    shares = energy_shares(clm, cl.compliance(clm, Q[0], "P"), wrench)
+    expected = energy_shares(tree, cl.compliance(tree, Q_tree[0], "P"), wrench)
+    assert shares["cA<->cB_rz"] > 0.01
+    np.testing.assert_allclose(shares["cA<->cB_rz"], expected["pin_C"], rtol=RTOL_SAME)
+    # deflections of the tree's pin at 20 N m/rad; fitted from 5 at the cut
+    rng = np.random.default_rng(3)
+    measurements = []
+    for q, q_tree in zip(Q, Q_tree, strict=True):
+        for w in rng.normal(size=(3, 6)):
+            twist = cl.compliance(tree, q_tree, "P").C @ w
+            measurements.append(Measurement.of(q=q, wrench=w, twist=twist, sd=np.full(6, 1e-6)))
+    fitted = identify(clm, measurements, "P", ["cA<->cB_rz"], start={"cA<->cB_rz": 5.0})
+    np.testing.assert_allclose(fitted.estimates["cA<->cB_rz"], 20.0, rtol=1e-6)
+
+
+def _bushing(seed: int = 4) -> np.ndarray:
+    """A 6x6 symmetric positive definite stiffness [N/m, N, N m/rad] in A's axes, coupled."""
+    rng = np.random.default_rng(seed)
+    d = np.sqrt([4e4, 6e4, 5e4, 40.0, 60.0, 30.0])
+    B = rng.normal(size=(6, 6)) * 0.3
+    return d[:, None] * (np.eye(6) + B @ B.T / 6) * d[None, :]
+
+
+def test_a_6x6_bushing_equals_a_free_flyer_in_the_tree_with_that_block(tmp_path):
+    K = _bushing()
+    clm = fourbar_as(tmp_path, "weld at C", closure_springs={0: K.tolist()})
+    assert "cA<->cB_bushing" in clm.spring_blocks
+    tree = fourbar_as(tmp_path, "bushing in the tree, rocker welded",
+                      springs_keyword={"bushing": K})  # fmt: skip
+    q, q_tree = pin.neutral(clm.model), pin.neutral(tree.model)
+    C = cl.compliance(clm, q, "P").C
+    assert_close_in_norm(C, cl.compliance(tree, q_tree, "P").C, RTOL_SAME, scale=SCALE)
+    batch = cl.compliances(clm, np.array([q, q]), "P").C
+    assert_close_in_norm(batch[1], C, RTOL_SAME, scale=SCALE)
+    wrench = np.array([3.0, 2.0, -4.0, 0.3, -0.2, 0.1])
+    from closedloop.elastostatics.statics import frame_displacement
+
+    moved = [frame_displacement(m, cl.solve_equilibrium(m, x, "P", wrench).q, x, "P")
+             for m, x in ((clm, q), (tree, q_tree))]  # fmt: skip
+    assert_close_in_norm(moved[0], moved[1], RTOL_SAME)
+
+
+def test_a_nearly_diagonal_bushing_is_the_chain_of_its_diagonal(tmp_path):
+    """The bushing's axes against the chain's (checked against the pin above): a 6x6 with a
+    coupling of 1e-9 of its diagonal, and its 6 diagonal values."""
+    d = np.array([4e4, 6e4, 5e4, 40.0, 60.0, 30.0])
+    K = np.diag(d) + 1e-9 * np.sqrt(np.outer(d, d)) * (1 - np.eye(6))
+    bushing = fourbar_as(tmp_path, "weld at C", closure_springs={0: K.tolist()})
+    chain = fourbar_as(tmp_path, "revolute closure", closure_springs={0: d.tolist()})
+    assert [n for n in chain.model.names if n.startswith("cA<->cB")] == [
+        f"cA<->cB_{s}" for s in ("px", "py", "pz", "rx", "ry", "rz")
+    ]
+    C = cl.compliance(bushing, pin.neutral(bushing.model), "P").C
+    expected = cl.compliance(chain, pin.neutral(chain.model), "P").C
+    assert_close_in_norm(C, expected, 1e-7, scale=SCALE)  # the coupling's 1e-9, times 6
+
+
+def test_a_spring_on_a_free_and_a_constrained_direction_equals_slides_in_the_tree(tmp_path):
+    """A prismatic closure (free along A's z) with a spring along z and a bushing along x."""
+    clm = fourbar_as(tmp_path, "prismatic closure",
+                     closure_springs={0: [3e4, INF, 500.0, INF, INF, INF]})  # fmt: skip
+    assert [n for n in clm.model.names if n.startswith("cA<->cB")] == ["cA<->cB_px", "cA<->cB_pz"]
+    tree = fourbar_as(tmp_path, "slides in the tree, rocker welded",
+                      springs={"s_x": 3e4, "s_z": 500.0})  # fmt: skip
+    q, q_tree = pin.neutral(clm.model), pin.neutral(tree.model)
+    C = cl.compliance(clm, q, "P").C
+    assert_close_in_norm(C, cl.compliance(tree, q_tree, "P").C, RTOL_SAME, scale=SCALE)
+    free = fourbar_as(tmp_path, "prismatic closure")  # the slide along z unsprung, x rigid
+    assert cl.compliance(free, pin.neutral(free.model), "P").C[1, 1] > 1.01 * C[1, 1]
