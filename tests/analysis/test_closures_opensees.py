@@ -236,6 +236,7 @@ FOURBAR_CUTS = {
     "3d": ((None, None), (5,)),  # two points on the y axis: the pin about y
     "universal": ((R_ZY, R_ZX), (4, 5)),
     "cylindrical": ((R_ZY, R_ZY), (2, 5)),
+    "6d": ((R_ZY, R_ZY), ()),
 }
 BALL = (4, 5, 6)  # one point: the three rotations free
 
@@ -301,9 +302,16 @@ def test_fourbar_against_opensees(tmp_path, case):
     )
 
 
-def test_torsion_spring_at_a_revolute_cut_against_opensees(tmp_path):
-    """The closure file's ``closure_springs:`` (the list form): K_CUT about the pin at C."""
-    clm = fourbar(tmp_path, "revolute", D_PLANAR, closure_springs=[K_CUT])
+#: The closure file's elastic closure: B's motion relative to A in A's axes (dx, dy, dz,
+#: rx, ry, rz), rigid but for a torsion spring K_CUT about A's z (world -y).
+PIN_WITH_SPRING = f"{{0: [.inf, .inf, .inf, .inf, .inf, {K_CUT}]}}"
+
+
+@pytest.mark.parametrize("kind", ["revolute", "6d"])
+def test_torsion_spring_at_a_cut_against_opensees(tmp_path, kind):
+    """A revolute closure given a spring about its axis, and a weld freed into the same
+    sprung pin: both the pin of OpenSees with a zeroLength spring about y."""
+    clm = fourbar(tmp_path, kind, D_PLANAR, closure_springs=PIN_WITH_SPRING)
     C = library_compliance(clm, "P")
     expected = opensees_compliance(fourbar_opensees((5,), D_PLANAR, {5: K_CUT}))
     assert_close_in_norm(C, expected, RTOL_OPENSEES)
@@ -346,21 +354,30 @@ def test_slider_crank_with_a_prismatic_closure_against_opensees(tmp_path):
 FRAME_NODES = np.array([[0, 0, 0], [0, 0, 0.4], [0.5, 0, 0.4], [0.5, 0.3, 0.4], [0.5, 0.3, 0]])
 
 
-def test_spatial_frame_closed_by_a_weld_against_opensees(tmp_path):
+#: Elastic directions of the weld at D (A = the frame's end, world-aligned): none, or a
+#: spring along y [N/m] and one about x [N m/rad].
+WELD_SPRINGS = {"rigid weld": {}, "elastic weld": {2: 3.0e4, 4: 50.0}}
+
+
+@pytest.mark.parametrize("weld", WELD_SPRINGS)
+def test_spatial_frame_closed_by_a_weld_against_opensees(tmp_path, weld):
     """Four beam links A-B-C-E-D in series, clamped at A, welded to the ground at D by a
-    '6d' closure; the output at C."""
+    '6d' closure, rigid or elastic in some directions; the output at C."""
     links = ["m0", "m1", "m2", "m3", "end"]
     joints = [(f"j{i}", (["ground", *links])[i], links[i], FRAME_NODES[i], None, "fixed", None)
               for i in range(5)]  # fmt: skip
     joints.append(("ja", "ground", "anchor", FRAME_NODES[4], None, "fixed", None))
     beams = {f"m{i}": f"j{i + 1}" for i in range(4)}
-    clm = urdf_model(tmp_path, "frame", joints, [("end", "anchor", "6d")], beams, {})
+    springs = WELD_SPRINGS[weld]
+    values = ", ".join(str(springs.get(d, ".inf")) for d in range(1, 7))
+    clm = urdf_model(tmp_path, weld.replace(" ", "_"), joints, [("end", "anchor", "6d")],
+                     beams, {}, f"{{0: [{values}]}}" if springs else None)  # fmt: skip
 
     def build(s: Structure) -> int:
         nodes = [s.node(FRAME_NODES[0], fixed=True)] + [s.node(p) for p in FRAME_NODES[1:]]
         for i, j in itertools.pairwise(nodes):
             s.beam(i, j)
-        s.joint(s.node(FRAME_NODES[4], fixed=True), nodes[4])
+        s.joint(s.node(FRAME_NODES[4], fixed=True), nodes[4], free=springs, springs=springs)
         return nodes[2]
 
     C = library_compliance(clm, "m2")
