@@ -138,6 +138,7 @@ class Structure:
             self.ops.element("zeroLength", self.n, r, c, "-mat", self.n, "-dir", dof)
 
     def rigid(self, r: int, c: int) -> None:
+        """Node c moved rigidly with node r."""
         self.ops.rigidLink("beam", r, c)
         self.retained.add(r)
         self.constrained.add(c)
@@ -381,6 +382,46 @@ def test_spatial_frame_closed_by_a_weld_against_opensees(tmp_path, weld):
         return nodes[2]
 
     C = library_compliance(clm, "m2")
+    assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES)
+
+
+# ----------------------------------------------------------------------------- platform
+#: Three legs, bases -> tips [m]: leg 0 clamped at the ground; a rigid platform (a ternary
+#: link) welded to its tip; legs 1 and 2 welded under the platform, down to their bases,
+#: closed against the ground there by a ball ('3d') or a weld ('6d'); the output O on the
+#: platform.
+BASES = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.1, 0.25, 0.0]])
+TIPS = np.array([[0.05, 0.03, 0.3], [0.25, 0.02, 0.3], [0.12, 0.2, 0.32]])
+O_ = np.array([0.15, 0.1, 0.36])
+BASE_CUTS = {"3d": (4, 5, 6), "6d": ()}  # the dofs OpenSees frees at a base
+
+
+@pytest.mark.parametrize("kind", BASE_CUTS)
+def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
+    joints = [("base0", "ground", "leg0", BASES[0], None, "fixed", None),
+              ("top0", "leg0", "platform", TIPS[0], None, "fixed", None),
+              ("O_joint", "platform", "O", O_, None, "fixed", None)]  # fmt: skip
+    for i in (1, 2):
+        joints += [(f"top{i}", "platform", f"leg{i}", TIPS[i], None, "fixed", None),
+                   (f"base{i}", f"leg{i}", f"b{i}", BASES[i], None, "fixed", None),
+                   (f"ground{i}", "ground", f"g{i}", BASES[i], None, "fixed", None)]  # fmt: skip
+    closures = [(f"b{i}", f"g{i}", kind) for i in (1, 2)]
+    beams = {"leg0": "top0", "leg1": "base1", "leg2": "base2"}
+    clm = urdf_model(tmp_path, f"platform_{kind}", joints, closures, beams, {})
+
+    def build(s: Structure) -> int:
+        platform = s.node(TIPS[0])  # leg 0's tip
+        s.beam(s.node(BASES[0], fixed=True), platform)
+        for i in (1, 2):
+            top, base = s.node(TIPS[i]), s.node(BASES[i])
+            s.rigid(platform, top)
+            s.beam(top, base)
+            s.joint(s.node(BASES[i], fixed=True), base, free=BASE_CUTS[kind])
+        out = s.node(O_)
+        s.rigid(platform, out)
+        return out
+
+    C = library_compliance(clm, "O")
     assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES)
 
 
