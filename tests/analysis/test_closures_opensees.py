@@ -91,7 +91,7 @@ RTOL_OPENSEES = 1e-9
 #: Rotations times a length of the mechanisms [m] before comparing, so that the tolerance
 #: weighs translations and rotations alike (assert_close_in_norm's scale).
 SCALE = np.array([1.0, 1.0, 1.0, 0.3, 0.3, 0.3])
-Y, X, Z = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+Y = np.array([0.0, 1.0, 0.0])
 R_ZY = pin.rpy.rpyToMatrix(math.pi / 2, 0.0, 0.0)  # z along -y
 R_ZX = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)  # z along +x
 
@@ -118,7 +118,6 @@ class Structure:
         self.ops, self.n, self.retained, self.constrained = ops, 0, set(), set()
         ops.wipe()
         ops.model("basic", "-ndm", 3, "-ndf", 6)
-        ops.uniaxialMaterial("Elastic", 1, 1.0)  # a placeholder; springs add their own
 
     def node(self, xyz, fixed=()) -> int:
         """A node at ``xyz`` [m], its dofs ``fixed`` (1-6, or True for all) held at zero."""
@@ -185,6 +184,20 @@ def opensees_compliance(build) -> np.ndarray:
     return C
 
 
+def test_a_node_retained_and_constrained_is_refused():
+    """The check every model passes: a chain of two ties through one node fails it."""
+
+    def chain(s: Structure) -> int:
+        a, b, c = s.node((0, 0, 0), fixed=True), s.node((0.1, 0, 0)), s.node((0.2, 0, 0))
+        s.beam(a, b)
+        s.joint(b, c)
+        s.rigid(c, s.node((0.3, 0, 0)))  # c both constrained and retained
+        return b
+
+    with pytest.raises(AssertionError, match=r"nodes \[3\] both retained and constrained"):
+        opensees_compliance(chain)
+
+
 # ------------------------------------------------------------------------------ library
 def rod(end: str) -> dict:
     return {"E": E, "G": G, "section": {"shape": "circle", "d": D}, "end": end}
@@ -225,7 +238,9 @@ def library_compliance(clm, frame: str) -> np.ndarray:
 
 
 def urdf_model(tmp_path, name, joints, closures, beams, springs, closure_springs=None):
-    """The library's model: ``closures`` [(frame A, frame B, type)]."""
+    """The library's model of :func:`write_urdf`'s ``joints``: ``closures`` [(frame A,
+    frame B, type)], ``beams`` {link: end joint}, ``springs`` {joint: k}, and
+    ``closure_springs`` the closure file's entry (YAML text)."""
     write_urdf(tmp_path / f"{name}.urdf", joints)
     pairs = [[a, b] for a, b, _ in closures]
     types = ", ".join(f"'{t}'" for _, _, t in closures)
