@@ -54,7 +54,13 @@ from closedloop.io.data import BUNDLED_MODELS, ROBOTS
 from closedloop.io.data import (
     robot_data_dir as robot_data_dir,  # its former home; cl.robot_data_dir
 )
-from closedloop.io.mjcf import match_parsed, pinocchio_copy, place_free_joints, read_mjcf_extras
+from closedloop.io.mjcf import (
+    anchor_equalities,
+    match_parsed,
+    pinocchio_copy,
+    place_free_joints,
+    read_mjcf_extras,
+)
 from closedloop.io.sdf import REST, load_sdf
 from closedloop.model.balls import ball_springs, urdf_with_balls
 from closedloop.model.beams import apply_beams
@@ -290,7 +296,8 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
         )
         match_parsed(model, len(points) + len(welds), extras, path)
         _check_masses(model, path)
-        constraints = place_free_joints(model, [*points, *welds])
+        place_free_joints(model)
+        constraints = anchor_equalities(model, extras)
         visual = _geometry(
             geometry, lambda: pin.buildGeomFromMJCF(model, parsed, pin.GeometryType.VISUAL), path
         )

@@ -5,9 +5,12 @@ Pinocchio 4.1 keeps neither actuators nor joint stiffness, shifts hinge and slid
 equalities by name (keeping one of each name), reads only the first ``<compiler>``,
 ``<equality>`` and root body, ignores positions and orientations given by ``<default>``
 classes, fails on ``class="main"``, and reads upper-case ``eulerseq`` axes as lower-case.
-:func:`read_mjcf_extras` reads the file as MuJoCo does and refuses what Pinocchio would
-silently get wrong; Pinocchio reads :func:`pinocchio_copy`; :func:`match_parsed` and
-:func:`place_free_joints` correct what it built.
+It also anchors a ``<connect>`` or ``<weld>`` at the joint of its body, dropping the body's
+placement relative to that joint (a body without joint of its own is then anchored at its
+parent joint's origin). :func:`read_mjcf_extras` reads the file as MuJoCo does and refuses
+what Pinocchio would silently get wrong; Pinocchio reads :func:`pinocchio_copy`;
+:func:`match_parsed`, :func:`place_free_joints` and :func:`anchor_equalities` correct what
+it built.
 """
 
 from __future__ import annotations
@@ -49,6 +52,27 @@ MIN_AXIS_NORM = 1e-7
 
 
 @dataclass(frozen=True)
+class Equality:
+    """One active ``<connect>`` or ``<weld>``, as MuJoCo reads it.
+
+    Attributes:
+        tag: ``"connect"`` or ``"weld"``.
+        body1, body2: the bodies' names; ``"world"`` for the world (body2 omitted).
+        anchor: shape (3,) [m]: a connect's point in body1's frame; a weld's point in
+            body2's frame.
+        relpose: a weld's explicit ``relpose`` (position [m] in body1's frame, then
+            quaternion w x y z), shape (7,); None when absent or its quaternion is zero
+            (the relative pose is then the one at ``qpos0``).
+    """
+
+    tag: str
+    body1: str
+    body2: str
+    anchor: np.ndarray
+    relpose: np.ndarray | None
+
+
+@dataclass(frozen=True)
 class MjcfExtras:
     """What :func:`read_mjcf_extras` reads from an MJCF file.
 
@@ -63,6 +87,7 @@ class MjcfExtras:
             as MuJoCo reads it: hinge [rad] (from the compiler's angle unit), slide [m];
             ``ref`` does not shift it; (-inf, inf) for a ``limited="false"`` one.
         nq: configuration size of the file's joints.
+        equalities: the active equalities, in :attr:`closures` order.
     """
 
     actuated: tuple[str, ...]
@@ -71,6 +96,7 @@ class MjcfExtras:
     undriven: tuple[str, ...]
     limits: tuple[tuple[int, float, float], ...]
     nq: int
+    equalities: tuple[Equality, ...]
 
 
 def read_mjcf_extras(path: Path) -> MjcfExtras:
@@ -204,6 +230,24 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         tuple(a.get("name") or a.tag for a in actuators if not a.get("joint")),
         tuple(limits),
         nq,
+        tuple(_equality(e, root, where) for _, e in equalities),
+    )
+
+
+def _equality(element: ET.Element, root: ET.Element, where: str) -> Equality:
+    """The :class:`Equality` of a checked ``<connect>`` or ``<weld>`` (classes resolved)."""
+    attrs = {**class_defaults(root, "equality").get(element.get("class", "main"), {})}
+    attrs.update(element.attrib)
+    what = f"<{element.tag}> {element_name(element)}"
+    anchor = read_numbers(attrs.get("anchor", "0 0 0"), 3, where, f"anchor of {what}")
+    relpose = read_numbers(attrs.get("relpose", "0 1 0 0 0 0 0"), 7, where, f"relpose of {what}")
+    explicit = element.tag == "weld" and relpose[3:].any()  # MuJoCo: a zero quaternion = qpos0
+    return Equality(
+        element.tag,
+        attrs["body1"],
+        attrs.get("body2", "world"),
+        anchor,
+        relpose if explicit else None,
     )
 
 
@@ -335,24 +379,18 @@ def match_parsed(model: pin.Model, n_constraints: int, extras: MjcfExtras, path:
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
 
 
-def place_free_joints(model: pin.Model, constraints: list) -> list:
-    """Correct Pinocchio's placement of free joints; the constraints re-anchored at qpos0.
+def place_free_joints(model: pin.Model) -> None:
+    """Correct Pinocchio's placement of free joints (call before :func:`anchor_equalities`).
 
     Pinocchio 4.1 places the free joint of a top-level body at pos = p, quat = R at
     (I, p - R p) in the world instead of the identity, while its ``qpos0`` holds (p, R):
     the body then sits at 2 p - R p, not at p (checked on a rotated platform). MuJoCo
     allows free joints on top-level bodies only, whose parent is the world (or
-    :data:`WORLD_BODY` at the origin), so the right placement is the identity. The anchors
-    Pinocchio computed at ``qpos0`` on the second body of each ``<connect>`` / ``<weld>``
-    are recomputed with the corrected model (same first anchors, same ``qpos0``; a weld's
-    explicit ``relpose`` is not kept). Only that exact wrong placement is corrected.
+    :data:`WORLD_BODY` at the origin), so the right placement is the identity. Only that
+    exact wrong placement is corrected.
 
     Args:
         model: Pinocchio's model, corrected in place.
-        constraints: its anchor constraints (point and frame).
-
-    Returns:
-        The constraints, re-anchored when a placement was corrected.
     """
     q0 = model.referenceConfigurations["qpos0"]
 
@@ -364,16 +402,54 @@ def place_free_joints(model: pin.Model, constraints: list) -> list:
         wrong = X.translation - X.rotation @ X.translation
         return np.allclose(M.rotation, np.eye(3)) and np.allclose(M.translation, wrong)
 
-    bad = [j for j in range(1, model.njoints) if misplaced(j)]
-    if not bad:
-        return constraints
-    for j in bad:
+    for j in [j for j in range(1, model.njoints) if misplaced(j)]:
         model.jointPlacements[j] = pin.SE3.Identity()
+
+
+def anchor_equalities(model: pin.Model, extras: MjcfExtras) -> list:
+    """The anchor constraints of the file's equalities, placed as MuJoCo places them.
+
+    Pinocchio 4.1 computes each anchor in the frame of the body's joint as if the body
+    were at that joint's origin: a ``<connect>`` on a body without joint of its own (a
+    fixed child of a moving body) is anchored at the parent joint's origin, and its second
+    point is computed from that wrong first one (a weld's points likewise). Here each
+    anchor is placed from Pinocchio's frame of the body (its placement relative to its
+    joint, ``model.frames``): a connect holds body1's point ``anchor`` and the point of
+    body2 that coincides with it at ``qpos0``; a weld holds body2's frame moved to
+    ``anchor`` and the frame of body1 that coincides with it at ``qpos0``, or, with an
+    explicit ``relpose``, body1's frame moved by ``relpose``. Bodies that carry their
+    joint keep Pinocchio's placements (their frame is the joint's).
+
+    Args:
+        model: Pinocchio's model, free joints placed (:func:`place_free_joints`).
+        extras: what :func:`read_mjcf_extras` read from the file.
+
+    Returns:
+        One point (connect) or frame (weld) anchor constraint per :attr:`MjcfExtras.equalities`.
+    """
     data = model.createData()
-    pin.forwardKinematics(model, data, q0)
+    pin.forwardKinematics(model, data, model.referenceConfigurations["qpos0"])
+
+    def body(name: str) -> tuple[int, pin.SE3]:  # (joint, body frame in that joint's frame)
+        if name == "world":
+            return 0, pin.SE3.Identity()
+        frame = model.frames[model.getFrameId(name, pin.FrameType.BODY)]
+        return frame.parentJoint, frame.placement
+
     out = []
-    for c in constraints:
-        oM1 = data.oMi[c.joint1_id] * c.joint1_placement
-        M2 = data.oMi[c.joint2_id].inverse() * oM1
-        out.append(type(c)(model, c.joint1_id, c.joint1_placement, c.joint2_id, M2))
+    for eq in extras.equalities:
+        (j1, F1), (j2, F2) = body(eq.body1), body(eq.body2)
+        if eq.tag == "connect":
+            M1 = F1 * pin.SE3(np.eye(3), eq.anchor)
+            M2 = data.oMi[j2].inverse() * data.oMi[j1] * M1
+            out.append(pin.PointAnchorConstraintModel(model, j1, M1, j2, M2))
+            continue
+        M2 = F2 * pin.SE3(np.eye(3), eq.anchor)
+        if eq.relpose is None:
+            M1 = data.oMi[j1].inverse() * data.oMi[j2] * M2
+        else:
+            w, x, y, z = eq.relpose[3:]
+            rotation = pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+            M1 = F1 * pin.SE3(rotation, eq.relpose[:3])
+        out.append(pin.FrameAnchorConstraintModel(model, j1, M1, j2, M2))
     return out
