@@ -140,6 +140,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         )
     equalities = active_equalities(root, where)
     check_numbers(root, where)
+    anchored = tuple(_equality(e, root, where) for _, e in equalities)  # classes resolved
     write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
     joints = joints_with_defaults(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
@@ -230,7 +231,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         tuple(a.get("name") or a.tag for a in actuators if not a.get("joint")),
         tuple(limits),
         nq,
-        tuple(_equality(e, root, where) for _, e in equalities),
+        anchored,
     )
 
 
