@@ -140,7 +140,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         )
     equalities = active_equalities(root, where)
     check_numbers(root, where)
-    anchored = tuple(_equality(e, root, where) for _, e in equalities)  # classes resolved
+    anchored = tuple(_equality(e, where) for _, e in equalities)
     write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
     joints = joints_with_defaults(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
@@ -235,10 +235,10 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     )
 
 
-def _equality(element: ET.Element, root: ET.Element, where: str) -> Equality:
-    """The :class:`Equality` of a checked ``<connect>`` or ``<weld>`` (classes resolved)."""
-    attrs = {**class_defaults(root, "equality").get(element.get("class", "main"), {})}
-    attrs.update(element.attrib)
+def _equality(element: ET.Element, where: str) -> Equality:
+    """The :class:`Equality` of a checked ``<connect>`` or ``<weld>`` (a ``<default>``
+    class gives an equality neither anchor nor relpose)."""
+    attrs = element.attrib
     what = f"<{element.tag}> {element_name(element)}"
     anchor = read_numbers(attrs.get("anchor", "0 0 0"), 3, where, f"anchor of {what}")
     relpose = read_numbers(attrs.get("relpose", "0 1 0 0 0 0 0"), 7, where, f"relpose of {what}")
