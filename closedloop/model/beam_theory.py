@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -364,36 +364,69 @@ class BeamSite:
     link_frame: int
     joint: int  # parent joint of the link (the beam's start)
     end: str
-    end_joint: int | None  # the moving end joint, or None for a fixed end
-    end_frame: int  # the end's JOINT or FIXED_JOINT frame
+    end_joint: int | None  # the moving end joint, or None for a fixed end, a frame, an anchor
+    end_frame: int | None  # the end's frame (JOINT, FIXED_JOINT or OP_FRAME); None: an anchor
     placement: pin.SE3  # the end's origin and axes in the parent joint's frame
 
 
-def beam_site(model: pin.Model, beam: str, end: str | None) -> BeamSite:
-    """Where the beam on link ``beam`` sits in ``model``, ending at joint ``end`` (None: the
-    link's only child joint).
+#: Prefix of a beam's ``end`` that names a closure's anchor: ``anchor:<closure name>``.
+ANCHOR_END = "anchor:"
+
+
+def beam_site(
+    model: pin.Model, beam: str, end: str | None, anchors: Sequence[tuple] = ()
+) -> BeamSite:
+    """Where the beam on link ``beam`` sits in ``model``, ending at ``end``: a child joint
+    of the link, a frame of the link (a fixed joint's, a site, an operational frame) or
+    ``anchor:<closure name>``, one of ``anchors`` (None: the link's only child joint).
+
+    Args:
+        model: the kinematic tree.
+        beam: the link's name.
+        end: the end's name, or None.
+        anchors: (``anchor:<closure name>``, joint index, placement in the joint's frame)
+            of the closures' anchors (two a closure); those on the link's joint may end
+            its beam. An anchor end has the link frame's axes.
 
     Raises:
-        BeamError: an unknown link, or an end that is not one of its child joints.
+        BeamError: an unknown link, or an end that is not one of its child joints, frames
+            or anchors (the message lists those).
     """
     bodies = [f.name for f in model.frames if f.type == pin.BODY]
     if beam not in bodies:
         raise BeamError(beam, f"unknown link; expected one of {bodies[:12]}")
     fl = next(i for i, f in enumerate(model.frames) if f.type == pin.BODY and f.name == beam)
+    link = model.frames[fl]
     kinds = (pin.JOINT, pin.FIXED_JOINT)
     children = [i for i, f in enumerate(model.frames) if f.parentFrame == fl and f.type in kinds]
     names = [model.frames[i].name for i in children]
+    frames = [
+        i for i, f in enumerate(model.frames)
+        if f.parentFrame == fl and f.type == pin.OP_FRAME and f.parentJoint == link.parentJoint
+    ]  # fmt: skip
+    on_link = {}
+    for k, j, M in anchors:
+        if int(j) == link.parentJoint:
+            on_link.setdefault(k, (int(j), pin.SE3(M)))
+    ends = names + [model.frames[i].name for i in frames] + list(on_link)
     if end is None:
         if len(children) != 1:
-            raise BeamError(beam, f"the link has {len(children)} child joints {names}: give end")
+            raise BeamError(beam, f"the link has {len(children)} child joints {names}: give "
+                            f"end, one of {ends}")  # fmt: skip
         end = names[0]
-    if end not in names:
-        known = model.existJointName(end) or any(
-            f.name == end and f.type == pin.FIXED_JOINT for f in model.frames
+    if end in on_link:
+        j, M = on_link[end]
+        return BeamSite(fl, j, end, None, None, pin.SE3(link.placement.rotation, M.translation))
+    if end not in ends:
+        known = model.existJointName(end) or model.existFrame(end)
+        known = known or any(k == end for k, _, _ in anchors)
+        what = (
+            "is not a child joint of the link, nor one of its frames or anchors"
+            if known
+            else "is not a joint of the model, nor a frame or a closure's anchor"
         )
-        what = "is not a child joint of the link" if known else "is not a joint of the model"
-        raise BeamError(beam, f"end {end!r} {what}; expected one of {names}")
-    fe = children[names.index(end)]
+        raise BeamError(beam, f"end {end!r} {what}; expected one of {ends}")
+    fe = (children + frames)[ends.index(end)]
     frame = model.frames[fe]
     if frame.type == pin.JOINT:
         j = frame.parentJoint
@@ -414,7 +447,11 @@ def element_count(beam: str, spec: Mapping) -> int:
 
 
 def beam_stiffness(
-    model: pin.Model, beam: str, spec: Mapping, shapes: list[Shape] | None = None
+    model: pin.Model,
+    beam: str,
+    spec: Mapping,
+    shapes: list[Shape] | None = None,
+    anchors: Sequence[tuple] = (),
 ) -> tuple[str | None, np.ndarray, BeamMass | None]:
     """(end, K, mass) of one beam: its end joint, its (6, 6) tip stiffness in the end
     joint's axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the
@@ -422,7 +459,8 @@ def beam_stiffness(
     compliance_6x6 given in that same frame; density [kg/m^3]; elements: split into that
     many equal elements, K then that of one of them), and its section for its own mass
     (None without a section); ``shapes``: the link's URDF shapes, for ``section:
-    geometry`` (:func:`geometry_section`)."""
+    geometry`` (:func:`geometry_section`); ``anchors``: the closures' anchors an ``end``
+    may name (:func:`beam_site`)."""
     if not isinstance(spec, Mapping):
         raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
     unknown = set(spec) - set(BEAM_KEYS)
@@ -430,8 +468,8 @@ def beam_stiffness(
         raise BeamError(beam, f"unknown key(s) {sorted(unknown)}; expected {list(BEAM_KEYS)}")
     end = spec.get("end")
     if end is not None and not isinstance(end, str):
-        raise BeamError(beam, f"end is {end!r}; expected a joint name")
-    site = beam_site(model, beam, end)
+        raise BeamError(beam, f"end is {end!r}; expected a joint, frame or anchor name")
+    site = beam_site(model, beam, end, anchors)
     density = _positive(beam, "density [kg/m^3]", spec["density"]) if "density" in spec else None
     elements = element_count(beam, spec)
     given = [k for k in ("stiffness_6x6", "compliance_6x6") if k in spec]

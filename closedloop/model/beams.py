@@ -4,7 +4,10 @@ A flexible link is a rigid body with a 6-dof virtual spring at its end (Pashkevi
 Klimchik and Chablat's Virtual Joint Method). A *beam* on a link is straight, from the
 origin of the link's frame (its start, clamped) to the origin of its ``end`` joint (the
 tip): its length is that distance. The tip carries the ``end`` joint and everything beyond
-it; the link's other child joints stay rigid with the start. :func:`apply_beams` puts a
+it; the link's other child joints stay rigid with the start. The ``end`` may also be a
+frame of the link (a site, an operational frame) or ``anchor:<closure name>``, a closure's
+anchor on the link: the tip then carries that frame or anchor only, every child joint of
+the link staying with the start (one at its origin too). :func:`apply_beams` puts a
 6-dof virtual joint (a Pinocchio free flyer named ``<link>_beam``) between the link and
 its ``end``, placed at the end joint's origin with the end joint's axes, and gives it the
 beam's tip stiffness as an SPD block spring (:mod:`closedloop.model.closed_loop`). Its coordinates
@@ -45,6 +48,7 @@ import pinocchio as pin
 
 from closedloop.exceptions import BeamError, InvalidInputError
 from closedloop.model.beam_theory import (
+    ANCHOR_END,
     GEOMETRY,
     BeamSite,
     beam_site,
@@ -85,6 +89,8 @@ def _insert(model, geometries, site: BeamSite, name: str):
     if site.end_joint is not None:
         moved_frames = set()
         moved_joints = {site.end_joint}
+    elif site.end_frame is None:  # a closure's anchor: the tip carries the anchor only
+        moved_frames, moved_joints = set(), set()
     else:
         moved_frames = _descendant_frames(model, site.end_frame)
         moved_joints = {
@@ -227,7 +233,7 @@ TIP_RTOL = 1e-9
 
 
 def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None,
-                anchors=()):  # fmt: skip
+                anchors=(), anchor_names=()):  # fmt: skip
     """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
     inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
 
@@ -240,6 +246,8 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             (the closures' anchors), carried over: an anchor at a beam's tip (to
             :data:`TIP_RTOL` of its length) moves with the tip, the others stay on their
             joints.
+        anchor_names: the closure's name of each of ``anchors`` (or empty): a beam's
+            ``end: anchor:<closure name>`` is that closure's anchor on the beam's link.
 
     Returns:
         (model, geometries, springs, anchors, masses): the new model, its geometry models,
@@ -264,8 +272,9 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             raise BeamError(beam, f"the link already has a beam (or the model a joint named "
                             f"{name!r}): one beam a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(beam, [])
-        end, K, mass = beam_stiffness(model, beam, spec, link_shapes)
-        site = beam_site(model, beam, end)
+        named = [(f"{ANCHOR_END}{n}", *anchors[i]) for i, n in enumerate(anchor_names)]
+        end, K, mass = beam_stiffness(model, beam, spec, link_shapes, named)
+        site = beam_site(model, beam, end, named)
         tip, start = site.placement, model.frames[site.link_frame].placement
         length = float(np.linalg.norm(tip.translation - start.translation))
         model, geometries, step = _insert(model, geometries, site, name)

@@ -471,7 +471,8 @@ class ClosedLoopModel:
         Actuated joints, springs and locked joints keep their names; closure anchors are
         carried over on their joints, those at a beam's tip with the tip (a loop of an MJCF
         or SDF file closed at the end of a link that becomes a beam); an anchor elsewhere on
-        the beam's link stays with the beam's start.
+        the beam's link stays with the beam's start. A beam's ``end: anchor:<closure
+        name>`` ends it at that closure's anchor on the link.
 
         Raises:
             BeamError: a bad specification (the message names the beam and the value).
@@ -479,7 +480,10 @@ class ClosedLoopModel:
         geoms = [self.visual_model, self.collision_model]
         ends = [(k.joint1_id, k.joint1_placement) for c in self.closures for k in [c.constraint]]
         ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
-        model, geoms, springs, ends, masses = apply_beams(self.model, geoms, beams, anchors=ends)
+        names = [c.name for c in self.closures] * 2
+        model, geoms, springs, ends, masses = apply_beams(
+            self.model, geoms, beams, anchors=ends, anchor_names=names
+        )
         n = len(self.closures)
         closures = [c.on(model, ends[i], ends[n + i]) for i, c in enumerate(self.closures)]
         return ClosedLoopModel(

@@ -14,7 +14,8 @@ sprung revolute closure and by a weld freed into the same sprung pin (elastic cl
 a spatial four-bar closed by a universal and by a cylindrical closure; a slider-crank
 closed by a prismatic closure; a spatial frame closed by a weld, rigid or elastic along y
 and about x; a rigid platform (a ternary link) on three flexible legs, two closed at the
-ground by points or welds; the planar four-bar as an MJCF file closed by a ``<connect>``.
+ground by points or welds; the planar four-bar as an MJCF file closed by a ``<connect>``,
+its rocker a beam to a tip body or to the ``<connect>``'s anchor.
 
 How each part of the library's model is modelled in OpenSees:
 
@@ -488,6 +489,28 @@ def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
              "rocker": rod("rocker_tip_fixed")}  # fmt: skip
     clm = cl.load_model(tmp_path / "fourbar_beams.xml", beams=beams)
     assert [c.kind for c in clm.closures] == ["3d"]
+    C = library_compliance(clm, "P")
+    assert_close_in_norm(
+        C, opensees_compliance(fourbar_opensees(BALL, D_PLANAR)), RTOL_OPENSEES, SCALE
+    )
+
+
+def test_mjcf_fourbar_rocker_to_its_connect_anchor_against_opensees(tmp_path):
+    """The same four-bar, its rocker a body whose far end is only the ``<connect>``'s
+    anchor (computed by the reader on the rocker): a beam to ``anchor:C``."""
+    text = FOURBAR_MJCF.replace('<body name="rocker_tip" pos="{DC}"/>', "").replace(
+        'body1="coupler" body2="rocker" anchor="{BC}"',
+        'body1="coupler_tip" body2="rocker" anchor="0 0 0"',
+    )
+    assert text.count("rocker_tip") == 0 and 'body1="coupler_tip"' in text
+    join = " ".join
+    (tmp_path / "fourbar_anchor.xml").write_text(text.format(
+        k=K_CRANK, B=join(map(str, B_)), BC=join(map(str, C_ - B_)), CP=join(map(str, P_ - C_)),
+        D=join(map(str, D_PLANAR))))  # fmt: skip
+    beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
+             "rocker": rod("anchor:C")}  # fmt: skip
+    clm = cl.load_model(tmp_path / "fourbar_anchor.xml", beams=beams)
+    assert clm.closures[0].constraint.joint2_id == clm.model.getJointId("rocker_beam")
     C = library_compliance(clm, "P")
     assert_close_in_norm(
         C, opensees_compliance(fourbar_opensees(BALL, D_PLANAR)), RTOL_OPENSEES, SCALE
