@@ -153,10 +153,10 @@ def configuration(
         start = reference_configuration(clm)
         if actuated is None:
             q = assemble(clm, None, start).q  # the file's own configuration, as drawn
-        elif check_limits:
-            q = assemble_connected(clm, actuated, start, jacobian=False).q  # start's mode
-        else:
-            q = assemble(clm, actuated, start, jacobian=False).q
+        else:  # driven there on the start's assembly mode, limits checked or not
+            q = assemble_connected(
+                clm, actuated, start, jacobian=False, check_limits=check_limits
+            ).q
     state = Configuration(clm, q, check_limits=check_limits and given)
     try:
         return state.require_closed()

@@ -39,6 +39,23 @@ def one_error_line(err: str) -> str:
 
 
 # ------------------------------------------------------------------------ joint limits
+def test_no_limits_drives_the_actuated_values_on_the_start_mode(capsys):
+    """--no-limits changes only the limits check: --actuated still drives the crank from the
+    file's configuration in steps (one direct solve lands the bundled four-bar on its other
+    assembly mode at crank 1.0 rad, rocker -3.17 rad)."""
+    runs = [
+        run(capsys, "stiffness", "fourbar", "--frame", "P", "--actuated", "1.0", "--json", *flag)
+        for flag in ((), ("--no-limits",))
+    ]
+    (code, out, _), (code_free, out_free, _) = runs
+    assert code == code_free == 1  # planar: K does not exist, C does
+    q, q_free = (np.array(json.loads(o)["q"]) for o in (out, out_free))
+    np.testing.assert_allclose(q_free, q, rtol=0, atol=1e-9)  # the assembly's tolerance
+    robot = cl.load_model(data.path("fourbar.urdf"), data.path("fourbar.yaml"))
+    direct = cl.assemble(robot, actuated=[1.0]).q  # one solve from neutral: the other mode
+    assert np.max(np.abs(direct - q)) > 1.0
+
+
 def test_degrees_are_refused_naming_joint_value_limits(ur5):
     clm, _ = ur5
     with pytest.raises(cl.OutsideLimitsError, match=r"elbow_joint = 86 \(limits \[-3.14159") as e:
