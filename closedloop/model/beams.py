@@ -287,11 +287,15 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
     for link, spec in beams.items():
         plan = _plan(link, spec)
-        for name, _, _ in plan:
-            if model.existJointName(name):  # before the stiffness, which would measure the
-                # link from the existing beam's joint (a length of 0)
-                raise BeamError(link, f"the link already has a beam (or the model a joint "
-                                f"named {name!r}): one entry a link")  # fmt: skip
+        had = [
+            b.name for b in inserted_beams(model)
+            if _beam_link(model, model.frames[model.getFrameId(b.name, pin.JOINT)]) == link
+        ]  # fmt: skip
+        for name in had[:1] + [name for name, _, _ in plan if model.existJointName(name)]:
+            # before the stiffness, which would measure the link from the existing beam's
+            # joint (a length of 0)
+            raise BeamError(link, f"the link already has a beam (or the model a joint "
+                            f"named {name!r}): one entry a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(link, [])
         named = [(f"{ANCHOR_END}{n}", *anchors[i]) for i, n in enumerate(anchor_names)]
         sites, stiffness, ends = {}, {}, {}  # on the model before this link's beams

@@ -165,3 +165,14 @@ def test_closure_file_takes_a_list_of_beams(tmp_path):
     from_file = load_model(tmp_path / "rod.urdf", tmp_path / "rod.yaml", geometry=False)
     np.testing.assert_array_equal(cl.compliance(from_file, q, "tip").C,
                                   cl.compliance(clm, q, "tip").C)  # fmt: skip
+
+
+def test_a_link_with_beams_takes_no_second_entry(tmp_path):
+    """Beams added twice to one link (``with_beams`` on a model that has them): refused,
+    naming the existing beam, whatever the form of either entry."""
+    clm, _ = ternary(tmp_path)
+    with pytest.raises(BeamError, match=r"beam 'hub': the link already has a beam.*'hub_beam_ja'"):
+        clm.with_beams({"hub": rod("ja")})
+    single, _ = ternary(tmp_path, {"hub": rod("ja")})
+    with pytest.raises(BeamError, match=r"beam 'hub': the link already has a beam.*'hub_beam'"):
+        single.with_beams({"hub": [rod("jb")]})
