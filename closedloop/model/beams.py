@@ -252,7 +252,8 @@ TIP_RTOL = 1e-9
 def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None,
                 anchors=(), anchor_names=()):  # fmt: skip
     """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
-    inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
+    inserted as 6-dof virtual joints ``<link>_beam`` (a list of beams on a link:
+    ``<link>_beam_<end>`` each, module docstring), applied one after the other.
 
     Args:
         model: the kinematic tree (not modified).
@@ -291,11 +292,11 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
             b.name for b in inserted_beams(model)
             if _beam_link(model, model.frames[model.getFrameId(b.name, pin.JOINT)]) == link
         ]  # fmt: skip
-        for name in had[:1] + [name for name, _, _ in plan if model.existJointName(name)]:
-            # before the stiffness, which would measure the link from the existing beam's
-            # joint (a length of 0)
+        clash = had + [name for name, _, _ in plan if model.existJointName(name)]
+        if clash:  # before the stiffness, which would measure the link from the existing
+            # beam's joint (a length of 0)
             raise BeamError(link, f"the link already has a beam (or the model a joint "
-                            f"named {name!r}): one entry a link")  # fmt: skip
+                            f"named {clash[0]!r}): one entry a link")  # fmt: skip
         link_shapes = None if shapes is None else shapes.get(link, [])
         named = [(f"{ANCHOR_END}{n}", *anchors[i]) for i, n in enumerate(anchor_names)]
         sites, stiffness, ends = {}, {}, {}  # on the model before this link's beams
