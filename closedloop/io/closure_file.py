@@ -236,13 +236,14 @@ def _numbers(value):
 
 
 def _check_beams(beams, where: str) -> dict[str, dict]:
-    """``beams:`` mapping link name -> beam mapping; the beams module checks the contents."""
+    """``beams:`` mapping link name -> beam mapping (or a list of them, several beams on
+    the link); the beams module checks the contents."""
     if not isinstance(beams, dict) or not all(
-        isinstance(k, str) and isinstance(v, dict) for k, v in beams.items()
+        isinstance(k, str) and isinstance(v, dict | list) for k, v in beams.items()
     ):
         raise ModelFileError(
             f"{where}: beams must be a mapping link name -> {{end, E, G, section, theory}} "
-            f"or {{end, stiffness_6x6}}, got {beams!r}"
+            f"or {{end, stiffness_6x6}} (or a list of them), got {beams!r}"
         )
     return beams
 

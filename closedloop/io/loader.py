@@ -362,7 +362,8 @@ def load_model(
         file_format: ``"urdf"``, ``"mjcf"`` or ``"sdf"``; default: from the file suffix.
         free_base: SDF only: a free-flyer root joint instead of the root link fixed.
         beams: flexible links, link name -> beam (:mod:`closedloop.model.beams`), merged over
-            the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (map a
+            the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (a list
+            of beams on a link, ``<link>_beam_<end>`` each; map a
             configuration with :func:`closedloop.model.beams.map_configuration`).
         closure_springs: URDF only: elastic closures, closure file pair index (0-based) ->
             6 stiffnesses [N/m, N m/rad] or a 6x6 matrix, merged over the file's

@@ -452,6 +452,7 @@ def beam_stiffness(
     spec: Mapping,
     shapes: list[Shape] | None = None,
     anchors: Sequence[tuple] = (),
+    start: pin.SE3 | None = None,
 ) -> tuple[str | None, np.ndarray, BeamMass | None]:
     """(end, K, mass) of one beam: its end joint, its (6, 6) tip stiffness in the end
     joint's axes at its origin [N/m, N/rad, N m/rad], from ``spec`` (the keys of the
@@ -460,7 +461,9 @@ def beam_stiffness(
     many equal elements, K then that of one of them), and its section for its own mass
     (None without a section); ``shapes``: the link's URDF shapes, for ``section:
     geometry`` (:func:`geometry_section`); ``anchors``: the closures' anchors an ``end``
-    may name (:func:`beam_site`)."""
+    may name (:func:`beam_site`); ``start``: the beam's start (origin, and the link frame's
+    axes, in which a section's y_axis is given) in the link's parent joint frame (None: the
+    link frame)."""
     if not isinstance(spec, Mapping):
         raise BeamError(beam, f"specification is {spec!r}; expected a mapping of {BEAM_KEYS}")
     unknown = set(spec) - set(BEAM_KEYS)
@@ -501,11 +504,11 @@ def beam_stiffness(
     theory = spec.get("theory", "euler-bernoulli")
     if theory not in THEORIES:
         raise BeamError(beam, f"theory {theory!r}; expected one of {list(THEORIES)}")
-    link = model.frames[site.link_frame].placement
+    link = model.frames[site.link_frame].placement if start is None else start
     M_LE = link.actInv(site.placement)  # the end in the link frame
     length = float(np.linalg.norm(M_LE.translation))
     if length <= 1e-12:
-        raise BeamError(beam, f"length {length} m: end {site.end!r} is at the link's origin")
+        raise BeamError(beam, f"length {length} m: end {site.end!r} is at the beam's start")
     given = spec["section"]
     if given == GEOMETRY:
         given = geometry_section(beam, shapes, M_LE.translation)

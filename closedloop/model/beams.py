@@ -14,6 +14,12 @@ beam's tip stiffness as an SPD block spring (:mod:`closedloop.model.closed_loop`
 dq = (v, w) are the twist of the tip (translation [m], small rotation [rad]) in the end
 joint's axes, so the block is the tip stiffness in that frame, wrench (f [N], n [N m]).
 
+Several beams on a link: a list of entries, each with its ``end`` and an optional
+``start`` (the ``end`` of another beam of the list; default: the link's origin), each a
+virtual joint ``<link>_beam_<end>`` placed after its start beam's (or on the link's joint),
+straight from its start to its end; its tip carries its end and the ends of the beams that
+start from it, the link's inertia and other child joints staying at the origin.
+
 The tip stiffness from beam theory, the sections and ``section: geometry``:
 :mod:`closedloop.model.beam_theory`.
 
@@ -83,20 +89,21 @@ _NV_ATTRIBUTES = (
 )  # fmt: skip
 
 
-def _insert(model, geometries, site: BeamSite, name: str):
+def _insert(model, geometries, site: BeamSite, name: str, carried=()):
     """A copy of ``model`` (and of the geometry models) with a free-flyer ``name`` between
-    the site's joint and its end; returns (model, geometries, old -> new joint index)."""
-    if site.end_joint is not None:
-        moved_frames = set()
-        moved_joints = {site.end_joint}
-    elif site.end_frame is None:  # a closure's anchor: the tip carries the anchor only
-        moved_frames, moved_joints = set(), set()
-    else:
-        moved_frames = _descendant_frames(model, site.end_frame)
-        moved_joints = {
-            f.parentJoint for f in model.frames if f.type == pin.JOINT
-            and f.parentJoint > 0 and f.parentFrame in moved_frames
-        }  # fmt: skip
+    the site's joint and its end (and the ends of the sites ``carried``, on the same joint:
+    those of the beams that start at this one's tip); returns (model, geometries, old ->
+    new joint index)."""
+    moved_frames, moved_joints = set(), set()
+    for s in (site, *carried):
+        if s.end_joint is not None:
+            moved_joints.add(s.end_joint)
+        elif s.end_frame is not None:  # None: a closure's anchor, the tip carries it only
+            moved_frames |= _descendant_frames(model, s.end_frame)
+    moved_joints |= {
+        f.parentJoint for f in model.frames if f.type == pin.JOINT
+        and f.parentJoint > 0 and f.parentFrame in moved_frames
+    }  # fmt: skip
     Mv = site.placement
     children = {j: [] for j in range(model.njoints)}
     for j in range(1, model.njoints):
@@ -179,24 +186,34 @@ class InsertedBeam:
     rest: pin.SE3
 
 
+def _beam_link(model: pin.Model, frame: pin.Frame) -> str | None:
+    """The link of the beam whose virtual joint has the JOINT frame ``frame``: the BODY
+    frame reached through its parent frames, all JOINT frames named ``<link>_beam`` or
+    ``<link>_beam_*``; None if there is none."""
+    chain = [frame.name]
+    while frame.type == pin.JOINT:
+        frame = model.frames[frame.parentFrame]
+        chain.append(frame.name)
+    link = chain.pop()
+    if frame.type != pin.BODY:
+        return None
+    ok = all(n == f"{link}_beam" or n.startswith(f"{link}_beam_") for n in chain)
+    return link if ok else None
+
+
 def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
-    """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: its
-    ``<link>_beam`` joint frames whose parent frame is the link's body frame, on the
-    joint's parent joint; of a beam split into n elements, ``<link>_beam_1`` so, then
-    ``<link>_beam_k`` (and last ``<link>_beam``) whose parent frame is the joint frame of
-    ``<link>_beam_{k-1}``, on its joint (``link_frame``: the element's start)."""
+    """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: the
+    JOINT frames of its virtual joints, each on the joint's parent joint, whose parent
+    frame (``link_frame``, the beam's or element's start) is the link's body frame or the
+    frame of another virtual joint of the link, all named ``<link>_beam`` or
+    ``<link>_beam_*``."""
     out = []
     for f in model.frames:
         start = model.frames[f.parentFrame]
         j = f.parentJoint
         if f.type != pin.JOINT or start.parentJoint != model.parents[j]:
             continue
-        if start.type == pin.BODY:
-            names = (f"{start.name}_beam", f"{start.name}_beam_1")
-        else:
-            head, _, k = start.name.rpartition("_beam_")
-            names = (f"{head}_beam", f"{head}_beam_{int(k) + 1}") if k.isdigit() else ()
-        if start.type in (pin.BODY, pin.JOINT) and f.name in names:
+        if start.type in (pin.BODY, pin.JOINT) and _beam_link(model, f) is not None:
             rest = start.placement.actInv(model.jointPlacements[j])
             out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
     return out
@@ -235,7 +252,8 @@ TIP_RTOL = 1e-9
 def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf=None,
                 anchors=(), anchor_names=()):  # fmt: skip
     """``model`` with ``beams`` (link name -> specification, see :func:`beam_stiffness`)
-    inserted as 6-dof virtual joints ``<link>_beam``, applied one after the other.
+    inserted as 6-dof virtual joints ``<link>_beam`` (a list of beams on a link:
+    ``<link>_beam_<end>`` each, module docstring), applied one after the other.
 
     Args:
         model: the kinematic tree (not modified).
@@ -263,36 +281,127 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
     springs, masses = {}, {}
     anchors = [(int(j), pin.SE3(M)) for j, M in anchors]
     geometries = list(geometries)
-    wanted = any(isinstance(b, Mapping) and b.get("section") == GEOMETRY for b in beams.values())
+    wanted = any(
+        isinstance(b, Mapping) and b.get("section") == GEOMETRY
+        for spec in beams.values() for b in (spec if isinstance(spec, list | tuple) else [spec])
+    )  # fmt: skip
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
-    for beam, spec in beams.items():
-        name = f"{beam}_beam"
-        if model.existJointName(name):  # before the stiffness, which would measure the link
-            # from the existing beam's joint (a length of 0)
-            raise BeamError(beam, f"the link already has a beam (or the model a joint named "
-                            f"{name!r}): one beam a link")  # fmt: skip
-        link_shapes = None if shapes is None else shapes.get(beam, [])
+    for link, spec in beams.items():
+        plan = _plan(link, spec)
+        had = [
+            b.name for b in inserted_beams(model)
+            if _beam_link(model, model.frames[model.getFrameId(b.name, pin.JOINT)]) == link
+        ]  # fmt: skip
+        clash = had + [name for name, _, _ in plan if model.existJointName(name)]
+        if clash:  # before the stiffness, which would measure the link from the existing
+            # beam's joint (a length of 0)
+            raise BeamError(link, f"the link already has a beam (or the model a joint "
+                            f"named {clash[0]!r}): one entry a link")  # fmt: skip
+        link_shapes = None if shapes is None else shapes.get(link, [])
         named = [(f"{ANCHOR_END}{n}", *anchors[i]) for i, n in enumerate(anchor_names)]
-        end, K, mass = beam_stiffness(model, beam, spec, link_shapes, named)
-        site = beam_site(model, beam, end, named)
-        tip, start = site.placement, model.frames[site.link_frame].placement
-        length = float(np.linalg.norm(tip.translation - start.translation))
-        model, geometries, step = _insert(model, geometries, site, name)
-        anchors = [
-            (model.getJointId(name), tip.actInv(M))
-            if j == site.joint
-            and np.linalg.norm(M.translation - tip.translation) <= TIP_RTOL * length
-            else (step[j], M)
-            for j, M in anchors
-        ]
-        elements = [name] + [f"{name}_{k}" for k in range(1, element_count(beam, spec))]
-        if len(elements) > 1:
-            model, geometries, anchors = _split(model, geometries, anchors, name, len(elements))
-        for element in elements:
-            springs[element] = K
-            if mass is not None:
-                masses[element] = mass
+        sites, stiffness, ends = {}, {}, {}  # on the model before this link's beams
+        for name, start, entry in plan:
+            at = None
+            if start is not None:
+                first = sites[ends[start]]
+                rotation = model.frames[first.link_frame].placement.rotation
+                at = pin.SE3(rotation, first.placement.translation)
+            end, K, mass = beam_stiffness(model, link, entry, link_shapes, named, at)
+            sites[name] = beam_site(model, link, end, named)
+            stiffness[name] = (K, mass, element_count(link, entry))
+            ends[sites[name].end] = name
+        before = model
+        for name, start, _ in plan:
+            start = None if start is None else ends[start]
+            carried = [n for n, _, _ in plan if n != name and _starts_from(plan, ends, n, name)]
+            origin = pin.SE3.Identity() if start is None else sites[start].placement
+            moved = [_moved(sites[n], before, model, start, origin) for n in (name, *carried)]
+            site = moved[0]
+            points = [m.placement.translation for m in moved]
+            start_point = model.frames[site.link_frame].placement.translation
+            length = float(np.linalg.norm(site.placement.translation - start_point))
+            model, geometries, step = _insert(model, geometries, site, name, moved[1:])
+            tip = site.placement
+            anchors = [
+                (model.getJointId(name), tip.actInv(M))
+                if j == site.joint and min(
+                    np.linalg.norm(M.translation - p) for p in points) <= TIP_RTOL * length
+                else (step[j], M)
+                for j, M in anchors
+            ]  # fmt: skip
+            K, mass, n = stiffness[name]
+            elements = [name] + [f"{name}_{k}" for k in range(1, n)]
+            if n > 1:
+                model, geometries, anchors = _split(model, geometries, anchors, name, n)
+            for element in elements:
+                springs[element] = K
+                if mass is not None:
+                    masses[element] = mass
     return model, geometries, springs, anchors, masses
+
+
+def _moved(site: BeamSite, before: pin.Model, model: pin.Model, start: str | None,
+           origin: pin.SE3) -> BeamSite:  # fmt: skip
+    """``site`` (on ``before``, the model without the link's beams) on ``model``, starting at
+    the virtual joint ``start`` placed at ``origin`` in the link's parent joint frame (None:
+    the link's origin, ``origin`` the identity)."""
+    joint = before.names[site.joint] if start is None else start
+    end_joint = None if site.end_joint is None else model.getJointId(before.names[site.end_joint])
+    return BeamSite(
+        site.link_frame if start is None else model.getFrameId(start, pin.JOINT),
+        model.getJointId(joint), site.end, end_joint, site.end_frame,
+        origin.actInv(site.placement),
+    )  # fmt: skip
+
+
+def _starts_from(plan, ends: dict, name: str, root: str) -> bool:
+    """Whether the beam ``name`` of ``plan`` starts, through a chain of beams, at the tip of
+    the beam ``root``."""
+    start = {n: s for n, s, _ in plan}
+    while start[name] is not None:
+        name = ends[start[name]]
+        if name == root:
+            return True
+    return False
+
+
+def _plan(link: str, spec) -> list[tuple[str, str | None, Mapping]]:
+    """(virtual joint name, start (the end of another beam, None: the link's origin), the
+    entry without ``start``) of each beam of the link's entry ``spec``, each after the beam
+    it starts from: a mapping is one beam ``<link>_beam``, a list one beam
+    ``<link>_beam_<end>`` an item."""
+    if isinstance(spec, Mapping):
+        return [(f"{link}_beam", None, spec)]
+    if not isinstance(spec, list | tuple) or not spec:
+        raise BeamError(link, f"specification is {spec!r}; expected a mapping or a non-empty "
+                        "list of them")  # fmt: skip
+    items = []
+    for item in spec:
+        if not isinstance(item, Mapping) or not isinstance(item.get("end"), str):
+            raise BeamError(link, f"list item {item!r}; expected a mapping with its end (a "
+                            "joint, frame or anchor name)")  # fmt: skip
+        start = item.get("start")
+        if start is not None and not isinstance(start, str):
+            raise BeamError(link, f"start {start!r}; expected the end of another beam")
+        items.append((item["end"], start, {k: v for k, v in item.items() if k != "start"}))
+    ends = [end for end, _, _ in items]
+    for end, start, _ in items:
+        if ends.count(end) > 1:
+            raise BeamError(link, f"two beams end at {end!r}; expected one beam an end")
+        if start is not None and start not in ends:
+            raise BeamError(link, f"start {start!r} of the beam to {end!r} is not the end of "
+                            f"a beam of the list; expected one of {ends} (or no start: the "
+                            "link's origin)")  # fmt: skip
+    ordered, done = [], set()
+    while len(ordered) < len(items):
+        ready = [it for it in items if it[0] not in done and (it[1] is None or it[1] in done)]
+        if not ready:
+            rest = [end for end in ends if end not in done]
+            raise BeamError(link, f"the beams to {rest} start from each other (a cycle); "
+                            "expected chains from the link's origin")  # fmt: skip
+        ordered += ready
+        done |= {end for end, _, _ in ready}
+    return [(f"{link}_beam_{end}", start, entry) for end, start, entry in ordered]
 
 
 def _split(model, geometries, anchors, name: str, n: int):

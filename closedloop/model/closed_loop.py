@@ -463,7 +463,8 @@ class ClosedLoopModel:
 
     def with_beams(self, beams: Mapping[str, Mapping]) -> ClosedLoopModel:
         """This model with flexible links: each beam (link name -> specification: end, E,
-        G, section, theory, or stiffness_6x6) becomes a 6-dof virtual joint
+        G, section, theory, or stiffness_6x6; or a list of them with ``start``, several
+        beams ``<link>_beam_<end>`` on the link) becomes a 6-dof virtual joint
         ``<link>_beam`` with its tip stiffness as a block spring
         (:func:`closedloop.model.beams.apply_beams`). The new model has more coordinates: map a
         configuration with :func:`closedloop.model.beams.map_configuration`.

@@ -67,7 +67,7 @@ def beam_joints(clm: ClosedLoopModel) -> tuple[BeamJoint, ...]:
 
 def _beam_joints(clm: ClosedLoopModel) -> tuple[BeamJoint, ...]:
     model = clm.model
-    if not any(f.name.endswith("_beam") for f in model.frames):
+    if not any("_beam" in f.name for f in model.frames):
         return ()
     out = []
     for beam in inserted_beams(model):

@@ -60,8 +60,9 @@ constrains, which then cannot retain that joint, so the platform's legs are weld
 and closed at their ground ends. OpenSees' ``rigidLink bar`` is not a ball joint on a
 rigid body (it ties the translations only, without the body's rotation) and is not used.
 
-Links as frames of several beams (a flexible ternary link or platform) are not a feature
-of the library: their cases await it.
+A link may also be several beams (a list under its name in ``beams``): the flexible
+platform, from its origin to its centre and from there to its two other legs, is three
+``elasticBeamColumn`` elements between those nodes.
 """
 
 from __future__ import annotations
@@ -240,7 +241,8 @@ def library_compliance(clm, frame: str) -> np.ndarray:
 
 def urdf_model(tmp_path, name, joints, closures, beams, springs, closure_springs=None):
     """The library's model of :func:`write_urdf`'s ``joints``: ``closures`` [(frame A,
-    frame B, type)], ``beams`` {link: end joint}, ``springs`` {joint: k}, and
+    frame B, type)], ``beams`` {link: end joint, or a list of (start or None, end) of
+    several beams on the link}, ``springs`` {joint: k}, and
     ``closure_springs`` the closure file's entry (YAML text)."""
     write_urdf(tmp_path / f"{name}.urdf", joints)
     pairs = [[a, b] for a, b, _ in closures]
@@ -249,7 +251,11 @@ def urdf_model(tmp_path, name, joints, closures, beams, springs, closure_springs
     if closure_springs is not None:
         text += f"closure_springs: {closure_springs}\n"
     (tmp_path / f"{name}.yaml").write_text(text)
-    beams = {link: rod(end) for link, end in beams.items()}
+    beams = {
+        link: rod(end) if isinstance(end, str)
+        else [rod(e) | ({} if a is None else {"start": a}) for a, e in end]
+        for link, end in beams.items()
+    }  # fmt: skip
     return cl.load_model(tmp_path / f"{name}.urdf", tmp_path / f"{name}.yaml", beams=beams)
 
 
@@ -451,6 +457,41 @@ def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
 
     C = library_compliance(clm, "O")
     assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES, SCALE)
+
+
+@pytest.mark.parametrize("kind", BASE_CUTS)
+def test_flexible_platform_of_three_beams_against_opensees(tmp_path, kind):
+    """The platform on the three legs above, flexible: three beams on one link, from its
+    origin (leg 0's tip) to its centre O, and from O to the tips of legs 1 and 2."""
+    joints = [("base0", "ground", "leg0", BASES[0], None, "fixed", None),
+              ("top0", "leg0", "platform", TIPS[0], None, "fixed", None),
+              ("O_joint", "platform", "O", O_, None, "fixed", None)]  # fmt: skip
+    for i in (1, 2):
+        joints += [(f"top{i}", "platform", f"leg{i}", TIPS[i], None, "fixed", None),
+                   (f"base{i}", f"leg{i}", f"b{i}", BASES[i], None, "fixed", None),
+                   (f"ground{i}", "ground", f"g{i}", BASES[i], None, "fixed", None)]  # fmt: skip
+    closures = [(f"b{i}", f"g{i}", kind) for i in (1, 2)]
+    platform = [(None, "O_joint"), ("O_joint", "top1"), ("O_joint", "top2")]
+    beams = {"leg0": "top0", "platform": platform, "leg1": "base1", "leg2": "base2"}
+    clm = urdf_model(tmp_path, f"flexible_platform_{kind}", joints, closures, beams, {})
+    assert len(clm.spring_blocks) == 6
+
+    def build(s: Structure) -> int:
+        origin, out = s.node(TIPS[0]), s.node(O_)
+        s.beam(s.node(BASES[0], fixed=True), origin)
+        s.beam(origin, out)
+        for i in (1, 2):
+            top, base = s.node(TIPS[i]), s.node(BASES[i])
+            s.beam(out, top)
+            s.beam(top, base)
+            s.joint(s.node(BASES[i], fixed=True), base, free=BASE_CUTS[kind])
+        return out
+
+    C = library_compliance(clm, "O")
+    assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES, SCALE)
+    del beams["platform"]  # the platform rigid: its beams are felt
+    rigid = library_compliance(urdf_model(tmp_path, "rigid", joints, closures, beams, {}), "O")
+    assert np.max(np.abs(C - rigid)) > 1e-2 * np.max(np.abs(rigid))
 
 
 # ------------------------------------------------------------------------------- MJCF

@@ -341,3 +341,35 @@ def test_map_of_frequencies_refuses_a_massless_model():
 
     with pytest.raises(cl.ModesError, match="no mass"):
         stiffness_map(pendulum(), "tip", sweeps={"hinge": [0.0, 0.1]}, modes=True)
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_beams_chained_on_one_link_are_the_chain_of_beam_links(tmp_path, n):
+    """n beams chained on one link (``start:`` each the previous beam's end, a frame of
+    the link at k L / n) carry their own mass as the n beam links in a row do: the same
+    frequencies (to rounding, other coordinate orders) and the same tip compliance."""
+    h = L_ROD / n
+    points = "".join(
+        f'<link name="p{k}"/><joint name="j{k}" type="fixed"><parent link="seg0"/>'
+        f'<child link="p{k}"/><origin xyz="{k * h} 0 0"/></joint>'
+        for k in range(1, n + 1)
+    )
+    path = tmp_path / f"one_link{n}.urdf"
+    path.write_text(
+        '<robot name="rod"><link name="base"/><link name="seg0"/>'
+        '<joint name="root" type="revolute"><parent link="base"/><child link="seg0"/>'
+        '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        f"{points}</robot>"
+    )
+    spec = {"E": E_STEEL, "G": G_STEEL, "section": {"shape": "circle", "d": D_ROD},
+            "density": RHO_STEEL}  # fmt: skip
+    beams = [{"end": "j1", **spec}]
+    beams += [{"start": f"j{k - 1}", "end": f"j{k}", **spec} for k in range(2, n + 1)]
+    one = cl.load_model(path, springs={"root": math.inf}, beams={"seg0": beams})
+    links = rod(tmp_path, n)
+    assert one.model.nv == links.model.nv == 1 + 6 * n
+    np.testing.assert_allclose(cl.modes(*at_rest(one)).frequencies,
+                               cl.modes(*at_rest(links)).frequencies, rtol=1e-10)  # fmt: skip
+    C = cl.compliance(*at_rest(links), "tip").C
+    np.testing.assert_allclose(cl.compliance(*at_rest(one), f"p{n}").C, C, rtol=1e-9,
+                               atol=1e-12 * np.abs(C).max())  # fmt: skip

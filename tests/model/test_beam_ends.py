@@ -58,10 +58,9 @@ def fourbar_compliance(path: Path, beams: dict) -> np.ndarray:
     return cl.compliance(clm, q, "P").C
 
 
-def test_coupler_to_the_connect_anchor_is_the_coupler_to_a_tip_body(tmp_path):
-    """The bundled MJCF four-bar's coupler, whose far end is only the ``<connect>``
-    anchor, as a beam to that anchor; the same mechanism written with a body at the anchor
-    (the connect on it) is a beam to that body's fixed joint, as before."""
+def tip_file(tmp_path) -> Path:
+    """The bundled four-bar with a body ``coupler_tip`` at the ``<connect>``'s anchor on
+    the coupler, the connect on that body."""
     text = (REPO / "fourbar.xml").read_text()
     connect = (
         '<connect name="closedloop1" body1="coupler_link" body2="rocker_end" anchor="0.3 0 0"/>'
@@ -72,10 +71,38 @@ def test_coupler_to_the_connect_anchor_is_the_coupler_to_a_tip_body(tmp_path):
     moved = connect.replace("coupler_link", "coupler_tip").replace("0.3 0 0", "0 0 0")
     body = '<body name="coupler_tip" pos="0.3 0 0"/>'
     tip.write_text(text.replace(site, site + body).replace(connect, moved))
+    return tip
+
+
+def test_coupler_to_the_connect_anchor_is_the_coupler_to_a_tip_body(tmp_path):
+    """The bundled MJCF four-bar's coupler, whose far end is only the ``<connect>``
+    anchor, as a beam to that anchor; the same mechanism written with a body at the anchor
+    (the connect on it) is a beam to that body's fixed joint, as before."""
+    tip = tip_file(tmp_path)
     C = fourbar_compliance(REPO / "fourbar.xml", {"coupler_link": rod("anchor:closedloop1")})
     expected = fourbar_compliance(tip, {"coupler_link": rod("coupler_tip_fixed")})
     rigid = fourbar_compliance(REPO / "fourbar.xml", {})
     assert np.max(np.abs(C - rigid)) > 1e-3 * np.max(np.abs(rigid))  # the rod is felt
+    assert_close_in_norm(C, expected, RTOL_EXACT, scale=[1, 1, 1, 0.3, 0.3, 0.3])
+
+
+def test_a_chain_to_the_connect_anchor_is_the_chain_to_a_tip_body(tmp_path):
+    """Two beams on the coupler, from its origin to the site P and from P on to the
+    ``<connect>`` anchor (a list of beams): the same as the chain to a body written at
+    the anchor, the anchor carried by the first beam's tip to the second's start."""
+    tip = tip_file(tmp_path)
+    anchor = [rod("P"), {**rod("anchor:closedloop1"), "start": "P"}]
+    body_end = [rod("P"), {**rod("coupler_tip_fixed"), "start": "P"}]
+    C = fourbar_compliance(REPO / "fourbar.xml", {"coupler_link": anchor})
+    expected = fourbar_compliance(tip, {"coupler_link": body_end})
+    for path, beams, last in ((REPO / "fourbar.xml", anchor, "anchor:closedloop1"),
+                              (tip, body_end, "coupler_tip_fixed")):  # fmt: skip
+        clm = load_model(path, beams={"coupler_link": beams}, geometry=False)
+        anchor_on = clm.closures[0].constraint  # the coupler's anchor: at the chain's tip
+        assert clm.model.names[anchor_on.joint1_id] == f"coupler_link_beam_{last}"
+        assert anchor_on.joint1_placement.isApprox(pin.SE3.Identity(), 1e-12)
+    one = fourbar_compliance(REPO / "fourbar.xml", {"coupler_link": rod("anchor:closedloop1")})
+    assert np.max(np.abs(C - one)) > 1e-3 * np.max(np.abs(one))  # the chain is not one rod
     assert_close_in_norm(C, expected, RTOL_EXACT, scale=[1, 1, 1, 0.3, 0.3, 0.3])
 
 
