@@ -44,6 +44,29 @@ def browser() -> str:
     )
 
 
+async def devtools_page(proc: subprocess.Popen, profile: Path, deadline: float):
+    """The DevTools websocket of the one page of a Chromium started by ``proc`` with
+    ``--user-data-dir=profile`` and a DevTools port of its choosing (:data:`FLAGS`), once it
+    has written that port; ``deadline``: a ``time.monotonic()`` instant."""
+    import asyncio
+    import json
+    import time
+    import urllib.request
+
+    from tornado.websocket import websocket_connect
+
+    port_file = profile / "DevToolsActivePort"
+    while not (port_file.is_file() and port_file.read_text().strip()):
+        assert proc.poll() is None, f"Chromium exited with code {proc.returncode}"
+        assert time.monotonic() < deadline, "Chromium did not open its DevTools port"
+        await asyncio.sleep(0.05)
+    port = int(port_file.read_text().split()[0])
+    direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+    with direct.open(f"http://127.0.0.1:{port}/json/list", timeout=10) as f:
+        (page,) = [t for t in json.load(f) if t["type"] == "page"]
+    return await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
+
+
 #: The per-point indices of a map (closedloop.analysis.batch_indices.batch_indices names) as a
 #: single query's StiffnessIndices gives them.
 INDEX_GETTERS = {

@@ -25,12 +25,10 @@ import subprocess
 import sys
 import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
-from helpers import FLAGS, browser
-from tornado.websocket import websocket_connect
+from helpers import FLAGS, browser, devtools_page
 
 import cahyman_pin
 import closedloop
@@ -105,16 +103,7 @@ async def _visit(url: str, profile: Path, done: str | None) -> dict:
     )
     deadline = time.monotonic() + PAGE_TIMEOUT
     try:
-        port_file = profile / "DevToolsActivePort"
-        while not (port_file.is_file() and port_file.read_text().strip()):
-            assert proc.poll() is None, f"Chromium exited with code {proc.returncode}"
-            assert time.monotonic() < deadline, "Chromium did not open its DevTools port"
-            await asyncio.sleep(0.05)
-        port = int(port_file.read_text().split()[0])
-        direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))
-        with direct.open(f"http://127.0.0.1:{port}/json/list", timeout=10) as f:
-            (page,) = [t for t in json.load(f) if t["type"] == "page"]
-        ws = await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
+        ws = await devtools_page(proc, profile, deadline)
         ids, errors, failed = iter(range(1, 1 << 30)), [], []
 
         def record(message: dict) -> None:

@@ -21,7 +21,6 @@ import signal
 import subprocess
 import sys
 import time
-import urllib.request
 from concurrent.futures import ThreadPoolExecutor
 
 import coal
@@ -29,10 +28,9 @@ import meshcat
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import FLAGS, UR5_Q, browser
+from helpers import FLAGS, UR5_Q, browser, devtools_page
 from PIL import Image
 from test_viewer_edges import scaled_fourbar
-from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
 from closedloop.io.loader import load_model
@@ -131,17 +129,8 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
         start_new_session=True,
     )
     try:
-        port_file = profile / "DevToolsActivePort"
         deadline = time.monotonic() + BROWSER_TIMEOUT
-        while not (port_file.is_file() and port_file.read_text().strip()):
-            assert proc.poll() is None, f"Chromium exited with code {proc.returncode}"
-            assert time.monotonic() < deadline, "Chromium did not open its DevTools port"
-            await asyncio.sleep(0.05)
-        port = int(port_file.read_text().split()[0])
-        direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))
-        with direct.open(f"http://127.0.0.1:{port}/json/list", timeout=10) as f:
-            (page,) = [t for t in json.load(f) if t["type"] == "page"]
-        ws = await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
+        ws = await devtools_page(proc, profile, deadline)
         ids = iter(range(1, 1 << 30))
         errors = []  # the page's JavaScript errors (Log.entryAdded), from its start
 
