@@ -73,6 +73,26 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _computing_map(out: Path) -> tuple[subprocess.Popen, list]:
+    """``closedloop map --workers 2`` in a session of its own, once its first progress line
+    is out: (the process, its worker processes)."""
+    argv, label = COMMANDS["closedloop"]
+    proc = subprocess.Popen(
+        [sys.executable, *argv, "--workers", "2", "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + START_TIMEOUT
+        while not proc.stderr.readline().startswith(label):
+            assert time.monotonic() < deadline and proc.poll() is None
+        return proc, psutil.Process(proc.pid).children(recursive=True)
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise
+
+
 def _interrupted_run(prog: str, sig: signal.Signals, out: Path):
     """Start ``prog map --workers 2``, wait for its first progress line, send ``sig`` (SIGINT
     to the process group, as Ctrl-C; SIGTERM to the main process only), and return
@@ -196,17 +216,8 @@ def test_a_worker_ends_with_its_parent_killed_by_sigkill(tmp_path):
     """A parent that cannot clean up (SIGKILL) takes its workers with it (Linux)."""
     if not sys.platform.startswith("linux"):
         pytest.skip("the parent-death signal is Linux's")
-    argv, label = COMMANDS["closedloop"]
-    proc = subprocess.Popen(
-        [sys.executable, *argv, "--workers", "2", "--out", str(tmp_path)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
-        start_new_session=True,
-    )  # fmt: skip
+    proc, workers = _computing_map(tmp_path)
     try:
-        deadline = time.monotonic() + START_TIMEOUT
-        while not proc.stderr.readline().startswith(label):
-            assert time.monotonic() < deadline and proc.poll() is None
-        workers = psutil.Process(proc.pid).children(recursive=True)
         assert len(workers) >= 2
         proc.kill()
         proc.wait()
@@ -221,17 +232,8 @@ def test_a_worker_ends_with_its_parent_killed_by_sigkill(tmp_path):
 def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
     """A worker killed by SIGKILL while computing: the command does not hang; one line,
     exit 3 (a failed computation), no process left."""
-    argv, label = COMMANDS["closedloop"]
-    proc = subprocess.Popen(
-        [sys.executable, *argv, "--workers", "2", "--out", str(tmp_path)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
-        start_new_session=True,
-    )  # fmt: skip
+    proc, workers = _computing_map(tmp_path)
     try:
-        deadline = time.monotonic() + START_TIMEOUT
-        while not proc.stderr.readline().startswith(label):
-            assert time.monotonic() < deadline and proc.poll() is None
-        workers = psutil.Process(proc.pid).children(recursive=True)
         workers[0].kill()
         code = proc.wait(timeout=STOP_TIMEOUT)
         err = proc.stderr.read().splitlines()
@@ -241,7 +243,7 @@ def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
             proc.wait()
     assert not _left(workers)
     assert code == 3
-    own = [line for line in err if not line.startswith(label)]
+    own = [line for line in err if not line.startswith(COMMANDS["closedloop"][1])]
     assert own == ["closedloop: error: a worker process of the map ended abruptly (killed, or "
                    "out of memory?); the map stopped, the others ended"]  # fmt: skip
 
