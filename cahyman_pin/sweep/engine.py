@@ -58,7 +58,7 @@ from cahyman_pin.sweep.points import (
 )
 from closedloop.analysis.interrupts import Interrupted
 from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointData
-from closedloop.analysis.maps import ALL_INDICES, column_name
+from closedloop.analysis.maps import ALL_INDICES, MODE_INDICES, column_name
 from closedloop.analysis.tasks import gather, run_tasks_by_point
 from closedloop.common.arrays import check_wrench, frozen, readonly
 from closedloop.common.files import write_atomically
@@ -407,11 +407,9 @@ def sweep(
     results = run_tasks_by_point(run_chunk, chunks, [len(p) for p in pieces], pool, n_workers,
                                  label=f"{backend} sweep", show_progress=show_progress)  # fmt: skip
     try:
-        data = gather(n, pieces, results, w)
+        data = gather(n, pieces, results, w, MODE_INDICES if modes else ())
     except Interrupted as stop:
         if stop.data is not None:  # else stopped before gather began
-            if modes:  # its index even when no chunk came back
-                stop.data.indices.setdefault("lowest_frequency", np.full(n, np.nan))
             stop.partial = _result(points, backend, w, stop.data, time.perf_counter() - t0)
         raise
     return _result(points, backend, w, data, time.perf_counter() - t0)

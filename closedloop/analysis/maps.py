@@ -369,11 +369,9 @@ def stiffness_map(
                                       label="map points", show_progress=show_progress)  # fmt: skip
 
     try:
-        data = gather(n, pieces, results(), w)
+        data = gather(n, pieces, results(), w, MODE_INDICES if modes else ())
     except Interrupted as stop:
         if stop.data is not None:  # else stopped before gather began
-            if modes:  # its index even when no chunk came back
-                stop.data.indices.setdefault("lowest_frequency", np.full(n, np.nan))
             stop.partial = _stiffness_map(clm, pts, shape, swept, frame, w, stop.data)
         raise
     return _stiffness_map(clm, pts, shape, swept, frame, w, data)

@@ -133,7 +133,9 @@ def run_tasks_by_point(
         running.close()
 
 
-def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator, wrench=None) -> PointData:
+def gather(
+    n: int, pieces: Sequence[np.ndarray], results: Iterator, wrench=None, extra: Sequence = ()
+) -> PointData:
     """Per-point arrays from the results of the chunks.
 
     SIGINT and SIGTERM stop it (:func:`~closedloop.analysis.interrupts.stop_on_signals`), as a
@@ -148,6 +150,8 @@ def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator, wrench=None)
             in any order (e.g. :func:`run_tasks`).
         wrench: (6,) wrench of the chunks' deflection indices [N, N m], or None: the
             indices of a map whose chunks are all lost (their names).
+        extra: names of the further indices the chunks give (``lowest_frequency``), NaN
+            in a map whose chunks are all lost.
 
     Raises:
         Interrupted: by SIGINT (or a ``KeyboardInterrupt``) or SIGTERM.
@@ -170,7 +174,8 @@ def gather(n: int, pieces: Sequence[np.ndarray], results: Iterator, wrench=None)
             stop = e if isinstance(e, Interrupted) else Interrupted()
             getattr(results, "close", lambda: None)()
             data = _no_points(n) if data is None else data
-            _not_computed(data, [pieces[k] for k in np.flatnonzero(~received)], wrench, stop)
+            lost = [pieces[k] for k in np.flatnonzero(~received)]
+            _not_computed(data, lost, wrench, extra, stop)
             if stop is e:
                 raise
             raise stop from None
@@ -185,11 +190,11 @@ def _no_points(n: int) -> PointData:
                      reason_codes=np.zeros(n, dtype=np.int32), reason_texts=[""])  # fmt: skip
 
 
-def _not_computed(data: PointData, pieces: list, wrench, stop: Interrupted) -> None:
+def _not_computed(data: PointData, pieces: list, wrench, extra, stop: Interrupted) -> None:
     """Mark the points of ``pieces`` not computed (in place), attach ``data`` to ``stop``."""
     empty = ChunkResult.empty(0)
     complete(empty, wrench)
-    for name in empty.indices:
+    for name in (*empty.indices, *extra):
         data.indices.setdefault(name, np.full(len(data.codes), np.nan))
     p = np.concatenate([np.zeros(0, dtype=np.intp), *pieces]).astype(np.intp)
     data.C[p], data.rank[p], data.condition[p], data.codes[p] = np.nan, -1, np.nan, NOT_COMPUTED

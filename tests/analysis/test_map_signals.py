@@ -282,6 +282,20 @@ def test_gather_keeps_the_chunks_received_before_a_keyboard_interrupt(received):
     np.testing.assert_array_equal(data.indices["det_K"][kept], [2.0, 1.0][: len(kept)])
 
 
+def test_gather_interrupted_before_any_chunk_keeps_the_extra_indices():
+    """A map of natural frequencies stopped before its first chunk still has that index
+    (NaN everywhere), so that its partial files hold the index the command plots."""
+
+    def results():
+        raise KeyboardInterrupt
+        yield
+
+    with pytest.raises(Interrupted) as caught:
+        gather(3, [np.arange(3)], results(), extra=("lowest_frequency",))
+    values = caught.value.data.indices["lowest_frequency"]
+    assert values.shape == (3,) and np.isnan(values).all()
+
+
 def test_a_failing_task_ends_the_pool_at_once():
     """An error in one task ends the other running tasks' processes at once, instead of
     waiting for them (the pool is ended, not shut down)."""
