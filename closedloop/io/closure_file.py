@@ -10,7 +10,7 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
                                            # one per pair (closedloop.model.closures)
     closure_springs: {0: [dx, dy, dz, rx, ry, rz] | 6x6, ...}  # optional, pair index ->
                                            # stiffness of B's motion in A's axes
-                                           # (closedloop.model.closures.with_elastic_closures)
+                                           # (closedloop.model.elastic_closures)
     name_mot: [joint, ...]                 # actuated joints
     springs: {joint: stiffness, ...}       # optional [N m/rad or N/m]; list per coordinate
     locked: [joint, ...]                   # optional rigid joints
@@ -204,7 +204,7 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
 def _closure_springs(doc: dict, n: int, where: str) -> dict:
     """``closure_springs:``: pair index -> 6 numbers or a 6x6 list of lists (a string
     that reads as a number accepted); {} when absent. The values' meaning is checked by
-    :func:`closedloop.model.closures.closure_spring`."""
+    :func:`closedloop.model.elastic_closures.closure_spring`."""
     springs = _value(doc, "closure_springs", {})
     if not isinstance(springs, dict):
         raise ModelFileError(

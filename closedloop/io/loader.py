@@ -65,13 +65,8 @@ from closedloop.io.sdf import REST, load_sdf
 from closedloop.model.balls import ball_springs, urdf_with_balls
 from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
-from closedloop.model.closures import (
-    Closure,
-    check_closure_springs,
-    closure_between_frames,
-    joint_names,
-    with_elastic_closures,
-)
+from closedloop.model.closures import Closure, closure_between_frames, joint_names
+from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
 
 #: Model-file suffixes and their format.
 MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
@@ -169,6 +164,7 @@ class _Tree:
     beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
     balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
     beam_masses: tuple = ()  # (virtual joint name, closedloop.model.beams.BeamMass) of the beams
+    elastic: tuple[int, ...] = ()  # SDF: the loops closed by a joint with a spring
 
 
 def _read_urdf(
@@ -229,10 +225,11 @@ def _read_urdf_tree(
         check_closure_springs(loops, spec.closure_springs)
     with in_file(f"{where}, closure_springs= of load_model"):
         check_closure_springs(loops, elastic or {})
+    merged = {**spec.closure_springs, **(elastic or {})}
+    if merged:  # the drawing, with the cut's joints closing it, starts the assembly
+        model.referenceConfigurations[REST] = pin.neutral(model)
     with in_file(where):
-        model, loops, cuts = with_elastic_closures(
-            model, loops, {**spec.closure_springs, **(elastic or {})}
-        )
+        model, loops, cuts = with_elastic_closures(model, loops, merged)
     return _Tree(model, loops, spec.actuated or (), {**spec.springs, **blocks, **cuts}, spec.locked,
                  visual, beam_joints=tuple(blocks), balls=spec.balls,
                  beam_masses=tuple(masses.items()))  # fmt: skip
@@ -321,9 +318,8 @@ def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) ->
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.io.sdf
     _check_masses(robot.model, path)
     spec, springs = read_side_file(robot.model, side_file, robot.springs)
-    return _Tree(
-        robot.model, robot.closures, spec.actuated or (), springs, spec.locked, robot.visual
-    )
+    return _Tree(robot.model, robot.closures, spec.actuated or (), springs, spec.locked,
+                 robot.visual, elastic=robot.elastic)  # fmt: skip
 
 
 def load_model(
@@ -365,9 +361,12 @@ def load_model(
             the file's ``beams:``; each adds a 6-dof virtual joint ``<link>_beam`` (a list
             of beams on a link, ``<link>_beam_<end>`` each; map a
             configuration with :func:`closedloop.model.beams.map_configuration`).
-        closure_springs: URDF only: elastic closures, closure file pair index (0-based) ->
-            6 stiffnesses [N/m, N m/rad] or a 6x6 matrix, merged over the file's
-            ``closure_springs:`` (:func:`closedloop.model.closures.with_elastic_closures`).
+        closure_springs: elastic closures, loop index (0-based: a closure file's pair, an
+            MJCF equality, an SDF loop-closing joint, in file order) -> 6 stiffnesses [N/m,
+            N m/rad] or a 6x6 matrix, merged over a closure file's ``closure_springs:``
+            (:mod:`closedloop.model.elastic_closures`); the model's reference
+            configurations (:func:`reference_configuration`) are extended with the values
+            of the joints added at the cuts.
 
     Raises:
         ModelFileError: missing or unparsable robot or closure file, unknown format; the
@@ -396,12 +395,6 @@ def load_model(
             "(free_base: SDF only)" + _by_name_hint(path)
         )
     path = existing_path(path, "robot file")
-    if closure_springs and kind != "urdf":
-        raise InvalidInputError(
-            f"load_model: closure_springs {dict(closure_springs)!r} given to the {kind.upper()} "
-            f"file {str(path)!r}; expected them for a URDF and its closure file only (an SDF "
-            "loop joint takes its spring in the file)"
-        )
     if kind == "sdf":
         tree = _read_sdf(path, closures, geometry, free_base)
     else:
@@ -455,7 +448,30 @@ def load_model(
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
         if side or beams:
             clm = clm.with_beams({**side, **(beams or {})})
+        if closure_springs:
+            clm = _with_closure_springs(clm, closure_springs, path, tree.elastic)
     return clm
+
+
+def _with_closure_springs(
+    clm: ClosedLoopModel, springs: Mapping, path: Path, elastic: tuple[int, ...]
+) -> ClosedLoopModel:
+    """An MJCF or SDF model with the closures of ``springs`` made elastic
+    (:func:`closedloop.model.elastic_closures.with_elastic_closures`); ``elastic``: the
+    indices of the loops the file made elastic already (an SDF loop joint's spring)."""
+    with in_file(f"robot file {str(path)!r}, closure_springs= of load_model"):
+        checked = check_closure_springs(list(clm.closures), springs)
+        taken = sorted(set(checked) & set(elastic))
+        if taken:
+            raise InvalidInputError(
+                f"closure_springs given to the loops {taken} ("
+                f"{[clm.closures[i].name for i in taken]}), whose loop-closing joints have "
+                "a spring in the file; expected closure springs only for loops without one"
+            )
+        model, closures, cut = with_elastic_closures(clm.model, list(clm.closures), checked)
+    return ClosedLoopModel(model, closures, clm.actuated, {**clm.springs, **cut}, clm.locked,
+                           clm.visual_model, clm.collision_model, clm.name,
+                           beam_masses=clm.beam_masses)  # fmt: skip
 
 
 def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:

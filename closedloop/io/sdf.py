@@ -31,7 +31,7 @@ joint frame is fixed to the child link; q = 0 is the drawing):
 
 (:mod:`closedloop.model.closures`.) A revolute, continuous or prismatic loop-closing joint
 with a spring becomes an elastic closure, its free direction sprung
-(:func:`closedloop.model.closures.with_elastic_closures`: the joint ``<name>_rz`` or
+(:func:`closedloop.model.elastic_closures.with_elastic_closures`: the joint ``<name>_rz`` or
 ``<name>_pz``), at rest at its ``spring_reference``; a
 universal one with a spring is refused (list it first, so that it is a tree joint).
 
@@ -58,12 +58,8 @@ import pinocchio as pin
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
-from closedloop.model.closures import (
-    CLOSURE_TYPES,
-    FREE_DIRECTIONS,
-    Closure,
-    with_elastic_closures,
-)
+from closedloop.model.closures import CLOSURE_TYPES, Closure
+from closedloop.model.elastic_closures import FREE_DIRECTIONS, with_elastic_closures
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
@@ -82,6 +78,7 @@ class SdfRobot:
         rest: (nq,) rest configuration (also ``model.referenceConfigurations[REST]``).
         visual: visual geometry, or None when not asked for.
         closing_joints: names of the joints that close loops, in file order.
+        elastic: indices in ``closures`` of the loops closed by a joint with a spring.
     """
 
     model: pin.Model
@@ -90,6 +87,7 @@ class SdfRobot:
     rest: np.ndarray
     visual: pin.GeometryModel | None
     closing_joints: tuple[str, ...]
+    elastic: tuple[int, ...] = ()
 
 
 def _joint_model(r: SdfReader, name: str, kind: str):
@@ -225,22 +223,24 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
         if k:
             elastic[i] = [math.inf] * 6
             elastic[i][FREE_DIRECTIONS[c.kind][0]] = k
-    model, closures, cut = with_elastic_closures(model, closures, elastic)
     rest = pin.neutral(model)
     for i, v in rest_values.items():
         rest[i] = v
+    if free_base:
+        rest[:7] = free_q
+    model.referenceConfigurations[REST] = rest
+    model, closures, cut = with_elastic_closures(model, closures, elastic)
+    rest = model.referenceConfigurations[REST].copy()
     for name, k in cut.items():  # a spring at a loop cut, at rest at its spring_reference
         springs[name] = k
         rest[model.joints[model.getJointId(name)].idx_q] = cut_springs[name.rsplit("_", 1)[0]][1]
-    if free_base:
-        rest[:7] = free_q
     model.referenceConfigurations[REST] = rest
     lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
     for i, (lo, hi) in bounds.items():
         lower[i], upper[i] = lo, hi
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     visual = _visuals(r, model, body) if geometry else None
-    return SdfRobot(model, closures, springs, rest, visual, tuple(closing))
+    return SdfRobot(model, closures, springs, rest, visual, tuple(closing), tuple(elastic))
 
 
 def _z_along(axis: np.ndarray) -> pin.SE3:

@@ -1,0 +1,331 @@
+"""Elastic loop closures: a stiffness at a cut, carried by joints added there.
+
+The spring of a closure is the stiffness of the relative motion of frame B with respect
+to frame A, in A's axes at A's origin (:data:`DIRECTIONS`: translations [N/m], then
+rotations [N m/rad]). Given as 6 values, each direction is rigid (``inf`` on a direction
+the closure type constrains), elastic (a finite value on a constrained direction, or > 0
+on a free one) or free (0 on a free direction: the default of :data:`FREE_DIRECTIONS`,
+or on a constrained one). Given as a 6x6, every direction is elastic.
+
+The joints that carry it are laid out so that, for small motions about any configuration
+where the pair holds as its type says, their deflection is exactly B's motion relative to
+A in A's axes at A's origin, whatever the pair's relative placement there (no gimbal
+lock):
+
+* 6 values: a chain of single-coordinate joints on A's body at A's origin, one per
+  elastic or free direction (none for a rigid one), in the order px, py, rx, ry, pz, rz
+  (:data:`CHAIN_ORDER`), named ``"<closure>_<direction>"``, its end welded (``6d``) to B.
+  Where a pair of type ``6d``, ``revolute``, ``prismatic`` or ``cylindrical`` holds,
+  px, py, rx and ry are 0: every joint's axis is A's and passes through A's origin, and
+  pz and rz, the only ones away from 0, are along and about A's z axis.
+* 6 values whose three rotations are free (0; a ``3d`` pair's default): no rotation
+  joint; the chain's end is closed to B's origin by a point (``3d``).
+* 6 values whose three rotations have springs (> 0) on a ``3d`` pair, whose relative
+  orientation is free: a ball joint (``"<closure>_ball"``, spherical: no gimbal lock) on
+  B's body at B's origin, then the translations' joints, the end welded to A. The ball's
+  rotation is A's orientation relative to B, its deflection A's rotation in A's axes:
+  minus B's relative to A, the same energy.
+* a 6x6: one 6-coordinate joint (a free flyer) ``"<closure>_bushing"`` carrying the
+  matrix as its block spring, on A's body at A's origin welded to B for a ``6d`` pair
+  (A and B coincide at rest), else on B's body at B's origin welded to A (its tangent,
+  linear then angular, is A's motion relative to B in A's axes at A's origin).
+
+Three non-rigid rotations of which some are free and some sprung are refused (a chain of
+three rotations has a gimbal lock); so is a spring at a ``universal`` pair, whose free
+rotation about B's z axis is not one of A's axes.
+
+The joints are springs like any other (an elastic one has its value as joint spring, a
+free one none: passive). Their rest state is the pair met as its type says, the springs at
+rest at the configuration analysed. The model's reference configurations (an MJCF
+``qpos0``, an SDF rest) are extended with the joints' values there
+(:func:`chain_values`), so that an assembly started from them closes an elastic closure
+as the file draws it. The energy of a loaded equilibrium is that of the joints'
+coordinates (exact to first order about the rest, as above).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from closedloop.exceptions import InvalidInputError
+from closedloop.model.closures import CLOSURE_TYPES, Closure
+
+#: Directions of the relative motion of frame B with respect to frame A, in A's axes at
+#: A's origin: translations [m], then rotations [rad]; the order of ``closure_springs``.
+DIRECTIONS = ("px", "py", "pz", "rx", "ry", "rz")
+
+#: Order of the chain's joints (indices in :data:`DIRECTIONS`): across A's z axis first,
+#: then along and about it (module docstring).
+CHAIN_ORDER = (0, 1, 3, 4, 2, 5)
+
+#: The single-dof joint of each direction (:data:`DIRECTIONS`), about or along A's axis.
+_DIRECTION_JOINTS = (
+    pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ,
+    pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ,
+)  # fmt: skip
+
+#: Per closure type, the directions (indices in :data:`DIRECTIONS`) it leaves free; the
+#: universal type, whose free rotation about B's z axis is not one of A's axes, takes no
+#: closure spring.
+FREE_DIRECTIONS = {
+    "3d": (3, 4, 5),
+    "6d": (),
+    "revolute": (5,),
+    "prismatic": (2,),
+    "cylindrical": (2, 5),
+}
+
+#: Relative asymmetry max|K - K^T| / max|K| above which a 6x6 closure spring is refused.
+SYMMETRY_RTOL = 1e-9
+
+#: Suffix of the 6-dof joint of a full 6x6 closure spring (a bushing).
+BUSHING = "bushing"
+
+#: Suffix of the ball joint of a ``3d`` pair's rotation springs.
+BALL = "ball"
+
+
+def closure_spring(closure: Closure, value) -> np.ndarray:
+    """The validated spring of ``closure``: (6,) diagonal or (6, 6) matrix [N/m, N/rad,
+    N m/rad] (module docstring); a 6x6 that is diagonal is returned as its diagonal.
+
+    Raises:
+        InvalidInputError: naming the closure, the value and what was expected.
+    """
+    what = f"closure {closure.name!r} of type {closure.kind!r}"
+    if closure.kind not in FREE_DIRECTIONS:
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}; expected a spring only at a closure of type "
+            f"{', '.join(map(repr, FREE_DIRECTIONS))} (the free rotation of a universal "
+            "closure is not about one of frame A's axes)"
+        )
+    try:
+        K = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        K = np.empty(0)
+    if K.shape not in ((6,), (6, 6)) or np.isnan(K).any():
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}; expected 6 numbers (dx dy dz rx ry rz in "
+            "frame A's axes [N/m, N m/rad], .inf = rigid) or a 6x6 symmetric positive "
+            "semi-definite matrix"
+        )
+    if K.ndim == 2 and not np.any(K - np.diag(np.diag(K))):
+        K = np.diag(K).copy()
+    if K.ndim == 1:
+        _check_diagonal(what, value, K, closure.kind)
+        return K
+    if not np.isfinite(K).all():
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r} with infinite entries; expected a "
+            "finite 6x6 (a full bushing), or 6 values (.inf for a rigid direction)"
+        )
+    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
+    if skew > SYMMETRY_RTOL * scale:
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r}, not symmetric (max |K - K^T| = "
+            f"{skew:.3g}); expected a symmetric positive semi-definite matrix"
+        )
+    K = 0.5 * (K + K.T)
+    eig = np.linalg.eigvalsh(K)
+    if eig[0] < -SYMMETRY_RTOL * scale:
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r}, not positive semi-definite "
+            f"(eigenvalues {eig.tolist()}); expected a symmetric positive semi-definite matrix"
+        )
+    try:
+        np.linalg.cholesky(K)
+    except np.linalg.LinAlgError:
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r}, singular (eigenvalues {eig.tolist()}); "
+            "expected a positive definite 6x6, or 6 values (0 on a free direction)"
+        ) from None
+    return K
+
+
+def _check_diagonal(what: str, value, K: np.ndarray, kind: str) -> None:
+    """6 values: >= 0, finite on the type's free directions, three non-rigid rotations
+    all free or all sprung."""
+    if (K < 0).any():
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}; expected values >= 0 (0 = free, .inf = rigid)"
+        )
+    free_inf = [DIRECTIONS[i] for i in FREE_DIRECTIONS[kind] if np.isinf(K[i])]
+    if free_inf:
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}: .inf on {free_inf}, which the type "
+            "leaves free; expected a finite value there (0 = free), or a closure type "
+            "that constrains it"
+        )
+    rotations = K[3:]
+    if np.isfinite(rotations).all() and (rotations == 0).any() and (rotations > 0).any():
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}: the rotations rx ry rz are partly free (0) "
+            "and partly sprung; expected all three free, all three sprung (a ball joint "
+            "with springs), or one of them rigid (.inf, on a type that constrains it): "
+            "three rotations in a chain would lock at 90 degrees"
+        )
+
+
+def check_closure_springs(closures: list[Closure], springs) -> dict[int, np.ndarray]:
+    """``springs`` (closure index -> spring) validated against ``closures``
+    (:func:`closure_spring`); :class:`InvalidInputError` for an index out of range."""
+    if not isinstance(springs, Mapping):
+        raise InvalidInputError(
+            f"closure_springs must be a mapping closure index -> spring, got {springs!r}"
+        )
+    out = {}
+    for i, value in springs.items():
+        if (
+            isinstance(i, bool)
+            or not isinstance(i, int | np.integer)
+            or not (0 <= i < len(closures))
+        ):
+            raise InvalidInputError(
+                f"closure_springs index {i!r}; expected the 0-based index of a pair of "
+                f"closed_loop, 0..{len(closures) - 1}"
+            )
+        out[int(i)] = closure_spring(closures[i], value)
+    return out
+
+
+class _Cut(NamedTuple):
+    """The joints of one elastic closure: hung from ``start`` (joint, placement: frame A's,
+    or B's when ``from_b``), their end closed to ``end`` (the other frame) by a closure of
+    type ``end_kind``."""
+
+    start: tuple
+    end: tuple
+    joints: tuple  # (suffix, pinocchio joint model, spring or None) in chain order
+    end_kind: str
+    kind: str  # the closure's type
+    from_b: bool = False
+
+
+def _layout(closure: Closure, K: np.ndarray) -> _Cut:
+    """Where and which joints carry the spring ``K`` of ``closure`` (module docstring)."""
+    c = closure.constraint
+    a, b = (c.joint1_id, c.joint1_placement), (c.joint2_id, c.joint2_placement)
+    if K.ndim == 2:
+        joints = ((BUSHING, pin.JointModelFreeFlyer(), K),)
+        from_b = closure.kind != "6d"
+        return _Cut(*((b, a) if from_b else (a, b)), joints, "6d", closure.kind, from_b)
+    rotations = K[3:]
+    free = not rotations.any()  # three free rotations: closed by a point
+    ball = closure.kind == "3d" and not free  # three sprung rotations of a '3d' pair
+    chain = tuple(
+        (DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
+        for d in CHAIN_ORDER
+        if math.isfinite(K[d]) and not (d >= 3 and (free or ball))
+    )
+    if ball:
+        joints = ((BALL, pin.JointModelSpherical(), rotations), *chain)
+        return _Cut(b, a, joints, "6d", closure.kind, from_b=True)
+    return _Cut(a, b, chain, "3d" if free else "6d", closure.kind)
+
+
+def with_elastic_closures(
+    model: pin.Model, closures: list[Closure], springs
+) -> tuple[pin.Model, list[Closure], dict[str, float | np.ndarray]]:
+    """The model with the closures given a spring made elastic (module docstring).
+
+    Args:
+        model: the kinematic tree (not modified).
+        closures: its closures.
+        springs: closure index (0-based) -> 6 values or a 6x6 matrix [N/m, N m/rad].
+
+    Returns:
+        (the model with the closures' joints appended and its reference configurations
+        extended with their values there (:func:`chain_values`), the closures on it, the
+        springs of those joints {joint name: stiffness, (3,) rotations of a ball, or a
+        (6, 6) block}).
+
+    Raises:
+        InvalidInputError: an index out of range, a spring of the wrong length, a 6x6 not
+            symmetric positive definite or not finite, ``inf`` on a free direction,
+            rotations partly free and partly sprung, a spring at a universal closure.
+    """
+    checked = check_closure_springs(closures, springs)
+    cuts = {}
+    for i, K in checked.items():
+        free = FREE_DIRECTIONS[closures[i].kind]
+        if K.ndim == 2 or any(np.isfinite(k) and (k > 0 or d not in free) for d, k in enumerate(K)):
+            cuts[i] = _layout(closures[i], K)
+    if not cuts:
+        return model, list(closures), {}
+    out_model = pin.Model(model)
+    out_closures, out = [], {}
+    for i, c in enumerate(closures):
+        if i not in cuts:
+            out_closures.append(c.on(out_model, *_ends(c)))
+            continue
+        j, M = cuts[i].start
+        for suffix, joint, k in cuts[i].joints:
+            name = f"{c.name}_{suffix}"
+            j = out_model.addJoint(j, joint, M, name)
+            out_model.addJointFrame(j)
+            M = pin.SE3.Identity()
+            if k is not None:
+                out[name] = k if np.ndim(k) == 2 or np.size(k) > 1 else float(k)
+        kind = cuts[i].end_kind
+        out_closures.append(
+            Closure(CLOSURE_TYPES[kind](out_model, j, M, *cuts[i].end), c.name, kind)
+        )
+    for entry in model.referenceConfigurations:
+        q = entry.data()
+        out_model.referenceConfigurations[entry.key()] = np.concatenate(
+            [q, *chain_values(model, q, cuts.values())]
+        )
+    return out_model, out_closures, out
+
+
+def _ends(c: Closure) -> tuple[tuple, tuple]:
+    k = c.constraint
+    return (k.joint1_id, k.joint1_placement), (k.joint2_id, k.joint2_placement)
+
+
+def chain_values(model: pin.Model, q: np.ndarray, cuts) -> list[np.ndarray]:
+    """The configuration values of each cut's joints (in order) at the configuration
+    ``q`` (nq,) of the tree ``model`` without them: those of the pair met as its type says
+    there, the springs at rest (:func:`_free_part` of B's placement relative to A)."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    out = []
+    for cut in cuts:
+        (j1, M1), (j2, M2) = cut.start, cut.end
+        M = (data.oMi[j1] * M1).actInv(data.oMi[j2] * M2)
+        P = _free_part(cut.kind, M.inverse() if cut.from_b else M)  # B relative to A
+        M = P.inverse() if cut.from_b else P  # the chain's end relative to its start
+        R, t = M.rotation, M.translation
+        values = []
+        for suffix, _, _ in cut.joints:
+            if suffix == BUSHING:
+                values.append(pin.SE3ToXYZQUAT(M))
+            elif suffix == BALL:
+                values.append(pin.Quaternion(R).coeffs())
+                t = R.T @ t  # the translations after the ball, in its moving axes
+            elif suffix == "rz":
+                values.append([math.atan2(R[1, 0], R[0, 0])])
+            else:
+                values.append([t["xyz".index(suffix[1])] if suffix[0] == "p" else 0.0])
+        out.append(np.concatenate(values) if values else np.empty(0))
+    return out
+
+
+def _free_part(kind: str, M: pin.SE3) -> pin.SE3:
+    """B's placement ``M`` relative to A reduced to what a pair of type ``kind`` leaves
+    free: the turn about and the slide along A's z axis, a ball's rotation, nothing for a
+    weld (the constrained directions at 0, as the assembly makes them)."""
+    turn = math.atan2(M.rotation[1, 0], M.rotation[0, 0])
+    slide = np.array([0.0, 0.0, M.translation[2]])
+    return {
+        "6d": pin.SE3.Identity(),
+        "3d": pin.SE3(M.rotation, np.zeros(3)),
+        "revolute": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, turn), np.zeros(3)),
+        "prismatic": pin.SE3(np.eye(3), slide),
+        "cylindrical": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, turn), slide),
+    }[kind]

@@ -1,0 +1,152 @@
+"""Elastic closures measure B's motion in A's axes at A's origin at any rest of the pair.
+
+Each case is checked against a closed form written here: a body held to the ground by
+nothing but one elastic closure (a passive free flyer in the tree) has, at a frame of
+the body that coincides with A, the compliance K^-1 of the closure's spring, whatever
+the pair's relative placement at rest (a revolute pair turned, a prismatic one slid, a
+ball turned 90 degrees about y, where a chain of three rotations would lock); and a
+two-link arm tied to the ground by an elastic ball has the compliance of its two joint
+springs plus the ball's springs, by hand.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import closedloop as cl
+from closedloop.exceptions import InvalidInputError
+from closedloop.io.loader import load_model, reference_configuration
+from closedloop.kinematics.constraints import closure_residual
+
+#: Both sides are solved to rounding: the compliance of a 6x6 spring of condition ~1e4
+#: (N/m against N m/rad, the model's length 1 m), 1e4 * 1e-16, with a wide margin.
+RTOL_EXACT = 1e-9
+
+INF = float("inf")
+#: A's placement in the world: a generic orientation and position.
+A_WORLD = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.5, 0.8), np.array([0.2, -0.1, 0.4]))
+#: A diagonal spring with every direction elastic [N/m, N m/rad].
+DIAGONAL = np.array([2e4, 3e4, 5e4, 40.0, 70.0, 20.0])
+
+#: B's placement relative to A at rest, per type: where the type holds, away from the
+#: placement where A and B coincide in every direction the type leaves free.
+AT_REST = {
+    "6d": pin.SE3.Identity(),
+    "revolute": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.7), np.zeros(3)),
+    "prismatic": pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])),
+    "cylindrical": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, -1.1), np.array([0.0, 0.0, 0.3])),
+    "3d": pin.SE3(pin.rpy.rpyToMatrix(0.4, np.pi / 2, -0.3), np.zeros(3)),
+}
+
+
+def _origin(M: pin.SE3) -> str:
+    xyz = " ".join(repr(float(x)) for x in M.translation)
+    rpy = " ".join(repr(float(x)) for x in pin.rpy.matrixToRpy(M.rotation))
+    return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
+
+
+def _held_body(tmp_path, kind: str, spring) -> tuple:
+    """A body on a passive free flyer, held to the ground by one elastic closure of type
+    ``kind`` between A (on the ground) and B (the body's origin) at :data:`AT_REST`; the
+    body's frame ``at_A`` coincides with A at rest. Returns (model, q at rest)."""
+    B_world = A_WORLD * AT_REST[kind]
+    inertial = ('<inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
+    urdf = f"""<robot name="held">
+<link name="ground"/><link name="body">{inertial}</link><link name="A"/><link name="at_A"/>
+<joint name="float" type="floating"><parent link="ground"/><child link="body"/>
+{_origin(B_world)}</joint>
+<joint name="A_joint" type="fixed"><parent link="ground"/><child link="A"/>
+{_origin(A_WORLD)}</joint>
+<joint name="at_A_joint" type="fixed"><parent link="body"/><child link="at_A"/>
+{_origin(AT_REST[kind].inverse())}</joint>
+</robot>"""
+    (tmp_path / "held.urdf").write_text(urdf)
+    (tmp_path / "held.yaml").write_text(
+        f"closed_loop: [[A, body]]\ntype: ['{kind}']\nname_mot: []\n"
+    )
+    clm = load_model(
+        tmp_path / "held.urdf",
+        tmp_path / "held.yaml",
+        geometry=False,
+        closure_springs={0: np.asarray(spring).tolist()},
+    )
+    return clm, reference_configuration(clm)
+
+
+def _bushing() -> np.ndarray:
+    """A coupled 6x6 symmetric positive definite stiffness [N/m, N, N m/rad]."""
+    rng = np.random.default_rng(7)
+    d = np.sqrt(DIAGONAL)
+    B = rng.normal(size=(6, 6)) * 0.3
+    return d[:, None] * (np.eye(6) + B @ B.T / 6) * d[None, :]
+
+
+@pytest.mark.parametrize("kind", list(AT_REST))
+@pytest.mark.parametrize("form", ["6 values", "6x6"])
+def test_the_spring_is_in_a_axes_at_a_origin_whatever_the_rest(tmp_path, kind, form):
+    K = np.diag(DIAGONAL) if form == "6 values" else _bushing()
+    clm, q = _held_body(tmp_path, kind, DIAGONAL if form == "6 values" else K)
+    np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-12)  # closed at rest
+    C = cl.compliance(clm, q, "at_A", axes="local").C  # A's axes
+    expected = np.linalg.inv(K)
+    unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))  # entries per their units
+    np.testing.assert_allclose(C / unit, expected / unit, rtol=0.0, atol=RTOL_EXACT)
+
+
+def test_a_ball_rotation_spring_is_one_ball_joint_and_a_free_one_none(tmp_path):
+    clm, _ = _held_body(tmp_path, "3d", DIAGONAL)
+    assert [n for n in clm.model.names if n.startswith("A<->body")] == [
+        "A<->body_ball", "A<->body_px", "A<->body_py", "A<->body_pz"
+    ]  # fmt: skip
+    np.testing.assert_array_equal(clm.springs["A<->body_ball"], DIAGONAL[3:])
+
+
+ARM = """<robot name="arm">
+<link name="ground"/><link name="l1">{inertial}</link><link name="l2">{inertial}</link>
+<link name="tip"/><link name="B"/>
+<joint name="j1" type="revolute"><parent link="ground"/><child link="l1"/>
+<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+<origin xyz="0.5 0 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/>
+</joint>
+<joint name="tip_joint" type="fixed"><parent link="l2"/><child link="tip"/>
+<origin xyz="0.5 0 0"/></joint>
+<joint name="B_joint" type="fixed"><parent link="ground"/><child link="B"/>
+<origin xyz="1 0 0" rpy="{rpy}"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("rpy", ["0 0 0", "0 1.2 0", "0 1.5707963267948966 0", "0.3 -0.7 2.0"])
+@pytest.mark.parametrize("rotations", [(0.0, 0.0, 0.0), (30.0, 70.0, 20.0)])
+def test_an_arm_tied_by_an_elastic_ball_whatever_the_ground_frame(tmp_path, rpy, rotations):
+    """Two revolute joints (z at the origin, 100 N m/rad; y at x = 0.5 m, 50 N m/rad)
+    whose tip (x = 1 m, world axes at q = 0) is tied to the ground frame B by an elastic
+    ball: translation springs in the tip's axes and rotations free or sprung. Closed form
+    at q = 0: K = diag(100, 50) + Jp^T Kt Jp + Jw^T Kr Jw on (q1, q2), C = J K^-1 J^T,
+    with Jp, Jw the tip's point and rotation Jacobians. B's orientation cannot matter."""
+    inertial = ('<inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
+    (tmp_path / "arm.urdf").write_text(ARM.format(inertial=inertial, rpy=rpy))
+    kt = np.array([1e4, 2e4, 3e4])
+    (tmp_path / "arm.yaml").write_text(
+        "closed_loop: [[tip, B]]\ntype: ['3d']\nname_mot: [j1]\n"
+        "springs: {j1: 100.0, j2: 50.0}\n"
+        f"closure_springs: {{0: {[*kt.tolist(), *rotations]}}}\n"
+    )
+    clm = load_model(tmp_path / "arm.urdf", tmp_path / "arm.yaml", geometry=False)
+    q = cl.assemble(clm, [0.0], reference_configuration(clm)).q
+    Jp = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, -0.5]])
+    Jw = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
+    K = np.diag([100.0, 50.0]) + Jp.T @ np.diag(kt) @ Jp + Jw.T @ np.diag(rotations) @ Jw
+    J = np.vstack([Jp, Jw])
+    expected = J @ np.linalg.solve(K, J.T)
+    C = cl.compliance(clm, q, "tip").C
+    np.testing.assert_allclose(C, expected, rtol=RTOL_EXACT, atol=RTOL_EXACT * expected.max())
+
+
+def test_rotations_partly_free_and_partly_sprung_are_refused(tmp_path):
+    with pytest.raises(InvalidInputError, match=r"partly free \(0\) and partly sprung"):
+        _held_body(tmp_path, "3d", [1e4, 1e4, 1e4, 0.0, 0.0, 20.0])
