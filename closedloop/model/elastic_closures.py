@@ -69,16 +69,21 @@ _DIRECTION_JOINTS = (
     pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ,
 )  # fmt: skip
 
-#: Per closure type, the directions (indices in :data:`DIRECTIONS`) it leaves free; the
-#: universal type, whose free rotation about B's z axis is not one of A's axes, takes no
-#: closure spring.
+#: Per closure type, the directions (indices in :data:`DIRECTIONS`) it leaves free (a
+#: universal pair's in its own frame U: the rotations about B's z axis and A's z axis).
 FREE_DIRECTIONS = {
     "3d": (3, 4, 5),
     "6d": (),
     "revolute": (5,),
     "prismatic": (2,),
     "cylindrical": (2, 5),
+    "universal": (3, 5),
 }
+
+#: A universal pair's chain: about A's z first (turning U about it), then U's axes.
+UNIVERSAL_ORDER = (5, 0, 1, 2, 4, 3)
+#: B's orientation relative to the end of a universal pair's chain: z onto x.
+_Z_ONTO_X = pin.SE3(pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0), np.zeros(3))
 
 #: Relative asymmetry max|K - K^T| / max|K| above which a 6x6 closure spring is refused.
 SYMMETRY_RTOL = 1e-9
@@ -98,12 +103,6 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
         InvalidInputError: naming the closure, the value and what was expected.
     """
     what = f"closure {closure.name!r} of type {closure.kind!r}"
-    if closure.kind not in FREE_DIRECTIONS:
-        raise InvalidInputError(
-            f"{what} given the spring {value!r}; expected a spring only at a closure of type "
-            f"{', '.join(map(repr, FREE_DIRECTIONS))} (the free rotation of a universal "
-            "closure is not about one of frame A's axes)"
-        )
     try:
         K = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -119,6 +118,12 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
     if K.ndim == 1:
         _check_diagonal(what, value, K, closure.kind)
         return K
+    if closure.kind == "universal":
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r}; expected 6 values (in the pair's frame "
+            "U, whose axes turn with the pair's free rotations: a coupled matrix there has "
+            "no fixed meaning)"
+        )
     if not np.isfinite(K).all():
         raise InvalidInputError(
             f"{what} given the 6x6 spring {value!r} with infinite entries; expected a "
@@ -162,7 +167,18 @@ def _check_diagonal(what: str, value, K: np.ndarray, kind: str) -> None:
             "that constrains it"
         )
     rotations = K[3:]
-    if np.isfinite(rotations).all() and (rotations == 0).any() and (rotations > 0).any():
+    if kind == "universal" and K[4] == 0:
+        raise InvalidInputError(
+            f"{what} given the spring {value!r}: 0 (free) on ry, the rotation about the "
+            "pair's cross axis, which makes it a ball joint; expected .inf (rigid) or a "
+            "stiffness > 0 there, or a '3d' pair"
+        )
+    if (
+        kind != "universal"
+        and np.isfinite(rotations).all()
+        and (rotations == 0).any()
+        and (rotations > 0).any()
+    ):
         raise InvalidInputError(
             f"{what} given the spring {value!r}: the rotations rx ry rz are partly free (0) "
             "and partly sprung; expected all three free, all three sprung (a ball joint "
@@ -204,6 +220,7 @@ class _Cut(NamedTuple):
     end_kind: str
     kind: str  # the closure's type
     from_b: bool = False
+    tip: pin.SE3 = pin.SE3.Identity()  # the closed frame relative to the chain's end
 
 
 def _layout(closure: Closure, K: np.ndarray) -> _Cut:
@@ -214,6 +231,13 @@ def _layout(closure: Closure, K: np.ndarray) -> _Cut:
         joints = ((BUSHING, pin.JointModelFreeFlyer(), K),)
         from_b = closure.kind != "6d"
         return _Cut(*((b, a) if from_b else (a, b)), joints, "6d", closure.kind, from_b)
+    if closure.kind == "universal":
+        chain = tuple(
+            (DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
+            for d in UNIVERSAL_ORDER
+            if math.isfinite(K[d])
+        )
+        return _Cut(a, b, chain, "6d", "universal", tip=_Z_ONTO_X)
     rotations = K[3:]
     free = not rotations.any()  # three free rotations: closed by a point
     ball = closure.kind == "3d" and not free  # three sprung rotations of a '3d' pair
@@ -271,7 +295,7 @@ def with_elastic_closures(
             M = pin.SE3.Identity()
             if k is not None:
                 out[name] = k if np.ndim(k) == 2 or np.size(k) > 1 else float(k)
-        kind = cuts[i].end_kind
+        M, kind = cuts[i].tip, cuts[i].end_kind
         out_closures.append(
             Closure(CLOSURE_TYPES[kind](out_model, j, M, *cuts[i].end), c.name, kind)
         )
@@ -299,17 +323,20 @@ def chain_values(model: pin.Model, q: np.ndarray, cuts) -> list[np.ndarray]:
         (j1, M1), (j2, M2) = cut.start, cut.end
         M = (data.oMi[j1] * M1).actInv(data.oMi[j2] * M2)
         P = _free_part(cut.kind, M.inverse() if cut.from_b else M)  # B relative to A
-        M = P.inverse() if cut.from_b else P  # the chain's end relative to its start
+        # the chain's end relative to its start
+        M = (P.inverse() if cut.from_b else P) * cut.tip.inverse()
         R, t = M.rotation, M.translation
         values = []
         for suffix, _, _ in cut.joints:
             if suffix == BUSHING:
                 values.append(pin.SE3ToXYZQUAT(M))
-            elif suffix == BALL:
-                values.append(pin.Quaternion(R).coeffs())
-                t = R.T @ t  # the translations after the ball, in its moving axes
-            elif suffix == "rz":
-                values.append([math.atan2(R[1, 0], R[0, 0])])
+            elif suffix in (BALL, "rz"):  # the rest of the chain in the joint's moving axes
+                turn = math.atan2(R[1, 0], R[0, 0])
+                values.append(pin.Quaternion(R).coeffs() if suffix == BALL else [turn])
+                Rj = R if suffix == BALL else pin.rpy.rpyToMatrix(0.0, 0.0, turn)
+                R, t = Rj.T @ R, Rj.T @ t
+            elif suffix == "rx" and cut.kind == "universal":  # the turn about B's z
+                values.append([math.atan2(R[2, 1], R[1, 1])])
             else:
                 values.append([t["xyz".index(suffix[1])] if suffix[0] == "p" else 0.0])
         out.append(np.concatenate(values) if values else np.empty(0))
@@ -322,6 +349,12 @@ def _free_part(kind: str, M: pin.SE3) -> pin.SE3:
     weld (the constrained directions at 0, as the assembly makes them)."""
     turn = math.atan2(M.rotation[1, 0], M.rotation[0, 0])
     slide = np.array([0.0, 0.0, M.translation[2]])
+    if kind == "universal":  # B's z turned onto U's x about A's z, then B about it
+        z = M.rotation[:, 2]
+        U = pin.rpy.rpyToMatrix(0.0, 0.0, math.atan2(z[1], z[0]))
+        Rb = U.T @ M.rotation @ _Z_ONTO_X.rotation.T
+        spin = pin.rpy.rpyToMatrix(math.atan2(Rb[2, 1], Rb[1, 1]), 0.0, 0.0)
+        return pin.SE3(U @ spin @ _Z_ONTO_X.rotation, np.zeros(3))
     return {
         "6d": pin.SE3.Identity(),
         "3d": pin.SE3(M.rotation, np.zeros(3)),

@@ -38,7 +38,17 @@ AT_REST = {
     "prismatic": pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])),
     "cylindrical": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, -1.1), np.array([0.0, 0.0, 0.3])),
     "3d": pin.SE3(pin.rpy.rpyToMatrix(0.4, np.pi / 2, -0.3), np.zeros(3)),
+    # B's z turned 0.6 rad about A's z from A's x, B turned -0.4 rad about it
+    "universal": pin.SE3(
+        pin.rpy.rpyToMatrix(0.0, 0.0, 0.6)
+        @ pin.rpy.rpyToMatrix(-0.4, 0.0, 0.0)
+        @ pin.rpy.rpyToMatrix(0.0, np.pi / 2, 0.0),
+        np.zeros(3),
+    ),
 }
+#: The frame of the spring's directions relative to A: A's own, but for the universal pair
+#: its frame U (x along B's z, y along z_A x z_B, z along A's z).
+SPRING_FRAME = {"universal": pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.6), np.zeros(3))}
 
 
 def _origin(M: pin.SE3) -> str:
@@ -50,7 +60,8 @@ def _origin(M: pin.SE3) -> str:
 def _held_body(tmp_path, kind: str, spring) -> tuple:
     """A body on a passive free flyer, held to the ground by one elastic closure of type
     ``kind`` between A (on the ground) and B (the body's origin) at :data:`AT_REST`; the
-    body's frame ``at_A`` coincides with A at rest. Returns (model, q at rest)."""
+    body's frame ``at_A`` coincides with A (U for a universal pair: :data:`SPRING_FRAME`)
+    at rest. Returns (model, q at rest)."""
     B_world = A_WORLD * AT_REST[kind]
     inertial = ('<inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" '
                 'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
@@ -61,7 +72,7 @@ def _held_body(tmp_path, kind: str, spring) -> tuple:
 <joint name="A_joint" type="fixed"><parent link="ground"/><child link="A"/>
 {_origin(A_WORLD)}</joint>
 <joint name="at_A_joint" type="fixed"><parent link="body"/><child link="at_A"/>
-{_origin(AT_REST[kind].inverse())}</joint>
+{_origin(AT_REST[kind].inverse() * SPRING_FRAME.get(kind, pin.SE3.Identity()))}</joint>
 </robot>"""
     (tmp_path / "held.urdf").write_text(urdf)
     (tmp_path / "held.yaml").write_text(
@@ -84,13 +95,16 @@ def _bushing() -> np.ndarray:
     return d[:, None] * (np.eye(6) + B @ B.T / 6) * d[None, :]
 
 
-@pytest.mark.parametrize("kind", list(AT_REST))
-@pytest.mark.parametrize("form", ["6 values", "6x6"])
+@pytest.mark.parametrize(
+    ("kind", "form"),
+    [(kind, "6 values") for kind in AT_REST]
+    + [(kind, "6x6") for kind in AT_REST if kind != "universal"],
+)
 def test_the_spring_is_in_a_axes_at_a_origin_whatever_the_rest(tmp_path, kind, form):
     K = np.diag(DIAGONAL) if form == "6 values" else _bushing()
     clm, q = _held_body(tmp_path, kind, DIAGONAL if form == "6 values" else K)
     np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-12)  # closed at rest
-    C = cl.compliance(clm, q, "at_A", axes="local").C  # A's axes
+    C = cl.compliance(clm, q, "at_A", axes="local").C  # A's axes (U's)
     expected = np.linalg.inv(K)
     unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))  # entries per their units
     np.testing.assert_allclose(C / unit, expected / unit, rtol=0.0, atol=RTOL_EXACT)
@@ -150,3 +164,15 @@ def test_an_arm_tied_by_an_elastic_ball_whatever_the_ground_frame(tmp_path, rpy,
 def test_rotations_partly_free_and_partly_sprung_are_refused(tmp_path):
     with pytest.raises(InvalidInputError, match=r"partly free \(0\) and partly sprung"):
         _held_body(tmp_path, "3d", [1e4, 1e4, 1e4, 0.0, 0.0, 20.0])
+
+
+@pytest.mark.parametrize(
+    ("spring", "match"),
+    [(_bushing(), r"6x6 spring .*expected 6 values \(in the pair's frame U"),
+     ([1e4, 1e4, 1e4, 5.0, 0.0, 5.0], r"0 \(free\) on ry, .*cross axis")],
+)  # fmt: skip
+def test_a_universal_pair_refuses_a_coupled_spring_and_a_free_cross_rotation(
+    tmp_path, spring, match
+):
+    with pytest.raises(InvalidInputError, match=match):
+        _held_body(tmp_path, "universal", spring)
