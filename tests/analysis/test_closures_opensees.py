@@ -77,6 +77,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm
+from mechanisms import mjcf_fourbar, xyz_text
 
 import closedloop as cl
 from closedloop.kinematics.constraints import closure_residual
@@ -495,40 +496,20 @@ def test_flexible_platform_of_three_beams_against_opensees(tmp_path, kind):
 
 
 # ------------------------------------------------------------------------------- MJCF
-#: The planar four-bar in MJCF, closed at C by a ``<connect>`` (a '3d' closure, a ball),
-#: the crank's spring as its hinge's ``stiffness``; the anchor is given on the coupler
-#: and rocker bodies, at their beams' tips (bodies with no joint carry the tips and P).
-FOURBAR_MJCF = """<mujoco model="fourbar_beams">
-  <compiler angle="radian"/>
-  <worldbody>
-    <body name="ground">
-      <body name="crank">
-        <joint name="crank" type="hinge" axis="0 1 0" stiffness="{k}"/>
-        <body name="coupler" pos="{B}">
-          <joint name="coupler" type="hinge" axis="0 1 0"/>
-          <body name="coupler_tip" pos="{BC}"><site name="P" pos="{CP}"/></body>
-        </body>
-      </body>
-      <body name="rocker" pos="{D}">
-        <joint name="rocker" type="hinge" axis="0 1 0"/>
-        <body name="rocker_tip" pos="{DC}"/>
-      </body>
-    </body>
-  </worldbody>
-  <equality>
-    <connect name="C" body1="coupler" body2="rocker" anchor="{BC}"/>
-  </equality>
-</mujoco>"""
+#: The four-bar above (planar) in MJCF (:func:`mechanisms.mjcf_fourbar`), closed at C by a
+#: ``<connect>`` (a '3d' closure, a ball), the crank's spring as its hinge's ``stiffness``.
+FOURBAR_POINTS = {"B": B_, "C": C_, "D": D_PLANAR, "P": P_}
 
 
 def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
-    text = " ".join
-    (tmp_path / "fourbar_beams.xml").write_text(FOURBAR_MJCF.format(
-        k=K_CRANK, B=text(map(str, B_)), BC=text(map(str, C_ - B_)), CP=text(map(str, P_ - C_)),
-        D=text(map(str, D_PLANAR)), DC=text(map(str, C_ - D_PLANAR))))  # fmt: skip
+    """The anchor given on the coupler and rocker bodies, at their beams' tips (jointless
+    bodies carry the tips and P)."""
+    connect = f'<connect name="C" body1="coupler" body2="rocker" anchor="{xyz_text(C_ - B_)}"/>'
+    path = tmp_path / "fourbar_beams.xml"
+    path.write_text(mjcf_fourbar(connect, K_CRANK, points=FOURBAR_POINTS))
     beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
              "rocker": rod("rocker_tip_fixed")}  # fmt: skip
-    clm = cl.load_model(tmp_path / "fourbar_beams.xml", beams=beams)
+    clm = cl.load_model(path, beams=beams)
     assert [c.kind for c in clm.closures] == ["3d"]
     C = library_compliance(clm, "P")
     assert_close_in_norm(
@@ -539,18 +520,13 @@ def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
 def test_mjcf_fourbar_rocker_to_its_connect_anchor_against_opensees(tmp_path):
     """The same four-bar, its rocker a body whose far end is only the ``<connect>``'s
     anchor (computed by the reader on the rocker): a beam to ``anchor:C``."""
-    text = FOURBAR_MJCF.replace('<body name="rocker_tip" pos="{DC}"/>', "").replace(
-        'body1="coupler" body2="rocker" anchor="{BC}"',
-        'body1="coupler_tip" body2="rocker" anchor="0 0 0"',
-    )
-    assert text.count("rocker_tip") == 0 and 'body1="coupler_tip"' in text
-    join = " ".join
-    (tmp_path / "fourbar_anchor.xml").write_text(text.format(
-        k=K_CRANK, B=join(map(str, B_)), BC=join(map(str, C_ - B_)), CP=join(map(str, P_ - C_)),
-        D=join(map(str, D_PLANAR))))  # fmt: skip
+    connect = '<connect name="C" body1="coupler_tip" body2="rocker" anchor="0 0 0"/>'
+    path = tmp_path / "fourbar_anchor.xml"
+    path.write_text(mjcf_fourbar(connect, K_CRANK, rocker_tip=False, points=FOURBAR_POINTS))
     beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
              "rocker": rod("anchor:C")}  # fmt: skip
-    clm = cl.load_model(tmp_path / "fourbar_anchor.xml", beams=beams)
+    clm = cl.load_model(path, beams=beams)
+    assert "rocker_tip" not in clm.model.names and not clm.model.existFrame("rocker_tip")
     assert clm.closures[0].constraint.joint2_id == clm.model.getJointId("rocker_beam")
     C = library_compliance(clm, "P")
     assert_close_in_norm(
