@@ -10,6 +10,7 @@ elastic closure with its tree-equivalent description build the models here.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -109,13 +110,18 @@ ELASTIC_DESCRIPTIONS = {
 }  # fmt: skip
 
 
-def urdf_text(joints) -> str:
+def urdf_text(joints, visual: bool = False) -> str:
+    """The URDF of the four-bar's ``joints``; ``visual``: a box on each link of a shared
+    moving joint, off its joint's origin (so that its drawn placement turns with it)."""
     links = {"ground"} | {j[2] for j in joints}
     inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
                 'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
+    box = ('<visual><origin xyz="0.02 0.01 0.03" rpy="0 0 0"/><geometry>'
+           '<box size="0.03 0.02 0.01"/></geometry></visual>') if visual else ""  # fmt: skip
     body = ['<robot name="spatial_fourbar">']
     heavy = {j[2] for j in SHARED if j[5] != "fixed"}  # the frames and cut halves weigh 0
-    body += [f'<link name="{n}">{inertial if n in heavy else ""}</link>' for n in sorted(links)]
+    body += [f'<link name="{n}">{inertial + box if n in heavy else ""}</link>'
+             for n in sorted(links)]  # fmt: skip
     for name, parent, child, xyz, rpy, kind, axis in joints:
         body.append(
             f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
@@ -128,8 +134,38 @@ def urdf_text(joints) -> str:
     return "\n".join([*body, "</robot>"])
 
 
+def fourbar_files(
+    tmp_path: Path,
+    description: str,
+    *,
+    flip: bool = False,
+    closure_springs=None,
+    springs=None,
+    visual: bool = False,
+) -> tuple[Path, Path]:
+    """(URDF, closure file) of the spatial four-bar of one description of
+    :data:`DESCRIPTIONS` or :data:`ELASTIC_DESCRIPTIONS`, written in ``tmp_path``: the
+    crank actuated, the springs :data:`SPRINGS`. ``flip`` turns B's frame of the revolute
+    closure over (its z axis opposite A's); ``closure_springs`` (the file's mapping),
+    ``springs`` (added to :data:`SPRINGS`); ``visual``: :func:`urdf_text`."""
+    extra, pairs, types = {**DESCRIPTIONS, **ELASTIC_DESCRIPTIONS}[description]
+    if flip:
+        extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
+    stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
+    stem += "_sprung" if closure_springs or springs else ""
+    urdf, closures = tmp_path / f"{stem}.urdf", tmp_path / f"{stem}.yaml"
+    urdf.write_text(urdf_text(SHARED + extra, visual))
+    quoted = ", ".join(f"'{t}'" for t in types)
+    text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
+    text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
+    if closure_springs is not None:
+        text += f"closure_springs: {yaml_springs(closure_springs)}\n"
+    closures.write_text(text.replace("None", "null"))
+    return urdf, closures
+
+
 def fourbar_as(
-    tmp_path,
+    tmp_path: Path,
     description: str,
     *,
     flip: bool = False,
@@ -137,27 +173,18 @@ def fourbar_as(
     springs=None,
     **options,
 ) -> ClosedLoopModel:
-    """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
-    B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
-    (the file's mapping), ``springs`` (added to :data:`SPRINGS`); ``options`` to
-    :func:`load_model`."""
-    extra, pairs, types = {**DESCRIPTIONS, **ELASTIC_DESCRIPTIONS}[description]
-    if flip:
-        extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
-    stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
-    stem += "_sprung" if closure_springs or springs or options else ""
-    (tmp_path / f"{stem}.urdf").write_text(urdf_text(SHARED + extra))
-    quoted = ", ".join(f"'{t}'" for t in types)
-    text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
-    text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
-    if closure_springs is not None:
-        text += f"closure_springs: {yaml_springs(closure_springs)}\n"
-    (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
+    """The model of :func:`fourbar_files` (the same arguments), loaded without geometry
+    unless ``geometry=True`` (then with the visual boxes); ``springs_keyword``: the
+    keyword ``springs`` of :func:`load_model`; other ``options`` to :func:`load_model`."""
     keyword = options.pop("springs_keyword", None)
+    geometry = options.pop("geometry", False)
+    urdf, closures = fourbar_files(tmp_path, description, flip=flip,
+                                   closure_springs=closure_springs, springs=springs,
+                                   visual=geometry)  # fmt: skip
     return load_model(
-        tmp_path / f"{stem}.urdf",
-        tmp_path / f"{stem}.yaml",
-        geometry=False,
+        urdf,
+        closures,
+        geometry=geometry,
         **({"springs": keyword} if keyword else {}),
         **options,
     )
