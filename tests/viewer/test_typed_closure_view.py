@@ -14,11 +14,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import assert_close_in_norm
-from spatial_fourbar import PIN, PIN_CUT, SHARED_JOINTS, fourbar_as, mapped_configuration
-from test_viewer import EXTERNAL, export, json_matrix, robot_groups, robots_object
+from spatial_fourbar import (
+    PIN,
+    PIN_CUT,
+    SHARED_JOINTS,
+    fourbar_as,
+    fourbar_files,
+    mapped_configuration,
+    shared_values,
+)
+from test_viewer import EXTERNAL, commands, export, json_matrix, robot_groups, robots_object
 
 import closedloop as cl
-from closedloop.viewer.mesh import node_name
+from closedloop.cli.app import main
 from closedloop.viewer.scene import deflection_scene
 
 #: Two descriptions of one mechanism: the joint deflections agree to rounding (compliances
@@ -77,6 +85,11 @@ def test_a_revolute_closure_is_drawn_deflected_as_the_pin_in_the_tree(views, pai
         assert change > 0.01 * np.abs(scene.frame_twist).max()
     np.testing.assert_allclose(scene.point_deflected, expected.point_deflected,
                                atol=RTOL_SAME * AMPLIFICATION * scene.max_displacement)  # fmt: skip
+    # the amplified configuration integrate(q, s dq), on the joints both have
+    drawn_dq = AMPLIFICATION * np.abs(scene.dq).max()
+    np.testing.assert_allclose(shared_values(clm, scene.q_deflected),
+                               shared_values(twin, expected.q_deflected),
+                               atol=RTOL_SAME * drawn_dq)  # fmt: skip
     ids, twin_ids = _shared(clm), _shared(twin)
     twists = scene.twists[ids]
     assert np.abs(twists).max() > 1e-3  # the links move (rad, m)
@@ -87,27 +100,47 @@ def test_a_revolute_closure_is_drawn_deflected_as_the_pin_in_the_tree(views, pai
                          RTOL_SAME)  # fmt: skip
 
 
+def drawn_links(html: str, cmds: list[dict]) -> dict:
+    """{(robot, geometry name): ((4, 4) placement [m], colour)} of the page of the
+    spatial four-bar: the ghost ('nominal') and the deflected drawing of each link's box."""
+    assert EXTERNAL.search(html) is None and "<title>spatial_fourbar: deflection at P" in html
+    obj = robots_object(cmds)
+    materials = {m["uuid"]: m["color"] for m in obj["materials"]}
+    out = {}
+    for root in ("nominal", "deflected"):
+        for name, group in robot_groups(obj, root).items():
+            (mesh,) = group["children"]
+            out[root, name.removeprefix(f"{root}_")] = (json_matrix(group),
+                                                        materials[mesh["material"]])  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize("route", ["python", "command line"])
 def test_the_static_page_of_a_revolute_closure_draws_the_links_of_the_pin_in_the_tree(
-    views, tmp_path
+    views, tmp_path, capsys, route
 ):
     """meshcat's static HTML, decoded: each link's box, ghost and deflected, at the
-    placement of the tree description's, with the same colour (its real displacement)."""
-    drawn = {}
-    for d in DESCRIPTIONS:
-        clm, q = views[d]
+    placement of the tree description's, with the same colour (its real displacement).
+    The page of the revolute closure from :class:`DeflectionViewer` or from
+    ``closedloop view --html`` on its files (assembled at crank 0.4 from the drawing)."""
+    tree, q_tree = views["pin in the tree, rocker welded"]
+    scene = deflection_scene(tree, q_tree, "P", WRENCH, scale=AMPLIFICATION)
+    expected = drawn_links(*export(tree, scene, tmp_path, name="tree.html"))
+    if route == "python":
+        clm, q = views["revolute closure"]
         scene = deflection_scene(clm, q, "P", WRENCH, scale=AMPLIFICATION)
-        html, cmds = export(clm, scene, tmp_path, name=f"{d.split()[0]}.html")
-        assert EXTERNAL.search(html) is None and "<title>spatial_fourbar: deflection at P" in html
-        obj = robots_object(cmds)
-        materials = {m["uuid"]: m["color"] for m in obj["materials"]}
-        drawn[d] = {}
-        for root in ("nominal", "deflected"):
-            groups = robot_groups(obj, root)
-            for g in clm.visual_model.geometryObjects:
-                group = groups[node_name(root, g.name)]
-                (mesh,) = group["children"]
-                drawn[d][root, g.name] = json_matrix(group), materials[mesh["material"]]
-    page, expected = (drawn[d] for d in DESCRIPTIONS)
+        page = drawn_links(*export(clm, scene, tmp_path, name="closure.html"))
+    else:
+        urdf, closures = fourbar_files(tmp_path, "revolute closure", visual=True)
+        html = tmp_path / "closure.html"
+        code = main(["view", str(urdf), "--closures", str(closures), "--frame", "P",
+                     "--actuated", "0.4", "--force", *map(str, WRENCH[:3]), "--torque",
+                     *map(str, WRENCH[3:]), "--scale", str(AMPLIFICATION),
+                     "--html", str(html)])  # fmt: skip
+        captured = capsys.readouterr()
+        assert (code, captured.err) == (0, "") and f"wrote {html}" in captured.out
+        text = html.read_text(encoding="utf-8")
+        page = drawn_links(text, commands(text))
     assert len(page) == 2 * 9 and page.keys() == expected.keys()  # a box on each moving link
     names = [name for root, name in page if root == "deflected"]
     moved = np.array([page["deflected", n][0] - page["nominal", n][0] for n in names])
