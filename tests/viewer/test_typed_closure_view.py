@@ -2,7 +2,8 @@
 against the view of the four-bar written with the pin kept in the tree (the loop welded in
 the rocker: no code of the typed closure on that side), and of the issue's sprung pin on
 that closure (``closure_springs``) against the sprung pin in the tree: the scene's maths
-and the static page's drawing of the links both descriptions share.
+and the static page's drawing of the links both descriptions share, and the natural modes
+as drawn.
 
 (``close_loops`` is not compared: its re-assembly keeps the amplified out-of-plane spring
 deflections, which the planar loop's passive joints cannot close, on either description
@@ -26,8 +27,9 @@ from spatial_fourbar import (
 from test_viewer import EXTERNAL, commands, export, json_matrix, robot_groups, robots_object
 
 import closedloop as cl
+from closedloop.analysis.vibration import modes
 from closedloop.cli.app import main
-from closedloop.viewer.scene import deflection_scene
+from closedloop.viewer.scene import deflection_scene, mode_scene
 
 #: Two descriptions of one mechanism: the joint deflections agree to rounding (compliances
 #: by factorisations of condition ~1e6 at most; the nonlinear equilibria solved to
@@ -98,6 +100,21 @@ def test_a_revolute_closure_is_drawn_deflected_as_the_pin_in_the_tree(views, pai
     moved = scene.ramp_poses[:, ids] - scene.poses[ids]
     assert_close_in_norm(moved, expected.ramp_poses[:, twin_ids] - expected.poses[twin_ids],
                          RTOL_SAME)  # fmt: skip
+
+
+def test_the_natural_modes_of_a_revolute_closure_are_drawn_as_the_pin_in_the_tree(views):
+    """Each mode's frequency, and each shared link's swing (mode shapes mass-normalised:
+    the same up to sign; the cut's halves weigh nothing on either description)."""
+    (clm, q), (twin, q_twin) = (views[d] for d in DESCRIPTIONS)
+    result, expected = modes(clm, q), modes(twin, q_twin)
+    assert len(result.frequencies) == len(expected.frequencies) == 4  # 9 coordinates, 5 rows
+    np.testing.assert_allclose(result.frequencies, expected.frequencies, rtol=RTOL_SAME)
+    for i, frequency in enumerate(result.frequencies):
+        scene = mode_scene(clm, q, result.shapes[:, i], frequency, i + 1, "P", scale=1.0)
+        other = mode_scene(twin, q_twin, expected.shapes[:, i], frequency, i + 1, "P", scale=1.0)
+        twists, twists_twin = scene.twists[_shared(clm)], other.twists[_shared(twin)]
+        sign = np.sign(np.vdot(twists, twists_twin))
+        assert_close_in_norm(twists, sign * twists_twin, RTOL_SAME)
 
 
 def drawn_links(html: str, cmds: list[dict]) -> dict:
