@@ -10,8 +10,7 @@ import pytest
 from helpers import assert_close_in_norm
 from spatial_fourbar import PIN, PIN_CUT, fourbar_as, fourbar_files, mapped_configuration
 
-import closedloop as cl
-from closedloop.analysis.maps import stiffness_map
+from closedloop.analysis.maps import StiffnessMap, stiffness_map
 from closedloop.cli.app import main
 from closedloop.kinematics.driving import assemble_connected
 
@@ -30,7 +29,7 @@ TYPED_AND_TREE = [
 ]
 
 
-def assert_same_maps(smap: cl.analysis.maps.StiffnessMap, expected) -> None:
+def assert_same_maps(smap: StiffnessMap, expected: StiffnessMap) -> None:
     """Every point computed on both, the same statuses, compliances and indices (NaN on
     both where an index is not defined, e.g. det K of a compliance of rank < 6)."""
     np.testing.assert_array_equal(smap.status, expected.status)
