@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import REPO, UR5_JOINTS, UR5_Q
+from spatial_fourbar import assembled_fourbars, sprung_pins
 
 from closedloop.io.loader import load_urdf, robot_data_dir
 from closedloop.kinematics.assembly import assemble
@@ -67,3 +68,18 @@ def cahyman():
     from cahyman_pin.params import DEFAULT_PARAMS
 
     return cahyman_model(DEFAULT_PARAMS)
+
+
+# ------------------------------------------------ the spatial four-bar cut at its pin C
+@pytest.fixture(scope="module")
+def fourbars(tmp_path_factory):
+    """{description: (model, q assembled at crank = 0.4 rad)}: the spatial four-bar in each
+    description of :data:`spatial_fourbar.DESCRIPTIONS`."""
+    return assembled_fourbars(tmp_path_factory.mktemp("fourbars"))
+
+
+@pytest.fixture(scope="module")
+def pins(tmp_path_factory, fourbars):
+    """{description: (model, Q)}: the issue's sprung pin at C on a '6d' and a 'revolute'
+    closure and in the tree (:func:`spatial_fourbar.sprung_pins`)."""
+    return sprung_pins(tmp_path_factory.mktemp("pins"), fourbars)

@@ -586,3 +586,52 @@ def scaled_fourbar(s: float, springs=None) -> tuple[ClosedLoopModel, np.ndarray,
     q = np.array(q1, dtype=float)
     q[clm.linear_coordinates] *= s
     return clm, q, "P"
+
+
+# ------------------------------------------------------------------ MJCF four-bar
+#: The MJCF four-bar's points in the world at qpos0 [m], in the xz plane: the crank's hinge
+#: at the origin, the coupler's at B, the rocker's at D, the loop's closing point C, the
+#: output site P on the coupler.
+MJCF_FOURBAR_POINTS = {"B": (0.0, 0.0, 0.12), "C": (0.3, 0.0, 0.18), "D": (0.34, 0.0, 0.0),
+                       "P": (0.25, 0.0, 0.22)}  # fmt: skip
+
+
+def xyz_text(v) -> str:
+    """The text of an MJCF vector attribute: the numbers of ``v``, shortest round trip."""
+    return " ".join(map(repr, map(float, v)))
+
+
+def mjcf_fourbar(equality: str, k: float = 400.0, rocker_tip: bool = True,
+                 points=MJCF_FOURBAR_POINTS) -> str:  # fmt: skip
+    """The MJCF text of a planar four-bar closed by ``equality`` (the content of its
+    ``<equality>``, e.g. a ``<connect>``).
+
+    Bodies ``crank`` (hinge ``crank`` at the origin, ``stiffness`` k [N m/rad]), ``coupler``
+    (hinge at B) and ``rocker`` (hinge at D), hinges about y; the jointless body
+    ``coupler_tip`` at C carries the site ``P``, and the jointless body ``rocker_tip`` (left
+    out when not ``rocker_tip``) is at C on the rocker; all inside a jointless ``ground``.
+    ``points``: {"B", "C", "D", "P": (3,) world position at qpos0 [m]}; every body is
+    world-aligned.
+    """
+    B, C, D, P = (np.asarray(points[n], float) for n in "BCDP")
+    tip = f'\n        <body name="rocker_tip" pos="{xyz_text(C - D)}"/>' if rocker_tip else ""
+    return f"""<mujoco model="fourbar">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="ground">
+      <body name="crank">
+        <joint name="crank" type="hinge" axis="0 1 0" stiffness="{k!r}"/>
+        <body name="coupler" pos="{xyz_text(B)}">
+          <joint name="coupler" type="hinge" axis="0 1 0"/>
+          <body name="coupler_tip" pos="{xyz_text(C - B)}">
+            <site name="P" pos="{xyz_text(P - C)}"/>
+          </body>
+        </body>
+      </body>
+      <body name="rocker" pos="{xyz_text(D)}">
+        <joint name="rocker" type="hinge" axis="0 1 0"/>{tip}
+      </body>
+    </body>
+  </worldbody>
+  <equality>{equality}</equality>
+</mujoco>"""

@@ -6,16 +6,20 @@ file, or an MJCF file; links as Euler-Bernoulli beams, round steel rods) and for
 world axes, at the output frame's origin) is compared column by column with the
 displacements of the output node under six unit loads there (1 N along x, y, z, then
 1 N m about x, y, z), one linear static analysis each. At the configuration of each case
-the loops are closed and every link frame is world-aligned (both checked), so a node's
-position is its frame's and every joint axis a world axis, as ``equalDOF`` needs.
+(neutral; an MJCF file's ``qpos0``, which places a free body at its ``pos``) the loops are
+closed and every link frame is world-aligned (both checked), so a node's position is its
+frame's and every joint axis a world axis, as ``equalDOF`` needs.
 
 Cases: a planar four-bar closed by a revolute closure, by two point ('3d') closures, by a
 sprung revolute closure and by a weld freed into the same sprung pin (elastic closures);
 a spatial four-bar closed by a universal and by a cylindrical closure; a slider-crank
 closed by a prismatic closure; a spatial frame closed by a weld, rigid or elastic along y
 and about x; a rigid platform (a ternary link) on three flexible legs, two closed at the
-ground by points or welds; the planar four-bar as an MJCF file closed by a ``<connect>``,
-its rocker a beam to a tip body or to the ``<connect>``'s anchor.
+ground by points or welds, and the same platform flexible; the planar four-bar as an
+MJCF file closed by a ``<connect>``, its rocker a beam to a tip body or to the
+``<connect>``'s anchor; an MJCF mechanism of three legs (sprung hip, passive knee) whose
+flexible platform, a free body, is closed to the legs' tips by three ``<connect>``
+closures (or ``<weld>`` closures).
 
 How each part of the library's model is modelled in OpenSees:
 
@@ -41,7 +45,9 @@ the ground                      translation along the axis, the coupler pinned t
                                 translation along the axis
 'universal' closure             ``equalDOF``, all but the rotations about its two axes
 '6d' closure (weld)             ``equalDOF`` on all six dofs
-'3d' closure (one point)        ``equalDOF`` on the three translations
+'3d' closure (one point),       ``equalDOF`` on the three translations
+MJCF ``<connect>``
+free joint (MJCF ``freejoint``) nothing: the body's nodes are held by its closures
 elastic closure direction       the direction left out of the ``equalDOF``, and a
                                 ``zeroLength`` + ``uniaxialMaterial Elastic`` on it
 rigid link (the platform) and   ``rigidLink beam`` from one node of the body (retained)
@@ -62,7 +68,9 @@ rigid body (it ties the translations only, without the body's rotation) and is n
 
 A link may also be several beams (a list under its name in ``beams``): the flexible
 platform, from its origin to its centre and from there to its two other legs, is three
-``elasticBeamColumn`` elements between those nodes.
+``elasticBeamColumn`` elements between those nodes; the MJCF platform's three beams, from
+its centre to its three closures' anchors (``anchor:C<i>``), are three elements from the
+centre node, each pinned (or welded) to its leg's tip.
 """
 
 from __future__ import annotations
@@ -77,8 +85,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm
+from mechanisms import mjcf_fourbar, xyz_text
 
 import closedloop as cl
+from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.constraints import closure_residual
 
 E, G, D = 2.1e11, 8.1e10, 0.01  # steel [Pa], rod diameter [m]
@@ -88,7 +98,8 @@ K_CRANK, K_CUT = 400.0, 20.0  # [N m/rad]
 #: transports, OpenSees' assembled stiffness with its constraints transformed out), both
 #: exact for Euler-Bernoulli rods loaded at nodes: they differ by rounding times the
 #: condition of the stiffness (E A / L over the softest bending or spring term, up to ~1e7
-#: here), ~1e-16 * 1e7 = 1e-9 of the largest scaled entry of C (measured: 3e-12 at most).
+#: here), ~1e-16 * 1e7 = 1e-9 of the largest scaled entry of C (measured: 3e-11 at most,
+#: the MJCF platform).
 RTOL_OPENSEES = 1e-9
 #: Rotations times a length of the mechanisms [m] before comparing, so that the tolerance
 #: weighs translations and rotations alike (assert_close_in_norm's scale).
@@ -228,9 +239,9 @@ def write_urdf(path: Path, joints) -> None:
 
 
 def library_compliance(clm, frame: str) -> np.ndarray:
-    """(6, 6) compliance of ``frame`` at the neutral configuration, which must be closed
-    and world-aligned."""
-    q = pin.neutral(clm.model)
+    """(6, 6) compliance of ``frame`` at the reference configuration (neutral; an MJCF
+    file's qpos0), which must be closed and world-aligned."""
+    q = reference_configuration(clm)
     np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-14)
     data = clm.model.createData()
     pin.framesForwardKinematics(clm.model, data, q)
@@ -495,40 +506,20 @@ def test_flexible_platform_of_three_beams_against_opensees(tmp_path, kind):
 
 
 # ------------------------------------------------------------------------------- MJCF
-#: The planar four-bar in MJCF, closed at C by a ``<connect>`` (a '3d' closure, a ball),
-#: the crank's spring as its hinge's ``stiffness``; the anchor is given on the coupler
-#: and rocker bodies, at their beams' tips (bodies with no joint carry the tips and P).
-FOURBAR_MJCF = """<mujoco model="fourbar_beams">
-  <compiler angle="radian"/>
-  <worldbody>
-    <body name="ground">
-      <body name="crank">
-        <joint name="crank" type="hinge" axis="0 1 0" stiffness="{k}"/>
-        <body name="coupler" pos="{B}">
-          <joint name="coupler" type="hinge" axis="0 1 0"/>
-          <body name="coupler_tip" pos="{BC}"><site name="P" pos="{CP}"/></body>
-        </body>
-      </body>
-      <body name="rocker" pos="{D}">
-        <joint name="rocker" type="hinge" axis="0 1 0"/>
-        <body name="rocker_tip" pos="{DC}"/>
-      </body>
-    </body>
-  </worldbody>
-  <equality>
-    <connect name="C" body1="coupler" body2="rocker" anchor="{BC}"/>
-  </equality>
-</mujoco>"""
+#: The four-bar above (planar) in MJCF (:func:`mechanisms.mjcf_fourbar`), closed at C by a
+#: ``<connect>`` (a '3d' closure, a ball), the crank's spring as its hinge's ``stiffness``.
+FOURBAR_POINTS = {"B": B_, "C": C_, "D": D_PLANAR, "P": P_}
 
 
 def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
-    text = " ".join
-    (tmp_path / "fourbar_beams.xml").write_text(FOURBAR_MJCF.format(
-        k=K_CRANK, B=text(map(str, B_)), BC=text(map(str, C_ - B_)), CP=text(map(str, P_ - C_)),
-        D=text(map(str, D_PLANAR)), DC=text(map(str, C_ - D_PLANAR))))  # fmt: skip
+    """The anchor given on the coupler and rocker bodies, at their beams' tips (jointless
+    bodies carry the tips and P)."""
+    connect = f'<connect name="C" body1="coupler" body2="rocker" anchor="{xyz_text(C_ - B_)}"/>'
+    path = tmp_path / "fourbar_beams.xml"
+    path.write_text(mjcf_fourbar(connect, K_CRANK, points=FOURBAR_POINTS))
     beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
              "rocker": rod("rocker_tip_fixed")}  # fmt: skip
-    clm = cl.load_model(tmp_path / "fourbar_beams.xml", beams=beams)
+    clm = cl.load_model(path, beams=beams)
     assert [c.kind for c in clm.closures] == ["3d"]
     C = library_compliance(clm, "P")
     assert_close_in_norm(
@@ -539,20 +530,104 @@ def test_mjcf_fourbar_with_beams_against_opensees(tmp_path):
 def test_mjcf_fourbar_rocker_to_its_connect_anchor_against_opensees(tmp_path):
     """The same four-bar, its rocker a body whose far end is only the ``<connect>``'s
     anchor (computed by the reader on the rocker): a beam to ``anchor:C``."""
-    text = FOURBAR_MJCF.replace('<body name="rocker_tip" pos="{DC}"/>', "").replace(
-        'body1="coupler" body2="rocker" anchor="{BC}"',
-        'body1="coupler_tip" body2="rocker" anchor="0 0 0"',
-    )
-    assert text.count("rocker_tip") == 0 and 'body1="coupler_tip"' in text
-    join = " ".join
-    (tmp_path / "fourbar_anchor.xml").write_text(text.format(
-        k=K_CRANK, B=join(map(str, B_)), BC=join(map(str, C_ - B_)), CP=join(map(str, P_ - C_)),
-        D=join(map(str, D_PLANAR))))  # fmt: skip
+    connect = '<connect name="C" body1="coupler_tip" body2="rocker" anchor="0 0 0"/>'
+    path = tmp_path / "fourbar_anchor.xml"
+    path.write_text(mjcf_fourbar(connect, K_CRANK, rocker_tip=False, points=FOURBAR_POINTS))
     beams = {"crank": rod("coupler"), "coupler": rod("coupler_tip_fixed"),
              "rocker": rod("anchor:C")}  # fmt: skip
-    clm = cl.load_model(tmp_path / "fourbar_anchor.xml", beams=beams)
+    clm = cl.load_model(path, beams=beams)
+    assert "rocker_tip" not in clm.model.names and not clm.model.existFrame("rocker_tip")
     assert clm.closures[0].constraint.joint2_id == clm.model.getJointId("rocker_beam")
     C = library_compliance(clm, "P")
     assert_close_in_norm(
         C, opensees_compliance(fourbar_opensees(BALL, D_PLANAR)), RTOL_OPENSEES, SCALE
     )
+
+
+#: A spatial mechanism of three legs [m]: leg i a thigh from its hip hinge (about world
+#: y, x, y, sprung) at LEG_BASES[i] to its knee hinge (same axis, passive) at
+#: LEG_KNEES[i], then a shank to LEG_TIPS[i], all in the leg's plane; a platform (a free
+#: body) centred at CENTRE, closed to the three shanks' tips by equalities C0, C1, C2.
+CENTRE = np.array([0.0, 0.0, 0.4])
+LEG_BASES = np.array([[0.3, 0.0, 0.0], [-0.03, 0.3, 0.0], [-0.3, -0.06, 0.0]])
+LEG_KNEES = np.array([[0.25, 0.0, 0.2], [-0.03, 0.26, 0.2], [-0.27, -0.06, 0.21]])
+LEG_TIPS = np.array([[0.12, 0.0, 0.38], [-0.03, 0.11, 0.41], [-0.1, -0.06, 0.4]])
+LEG_AXES = (5, 4, 5)  # the hinges' axes as the OpenSees dof of their rotation (ry, rx, ry)
+K_HIPS = (400.0, 300.0, 500.0)  # [N m/rad]
+#: MJCF equality closing the platform -> the dofs OpenSees frees at the legs' tips.
+PLATFORM_EQUALITIES = {"connect": BALL, "weld": ()}
+
+
+def platform_mjcf(equality: str) -> str:
+    """The three-legged mechanism's MJCF text, closed by ``equality`` ("connect" or
+    "weld") elements C0, C1, C2 (body1 the platform, body2 the shank); the site O at the
+    platform's centre."""
+    legs = "".join(
+        f"""
+      <body name="thigh{i}" pos="{xyz_text(LEG_BASES[i])}">
+        <joint name="hip{i}" type="hinge" axis="{xyz_text(np.eye(3)[d - 4])}"
+               stiffness="{K_HIPS[i]!r}"/>
+        <body name="shank{i}" pos="{xyz_text(LEG_KNEES[i] - LEG_BASES[i])}">
+          <joint name="knee{i}" type="hinge" axis="{xyz_text(np.eye(3)[d - 4])}"/>
+        </body>
+      </body>"""
+        for i, d in enumerate(LEG_AXES)
+    )
+    # a <connect>'s anchor is in body1's frame (the platform's), a <weld>'s in body2's
+    origins = [CENTRE] * 3 if equality == "connect" else LEG_KNEES
+    closures = "".join(
+        f'\n    <{equality} name="C{i}" body1="platform" body2="shank{i}" '
+        f'anchor="{xyz_text(LEG_TIPS[i] - origins[i])}"/>'
+        for i in range(3)
+    )
+    return f"""<mujoco model="three_legs">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="ground">{legs}
+    </body>
+    <body name="platform" pos="{xyz_text(CENTRE)}">
+      <freejoint name="platform"/>
+      <site name="O"/>
+    </body>
+  </worldbody>
+  <equality>{closures}
+  </equality>
+</mujoco>"""
+
+
+@pytest.mark.parametrize("equality", PLATFORM_EQUALITIES)
+def test_mjcf_flexible_platform_to_three_closure_anchors_against_opensees(tmp_path, equality):
+    """The platform three beams on one link, from its centre (its origin, the output O) to
+    the anchors of its three ``<connect>`` (or ``<weld>``) closures, ``anchor:C<i>``; each
+    shank a beam to its own anchor of the same closure, each thigh a beam to its knee.
+    OpenSees: three beams from the centre node, each pinned (or welded) to a shank's tip."""
+    path = tmp_path / "three_legs.xml"
+    path.write_text(platform_mjcf(equality))
+    beams = {"platform": [rod(f"anchor:C{i}") for i in range(3)]}
+    for i in range(3):
+        beams |= {f"thigh{i}": rod(f"knee{i}"), f"shank{i}": rod(f"anchor:C{i}")}
+    clm = cl.load_model(path, beams=beams)
+    assert [c.kind for c in clm.closures] == ["3d" if equality == "connect" else "6d"] * 3
+    ends = [(clm.model.names[c.constraint.joint1_id], clm.model.names[c.constraint.joint2_id])
+            for c in clm.closures]  # fmt: skip
+    assert ends == [(f"platform_beam_anchor:C{i}", f"shank{i}_beam") for i in range(3)]
+
+    def build(s: Structure) -> int:
+        out = s.node(CENTRE)
+        for i, d in enumerate(LEG_AXES):
+            hip = s.node(LEG_BASES[i])
+            s.joint(s.node(LEG_BASES[i], fixed=True), hip, free=(d,), springs={d: K_HIPS[i]})
+            knee_thigh, knee_shank = s.node(LEG_KNEES[i]), s.node(LEG_KNEES[i])
+            s.beam(hip, knee_thigh)
+            s.joint(knee_thigh, knee_shank, free=(d,))
+            tip_shank, tip_platform = s.node(LEG_TIPS[i]), s.node(LEG_TIPS[i])
+            s.beam(knee_shank, tip_shank)
+            s.beam(out, tip_platform)
+            s.joint(tip_shank, tip_platform, free=PLATFORM_EQUALITIES[equality])
+        return out
+
+    C = library_compliance(clm, "O")
+    assert_close_in_norm(C, opensees_compliance(build), RTOL_OPENSEES, SCALE)
+    del beams["platform"]  # the platform rigid: its beams are felt
+    rigid = library_compliance(cl.load_model(path, beams=beams), "O")
+    assert np.max(np.abs(C - rigid)) > 1e-2 * np.max(np.abs(rigid))

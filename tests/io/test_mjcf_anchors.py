@@ -11,35 +11,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm
+from mechanisms import mjcf_fourbar
 
 import closedloop as cl
 from closedloop.io.loader import load_model, reference_configuration
 
-#: A planar four-bar in the xz plane: crank (spring 400 N m/rad) at the origin, coupler
-#: hinge at (0, 0, 0.12), rocker hinge at (0.34, 0, 0); the loop closes at the world point
-#: (0.3, 0, 0.18), the origin of the jointless bodies coupler_tip and rocker_tip [m].
-FOURBAR = """<mujoco model="fourbar">
-  <compiler angle="radian"/>
-  <worldbody>
-    <body name="ground">
-      <body name="crank">
-        <joint name="crank" type="hinge" axis="0 1 0" stiffness="400"/>
-        <body name="coupler" pos="0 0 0.12">
-          <joint name="coupler" type="hinge" axis="0 1 0"/>
-          <body name="coupler_tip" pos="0.3 0 0.06">
-            <site name="P" pos="-0.05 0 0.04"/>
-          </body>
-        </body>
-      </body>
-      <body name="rocker" pos="0.34 0 0">
-        <joint name="rocker" type="hinge" axis="0 1 0"/>
-        <body name="rocker_tip" pos="-0.04 0 0.18"/>
-      </body>
-    </body>
-  </worldbody>
-  <equality>EQUALITY</equality>
-</mujoco>"""
-#: The loop's closing point in the world at the reference configuration [m].
+#: The loop's closing point in the world at the reference configuration [m], the origin of
+#: the jointless bodies coupler_tip and rocker_tip of :func:`mechanisms.mjcf_fourbar`
+#: (crank hinge at the origin, coupler's at (0, 0, 0.12), rocker's at (0.34, 0, 0)).
 CLOSING_POINT = np.array([0.3, 0.0, 0.18])
 #: Placements and compliances of one model computed along two descriptions from the same
 #: doubles of order 1 (compliance ~1e-5 m/N, relative): a few ulps apart; the misplaced
@@ -49,7 +28,7 @@ TOL = 1e-12
 
 def fourbar(tmp_path: Path, equality: str, name: str):
     path = tmp_path / f"{name}.xml"
-    path.write_text(FOURBAR.replace("EQUALITY", equality))
+    path.write_text(mjcf_fourbar(equality))
     robot = load_model(path, geometry=False)
     return robot, cl.Configuration(robot, reference_configuration(robot))
 

@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from helpers import assert_close_in_norm, tangent_differences
+from spatial_fourbar import DESCRIPTIONS, INF, SHARED, fourbar_as, shared_values, urdf_text
 
 import closedloop as cl
 from closedloop.io.loader import load_model
@@ -80,186 +81,11 @@ def test_each_type_vanishes_on_what_it_constrains_and_only_there(kind):
 
 
 # --------------------------------------------------------- a four-bar cut at its pin C
-HALF_PI = math.pi / 2
-INF = math.inf
-SPRINGS = {"crank": 50.0, "crank_axial": 1e5, "crank_tilt": 20.0, "coupler_twist": 30.0,
-           "rocker_tilt": 25.0, "crank_yaw": 15.0, "rocker_yaw": 18.0}  # fmt: skip
-#: The four-bar of urdf/fourbar.urdf (ground pivots A = 0, D = (0.3, 0, 0), crank 0.1 m,
-#: rocker 0.15 m) made spatial: sprung tilts of the crank and rocker about x and a twist of
-#: the coupler, sprung turns of both about z, so that the pin at C holds moments, not
-#: only forces, and P moves out of the plane.
-SHARED = [
-    ("crank", "ground", "crank_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
-    ("crank_axial", "crank_link", "crank_end", (0, 0, 0.1), (0, 0, 0), "prismatic", (0, 0, 1)),
-    ("crank_yaw", "crank_end", "yaw_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
-    ("crank_tilt", "yaw_link", "tilt_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
-    ("coupler", "tilt_link", "coupler_link", (0, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
-    ("coupler_twist", "coupler_link", "coupler_body", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
-    ("P_joint", "coupler_body", "P", (0.15, 0, 0.08), (0, 0, 0), "fixed", None),
-    ("rocker", "ground", "rocker_base", (0.3, 0, 0), (0, 0, 0), "revolute", (0, 1, 0)),
-    ("rocker_yaw", "rocker_base", "rocker_turn", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
-    ("rocker_tilt", "rocker_turn", "rocker_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
-]
-C_COUPLER, C_ROCKER = (0.3, 0, 0.05), (0, 0, 0.15)  # the pin C on either side, z along -y
-DESCRIPTIONS = {
-    "revolute closure": (
-        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
-         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
-        [["cA", "cB"]], ["revolute"],
-    ),
-    "two point closures": (
-        [("cA_joint", "coupler_body", "cA", C_COUPLER, (0, 0, 0), "fixed", None),
-         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, 0, 0), "fixed", None),
-         ("cA2_joint", "coupler_body", "cA2", (0.3, 0.02, 0.05), (0, 0, 0), "fixed", None),
-         ("cB2_joint", "rocker_link", "cB2", (0, 0.02, 0.15), (0, 0, 0), "fixed", None)],
-        [["cA", "cB"], ["cA2", "cB2"]], ["3d", "3d"],
-    ),
-    "pin in the tree, rocker welded": (  # the rocker cut in two at its middle
-        [("pin_C", "coupler_body", "rocker_top", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
-        [["wA", "wB"]], ["6d"],
-    ),
-    "universal closure": (  # the pin C replaced by a universal joint: axes y, then x
-        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
-         ("cB_joint", "rocker_link", "cB", C_ROCKER, (0, HALF_PI, 0), "fixed", None)],
-        [["cA", "cB"]], ["universal"],
-    ),
-    "universal in the tree, rocker welded": (
-        [("u1", "coupler_body", "u_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
-         ("u2", "u_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
-        [["wA", "wB"]], ["6d"],
-    ),
-    "cylindrical closure": (  # the pin C replaced by a cylindrical joint along y
-        [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
-         ("cB_joint", "rocker_link", "cB", C_ROCKER, (HALF_PI, 0, 0), "fixed", None)],
-        [["cA", "cB"]], ["cylindrical"],
-    ),
-    "cylindrical in the tree, rocker welded": (
-        [("c1", "coupler_body", "c_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
-         ("c2", "c_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, 1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
-        [["wA", "wB"]], ["6d"],
-    ),
-}  # fmt: skip
-
-
-#: The four-bar closed at C by other closures (not assembled away from the drawing: a
-#: prismatic closure at C locks the crank) and their tree equivalents.
-_REVOLUTE_AT_C = DESCRIPTIONS["revolute closure"][0]
-_ROCKER_WELDED = [("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)]
-ELASTIC_DESCRIPTIONS = {
-    "weld at C": (_REVOLUTE_AT_C, [["cA", "cB"]], ["6d"]),
-    "prismatic closure": (_REVOLUTE_AT_C, [["cA", "cB"]], ["prismatic"]),
-    "slides in the tree, rocker welded": (  # along A's x (world x) and z (world -y)
-        [("s_x", "coupler_body", "s_mid", C_COUPLER, (0, 0, 0), "prismatic", (1, 0, 0)),
-         ("s_z", "s_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, -1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         *_ROCKER_WELDED],
-        [["wA", "wB"]], ["6d"],
-    ),
-    "bushing in the tree, rocker welded": (  # a free flyer in A's axes (x, -z, y of world)
-        [("bushing", "coupler_body", "rocker_top", C_COUPLER, (HALF_PI, 0, 0), "floating",
-          None),
-         ("wA_joint", "rocker_top", "wA", (0, -0.075, 0), (-HALF_PI, 0, 0), "fixed", None),
-         *_ROCKER_WELDED],
-        [["wA", "wB"]], ["6d"],
-    ),
-}  # fmt: skip
-
-
-def _urdf(joints) -> str:
-    links = {"ground"} | {j[2] for j in joints}
-    inertial = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
-                'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
-    body = ['<robot name="spatial_fourbar">']
-    heavy = {j[2] for j in SHARED if j[5] != "fixed"}  # the frames and cut halves weigh 0
-    body += [f'<link name="{n}">{inertial if n in heavy else ""}</link>' for n in sorted(links)]
-    for name, parent, child, xyz, rpy, kind, axis in joints:
-        body.append(
-            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
-            f'<child link="{child}"/><origin xyz="{" ".join(map(str, xyz))}" '
-            f'rpy="{" ".join(map(str, rpy))}"/>'
-            + (f'<axis xyz="{" ".join(map(str, axis))}"/>' if axis else "")
-            + ('<limit lower="-3" upper="3" effort="1" velocity="1"/>' if kind != "fixed" else "")
-            + "</joint>"
-        )
-    return "\n".join([*body, "</robot>"])
-
-
-def fourbar_as(
-    tmp_path,
-    description: str,
-    *,
-    flip: bool = False,
-    closure_springs=None,
-    springs=None,
-    **options,
-) -> ClosedLoopModel:
-    """The spatial four-bar of one description of :data:`DESCRIPTIONS`; ``flip`` turns
-    B's frame of the revolute closure over (its z axis opposite A's); ``closure_springs``
-    (the file's mapping), ``springs`` (added to :data:`SPRINGS`); ``options`` to
-    :func:`load_model`."""
-    extra, pairs, types = {**DESCRIPTIONS, **ELASTIC_DESCRIPTIONS}[description]
-    if flip:
-        extra = [extra[0], (*extra[1][:4], (-HALF_PI, 0, 0), *extra[1][5:])]
-    stem = description.replace(" ", "_").replace(",", "") + ("_flipped" if flip else "")
-    stem += "_sprung" if closure_springs or springs or options else ""
-    (tmp_path / f"{stem}.urdf").write_text(_urdf(SHARED + extra))
-    quoted = ", ".join(f"'{t}'" for t in types)
-    text = f"closed_loop: {pairs}\ntype: [{quoted}]\nname_mot: [crank]\n"
-    text += f"springs: { ({**SPRINGS, **(springs or {})}) }\n"
-    if closure_springs is not None:
-        text += f"closure_springs: {yaml_springs(closure_springs)}\n"
-    (tmp_path / f"{stem}.yaml").write_text(text.replace("None", "null"))
-    keyword = options.pop("springs_keyword", None)
-    return load_model(
-        tmp_path / f"{stem}.urdf",
-        tmp_path / f"{stem}.yaml",
-        geometry=False,
-        **({"springs": keyword} if keyword else {}),
-        **options,
-    )
-
-
-def yaml_springs(springs: dict) -> str:
-    """A closure_springs mapping written as YAML (``.inf`` for infinity)."""
-
-    def value(v):
-        if isinstance(v, list | tuple | np.ndarray):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return ".inf" if math.isinf(v) else repr(float(v))
-
-    return "{" + ", ".join(f"{i}: {value(v)}" for i, v in springs.items()) + "}"
-
-
-SHARED_JOINTS = tuple(j[0] for j in SHARED if j[5] != "fixed")
-
-
-def _shared(clm: ClosedLoopModel, q: np.ndarray) -> np.ndarray:
-    """The values of the joints every description has, in one order."""
-    return np.array([q[clm.model.joints[clm.model.getJointId(n)].idx_q] for n in SHARED_JOINTS])
-
-
-@pytest.fixture(scope="module")
-def fourbars(tmp_path_factory):
-    """{description: (model, q assembled at crank = 0.4 rad)}."""
-    tmp = tmp_path_factory.mktemp("fourbars")
-    out = {}
-    for d in DESCRIPTIONS:
-        clm = fourbar_as(tmp, d)
-        out[d] = clm, np.array(cl.assemble(clm, [0.4]).q)
-    return out
-
-
 def test_a_revolute_closure_assembles_as_the_other_descriptions(fourbars):
     clm, q = fourbars["revolute closure"]
     assert [c.kind for c in clm.closures] == ["revolute"] and clm.n_constraints == 5
     for d in ("two point closures", "pin in the tree, rocker welded"):
-        np.testing.assert_allclose(_shared(clm, q), _shared(*fourbars[d]), atol=1e-10)
+        np.testing.assert_allclose(shared_values(clm, q), shared_values(*fourbars[d]), atol=1e-10)
 
 
 @pytest.mark.parametrize("other", ["two point closures", "pin in the tree, rocker welded"])
@@ -322,7 +148,7 @@ def test_a_universal_or_cylindrical_closure_equals_its_joint_in_the_tree(fourbar
 
     (clm, q), (twin, q_twin) = fourbars[closure], fourbars[tree]
     assert clm.n_constraints == 4
-    np.testing.assert_allclose(_shared(clm, q), _shared(twin, q_twin), atol=1e-10)
+    np.testing.assert_allclose(shared_values(clm, q), shared_values(twin, q_twin), atol=1e-10)
     scale = [1, 1, 1, 0.1, 0.1, 0.1]
     C = cl.compliance(clm, q, "P").C
     assert np.linalg.matrix_rank(C, tol=1e-9 * np.abs(C).max()) >= 3
@@ -346,9 +172,9 @@ def test_a_revolute_closure_is_driven_as_the_pin_in_the_tree(fourbars):
 
     (clm, _), (twin, _) = fourbars["revolute closure"], fourbars["pin in the tree, rocker welded"]
     q = assemble_connected(clm, np.array([1.2])).q
-    np.testing.assert_allclose(_shared(clm, q), _shared(twin, assemble_connected(twin, [1.2]).q),
-                               atol=1e-10)  # fmt: skip
-    assert _shared(clm, q)[0] == pytest.approx(1.2)
+    expected = shared_values(twin, assemble_connected(twin, [1.2]).q)
+    np.testing.assert_allclose(shared_values(clm, q), expected, atol=1e-10)
+    assert shared_values(clm, q)[0] == pytest.approx(1.2)
 
 
 def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
@@ -363,7 +189,7 @@ def test_a_closure_of_an_unknown_type_or_the_wrong_carrier_is_refused(tmp_path):
         Closure(frame, "c", "hinge")
     assert (Closure(point, "c").kind, Closure(frame, "c").kind) == ("3d", "6d")
     urdf = tmp_path / "r.urdf"
-    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    urdf.write_text(urdf_text(SHARED + DESCRIPTIONS["revolute closure"][0]))
     closures = tmp_path / "c.yaml"
     closures.write_text("closed_loop: [[cA, cB]]\ntype: ['hinge']\nname_mot: [crank]\n")
     with pytest.raises(ModelFileError, match=r"type 'hinge'; expected one of \['3d', '6d', 're"):
@@ -430,7 +256,7 @@ def test_bad_closure_springs_are_refused_naming_file_closure_and_value(
     import closedloop.exceptions as exceptions
 
     urdf = tmp_path / "r.urdf"
-    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    urdf.write_text(urdf_text(SHARED + DESCRIPTIONS["revolute closure"][0]))
     closures = tmp_path / "c.yaml"
     closures.write_text(f"closed_loop: [[cA, cB]]\ntype: [{kind}]\nclosure_springs: {springs}\n")
     where = rf"^closure file '{closures}'"
@@ -442,7 +268,7 @@ def test_bad_keyword_closure_springs_are_refused(tmp_path):
     from closedloop.exceptions import InvalidInputError
 
     urdf = tmp_path / "r.urdf"
-    urdf.write_text(_urdf(SHARED + DESCRIPTIONS["revolute closure"][0]))
+    urdf.write_text(urdf_text(SHARED + DESCRIPTIONS["revolute closure"][0]))
     closures = tmp_path / "c.yaml"
     closures.write_text("closed_loop: [[cA, cB]]\ntype: [revolute]\n")
     with pytest.raises(InvalidInputError, match=r"closure_springs index 3; expected"):
@@ -453,38 +279,6 @@ def test_bad_keyword_closure_springs_are_refused(tmp_path):
 
 # ------------------------------------------------------------------ elastic closures
 SCALE = [1, 1, 1, 0.1, 0.1, 0.1]  # P's twist: rotations weighed by 0.1 m
-PIN = [INF] * 5 + [20.0]  # the issue's example: a pin with a 20 N m/rad torsion spring
-
-
-def _mapped(clm: ClosedLoopModel, tree: ClosedLoopModel, q_tree: np.ndarray, cut: dict):
-    """q of ``clm`` from ``q_tree``: the joints both have by name, ``cut`` {joint of clm:
-    (joint of tree, sign)} for the joints at the cut."""
-    q = pin.neutral(clm.model)
-    for j in range(1, clm.model.njoints):
-        name, jm = clm.model.names[j], clm.model.joints[j]
-        other, sign = cut.get(name, (name, 1.0))
-        if tree.model.existJointName(other):
-            tm = tree.model.joints[tree.model.getJointId(other)]
-            q[jm.idx_q : jm.idx_q + jm.nq] = sign * q_tree[tm.idx_q : tm.idx_q + tm.nq]
-    return q
-
-
-@pytest.fixture(scope="module")
-def pins(tmp_path_factory, fourbars):
-    """{description: (model, Q)}: the issue's pin at C as a spring on a '6d' and on a
-    'revolute' closure, and kept in the tree, at crank 0.4 and 0.2 rad (the tree's
-    assembly, where the pin turns, carried over; the springs at rest there)."""
-    tmp = tmp_path_factory.mktemp("pins")
-    tree0, q0 = fourbars["pin in the tree, rocker welded"]
-    Q_tree = np.array([q0, cl.assemble(tree0, [0.2], q0).q])
-    tree = fourbar_as(tmp, "pin in the tree, rocker welded", springs={"pin_C": 20.0})
-    out = {"tree": (tree, Q_tree)}
-    for d in ("weld at C", "revolute closure"):
-        clm = fourbar_as(tmp, d, closure_springs={0: PIN})
-        # A's z is world -y, the pin's axis +y: the cut's rotation is minus the pin's
-        out[d] = clm, np.array([_mapped(clm, tree, q, {"cA<->cB_rz": ("pin_C", -1.0)})
-                                for q in Q_tree])  # fmt: skip
-    return out
 
 
 def test_the_issue_pin_is_one_rotation_joint_at_the_cut_on_either_type(pins):
