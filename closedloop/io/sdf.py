@@ -29,11 +29,11 @@ joint frame is fixed to the child link; q = 0 is the drawing):
   ``axis``, the child's along ``axis2``;
 * fixed: a weld (``6d``).
 
-(:mod:`closedloop.model.closures`.) A revolute, continuous or prismatic loop-closing joint
-with a spring becomes an elastic closure, its free direction sprung
-(:func:`closedloop.model.elastic_closures.with_elastic_closures`: the joint ``<name>_rz`` or
-``<name>_pz``), at rest at its ``spring_reference``; a
-universal one with a spring is refused (list it first, so that it is a tree joint).
+(:mod:`closedloop.model.closures`.) A revolute, continuous, prismatic or universal
+loop-closing joint with a spring becomes an elastic closure, its free directions sprung
+(:mod:`closedloop.model.elastic_closures`: the joint ``<name>_rz`` or ``<name>_pz``; a
+universal's ``<name>_rz`` about ``axis`` and ``<name>_rx`` about ``axis2``), at rest at
+its ``spring_reference`` from the drawing.
 
 The root link (no joint names it as child) is fixed to the world at its pose, or carried
 by a free flyer ``root_joint`` (``free_base``); a joint with parent ``world`` fixes its child.
@@ -59,7 +59,7 @@ from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
 from closedloop.model.closures import CLOSURE_TYPES, Closure
-from closedloop.model.elastic_closures import FREE_DIRECTIONS, with_elastic_closures
+from closedloop.model.elastic_closures import DIRECTIONS, FREE_DIRECTIONS, with_elastic_closures
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
@@ -218,11 +218,12 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
             pin.Frame(name, jid, model.getFrameId(link), placement, pin.FrameType.OP_FRAME)
         )
     closures, cut_springs = _closures(r, model, body, closing, W)
-    elastic = {}  # a sprung revolute or prismatic loop joint: its free direction sprung
-    for i, (c, (k, _)) in enumerate(zip(closures, cut_springs.values(), strict=True)):
-        if k:
-            elastic[i] = [math.inf] * 6
-            elastic[i][FREE_DIRECTIONS[c.kind][0]] = k
+    elastic = {}  # a loop joint with springs: its free directions sprung or free
+    for i, (c, sprung) in enumerate(zip(closures, cut_springs.values(), strict=True)):
+        if sprung:
+            elastic[i] = [0.0 if d in FREE_DIRECTIONS[c.kind] else math.inf for d in range(6)]
+            for suffix, (k, _) in sprung.items():
+                elastic[i][DIRECTIONS.index(suffix)] = k
     rest = pin.neutral(model)
     for i, v in rest_values.items():
         rest[i] = v
@@ -233,7 +234,8 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
     rest = model.referenceConfigurations[REST].copy()
     for name, k in cut.items():  # a spring at a loop cut, at rest at its spring_reference
         springs[name] = k
-        rest[model.joints[model.getJointId(name)].idx_q] = cut_springs[name.rsplit("_", 1)[0]][1]
+        joint, suffix = name.rsplit("_", 1)
+        rest[model.joints[model.getJointId(name)].idx_q] += cut_springs[joint][suffix][1]
     model.referenceConfigurations[REST] = rest
     lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
     for i, (lo, hi) in bounds.items():
@@ -255,8 +257,8 @@ LOOP_TYPES = {"ball": "3d", "fixed": "6d", "revolute": "revolute", "continuous":
 
 
 def _closures(r: SdfReader, model, body, closing, W) -> tuple[list[Closure], dict]:
-    """(the closures of the loop-closing joints, {joint: (spring stiffness or None,
-    spring reference)} in their order)."""
+    """(the closures of the loop-closing joints, {joint: {direction: (spring stiffness,
+    spring reference)} of its axes with a spring} in their order)."""
     out, springs = [], {}
     for name in closing:
         e, what = r.joints[name], f"loop-closing joint {name!r}"
@@ -265,11 +267,11 @@ def _closures(r: SdfReader, model, body, closing, W) -> tuple[list[Closure], dic
         found = [r.axis(name, a) for a in axes]
         if len(found) == 2 and abs(found[0][0] @ found[1][0]) > 1e-9:
             r.fail(f"{what} has axes {found[0][0]} and {found[1][0]}; expected orthogonal axes")
-        k, ref = r.spring(found[0][1], what) if len(found) == 1 else (0.0, 0.0)
-        if len(found) == 2 and any(r.spring(elem, what)[0] > 0 for _, elem in found):
-            r.fail(f"{what} is universal with a spring, which is not read at a loop cut; "
-                   "expected it listed first (a tree joint)")  # fmt: skip
-        springs[name] = (k or None, ref)
+        # the directions of the closure's springs: along or about A's z axis, a universal
+        # pair's second axis about B's z (closedloop.model.elastic_closures)
+        suffixes = ("pz",) if kind == "prismatic" else ("rz", "rx")
+        sprung = zip(suffixes, (r.spring(elem, what) for _, elem in found), strict=False)
+        springs[name] = {suffix: (k, ref) for suffix, (k, ref) in sprung if k > 0}
         parent, child = r.text(e, "parent", what), r.text(e, "child", what)
         if parent == "world":
             r.fail(f"{what} has parent 'world'; expected a link of the model")

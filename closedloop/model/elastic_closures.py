@@ -30,9 +30,15 @@ lock):
   (A and B coincide at rest), else on B's body at B's origin welded to A (its tangent,
   linear then angular, is A's motion relative to B in A's axes at A's origin).
 
+* a ``universal`` pair (6 values only): its directions are those of its own frame U at
+  A's origin, whose axes turn with the pair's free rotations: x along B's z axis, y along
+  z_A x z_B (the cross axis), z along A's z axis (U is A where B's z is along A's x). The
+  chain turns about A's z first (rz, turning U with it), then px, py, pz, ry, rx along and
+  about U's axes (:data:`UNIVERSAL_ORDER`), its end welded to B turned z onto x.
+
 Three non-rigid rotations of which some are free and some sprung are refused (a chain of
-three rotations has a gimbal lock); so is a spring at a ``universal`` pair, whose free
-rotation about B's z axis is not one of A's axes.
+three rotations has a gimbal lock), as are a universal pair's free cross rotation (a ball:
+a ``3d`` pair) and a 6x6 on a universal pair.
 
 The joints are springs like any other (an elastic one has its value as joint spring, a
 free one none: passive). Their rest state is the pair met as its type says, the springs at

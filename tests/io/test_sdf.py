@@ -535,16 +535,24 @@ def test_loop_closing_pin_with_a_spring_equals_the_sprung_pin_in_the_tree(tmp_pa
     assert abs(C_free[4, 4] - cl.compliance(a, "rod_end").C[4, 4]) > 1e-3 * C_free[4, 4]
 
 
-def test_loop_closing_universal_joint_with_a_spring_is_refused(tmp_path):
+def test_loop_closing_universal_joint_with_springs_holds_the_link_by_them(tmp_path):
+    """A link hung on a ball joint at the origin and closed to the ground there by a
+    universal joint, axis x (3 N m/rad) and axis2 y (5 N m/rad): the link turns about x
+    and y against those springs and not about z, the cross axis. Closed form at the
+    drawing (the link's frame is the world's): C = diag(0, 0, 0, 1/3, 1/5, 0)."""
     text = (
         '<sdf version="1.7"><model name="m"><link name="g"/><link name="b"/>'
         '<joint name="hang" type="ball"><parent>g</parent><child>b</child></joint>'
         '<joint name="u" type="universal"><parent>g</parent><child>b</child>'
         "<axis><xyz>1 0 0</xyz><dynamics><spring_stiffness>3</spring_stiffness></dynamics>"
-        "</axis><axis2><xyz>0 1 0</xyz></axis2></joint></model></sdf>"
+        "</axis><axis2><xyz>0 1 0</xyz><dynamics><spring_stiffness>5</spring_stiffness>"
+        "</dynamics></axis2></joint></model></sdf>"
     )
-    with pytest.raises(ModelFileError, match=r"loop-closing joint 'u' is universal with a spr"):
-        load_model(write(tmp_path, text), geometry=False)
+    robot = load_model(write(tmp_path, text), geometry=False)
+    assert robot.springs == {"u_rz": 3.0, "u_rx": 5.0}
+    q = reference_configuration(robot)
+    C = cl.compliance(robot, q, "b").C
+    np.testing.assert_allclose(C, np.diag([0, 0, 0, 1 / 3, 1 / 5, 0]), atol=1e-12)
 
 
 def test_cycle_of_tree_joints_is_refused(tmp_path):

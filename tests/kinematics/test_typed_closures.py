@@ -248,7 +248,7 @@ def test_a_spring_at_a_cut_equals_the_sprung_joint_in_the_tree(
                            for j in range(6)] for i in range(6)]) + "}",
       "InvalidInputError", r"not positive semi-definite \(eigenvalues \[-1.0"),
      ("universal", "{0: [.inf, .inf, .inf, .inf, 0.0, 0.0]}", "InvalidInputError",
-      r"type 'universal' given the spring .*expected a spring only at a closure of type")],
+      r"type 'universal' given the spring .*\.inf on \['rx'\], which the type leaves free")],
 )  # fmt: skip
 def test_bad_closure_springs_are_refused_naming_file_closure_and_value(
     tmp_path, kind, springs, error, message
