@@ -28,7 +28,9 @@ lock):
 * a 6x6: one 6-coordinate joint (a free flyer) ``"<closure>_bushing"`` carrying the
   matrix as its block spring, on A's body at A's origin welded to B for a ``6d`` pair
   (A and B coincide at rest), else on B's body at B's origin welded to A (its tangent,
-  linear then angular, is A's motion relative to B in A's axes at A's origin).
+  linear then angular, is A's motion relative to B in A's axes at A's origin). A
+  singular 6x6 (positive semi-definite) is followed by one passive screw joint per free
+  direction, ``"<closure>_free1"``, ... (:func:`_bushing`).
 
 * a ``universal`` pair (6 values only): its directions are those of its own frame U at
   A's origin, whose axes turn with the pair's free rotations: x along B's z axis, y along
@@ -142,20 +144,24 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
             f"{skew:.3g}); expected a symmetric positive semi-definite matrix"
         )
     K = 0.5 * (K + K.T)
-    eig = np.linalg.eigvalsh(K)
-    if eig[0] < -SYMMETRY_RTOL * scale:
+    d = _balance(K)
+    lam = np.linalg.eigvalsh(K * np.outer(d, d))  # unit-balanced
+    if lam[0] < -SYMMETRY_RTOL * lam[-1]:
         raise InvalidInputError(
             f"{what} given the 6x6 spring {value!r}, not positive semi-definite "
-            f"(eigenvalues {eig.tolist()}); expected a symmetric positive semi-definite matrix"
+            f"(eigenvalues {np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive "
+            "semi-definite matrix"
         )
-    try:
-        np.linalg.cholesky(K)
-    except np.linalg.LinAlgError:
-        raise InvalidInputError(
-            f"{what} given the 6x6 spring {value!r}, singular (eigenvalues {eig.tolist()}); "
-            "expected a positive definite 6x6, or 6 values (0 on a free direction)"
-        ) from None
     return K
+
+
+def _balance(K: np.ndarray) -> np.ndarray:
+    """(6,) d = (L, L, L, 1, 1, 1) with the spring's own length L [m], the square root of
+    its mean rotational over its mean translational diagonal stiffness (1 m if either is
+    0): D K D, D = diag(d), weighs translations and rotations alike."""
+    t, r = np.mean(np.diag(K)[:3]), np.mean(np.diag(K)[3:])
+    L = math.sqrt(r / t) if t > 0 and r > 0 else 1.0
+    return np.array([L, L, L, 1.0, 1.0, 1.0])
 
 
 def _check_diagonal(what: str, value, K: np.ndarray, kind: str) -> None:
@@ -215,6 +221,16 @@ def check_closure_springs(closures: list[Closure], springs) -> dict[int, np.ndar
     return out
 
 
+class _Joint(NamedTuple):
+    """One joint at a cut: its name's suffix, Pinocchio joint model, spring (None:
+    passive) and placement relative to the previous joint's frame."""
+
+    suffix: str
+    model: object
+    spring: object = None
+    placement: pin.SE3 = pin.SE3.Identity()
+
+
 class _Cut(NamedTuple):
     """The joints of one elastic closure: hung from ``start`` (joint, placement: frame A's,
     or B's when ``from_b``), their end closed to ``end`` (the other frame) by a closure of
@@ -222,7 +238,7 @@ class _Cut(NamedTuple):
 
     start: tuple
     end: tuple
-    joints: tuple  # (suffix, pinocchio joint model, spring or None) in chain order
+    joints: tuple  # the _Joint of the chain, in order
     end_kind: str
     kind: str  # the closure's type
     from_b: bool = False
@@ -234,12 +250,12 @@ def _layout(closure: Closure, K: np.ndarray) -> _Cut:
     c = closure.constraint
     a, b = (c.joint1_id, c.joint1_placement), (c.joint2_id, c.joint2_placement)
     if K.ndim == 2:
-        joints = ((BUSHING, pin.JointModelFreeFlyer(), K),)
+        joints, tip = _bushing(K)
         from_b = closure.kind != "6d"
-        return _Cut(*((b, a) if from_b else (a, b)), joints, "6d", closure.kind, from_b)
+        return _Cut(*((b, a) if from_b else (a, b)), joints, "6d", closure.kind, from_b, tip)
     if closure.kind == "universal":
         chain = tuple(
-            (DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
+            _Joint(DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
             for d in UNIVERSAL_ORDER
             if math.isfinite(K[d])
         )
@@ -248,14 +264,49 @@ def _layout(closure: Closure, K: np.ndarray) -> _Cut:
     free = not rotations.any()  # three free rotations: closed by a point
     ball = closure.kind == "3d" and not free  # three sprung rotations of a '3d' pair
     chain = tuple(
-        (DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
+        _Joint(DIRECTIONS[d], _DIRECTION_JOINTS[d](), K[d] if K[d] > 0 else None)
         for d in CHAIN_ORDER
         if math.isfinite(K[d]) and not (d >= 3 and (free or ball))
     )
     if ball:
-        joints = ((BALL, pin.JointModelSpherical(), rotations), *chain)
+        joints = (_Joint(BALL, pin.JointModelSpherical(), rotations), *chain)
         return _Cut(b, a, joints, "6d", closure.kind, from_b=True)
     return _Cut(a, b, chain, "3d" if free else "6d", closure.kind)
+
+
+#: Eigenvalues of a 6x6 closure spring (unit-balanced, :func:`_balance`) below this times
+#: its largest are its free directions.
+NULL_RTOL = 1e-9
+#: Components of a free direction (unit-balanced, unit norm) below this are rounding.
+ROUNDING = 1e-12
+
+
+def _bushing(K: np.ndarray) -> tuple[tuple, pin.SE3]:
+    """The joints of a 6x6 spring K (PSD) and the closed frame relative to their end.
+
+    A free flyer carries K + c n n^T, its free directions n (K n = 0) given the stiffness
+    c (K's largest eigenvalue, unit-balanced), followed by one passive screw joint per
+    free direction (a helical joint, or a prismatic one for a translation) along it at
+    rest: the series of the two is exactly K, whatever c > 0 (the free flyer's spring on
+    the screws' directions is annulled by their freedom:
+    K + c n n^T - (K + c n n^T) n (n^T (K + c n n^T) n)^-1 n^T (K + c n n^T) = K).
+    """
+    d = _balance(K)
+    lam, V = np.linalg.eigh(K * np.outer(d, d))
+    free = V[:, lam <= NULL_RTOL * lam[-1]]
+    free[np.abs(free) < ROUNDING] = 0.0
+    block = K + lam[-1] * (free @ free.T) / np.outer(d, d)
+    joints, point = [_Joint(BUSHING, pin.JointModelFreeFlyer(), block)], np.zeros(3)
+    for i, n in enumerate((free * d[:, None]).T):  # SI twists (v [m], w [rad])
+        v, w = n[:3], n[3:]
+        if not w.any():
+            joint, at = pin.JointModelPrismaticUnaligned(v / np.linalg.norm(v)), np.zeros(3)
+        else:  # a screw along w through the point at: v = h w + at x w
+            u, v = w / np.linalg.norm(w), v / np.linalg.norm(w)
+            joint, at = pin.JointModelHelicalUnaligned(u, float(u @ v)), np.cross(u, v)
+        joints.append(_Joint(f"free{i + 1}", joint, None, pin.SE3(np.eye(3), at - point)))
+        point = at
+    return tuple(joints), pin.SE3(np.eye(3), -point)
 
 
 def with_elastic_closures(
@@ -276,7 +327,7 @@ def with_elastic_closures(
 
     Raises:
         InvalidInputError: an index out of range, a spring of the wrong length, a 6x6 not
-            symmetric positive definite or not finite, ``inf`` on a free direction,
+            symmetric positive semi-definite or not finite, ``inf`` on a free direction,
             rotations partly free and partly sprung, a spring at a universal closure.
     """
     checked = check_closure_springs(closures, springs)
@@ -294,9 +345,9 @@ def with_elastic_closures(
             out_closures.append(c.on(out_model, *_ends(c)))
             continue
         j, M = cuts[i].start
-        for suffix, joint, k in cuts[i].joints:
-            name = f"{c.name}_{suffix}"
-            j = out_model.addJoint(j, joint, M, name)
+        for joint in cuts[i].joints:
+            name, k = f"{c.name}_{joint.suffix}", joint.spring
+            j = out_model.addJoint(j, joint.model, M * joint.placement, name)
             out_model.addJointFrame(j)
             M = pin.SE3.Identity()
             if k is not None:
@@ -333,9 +384,9 @@ def chain_values(model: pin.Model, q: np.ndarray, cuts) -> list[np.ndarray]:
         M = (P.inverse() if cut.from_b else P) * cut.tip.inverse()
         R, t = M.rotation, M.translation
         values = []
-        for suffix, _, _ in cut.joints:
-            if suffix == BUSHING:
-                values.append(pin.SE3ToXYZQUAT(M))
+        for suffix, *_ in cut.joints:
+            if suffix == BUSHING:  # the screws after it at 0: it takes the whole placement
+                values.append(pin.SE3ToXYZQUAT(M * cut.tip))
             elif suffix in (BALL, "rz"):  # the rest of the chain in the joint's moving axes
                 turn = math.atan2(R[1, 0], R[0, 0])
                 values.append(pin.Quaternion(R).coeffs() if suffix == BALL else [turn])
@@ -343,8 +394,10 @@ def chain_values(model: pin.Model, q: np.ndarray, cuts) -> list[np.ndarray]:
                 R, t = Rj.T @ R, Rj.T @ t
             elif suffix == "rx" and cut.kind == "universal":  # the turn about B's z
                 values.append([math.atan2(R[2, 1], R[1, 1])])
-            else:
-                values.append([t["xyz".index(suffix[1])] if suffix[0] == "p" else 0.0])
+            elif suffix in DIRECTIONS[:3]:
+                values.append([t["xyz".index(suffix[1])]])
+            else:  # a rotation a type constrains, a bushing's screw: 0 where the pair holds
+                values.append([0.0])
         out.append(np.concatenate(values) if values else np.empty(0))
     return out
 

@@ -16,7 +16,7 @@ import pinocchio as pin
 import pytest
 
 import closedloop as cl
-from closedloop.exceptions import InvalidInputError
+from closedloop.exceptions import InvalidInputError, MechanismError
 from closedloop.io.loader import load_model, reference_configuration
 from closedloop.kinematics.constraints import closure_residual
 
@@ -57,16 +57,21 @@ def _origin(M: pin.SE3) -> str:
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
-def _held_body(tmp_path, kind: str, spring) -> tuple:
+def _held_body(tmp_path, kind: str, spring, second=None) -> tuple:
     """A body on a passive free flyer, held to the ground by one elastic closure of type
     ``kind`` between A (on the ground) and B (the body's origin) at :data:`AT_REST`; the
     body's frame ``at_A`` coincides with A (U for a universal pair: :data:`SPRING_FRAME`)
-    at rest. Returns (model, q at rest)."""
+    at rest; ``second``: the spring of a second closure of the same type between the same
+    places (frames A2 and B2). Returns (model, q at rest)."""
     B_world = A_WORLD * AT_REST[kind]
     inertial = ('<inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" '
                 'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
     urdf = f"""<robot name="held">
 <link name="ground"/><link name="body">{inertial}</link><link name="A"/><link name="at_A"/>
+<link name="A2"/><link name="B2"/>
+<joint name="A2_joint" type="fixed"><parent link="ground"/><child link="A2"/>
+{_origin(A_WORLD)}</joint>
+<joint name="B2_joint" type="fixed"><parent link="body"/><child link="B2"/></joint>
 <joint name="float" type="floating"><parent link="ground"/><child link="body"/>
 {_origin(B_world)}</joint>
 <joint name="A_joint" type="fixed"><parent link="ground"/><child link="A"/>
@@ -75,14 +80,13 @@ def _held_body(tmp_path, kind: str, spring) -> tuple:
 {_origin(AT_REST[kind].inverse() * SPRING_FRAME.get(kind, pin.SE3.Identity()))}</joint>
 </robot>"""
     (tmp_path / "held.urdf").write_text(urdf)
-    (tmp_path / "held.yaml").write_text(
-        f"closed_loop: [[A, body]]\ntype: ['{kind}']\nname_mot: []\n"
-    )
+    pairs, springs = [["A", "body"]], {0: np.asarray(spring).tolist()}
+    if second is not None:
+        pairs, springs[1] = [*pairs, ["A2", "B2"]], np.asarray(second).tolist()
+    types = ", ".join([f"'{kind}'"] * len(pairs))
+    (tmp_path / "held.yaml").write_text(f"closed_loop: {pairs}\ntype: [{types}]\nname_mot: []\n")
     clm = load_model(
-        tmp_path / "held.urdf",
-        tmp_path / "held.yaml",
-        geometry=False,
-        closure_springs={0: np.asarray(spring).tolist()},
+        tmp_path / "held.urdf", tmp_path / "held.yaml", geometry=False, closure_springs=springs
     )
     return clm, reference_configuration(clm)
 
@@ -108,6 +112,36 @@ def test_the_spring_is_in_a_axes_at_a_origin_whatever_the_rest(tmp_path, kind, f
     expected = np.linalg.inv(K)
     unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))  # entries per their units
     np.testing.assert_allclose(C / unit, expected / unit, rtol=0.0, atol=RTOL_EXACT)
+
+
+def _singular(free: int, seed: int = 5) -> np.ndarray:
+    """A coupled 6x6 positive semi-definite stiffness of rank 6 - ``free`` [N/m, N,
+    N m/rad], its free directions general twists (screws, not along A's axes)."""
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    d = np.array([0.1, 0.1, 0.1, 1.0, 1.0, 1.0])  # unit-balanced at 0.1 m
+    lam = np.r_[[40.0, 70.0, 20.0, 55.0, 30.0, 60.0][: 6 - free], np.zeros(free)]
+    return (Q * lam) @ Q.T / np.outer(d, d)
+
+
+@pytest.mark.parametrize("kind", [k for k in AT_REST if k != "universal"])
+@pytest.mark.parametrize("free", [1, 2])
+def test_a_singular_bushing_in_parallel_with_a_diagonal_spring(tmp_path, kind, free):
+    """A positive semi-definite 6x6 (free along 1 or 2 general twists) and a diagonal
+    spring, two closures between the same places: the body has the compliance
+    (K + diag)^-1 in A's axes at A's origin; the bushing alone leaves it a mechanism."""
+    K = _singular(free)
+    assert np.linalg.matrix_rank(K, tol=1e-9 * np.abs(K).max()) == 6 - free
+    clm, q = _held_body(tmp_path, kind, K, second=DIAGONAL)
+    assert len([n for n in clm.model.names if "_free" in n]) == free  # one screw each
+    np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-12)
+    C = cl.compliance(clm, q, "at_A", axes="local").C
+    expected = np.linalg.inv(K + np.diag(DIAGONAL))
+    unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
+    np.testing.assert_allclose(C / unit, expected / unit, rtol=0.0, atol=RTOL_EXACT)
+    alone, q = _held_body(tmp_path, kind, K)
+    with pytest.raises(MechanismError):
+        cl.compliance(alone, q, "at_A")
 
 
 def test_a_ball_rotation_spring_is_one_ball_joint_and_a_free_one_none(tmp_path):
