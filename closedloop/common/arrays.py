@@ -55,6 +55,16 @@ def decimal(text: str) -> float:
     return float(text)
 
 
+def decimals(text: str) -> np.ndarray:
+    """(n,) the numbers written in ``text``, separated by white space, each
+    :func:`decimal` (as a file's ``"0 0.1 -2e-3"``).
+
+    Raises:
+        ValueError: a word of ``text`` is not such a number.
+    """
+    return np.array([decimal(word) for word in text.split()], dtype=float)
+
+
 def real_array(value, name: str) -> np.ndarray:
     """``value`` as a float array, refusing what is not real numbers.
 

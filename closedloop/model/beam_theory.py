@@ -45,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.exceptions import BeamError
+from closedloop.common.arrays import decimals
+from closedloop.exceptions import BeamError, ModelFileError
 
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
@@ -170,12 +171,13 @@ class Shape:
     """One ``<collision>`` or ``<visual>`` element of a URDF link, as written: ``kind`` the
     tag of its geometry (cylinder, box, mesh, sphere...), ``sizes`` that tag's attributes
     (radius, length [m] / size "x y z" [m] / filename...), ``rpy`` its origin's roll, pitch,
-    yaw [rad] in the link frame."""
+    yaw [rad] in the link frame, ``where`` the file and link (for messages)."""
 
     source: str  # "collision" or "visual"
     kind: str
     sizes: dict[str, str]
-    rpy: str = "0 0 0"
+    rpy: str
+    where: str
 
 
 def urdf_shapes(path) -> dict[str, list[Shape]]:
@@ -183,6 +185,7 @@ def urdf_shapes(path) -> dict[str, list[Shape]]:
     file ``path``, for ``section: geometry``."""
     out = {}
     for link in ET.parse(path).getroot().iter("link"):
+        where = f"robot file {str(path)!r}: link {link.get('name')!r}"
         for source in ("collision", "visual"):
             shapes = []
             for element in link.findall(source):
@@ -190,20 +193,30 @@ def urdf_shapes(path) -> dict[str, list[Shape]]:
                 origin = element.find("origin")
                 rpy = "0 0 0" if origin is None else origin.get("rpy", "0 0 0")
                 for g in [] if geometry is None else list(geometry)[:1]:
-                    shapes.append(Shape(source, g.tag, dict(g.attrib), rpy))
+                    shapes.append(Shape(source, g.tag, dict(g.attrib), rpy, where))
             if shapes:
                 out[link.get("name")] = shapes
                 break
     return out
 
 
-def _numbers(beam: str, what: str, text: str, n: int) -> np.ndarray:
+def _numbers(shape: Shape, attribute: str, text: str | None, n: int) -> np.ndarray:
+    """The ``n`` finite numbers of the attribute ``<tag> attribute`` (such as
+    ``<cylinder> radius``) of ``shape``'s element, written ``text`` in ASCII decimal
+    notation (:func:`closedloop.common.arrays.decimals`).
+
+    Raises:
+        ModelFileError: naming the file, the link, the element, the attribute and ``text``.
+    """
     try:
-        x = np.array([float(v) for v in str(text).split()])
+        x = decimals(text) if isinstance(text, str) else np.zeros(0)
     except ValueError:
         x = np.zeros(0)
     if x.shape != (n,) or not np.all(np.isfinite(x)):
-        raise BeamError(beam, f"section geometry: {what} is {text!r}; expected {n} numbers")
+        raise ModelFileError(
+            f"{shape.where}: <{shape.source}> {attribute} is {text!r}; expected {n} finite "
+            "numbers in ASCII decimal notation"
+        )
     return x
 
 
@@ -214,6 +227,8 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
 
     Raises:
         BeamError: no URDF, no cylinder or box, several of them, a shape across the beam.
+        ModelFileError: the shape's size or its origin's rpy is not finite numbers in ASCII
+            decimal notation.
     """
     if shapes is None:
         raise BeamError(
@@ -237,7 +252,7 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
             "expected exactly one cylinder or box",
         )
     shape = found[0]
-    R = pin.rpy.rpyToMatrix(*_numbers(beam, f"{source} origin rpy", shape.rpy, 3))
+    R = pin.rpy.rpyToMatrix(*_numbers(shape, "<origin> rpy", shape.rpy, 3))
     x = axis / np.linalg.norm(axis)
     i = 2 if shape.kind == "cylinder" else int(np.argmax(np.abs(R.T @ x)))
     angle = math.asin(min(1.0, float(np.linalg.norm(np.cross(R[:, i], x)))))
@@ -250,9 +265,9 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
             f"expected along it (within {ALIGN_TOLERANCE} rad)",
         )
     if shape.kind == "cylinder":
-        radius = _numbers(beam, f"{source} cylinder radius", shape.sizes.get("radius"), 1)
+        radius = _numbers(shape, "<cylinder> radius", shape.sizes.get("radius"), 1)
         return {"shape": "circle", "d": float(2 * radius[0])}
-    size = _numbers(beam, f"{source} box size", shape.sizes.get("size"), 3).tolist()
+    size = _numbers(shape, "<box> size", shape.sizes.get("size"), 3).tolist()
     j, k = (i + 1) % 3, (i + 2) % 3
     return {"shape": "rectangle", "b": size[j], "h": size[k], "y_axis": R[:, j].tolist()}
 

@@ -288,6 +288,8 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
+        ModelFileError: ``section: geometry`` on a link whose URDF cylinder or box has a
+            size or rpy that is not finite numbers in ASCII decimal notation.
     """
     if not isinstance(beams, Mapping):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")

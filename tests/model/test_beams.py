@@ -20,7 +20,9 @@ from helpers import UR5_BEAM_ENDS, assert_close_in_norm
 import closedloop as cl
 from closedloop.elastostatics.compliance import energy_shares
 from closedloop.elastostatics.statics import solve_equilibrium
+from closedloop.exceptions import ModelFileError
 from closedloop.io.loader import load_model, reference_configuration, robot_data_dir
+from closedloop.model.beam_theory import Shape, geometry_section
 from closedloop.model.beams import BeamError, map_configuration
 
 # Library vs closed form / FEM: the same beam theory through different algebra (6x6
@@ -264,6 +266,30 @@ def test_geometry_box_is_its_rectangle_across_the_beam(tmp_path, along):
 def test_bad_geometry_sections_are_refused(tmp_path, shapes, match):
     with pytest.raises(BeamError, match=match):
         geometry_block(geometry_urdf(tmp_path, shapes))
+
+
+@pytest.mark.parametrize(
+    ("kind", "sizes", "rpy", "attribute", "text"),
+    [  # Python's float read 0.015 m, 0.015 m, rpy (0, 0, 0)
+        ("cylinder", {"radius": "0_015"}, "0 0 0", "<cylinder> radius", "0_015"),
+        ("cylinder", {"radius": "0.0\u0661\u0665"}, "0 0 0", "<cylinder> radius",
+         "0.0\u0661\u0665"),  # Arabic-Indic digits
+        ("box", {"size": "0.01 0.01 0.3"}, "0 0 0_0", "<origin> rpy", "0 0 0_0"),
+        ("cylinder", {"radius": "nan"}, "0 0 0", "<cylinder> radius", "nan"),
+    ],
+)  # fmt: skip
+def test_geometry_numbers_are_ascii_decimals(kind, sizes, rpy, attribute, text):
+    """A size or rpy of the URDF shape (:func:`urdf_shapes`) that is not finite numbers in
+    ASCII decimal notation is refused naming the file, the link, the element and the value.
+    (Loading such a URDF, Pinocchio's parser refuses it first; ``apply_beams`` may be
+    given any URDF file.)"""
+    shape = Shape("collision", kind, sizes, rpy, "robot file 'r.urdf': link 'ground'")
+    with pytest.raises(ModelFileError) as info:
+        geometry_section("ground", [shape], np.array([0.0, 0.0, 1.0]))
+    assert str(info.value) == (
+        f"robot file 'r.urdf': link 'ground': <collision> {attribute} is {text!r}; expected "
+        f"{3 if 'rpy' in attribute else 1} finite numbers in ASCII decimal notation"
+    )
 
 
 def test_geometry_section_needs_the_urdf(tmp_path):
