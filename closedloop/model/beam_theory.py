@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import decimals
+from closedloop.common.arrays import decimal, decimals
 from closedloop.exceptions import BeamError, ModelFileError
 
 THEORIES = ("euler-bernoulli", "timoshenko")
@@ -63,10 +63,18 @@ GEOMETRY = "geometry"
 ALIGN_TOLERANCE = 1e-3
 
 
+def _number(value) -> float:
+    """``value`` (a number, or a string such as YAML 1.1's ``"2.1e11"`` in ASCII decimal
+    notation, :func:`closedloop.common.arrays.decimal`) as a float; ValueError for a bool
+    (``True`` is not 1) or another string, TypeError for other objects."""
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"{value!r} is a bool, not a number")
+    return decimal(value.strip()) if isinstance(value, str) else float(value)
+
+
 def _positive(beam: str, what: str, value) -> float:
     try:
-        # "2.1e11" from a YAML 1.1 file is a number; a bool is not
-        x = math.nan if isinstance(value, bool | np.bool_) else float(value)
+        x = _number(value)
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected a number > 0") from None
     if not (math.isfinite(x) and x > 0):
@@ -132,7 +140,7 @@ def section_from_spec(beam: str, spec) -> Section:
         try:
             # a list, tuple or array of numbers; not a string, a mapping or a scalar
             seq = isinstance(y_axis, list | tuple | np.ndarray) and np.ndim(y_axis) == 1
-            y = np.asarray([float(v) for v in y_axis]) if seq else None
+            y = np.asarray([_number(v) for v in y_axis]) if seq else None
         except (TypeError, ValueError):
             y = None
         if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
@@ -336,7 +344,7 @@ def transport_stiffness(K: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _matrix(beam: str, what: str, value) -> np.ndarray:
     try:
-        K = np.array([float(v) for v in np.asarray(value, dtype=object).reshape(-1)])
+        K = np.array([_number(v) for v in np.asarray(value, dtype=object).reshape(-1)])
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected 36 numbers") from None
     if K.size != 36:
