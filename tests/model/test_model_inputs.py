@@ -95,6 +95,11 @@ def test_a_closure_of_one_body_is_refused(tmp_path, fourbar_urdf):
         ({"locked": "j"}, r"locked joints must be a list of joint names, got 'j'"),
         ({"springs": {"j": True}}, "stiffness of joint 'j' is True; expected a number"),
         ({"springs": {"j": [1.0, 2.0]}}, "has 2 values; expected 1$"),
+        (  # was numpy's ValueError
+            {"springs": {"j": [[1.0, 2.0], [3.0]]}},
+            r"^stiffness of joint 'j' must be real numbers, got \[\[1.0, 2.0\], \[3.0\]\] "
+            r"\(ragged list\)$",
+        ),
     ],
 )
 def test_wrong_arguments_of_a_model_are_typed_errors(kwargs, match):
