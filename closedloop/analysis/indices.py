@@ -51,10 +51,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from closedloop.analysis.batch_indices import R, T, block_spectrum
-from closedloop.analysis.screws import DELTA, Eigenscrew, PrincipalStiffness, unit_direction
+from closedloop.analysis.screws import Eigenscrew, PrincipalStiffness, eigenscrews, unit_direction
 from closedloop.analysis.spectra import (
     RESOLVED_RTOL,
-    ROUNDING_RTOL,
     finite_determinant,
     inverse_pair_eigenvalues,
     lu_determinant,
@@ -416,11 +415,7 @@ class StiffnessIndices:
     def eigenscrews(self) -> tuple[Eigenscrew, ...]:
         """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first).
 
-        With factors K = F F^T and C = B B^T, ``F^T Delta F`` has the eigenvalues lambda
-        (twist ``Delta F z``) and ``B^T Delta B`` their inverses (twist ``B z``): each
-        screw is taken from the one that resolves it, the stiff ones from K and the soft
-        ones from C (about eps sqrt(cond) relative, where a Cholesky factorisation of K
-        loses the soft ones at eps cond, and fails near a singular pose).
+        Computed from both K and C (:func:`closedloop.analysis.screws.eigenscrews`).
 
         Raises:
             RigidDirectionsError: C is rank deficient.
@@ -430,33 +425,7 @@ class StiffnessIndices:
         what = "the eigenscrews of K"
         self._require_full_rank(what)
         self._require_symmetric(what)
-        C, K = 0.5 * (self.C + self.C.T), 0.5 * (self.K + self.K.T)
-        (mu, V), (kappa, U) = np.linalg.eigh(C), np.linalg.eigh(K)
-        if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
-            raise InvalidInputError(
-                f"{what} need a positive definite K; its eigenvalues run from {kappa[0]:.3g} "
-                f"to {kappa[-1]:.3g} (an unstable preloaded equilibrium)"
-            )
-        F, B = U * np.sqrt(np.clip(kappa, 0.0, None)), V * np.sqrt(np.clip(mu, 0.0, None))
-        lam_K, Z_K = np.linalg.eigh(F.T @ DELTA @ F)  # ascending: 3 negative, 3 positive
-        nu, Z_C = np.linalg.eigh(B.T @ DELTA @ B)  # 1 / lambda, ascending
-        # the lambda_K of the same screw: the inertia of Delta decides the positions
-        pair = [2, 1, 0, 5, 4, 3]
-        nu, Z_C = nu[pair], Z_C[:, pair]
-        with np.errstate(divide="ignore"):
-            lam_C = 1.0 / nu
-        # soft screws (|lambda| below the geometric mean of the extremes) from C
-        soft = np.abs(lam_C) <= np.sqrt(np.abs(lam_K).max() / np.abs(nu).max())
-        lam = np.where(soft, lam_C, lam_K)
-        X = np.where(soft, B @ Z_C, DELTA @ F @ Z_K)  # twists, each to a scale
-        screws = []
-        for i in np.argsort(lam, kind="stable"):
-            v, w = X[:3, i], X[3:, i]
-            n2 = float(w @ w)
-            pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
-            lam_i = float(lam[i])
-            screws.append(Eigenscrew(lam_i, pitch, unit_direction(w), point, lam_i / (2.0 * pitch)))
-        return tuple(screws)
+        return eigenscrews(0.5 * (self.C + self.C.T), 0.5 * (self.K + self.K.T))
 
     # ------------------------------------------------------------------ export
     def to_dict(self) -> dict:

@@ -9,8 +9,9 @@ a rotation part (``x^T K x = 2 lambda w.v > 0``), so each eigenscrew has a finit
 pitch h (same sign as lambda) and an axis; ``K = sum_i k_i W_i W_i^T`` with ``W_i`` the
 unit wrench on screw i and ``k_i = lambda_i / (2 h_i) > 0`` [N/m].
 
-Their values are computed by :class:`closedloop.analysis.indices.StiffnessIndices`
-(``min_translational_stiffness``..., ``eigenscrews``).
+The eigenscrews are computed by :func:`eigenscrews`; the indices of
+:class:`closedloop.analysis.indices.StiffnessIndices` (``min_translational_stiffness``...,
+``eigenscrews``) give both.
 """
 
 from __future__ import annotations
@@ -20,7 +21,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from closedloop.analysis.spectra import ROUNDING_RTOL
 from closedloop.common.arrays import readonly
+from closedloop.exceptions import InvalidInputError
 
 #: Reciprocal product matrix (6, 6): twist^T DELTA wrench = work [J].
 DELTA = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
@@ -73,3 +76,49 @@ class Eigenscrew:
     def wrench(self) -> np.ndarray:
         """(6,) unit force on the screw: (u [N], h u + p x u [N m]); ``K twist = lambda wrench``."""
         return DELTA @ self.twist
+
+
+def eigenscrews(C: np.ndarray, K: np.ndarray) -> tuple[Eigenscrew, ...]:
+    """The six eigenscrews of K, by ascending eigenvalue (three negative pitches first).
+
+    With factors K = F F^T and C = B B^T, ``F^T Delta F`` has the eigenvalues lambda
+    (twist ``Delta F z``) and ``B^T Delta B`` their inverses (twist ``B z``): each screw is
+    taken from the one that resolves it, the stiff ones from K and the soft ones from C
+    (about eps sqrt(cond) relative, where a Cholesky factorisation of K loses the soft ones
+    at eps cond, and fails near a singular pose).
+
+    Args:
+        C: (6, 6) symmetric compliance [m/N, rad/N, rad/(N m)], full rank.
+        K: (6, 6) its inverse, the stiffness [N/m, N/rad, N m/rad]; both at one reference
+            point and in one set of axes, those of the screws.
+
+    Raises:
+        InvalidInputError: K is not positive definite (an unstable preloaded equilibrium):
+            the decomposition does not exist.
+    """
+    (mu, V), (kappa, U) = np.linalg.eigh(C), np.linalg.eigh(K)
+    if mu[0] < -ROUNDING_RTOL * mu[-1] or kappa[0] < -ROUNDING_RTOL * kappa[-1]:
+        raise InvalidInputError(
+            f"the eigenscrews of K need a positive definite K; its eigenvalues run from "
+            f"{kappa[0]:.3g} to {kappa[-1]:.3g} (an unstable preloaded equilibrium)"
+        )
+    F, B = U * np.sqrt(np.clip(kappa, 0.0, None)), V * np.sqrt(np.clip(mu, 0.0, None))
+    lam_K, Z_K = np.linalg.eigh(F.T @ DELTA @ F)  # ascending: 3 negative, 3 positive
+    nu, Z_C = np.linalg.eigh(B.T @ DELTA @ B)  # 1 / lambda, ascending
+    # the lambda_K of the same screw: the inertia of Delta decides the positions
+    pair = [2, 1, 0, 5, 4, 3]
+    nu, Z_C = nu[pair], Z_C[:, pair]
+    with np.errstate(divide="ignore"):
+        lam_C = 1.0 / nu
+    # soft screws (|lambda| below the geometric mean of the extremes) from C
+    soft = np.abs(lam_C) <= np.sqrt(np.abs(lam_K).max() / np.abs(nu).max())
+    lam = np.where(soft, lam_C, lam_K)
+    X = np.where(soft, B @ Z_C, DELTA @ F @ Z_K)  # twists, each to a scale
+    screws = []
+    for i in np.argsort(lam, kind="stable"):
+        v, w = X[:3, i], X[3:, i]
+        n2 = float(w @ w)
+        pitch, point = float(w @ v / n2), readonly(np.cross(w, v) / n2)
+        lam_i = float(lam[i])
+        screws.append(Eigenscrew(lam_i, pitch, unit_direction(w), point, lam_i / (2.0 * pitch)))
+    return tuple(screws)

@@ -42,10 +42,10 @@ def add_parser(sub, model_arguments) -> None:
         "--density", type=finite_float, metavar="RHO",
         help="density [kg/m^3] of the beams without a density: key",
     )  # fmt: skip
-    add_preload_arguments(p)
-    p._option_string_actions["--payload"].help = (  # argparse has no public setter
-        "MASS [kg] [X Y Z]: a point mass at --frame, offset in its axes [m] (its weight "
-        "too with --gravity)"
+    add_preload_arguments(
+        p,
+        payload_help="MASS [kg] [X Y Z]: a point mass at --frame, offset in its axes [m] (its "
+        "weight too with --gravity)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--html", metavar="FILE", help="write a page that plays mode --mode")

@@ -69,19 +69,22 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
     )
 
 
-def add_preload_arguments(p: argparse.ArgumentParser) -> None:
-    """--gravity [GX GY GZ], --payload MASS [X Y Z], --preload FX FY FZ NX NY NZ (SI)."""
+#: Help of ``--payload`` where the payload loads the queried frame (``stiffness``).
+PAYLOAD_HELP = (
+    "MASS [kg] [X Y Z]: a point mass at the loaded frame, offset in its axes [m] (needs --gravity)"
+)
+
+
+def add_preload_arguments(p: argparse.ArgumentParser, payload_help: str = PAYLOAD_HELP) -> None:
+    """--gravity [GX GY GZ], --payload MASS [X Y Z], --preload FX FY FZ NX NY NZ (SI);
+    ``payload_help`` the help of ``--payload`` (a command whose payload means more)."""
     p.add_argument(
         "--gravity", nargs="*", type=finite_float, metavar="G",
         help="weigh the model's link inertias: GX GY GZ [m/s^2], world axes (no values: "
         "0 0 -9.80665, standard gravity); q is then the springs' rest configuration and the "
         "result the tangent compliance where the mechanism settles, with its sag",
     )  # fmt: skip
-    p.add_argument(
-        "--payload", nargs="+", type=finite_float, metavar="V",
-        help="MASS [kg] [X Y Z]: a point mass at the loaded frame, offset in its axes [m] "
-        "(needs --gravity)",
-    )  # fmt: skip
+    p.add_argument("--payload", nargs="+", type=finite_float, metavar="V", help=payload_help)
     p.add_argument(
         "--preload", nargs=6, type=finite_float, metavar="W",
         help="dead-load wrench fx fy fz [N] nx ny nz [N m] at the frame, world axes",

@@ -55,6 +55,16 @@ def decimal(text: str) -> float:
     return float(text)
 
 
+def decimals(text: str) -> np.ndarray:
+    """(n,) the numbers written in ``text``, separated by white space, each
+    :func:`decimal` (as a file's ``"0 0.1 -2e-3"``).
+
+    Raises:
+        ValueError: a word of ``text`` is not such a number.
+    """
+    return np.array([decimal(word) for word in text.split()], dtype=float)
+
+
 def real_array(value, name: str) -> np.ndarray:
     """``value`` as a float array, refusing what is not real numbers.
 
@@ -63,10 +73,11 @@ def real_array(value, name: str) -> np.ndarray:
         name: the argument, named by the error message.
 
     Raises:
-        InvalidInputError: booleans (``True`` is not 1 rad), strings, complex numbers
-            (their imaginary part would be dropped), ``None`` or other objects, ragged
-            sequences, a masked array with masked entries (numpy would hand over the values
-            hidden under the mask).
+        InvalidInputError: booleans (``True`` is not 1 rad), also among numbers in a
+            sequence (``[1.0, True]``, which numpy would cast to ``[1.0, 1.0]``), strings,
+            complex numbers (their imaginary part would be dropped), ``None`` or other
+            objects, ragged sequences, a masked array with masked entries (numpy would hand
+            over the values hidden under the mask).
     """
     if np.ma.is_masked(value):
         raise InvalidInputError(
@@ -77,15 +88,19 @@ def real_array(value, name: str) -> np.ndarray:
         a = np.asarray(value)
     except (TypeError, ValueError):  # ragged nesting
         a = None
-    if a is None or a.dtype.kind not in "iuf":
-        text = " ".join(repr(value).split())
-        text = text if len(text) <= 80 else text[:77] + "..."
-        if a is None:
-            kind = f"ragged {type(value).__name__}"
-        else:
-            kind = {"b": "bool", "c": "complex"}.get(a.dtype.kind, type(value).__name__)
-        raise InvalidInputError(f"{name} must be real numbers, got {text} ({kind})")
-    return a.astype(float)
+    if a is None:
+        kind = f"ragged {type(value).__name__}"
+    elif a.dtype.kind not in "iuf":
+        kind = {"b": "bool", "c": "complex"}.get(a.dtype.kind, type(value).__name__)
+    elif not isinstance(value, np.ndarray) and any(
+        isinstance(x, bool | np.bool_) for x in np.asarray(value, dtype=object).flat
+    ):  # a bool among numbers in a sequence, which numpy casts to a number
+        kind = "bool"
+    else:
+        return a.astype(float)
+    text = " ".join(repr(value).split())
+    text = text if len(text) <= 80 else text[:77] + "..."
+    raise InvalidInputError(f"{name} must be real numbers, got {text} ({kind})")
 
 
 def _shown(value) -> str:

@@ -34,8 +34,8 @@ import pinocchio as pin
 
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
-from closedloop.model.closed_loop import check_locked_springs
 from closedloop.model.closures import CLOSURE_TYPES, joint_id
+from closedloop.model.spring_spec import check_locked_springs
 
 CLOSURE_KEYS = (
     "closed_loop", "type", "closure_springs", "name_mot", "springs", "locked", "beams", "balls"

@@ -289,9 +289,13 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
 
     * Pinocchio keeps only the first body under the first ``<worldbody>``; files written
       for MuJoCo put every leg and a free-jointed platform there (MuJoCo accepts a free
-      joint only on such a top-level body). The copy moves the root bodies of every
-      ``<worldbody>`` into one body ``WORLD_BODY`` without joint at the world origin: no
-      pose changes and the free joint's ``qpos0`` stays the body's pose in the world.
+      joint only on such a top-level body). It also takes a lone root body without joint
+      for the world itself, dropping its pose and its sites, and drops the sites of the
+      ``<worldbody>`` itself. The copy moves those sites onto a root body ``world`` (MuJoCo's
+      name of the world body) without joint at the origin, then the root bodies of every
+      ``<worldbody>`` into one body ``WORLD_BODY`` without joint at the world origin
+      (unless there is one root body, with a joint): no pose changes and the free joint's
+      ``qpos0`` stays the body's pose in the world.
     * Pinocchio reads only the first ``<compiler>``, and the assets before it with the
       default directories: the copy has one, first, that merges them in order (MuJoCo's
       rule, later attributes winning); a relative ``meshdir``, ``texturedir`` or
@@ -320,8 +324,16 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
     for extra in worlds[1:]:
         worlds[0].extend(list(extra))
         root.remove(extra)
+    sites = worlds[0].findall("site") if worlds else []
+    if sites:  # Pinocchio drops them: they go on a body named as MuJoCo's world body
+        holder = ET.Element("body", name="world")
+        worlds[0].insert(0, holder)
+        for site in sites:
+            worlds[0].remove(site)
+            holder.append(site)
     roots = worlds[0].findall("body") if worlds else []
-    if len(roots) > 1:
+    jointless = roots and all(roots[0].find(tag) is None for tag in ("joint", "freejoint"))
+    if len(roots) > 1 or jointless:
         wrapper = ET.SubElement(worlds[0], "body", name=WORLD_BODY)
         for body in roots:
             worlds[0].remove(body)

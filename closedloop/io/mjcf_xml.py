@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from closedloop.common.arrays import decimals
 from closedloop.exceptions import ModelFileError
 
 #: MJCF equality constraints and the closure type each gives.
@@ -56,13 +57,17 @@ def parse_xml(path: Path, where: str) -> ET.Element:
 
 
 def read_numbers(text: str, count: int, where: str, what: str) -> np.ndarray:
-    """``count`` finite numbers written in ``text``, or :class:`ModelFileError`."""
+    """``count`` finite numbers written in ``text`` in ASCII decimal notation
+    (:func:`closedloop.common.arrays.decimals`), or :class:`ModelFileError`."""
     try:
-        values = np.array(text.split(), dtype=float)
+        values = decimals(text)
     except ValueError:
         values = np.array([])
     if values.shape != (count,) or not np.isfinite(values).all():
-        raise ModelFileError(f"{where}: {what} is {text!r}; expected {count} finite numbers")
+        raise ModelFileError(
+            f"{where}: {what} is {text!r}; expected {count} finite numbers in ASCII decimal "
+            "notation"
+        )
     return values
 
 

@@ -6,12 +6,14 @@ inertias, every error naming the file and the element.
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from closedloop.common.arrays import decimals
 from closedloop.exceptions import ModelFileError
 
 #: SDF writes "no limit" as +-1e16.
@@ -34,10 +36,9 @@ class SdfReader:
         if root.tag != "sdf":
             self.fail(f"root element is <{root.tag}>; expected <sdf>")
         version = root.get("version") or "1.6"
-        try:
-            self.version = tuple(int(v) for v in version.split(".")[:2])
-        except ValueError:
+        if not re.fullmatch(r"\d+(\.\d+)*", version, re.ASCII):
             self.fail(f"version {version!r}; expected numbers such as '1.6'")
+        self.version = tuple(int(v) for v in version.split(".")[:2])
         models = root.findall("model")
         if len(models) != 1 or root.find(".//include") is not None:
             self.fail(
@@ -77,9 +78,12 @@ class SdfReader:
     def floats(self, elem: ET.Element | None, what: str, n: tuple[int, ...]) -> np.ndarray:
         text = (elem.text or "") if elem is not None else ""
         try:
-            v = np.array([float(t) for t in text.split()])
+            v = decimals(text)
         except ValueError:
-            self.fail(f"{what} is {text.strip()!r}; expected {' or '.join(map(str, n))} numbers")
+            self.fail(
+                f"{what} is {text.strip()!r}; expected {' or '.join(map(str, n))} numbers in "
+                "ASCII decimal notation"
+            )
         if v.size not in n or not np.all(np.isfinite(v)):
             self.fail(
                 f"{what} has {v.size} value(s) {text.strip()!r}; expected "

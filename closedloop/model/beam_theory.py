@@ -45,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from closedloop.exceptions import BeamError
+from closedloop.common.arrays import decimal, decimals
+from closedloop.exceptions import BeamError, ModelFileError
 
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
@@ -62,10 +63,18 @@ GEOMETRY = "geometry"
 ALIGN_TOLERANCE = 1e-3
 
 
+def _number(value) -> float:
+    """``value`` (a number, or a string such as YAML 1.1's ``"2.1e11"`` in ASCII decimal
+    notation, :func:`closedloop.common.arrays.decimal`) as a float; ValueError for a bool
+    (``True`` is not 1) or another string, TypeError for other objects."""
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"{value!r} is a bool, not a number")
+    return decimal(value.strip()) if isinstance(value, str) else float(value)
+
+
 def _positive(beam: str, what: str, value) -> float:
     try:
-        # "2.1e11" from a YAML 1.1 file is a number; a bool is not
-        x = math.nan if isinstance(value, bool | np.bool_) else float(value)
+        x = _number(value)
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected a number > 0") from None
     if not (math.isfinite(x) and x > 0):
@@ -131,7 +140,7 @@ def section_from_spec(beam: str, spec) -> Section:
         try:
             # a list, tuple or array of numbers; not a string, a mapping or a scalar
             seq = isinstance(y_axis, list | tuple | np.ndarray) and np.ndim(y_axis) == 1
-            y = np.asarray([float(v) for v in y_axis]) if seq else None
+            y = np.asarray([_number(v) for v in y_axis]) if seq else None
         except (TypeError, ValueError):
             y = None
         if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
@@ -170,12 +179,13 @@ class Shape:
     """One ``<collision>`` or ``<visual>`` element of a URDF link, as written: ``kind`` the
     tag of its geometry (cylinder, box, mesh, sphere...), ``sizes`` that tag's attributes
     (radius, length [m] / size "x y z" [m] / filename...), ``rpy`` its origin's roll, pitch,
-    yaw [rad] in the link frame."""
+    yaw [rad] in the link frame, ``where`` the file and link (for messages)."""
 
     source: str  # "collision" or "visual"
     kind: str
     sizes: dict[str, str]
-    rpy: str = "0 0 0"
+    rpy: str
+    where: str
 
 
 def urdf_shapes(path) -> dict[str, list[Shape]]:
@@ -183,6 +193,7 @@ def urdf_shapes(path) -> dict[str, list[Shape]]:
     file ``path``, for ``section: geometry``."""
     out = {}
     for link in ET.parse(path).getroot().iter("link"):
+        where = f"robot file {str(path)!r}: link {link.get('name')!r}"
         for source in ("collision", "visual"):
             shapes = []
             for element in link.findall(source):
@@ -190,20 +201,30 @@ def urdf_shapes(path) -> dict[str, list[Shape]]:
                 origin = element.find("origin")
                 rpy = "0 0 0" if origin is None else origin.get("rpy", "0 0 0")
                 for g in [] if geometry is None else list(geometry)[:1]:
-                    shapes.append(Shape(source, g.tag, dict(g.attrib), rpy))
+                    shapes.append(Shape(source, g.tag, dict(g.attrib), rpy, where))
             if shapes:
                 out[link.get("name")] = shapes
                 break
     return out
 
 
-def _numbers(beam: str, what: str, text: str, n: int) -> np.ndarray:
+def _numbers(shape: Shape, attribute: str, text: str | None, n: int) -> np.ndarray:
+    """The ``n`` finite numbers of the attribute ``<tag> attribute`` (such as
+    ``<cylinder> radius``) of ``shape``'s element, written ``text`` in ASCII decimal
+    notation (:func:`closedloop.common.arrays.decimals`).
+
+    Raises:
+        ModelFileError: naming the file, the link, the element, the attribute and ``text``.
+    """
     try:
-        x = np.array([float(v) for v in str(text).split()])
+        x = decimals(text) if isinstance(text, str) else np.zeros(0)
     except ValueError:
         x = np.zeros(0)
     if x.shape != (n,) or not np.all(np.isfinite(x)):
-        raise BeamError(beam, f"section geometry: {what} is {text!r}; expected {n} numbers")
+        raise ModelFileError(
+            f"{shape.where}: <{shape.source}> {attribute} is {text!r}; expected {n} finite "
+            "numbers in ASCII decimal notation"
+        )
     return x
 
 
@@ -214,6 +235,8 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
 
     Raises:
         BeamError: no URDF, no cylinder or box, several of them, a shape across the beam.
+        ModelFileError: the shape's size or its origin's rpy is not finite numbers in ASCII
+            decimal notation.
     """
     if shapes is None:
         raise BeamError(
@@ -237,7 +260,7 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
             "expected exactly one cylinder or box",
         )
     shape = found[0]
-    R = pin.rpy.rpyToMatrix(*_numbers(beam, f"{source} origin rpy", shape.rpy, 3))
+    R = pin.rpy.rpyToMatrix(*_numbers(shape, "<origin> rpy", shape.rpy, 3))
     x = axis / np.linalg.norm(axis)
     i = 2 if shape.kind == "cylinder" else int(np.argmax(np.abs(R.T @ x)))
     angle = math.asin(min(1.0, float(np.linalg.norm(np.cross(R[:, i], x)))))
@@ -250,9 +273,9 @@ def geometry_section(beam: str, shapes: list[Shape] | None, axis: np.ndarray) ->
             f"expected along it (within {ALIGN_TOLERANCE} rad)",
         )
     if shape.kind == "cylinder":
-        radius = _numbers(beam, f"{source} cylinder radius", shape.sizes.get("radius"), 1)
+        radius = _numbers(shape, "<cylinder> radius", shape.sizes.get("radius"), 1)
         return {"shape": "circle", "d": float(2 * radius[0])}
-    size = _numbers(beam, f"{source} box size", shape.sizes.get("size"), 3).tolist()
+    size = _numbers(shape, "<box> size", shape.sizes.get("size"), 3).tolist()
     j, k = (i + 1) % 3, (i + 2) % 3
     return {"shape": "rectangle", "b": size[j], "h": size[k], "y_axis": R[:, j].tolist()}
 
@@ -321,7 +344,7 @@ def transport_stiffness(K: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _matrix(beam: str, what: str, value) -> np.ndarray:
     try:
-        K = np.array([float(v) for v in np.asarray(value, dtype=object).reshape(-1)])
+        K = np.array([_number(v) for v in np.asarray(value, dtype=object).reshape(-1)])
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected 36 numbers") from None
     if K.size != 36:

@@ -186,34 +186,47 @@ class InsertedBeam:
     rest: pin.SE3
 
 
-def _beam_link(model: pin.Model, frame: pin.Frame) -> str | None:
-    """The link of the beam whose virtual joint has the JOINT frame ``frame``: the BODY
-    frame reached through its parent frames, all JOINT frames named ``<link>_beam`` or
-    ``<link>_beam_*``; None if there is none."""
-    chain = [frame.name]
-    while frame.type == pin.JOINT:
-        frame = model.frames[frame.parentFrame]
-        chain.append(frame.name)
-    link = chain.pop()
-    if frame.type != pin.BODY:
+def _virtual_frames(model: pin.Model) -> set[int]:
+    """The JOINT frames that may be beams' virtual joints, whatever their names: those of
+    free flyers from which no BODY frame hangs. Every joint a robot file's parser builds
+    carries the BODY frame of its child link; :func:`apply_beams` gives its virtual joints
+    none (the frames they carry keep their parent frames)."""
+    bodies = {f.parentFrame for f in model.frames if f.type == pin.BODY}
+    return {
+        i for i, f in enumerate(model.frames)
+        if f.type == pin.JOINT and i not in bodies
+        and model.joints[f.parentJoint].shortname() == "JointModelFreeFlyer"
+    }  # fmt: skip
+
+
+def _beam_link(model: pin.Model, frame: int, virtual: set[int]) -> str | None:
+    """The link of the beam whose virtual joint has the JOINT frame ``frame`` (index): the
+    BODY frame reached through its parent frames, all ``virtual``
+    (:func:`_virtual_frames`) and named ``<link>_beam`` or ``<link>_beam_*``; None if there
+    is none."""
+    chain = []
+    while frame in virtual:
+        chain.append(model.frames[frame].name)
+        frame = model.frames[frame].parentFrame
+    link = model.frames[frame]
+    if not chain or link.type != pin.BODY:
         return None
-    ok = all(n == f"{link}_beam" or n.startswith(f"{link}_beam_") for n in chain)
-    return link if ok else None
+    ok = all(n == f"{link.name}_beam" or n.startswith(f"{link.name}_beam_") for n in chain)
+    return link.name if ok else None
 
 
 def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
     """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: the
-    JOINT frames of its virtual joints, each on the joint's parent joint, whose parent
-    frame (``link_frame``, the beam's or element's start) is the link's body frame or the
-    frame of another virtual joint of the link, all named ``<link>_beam`` or
-    ``<link>_beam_*``."""
-    out = []
-    for f in model.frames:
+    JOINT frames of its virtual joints (free flyers that carry no BODY frame), each on the
+    joint's parent joint, whose parent frame (``link_frame``, the beam's or element's
+    start) is the link's body frame or the frame of another virtual joint of the link, all
+    named ``<link>_beam`` or ``<link>_beam_*``. An ordinary joint so named is no beam."""
+    out, virtual = [], _virtual_frames(model)
+    for i in sorted(virtual):
+        f = model.frames[i]
         start = model.frames[f.parentFrame]
         j = f.parentJoint
-        if f.type != pin.JOINT or start.parentJoint != model.parents[j]:
-            continue
-        if start.type in (pin.BODY, pin.JOINT) and _beam_link(model, f) is not None:
+        if start.parentJoint == model.parents[j] and _beam_link(model, i, virtual) is not None:
             rest = start.placement.actInv(model.jointPlacements[j])
             out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
     return out
@@ -275,6 +288,8 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).
+        ModelFileError: ``section: geometry`` on a link whose URDF cylinder or box has a
+            size or rpy that is not finite numbers in ASCII decimal notation.
     """
     if not isinstance(beams, Mapping):
         raise InvalidInputError(f"beams must be a mapping link name -> beam, got {beams!r}")
@@ -288,9 +303,10 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
     for link, spec in beams.items():
         plan = _plan(link, spec)
+        virtual = _virtual_frames(model)
         had = [
             b.name for b in inserted_beams(model)
-            if _beam_link(model, model.frames[model.getFrameId(b.name, pin.JOINT)]) == link
+            if _beam_link(model, model.getFrameId(b.name, pin.JOINT), virtual) == link
         ]  # fmt: skip
         clash = had + [name for name, _, _ in plan if model.existJointName(name)]
         if clash:  # before the stiffness, which would measure the link from the existing

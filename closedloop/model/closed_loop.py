@@ -44,6 +44,7 @@ from closedloop.model.closures import (
     joint_id,
     joint_names,
 )
+from closedloop.model.spring_spec import joint_stiffness
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
@@ -85,48 +86,6 @@ def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
     points = [data.oMi[j].translation for j in range(1, model.njoints)]
     points += [data.oMf[i].translation for i in range(1, model.nframes)]  # 0: the universe
     return frozen(mask), characteristic_length(points)
-
-
-def check_locked_springs(springs: Mapping, locked: Iterable[str]) -> None:
-    """InvalidInputError for joints both ``locked`` and given ``springs`` (names)."""
-    both = sorted(set(locked) & set(springs))
-    if both:
-        raise InvalidInputError(
-            f"joints {both} are both locked and given springs; expected one or the other "
-            "(a lock is an infinite stiffness)"
-        )
-
-
-#: Relative asymmetry max|K - K^T| / max|K| above which a spring block is refused (a block
-#: read from 36 printed numbers is symmetric to their ~1e-16 rounding).
-BLOCK_SYMMETRY_RTOL = 1e-9
-
-
-def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
-    """Validated read-only (nv, nv) symmetric positive definite block of joint ``name``."""
-    if K.shape != (nv, nv):
-        raise InvalidInputError(
-            f"stiffness block of joint {name!r} has shape {K.shape}; expected ({nv}, {nv})"
-        )
-    if not np.all(np.isfinite(K)):
-        raise InvalidInputError(
-            f"stiffness block of joint {name!r} has non-finite entries: {K.tolist()}"
-        )
-    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
-    if skew > BLOCK_SYMMETRY_RTOL * scale:
-        raise InvalidInputError(
-            f"stiffness block of joint {name!r} is not symmetric (max |K - K^T| = {skew:.3g}, "
-            f"max |K| = {scale:.3g}); expected a symmetric positive definite matrix"
-        )
-    K = 0.5 * (K + K.T)
-    try:
-        np.linalg.cholesky(K)
-    except np.linalg.LinAlgError:
-        raise InvalidInputError(
-            f"stiffness block of joint {name!r} is not positive definite (eigenvalues "
-            f"{np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive definite matrix"
-        ) from None
-    return frozen(K)
 
 
 class ClosedLoopModel:
@@ -196,8 +155,8 @@ class ClosedLoopModel:
                 )
         locked = joint_names("locked", locked)
         self._spec = (dict(springs or {}), locked)
-        self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType({})
-        self.stiffness = self._stiffness_vector(springs or {}, locked)
+        self.stiffness, blocks = joint_stiffness(model, springs or {}, locked, self.actuated_ids)
+        self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType(blocks)
         self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
         rows = [r for c in self.closures for r in c.linear_rows]
         self.linear_rows = frozen(np.array(rows, dtype=bool))
@@ -270,54 +229,6 @@ class ClosedLoopModel:
         coincide), whatever the mechanism's place in the world; the default scale of the
         unit-free rules (:mod:`closedloop.common.conditioning`)."""
         return self._length
-
-    def _stiffness_vector(self, springs, locked) -> np.ndarray:
-        k = np.zeros(self.model.nv)
-        for j in self.actuated_ids:
-            k[self.model.joints[j].idx_v] = np.inf
-        for name in locked:
-            jm = self.model.joints[joint_id(self.model, name)]
-            k[jm.idx_v : jm.idx_v + jm.nv] = np.inf
-        if not isinstance(springs, Mapping):
-            raise InvalidInputError(
-                f"springs must be a mapping joint name -> stiffness, got {type(springs).__name__}"
-            )
-        check_locked_springs(springs, locked)
-        blocks = {}
-        for name, value in springs.items():
-            jm = self.model.joints[joint_id(self.model, name)]
-            if not jm.nv:
-                raise InvalidInputError(
-                    f"joint {name!r} ({jm.shortname()}) has no coordinate of its own (a mimic "
-                    "joint follows its leader): give the spring to the joint it follows"
-                )
-            if isinstance(value, bool | np.bool_) or np.asarray(value).dtype == bool:
-                raise InvalidInputError(
-                    f"stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
-                    "[N m/rad or N/m], not a bool"
-                )
-            value = real_array(value, f"stiffness of joint {name!r}")
-            if value.ndim == 2 and value.size > 1:
-                blocks[name] = _spd_block(name, value, jm.nv)
-                k[jm.idx_v : jm.idx_v + jm.nv] = np.diag(blocks[name])
-                continue
-            if value.ndim == 2:  # a 1x1 block is a number
-                value = value.reshape(-1)
-            values = np.broadcast_to(value, (jm.nv,)) if value.ndim == 0 else value
-            if values.shape != (jm.nv,):
-                raise InvalidInputError(
-                    f"stiffness of joint {name!r} has {values.size} values; expected "
-                    + ("1" if jm.nv == 1 else f"1 or {jm.nv}")
-                )
-            if np.any(np.isnan(values)) or np.any(values < 0):
-                raise InvalidInputError(
-                    f"stiffness of joint {name!r} is {values.tolist()}; expected values >= 0 "
-                    "(0 = passive, inf = locked)"
-                )
-            k[jm.idx_v : jm.idx_v + jm.nv] = values
-        k.flags.writeable = False
-        self.spring_blocks = MappingProxyType(blocks)
-        return k
 
     # ------------------------------------------------------------------ joint stiffness
     @property

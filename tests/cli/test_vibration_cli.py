@@ -3,6 +3,7 @@ errors."""
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import numpy as np
@@ -12,6 +13,7 @@ from helpers import REPO
 import closedloop as cl
 from cahyman_pin.cli import main as cahyman_main
 from closedloop.cli.app import main
+from closedloop.cli.options import add_preload_arguments
 
 UR5_Q = ("0.3", "-1.2", "1.4", "-0.6", "1.1", "0.2")
 
@@ -201,3 +203,19 @@ def test_cahyman_map_masses_are_for_the_frequency_only(capsys, tmp_path, argv, m
     code, out, err = run(capsys, cahyman_main, "map", "--alpha4", "30,60", "--out",
                          str(tmp_path), *argv)  # fmt: skip
     assert code == 2 and out == "" and err.count("\n") == 1 and message in err
+
+
+def test_payload_help_is_the_command_s_own(capsys):
+    """The preload options take the help of --payload: the payload of ``modes`` sits at
+    --frame and weighs only with --gravity; that of ``stiffness`` loads its frame."""
+    parser = argparse.ArgumentParser()
+    add_preload_arguments(parser, payload_help="a payload of this command")
+    assert "a payload of this command" in " ".join(parser.format_help().split())
+    helps = {}
+    for command in ("modes", "stiffness"):
+        code, out, _ = run(capsys, main, command, "--help")
+        assert code == 0
+        helps[command] = " ".join(out.split())
+    modes = "a point mass at --frame, offset in its axes [m] (its weight too with --gravity)"
+    stiffness = "a point mass at the loaded frame, offset in its axes [m] (needs --gravity)"
+    assert modes in helps["modes"] and stiffness in helps["stiffness"]

@@ -386,6 +386,8 @@ def test_bodies_nested_too_deep_and_unknown_classes_are_model_file_errors(fourba
         ('pos="0 0 0.1"', 'pos="a 0 0.1"', r"pos of <body> 'crank_end' is 'a 0 0.1'; expected 3"),
         ('pos="0 0 0.1"', 'pos="0 0.1"', r"pos of <body> 'crank_end' is '0 0.1'; expected 3"),
         ('pos="0 0 0.1"', 'pos="0 0 1e999"', r"pos of <body> 'crank_end' is '0 0 1e999'"),
+        ('pos="0 0 0.1"', 'pos="0 0 0_1"', r"pos of <body> 'crank_end' is '0 0 0_1'; "
+         "expected 3 finite numbers in ASCII decimal notation"),  # Pinocchio read 0 0 0
         ('pos="0 0 0.1"', 'pos="0 0 0.1" quat="0 0 0 0"', r"quat of <body> 'crank_end' is "
          r"'0 0 0 0'; expected a rotation"),
         ('anchor="0.3 0 0"', 'anchor="nan 0 0"', r"anchor of <connect> 'closedloop1' is "),

@@ -141,6 +141,33 @@ def test_every_root_body_is_kept(hexapods):
     assert state.closure_error < 1e-14
 
 
+def test_sites_of_the_world_and_of_a_lone_root_body_without_joint_are_kept(tmp_path):
+    """Pinocchio dropped the sites of <worldbody> and took a lone root body without joint
+    for the world: its site was lost and its pose dropped from the bodies under it. Site w
+    at (0.5, 0, 0) turned 90 deg about y; base at (1, 2, 3) turned 90 deg about z; site s
+    at (0.1, 0.2, 0.3) in it, turned 90 deg about x; arm at (0, 0, 1) in it. Entries of
+    order 1 from degrees: a few ulps."""
+    text = (
+        '<mujoco model="t"><worldbody><site name="w" pos="0.5 0 0" axisangle="0 1 0 90"/>'
+        '<body name="base" pos="1 2 3" axisangle="0 0 1 90">'
+        '<site name="s" pos="0.1 0.2 0.3" axisangle="1 0 0 90"/>'
+        '<body name="arm" pos="0 0 1"><joint name="j" axis="0 1 0"/>'
+        '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/></body>'
+        "</body></worldbody></mujoco>"
+    )
+    (tmp_path / "t.xml").write_text(text)
+    state = cl.Configuration(load_model(tmp_path / "t.xml", actuated=[], geometry=False), [0.0])
+    expected = {  # (rotation, translation): Ry(90); Rz(90) Rx(90), (1, 2, 3) + Rz(90) s; Rz(90)
+        "w": ([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], [0.5, 0, 0]),
+        "s": ([[0, 0, 1], [1, 0, 0], [0, 1, 0]], [0.8, 2.1, 3.3]),
+        "arm": ([[0, -1, 0], [1, 0, 0], [0, 0, 1]], [1, 2, 4]),
+    }
+    for frame, (rotation, translation) in expected.items():
+        M = state.frame_placement(frame)
+        np.testing.assert_allclose(M.rotation, rotation, atol=1e-15)
+        np.testing.assert_allclose(M.translation, translation, atol=1e-15)
+
+
 def test_natural_mjcf_equals_its_urdf_twin_and_the_stewart_formula(hexapods):
     mj, ur = hexapods
     C_mj = cl.compliance(mj, reference_configuration(mj), "platform").C

@@ -492,6 +492,18 @@ MALFORMED = [
         r"pose of frame 'f' has the quaternion 0 0 0 0; expected a rotation",
     ),
     ("</model></sdf>", "", r"is not valid XML"),
+    # numbers in ASCII decimal notation only (Python's float read 50, 0 and version 17)
+    (
+        "<spring_stiffness>50.0</spring_stiffness>",
+        "<spring_stiffness>5_0</spring_stiffness>",
+        r"joint 'crank' <spring_stiffness> is '5_0'; expected 1 numbers in ASCII decimal",
+    ),
+    (
+        '"crank_link">0 0 0.1 0 0 0</pose>',
+        '"crank_link">0 0 0.1 0 0 \u0660</pose>',  # an Arabic-Indic zero
+        r"pose of link 'crank_end' is '0 0 0.1 0 0 \u0660'; expected 6 numbers in ASCII",
+    ),
+    ('<sdf version="1.7">', '<sdf version="1_7">', r"version '1_7'; expected numbers such as"),
     (  # SDF 1.11: a coupling that would be lost, leaving the joint free
         '<xyz expressed_in="__model__">0 1 0</xyz>',
         '<xyz expressed_in="__model__">0 1 0</xyz><mimic joint="rocker"/>',

@@ -20,7 +20,9 @@ from helpers import UR5_BEAM_ENDS, assert_close_in_norm
 import closedloop as cl
 from closedloop.elastostatics.compliance import energy_shares
 from closedloop.elastostatics.statics import solve_equilibrium
+from closedloop.exceptions import ModelFileError
 from closedloop.io.loader import load_model, reference_configuration, robot_data_dir
+from closedloop.model.beam_theory import Shape, geometry_section
 from closedloop.model.beams import BeamError, map_configuration
 
 # Library vs closed form / FEM: the same beam theory through different algebra (6x6
@@ -266,6 +268,30 @@ def test_bad_geometry_sections_are_refused(tmp_path, shapes, match):
         geometry_block(geometry_urdf(tmp_path, shapes))
 
 
+@pytest.mark.parametrize(
+    ("kind", "sizes", "rpy", "attribute", "text"),
+    [  # Python's float read 0.015 m, 0.015 m, rpy (0, 0, 0)
+        ("cylinder", {"radius": "0_015"}, "0 0 0", "<cylinder> radius", "0_015"),
+        ("cylinder", {"radius": "0.0\u0661\u0665"}, "0 0 0", "<cylinder> radius",
+         "0.0\u0661\u0665"),  # Arabic-Indic digits
+        ("box", {"size": "0.01 0.01 0.3"}, "0 0 0_0", "<origin> rpy", "0 0 0_0"),
+        ("cylinder", {"radius": "nan"}, "0 0 0", "<cylinder> radius", "nan"),
+    ],
+)  # fmt: skip
+def test_geometry_numbers_are_ascii_decimals(kind, sizes, rpy, attribute, text):
+    """A size or rpy of the URDF shape (:func:`urdf_shapes`) that is not finite numbers in
+    ASCII decimal notation is refused naming the file, the link, the element and the value.
+    (Loading such a URDF, Pinocchio's parser refuses it first; ``apply_beams`` may be
+    given any URDF file.)"""
+    shape = Shape("collision", kind, sizes, rpy, "robot file 'r.urdf': link 'ground'")
+    with pytest.raises(ModelFileError) as info:
+        geometry_section("ground", [shape], np.array([0.0, 0.0, 1.0]))
+    assert str(info.value) == (
+        f"robot file 'r.urdf': link 'ground': <collision> {attribute} is {text!r}; expected "
+        f"{3 if 'rpy' in attribute else 1} finite numbers in ASCII decimal notation"
+    )
+
+
 def test_geometry_section_needs_the_urdf(tmp_path):
     shapes = element("collision", '<cylinder radius="0.015" length="0.3"/>', shape_axes(2))
     clm = load_model(geometry_urdf(tmp_path, shapes), geometry=False)
@@ -490,7 +516,7 @@ def _tip_file(tmp_path):
     [
         ({"E": -2.1e11}, r"beam 'arm': E \[Pa\] is -210000000000.0; expected a finite number > 0"),
         ({"G": 0}, r"beam 'arm': G \[Pa\] is 0; expected a finite number > 0"),
-        ({"E": True}, r"beam 'arm': E \[Pa\] is True; expected a finite number > 0"),
+        ({"E": True}, r"beam 'arm': E \[Pa\] is True; expected a number > 0"),
         ({"G": 80.0}, r"Poisson ratio E / \(2 G\) - 1 = 1\.312e\+09; expected one in \(-1, 0.5\]"),
         ({"section": {"shape": "circle", "d": -0.01}}, r"beam 'arm': section d is -0.01"),
         ({"section": {"shape": "tube", "d": 0.02, "t": 0.015}},
@@ -507,6 +533,14 @@ def _tip_file(tmp_path):
          r"beam 'arm': an explicit section needs kappa_y and kappa_z"),
         ({"section": {"shape": "rectangle", "b": 0.01, "h": 0.02, "y_axis": ["a", 0, 1]}},
          r"beam 'arm': section y_axis is \['a', 0, 1\]; expected 3 numbers"),  # ValueError
+        # numpy or float read these as 1 and 2.1e11: a bool among numbers, a grouped number
+        ({"section": {"shape": "rectangle", "b": 0.01, "h": 0.02, "y_axis": [0, True, 0]}},
+         r"beam 'arm': section y_axis is \[0, True, 0\]; expected 3 numbers"),
+        ({"E": None, "G": None, "section": None,
+          "stiffness_6x6": [[1e6 if i == j else 0.0 for j in range(6)] for i in range(5)]
+          + [[0.0] * 5 + [True]]},
+         r"beam 'arm': stiffness_6x6 is .*True\]\]; expected 36 numbers"),
+        ({"E": "2_1e11"}, r"beam 'arm': E \[Pa\] is '2_1e11'; expected a number > 0"),
         # sizes and materials beyond the float range: ZeroDivisionError, LinAlgError, a NaN
         # stiffness block (an indefinite one, after transport, by rounding)
         ({"E": 1e-300, "G": 4e-301, "section": {"shape": "circle", "d": 1e-10}}, BEYOND),

@@ -95,6 +95,11 @@ def test_a_closure_of_one_body_is_refused(tmp_path, fourbar_urdf):
         ({"locked": "j"}, r"locked joints must be a list of joint names, got 'j'"),
         ({"springs": {"j": True}}, "stiffness of joint 'j' is True; expected a number"),
         ({"springs": {"j": [1.0, 2.0]}}, "has 2 values; expected 1$"),
+        (  # was numpy's ValueError
+            {"springs": {"j": [[1.0, 2.0], [3.0]]}},
+            r"^stiffness of joint 'j' must be real numbers, got \[\[1.0, 2.0\], \[3.0\]\] "
+            r"\(ragged list\)$",
+        ),
     ],
 )
 def test_wrong_arguments_of_a_model_are_typed_errors(kwargs, match):
@@ -239,6 +244,28 @@ def test_boolean_actuated_values_are_refused(fourbar, value):
     clm, _ = fourbar
     with pytest.raises(InvalidInputError, match=r"^actuated must be real numbers, .*\(bool\)$"):
         cl.assemble(clm, value)
+
+
+def test_a_bool_among_numbers_is_refused(fourbar):
+    """numpy cast a bool in a list of numbers to 1.0 (a stiffness of 1 N m/rad, a preload
+    torque of 1 N m, 1 rad of q); lists of bools alone were already refused."""
+    clm, q = fourbar
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    cases = [
+        (lambda: cl.ClosedLoopModel(model, springs={"ball": [1.0, 2.0, True]}),
+         "stiffness of joint 'ball'", r"\[1.0, 2.0, True\]"),
+        (lambda: cl.ClosedLoopModel(model, springs={"ball": [[1.0, 0, 0], [0, np.True_, 0],
+                                                            [0, 0, 1.0]]}),
+         "stiffness of joint 'ball'", r"\[\[1.0, 0, 0\], \[0, np.True_, 0\]"),
+        (lambda: cl.compliance(clm, q, "P", preload=[1.0, 0, 0, 0, 0, True]), "preload",
+         r"\[1.0, 0, 0, 0, 0, True\]"),
+        (lambda: cl.compliance(clm, [*q[:-1].tolist(), False], "P"), "q", r"\[.*, False\]"),
+    ]  # fmt: skip
+    for call, name, shown in cases:
+        with pytest.raises(InvalidInputError, match=rf"^{name} must be real numbers, got "
+                           rf"{shown}.* \(bool\)$"):  # fmt: skip
+            call()
 
 
 @pytest.mark.parametrize(

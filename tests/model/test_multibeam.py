@@ -15,7 +15,7 @@ from test_beams import STEEL, _skew, round_tip_compliance, urdf_of
 import closedloop as cl
 from closedloop.exceptions import BeamError
 from closedloop.io.loader import load_model
-from closedloop.model.beams import inserted_beams
+from closedloop.model.beams import inserted_beams, map_configuration
 from closedloop.model.elastic import beam_joints
 
 #: The same beam theory through different algebra (6x6 inverses and transports of a
@@ -178,6 +178,38 @@ def test_a_link_with_beams_takes_no_second_entry(tmp_path):
     single, _ = ternary(tmp_path, {"hub": rod("ja")})
     with pytest.raises(BeamError, match=r"beam 'hub': the link already has a beam.*'hub_beam'"):
         single.with_beams({"hub": [rod("jb")]})
+
+
+def test_an_ordinary_joint_named_like_a_beam_is_no_beam(tmp_path):
+    """A link's own revolute joint ``arm_beam_x`` was taken for a beam's virtual joint: a
+    preloaded compliance failed on its one coordinate and a beam on ``arm`` was refused as
+    a second one. It is an ordinary joint: the results are those of the same robot with the
+    joint named ``elbow`` (the same arithmetic: equal to the last bit)."""
+    robots = {}
+    for name in ("elbow", "arm_beam_x"):
+        path = urdf_of(
+            tmp_path, name, ["base", "arm", "tip"],
+            [("shoulder", "base", "arm", (0, 0, 0), (0, 0, 0), "revolute", (0, 0, 1)),
+             (name, "arm", "tip", (0.5, 0, 0), (0, 0, 0), "revolute", (0, 1, 0))],
+        )  # fmt: skip
+        robots[name] = load_model(path, springs={"shoulder": 100.0, name: 50.0}, geometry=False)
+    plain, named = robots["elbow"], robots["arm_beam_x"]
+    assert inserted_beams(named.model) == [] and beam_joints(named) == ()
+    q, preload = np.array([0.3, 0.2]), np.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(
+        cl.compliance(named, q, "tip", preload=preload).C,
+        cl.compliance(plain, q, "tip", preload=preload).C,
+    )
+    beamed, beamed_plain = (
+        named.with_beams({"arm": rod("arm_beam_x")}),
+        plain.with_beams({"arm": rod("elbow")}),
+    )
+    assert [b.name for b in inserted_beams(beamed.model)] == ["arm_beam"]
+    q_beam = map_configuration(named.model, beamed.model, q)
+    np.testing.assert_array_equal(
+        cl.compliance(beamed, q_beam, "tip", preload=preload).C,
+        cl.compliance(beamed_plain, q_beam, "tip", preload=preload).C,
+    )
 
 
 #: The one-element beam-column's error at P L^2 / EI = 1 (tests/model/test_beams.py: 0.2 %):
