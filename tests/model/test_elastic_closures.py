@@ -231,3 +231,9 @@ def test_a_small_load_moves_the_body_by_the_compliance(tmp_path, kind, spring):
         moved = frame_displacement(clm, eq.q, q, "at_A")
         gaps.append(np.abs(moved - C @ wrench).max() / np.abs(C @ wrench).max())
     assert gaps[0] < 2e-4 and gaps[1] < 0.15 * gaps[0]
+
+
+@pytest.mark.parametrize("bad", [[1e4] * 3 + [True] + [1e4] * 2, ["0_3"] * 6, [1e4] * 5])
+def test_a_spring_that_is_not_six_numbers_is_refused(tmp_path, bad):
+    with pytest.raises(InvalidInputError, match=r"expected 6 numbers"):
+        _held_body(tmp_path, "6d", bad)
