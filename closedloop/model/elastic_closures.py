@@ -60,6 +60,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from closedloop.common.arrays import real_array
 from closedloop.exceptions import InvalidInputError
 from closedloop.model.closures import CLOSURE_TYPES, Closure
 
@@ -112,8 +113,8 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
     """
     what = f"closure {closure.name!r} of type {closure.kind!r}"
     try:
-        K = np.array(value, dtype=float)
-    except (TypeError, ValueError):
+        K = real_array(value, f"the spring of {what}")
+    except InvalidInputError:  # not numbers: the message below says what is expected
         K = np.empty(0)
     if K.shape not in ((6,), (6, 6)) or np.isnan(K).any():
         raise InvalidInputError(

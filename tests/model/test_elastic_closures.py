@@ -210,3 +210,30 @@ def test_a_universal_pair_refuses_a_coupled_spring_and_a_free_cross_rotation(
 ):
     with pytest.raises(InvalidInputError, match=match):
         _held_body(tmp_path, "universal", spring)
+
+
+@pytest.mark.parametrize(("kind", "spring"), [("3d", "diagonal"), ("revolute", "singular")])
+def test_a_small_load_moves_the_body_by_the_compliance(tmp_path, kind, spring):
+    """The nonlinear equilibrium under a small wrench at at_A (the ball's rotations, a
+    singular bushing's screws solved with the rest) against the linear compliance: they
+    differ at second order, the difference falls 10 times with the load."""
+    from closedloop.elastostatics.equilibrium import frame_displacement
+
+    if spring == "diagonal":
+        clm, q = _held_body(tmp_path, kind, DIAGONAL)
+    else:
+        clm, q = _held_body(tmp_path, kind, _singular(2), second=DIAGONAL)
+    C = cl.compliance(clm, q, "at_A").C
+    gaps = []
+    for scale in (0.01, 0.001):  # deflections ~1e-6 m, rotations ~1e-5 rad and less
+        wrench = scale * np.array([2.0, -3.0, 4.0, 0.02, -0.03, 0.01])  # world axes, at_A
+        eq = cl.solve_equilibrium(clm, q, "at_A", wrench)
+        moved = frame_displacement(clm, eq.q, q, "at_A")
+        gaps.append(np.abs(moved - C @ wrench).max() / np.abs(C @ wrench).max())
+    assert gaps[0] < 2e-4 and gaps[1] < 0.15 * gaps[0]
+
+
+@pytest.mark.parametrize("bad", [[1e4] * 3 + [True] + [1e4] * 2, ["0_3"] * 6, [1e4] * 5])
+def test_a_spring_that_is_not_six_numbers_is_refused(tmp_path, bad):
+    with pytest.raises(InvalidInputError, match=r"expected 6 numbers"):
+        _held_body(tmp_path, "6d", bad)
