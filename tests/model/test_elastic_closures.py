@@ -80,9 +80,10 @@ def _held_body(tmp_path, kind: str, spring, second=None) -> tuple:
 {_origin(AT_REST[kind].inverse() * SPRING_FRAME.get(kind, pin.SE3.Identity()))}</joint>
 </robot>"""
     (tmp_path / "held.urdf").write_text(urdf)
-    pairs, springs = [["A", "body"]], {0: np.asarray(spring).tolist()}
+    listed = lambda x: x.tolist() if isinstance(x, np.ndarray) else x  # noqa: E731
+    pairs, springs = [["A", "body"]], {0: listed(spring)}
     if second is not None:
-        pairs, springs[1] = [*pairs, ["A2", "B2"]], np.asarray(second).tolist()
+        pairs, springs[1] = [*pairs, ["A2", "B2"]], listed(second)
     types = ", ".join([f"'{kind}'"] * len(pairs))
     (tmp_path / "held.yaml").write_text(f"closed_loop: {pairs}\ntype: [{types}]\nname_mot: []\n")
     clm = load_model(
