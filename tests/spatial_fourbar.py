@@ -40,6 +40,9 @@ SHARED = [
     ("rocker_tilt", "rocker_turn", "rocker_link", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
 ]
 C_COUPLER, C_ROCKER = (0.3, 0, 0.05), (0, 0, 0.15)  # the pin C on either side, z along -y
+#: The rocker cut in two at its middle, the halves welded (the loop closed there).
+_ROCKER_CUT = [("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+               ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)]
 DESCRIPTIONS = {
     "revolute closure": (
         [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
@@ -55,8 +58,7 @@ DESCRIPTIONS = {
     ),
     "pin in the tree, rocker welded": (  # the rocker cut in two at its middle
         [("pin_C", "coupler_body", "rocker_top", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+         *_ROCKER_CUT],
         [["wA", "wB"]], ["6d"],
     ),
     "universal closure": (  # the pin C replaced by a universal joint: axes y, then x
@@ -67,8 +69,7 @@ DESCRIPTIONS = {
     "universal in the tree, rocker welded": (
         [("u1", "coupler_body", "u_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
          ("u2", "u_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "revolute", (1, 0, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+         *_ROCKER_CUT],
         [["wA", "wB"]], ["6d"],
     ),
     "cylindrical closure": (  # the pin C replaced by a cylindrical joint along y
@@ -79,8 +80,7 @@ DESCRIPTIONS = {
     "cylindrical in the tree, rocker welded": (
         [("c1", "coupler_body", "c_mid", C_COUPLER, (0, 0, 0), "revolute", (0, 1, 0)),
          ("c2", "c_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, 1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)],
+         *_ROCKER_CUT],
         [["wA", "wB"]], ["6d"],
     ),
 }  # fmt: skip
@@ -89,15 +89,14 @@ DESCRIPTIONS = {
 #: The four-bar closed at C by other closures (not assembled away from the drawing: a
 #: prismatic closure at C locks the crank) and their tree equivalents.
 _REVOLUTE_AT_C = DESCRIPTIONS["revolute closure"][0]
-_ROCKER_WELDED = [("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)]
+_ROCKER_WELDED = _ROCKER_CUT[1:]
 ELASTIC_DESCRIPTIONS = {
     "weld at C": (_REVOLUTE_AT_C, [["cA", "cB"]], ["6d"]),
     "prismatic closure": (_REVOLUTE_AT_C, [["cA", "cB"]], ["prismatic"]),
     "slides in the tree, rocker welded": (  # along A's x (world x) and z (world -y)
         [("s_x", "coupler_body", "s_mid", C_COUPLER, (0, 0, 0), "prismatic", (1, 0, 0)),
          ("s_z", "s_mid", "rocker_top", (0, 0, 0), (0, 0, 0), "prismatic", (0, -1, 0)),
-         ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-         *_ROCKER_WELDED],
+         *_ROCKER_CUT],
         [["wA", "wB"]], ["6d"],
     ),
     "bushing in the tree, rocker welded": (  # a free flyer in A's axes (x, -z, y of world)

@@ -139,6 +139,19 @@ def check_wrench(w, name: str = "wrench") -> np.ndarray:
     return w
 
 
+def symmetrized(K: np.ndarray, rtol: float, what: str, expected: str) -> np.ndarray:
+    """(K + K^T) / 2 of a square matrix K whose asymmetry max|K - K^T| is at most ``rtol``
+    times max|K|, else an InvalidInputError: "``what`` is not symmetric (...); expected
+    ``expected``"."""
+    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
+    if skew > rtol * scale:
+        raise InvalidInputError(
+            f"{what} is not symmetric (max |K - K^T| = {skew:.3g}, max |K| = {scale:.3g}); "
+            f"expected {expected}"
+        )
+    return 0.5 * (K + K.T)
+
+
 def upper_triangular_inverses(R: np.ndarray) -> np.ndarray:
     """(n, p, p) inverses of the upper triangular matrices R (n, p, p) (the entries below
     the diagonal are not read).

@@ -60,7 +60,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import real_array
+from closedloop.common.arrays import real_array, symmetrized
 from closedloop.exceptions import InvalidInputError
 from closedloop.model.closures import CLOSURE_TYPES, Closure
 
@@ -138,13 +138,10 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
             f"{what} given the 6x6 spring {value!r} with infinite entries; expected a "
             "finite 6x6 (a full bushing), or 6 values (.inf for a rigid direction)"
         )
-    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
-    if skew > SYMMETRY_RTOL * scale:
-        raise InvalidInputError(
-            f"{what} given the 6x6 spring {value!r}, not symmetric (max |K - K^T| = "
-            f"{skew:.3g}); expected a symmetric positive semi-definite matrix"
-        )
-    K = 0.5 * (K + K.T)
+    K = symmetrized(
+        K, SYMMETRY_RTOL, f"{what} given the 6x6 spring {value!r}",
+        "a symmetric positive semi-definite matrix",
+    )  # fmt: skip
     d = _balance(K)
     lam = np.linalg.eigvalsh(K * np.outer(d, d))  # unit-balanced
     if lam[0] < -SYMMETRY_RTOL * lam[-1]:

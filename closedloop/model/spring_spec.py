@@ -10,7 +10,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import frozen, real_array
+from closedloop.common.arrays import frozen, real_array, symmetrized
 from closedloop.exceptions import InvalidInputError
 from closedloop.model.closures import joint_id
 
@@ -40,13 +40,10 @@ def _spd_block(name: str, K: np.ndarray, nv: int) -> np.ndarray:
         raise InvalidInputError(
             f"stiffness block of joint {name!r} has non-finite entries: {K.tolist()}"
         )
-    scale, skew = np.max(np.abs(K)), np.max(np.abs(K - K.T))
-    if skew > BLOCK_SYMMETRY_RTOL * scale:
-        raise InvalidInputError(
-            f"stiffness block of joint {name!r} is not symmetric (max |K - K^T| = {skew:.3g}, "
-            f"max |K| = {scale:.3g}); expected a symmetric positive definite matrix"
-        )
-    K = 0.5 * (K + K.T)
+    K = symmetrized(
+        K, BLOCK_SYMMETRY_RTOL, f"stiffness block of joint {name!r}",
+        "a symmetric positive definite matrix",
+    )  # fmt: skip
     try:
         np.linalg.cholesky(K)
     except np.linalg.LinAlgError:
