@@ -1,7 +1,8 @@
 """The overlay of the viewer page: title, HTML legend in screen space, page script.
 
 The legend (a fixed ``<div id="closedloop-legend">`` over the WebGL canvas, so it reads
-the same from any view point) gives the model and pose, the wrench components, the
+the same from any view point; drawn at 70 % in a window narrower than 1100 px or lower
+than 760 px, at 50 % below 700 x 500 px, to leave the robot in view) gives the model and pose, the wrench components, the
 amplification, the real largest displacement and link rotation with the caps of the
 automatic amplification, the loaded frame's displacement (mm, deg), and the colour key
 of ghost, deflected robot, arrows, ellipsoids and grid.
@@ -49,6 +50,10 @@ _STYLE = """<style>
 #closedloop-legend .cl-bar-title { margin-top: 4px; }
 #closedloop-legend .cl-bar .cl-swatch { height: 10px; }
 #closedloop-legend .cl-ticks { display: flex; justify-content: space-between; width: 302px; }
+@media (max-width: 1100px), (max-height: 760px) {
+  #closedloop-legend { transform: scale(0.7); transform-origin: 0 0; } }
+@media (max-width: 700px), (max-height: 500px) {
+  #closedloop-legend { transform: scale(0.5); } }
 </style>"""
 
 _SCRIPT = """<script>
