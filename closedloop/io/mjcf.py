@@ -253,16 +253,21 @@ def _equality(element: ET.Element, where: str) -> Equality:
 
 
 def _check_springref(attrs: dict[str, str], what: str, where: str) -> None:
-    """Warn of a spring whose ``springref`` differs from its ``ref``: its rest is then not
-    at ``qpos0``, where the springs are taken at rest."""
-    if "springref" not in attrs or not read_numbers(attrs["stiffness"], 1, where, what)[0]:
+    """Warn of a hinge or slide spring whose rest ``springref`` (MuJoCo's default: 0)
+    differs from its ``ref``: MuJoCo's spring is then not at rest at ``qpos0``, where the
+    springs are taken at rest (a ball or free joint's spring is at rest at ``qpos0``)."""
+    if attrs.get("type", "hinge") not in ("hinge", "slide"):
         return
-    rest = read_numbers(attrs["springref"], 1, where, f"springref of {what}")[0]
+    if not read_numbers(attrs["stiffness"], 1, where, what)[0]:
+        return
+    text = attrs.get("springref", "0")
+    rest = read_numbers(text, 1, where, f"springref of {what}")[0]
     if rest != read_numbers(attrs.get("ref", "0"), 1, where, f"ref of {what}")[0]:
+        given = "" if "springref" in attrs else " (MuJoCo's default: no springref given)"
         warnings.warn(
-            f"{where}: {what} has springref={attrs['springref']!r}, not its ref "
-            f"{attrs.get('ref', '0')!r}: springref is not read, the spring is taken at rest at "
-            "qpos0",
+            f"{where}: {what} has springref={text!r}{given}, not its ref "
+            f"{attrs.get('ref', '0')!r}: MuJoCo's spring is at rest at qpos = springref; here "
+            "it is taken at rest at qpos0 (write springref equal to ref)",
             IgnoredFeatureWarning,
             stacklevel=3,
         )
