@@ -189,9 +189,13 @@ def test_mjcf_springref_at_ref_does_not_warn(fourbar_mjcf, tmp_path, recwarn):
     """The crank's springref is its ref; the slides have neither (both 0); a ball joint's
     spring is at rest at qpos0 whatever its springref (MuJoCo ignores it)."""
     io.load_model(fourbar_mjcf, geometry=False)
-    text = fourbar_mjcf.read_text().replace(
-        '<joint name="rocker_axial" type="slide"', '<joint name="rocker_axial" type="ball"'
-    ).replace('stiffness="2e5"', 'stiffness="2e5" springref="0.1"')
+    text = (
+        fourbar_mjcf.read_text()
+        .replace(
+            '<joint name="rocker_axial" type="slide"', '<joint name="rocker_axial" type="ball"'
+        )
+        .replace('stiffness="2e5"', 'stiffness="2e5" springref="0.1"')
+    )
     io.load_model(write(tmp_path, "r.xml", text), geometry=False)
     assert not [w for w in recwarn if issubclass(w.category, IgnoredFeatureWarning)]
 
