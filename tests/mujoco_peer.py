@@ -1,0 +1,155 @@
+"""MuJoCo (the ``mujoco-core`` package) as an independent reader of MJCF files.
+
+A plain module, not a test module. MuJoCo compiles the original file with its own parser
+and kinematics; the library reads it through Pinocchio and its corrections. The helpers
+here only translate between the two: joint coordinates by joint name (MuJoCo's
+quaternions are w x y z, Pinocchio's x y z w; hinge and slide values are the same
+numbers, both being MuJoCo's ``qpos``), bodies, sites and equalities by name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from closedloop.model.closed_loop import ClosedLoopModel
+
+
+def mujoco():
+    """The ``mujoco`` module, or the calling test skipped, saying how to install it."""
+    return pytest.importorskip(
+        "mujoco", reason="MuJoCo is not installed (pip install '.[test]', mujoco-core)"
+    )
+
+
+def compiled(path: Path):
+    """(MjModel, MjData) of the file as MuJoCo compiles it."""
+    mj = mujoco()
+    m = mj.MjModel.from_xml_path(str(path))
+    return m, mj.MjData(m)
+
+
+def to_q(m, clm: ClosedLoopModel, qpos: np.ndarray) -> np.ndarray:
+    """The library's configuration (nq,) of MuJoCo's ``qpos`` (m.nq,), joint by joint."""
+    model = clm.model
+    q = pin.neutral(model)
+    for j in range(m.njnt):
+        joint = model.joints[model.getJointId(m.joint(j).name)]
+        a, nq = m.jnt_qposadr[j], joint.nq
+        values = qpos[a : a + nq]
+        if nq == 7:  # free: position, then quaternion
+            values = np.r_[values[:3], values[4:], values[3]]
+        elif nq == 4:  # ball
+            values = np.r_[values[1:], values[0]]
+        q[joint.idx_q : joint.idx_q + nq] = values
+    return q
+
+
+def one_dof(m, j: int) -> bool:
+    """Whether MuJoCo's joint ``j`` is a hinge or a slide."""
+    kinds = mujoco().mjtJoint
+    return int(m.jnt_type[j]) in (int(kinds.mjJNT_HINGE), int(kinds.mjJNT_SLIDE))
+
+
+def random_qpos(m, rng: np.random.Generator, turn: float = 1.0, slide: float = 0.02):
+    """``m.qpos0`` moved at random: hinges by up to ``turn`` [rad], slides by up to
+    ``slide`` [m], free positions by up to ``slide`` [m], quaternions to random ones."""
+    kinds = mujoco().mjtJoint
+    qpos = m.qpos0.copy()
+    for j in range(m.njnt):
+        a, kind = m.jnt_qposadr[j], int(m.jnt_type[j])
+        if kind == int(kinds.mjJNT_HINGE):
+            qpos[a] += rng.uniform(-turn, turn)
+        elif kind == int(kinds.mjJNT_SLIDE):
+            qpos[a] += rng.uniform(-slide, slide)
+        else:
+            if kind == int(kinds.mjJNT_FREE):
+                qpos[a : a + 3] += rng.uniform(-slide, slide, 3)
+                a += 3
+            quat = rng.normal(size=4)
+            qpos[a : a + 4] = quat / np.linalg.norm(quat)
+    return qpos
+
+
+def placements(m, d, clm: ClosedLoopModel, qpos: np.ndarray) -> dict[str, tuple]:
+    """{"body NAME" / "site NAME": (MuJoCo's, the library's)} world placements
+    ((4, 4) homogeneous matrices [m]) of every named body but the world, and every site,
+    at ``qpos``."""
+    mj = mujoco()
+    d.qpos[:] = qpos
+    mj.mj_kinematics(m, d)
+    model, data = clm.model, clm.model.createData()
+    pin.framesForwardKinematics(model, data, to_q(m, clm, qpos))
+
+    def library(name: str, kind) -> np.ndarray:
+        assert model.existFrame(name, kind), f"the library has no frame {name!r}"
+        return data.oMf[model.getFrameId(name, kind)].homogeneous
+
+    out = {}
+    for b in range(1, m.nbody):
+        M = homogeneous(d.xmat[b], d.xpos[b])
+        out[f"body {m.body(b).name}"] = (M, library(m.body(b).name, pin.FrameType.BODY))
+    for s in range(m.nsite):
+        M = homogeneous(d.site_xmat[s], d.site_xpos[s])
+        out[f"site {m.site(s).name}"] = (M, library(m.site(s).name, pin.FrameType.OP_FRAME))
+    return out
+
+
+def homogeneous(xmat: np.ndarray, xpos: np.ndarray) -> np.ndarray:
+    """(4, 4) of a MuJoCo rotation (9,) row-major and position (3,) [m]."""
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = np.reshape(xmat, (3, 3)), xpos
+    return M
+
+
+def equality_ends(m, d, e: int) -> tuple[np.ndarray, np.ndarray]:
+    """World placements (4, 4) [m] of the two ends of MuJoCo's equality ``e`` after
+    ``mj_kinematics``, as ``eq_data`` defines them (MuJoCo's XML reference,
+    ``equality/connect`` and ``equality/weld``; the point constraint is their positions'
+    difference, the weld's rotation the difference of their orientations):
+
+    * connect: body1's point ``eq_data[0:3]`` (the ``anchor``) and body2's point
+      ``eq_data[3:6]`` (where the anchor is at ``qpos0``); orientations are body1's and
+      body2's, unconstrained;
+    * weld: body1's frame moved by ``eq_data[3:10]`` (``relpose``: position, quaternion
+      w x y z; the pose at ``qpos0`` when the file's quaternion is zero) and body2's frame
+      moved to ``eq_data[0:3]`` (the ``anchor``).
+    """
+    mj = mujoco()
+    b1, b2, data = m.eq_obj1id[e], m.eq_obj2id[e], m.eq_data[e]
+    X1, X2 = (homogeneous(d.xmat[b], d.xpos[b]) for b in (b1, b2))
+    if m.eq_type[e] == mj.mjtEq.mjEQ_CONNECT:
+        return X1 @ offset(np.eye(3), data[0:3]), X2 @ offset(np.eye(3), data[3:6])
+    R = np.empty(9)
+    mj.mju_quat2Mat(R, data[6:10] / np.linalg.norm(data[6:10]))
+    return X1 @ offset(R.reshape(3, 3), data[3:6]), X2 @ offset(np.eye(3), data[0:3])
+
+
+def offset(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = R, p
+    return M
+
+
+def closure_name(m, e: int) -> str:
+    """The library's name of MuJoCo's equality ``e``: its own, else ``<tag><i>``, the i-th
+    of its kind in the file."""
+    if m.eq(e).name:
+        return m.eq(e).name
+    tag = "connect" if m.eq_type[e] == mujoco().mjtEq.mjEQ_CONNECT else "weld"
+    return f"{tag}{int(np.sum(m.eq_type[:e] == m.eq_type[e]))}"
+
+
+def library_ends(clm: ClosedLoopModel, name: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World placements (4, 4) [m] of the two anchors of the library's closure ``name`` at
+    q (the library's configuration)."""
+    (closure,) = [c for c in clm.closures if c.name == name]
+    c = closure.constraint
+    data = clm.model.createData()
+    pin.forwardKinematics(clm.model, data, q)
+    M1 = data.oMi[c.joint1_id] * c.joint1_placement
+    M2 = data.oMi[c.joint2_id] * c.joint2_placement
+    return M1.homogeneous, M2.homogeneous
