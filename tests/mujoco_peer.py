@@ -153,3 +153,43 @@ def library_ends(clm: ClosedLoopModel, name: str, q: np.ndarray) -> tuple[np.nda
     M1 = data.oMi[c.joint1_id] * c.joint1_placement
     M2 = data.oMi[c.joint2_id] * c.joint2_placement
     return M1.homogeneous, M2.homogeneous
+
+
+#: A serial arm with a spring on every joint (no loop), for statics and vibration: hinges
+#: (one with ``ref`` and ``springref`` away from 0), a slide and a ball joint, world
+#: gravity off, ``armature`` 0 (MuJoCo then adds nothing to the mass matrix). Inertias off
+#: their bodies' origins, rotated or full; the body ``tool`` has its centre of mass at
+#: its origin, where MuJoCo's ``xfrc_applied`` acts.
+SPRUNG_ARM = """<mujoco model="sprung_arm">
+  <compiler angle="radian"/>
+  <option gravity="0 0 0"/>
+  <default><joint armature="0" damping="0"/></default>
+  <worldbody>
+    <body name="base" pos="0 0 0.1">
+      <joint name="yaw" axis="0 0 1" stiffness="30"/>
+      <inertial pos="0.02 0.01 0.1" mass="1.5" diaginertia="0.02 0.03 0.01"/>
+      <body name="upper" pos="0 0 0.2" euler="0 0.4 0">
+        <joint name="pitch" axis="0 1 0" ref="0.4" springref="0.4" stiffness="50"/>
+        <inertial pos="0.15 0 0.01" quat="0.9 0.1 0.3 0" mass="1.2"
+                  diaginertia="0.002 0.012 0.011"/>
+        <body name="fore" pos="0.3 0 0">
+          <joint name="reach" type="slide" axis="1 0 0" stiffness="2e4"/>
+          <inertial pos="0.1 0.005 0" mass="0.8" fullinertia="0.001 0.004 0.0045 1e-4 -2e-4 5e-5"/>
+          <body name="wrist" pos="0.2 0 0" axisangle="0 0 1 0.3">
+            <joint name="roll" axis="1 0 0" stiffness="20"/>
+            <inertial pos="0.02 0 0" mass="0.3" diaginertia="3e-4 2e-4 2e-4"/>
+            <body name="hand" pos="0.05 0 0">
+              <joint name="ball" type="ball" stiffness="15"/>
+              <inertial pos="0.04 0.01 0" mass="0.25" diaginertia="2e-4 3e-4 2.5e-4"/>
+              <body name="tool" pos="0.1 0.02 -0.03">
+                <inertial pos="0 0 0" quat="0.8 0 0.6 0" mass="0.4"
+                          diaginertia="4e-4 3e-4 2e-4"/>
+              </body>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
