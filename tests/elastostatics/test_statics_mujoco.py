@@ -8,7 +8,10 @@ configuration where MuJoCo's net generalised force ``qfrc_smooth`` (its joint sp
 ``mj_forward`` alone, the coordinates moved by MuJoCo's ``mj_integratePos``. Against it,
 the library's nonlinear equilibrium (``cl.solve_equilibrium``) under large loads and its
 compliance against MuJoCo's response to small ones. No loop: MuJoCo's equality
-constraints are soft, the library's closures rigid.
+constraints are soft in its simulation, the library's closures rigid: for the closed
+loops, MuJoCo's constraint residual ``efc_pos`` and Jacobian ``efc_J`` of each
+``<connect>`` are taken as rigid constraints with Lagrange multipliers (never its soft
+solver), the load mapped by its ``mj_applyFT``.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.optimize
-from helpers import assert_close_in_norm
+from helpers import ATOL_CLOSURE, REPO, assert_close_in_norm
 from mujoco_peer import SPRUNG_ARM, compiled, mujoco, to_q
 from scipy.spatial.transform import Rotation
 
@@ -130,3 +133,66 @@ def test_compliance_is_mujocos_small_load_response(arm):
     C = cl.compliance(cl.Configuration(clm, reference_configuration(clm)), "tool").C
     scale = np.r_[np.ones(3), np.full(3, ARM_LENGTH)]
     assert_close_in_norm(C, np.column_stack(columns), COMPLIANCE_RTOL, scale)
+
+
+#: Closed MJCF models, their loaded frame (a site, else a body origin) and a wrench (N,
+#: N m; world axes, at the frame) that moves their joints by 3e-3 to 6e-2 rad or m. Not the
+#: Delta: its rods spin freely about their axes, a motion without spring or load that
+#: leaves MuJoCo's full-coordinate equations singular.
+LOOPS = {
+    "fourbar": ("P", [30.0, 0.0, -20.0, 0.0, 4.0, 0.0]),
+    "fivebar5": ("E", [30.0, -20.0, 0.0, 0.0, 0.0, 0.0]),
+    "rrr3": ("platform", [30.0, -20.0, 0.0, 0.0, 0.0, 5.0]),
+    "stewart": ("platform", [300.0, -200.0, 500.0, 40.0, -30.0, 60.0]),
+}
+
+
+def mujoco_loop_equilibrium(m, d, frame: str, wrench: np.ndarray) -> np.ndarray:
+    """MuJoCo's ``qpos`` (nq,) where ``wrench`` at ``frame`` balances the joint springs
+    and the rigid equality constraints (``efc_pos`` = 0, forces ``efc_J^T lambda``),
+    gravity off, solved from ``qpos0``."""
+    mj = mujoco()
+    m.opt.gravity[:] = 0.0
+    m.opt.jacobian = mj.mjtJacobian.mjJAC_DENSE
+    if frame in [m.site(i).name for i in range(m.nsite)]:
+        site = m.site(frame).id
+        body, point = m.site_bodyid[site], lambda: d.site_xpos[site].copy()
+    else:
+        body = m.body(frame).id
+        point = lambda: d.xpos[body].copy()  # noqa: E731
+
+    def qpos(x: np.ndarray) -> np.ndarray:
+        out = m.qpos0.copy()
+        mj.mj_integratePos(m, out, x, 1.0)
+        return out
+
+    def equations(z: np.ndarray) -> np.ndarray:
+        d.qpos[:], d.qvel[:] = qpos(z[: m.nv]), 0.0
+        mj.mj_forward(m, d)
+        load = np.zeros(m.nv)
+        mj.mj_applyFT(m, d, wrench[:3], wrench[3:], point(), body, load)
+        J = d.efc_J[: d.ne * m.nv].reshape(d.ne, m.nv)
+        return np.r_[d.qfrc_spring + load + J.T @ z[m.nv :], d.efc_pos[: d.ne]]
+
+    d.qpos[:] = m.qpos0
+    mj.mj_forward(m, d)
+    solution = scipy.optimize.root(equations, np.zeros(m.nv + d.ne), method="hybr", tol=1e-15)
+    residual = equations(solution.x)
+    assert np.abs(residual[: m.nv]).max() <= ROOT_FORCE_TOL, solution.message
+    assert np.abs(residual[m.nv :]).max() <= ATOL_CLOSURE, solution.message
+    return qpos(solution.x[: m.nv])
+
+
+@pytest.mark.parametrize("name", LOOPS)
+def test_closed_loop_equilibrium_is_mujocos(name):
+    """The bundled closed MJCF models under a load: the library's equilibrium is MuJoCo's
+    with its equality constraints held rigid."""
+    frame, wrench = LOOPS[name]
+    path = REPO / "urdf" / f"{name}.xml"
+    (m, d), clm = compiled(path), load_model(path, geometry=False)
+    qpos = mujoco_loop_equilibrium(m, d, frame, np.array(wrench))
+    eq = cl.solve_equilibrium(clm, reference_configuration(clm), frame, wrench)
+    assert np.abs(eq.joint_deflection).max() > 1e-3
+    np.testing.assert_allclose(
+        pin.difference(clm.model, to_q(m, clm, qpos), eq.q), 0.0, atol=EQUILIBRIUM_TOL
+    )
