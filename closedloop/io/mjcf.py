@@ -107,7 +107,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
 
     Raises:
         ModelFileError: invalid XML, ``<include>``, a ``<frame>`` or ``<replicate>`` holding
-            bodies or joints, an equality other than connect/weld or without body1, an
+            bodies, joints or sites, an equality other than connect/weld or without body1, an
             ``active`` other than true/false, a repeated joint, body or equality name, an
             unknown joint type, a hinge or slide whose axis is the zero vector, a range or
             axis that is not numbers, a range whose lower bound is above its upper one, a
@@ -124,10 +124,10 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
     for tag in ("frame", "replicate"):  # Pinocchio drops what they hold
-        if root.find(f".//{tag}//body") is not None or root.find(f".//{tag}//joint") is not None:
+        if any(root.find(f".//{tag}//{held}") is not None for held in ("body", "joint", "site")):
             raise ModelFileError(
-                f"{where}: <{tag}> holding bodies or joints is not supported (Pinocchio's "
-                f"parser drops them); write the bodies without <{tag}>"
+                f"{where}: <{tag}> holding bodies, joints or sites is not supported "
+                f"(Pinocchio's parser drops them); write them without <{tag}>"
             )
     check_classes(root, where)
     _check_tendons(root, where)  # before the classes are written out and removed
