@@ -1,7 +1,7 @@
 """Natural frequencies of a sprung serial MJCF arm against MuJoCo's mass matrix.
 
 MuJoCo compiles :data:`mujoco_peer.SPRUNG_ARM` (inertias off their bodies' origins,
-rotated, full; ``armature`` 0) and gives its joint-space mass matrix at a configuration
+rotated, full; ``armature`` 0) and :data:`GEOM_CHAIN` (inertias from geoms) and gives its joint-space mass matrix at a configuration
 (``mj_fullM`` after ``mj_forward``); its joint springs give the stiffness, diagonal in
 MuJoCo's velocity coordinates (a ball joint's three, in its body's axes, each with the
 joint's ``stiffness``: the linearisation of MuJoCo's ball spring about its rest). The
@@ -26,10 +26,37 @@ from closedloop.io.loader import load_model
 FREQUENCY_RTOL = 1e-9
 
 
-@pytest.fixture(scope="module")
-def arm(tmp_path_factory):
-    path = tmp_path_factory.mktemp("arm") / "arm.xml"
-    path.write_text(SPRUNG_ARM)
+#: A sprung chain without ``<inertial>``: MuJoCo and the library take each body's mass
+#: and inertia from its geoms (a box, a capsule given by ``fromto``, a sphere with a
+#: ``mass``, a rotated cylinder with a ``density``, an ellipsoid; density 1000 kg/m^3).
+GEOM_CHAIN = """<mujoco model="geom_chain">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="a" pos="0 0 0.1">
+      <joint name="j1" axis="0 0 1" stiffness="10"/>
+      <geom type="box" size="0.05 0.02 0.01" pos="0.05 0 0"/>
+      <body name="b" pos="0.1 0 0">
+        <joint name="j2" axis="0 1 0" stiffness="20"/>
+        <geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.01"/>
+        <body name="c" pos="0.2 0 0">
+          <joint name="j3" axis="1 0 0" stiffness="5"/>
+          <geom type="sphere" size="0.03" pos="0.02 0.01 0" mass="0.3"/>
+          <geom type="cylinder" size="0.01 0.04" pos="0 0 0.05" euler="0.3 0 0" density="2000"/>
+          <geom type="ellipsoid" size="0.01 0.02 0.03" pos="0.05 0 0"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+MODELS = {"arm": SPRUNG_ARM, "geom_chain": GEOM_CHAIN}
+
+
+@pytest.fixture(scope="module", params=list(MODELS))
+def arm(tmp_path_factory, request):
+    """(MjModel, MjData, the library's model) of each of :data:`MODELS`."""
+    path = tmp_path_factory.mktemp("arm") / f"{request.param}.xml"
+    path.write_text(MODELS[request.param])
     return (*compiled(path), load_model(path, geometry=False))
 
 
@@ -59,5 +86,5 @@ def test_frequencies_are_mujocos(arm, seed):
     d.qpos[:] = m.qpos0 if rng is None else random_qpos(m, rng)
     expected = mujoco_frequencies(m, d)
     result = cl.modes(clm, to_q(m, clm, d.qpos))
-    assert expected.shape == (7,) and expected[0] > 0  # every motion sprung and massive
+    assert expected.shape == (m.nv,) and expected[0] > 0  # every motion sprung and massive
     np.testing.assert_allclose(result.frequencies, expected, rtol=FREQUENCY_RTOL)

@@ -97,10 +97,15 @@ FILES = {
         <body name="b2" pos="0.2 0 0" axisangle="1 1 1 45">
           <joint name="j2" axis="1 0 1" ref="10"/>{INERTIAL}<site name="s2" pos="0 0 0.1"/>
         </body></body></worldbody></mujoco>""",
-    # euler angles in another (intrinsic) sequence, in degrees
-    "euler": f"""<mujoco model="euler"><compiler angle="degree" eulerseq="zyx"/><worldbody>
+    # euler angles in another (intrinsic) sequence, in degrees; xyaxes and zaxis
+    "orientations": f"""<mujoco model="orientations">
+      <compiler angle="degree" eulerseq="zyx"/><worldbody>
       <body name="b1" pos="0 0.1 0" euler="30 -20 10"><joint name="j1" axis="1 0 0"/>
-        {INERTIAL}<site name="s1" pos="0.1 0 0" euler="5 60 -15"/></body>
+        {INERTIAL}<site name="s1" pos="0.1 0 0" euler="5 60 -15"/>
+        <body name="b2" pos="0 0 0.1" xyaxes="0 1 0 -1 0 1"><joint name="j2" axis="0 0 1"/>
+          {INERTIAL}<site name="s2" pos="0.12 0 0" zaxis="1 1 0"/>
+          <body name="b3" pos="0.2 0 0" zaxis="0 1 1"><joint name="j3" axis="1 0 0"/>
+            {INERTIAL}<site name="s3" pos="0 0 0.1" xyaxes="1 0 0 0 0 1"/></body></body></body>
       </worldbody></mujoco>""",
     # ranges: hinge ranges in degrees and shifted by ref, a slide's in metres, limited="false"
     "ranges": f"""<mujoco model="ranges"><compiler angle="degree" autolimits="true"/><worldbody>
