@@ -32,19 +32,34 @@ def compiled(path: Path):
     return m, mj.MjData(m)
 
 
-def to_q(m, clm: ClosedLoopModel, qpos: np.ndarray) -> np.ndarray:
-    """The library's configuration (nq,) of MuJoCo's ``qpos`` (m.nq,), joint by joint."""
-    model = clm.model
-    q = pin.neutral(model)
+def coordinates(m, clm: ClosedLoopModel) -> list[tuple[int, int]]:
+    """(first configuration index, first velocity index) in the library of each of MuJoCo's
+    joints: the joints in the same order (depth first), each where the library's joint of
+    its name starts, or next (the later joints of a body, which Pinocchio merges into a
+    composite joint named after the first)."""
+    model, out, i, v = clm.model, [], 0, 0
     for j in range(m.njnt):
-        joint = model.joints[model.getJointId(m.joint(j).name)]
-        a, nq = m.jnt_qposadr[j], joint.nq
+        if model.existJointName(m.joint(j).name):
+            joint = model.joints[model.getJointId(m.joint(j).name)]
+            i, v = joint.idx_q, joint.idx_v
+        out.append((i, v))
+        i += (m.jnt_qposadr[j + 1] if j + 1 < m.njnt else m.nq) - m.jnt_qposadr[j]
+        v += (m.jnt_dofadr[j + 1] if j + 1 < m.njnt else m.nv) - m.jnt_dofadr[j]
+    return out
+
+
+def to_q(m, clm: ClosedLoopModel, qpos: np.ndarray) -> np.ndarray:
+    """The library's configuration (nq,) of MuJoCo's ``qpos`` (m.nq,) (:func:`coordinates`)."""
+    q = pin.neutral(clm.model)
+    for j, (i, _) in enumerate(coordinates(m, clm)):
+        a = m.jnt_qposadr[j]
+        nq = (m.jnt_qposadr[j + 1] if j + 1 < m.njnt else m.nq) - a
         values = qpos[a : a + nq]
         if nq == 7:  # free: position, then quaternion
             values = np.r_[values[:3], values[4:], values[3]]
         elif nq == 4:  # ball
             values = np.r_[values[1:], values[0]]
-        q[joint.idx_q : joint.idx_q + nq] = values
+        q[i : i + nq] = values
     return q
 
 

@@ -20,6 +20,7 @@ from helpers import REPO
 from mujoco_peer import (
     closure_name,
     compiled,
+    coordinates,
     equality_ends,
     library_ends,
     mujoco,
@@ -116,6 +117,14 @@ FILES = {
             <joint name="u" axis="0 1 0" range="-10 10" limited="false"/>{INERTIAL}
             <body name="b4" pos="0.1 0 0"><joint name="v" axis="0 1 0" limited="true"
                 range="-5 5"/>{INERTIAL}</body></body></body></body>
+      </worldbody></mujoco>""",
+    # several joints in one body (a composite joint in Pinocchio), away from its origin
+    "composite": f"""<mujoco model="composite"><compiler angle="radian"/><worldbody>
+      <body name="a" pos="0 0 0.1" euler="0.1 0.2 0"><joint name="h1" pos="0.02 0 0"/>
+        <joint name="h2" axis="0 1 0" pos="0 0 0.03" ref="0.2"/>
+        <joint name="s" type="slide" axis="1 1 0"/>{INERTIAL}<site name="sa" pos="0.1 0 0"/>
+        <body name="b" pos="0.2 0 0"><joint name="b1" axis="1 0 0"/>{INERTIAL}
+          <site name="sb" pos="0 0.1 0"/></body></body>
       </worldbody></mujoco>""",
     # a lone root body without joint, rotated, with sites; a hinge away from its body origin
     "lone_root": f"""<mujoco model="lone_root"><compiler angle="radian"/><worldbody>
@@ -216,9 +225,9 @@ def test_springs_are_mujocos_at_rest_at_qpos0(files, name):
     m, _, clm = both(files[name])
     mujocos = {m.joint(j).name: float(m.jnt_stiffness[j]) for j in range(m.njnt)}
     assert dict(clm.springs) == {n: k for n, k in mujocos.items() if k > 0}
-    for j in range(m.njnt):
-        v = clm.joint_v_slice(m.joint(j).name)
-        np.testing.assert_array_equal(clm.stiffness[v], m.jnt_stiffness[j])
+    for j, (_, v) in enumerate(coordinates(m, clm)):
+        nv = (m.jnt_dofadr[j + 1] if j + 1 < m.njnt else m.nv) - m.jnt_dofadr[j]
+        np.testing.assert_array_equal(clm.stiffness[v : v + nv], m.jnt_stiffness[j])
         if m.jnt_stiffness[j] and one_dof(m, j):
             a = m.jnt_qposadr[j]
             assert m.qpos_spring[a] == m.qpos0[a], f"{name}: spring of {m.joint(j).name}"
@@ -229,8 +238,9 @@ def test_limits_are_mujocos(files, name):
     """A limited hinge or slide has MuJoCo's ``jnt_range`` (radians, metres); an unlimited
     one none."""
     m, _, clm = both(files[name])
-    for j in (j for j in range(m.njnt) if one_dof(m, j)):
-        i = clm.model.joints[clm.joint_id(m.joint(j).name)].idx_q
+    for j, (i, _) in enumerate(coordinates(m, clm)):
+        if not one_dof(m, j):
+            continue
         lib = clm.model.lowerPositionLimit[i], clm.model.upperPositionLimit[i]
         expected = m.jnt_range[j] if m.jnt_limited[j] else (-np.inf, np.inf)
         np.testing.assert_allclose(lib, expected, rtol=1e-15, err_msg=f"{m.joint(j).name}")
