@@ -342,6 +342,15 @@ def test_several_worldbody_sections_are_one(tmp_path):
 
 
 @pytest.mark.parametrize(
+    "bodies", ['body1="a" body2="a"', 'body1="world"', 'body1="world" body2="world"']
+)
+def test_an_equality_joining_a_body_to_itself_is_refused(tmp_path, bodies):
+    equality = f'<equality><connect {bodies} anchor="0 0 0"/></equality>'
+    text = mujoco(body("a", '<joint name="h"/>'), tail=equality)
+    refused(write(tmp_path, text), "joins body '(a|world)' to itself")
+
+
+@pytest.mark.parametrize(
     "held", [body("b", '<joint name="g"/>'), '<site name="s" pos="0.02 0 0"/>']
 )
 def test_bodies_and_sites_in_a_frame_are_refused(tmp_path, held):

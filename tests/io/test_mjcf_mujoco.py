@@ -58,7 +58,8 @@ FILES = {
       </body></worldbody>
       <equality><connect name="k" body1="arm_tip" body2="plat" anchor="0 0 0"/>
         <weld name="w" body1="child" body2="arm" anchor="0.1 0 0.02"/></equality></mujoco>""",
-    # connect and weld (relpose given or not, to the world) on bodies without joints
+    # connect and weld (relpose given or not; to the world, named or not) on bodies
+    # without joints
     "jointless": f"""<mujoco model="jointless"><compiler angle="radian"/><worldbody>
       <body name="ground" pos="0 0 0.1">
         <body name="crank"><joint name="crank" axis="0 1 0" stiffness="400"/>{INERTIAL}
@@ -75,7 +76,8 @@ FILES = {
         <weld name="R" body1="coupler_tip" body2="rocker_tip" anchor="0.1 0 0.02"
               relpose="0.1 0 0 0.9 0.1 0.2 0.1"/>
         <connect name="G" body1="rocker_tip" anchor="0 0.01 0"/>
-        <weld name="GW" body1="coupler_tip" relpose="0.2 0 0.1 1 0 0 0"/>
+        <connect name="GC" body1="coupler" body2="world" anchor="0.02 0 0.03"/>
+        <weld name="GW" body1="world" body2="coupler_tip" relpose="0.2 0 0.1 1 0 0 0"/>
         <connect name="off" body1="crank" body2="rocker" anchor="0 0 0" active="false"/>
       </equality></mujoco>""",
     # <default> classes: joint axis, pos, ref, stiffness, range; site pos and orientation
