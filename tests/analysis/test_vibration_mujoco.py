@@ -3,9 +3,9 @@
 MuJoCo compiles :data:`mujoco_peer.SPRUNG_ARM` (inertias off their bodies' origins,
 rotated, full; ``armature`` 0) and :data:`GEOM_CHAIN` (inertias from geoms) and gives
 their joint-space mass matrix at a configuration (``mj_fullM`` after ``mj_forward``); the
-joint springs give the stiffness, diagonal in
-MuJoCo's velocity coordinates (a ball joint's three, in its body's axes, each with the
-joint's ``stiffness``: the linearisation of MuJoCo's ball spring about its rest). The
+joint springs give the stiffness, diagonal in MuJoCo's velocity coordinates (a ball
+joint's three, in its body's axes, each with the joint's ``stiffness``: the
+linearisation of MuJoCo's ball spring about its rest). The
 generalised eigenproblem K y = omega^2 M y, solved by scipy, gives the frequencies that
 ``cl.modes`` must give (the modes about the configuration, unloaded: no geometric
 stiffness).
