@@ -107,14 +107,15 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
 
     Raises:
         ModelFileError: invalid XML, ``<include>``, a ``<frame>`` or ``<replicate>`` holding
-            bodies or joints, an equality other than connect/weld or without body1, an
-            ``active`` other than true/false, a repeated joint, body or equality name, an
-            unknown joint type, a hinge or slide whose axis is the zero vector, a range or
-            axis that is not numbers, a range whose lower bound is above its upper one, a
-            joint with a nonzero stiffness but no name, a malformed position or orientation
-            (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor, a class that no
-            ``<default>`` defines, a ``limited`` other than true/false/auto, ``euler``
-            angles with an upper-case (extrinsic) ``eulerseq``, a spring on a joint that
+            bodies, joints or sites, an equality other than connect/weld, without body1 or
+            joining a body to itself, an ``active`` other than true/false, a repeated joint,
+            body or equality name, an unknown joint type, a hinge or slide whose axis is the
+            zero vector, a range or axis that is not numbers, a range whose lower bound is
+            above its upper one, a joint with a nonzero stiffness but no name, a malformed
+            position or orientation (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor,
+            a class that no ``<default>`` defines, a ``limited`` other than
+            true/false/auto, ``euler`` angles with an upper-case (extrinsic) ``eulerseq``,
+            a spring on a joint that
             Pinocchio merges into a composite joint (several joints in one body), a joint
             ``springdamper`` (MuJoCo derives its stiffness from the mass), a tendon with a
             stiffness (a spring coupling joints). The message names the file.
@@ -124,10 +125,10 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
     for tag in ("frame", "replicate"):  # Pinocchio drops what they hold
-        if root.find(f".//{tag}//body") is not None or root.find(f".//{tag}//joint") is not None:
+        if any(root.find(f".//{tag}//{held}") is not None for held in ("body", "joint", "site")):
             raise ModelFileError(
-                f"{where}: <{tag}> holding bodies or joints is not supported (Pinocchio's "
-                f"parser drops them); write the bodies without <{tag}>"
+                f"{where}: <{tag}> holding bodies, joints or sites is not supported "
+                f"(Pinocchio's parser drops them); write them without <{tag}>"
             )
     check_classes(root, where)
     _check_tendons(root, where)  # before the classes are written out and removed
@@ -243,26 +244,31 @@ def _equality(element: ET.Element, where: str) -> Equality:
     anchor = read_numbers(attrs.get("anchor", "0 0 0"), 3, where, f"anchor of {what}")
     relpose = read_numbers(attrs.get("relpose", "0 1 0 0 0 0 0"), 7, where, f"relpose of {what}")
     explicit = element.tag == "weld" and relpose[3:].any()  # MuJoCo: a zero quaternion = qpos0
-    return Equality(
-        element.tag,
-        attrs["body1"],
-        attrs.get("body2", "world"),
-        anchor,
-        relpose if explicit else None,
-    )
+    body1, body2 = attrs["body1"], attrs.get("body2", "world")
+    if body1 == body2:
+        raise ModelFileError(
+            f"{where}: {what} joins body {body1!r} to itself (MuJoCo refuses it); expected "
+            "two different bodies (body2 omitted: the world)"
+        )
+    return Equality(element.tag, body1, body2, anchor, relpose if explicit else None)
 
 
 def _check_springref(attrs: dict[str, str], what: str, where: str) -> None:
-    """Warn of a spring whose ``springref`` differs from its ``ref``: its rest is then not
-    at ``qpos0``, where the springs are taken at rest."""
-    if "springref" not in attrs or not read_numbers(attrs["stiffness"], 1, where, what)[0]:
+    """Warn of a hinge or slide spring whose rest ``springref`` (MuJoCo's default: 0)
+    differs from its ``ref``: MuJoCo's spring is then not at rest at ``qpos0``, where the
+    springs are taken at rest (a ball or free joint's spring is at rest at ``qpos0``)."""
+    if attrs.get("type", "hinge") not in ("hinge", "slide"):
         return
-    rest = read_numbers(attrs["springref"], 1, where, f"springref of {what}")[0]
+    if not read_numbers(attrs["stiffness"], 1, where, what)[0]:
+        return
+    text = attrs.get("springref", "0")
+    rest = read_numbers(text, 1, where, f"springref of {what}")[0]
     if rest != read_numbers(attrs.get("ref", "0"), 1, where, f"ref of {what}")[0]:
+        given = "" if "springref" in attrs else " (MuJoCo's default: no springref given)"
         warnings.warn(
-            f"{where}: {what} has springref={attrs['springref']!r}, not its ref "
-            f"{attrs.get('ref', '0')!r}: springref is not read, the spring is taken at rest at "
-            "qpos0",
+            f"{where}: {what} has springref={text!r}{given}, not its ref "
+            f"{attrs.get('ref', '0')!r}: MuJoCo's spring is at rest at qpos = springref; here "
+            "it is taken at rest at qpos0 (write springref equal to ref)",
             IgnoredFeatureWarning,
             stacklevel=3,
         )
@@ -311,6 +317,9 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
       equalities by name keeping one of each name: the copy has the active ones only, in
       one ``<equality>``, named by their rank, so that Pinocchio returns the connects, then
       the welds, each in file order (:attr:`MjcfExtras.closures`).
+    * Pinocchio knows no body ``world``, MuJoCo's name of the world body: an equality's
+      ``body2="world"`` is left out (the world, for both), and ``body1="world"`` takes
+      the other body's name (:func:`anchor_equalities` places the anchors).
 
     Call it after :func:`read_mjcf_extras` has checked the file.
 
@@ -354,6 +363,10 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
             e.set("axisangle", " ".join([*map(repr, unit.tolist()), angle]))
     equality = ET.SubElement(root, "equality")
     for rank, (_, element) in enumerate(active):
+        if element.get("body1") == "world":  # Pinocchio has no body "world": MuJoCo's world
+            element.set("body1", element.attrib.pop("body2"))  # body; the anchors it
+        elif element.get("body2") == "world":  # computes are replaced (anchor_equalities)
+            del element.attrib["body2"]
         element.set("name", f"{rank:09d}")
         equality.append(element)
     copy = folder / path.name

@@ -173,7 +173,9 @@ def test_mjcf_zero_springdamper_and_tendon_without_stiffness_load(fourbar_mjcf, 
     ("old", "new", "match"),
     [
         ('<motor name="crank_motor"', '<position name="crank_motor"', r"<position> actuator"),
-        ('stiffness="50"', 'stiffness="50" springref="0"', r"joint 'crank' has springref='0'"),
+        ('springref="0.5"', 'springref="0"', r"joint 'crank' has springref='0', not its ref"),
+        # MuJoCo's default springref is 0, not ref: the spring is then at rest at qpos = 0
+        ('springref="0.5" ', "", r"joint 'crank' has springref='0' \(MuJoCo's default"),
     ],
 )
 def test_mjcf_servo_and_spring_rest_that_are_not_read_warn(fourbar_mjcf, tmp_path, old, new, match):
@@ -184,9 +186,17 @@ def test_mjcf_servo_and_spring_rest_that_are_not_read_warn(fourbar_mjcf, tmp_pat
 
 
 def test_mjcf_springref_at_ref_does_not_warn(fourbar_mjcf, tmp_path, recwarn):
-    text = fourbar_mjcf.read_text().replace('stiffness="50"', 'stiffness="50" springref="0.5"')
-    io.load_model(write(tmp_path, "r.xml", text), geometry=False)
+    """The crank's springref is its ref; the slides have neither (both 0); a ball joint's
+    spring is at rest at qpos0 whatever its springref (MuJoCo ignores it)."""
     io.load_model(fourbar_mjcf, geometry=False)
+    text = (
+        fourbar_mjcf.read_text()
+        .replace(
+            '<joint name="rocker_axial" type="slide"', '<joint name="rocker_axial" type="ball"'
+        )
+        .replace('stiffness="2e5"', 'stiffness="2e5" springref="0.1"')
+    )
+    io.load_model(write(tmp_path, "r.xml", text), geometry=False)
     assert not [w for w in recwarn if issubclass(w.category, IgnoredFeatureWarning)]
 
 

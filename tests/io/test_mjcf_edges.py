@@ -341,15 +341,23 @@ def test_several_worldbody_sections_are_one(tmp_path):
     assert {"ja", "jb", "jc"} <= set(robot.model.names)
 
 
-def test_bodies_in_a_frame_are_refused(tmp_path):
-    text = mujoco(
-        body(
-            "a",
-            '<joint name="h"/>',
-            '<frame pos="0 0 1">' + body("b", '<joint name="g"/>') + "</frame>",
-        )
-    )
-    refused(write(tmp_path, text), "<frame> holding bodies or joints is not supported")
+@pytest.mark.parametrize(
+    "bodies", ['body1="a" body2="a"', 'body1="world"', 'body1="world" body2="world"']
+)
+def test_an_equality_joining_a_body_to_itself_is_refused(tmp_path, bodies):
+    equality = f'<equality><connect {bodies} anchor="0 0 0"/></equality>'
+    text = mujoco(body("a", '<joint name="h"/>'), tail=equality)
+    refused(write(tmp_path, text), "joins body '(a|world)' to itself")
+
+
+@pytest.mark.parametrize(
+    "held", [body("b", '<joint name="g"/>'), '<site name="s" pos="0.02 0 0"/>']
+)
+def test_bodies_and_sites_in_a_frame_are_refused(tmp_path, held):
+    """MuJoCo places them by the frame's pose; Pinocchio's parser drops them (a site in a
+    frame was silently missing)."""
+    text = mujoco(body("a", '<joint name="h"/>', f'<frame pos="0 0 1">{held}</frame>'))
+    refused(write(tmp_path, text), "<frame> holding bodies, joints or sites is not supported")
 
 
 def test_meshes_of_a_file_without_compiler(tmp_path):
