@@ -10,6 +10,7 @@ depend on the executor. :func:`gather` puts their results into a
 from __future__ import annotations
 
 import itertools
+import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
@@ -33,12 +34,13 @@ from closedloop.exceptions import ClusterError, InvalidInputError
 CHUNK = 500
 
 
-def _end_pool(pool: ProcessPoolExecutor) -> None:
+def _end_pool(pool: ProcessPoolExecutor, others: set) -> None:
     """End the processes of ``pool`` at once, their running tasks with them (the executor
-    has no public way to stop a running task: its processes are its ``_processes``), then
+    has no way to stop a running task: its processes are the children of this process
+    started since it was made, ``multiprocessing.active_children()`` but ``others``), then
     its thread, which finds them gone and fails the pending tasks (none may be cancelled
     first: the thread of Python 3.11 raises on a cancelled one, with a traceback)."""
-    processes = list((pool._processes or {}).values())
+    processes = [p for p in multiprocessing.active_children() if p not in others]
     for process in processes:
         process.kill()
     for process in processes:
@@ -81,6 +83,7 @@ def run_tasks(
             yield k, kernel(task)
         return
     pool, futures, finished = executor, {}, False
+    others = set(multiprocessing.active_children())  # not the pool's
     try:
         with signals_blocked():  # the processes are started here
             if executor is None:
@@ -103,7 +106,7 @@ def run_tasks(
         elif pool is not None and finished:
             pool.shutdown()
         elif pool is not None:
-            _end_pool(pool)
+            _end_pool(pool, others)
 
 
 def run_tasks_by_point(
