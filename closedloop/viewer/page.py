@@ -2,10 +2,10 @@
 
 The legend (a fixed ``<div id="closedloop-legend">`` over the WebGL canvas, so it reads
 the same from any view point; drawn at 70 % in a window narrower than 1100 px or lower
-than 760 px, at 50 % below 700 x 500 px, to leave the robot in view) gives the model and pose, the wrench components, the
-amplification, the real largest displacement and link rotation with the caps of the
-automatic amplification, the loaded frame's displacement (mm, deg), and the colour key
-of ghost, deflected robot, arrows, ellipsoids and grid.
+than 760 px, at 50 % below 700 x 500 px, to leave the robot in view) gives the model and
+pose, the wrench components, the amplification, the real largest displacement and link
+rotation with the caps of the automatic amplification, the loaded frame's displacement
+(mm, deg), and the colour key of ghost, deflected robot, arrows, ellipsoids and grid.
 
 The page script waits until the scene has loaded (both robots' meshes and the load-ramp
 animation are in the page), then arms the animation: it loops (ping-pong: load, unload),
