@@ -41,8 +41,10 @@ SHARED = [
 ]
 C_COUPLER, C_ROCKER = (0.3, 0, 0.05), (0, 0, 0.15)  # the pin C on either side, z along -y
 #: The rocker cut in two at its middle, the halves welded (the loop closed there).
-_ROCKER_CUT = [("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
-               ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None)]
+_ROCKER_CUT = [
+    ("wA_joint", "rocker_top", "wA", (0, 0, -0.075), (0, 0, 0), "fixed", None),
+    ("wB_joint", "rocker_link", "wB", (0, 0, 0.075), (0, 0, 0), "fixed", None),
+]
 DESCRIPTIONS = {
     "revolute closure": (
         [("cA_joint", "coupler_body", "cA", C_COUPLER, (HALF_PI, 0, 0), "fixed", None),
