@@ -208,3 +208,24 @@ SPRUNG_ARM = """<mujoco model="sprung_arm">
   </worldbody>
 </mujoco>
 """
+
+
+def joint_inertias(m, clm: ClosedLoopModel) -> dict[int, pin.Inertia]:
+    """{library joint id: MuJoCo's inertia of the bodies it carries} (mass [kg], centre of
+    mass [m] and rotational inertia about it [kg m^2], in the joint's frame): each of
+    MuJoCo's bodies (``body_mass``, ``body_ipos``, ``body_iquat``, ``body_inertia``, in the
+    body's frame) moved into the frame of the library's joint that carries the body of its
+    name (its BODY frame's ``parentJoint`` and ``placement``), summed per joint, as
+    Pinocchio sums a fixed body into its joint. The world's joint (0) is left out."""
+    mj, model, out = mujoco(), clm.model, {}
+    for b in range(1, m.nbody):
+        frame = model.frames[model.getFrameId(m.body(b).name, pin.FrameType.BODY)]
+        if frame.parentJoint == 0:
+            continue
+        R = np.empty(9)
+        mj.mju_quat2Mat(R, m.body_iquat[b])
+        R = R.reshape(3, 3)
+        own = pin.Inertia(m.body_mass[b], m.body_ipos[b], R @ np.diag(m.body_inertia[b]) @ R.T)
+        moved = frame.placement.act(own)
+        out[frame.parentJoint] = out.get(frame.parentJoint, pin.Inertia.Zero()) + moved
+    return out

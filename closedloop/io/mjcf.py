@@ -4,7 +4,9 @@ Pinocchio 4.1 keeps neither actuators nor joint stiffness, shifts hinge and slid
 ``ref`` and converts slide ranges as angles, ignores ``limited`` and ``active``, orders the
 equalities by name (keeping one of each name), reads only the first ``<compiler>``,
 ``<equality>`` and root body, ignores positions and orientations given by ``<default>``
-classes, fails on ``class="main"``, and reads upper-case ``eulerseq`` axes as lower-case.
+classes, fails on ``class="main"``, reads upper-case ``eulerseq`` axes as lower-case,
+drops what a ``<frame>`` or ``<replicate>`` holds (the mass of a body's geoms there too) and
+ignores the compiler's mass settings.
 It also anchors a ``<connect>`` or ``<weld>`` at the joint of its body, dropping the body's
 placement relative to that joint (a body without joint of its own is then anchored at its
 parent joint's origin). :func:`read_mjcf_extras` reads the file as MuJoCo does and refuses
@@ -30,10 +32,12 @@ from closedloop.io.mjcf_xml import (
     active_equalities,
     check_classes,
     check_composite,
+    check_mass_settings,
     check_numbers,
     class_defaults,
     compiler_attributes,
     element_name,
+    flatten_frames,
     joints_with_defaults,
     parse_xml,
     read_numbers,
@@ -106,30 +110,29 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     with ``limited="false"`` has no limits, whatever its range.
 
     Raises:
-        ModelFileError: invalid XML, ``<include>``, a ``<frame>`` or ``<replicate>`` holding
-            bodies, joints or sites, an equality other than connect/weld, without body1 or
-            joining a body to itself, an ``active`` other than true/false, a repeated joint,
-            body or equality name, an unknown joint type, a hinge or slide whose axis is the
-            zero vector, a range or axis that is not numbers, a range whose lower bound is
-            above its upper one, a joint with a nonzero stiffness but no name, a malformed
-            position or orientation (:data:`NUMERIC_ATTRIBUTES`), a connect without anchor,
-            a class that no ``<default>`` defines, a ``limited`` other than
-            true/false/auto, ``euler`` angles with an upper-case (extrinsic) ``eulerseq``,
-            a spring on a joint that
+        ModelFileError: invalid XML, ``<include>``, a ``<replicate>`` holding anything, an
+            ``<inertial>`` inside a ``<frame>``, mass settings that Pinocchio ignores
+            (:func:`closedloop.io.mjcf_xml.check_mass_settings`), an equality other than
+            connect/weld, without body1 or joining a body to itself, an ``active`` other than
+            true/false, a repeated joint, body or equality name, an unknown joint type, a hinge or
+            slide whose axis is the zero vector, a range or axis that is not numbers, a range whose
+            lower bound is above its upper one, a joint with a nonzero stiffness but no name, a
+            malformed position or orientation (:data:`NUMERIC_ATTRIBUTES`), a connect without
+            anchor, a class that no ``<default>`` defines, a ``limited`` other than true/false/auto,
+            ``euler`` angles with an upper-case (extrinsic) ``eulerseq``, a spring on a joint that
             Pinocchio merges into a composite joint (several joints in one body), a joint
-            ``springdamper`` (MuJoCo derives its stiffness from the mass), a tendon with a
-            stiffness (a spring coupling joints). The message names the file.
+            ``springdamper`` (MuJoCo derives its stiffness from the mass), a tendon with a stiffness
+            (a spring coupling joints). The message names the file.
     """
     where = f"robot file {str(path)!r}"
     root = parse_xml(path, where)
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
-    for tag in ("frame", "replicate"):  # Pinocchio drops what they hold
-        if any(root.find(f".//{tag}//{held}") is not None for held in ("body", "joint", "site")):
-            raise ModelFileError(
-                f"{where}: <{tag}> holding bodies, joints or sites is not supported "
-                f"(Pinocchio's parser drops them); write them without <{tag}>"
-            )
+    if root.find(".//replicate/*") is not None:  # Pinocchio drops what it holds
+        raise ModelFileError(
+            f"{where}: <replicate> is not supported (Pinocchio's parser drops what it holds); "
+            "expected its copies written out"
+        )
     check_classes(root, where)
     _check_tendons(root, where)  # before the classes are written out and removed
     seq = compiler_attributes(root).get("eulerseq", "xyz")
@@ -143,6 +146,8 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     check_numbers(root, where)
     anchored = tuple(_equality(e, where) for _, e in equalities)
     write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
+    flatten_frames(root, where)
+    check_mass_settings(root, where)
     joints = joints_with_defaults(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
     for kind, names in (
@@ -311,6 +316,8 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
       another class, and fails on ``class="main"``: the copy writes on each joint, geom,
       site, mesh and material the attributes its class gives
       (:func:`closedloop.io.mjcf_xml.write_classes`), and has neither classes nor ``<default>``.
+    * Pinocchio drops what a ``<frame>`` holds: the copy has no frames, what they held
+      placed by their poses (:func:`closedloop.io.mjcf_xml.flatten_frames`).
     * Pinocchio 4.1 does not normalise the axis of an ``axisangle`` (the placement is then
       not a rotation): the copy's axes are unit vectors.
     * Pinocchio reads only the first ``<equality>``, ignores ``active``, and orders the
@@ -333,6 +340,9 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
     for extra in worlds[1:]:
         worlds[0].extend(list(extra))
         root.remove(extra)
+    active = active_equalities(root, where)  # before the classes are written out
+    write_classes(root)
+    flatten_frames(root, where)
     sites = worlds[0].findall("site") if worlds else []
     if sites:  # Pinocchio drops them: they go on a body named as MuJoCo's world body
         holder = ET.Element("body", name="world")
@@ -351,11 +361,9 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
     for key in ("meshdir", "texturedir", "assetdir"):
         if key in compiler.attrib or (key != "assetdir" and "assetdir" not in compiler.attrib):
             compiler.set(key, str(path.parent.resolve() / compiler.get(key, "")))
-    active = active_equalities(root, where)
     for element in root.findall("compiler") + root.findall("equality"):
         root.remove(element)
     root.insert(0, compiler)
-    write_classes(root)
     for e in root.iter():
         if "axisangle" in e.attrib:  # checked: 4 numbers, the axis not zero
             *axis, angle = e.get("axisangle").split()

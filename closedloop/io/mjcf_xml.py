@@ -1,6 +1,7 @@
 """The MJCF XML as MuJoCo reads it, for :mod:`closedloop.io.mjcf`: parsing with checked
 numbers, ``<compiler>`` settings, ``<default>`` classes (checked, and written out onto the
-elements), joints with their class attributes, composite joints, active equalities.
+elements), ``<frame>`` elements (composed into what they hold), joints with their class
+attributes, composite joints, active equalities.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from closedloop.common.arrays import decimals
 from closedloop.exceptions import ModelFileError
@@ -210,3 +212,108 @@ def active_equalities(root: ET.Element, where: str) -> list[tuple[str, ET.Elemen
             if state == "true":
                 active.append((name, e))
     return active
+
+
+def rotation(element: ET.Element, compiler: dict[str, str]) -> np.ndarray:
+    """Rotation (3, 3) that the orientation of ``element`` (checked numbers, classes written
+    out) gives, as MuJoCo reads it: ``quat`` (w x y z), ``axisangle``, ``euler`` (in the
+    compiler's ``angle`` unit and ``eulerseq``), ``xyaxes`` or ``zaxis``; else the identity."""
+    scale = 1.0 if compiler.get("angle", "degree") == "radian" else np.pi / 180
+    if "axisangle" in element.attrib:
+        *axis, angle = decimals(element.get("axisangle"))
+        return pin.AngleAxis(angle * scale, np.array(axis) / np.linalg.norm(axis)).matrix()
+    if "euler" in element.attrib:
+        R = np.eye(3)
+        for axis, angle in zip(
+            compiler.get("eulerseq", "xyz"), decimals(element.get("euler")), strict=True
+        ):
+            turn = pin.AngleAxis(angle * scale, np.eye(3)["xyz".index(axis.lower())]).matrix()
+            R = R @ turn if axis.islower() else turn @ R  # lower case: about the moved axes
+        return R
+    if "xyaxes" in element.attrib:
+        values = decimals(element.get("xyaxes"))
+        x = values[:3] / np.linalg.norm(values[:3])
+        y = values[3:] - x * (x @ values[3:])
+        y /= np.linalg.norm(y)
+        return np.column_stack([x, y, np.cross(x, y)])
+    if "zaxis" in element.attrib:  # the shortest turn from the z axis; about x if opposite
+        z = decimals(element.get("zaxis"))
+        z /= np.linalg.norm(z)
+        axis = np.cross([0.0, 0.0, 1.0], z)
+        sin = np.linalg.norm(axis)
+        axis = axis / sin if sin >= 1e-10 else np.array([1.0, 0.0, 0.0])
+        return pin.AngleAxis(np.arctan2(sin, z[2]), axis).matrix()
+    w, x, y, z = decimals(element.get("quat", "1 0 0 0"))
+    return pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+
+
+def flatten_frames(root: ET.Element, where: str) -> None:
+    """Replace each ``<frame>`` by what it holds, placed as the frame places it (MuJoCo's
+    rule; Pinocchio 4.1 drops what a frame holds): a held element's ``pos`` and orientation
+    become the frame's pose composed with its own (written as ``pos`` and ``quat``), a
+    ``fromto``'s two points and a joint's ``pos`` and ``axis`` are moved likewise. Call it
+    with the classes written out (:func:`write_classes`).
+
+    Raises:
+        ModelFileError: an ``<inertial>`` inside a ``<frame>``.
+    """
+    compiler = compiler_attributes(root)
+    parents = {child: parent for parent in root.iter() for child in parent}
+    for frame in [e for e in root.iter() if e.tag == "frame"]:  # outer frames first
+        if frame.find("inertial") is not None:
+            raise ModelFileError(
+                f"{where}: <frame> {element_name(frame)} holds an <inertial>; expected it in "
+                "its body, outside any <frame>"
+            )
+        R, t = rotation(frame, compiler), decimals(frame.get("pos", "0 0 0"))
+        parent = parents[frame]
+        at = list(parent).index(frame)
+        for e in list(frame):
+            parent.insert(at, e)
+            parents[e] = parent
+            at += 1
+            if e.tag == "joint":
+                e.set("pos", _numbers(R @ decimals(e.get("pos", "0 0 0")) + t))
+                e.set("axis", _numbers(R @ decimals(e.get("axis", "0 0 1"))))
+            elif e.tag == "freejoint":  # the body's pose, whatever the frame
+                continue
+            elif "fromto" in e.attrib:
+                ends = decimals(e.get("fromto")).reshape(2, 3)
+                e.set("fromto", _numbers((ends @ R.T + t).ravel()))
+            else:
+                quaternion = pin.Quaternion(R @ rotation(e, compiler))
+                for key in ALTERNATIVES:
+                    e.attrib.pop(key, None)
+                e.set("pos", _numbers(R @ decimals(e.get("pos", "0 0 0")) + t))
+                e.set("quat", _numbers(np.r_[quaternion.w, quaternion.vec()]))
+        parent.remove(frame)
+
+
+def _numbers(values: np.ndarray) -> str:
+    """``values`` written in full precision."""
+    return " ".join(map(repr, np.asarray(values, dtype=float).tolist()))
+
+
+def check_mass_settings(root: ET.Element, where: str) -> None:
+    """Refuse what makes MuJoCo's masses differ from those Pinocchio 4.1 reads: a
+    ``<compiler>`` ``boundmass``, ``boundinertia`` or ``settotalmass`` above 0, and a geom
+    of a body whose ``group`` is outside the compiler's ``inertiagrouprange`` (MuJoCo
+    leaves its mass out). Call it with the classes written out (:func:`write_classes`)."""
+    compiler = compiler_attributes(root)
+    for key in ("boundmass", "boundinertia", "settotalmass"):
+        text = compiler.get(key, "0")
+        if read_numbers(text, 1, where, f"<compiler> {key}")[0] > 0:
+            raise ModelFileError(
+                f"{where}: <compiler> {key}={text!r} changes MuJoCo's masses, which "
+                f"Pinocchio's parser does not; expected no {key} (the masses written out)"
+            )
+    text = compiler.get("inertiagrouprange", "0 5")
+    low, high = read_numbers(text, 2, where, "<compiler> inertiagrouprange")
+    for geom in (g for b in root.iter("body") for g in b.findall("geom")):
+        what = f"group of geom {element_name(geom)}"
+        if not low <= read_numbers(geom.get("group", "0"), 1, where, what)[0] <= high:
+            raise ModelFileError(
+                f"{where}: geom {element_name(geom)} has group {geom.get('group')!r}, outside "
+                f"<compiler> inertiagrouprange={text!r}: MuJoCo leaves its mass out, "
+                "Pinocchio's parser does not; expected the groups of a body's geoms in the range"
+            )

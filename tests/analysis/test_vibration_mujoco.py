@@ -29,7 +29,8 @@ FREQUENCY_RTOL = 1e-9
 
 #: A sprung chain without ``<inertial>``: MuJoCo and the library take each body's mass
 #: and inertia from its geoms (a box, a capsule given by ``fromto``, a sphere with a
-#: ``mass``, a rotated cylinder with a ``density``, an ellipsoid; density 1000 kg/m^3).
+#: ``mass``, a rotated cylinder with a ``density``, an ellipsoid in a ``<frame>``; density
+#: 1000 kg/m^3).
 GEOM_CHAIN = """<mujoco model="geom_chain">
   <compiler angle="radian"/>
   <worldbody>
@@ -43,7 +44,8 @@ GEOM_CHAIN = """<mujoco model="geom_chain">
           <joint name="j3" axis="1 0 0" stiffness="5"/>
           <geom type="sphere" size="0.03" pos="0.02 0.01 0" mass="0.3"/>
           <geom type="cylinder" size="0.01 0.04" pos="0 0 0.05" euler="0.3 0 0" density="2000"/>
-          <geom type="ellipsoid" size="0.01 0.02 0.03" pos="0.05 0 0"/>
+          <frame pos="0.05 0 0" euler="0 0.2 0.4">
+            <geom type="ellipsoid" size="0.01 0.02 0.03" pos="0.01 0 0"/></frame>
         </body>
       </body>
     </body>

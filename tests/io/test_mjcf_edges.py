@@ -350,14 +350,37 @@ def test_an_equality_joining_a_body_to_itself_is_refused(tmp_path, bodies):
     refused(write(tmp_path, text), "joins body '(a|world)' to itself")
 
 
-@pytest.mark.parametrize(
-    "held", [body("b", '<joint name="g"/>'), '<site name="s" pos="0.02 0 0"/>']
-)
-def test_bodies_and_sites_in_a_frame_are_refused(tmp_path, held):
-    """MuJoCo places them by the frame's pose; Pinocchio's parser drops them (a site in a
-    frame was silently missing)."""
-    text = mujoco(body("a", '<joint name="h"/>', f'<frame pos="0 0 1">{held}</frame>'))
-    refused(write(tmp_path, text), "<frame> holding bodies, joints or sites is not supported")
+@pytest.mark.parametrize("held", ['<geom size="0.01"/>', body("b", '<joint name="g"/>')])
+def test_what_a_replicate_holds_is_refused(tmp_path, held):
+    """Pinocchio's parser drops it: a geom's mass was silently missing."""
+    replicate = f'<replicate count="2" offset="0 0 0.1">{held}</replicate>'
+    text = mujoco(body("a", '<joint name="h"/>', replicate))
+    refused(write(tmp_path, text), "<replicate> is not supported")
+
+
+def test_an_inertial_in_a_frame_is_refused(tmp_path):
+    frame = f'<frame name="f" pos="0 0 1">{INERTIAL}</frame>'
+    text = mujoco('<body name="a"><joint name="h"/><geom size="0.01"/>' + frame + "</body>")
+    refused(write(tmp_path, text), "<frame> 'f' holds an <inertial>; expected it in its body")
+
+
+@pytest.mark.parametrize("setting", ["boundmass", "boundinertia", "settotalmass"])
+def test_compiler_mass_settings_are_refused(tmp_path, setting):
+    """MuJoCo changes the masses by them; Pinocchio's parser ignored them."""
+    head = f'<compiler angle="radian" {setting}="0.5"/>'
+    text = mujoco(body("a", '<joint name="h"/>', '<geom size="0.01"/>'), head=head)
+    refused(write(tmp_path, text), f"<compiler> {setting}='0.5' changes MuJoCo's masses")
+
+
+def test_a_geom_outside_the_inertia_groups_is_refused(tmp_path):
+    """MuJoCo leaves its mass out; Pinocchio's parser did not. A world geom does not count
+    (no mass)."""
+    head = '<compiler angle="radian" inertiagrouprange="0 2"/>'
+    world = '<geom name="floor" type="plane" size="1 1 0.1" group="4"/>'
+    geoms = '<geom name="g0" size="0.01"/><geom name="g3" size="0.01" group="3"/>'
+    text = mujoco(world + body("a", '<joint name="h"/>', geoms), head=head)
+    refused(write(tmp_path, text), "geom 'g3' has group '3', outside <compiler> inertiagrouprange")
+    load_model(write(tmp_path, text.replace('group="3"', 'group="2"')), geometry=False)
 
 
 def test_meshes_of_a_file_without_compiler(tmp_path):

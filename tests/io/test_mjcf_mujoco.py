@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from helpers import REPO
 from mujoco_peer import (
@@ -22,6 +23,7 @@ from mujoco_peer import (
     compiled,
     coordinates,
     equality_ends,
+    joint_inertias,
     library_ends,
     mujoco,
     one_dof,
@@ -38,6 +40,12 @@ from closedloop.io.loader import load_model
 #: a few ulps (measured: 9e-16 at most). The misplacements the library corrects were off
 #: by 1e-2 m or more; a hinge read about a wrong point or axis, by the angle times a length.
 PLACEMENT_TOL = 1e-12
+#: Masses and inertias of boxes, spheres, capsules, cylinders and ellipsoids computed by
+#: two codes from the same decimal sizes and densities, then moved and summed: they differ
+#: by rounding (measured: masses 3e-16 relative; inertias 9e-15 relative to their largest
+#: entry; centres of mass 3e-17 m, within :data:`PLACEMENT_TOL`). The geoms Pinocchio
+#: dropped (in a <frame>) took 65 % of a body's mass away.
+MASS_RTOL = 1e-12
 #: Random configurations compared besides qpos0, per file.
 N_RANDOM = 3
 
@@ -138,6 +146,60 @@ FILES = {
           <body name="l2" pos="0.2 0 0"><joint name="j2" axis="0 1 0" stiffness="7"/>
             {INERTIAL}</body></body></body>
       </worldbody></mujoco>""",
+    # geoms in a rotated <frame> of a body without <inertial> (Pinocchio dropped them)
+    "frame_geoms": """<mujoco model="frame_geoms"><compiler angle="radian"/><worldbody>
+      <body name="a" pos="0 0 0.1"><joint name="j1" axis="0 1 0"/>
+        <geom type="box" size="0.05 0.02 0.01" pos="0.05 0 0"/>
+        <frame pos="0.1 0.02 0" euler="0 0 0.5"><geom type="sphere" size="0.03" pos="0.02 0 0"/>
+          <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.01"/></frame>
+      </body></worldbody></mujoco>""",
+    # <frame> elements (rotated, nested; euler, xyaxes, zaxis, a childclass) holding geoms
+    # (fromto and placed, in a body without <inertial>), sites, a joint, a body; a frame in
+    # the worldbody
+    "frames": """<mujoco model="frames"><compiler angle="degree" eulerseq="zyx"/>
+      <default><default class="f"><geom type="box" size="0.02 0.01 0.01" pos="0.01 0 0"/>
+        <site pos="0 0.01 0"/></default></default><worldbody>
+      <frame pos="0.05 0 0" euler="10 0 0"><site name="w" pos="0 0 0.1"/></frame>
+      <body name="a" pos="0 0 0.1"><joint name="j1" axis="0 1 0"/>
+        <geom type="box" size="0.05 0.02 0.01" pos="0.05 0 0"/>
+        <frame pos="0.1 0.02 0" euler="30 10 -20">
+          <geom type="sphere" size="0.03" pos="0.02 0 0" density="2000"/>
+          <geom type="capsule" fromto="0 0 0 0.1 0 0.02" size="0.01"/>
+          <site name="s1" pos="0.05 0 0" axisangle="1 0 0 30"/>
+          <frame pos="0 0.05 0" xyaxes="0 1 0 -1 0 0.5" childclass="f">
+            <geom/><geom type="cylinder" size="0.01 0.03" zaxis="1 1 0" mass="0.2"/>
+            <site name="s2"/></frame></frame>
+        <frame pos="0.3 0 0" zaxis="0 1 1">
+          <body name="b" pos="0.02 0 0" euler="0 20 0">
+            <geom type="ellipsoid" size="0.01 0.02 0.03" pos="0.03 0 0"/>
+            <frame quat="0.9 0.1 0 0.3"><joint name="j2" pos="0.01 0 0" axis="1 0 0"/></frame>
+            <site name="s3" pos="0.05 0 0"/></body></frame>
+      </body></worldbody></mujoco>""",
+    # bodies without <inertial> (masses from geoms: <default> classes, mass or density,
+    # fromto capsules and cylinders, a zero density) and with one too; the compiler's
+    # inertiafromgeom MuJoCo's default (auto: the <inertial> wins), true (the geoms win)
+    # and false (the <inertial> only)
+    **{
+        f"geom_masses_{setting}": f"""<mujoco model="geom_masses">
+      <compiler angle="radian" inertiafromgeom="{setting}"/>
+      <default><geom type="box" size="0.02 0.02 0.02" density="500"/>
+        <default class="heavy"><geom type="sphere" size="0.03" mass="2" pos="0.1 0 0"/>
+        </default></default><worldbody>
+      <body name="a" pos="0 0 0.1"><joint name="j1" axis="0 1 0"/>
+        <inertial pos="0.1 0 0" mass="0.5" diaginertia="1e-3 2e-3 2.5e-3"/>
+        <geom pos="0.05 0 0"/><geom class="heavy"/>
+        <body name="b" pos="0.2 0 0" childclass="heavy"><joint name="j2" axis="0 1 0"/>
+          {INERTIAL if setting == "false" else ""}<geom/>
+          <geom type="cylinder" size="0.01 0.05" euler="0.3 0 0" pos="0 0 0.05"/>
+          <body name="c" pos="0.2 0 0"><joint name="j3" axis="1 0 0"/>
+            {INERTIAL if setting == "false" else ""}
+            <geom type="capsule" fromto="0 0 0 0.2 0.05 0" size="0.01" class="main"/>
+            <geom type="cylinder" fromto="0 0 0 0 0 0.1" size="0.02" mass="0.3" class="main"/>
+            <geom type="box" size="0.01 0.01 0.01" density="0" class="main"/>
+          </body></body>
+      </body></worldbody></mujoco>"""
+        for setting in ("auto", "true", "false")
+    },
 }
 
 
@@ -171,6 +233,67 @@ def test_bodies_and_sites_are_where_mujoco_puts_them(files, name):
             np.testing.assert_allclose(
                 lib, mj, rtol=0, atol=PLACEMENT_TOL, err_msg=f"{name}: {what}, configuration {k}"
             )
+
+
+@pytest.mark.parametrize("name", BUNDLED + tuple(FILES))
+def test_masses_and_inertias_are_mujocos(files, name):
+    """Each moving joint carries MuJoCo's mass, centre of mass and rotational inertia of
+    its bodies (:func:`mujoco_peer.joint_inertias`): given by ``<inertial>``, or by the
+    geoms (those in a ``<frame>`` too), as the compiler's ``inertiafromgeom`` says."""
+    m, _, clm = both(files[name])
+    expected = joint_inertias(m, clm)
+    assert sorted(expected) == list(range(1, clm.model.njoints)), name
+    for j, Y in expected.items():
+        lib, what = clm.model.inertias[j], f"{name}: joint {clm.model.names[j]}"
+        np.testing.assert_allclose(lib.mass, Y.mass, rtol=MASS_RTOL, err_msg=what)
+        np.testing.assert_allclose(lib.lever, Y.lever, rtol=0, atol=PLACEMENT_TOL, err_msg=what)
+        scale = np.abs(Y.inertia).max()
+        np.testing.assert_allclose(
+            lib.inertia, Y.inertia, rtol=0, atol=MASS_RTOL * scale, err_msg=what
+        )
+
+
+@pytest.mark.parametrize("name", [*BUNDLED, "frame_geoms", "frames", "geom_masses_auto"])
+def test_visual_geoms_are_where_mujoco_puts_them(files, name):
+    """The library's visual geoms are MuJoCo's geoms (those in a ``<frame>`` too), in
+    MuJoCo's order, where MuJoCo puts them (``geom_xpos``) and turned as MuJoCo
+    turns them (``geom_xmat``), up to the shape's symmetries (Pinocchio turns a ``fromto``
+    capsule or cylinder end for end): R diag(e^2) R^T agree, e the half-extents along the
+    geom's axes, at qpos0 and elsewhere."""
+    m, d = compiled(files[name])
+    clm = load_model(files[name])
+    assert len(clm.visual_model.geometryObjects) == m.ngeom, name
+    data, geom_data = clm.model.createData(), pin.GeometryData(clm.visual_model)
+    for k, qpos in enumerate(configurations(m, seed=k_seed(name))):
+        d.qpos[:] = qpos
+        mujoco().mj_kinematics(m, d)
+        q = to_q(m, clm, qpos)
+        pin.updateGeometryPlacements(clm.model, data, clm.visual_model, geom_data, q)
+        for g in range(m.ngeom):
+            lib, what = geom_data.oMg[g], f"{name}: geom {g}, configuration {k}"
+            R, extents = d.geom_xmat[g].reshape(3, 3), np.diag(half_extents(m, g) ** 2)
+            np.testing.assert_allclose(
+                lib.translation, d.geom_xpos[g], rtol=0, atol=PLACEMENT_TOL, err_msg=what
+            )
+            np.testing.assert_allclose(
+                lib.rotation @ extents @ lib.rotation.T,
+                R @ extents @ R.T,
+                rtol=0,
+                atol=PLACEMENT_TOL,
+                err_msg=what,
+            )
+
+
+def half_extents(m, g: int) -> np.ndarray:
+    """Half-extents (3,) [m] of MuJoCo's geom ``g`` along its axes (``geom_size``: a
+    sphere's radius; a capsule's or cylinder's radius and half-length along z)."""
+    kinds, size = mujoco().mjtGeom, m.geom_size[g]
+    kind = int(m.geom_type[g])
+    if kind == int(kinds.mjGEOM_SPHERE):
+        return np.full(3, size[0])
+    if kind in (int(kinds.mjGEOM_CAPSULE), int(kinds.mjGEOM_CYLINDER)):
+        return np.array([size[0], size[0], size[1]])
+    return size.copy()  # box, ellipsoid
 
 
 @pytest.mark.parametrize("name", [*BUNDLED, "free", "jointless"])
