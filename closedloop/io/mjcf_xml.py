@@ -296,9 +296,13 @@ def _numbers(values: np.ndarray) -> str:
 
 def check_mass_settings(root: ET.Element, where: str) -> None:
     """Refuse what makes MuJoCo's masses differ from those Pinocchio 4.1 reads: a
-    ``<compiler>`` ``boundmass``, ``boundinertia`` or ``settotalmass`` above 0, and a geom
-    of a body whose ``group`` is outside the compiler's ``inertiagrouprange`` (MuJoCo
-    leaves its mass out). Call it with the classes written out (:func:`write_classes`)."""
+    ``<compiler>`` ``boundmass``, ``boundinertia`` or ``settotalmass`` above 0, and, in a
+    body whose inertia comes from its geoms (``inertiafromgeom`` true, or auto and no
+    ``<inertial>``), a geom whose ``group`` is outside the compiler's ``inertiagrouprange``
+    (MuJoCo leaves its mass out) or a mesh (Pinocchio gives it 1 kg and 1 kg m^2 about each
+    axis at its origin, whatever its shape, ``mass`` and ``density``). Call it with the
+    classes written out (:func:`write_classes`) and frames flattened (:func:`flatten_frames`).
+    """
     compiler = compiler_attributes(root)
     for key in ("boundmass", "boundinertia", "settotalmass"):
         text = compiler.get(key, "0")
@@ -309,11 +313,21 @@ def check_mass_settings(root: ET.Element, where: str) -> None:
             )
     text = compiler.get("inertiagrouprange", "0 5")
     low, high = read_numbers(text, 2, where, "<compiler> inertiagrouprange")
-    for geom in (g for b in root.iter("body") for g in b.findall("geom")):
-        what = f"group of geom {element_name(geom)}"
-        if not low <= read_numbers(geom.get("group", "0"), 1, where, what)[0] <= high:
-            raise ModelFileError(
-                f"{where}: geom {element_name(geom)} has group {geom.get('group')!r}, outside "
-                f"<compiler> inertiagrouprange={text!r}: MuJoCo leaves its mass out, "
-                "Pinocchio's parser does not; expected the groups of a body's geoms in the range"
-            )
+    setting = compiler.get("inertiafromgeom", "auto")
+    for body in root.iter("body"):
+        if setting == "false" or (setting == "auto" and body.find("inertial") is not None):
+            continue
+        for geom in body.findall("geom"):
+            name, group = element_name(geom), geom.get("group", "0")
+            if not low <= read_numbers(group, 1, where, f"group of geom {name}")[0] <= high:
+                raise ModelFileError(
+                    f"{where}: geom {name} of body {element_name(body)} has group {group!r}, "
+                    f"outside <compiler> inertiagrouprange={text!r}: MuJoCo leaves its mass "
+                    "out, Pinocchio's parser does not; expected an <inertial> in the body"
+                )
+            if geom.get("type") == "mesh":
+                raise ModelFileError(
+                    f"{where}: body {element_name(body)} takes its inertia from its geoms, "
+                    f"and geom {name} is a mesh, to which Pinocchio's parser gives 1 kg and "
+                    "1 kg m^2 whatever its shape; expected an <inertial> in the body"
+                )

@@ -373,14 +373,41 @@ def test_compiler_mass_settings_are_refused(tmp_path, setting):
 
 
 def test_a_geom_outside_the_inertia_groups_is_refused(tmp_path):
-    """MuJoCo leaves its mass out; Pinocchio's parser did not. A world geom does not count
-    (no mass)."""
+    """MuJoCo leaves its mass out; Pinocchio's parser did not. A world geom (no mass) and the
+    geoms of a body with an <inertial> (MuJoCo's default inertiafromgeom="auto") do not
+    count."""
     head = '<compiler angle="radian" inertiagrouprange="0 2"/>'
     world = '<geom name="floor" type="plane" size="1 1 0.1" group="4"/>'
     geoms = '<geom name="g0" size="0.01"/><geom name="g3" size="0.01" group="3"/>'
-    text = mujoco(world + body("a", '<joint name="h"/>', geoms), head=head)
-    refused(write(tmp_path, text), "geom 'g3' has group '3', outside <compiler> inertiagrouprange")
+    a = f'<body name="a"><joint name="h"/>{geoms}</body>'
+    text = mujoco(world + a, head=head)
+    refused(write(tmp_path, text), "geom 'g3' of body 'a' has group '3', outside <compiler> "
+            "inertiagrouprange='0 2'")  # fmt: skip
     load_model(write(tmp_path, text.replace('group="3"', 'group="2"')), geometry=False)
+    load_model(write(tmp_path, mujoco(world + body("a", '<joint name="h"/>', geoms), head=head)))
+
+
+#: A 0.1 m cube as a Wavefront OBJ mesh: its corners, then two triangles a face.
+CUBE = "\n".join(
+    [f"v {x} {y} {z}" for z in (0, 0.1) for x, y in ((0, 0), (0.1, 0), (0.1, 0.1), (0, 0.1))]
+    + [f"f {a} {b} {c}" for a, b, c in ((1, 4, 3), (1, 3, 2), (5, 6, 7), (5, 7, 8), (1, 2, 6),
+       (1, 6, 5), (2, 3, 7), (2, 7, 6), (3, 4, 8), (3, 8, 7), (4, 1, 5), (4, 5, 8))]
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("geom_mass", ["", 'mass="0"', 'density="2000"'])
+def test_a_mesh_giving_a_body_its_inertia_is_refused(tmp_path, geom_mass):
+    """Pinocchio's parser gives a mesh geom 1 kg and 1 kg m^2 about each axis, whatever its
+    shape and mass (MuJoCo: a 0.1 m cube of 1000 kg/m^3, 1 kg and 1.7e-3 kg m^2); with an
+    <inertial> in the body (MuJoCo's default inertiafromgeom="auto") the mesh has no mass."""
+    (tmp_path / "cube.obj").write_text(CUBE)
+    asset = '<asset><mesh name="cube" file="cube.obj"/></asset>'
+    geom = f'<geom name="c" type="mesh" mesh="cube" {geom_mass}/>'
+    text = mujoco(f'<body name="a"><joint name="h"/>{geom}</body>', head=RADIAN + asset)
+    refused(write(tmp_path, text), "body 'a' takes its inertia from its geoms, and geom 'c' is "
+            "a mesh")  # fmt: skip
+    robot = load_model(write(tmp_path, text.replace(geom, INERTIAL + geom)), geometry=False)
+    np.testing.assert_allclose(robot.model.inertias[1].mass, 0.1, rtol=1e-15)  # INERTIAL's
 
 
 def test_meshes_of_a_file_without_compiler(tmp_path):
