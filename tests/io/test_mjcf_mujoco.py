@@ -155,11 +155,13 @@ FILES = {
       </body></worldbody></mujoco>""",
     # <frame> elements (rotated, nested; euler, xyaxes, zaxis, a childclass) holding geoms
     # (fromto and placed, in a body without <inertial>), sites, a joint, a body; a frame in
-    # the worldbody
+    # the worldbody holding a site and a root body
     "frames": """<mujoco model="frames"><compiler angle="degree" eulerseq="zyx"/>
       <default><default class="f"><geom type="box" size="0.02 0.01 0.01" pos="0.01 0 0"/>
         <site pos="0 0.01 0"/></default></default><worldbody>
-      <frame pos="0.05 0 0" euler="10 0 0"><site name="w" pos="0 0 0.1"/></frame>
+      <frame pos="0.05 0 0" euler="10 0 0"><site name="w" pos="0 0 0.1"/>
+        <body name="r" pos="0 0.2 0"><joint name="jr" axis="1 0 0"/>
+          <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.01"/></body></frame>
       <body name="a" pos="0 0 0.1"><joint name="j1" axis="0 1 0"/>
         <geom type="box" size="0.05 0.02 0.01" pos="0.05 0 0"/>
         <frame pos="0.1 0.02 0" euler="30 10 -20">
