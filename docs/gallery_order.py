@@ -4,8 +4,9 @@
 First one loop (the four-bar), then serial arms from their files (UR5, the redundant
 Panda), the parallel robots from the most general (Stewart) to the planar ones, a leg
 from an SDF file (Cassie), the hybrid showcase (CaHyMan); then what a model can add or
-answer: links as beams, gravity and payloads, a map over the workspace, springs identified
-from measurements; last, two implementations of CaHyMan that agree.
+answer: links as beams, a spring at a loop's cut, gravity and payloads, a map over the
+workspace, springs identified from measurements; last, two implementations of CaHyMan
+that agree.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ ORDER = (
     "plot_cassie_leg.py",
     "plot_cahyman.py",
     "plot_beams.py",
+    "plot_elastic_closure.py",
     "plot_gravity_sag.py",
     "plot_stiffness_map.py",
     "plot_identification.py",
