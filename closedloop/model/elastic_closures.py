@@ -31,7 +31,6 @@ lock):
   linear then angular, is A's motion relative to B in A's axes at A's origin). A
   singular 6x6 (positive semi-definite) is followed by one passive screw joint per free
   direction, ``"<closure>_free1"``, ... (:func:`_bushing`).
-
 * a ``universal`` pair (6 values only): its directions are those of its own frame U at
   A's origin, whose axes turn with the pair's free rotations: x along B's z axis, y along
   z_A x z_B (the cross axis), z along A's z axis (U is A where B's z is along A's x). The
@@ -45,7 +44,7 @@ a ``3d`` pair) and a 6x6 on a universal pair.
 The joints are springs like any other (an elastic one has its value as joint spring, a
 free one none: passive). Their rest state is the pair met as its type says, the springs at
 rest at the configuration analysed. The model's reference configurations (an MJCF
-``qpos0``, an SDF rest) are extended with the joints' values there
+``qpos0``, an SDF rest, a URDF's drawing) are extended with the joints' values there
 (:func:`chain_values`), so that an assembly started from them closes an elastic closure
 as the file draws it. The energy of a loaded equilibrium is that of the joints'
 coordinates (exact to first order about the rest, as above).
