@@ -149,17 +149,20 @@ def _limits_text(entry: dict) -> str:
 
 
 def format_info(info: dict) -> str:
-    """Text of :func:`model_info`: sizes, a table of the joints, closures, frames."""
+    """Text of :func:`model_info`: sizes, a table of the joints, closures, frames (the name
+    columns as wide as the longest name, at least 24 and 32 characters)."""
+    w = max([24, *(len(j["name"]) for j in info["joints"])])
+    wf = max([32, *(len(f["name"]) for f in info["frames"])])
     lines = [
         f"model {info['model']!r}: nq {info['nq']}, nv {info['nv']}, "
         f"L = {info['length']:.4g} m (characteristic length)",
         f"actuated: {', '.join(info['actuated']) or 'none'}",
         "",
         f"joints ({len(info['joints'])}; limits [rad or m], springs [N m/rad or N/m]):",
-        f"  {'name':<24} {'type':<11} {'role':<9} {'limits':<24} spring",
+        f"  {'name':<{w}} {'type':<11} {'role':<9} {'limits':<24} spring",
     ]
     lines += [
-        f"  {j['name']:<24} {j['type']:<11} {j['role']:<9} {_limits_text(j):<24} "
+        f"  {j['name']:<{w}} {j['type']:<11} {j['role']:<9} {_limits_text(j):<24} "
         f"{_spring_text(j)}".rstrip()
         for j in info["joints"]
     ]
@@ -172,7 +175,7 @@ def format_info(info: dict) -> str:
     lines.append(f"beams: {', '.join(info['beams']) or 'none'}")
     lines.append(f"mimic joints: {', '.join(info['mimic']) or 'none'}")
     lines += ["", f"frames ({len(info['frames'])}; name, type, on joint):"]
-    lines += [f"  {f['name']:<32} {f['type']:<12} {f['joint']}" for f in info["frames"]]
+    lines += [f"  {f['name']:<{wf}} {f['type']:<12} {f['joint']}" for f in info["frames"]]
     return "\n".join(lines)
 
 

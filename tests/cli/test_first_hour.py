@@ -216,6 +216,18 @@ def test_info_of_a_robot_without_springs_says_so(capsys, ur5_urdf):
     assert all(j["spring"] == [UR5_K] for j in json.loads(out)["joints"])
 
 
+def test_info_columns_stay_aligned_with_long_joint_names(capsys, tmp_path, fourbar_urdf):
+    """An elastic closure's joints have long names ("<A><->B_px"): the table widens."""
+    side = tmp_path / "fourbar.yaml"
+    side.write_text((fourbar_urdf.parent / "fourbar.yaml").read_text()
+                    + "closure_springs: {0: [2.0e+5, 2.0e+5, 2.0e+5, 0, 0, 0]}\n")  # fmt: skip
+    code, out, _ = run(capsys, "info", fourbar_urdf, "--closures", side)
+    table = out.split("joints (")[1].split("\n\n")[0].splitlines()[1:]
+    assert code == 0 and any("<->" in row for row in table)
+    assert len({row.index(" revolute ") if " revolute " in row else row.index(" prismatic ")
+                for row in table[1:]}) == 1  # fmt: skip
+
+
 def test_info_of_a_missing_file_is_one_line(capsys, tmp_path):
     code, out, err = run(capsys, "info", tmp_path / "none.urdf")
     assert code == 2 and out == "" and one_error_line(err)
