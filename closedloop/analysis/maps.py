@@ -316,7 +316,9 @@ def stiffness_map(
             (the command line's ``--no-limits``).
 
     Raises:
-        InvalidInputError: bad grid, points, wrench, workers or chunk.
+        InvalidInputError: bad grid, points, wrench, workers or chunk; ``modes`` on a model
+            whose link inertias are not the robot file's
+            (:meth:`closedloop.model.closed_loop.ClosedLoopModel.require_inertias`).
         NameNotFoundError: unknown frame.
         ModesError: ``modes`` on a model without any mass.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the map

@@ -276,7 +276,9 @@ def modes(
         ModesError: no admissible motion (a rigid model), no mass on any admissible
             motion, or an unstable equilibrium (a negative omega^2).
         InvalidInputError: a bad n, frame, axes, gravity, payload or density (not a
-            finite number > 0, or given to a model without a beam section).
+            finite number > 0, or given to a model without a beam section); a model whose
+            link inertias are not the robot file's
+            (:meth:`closedloop.model.closed_loop.ClosedLoopModel.require_inertias`).
         NameNotFoundError: an unknown frame.
     """
     if frame is not None:
@@ -286,6 +288,7 @@ def modes(
     state = as_configuration(model, q, length=length)
     state.require_closed()
     clm = state.model
+    clm.require_inertias("the natural frequencies")
     if frame is not None:
         clm.frame_id(frame)  # an unknown frame: before any work
     if density is not None:
@@ -353,7 +356,10 @@ def lowest_frequencies(clm: ClosedLoopModel, configurations: dict, done: np.ndar
 
 
 def check_massive(clm: ClosedLoopModel, density: float | None = None) -> None:
-    """Refuse a model without any mass (ModesError): no link inertia, no beam density."""
+    """Refuse a model without any mass (ModesError): no link inertia, no beam density; or
+    whose inertias are not the robot file's (InvalidInputError,
+    :meth:`closedloop.model.closed_loop.ClosedLoopModel.require_inertias`)."""
+    clm.require_inertias("the natural frequencies")
     weighed = any(s.density or density for s in clm.beam_masses.values())
     if not weighed and not any(inertia.mass > 0.0 for inertia in clm.model.inertias):
         raise ModesError(

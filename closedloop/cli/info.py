@@ -100,7 +100,9 @@ def model_info(clm: ClosedLoopModel) -> dict:
     nq, nv, limits [rad or m; None: unbounded], role, spring [SI per coordinate; None:
     rigid; a matrix for a block]), closures (name, type: one of
     :data:`closedloop.model.closures.CLOSURE_TYPES`), beams, mimic
-    joints, frames (name, type, parent joint), in the model's order."""
+    joints, frames (name, type, parent joint), in the model's order; unweighed bodies
+    (body name -> why its inertia is not the robot file's: no natural frequencies, no
+    gravity: ``ClosedLoopModel.unweighed_bodies``)."""
     pm = clm.model
     joints = [_joint(clm, j) for j in range(1, pm.njoints)]
     return {
@@ -121,6 +123,7 @@ def model_info(clm: ClosedLoopModel) -> dict:
             }
             for f in pm.frames
         ],
+        "unweighed_bodies": dict(clm.unweighed_bodies),
     }
 
 
@@ -174,6 +177,10 @@ def format_info(info: dict) -> str:
     lines += ["", f"closures ({len(info['closures'])}): {closures or 'none (a serial robot)'}"]
     lines.append(f"beams: {', '.join(info['beams']) or 'none'}")
     lines.append(f"mimic joints: {', '.join(info['mimic']) or 'none'}")
+    lines += [
+        f"inertia not the file's (no modes, no gravity; give it an <inertial>): {b} ({why})"
+        for b, why in info["unweighed_bodies"].items()
+    ]
     lines += ["", f"frames ({len(info['frames'])}; name, type, on joint):"]
     lines += [f"  {f['name']:<{wf}} {f['type']:<12} {f['joint']}" for f in info["frames"]]
     return "\n".join(lines)

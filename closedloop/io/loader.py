@@ -165,6 +165,7 @@ class _Tree:
     balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
     beam_masses: tuple = ()  # (virtual joint name, closedloop.model.beams.BeamMass) of the beams
     elastic: tuple[int, ...] = ()  # SDF: the loops closed by a joint with a spring
+    unweighed: tuple = ()  # MJCF: (body name, why Pinocchio's inertia of it is wrong)
 
 
 def _read_urdf(
@@ -311,6 +312,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
         spec.locked,
         visual,
         extras.undriven if spec.actuated is None else (),
+        unweighed=tuple(extras.unweighed.items()),
     )
 
 
@@ -443,6 +445,7 @@ def load_model(
         locked,
         visual_model=tree.visual,
         beam_masses=dict(tree.beam_masses),
+        unweighed_bodies=dict(tree.unweighed),
     )
     if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
         side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
@@ -471,7 +474,8 @@ def _with_closure_springs(
         model, closures, cut = with_elastic_closures(clm.model, list(clm.closures), checked)
     return ClosedLoopModel(model, closures, clm.actuated, {**clm.springs, **cut}, clm.locked,
                            clm.visual_model, clm.collision_model, clm.name,
-                           beam_masses=clm.beam_masses)  # fmt: skip
+                           beam_masses=clm.beam_masses,
+                           unweighed_bodies=clm.unweighed_bodies)  # fmt: skip
 
 
 def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:

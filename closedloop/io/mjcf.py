@@ -92,6 +92,9 @@ class MjcfExtras:
             ``ref`` does not shift it; (-inf, inf) for a ``limited="false"`` one.
         nq: configuration size of the file's joints.
         equalities: the active equalities, in :attr:`closures` order.
+        unweighed: body name -> why Pinocchio reads its inertia differently from MuJoCo
+            (:func:`closedloop.io.mjcf_xml.check_mass_settings`): its mass and inertia are
+            not to be used.
     """
 
     actuated: tuple[str, ...]
@@ -101,17 +104,20 @@ class MjcfExtras:
     limits: tuple[tuple[int, float, float], ...]
     nq: int
     equalities: tuple[Equality, ...]
+    unweighed: dict[str, str]
 
 
 def read_mjcf_extras(path: Path) -> MjcfExtras:
     """Actuators, joint stiffness, joint limits and closure names of an MJCF file.
 
     ``<default>`` classes and ``childclass`` are resolved as MuJoCo does. A hinge or slide
-    with ``limited="false"`` has no limits, whatever its range.
+    with ``limited="false"`` has no limits, whatever its range. A body whose inertia
+    Pinocchio reads differently from MuJoCo (a mesh geom, a geom outside the inertia group
+    range) is not refused but recorded in :attr:`MjcfExtras.unweighed`.
 
     Raises:
         ModelFileError: invalid XML, ``<include>``, a ``<replicate>`` holding anything, an
-            ``<inertial>`` inside a ``<frame>``, mass settings that Pinocchio ignores
+            ``<inertial>`` inside a ``<frame>``, compiler mass settings that Pinocchio ignores
             (:func:`closedloop.io.mjcf_xml.check_mass_settings`), an equality other than
             connect/weld, without body1 or joining a body to itself, an ``active`` other than
             true/false, a repeated joint, body or equality name, an unknown joint type, a hinge or
@@ -147,7 +153,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
     anchored = tuple(_equality(e, where) for _, e in equalities)
     write_classes(root)  # the joints' attributes as in the copy Pinocchio reads
     flatten_frames(root, where)
-    check_mass_settings(root, where)
+    unweighed = check_mass_settings(root, where)
     joints = joints_with_defaults(root)
     explicit = [e.get("name") for e in root.iter() if e.tag in MJCF_EQUALITIES]
     for kind, names in (
@@ -238,6 +244,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
         tuple(limits),
         nq,
         anchored,
+        unweighed,
     )
 
 

@@ -294,14 +294,23 @@ def _numbers(values: np.ndarray) -> str:
     return " ".join(map(repr, np.asarray(values, dtype=float).tolist()))
 
 
-def check_mass_settings(root: ET.Element, where: str) -> None:
-    """Refuse what makes MuJoCo's masses differ from those Pinocchio 4.1 reads: a
-    ``<compiler>`` ``boundmass``, ``boundinertia`` or ``settotalmass`` above 0, and, in a
-    body whose inertia comes from its geoms (``inertiafromgeom`` true, or auto and no
-    ``<inertial>``), a geom whose ``group`` is outside the compiler's ``inertiagrouprange``
-    (MuJoCo leaves its mass out) or a mesh (Pinocchio gives it 1 kg and 1 kg m^2 about each
-    axis at its origin, whatever its shape, ``mass`` and ``density``). Call it with the
-    classes written out (:func:`write_classes`) and frames flattened (:func:`flatten_frames`).
+def check_mass_settings(root: ET.Element, where: str) -> dict[str, str]:
+    """Refuse the ``<compiler>`` settings that make MuJoCo's masses differ from those
+    Pinocchio 4.1 reads (``boundmass``, ``boundinertia`` or ``settotalmass`` above 0), and
+    return the bodies whose inertia Pinocchio reads differently from MuJoCo: in a body whose
+    inertia comes from its geoms (``inertiafromgeom`` true, or auto and no ``<inertial>``),
+    a geom whose ``group`` is outside the compiler's ``inertiagrouprange`` (MuJoCo leaves its
+    mass out) or a mesh (Pinocchio gives it 1 kg and 1 kg m^2 about each axis at its origin,
+    whatever its shape, ``mass`` and ``density``). Call it with the classes written out
+    (:func:`write_classes`) and frames flattened (:func:`flatten_frames`).
+
+    Returns:
+        body name (``"(unnamed)"`` for a body without one) -> why its inertia is wrong
+        (the reasons of a body joined by "; "), in file order.
+
+    Raises:
+        ModelFileError: a compiler mass setting above 0, a malformed ``inertiagrouprange``
+            or geom ``group``.
     """
     compiler = compiler_attributes(root)
     for key in ("boundmass", "boundinertia", "settotalmass"):
@@ -314,20 +323,22 @@ def check_mass_settings(root: ET.Element, where: str) -> None:
     text = compiler.get("inertiagrouprange", "0 5")
     low, high = read_numbers(text, 2, where, "<compiler> inertiagrouprange")
     setting = compiler.get("inertiafromgeom", "auto")
+    unweighed: dict[str, list[str]] = {}
     for body in root.iter("body"):
         if setting == "false" or (setting == "auto" and body.find("inertial") is not None):
             continue
         for geom in body.findall("geom"):
             name, group = element_name(geom), geom.get("group", "0")
+            reasons = unweighed.setdefault(body.get("name") or "(unnamed)", [])
             if not low <= read_numbers(group, 1, where, f"group of geom {name}")[0] <= high:
-                raise ModelFileError(
-                    f"{where}: geom {name} of body {element_name(body)} has group {group!r}, "
-                    f"outside <compiler> inertiagrouprange={text!r}: MuJoCo leaves its mass "
-                    "out, Pinocchio's parser does not; expected an <inertial> in the body"
+                reasons.append(
+                    f"geom {name} has group {group!r}, outside <compiler> "
+                    f"inertiagrouprange={text!r}: MuJoCo leaves its mass out, Pinocchio's "
+                    "parser does not"
                 )
             if geom.get("type") == "mesh":
-                raise ModelFileError(
-                    f"{where}: body {element_name(body)} takes its inertia from its geoms, "
-                    f"and geom {name} is a mesh, to which Pinocchio's parser gives 1 kg and "
-                    "1 kg m^2 whatever its shape; expected an <inertial> in the body"
+                reasons.append(
+                    f"geom {name} is a mesh, to which Pinocchio's parser gives 1 kg and "
+                    "1 kg m^2 whatever its shape"
                 )
+    return {body: "; ".join(reasons) for body, reasons in unweighed.items() if reasons}

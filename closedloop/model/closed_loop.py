@@ -105,6 +105,11 @@ class ClosedLoopModel:
         beam_masses: virtual beam joint name -> :class:`closedloop.model.beams.BeamMass`, the
             sections (and densities) of the beams for their own mass
             (:mod:`closedloop.analysis.vibration`); filled by the loaders.
+        unweighed_bodies: body (link) name -> why the model's inertia of that body is not
+            the robot file's (an MJCF mesh geom, to which Pinocchio's parser gives 1 kg and
+            1 kg m^2, or a geom outside the compiler's ``inertiagrouprange``); filled by the
+            loaders. Stiffness queries do not need the inertias; gravity and natural
+            frequencies refuse such a model (:meth:`require_inertias`). Read-only.
 
     Attributes:
         stiffness: (nv,) read-only stiffness of every velocity coordinate (0, >0 or inf);
@@ -129,6 +134,7 @@ class ClosedLoopModel:
         name: str = "",
         *,
         beam_masses: Mapping | None = None,
+        unweighed_bodies: Mapping[str, str] | None = None,
         _neutral: tuple[np.ndarray, float] | None = None,  # with_springs: the same model
     ):
         if not isinstance(model, pin.Model):
@@ -145,6 +151,7 @@ class ClosedLoopModel:
         self.collision_model = collision_model
         self.name = name or model.name
         self.beam_masses = MappingProxyType(dict(beam_masses or {}))
+        self.unweighed_bodies: Mapping[str, str] = MappingProxyType(dict(unweighed_bodies or {}))
         self.actuated = joint_names("actuated", actuated)
         self.actuated_ids = tuple(joint_id(model, n) for n in self.actuated)
         for n, j in zip(self.actuated, self.actuated_ids, strict=True):
@@ -229,6 +236,27 @@ class ClosedLoopModel:
         coincide), whatever the mechanism's place in the world; the default scale of the
         unit-free rules (:mod:`closedloop.common.conditioning`)."""
         return self._length
+
+    def require_inertias(self, use: str) -> None:
+        """Refuse ``use`` (a computation that needs the links' inertias, e.g. "the
+        natural frequencies") on a model with ``unweighed_bodies``.
+
+        Raises:
+            InvalidInputError: the message names the bodies, why their inertia is wrong and
+                the fix (an ``<inertial>`` in each body).
+        """
+        if len(self.unweighed_bodies) == 1:
+            ((body, why),) = self.unweighed_bodies.items()
+            raise InvalidInputError(
+                f"{use} cannot be computed: Pinocchio's inertia of body {body!r} is not the "
+                f"robot file's ({why}); give the body an <inertial> (mass, diaginertia)"
+            )
+        if self.unweighed_bodies:
+            bodies = ", ".join(f"{b!r} ({why})" for b, why in self.unweighed_bodies.items())
+            raise InvalidInputError(
+                f"{use} cannot be computed: Pinocchio's inertias of bodies {bodies} are not "
+                "the robot file's; give each of these bodies an <inertial> (mass, diaginertia)"
+            )
 
     # ------------------------------------------------------------------ joint stiffness
     @property
@@ -369,6 +397,7 @@ class ClosedLoopModel:
             self.collision_model,
             self.name,
             beam_masses=self.beam_masses,
+            unweighed_bodies=self.unweighed_bodies,
             _neutral=(self.linear_coordinates, self._length),
         )
 
@@ -408,6 +437,7 @@ class ClosedLoopModel:
             geoms[1],
             self.name,
             beam_masses={**self.beam_masses, **masses},
+            unweighed_bodies=self.unweighed_bodies,
         )
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:

@@ -86,7 +86,9 @@ class GravityLoad:
         payloads: point masses at frames.
 
     Raises:
-        InvalidInputError: non-finite gravity, a bad payload.
+        InvalidInputError: non-finite gravity, a bad payload, a nonzero gravity on a model
+            whose inertias are not the robot file's
+            (:meth:`closedloop.model.closed_loop.ClosedLoopModel.require_inertias`).
         NameNotFoundError: a payload frame that the model does not have.
     """
 
@@ -97,6 +99,8 @@ class GravityLoad:
         payloads: Sequence[Payload] = (),
     ):
         self.gravity = readonly(_vector3(gravity, "gravity [m/s^2]"))
+        if self.gravity.any():  # the links' weight: their inertias are used
+            clm.require_inertias("the weight of the links (gravity)")
         try:
             self.payloads = tuple(payloads)
         except TypeError:  # one Payload, or not a sequence

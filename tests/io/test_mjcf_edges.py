@@ -14,7 +14,9 @@ from helpers import frame_placement
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
-from closedloop.exceptions import ModelFileError
+from closedloop.analysis.maps import stiffness_map
+from closedloop.cli.app import main
+from closedloop.exceptions import InvalidInputError, ModelFileError
 from closedloop.io.loader import load_model, reference_configuration
 
 INERTIAL = '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
@@ -372,19 +374,24 @@ def test_compiler_mass_settings_are_refused(tmp_path, setting):
     refused(write(tmp_path, text), f"<compiler> {setting}='0.5' changes MuJoCo's masses")
 
 
-def test_a_geom_outside_the_inertia_groups_is_refused(tmp_path):
-    """MuJoCo leaves its mass out; Pinocchio's parser did not. A world geom (no mass) and the
-    geoms of a body with an <inertial> (MuJoCo's default inertiafromgeom="auto") do not
-    count."""
+def test_a_geom_outside_the_inertia_groups_is_recorded(tmp_path):
+    """MuJoCo leaves its mass out; Pinocchio's parser did not: the body is recorded as
+    unweighed. A world geom (no mass) and the geoms of a body with an <inertial> (MuJoCo's
+    default inertiafromgeom="auto") do not count."""
     head = '<compiler angle="radian" inertiagrouprange="0 2"/>'
     world = '<geom name="floor" type="plane" size="1 1 0.1" group="4"/>'
     geoms = '<geom name="g0" size="0.01"/><geom name="g3" size="0.01" group="3"/>'
     a = f'<body name="a"><joint name="h"/>{geoms}</body>'
     text = mujoco(world + a, head=head)
-    refused(write(tmp_path, text), "geom 'g3' of body 'a' has group '3', outside <compiler> "
-            "inertiagrouprange='0 2'")  # fmt: skip
-    load_model(write(tmp_path, text.replace('group="3"', 'group="2"')), geometry=False)
-    load_model(write(tmp_path, mujoco(world + body("a", '<joint name="h"/>', geoms), head=head)))
+    robot = load_model(write(tmp_path, text), geometry=False)
+    assert list(robot.unweighed_bodies) == ["a"]
+    assert robot.unweighed_bodies["a"].startswith(
+        "geom 'g3' has group '3', outside <compiler> inertiagrouprange='0 2'"
+    )
+    robot = load_model(write(tmp_path, text.replace('group="3"', 'group="2"')), geometry=False)
+    assert robot.unweighed_bodies == {}
+    robot = load_model(write(tmp_path, mujoco(world + body("a", '<joint name="h"/>', geoms), head)))
+    assert robot.unweighed_bodies == {}
 
 
 #: A 0.1 m cube as a Wavefront OBJ mesh: its corners, then two triangles a face.
@@ -396,18 +403,113 @@ CUBE = "\n".join(
 
 
 @pytest.mark.parametrize("geom_mass", ["", 'mass="0"', 'density="2000"'])
-def test_a_mesh_giving_a_body_its_inertia_is_refused(tmp_path, geom_mass):
+def test_a_mesh_giving_a_body_its_inertia_is_recorded(tmp_path, geom_mass):
     """Pinocchio's parser gives a mesh geom 1 kg and 1 kg m^2 about each axis, whatever its
-    shape and mass (MuJoCo: a 0.1 m cube of 1000 kg/m^3, 1 kg and 1.7e-3 kg m^2); with an
-    <inertial> in the body (MuJoCo's default inertiafromgeom="auto") the mesh has no mass."""
+    shape and mass (MuJoCo: a 0.1 m cube of 1000 kg/m^3, 1 kg and 1.7e-3 kg m^2): the body
+    is recorded as unweighed; with an <inertial> in the body (MuJoCo's default
+    inertiafromgeom="auto") the mesh has no mass."""
     (tmp_path / "cube.obj").write_text(CUBE)
     asset = '<asset><mesh name="cube" file="cube.obj"/></asset>'
     geom = f'<geom name="c" type="mesh" mesh="cube" {geom_mass}/>'
     text = mujoco(f'<body name="a"><joint name="h"/>{geom}</body>', head=RADIAN + asset)
-    refused(write(tmp_path, text), "body 'a' takes its inertia from its geoms, and geom 'c' is "
-            "a mesh")  # fmt: skip
+    robot = load_model(write(tmp_path, text), geometry=False)
+    assert dict(robot.unweighed_bodies) == {
+        "a": "geom 'c' is a mesh, to which Pinocchio's parser gives 1 kg and 1 kg m^2 "
+        "whatever its shape"
+    }
+    two = cl.ClosedLoopModel(robot.model, unweighed_bodies={"a": "why a", "b": "why b"})
+    with pytest.raises(InvalidInputError, match=r"^the weight cannot be computed: Pinocchio's "
+                       r"inertias of bodies 'a' \(why a\), 'b' \(why b\) are not the robot "
+                       r"file's; give each of these bodies an <inertial>"):  # fmt: skip
+        two.require_inertias("the weight")
     robot = load_model(write(tmp_path, text.replace(geom, INERTIAL + geom)), geometry=False)
+    assert robot.unweighed_bodies == {}
+    robot.require_inertias("the weight")  # nothing to refuse
     np.testing.assert_allclose(robot.model.inertias[1].mass, 0.1, rtol=1e-15)  # INERTIAL's
+
+
+#: The coupler's <inertial> in urdf/fourbar.xml, and the geom that follows it.
+COUPLER = (
+    '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>\n'
+    '            <geom type="cylinder" pos="0.15 0 0"'
+)
+#: The fourbar's coupler given its inertia by a mesh geom, or by a geom outside the inertia
+#: groups: (compiler and assets, the geom, the words of the reason).
+UNWEIGHED = {
+    "mesh": ('<compiler angle="radian"/><asset><mesh name="cube" file="cube.obj"/></asset>',
+             '<geom name="m" type="mesh" mesh="cube"/>', "geom 'm' is a mesh"),
+    "group": ('<compiler angle="radian" inertiagrouprange="0 2"/>',
+              '<geom name="m" size="0.01" group="3"/>', "geom 'm' has group '3'"),
+}  # fmt: skip
+
+
+def unweighed_fourbar(fourbar_mjcf: Path, tmp_path: Path, case: str, inertial: bool) -> Path:
+    """urdf/fourbar.xml with the ``case`` geom in the coupler, whose <inertial> is kept
+    (``inertial``: its inertia is the file's) or removed (it then comes from the geoms)."""
+    head, geom, _ = UNWEIGHED[case]
+    (tmp_path / "cube.obj").write_text(CUBE)
+    text = fourbar_mjcf.read_text().replace('<compiler angle="radian"/>', head)
+    assert COUPLER in text
+    kept = COUPLER.split("\n")[0] if inertial else ""
+    text = text.replace(COUPLER, kept + geom + COUPLER.split("\n", 1)[1])
+    return write(tmp_path, text, f"{case}_{inertial}.xml")
+
+
+@pytest.mark.parametrize("case", list(UNWEIGHED))
+def test_an_unweighed_body_allows_stiffness_and_refuses_inertia(
+    fourbar_mjcf, tmp_path, capsys, case
+):
+    """A body whose inertia Pinocchio reads wrong: the stiffness, which does not depend on
+    the inertias, is that of the file with an <inertial> (exactly: the same computation on
+    the same numbers); the natural frequencies, the weight and the maps' lowest frequency
+    are refused naming the body, on derived models too, and on the command line."""
+    path = unweighed_fourbar(fourbar_mjcf, tmp_path, case, inertial=False)
+    robot = load_model(path, geometry=False)
+    assert list(robot.unweighed_bodies) == ["coupler_link"]
+    assert UNWEIGHED[case][2] in robot.unweighed_bodies["coupler_link"]
+    weighed = load_model(unweighed_fourbar(fourbar_mjcf, tmp_path, case, True), geometry=False)
+    assert weighed.unweighed_bodies == {}
+    q = reference_configuration(robot)
+    np.testing.assert_array_equal(q, reference_configuration(weighed))
+    np.testing.assert_array_equal(cl.compliance(robot, q, "P").C, cl.compliance(weighed, q, "P").C)
+    cl.compliance(weighed, q, "P", gravity=(0.0, 0.0, -9.81))  # the same calls, weighed
+    cl.modes(weighed, q)
+    derived = [
+        robot,
+        robot.with_springs({**robot.springs, "coupler": 30.0}),
+        robot.with_beams({"crank_link": {"E": 2.1e11, "G": 8.1e10, "end": "crank_axial",
+                                         "section": {"shape": "circle", "d": 0.03}}}),
+        load_model(path, geometry=False, closure_springs={0: [1e6, 1e6, 1e6, 1e3, 1e3, 1e3]}),
+    ]  # fmt: skip
+    for clm in derived:
+        assert dict(clm.unweighed_bodies) == dict(robot.unweighed_bodies)
+        start = q if clm.model.nq == q.size else reference_configuration(clm)
+        named = r"body 'coupler_link' is not the robot file's \(geom 'm' .*<inertial>"
+        with pytest.raises(InvalidInputError, match="the natural frequencies .*" + named):
+            cl.modes(clm, start)
+        weight = r"the weight of the links \(gravity\) .*" + named
+        with pytest.raises(InvalidInputError, match=weight):
+            cl.compliance(clm, start, "P", gravity=(0.0, 0.0, -9.81))
+        with pytest.raises(InvalidInputError, match=weight):
+            cl.solve_equilibrium(clm, start, "P", np.zeros(6), gravity=(0.0, 0.0, -9.81))
+        with pytest.raises(InvalidInputError, match=named):
+            cl.batch_modes(clm, [start])
+        with pytest.raises(InvalidInputError, match=named):
+            stiffness_map(clm, "P", points=[[0.5]], modes=True)
+        cl.compliance(clm, start, "P")  # the stiffness still, and the statics without weight
+        eq = cl.solve_equilibrium(clm, start, "P", [0.0, 0.0, -5.0, 0.0, 0.0, 0.0])
+        assert eq.gravity is None and np.abs(eq.translation).max() > 0.0
+    assert np.isfinite(stiffness_map(robot, "P", points=[[0.5]]).indices["min_translational"]).all()
+    code = main(["modes", str(path)])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith("closedloop: error: the natural frequencies")
+    assert "'coupler_link'" in err and "<inertial>" in err
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "inertia not the file's (no modes, no gravity; give it an <inertial>): coupler_link" in out
+    )
 
 
 def test_meshes_of_a_file_without_compiler(tmp_path):
