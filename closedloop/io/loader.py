@@ -460,7 +460,7 @@ def _with_closure_springs(
     clm: ClosedLoopModel, springs: Mapping, path: Path, elastic: tuple[int, ...]
 ) -> ClosedLoopModel:
     """An MJCF or SDF model with the closures of ``springs`` made elastic
-    (:func:`closedloop.model.elastic_closures.with_elastic_closures`); ``elastic``: the
+    (:meth:`ClosedLoopModel.with_closure_springs`); ``elastic``: the
     indices of the loops the file made elastic already (an SDF loop joint's spring)."""
     with in_file(f"robot file {str(path)!r}, closure_springs= of load_model"):
         checked = check_closure_springs(list(clm.closures), springs)
@@ -471,11 +471,7 @@ def _with_closure_springs(
                 f"{[clm.closures[i].name for i in taken]}), whose loop-closing joints have "
                 "a spring in the file; expected closure springs only for loops without one"
             )
-        model, closures, cut = with_elastic_closures(clm.model, list(clm.closures), checked)
-    return ClosedLoopModel(model, closures, clm.actuated, {**clm.springs, **cut}, clm.locked,
-                           clm.visual_model, clm.collision_model, clm.name,
-                           beam_masses=clm.beam_masses,
-                           unweighed_bodies=clm.unweighed_bodies)  # fmt: skip
+        return clm.with_closure_springs(checked)
 
 
 def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:

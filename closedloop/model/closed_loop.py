@@ -44,6 +44,7 @@ from closedloop.model.closures import (
     joint_id,
     joint_names,
 )
+from closedloop.model.elastic_closures import with_elastic_closures
 from closedloop.model.spring_spec import joint_stiffness
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
@@ -427,6 +428,19 @@ class ClosedLoopModel:
         )
         n = len(self.closures)
         closures = [c.on(model, ends[i], ends[n + i]) for i, c in enumerate(self.closures)]
+        return self._grown(model, closures, springs, geoms, masses)
+
+    def with_closure_springs(self, springs: Mapping) -> ClosedLoopModel:
+        """This model with the closures of ``springs`` (closure index -> 6 values or a 6x6
+        [N/m, N m/rad]) made elastic by joints at each cut, reference configurations
+        extended (:func:`closedloop.model.elastic_closures.with_elastic_closures`)."""
+        model, closures, cut = with_elastic_closures(self.model, list(self.closures), springs)
+        geoms = [self.visual_model, self.collision_model]
+        return self._grown(model, closures, cut, geoms, {})
+
+    def _grown(self, model, closures, springs, geoms, masses) -> ClosedLoopModel:
+        """This model grown by joints (beams, a cut's): the added ``springs`` and beam
+        ``masses`` merged over its own, ``geoms`` (visual, collision); the rest kept."""
         return ClosedLoopModel(
             model,
             closures,
