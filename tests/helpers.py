@@ -7,6 +7,8 @@ several modules use are in ``conftest.py``.
 
 from __future__ import annotations
 
+import ctypes
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -106,6 +108,22 @@ UR5_BEAM_ENDS = {
 SQ3 = np.sqrt(3.0)
 LEG_U = np.array([[1.0, 0.0, 0.0], [-0.5, SQ3 / 2, 0.0], [-0.5, -SQ3 / 2, 0.0]])
 LEG_T = np.array([[0.0, 1.0, 0.0], [-SQ3 / 2, -0.5, 0.0], [SQ3 / 2, -0.5, 0.0]])
+
+
+def opensees():
+    """openseespy's module, its bundled BLAS, LAPACK and Fortran runtime loaded first (the
+    wheel's extension finds them only so); the calling test skipped, saying how to install
+    it, without openseespy."""
+    spec = importlib.util.find_spec("openseespylinux")
+    if spec is None:
+        pytest.skip("openseespy is not installed (pip install '.[test]')")
+    lib = Path(spec.origin).parent / "lib"
+    for name in ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3",
+                 "liblapack.so.3"):  # fmt: skip
+        ctypes.CDLL(str(lib / name), mode=ctypes.RTLD_GLOBAL)
+    import openseespy.opensees as ops
+
+    return ops
 
 
 def rot_y(angle: float) -> np.ndarray:

@@ -75,8 +75,6 @@ centre node, each pinned (or welded) to its leg's tip.
 
 from __future__ import annotations
 
-import ctypes
-import importlib.util
 import itertools
 import math
 from pathlib import Path
@@ -84,7 +82,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import assert_close_in_norm, opensees
 from mechanisms import mjcf_fourbar, xyz_text
 
 import closedloop as cl
@@ -107,20 +105,6 @@ SCALE = np.array([1.0, 1.0, 1.0, 0.3, 0.3, 0.3])
 Y = np.array([0.0, 1.0, 0.0])
 R_ZY = pin.rpy.rpyToMatrix(math.pi / 2, 0.0, 0.0)  # z along -y
 R_ZX = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)  # z along +x
-
-
-def opensees():
-    """openseespy's module, its bundled BLAS, LAPACK and Fortran runtime loaded first."""
-    spec = importlib.util.find_spec("openseespylinux")
-    if spec is None:
-        pytest.skip("openseespy is not installed (pip install '.[test]')")
-    lib = Path(spec.origin).parent / "lib"
-    for name in ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3",
-                 "liblapack.so.3"):  # fmt: skip
-        ctypes.CDLL(str(lib / name), mode=ctypes.RTLD_GLOBAL)
-    import openseespy.opensees as ops
-
-    return ops
 
 
 # ----------------------------------------------------------------------------- OpenSees
@@ -441,8 +425,9 @@ O_ = np.array([0.15, 0.1, 0.36])
 BASE_CUTS = {"3d": (4, 5, 6), "6d": ()}  # the dofs OpenSees frees at a base
 
 
-@pytest.mark.parametrize("kind", BASE_CUTS)
-def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
+def _platform_on_legs(kind: str) -> tuple[list, list]:
+    """(joints, closures) of a platform on three legs: leg 0 carries it, legs 1 and 2
+    hang from it and are closed to the ground at their bases by a ``kind`` closure."""
     joints = [("base0", "ground", "leg0", BASES[0], None, "fixed", None),
               ("top0", "leg0", "platform", TIPS[0], None, "fixed", None),
               ("O_joint", "platform", "O", O_, None, "fixed", None)]  # fmt: skip
@@ -450,7 +435,12 @@ def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
         joints += [(f"top{i}", "platform", f"leg{i}", TIPS[i], None, "fixed", None),
                    (f"base{i}", f"leg{i}", f"b{i}", BASES[i], None, "fixed", None),
                    (f"ground{i}", "ground", f"g{i}", BASES[i], None, "fixed", None)]  # fmt: skip
-    closures = [(f"b{i}", f"g{i}", kind) for i in (1, 2)]
+    return joints, [(f"b{i}", f"g{i}", kind) for i in (1, 2)]
+
+
+@pytest.mark.parametrize("kind", BASE_CUTS)
+def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
+    joints, closures = _platform_on_legs(kind)
     beams = {"leg0": "top0", "leg1": "base1", "leg2": "base2"}
     clm = urdf_model(tmp_path, f"platform_{kind}", joints, closures, beams, {})
 
@@ -474,14 +464,7 @@ def test_rigid_platform_on_flexible_legs_against_opensees(tmp_path, kind):
 def test_flexible_platform_of_three_beams_against_opensees(tmp_path, kind):
     """The platform on the three legs above, flexible: three beams on one link, from its
     origin (leg 0's tip) to its centre O, and from O to the tips of legs 1 and 2."""
-    joints = [("base0", "ground", "leg0", BASES[0], None, "fixed", None),
-              ("top0", "leg0", "platform", TIPS[0], None, "fixed", None),
-              ("O_joint", "platform", "O", O_, None, "fixed", None)]  # fmt: skip
-    for i in (1, 2):
-        joints += [(f"top{i}", "platform", f"leg{i}", TIPS[i], None, "fixed", None),
-                   (f"base{i}", f"leg{i}", f"b{i}", BASES[i], None, "fixed", None),
-                   (f"ground{i}", "ground", f"g{i}", BASES[i], None, "fixed", None)]  # fmt: skip
-    closures = [(f"b{i}", f"g{i}", kind) for i in (1, 2)]
+    joints, closures = _platform_on_legs(kind)
     platform = [(None, "O_joint"), ("O_joint", "top1"), ("O_joint", "top2")]
     beams = {"leg0": "top0", "platform": platform, "leg1": "base1", "leg2": "base2"}
     clm = urdf_model(tmp_path, f"flexible_platform_{kind}", joints, closures, beams, {})

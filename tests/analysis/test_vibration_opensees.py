@@ -10,14 +10,11 @@ the dense generalised LAPACK solver.
 
 from __future__ import annotations
 
-import ctypes
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import pytest
+from helpers import opensees
 
 import closedloop as cl
 
@@ -26,21 +23,6 @@ NODES = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.4], [0.5, 0.0, 0.4], [0.5, 0.0, 
 #: The same element matrices assembled by two codes, solved by two dense eigensolvers:
 #: the frequencies agree to rounding times the condition of K and M (about 1e4 here).
 RTOL_OPENSEES = 1e-6
-
-
-def opensees():
-    """openseespy's module, its bundled BLAS, LAPACK and Fortran runtime loaded first
-    (the wheel's extension finds them only so)."""
-    spec = importlib.util.find_spec("openseespylinux")
-    if spec is None:
-        pytest.skip("openseespy is not installed (pip install '.[test]')")
-    lib = Path(spec.origin).parent / "lib"
-    for name in ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3",
-                 "liblapack.so.3"):  # fmt: skip
-        ctypes.CDLL(str(lib / name), mode=ctypes.RTLD_GLOBAL)
-    import openseespy.opensees as ops
-
-    return ops
 
 
 def portal(tmp_path) -> cl.ClosedLoopModel:
