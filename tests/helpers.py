@@ -69,6 +69,26 @@ async def devtools_page(proc: subprocess.Popen, profile: Path, deadline: float):
     return await websocket_connect(page["webSocketDebuggerUrl"], max_message_size=1 << 28)
 
 
+def devtools_caller(ws, on_event):
+    """``call(method, **params)``, an async DevTools command over the websocket ``ws``:
+    it returns the command's reply and hands every other message (events) to
+    ``on_event(message)`` as they come."""
+    import json
+
+    ids = iter(range(1, 1 << 30))
+
+    async def call(method: str, **params) -> dict:
+        n = next(ids)
+        await ws.write_message(json.dumps({"id": n, "method": method, "params": params}))
+        while True:
+            message = json.loads(await ws.read_message())
+            if message.get("id") == n:
+                return message
+            on_event(message)
+
+    return call
+
+
 #: The per-point indices of a map (closedloop.analysis.batch_indices.batch_indices names) as a
 #: single query's StiffnessIndices gives them.
 INDEX_GETTERS = {

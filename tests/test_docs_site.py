@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import FLAGS, browser, devtools_page
+from helpers import FLAGS, browser, devtools_caller, devtools_page
 
 import cahyman_pin
 import closedloop
@@ -104,7 +104,7 @@ async def _visit(url: str, profile: Path, done: str | None) -> dict:
     deadline = time.monotonic() + PAGE_TIMEOUT
     try:
         ws = await devtools_page(proc, profile, deadline)
-        ids, errors, failed = iter(range(1, 1 << 30)), [], []
+        errors, failed = [], []
 
         def record(message: dict) -> None:
             method, params = message.get("method"), message.get("params", {})
@@ -121,14 +121,7 @@ async def _visit(url: str, profile: Path, done: str | None) -> dict:
             elif method == "Network.responseReceived" and params["response"]["status"] >= 400:
                 failed.append(f"{params['response']['status']} {params['response']['url']}")
 
-        async def call(method: str, **params) -> dict:
-            n = next(ids)
-            await ws.write_message(json.dumps({"id": n, "method": method, "params": params}))
-            while True:
-                message = json.loads(await ws.read_message())
-                if message.get("id") == n:
-                    return message
-                record(message)
+        call = devtools_caller(ws, record)
 
         async def evaluate(expression: str):
             message = await call("Runtime.evaluate", expression=expression, returnByValue=True)

@@ -28,7 +28,7 @@ import meshcat
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import FLAGS, UR5_Q, browser, devtools_page
+from helpers import FLAGS, UR5_Q, browser, devtools_caller, devtools_page
 from PIL import Image
 from test_viewer_edges import scaled_fourbar
 
@@ -131,20 +131,15 @@ async def _devtools(target: str, profile, wait_ms: int, actions=None):
     try:
         deadline = time.monotonic() + BROWSER_TIMEOUT
         ws = await devtools_page(proc, profile, deadline)
-        ids = iter(range(1, 1 << 30))
         errors = []  # the page's JavaScript errors (Log.entryAdded), from its start
 
-        async def call(method: str, **params) -> dict:
-            n = next(ids)
-            await ws.write_message(json.dumps({"id": n, "method": method, "params": params}))
-            while True:
-                message = json.loads(await ws.read_message())
-                if message.get("id") == n:
-                    return message
-                entry = message.get("params", {}).get("entry", {})
-                if message.get("method") == "Log.entryAdded" and entry.get("level") == "error":
-                    if entry.get("source") == "javascript":
-                        errors.append(entry.get("text"))
+        def record(message: dict) -> None:
+            entry = message.get("params", {}).get("entry", {})
+            if message.get("method") == "Log.entryAdded" and entry.get("level") == "error":
+                if entry.get("source") == "javascript":
+                    errors.append(entry.get("text"))
+
+        call = devtools_caller(ws, record)
 
         async def evaluate(expression: str):
             """Value of ``expression`` (a promise is awaited) in the loaded page."""
