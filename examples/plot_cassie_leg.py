@@ -13,12 +13,11 @@ import numpy as np
 
 import closedloop as cl
 from closedloop.elastostatics.compliance import energy_shares
-from closedloop.io.loader import reference_configuration
 
 sdf = cl.robot_data_dir() / "cassie_description/robots/cassie_v2.sdf"
 motors = ["left-roll-op", "left-yaw-op", "left-pitch-op", "left-knee-op", "left-foot-op"]
 leg = cl.load_model(sdf, springs=dict.fromkeys(motors, 1.0e4))
-q = cl.assemble(leg, None, reference_configuration(leg)).q  # the pose drawn in the file
+q = cl.assemble(leg, None, leg.reference_configuration()).q  # the pose drawn in the file
 # the file draws two joints of each leg at 0, outside their limits: taken as drawn
 res = cl.compliance(leg, q, "left-foot", check_limits=False)
 print("diagonal of C:", ", ".join(f"{c:.3g}" for c in np.diag(res.C)))

@@ -12,10 +12,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.io.loader import reference_configuration
 
 robot = cl.load_model(cl.data.path("delta.xml"))
-q = cl.assemble(robot, None, reference_configuration(robot)).q
+q = cl.assemble(robot, None, robot.reference_configuration()).q
 res = cl.compliance(robot, q, "platform")
 print("rank", res.rank, "; rigid directions (columns):")
 print(np.round(res.rigid_directions, 3))  # res.K would raise RigidDirectionsError

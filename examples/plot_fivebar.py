@@ -11,10 +11,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.io.loader import reference_configuration
 
 robot = cl.load_model(cl.data.path("fivebar5.xml"))
-q0 = cl.assemble(robot, None, reference_configuration(robot)).q
+q0 = cl.assemble(robot, None, robot.reference_configuration()).q
 res = cl.compliance(robot, q0, "E")
 print("rank", res.rank)
 

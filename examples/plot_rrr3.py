@@ -11,10 +11,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.io.loader import reference_configuration
 
 robot = cl.load_model(cl.data.path("rrr3.xml"))
-q = cl.assemble(robot, None, reference_configuration(robot)).q
+q = cl.assemble(robot, None, robot.reference_configuration()).q
 res = cl.compliance(robot, q, "platform")
 print("rank", res.rank)
 

@@ -12,10 +12,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import closedloop as cl
-from closedloop.io.loader import reference_configuration
 
 robot = cl.load_model(cl.data.path("stewart.xml"))
-q = cl.assemble(robot, None, reference_configuration(robot)).q  # the file's own pose
+q = cl.assemble(robot, None, robot.reference_configuration()).q  # the file's own pose
 res = cl.compliance(robot, q, "platform")
 print("diagonal of K:", np.array2string(np.diag(res.K), precision=3))
 print(f"scaled condition number: {res.condition_number:.3g}")

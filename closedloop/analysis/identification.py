@@ -89,7 +89,6 @@ from closedloop.exceptions import (
     OutsideLimitsError,
     SingularConfigurationError,
 )
-from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.configuration import require_within_limits
 from closedloop.kinematics.driving import assemble_connected
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -202,7 +201,7 @@ def _configurations(clm: ClosedLoopModel, measurements, check_limits: bool) -> l
         )
     if not measurements or not all(isinstance(m, Measurement) for m in measurements):
         raise InvalidInputError("measurements must be a non-empty list of Measurement")
-    out, start = [], reference_configuration(clm)  # the file's, as the command line's
+    out, start = [], clm.reference_configuration()  # the file's, as the command line's
     for i, m in enumerate(measurements):
         try:  # actuated values: their count and values checked by the assembly
             q = None if m.q is None else clm.check_configuration(m.q)

@@ -42,7 +42,6 @@ from closedloop.analysis.model_source import ModelSource, model_of
 from closedloop.common.conditioning import ILL_CONDITIONED
 from closedloop.elastostatics.batch import STACK, answered
 from closedloop.elastostatics.compliance import compliance
-from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.assembly import free_coordinates
 from closedloop.kinematics.driving import (
     INPUT_STEP,
@@ -240,7 +239,7 @@ def path_start(clm: ClosedLoopModel, points: np.ndarray, check_limits: bool = Tr
     configuration (:func:`closedloop.kinematics.driving.assemble_connected`), as ``closedloop
     stiffness --actuated`` assembles it; the file's configuration where that fails (the
     point's own assembly then reports why)."""
-    reference = reference_configuration(clm)
+    reference = clm.reference_configuration()
     if not len(points):
         return reference
     try:

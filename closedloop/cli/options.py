@@ -10,7 +10,7 @@ import argparse
 from closedloop.cli.parser import finite_float, needs_gravity, number, path_text
 from closedloop.exceptions import InvalidInputError, OpenLoopError
 from closedloop.io.data import BUNDLED_MODELS, ROBOTS, resolve
-from closedloop.io.loader import load_model, read_springs_file, reference_configuration
+from closedloop.io.loader import load_model, read_springs_file
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.configuration import Configuration
 from closedloop.kinematics.driving import assemble_connected
@@ -153,7 +153,7 @@ def configuration(
     """
     given = q is not None or actuated is not None  # else the file's own configuration
     if q is None:
-        start = reference_configuration(clm)
+        start = clm.reference_configuration()
         if actuated is None:
             q = assemble(clm, None, start).q  # the file's own configuration, as drawn
         else:  # driven there on the start's assembly mode, limits checked or not

@@ -61,10 +61,10 @@ from closedloop.io.mjcf import (
     place_free_joints,
     read_mjcf_extras,
 )
-from closedloop.io.sdf import REST, load_sdf
+from closedloop.io.sdf import load_sdf
 from closedloop.model.balls import ball_springs, urdf_with_balls
 from closedloop.model.beams import apply_beams
-from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.closed_loop import REST, ClosedLoopModel
 from closedloop.model.closures import Closure, closure_between_frames, joint_names
 from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
 
@@ -342,11 +342,11 @@ def load_model(
     An SDF model's loops are its loop-closing joints and its springs the joints'
     ``spring_stiffness`` (:mod:`closedloop.io.sdf`; it names no actuated joint: give them as
     ``actuated`` or springs); its rest configuration puts the springs at their
-    ``spring_reference`` (:func:`reference_configuration`).
+    ``spring_reference`` (:meth:`ClosedLoopModel.reference_configuration`).
 
     An MJCF model's loops are its ``<equality><connect|weld>`` constraints. Pinocchio
     computes the ``<connect>`` anchor on the second body at ``qpos0``, so the file's
-    reference pose must be assembled; :func:`reference_configuration` returns it.
+    reference pose must be assembled; :meth:`ClosedLoopModel.reference_configuration` returns it.
 
     Args:
         path: robot file.
@@ -367,8 +367,8 @@ def load_model(
             MJCF equality, an SDF loop-closing joint, in file order) -> 6 stiffnesses [N/m,
             N m/rad] or a 6x6 matrix, merged over a closure file's ``closure_springs:``
             (:mod:`closedloop.model.elastic_closures`); the model's reference
-            configurations (:func:`reference_configuration`) are extended with the values
-            of the joints added at the cuts.
+            configurations (:meth:`ClosedLoopModel.reference_configuration`) are extended
+            with the values of the joints added at the cuts.
 
     Raises:
         ModelFileError: missing or unparsable robot or closure file, unknown format; the
@@ -477,12 +477,3 @@ def _with_closure_springs(
 def load_urdf(urdf: str | Path, closures: str | Path | None = None, **options) -> ClosedLoopModel:
     """:func:`load_model` for a URDF file, whatever its suffix (same keyword options)."""
     return load_model(urdf, closures, file_format="urdf", **options)
-
-
-def reference_configuration(clm: ClosedLoopModel) -> np.ndarray:
-    """(nq,) start configuration: the MJCF ``qpos0`` or the SDF rest configuration
-    (springs at their ``spring_reference``) if the model has one, else neutral."""
-    refs = clm.model.referenceConfigurations
-    key = next((k for k in ("qpos0", REST) if k in refs), None)
-    q = refs[key] if key else pin.neutral(clm.model)
-    return np.array(q, dtype=float)

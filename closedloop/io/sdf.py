@@ -41,7 +41,8 @@ by a free flyer ``root_joint`` (``free_base``); a joint with parent ``world`` fi
 Springs: ``spring_stiffness`` > 0 [N m/rad, N/m]. The model's springs are at rest at the
 configuration analysed, so the rest configuration ``model.referenceConfigurations[REST]``
 puts each spring joint at its ``spring_reference`` (others at the drawing, 0); assembly
-from it keeps the springs at rest (:func:`closedloop.io.loader.reference_configuration`).
+from it keeps the springs at rest
+(:meth:`closedloop.model.closed_loop.ClosedLoopModel.reference_configuration`).
 """
 
 from __future__ import annotations
@@ -58,13 +59,12 @@ import pinocchio as pin
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
+from closedloop.model.closed_loop import REST
 from closedloop.model.closures import CLOSURE_TYPES, Closure
 from closedloop.model.elastic_closures import DIRECTIONS, FREE_DIRECTIONS, with_elastic_closures
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")
-#: Name of the rest configuration (springs at their spring_reference) in the model.
-REST = "spring_rest"
 
 
 @dataclass(frozen=True)

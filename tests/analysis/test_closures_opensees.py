@@ -86,7 +86,6 @@ from helpers import assert_close_in_norm, opensees
 from mechanisms import mjcf_fourbar, xyz_text
 
 import closedloop as cl
-from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.constraints import closure_residual
 
 E, G, D = 2.1e11, 8.1e10, 0.01  # steel [Pa], rod diameter [m]
@@ -225,7 +224,7 @@ def write_urdf(path: Path, joints) -> None:
 def library_compliance(clm, frame: str) -> np.ndarray:
     """(6, 6) compliance of ``frame`` at the reference configuration (neutral; an MJCF
     file's qpos0), which must be closed and world-aligned."""
-    q = reference_configuration(clm)
+    q = clm.reference_configuration()
     np.testing.assert_allclose(closure_residual(clm, q), 0.0, atol=1e-14)
     data = clm.model.createData()
     pin.framesForwardKinematics(clm.model, data, q)

@@ -14,7 +14,6 @@ from closedloop.analysis.identification import Measurement, identify
 from closedloop.analysis.misfit import other_modes, worst_measurements
 from closedloop.cli.app import main
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, ModelMisfitWarning
-from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.driving import assemble_connected
 
 TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
@@ -81,7 +80,7 @@ def test_a_clean_data_set_names_none(fourbar_true):
         warnings.simplefilter("error", ModelMisfitWarning)
         fit = identify(fourbar_true, data, "P", ["crank"])
     assert fit.consistent and fit.worst == () and fit.other_mode == {}
-    start = reference_configuration(fourbar_true)
+    start = fourbar_true.reference_configuration()
     configs = [assemble_connected(fourbar_true, m.actuated, start).q for m in data]
     assert other_modes(fourbar_true, data, configs) == {}  # the checks themselves: none
 
@@ -134,7 +133,7 @@ def test_the_command_names_the_measurements_on_another_mode(tmp_path, fourbar_tr
 
 def test_no_limits_takes_measurements_outside_the_limits(tmp_path, fourbar_true, capsys):
     """A crank at 7 rad (its limit 6.3): refused, exit 2, unless --no-limits (a fit)."""
-    start = reference_configuration(fourbar_true)
+    start = fourbar_true.reference_configuration()
     q = assemble_connected(fourbar_true, [7.0], start, check_limits=False).q
     C = cl.compliance(fourbar_true, q, "P", check_limits=False).C
     w = np.array([[3.0, 0.0, -2.0, 0.0, 0.5, 0.0], [0.0, 1.0, 2.0, 0.3, 0.0, 0.0]])

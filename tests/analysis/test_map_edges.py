@@ -15,7 +15,6 @@ from closedloop.analysis.map_results import OK, ChunkResult
 from closedloop.analysis.maps import INDICES, column_name, stiffness_map
 from closedloop.analysis.model_source import ModelSource
 from closedloop.analysis.tasks import run_tasks
-from closedloop.io.loader import reference_configuration
 
 #: The four-bar of urdf/fourbar.urdf with its ground link 0.42 m instead of 0.3 m: crank
 #: 0.1 m, coupler 0.3 m, rocker 0.15 m; 0.1 + 0.42 > 0.3 + 0.15, so the crank cannot turn
@@ -124,7 +123,7 @@ def test_failed_first_points_of_chunks_and_chunk_sizes(long_ground):
 def test_one_point_map_equals_a_direct_query(fourbar_urdf, fourbar_yaml, tmp_path):
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
     m = stiffness_map(clm, "P", sweeps={"crank": [0.7]}, wrench=WRENCH)
-    q = cl.assemble(clm, [0.7], reference_configuration(clm)).q
+    q = cl.assemble(clm, [0.7], clm.reference_configuration()).q
     assert_close_in_norm(m.C[0], cl.compliance(clm, q, "P").C, 1e-12)
     assert [p.name for p in m.save(tmp_path)] == ["map.npz", "map.csv", "map.png"]
 
@@ -139,7 +138,7 @@ def test_points_outside_the_joint_limits_are_invalid(fourbar_urdf, fourbar_yaml)
     ]
     assert m.reasons[2] == "actuated joints outside their limits: crank = 7 (limits [-6.3, 6.3])"
     assert np.all(np.isnan(m.indices["min_translational"][2:5]))
-    q = cl.assemble(clm, [0.6], reference_configuration(clm)).q  # after invalid points
+    q = cl.assemble(clm, [0.6], clm.reference_configuration()).q  # after invalid points
     assert_close_in_norm(m.C[5], cl.compliance(clm, q, "P").C, CHUNK_RTOL)
 
 
@@ -328,7 +327,7 @@ def test_a_map_starts_on_the_mode_of_the_single_query(fourbar_urdf, fourbar_yaml
     from closedloop.kinematics.driving import assemble_connected
 
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
-    single = cl.compliance(clm, assemble_connected(clm, [1.0], reference_configuration(clm)).q,
+    single = cl.compliance(clm, assemble_connected(clm, [1.0], clm.reference_configuration()).q,
                            "P").C  # fmt: skip
     for chunk in (1, 3):  # the first chunk, and the border pass of the others
         m = stiffness_map(clm, "P", sweeps={"crank": [1.0, 1.2, 1.4]}, chunk=chunk)

@@ -15,7 +15,6 @@ from helpers import assert_close_in_norm, driven
 
 import closedloop as cl
 from closedloop.analysis.maps import grid_points, stiffness_map
-from closedloop.io.loader import reference_configuration
 
 #: Largest input step [rad] of the driven reference: 5 times below the map's continuation
 #: step (closedloop.kinematics.driving.INPUT_STEP, 0.05 rad) and about 16 times below the grids'
@@ -40,7 +39,7 @@ def fourbar_model(fourbar_urdf, fourbar_yaml):
     """The bundled four-bar, started by its maps from its file's configuration (neutral,
     the start of ``helpers.driven``)."""
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
-    np.testing.assert_array_equal(reference_configuration(clm), pin.neutral(clm.model))
+    np.testing.assert_array_equal(clm.reference_configuration(), pin.neutral(clm.model))
     return clm
 
 
@@ -65,7 +64,7 @@ def grid_reference(fivebar_model):
 def driven_grid(clm, LEG0, LEG1):
     """(n0, n1, 6, 6) compliance at distal1 on the LEG0 x LEG1 grid [SI], driven along the
     boustrophedon in ascending values (rows of LEG0, LEG1 back and forth)."""
-    q = reference_configuration(clm)
+    q = clm.reference_configuration()
     here = clm.actuated_values(q)
     out = np.empty((len(LEG0), len(LEG1), 6, 6))
     for i, leg0 in enumerate(LEG0):

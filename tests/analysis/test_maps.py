@@ -10,7 +10,6 @@ from helpers import assert_close_in_norm
 import closedloop as cl
 from closedloop.analysis.maps import INDICES, grid_points, stiffness_map
 from closedloop.analysis.model_source import ModelSource
-from closedloop.io.loader import reference_configuration
 from closedloop.kinematics.driving import assemble_connected
 
 #: A map point is the very computation of a direct query from the same start: equal to
@@ -26,7 +25,7 @@ def test_fourbar_crank_range_equals_direct_queries(fourbar_urdf, fourbar_yaml):
     assert m.shape == (15,) and m.swept == ("crank",)
     assert set(m.indices) == set(INDICES)
     assert np.all(m.status == "rank_deficient")  # a planar loop is rigid out of its plane
-    q = reference_configuration(clm)  # the map's start, then each point driven from the
+    q = clm.reference_configuration()  # the map's start, then each point driven from the
     for i, crank in enumerate(CRANKS):  # last (steps of 0.2 rad: four of INPUT_STEP each)
         q = assemble_connected(clm, [crank], q).q
         res = cl.compliance(clm, q, "P")
@@ -150,14 +149,14 @@ def test_tiny_chunks_on_processes_follow_the_serial_branch(fourbar_urdf, fourbar
     # the test bites: from the reference, the border point at crank 1.1 is on the other mode
     i = int(np.flatnonzero(np.isclose(cranks, 1.1))[0])
     assert i % 2 == 0  # a chunk border of the tiny map
-    q = cl.assemble(clm, [cranks[i]], reference_configuration(clm)).q
+    q = cl.assemble(clm, [cranks[i]], clm.reference_configuration()).q
     other = cl.compliance(clm, q, "P").C
     assert np.linalg.norm(other - serial.C[i]) > 1e-3 * np.linalg.norm(serial.C[i])
 
 
 def from_reference(clm, points):
     """A start provider: every point from the reference configuration."""
-    return np.tile(reference_configuration(clm), (len(points), 1))
+    return np.tile(clm.reference_configuration(), (len(points), 1))
 
 
 def test_start_provider_sets_every_start(fourbar_urdf, fourbar_yaml):
@@ -170,7 +169,7 @@ def test_start_provider_sets_every_start(fourbar_urdf, fourbar_yaml):
     m = stiffness_map(source, "P", sweeps={"crank": cranks}, start=from_reference, workers=2,
                       chunk=5)  # fmt: skip
     for i, crank in enumerate(cranks):
-        q = cl.assemble(clm, [crank], reference_configuration(clm)).q
+        q = cl.assemble(clm, [crank], clm.reference_configuration()).q
         assert_close_in_norm(m.C[i], cl.compliance(clm, q, "P").C, RTOL_SAME)
 
 

@@ -26,7 +26,7 @@ def test_map_of_the_fourbar(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
     data = np.load(out / "map.npz")
     np.testing.assert_allclose(data["crank"], CRANKS, rtol=1e-15)
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
-    q = cl.io.loader.reference_configuration(clm)
+    q = clm.reference_configuration()
     for i, crank in enumerate(CRANKS):
         q = cl.assemble(clm, actuated=[crank], q0=q).q
         res = cl.StiffnessIndices.from_result(cl.compliance(clm, q, "P"))

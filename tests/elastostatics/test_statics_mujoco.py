@@ -25,7 +25,7 @@ from mujoco_peer import SPRUNG_ARM, compiled, mujoco, to_q
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 
 #: MuJoCo's equilibria are solved to a net generalised force at rounding: the ulps of the
 #: spring forces k (qpos - qpos_spring), 50 N m/rad times 6e-17 rad at the 0.4 rad
@@ -111,7 +111,7 @@ def test_the_arm_gravity_and_springs_are_as_meant(arm):
 def test_large_load_equilibrium_is_mujocos(arm, wrench):
     m, d, clm = arm
     qpos = mujoco_equilibrium(m, d, wrench)
-    eq = cl.solve_equilibrium(clm, reference_configuration(clm), "tool", wrench)
+    eq = cl.solve_equilibrium(clm, clm.reference_configuration(), "tool", wrench)
     assert np.abs(eq.joint_deflection).max() > 0.1  # rotations of 0.1 rad and more
     np.testing.assert_allclose(
         pin.difference(clm.model, to_q(m, clm, qpos), eq.q), 0.0, atol=EQUILIBRIUM_TOL
@@ -130,7 +130,7 @@ def test_compliance_is_mujocos_small_load_response(arm):
         w = LOAD_STEP * np.eye(6)[j]
         plus, minus = (tool_motion(m, d, mujoco_equilibrium(m, d, s * w)) for s in (1, -1))
         columns.append((plus - minus) / (2 * LOAD_STEP))
-    C = cl.compliance(cl.Configuration(clm, reference_configuration(clm)), "tool").C
+    C = cl.compliance(cl.Configuration(clm, clm.reference_configuration()), "tool").C
     scale = np.r_[np.ones(3), np.full(3, ARM_LENGTH)]
     assert_close_in_norm(C, np.column_stack(columns), COMPLIANCE_RTOL, scale)
 
@@ -191,7 +191,7 @@ def test_closed_loop_equilibrium_is_mujocos(name):
     path = REPO / "urdf" / f"{name}.xml"
     (m, d), clm = compiled(path), load_model(path, geometry=False)
     qpos = mujoco_loop_equilibrium(m, d, frame, np.array(wrench))
-    eq = cl.solve_equilibrium(clm, reference_configuration(clm), frame, wrench)
+    eq = cl.solve_equilibrium(clm, clm.reference_configuration(), frame, wrench)
     assert np.abs(eq.joint_deflection).max() > 1e-3
     np.testing.assert_allclose(
         pin.difference(clm.model, to_q(m, clm, qpos), eq.q), 0.0, atol=EQUILIBRIUM_TOL

@@ -12,7 +12,7 @@ from test_sdf import FOURBAR_ANGLES, fourbar_sdf, slider_crank_sdf, write
 
 import closedloop as cl
 from closedloop.exceptions import InvalidInputError
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 
 #: The twins agree to rounding (test_sdf.RTOL_TWIN: assembly to 1e-12 of the length,
 #: compliance of condition ~1e6).
@@ -28,11 +28,11 @@ def urdf_twin(tmp_path_factory, fourbar_urdf, fourbar_yaml):
     side = tmp_path_factory.mktemp("twin") / "fourbar.yaml"
     side.write_text(fourbar_yaml.read_text() + f"closure_springs: {{0: {BALL}}}\n")
     twin = load_model(fourbar_urdf, side, geometry=False)
-    return twin, cl.assemble(twin, [FOURBAR_ANGLES[0]], reference_configuration(twin)).q
+    return twin, cl.assemble(twin, [FOURBAR_ANGLES[0]], twin.reference_configuration()).q
 
 
 def _same_as_twin(clm, urdf_twin) -> None:
-    state = cl.Configuration(clm, reference_configuration(clm))
+    state = cl.Configuration(clm, clm.reference_configuration())
     assert state.closure_error <= 1e-12  # the stored start, cut joints included, is closed
     twin, q_twin = urdf_twin
     C = cl.compliance(state, "P").C
@@ -44,7 +44,7 @@ def _same_as_twin(clm, urdf_twin) -> None:
 
 def test_an_mjcf_connect_made_elastic_equals_the_urdf_twin(fourbar_mjcf, urdf_twin):
     clm = load_model(fourbar_mjcf, geometry=False, closure_springs={0: BALL})
-    assert len(reference_configuration(clm)) == clm.model.nq
+    assert len(clm.reference_configuration()) == clm.model.nq
     _same_as_twin(clm, urdf_twin)
 
 

@@ -17,7 +17,7 @@ from helpers import assert_close_in_norm
 from closedloop.elastostatics.compliance import compliance
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from closedloop.io.closure_file import read_closure_file, read_springs_file
-from closedloop.io.loader import load_model, load_urdf, reference_configuration
+from closedloop.io.loader import load_model, load_urdf
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.constraints import closure_residual
 
@@ -102,7 +102,7 @@ def test_mjcf_fourbar_reads_actuator_stiffness_and_connect(
 
 def test_mjcf_qpos0_is_the_closed_form_assembled_pose(fourbar_mjcf):
     clm = load_model(fourbar_mjcf, geometry=False)
-    q0 = reference_configuration(clm)
+    q0 = clm.reference_configuration()
     coupler, rocker = fourbar_angles(0.5)
     np.testing.assert_allclose(q0, [0.5, 0.0, coupler, rocker, 0.0], rtol=0, atol=ATOL_QPOS0)
     assert np.max(np.abs(closure_residual(clm, q0))) < ATOL_QPOS0
@@ -115,7 +115,7 @@ def test_mjcf_and_urdf_fourbars_have_the_same_compliance(
 ):
     mj = load_model(fourbar_mjcf, geometry=False)
     ur = load_model(fourbar_urdf, fourbar_yaml, geometry=False)
-    start = reference_configuration(mj)
+    start = mj.reference_configuration()
     q_mj = assemble(mj, [crank], start).q
     q_ur = assemble(ur, [crank], start).q
     coupler, rocker = fourbar_angles(crank)  # same joint coordinates in both files
@@ -180,7 +180,7 @@ def test_ur5_every_joint_actuated(ur5_urdf):
     assert clm.model.nv == 6
     np.testing.assert_array_equal(clm.stiffness, np.full(6, 1e4))
     assert clm.visual_model.ngeoms > 0  # package:// meshes resolved
-    np.testing.assert_array_equal(reference_configuration(clm), np.zeros(6))
+    np.testing.assert_array_equal(clm.reference_configuration(), np.zeros(6))
 
 
 def test_panda_arm_actuated_fingers_locked(panda_urdf):

@@ -14,7 +14,7 @@ from helpers import assert_close_in_norm
 from mechanisms import mjcf_fourbar
 
 import closedloop as cl
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 
 #: The loop's closing point in the world at the reference configuration [m], the origin of
 #: the jointless bodies coupler_tip and rocker_tip of :func:`mechanisms.mjcf_fourbar`
@@ -30,7 +30,7 @@ def fourbar(tmp_path: Path, equality: str, name: str):
     path = tmp_path / f"{name}.xml"
     path.write_text(mjcf_fourbar(equality))
     robot = load_model(path, geometry=False)
-    return robot, cl.Configuration(robot, reference_configuration(robot))
+    return robot, cl.Configuration(robot, robot.reference_configuration())
 
 
 def world_ends(robot, q) -> tuple[pin.SE3, pin.SE3]:

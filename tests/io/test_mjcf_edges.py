@@ -17,7 +17,7 @@ import closedloop as cl
 from closedloop.analysis.maps import stiffness_map
 from closedloop.cli.app import main
 from closedloop.exceptions import InvalidInputError, ModelFileError
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 
 INERTIAL = '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
 RADIAN = '<compiler angle="radian"/>'
@@ -190,7 +190,7 @@ def test_hinge_range_in_the_angle_unit_slide_range_in_metres(tmp_path, head, to_
     np.testing.assert_array_equal([lower[0], upper[0]], np.array([-1.0, 2.0]) * to_rad)
     np.testing.assert_array_equal([lower[1], upper[1]], np.array(hinge, dtype=float) * to_rad)
     np.testing.assert_array_equal([lower[2], upper[2]], np.array(slide, dtype=float))
-    q0 = reference_configuration(robot)
+    q0 = robot.reference_configuration()
     np.testing.assert_array_equal(q0, [0.0, 5.0 * to_rad, 0.005])  # q = MuJoCo's qpos
 
 
@@ -223,7 +223,7 @@ def test_compiler_elements_merge_in_order(tmp_path):
     text = mujoco(body("a", '<joint name="h" ref="0.5" range="-1 1"/>'), head=head)
     robot = load_model(write(tmp_path, text), actuated=[], geometry=False)
     assert limits(robot, "h") == (-1.0, 1.0)
-    assert reference_configuration(robot)[0] == 0.5
+    assert robot.reference_configuration()[0] == 0.5
 
 
 @pytest.mark.parametrize(
@@ -283,7 +283,7 @@ def test_inactive_equality_is_no_closure(fourbar_mjcf, tmp_path, head, equality)
     path.write_text(path.read_text().replace("<worldbody>", head + "<worldbody>", 1))
     robot, fourbar = load_model(path, geometry=False), load_model(fourbar_mjcf, geometry=False)
     assert [c.name for c in robot.closures] == [c.name for c in fourbar.closures]
-    C = [cl.compliance(r, reference_configuration(r), "P").C for r in (robot, fourbar)]
+    C = [cl.compliance(r, r.reference_configuration(), "P").C for r in (robot, fourbar)]
     np.testing.assert_array_equal(C[0], C[1])
 
 
@@ -469,8 +469,8 @@ def test_an_unweighed_body_allows_stiffness_and_refuses_inertia(
     assert UNWEIGHED[case][2] in robot.unweighed_bodies["coupler_link"]
     weighed = load_model(unweighed_fourbar(fourbar_mjcf, tmp_path, case, True), geometry=False)
     assert weighed.unweighed_bodies == {}
-    q = reference_configuration(robot)
-    np.testing.assert_array_equal(q, reference_configuration(weighed))
+    q = robot.reference_configuration()
+    np.testing.assert_array_equal(q, weighed.reference_configuration())
     np.testing.assert_array_equal(cl.compliance(robot, q, "P").C, cl.compliance(weighed, q, "P").C)
     cl.compliance(weighed, q, "P", gravity=(0.0, 0.0, -9.81))  # the same calls, weighed
     cl.modes(weighed, q)
@@ -483,7 +483,7 @@ def test_an_unweighed_body_allows_stiffness_and_refuses_inertia(
     ]  # fmt: skip
     for clm in derived:
         assert dict(clm.unweighed_bodies) == dict(robot.unweighed_bodies)
-        start = q if clm.model.nq == q.size else reference_configuration(clm)
+        start = q if clm.model.nq == q.size else clm.reference_configuration()
         named = r"body 'coupler_link' is not the robot file's \(geom 'm' .*<inertial>"
         with pytest.raises(InvalidInputError, match="the natural frequencies .*" + named):
             cl.modes(clm, start)

@@ -12,7 +12,7 @@ from helpers import REPO, assert_close_in_norm
 from scipy.spatial.transform import Rotation
 
 import closedloop as cl
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 from closedloop.io.mjcf import WORLD_BODY
 
 # Two parsers read one mechanism from 17-digit numbers; the MJCF anchors are computed at
@@ -134,7 +134,7 @@ def test_every_root_body_is_kept(hexapods):
     names = {f.name for f in mj.model.frames}
     assert {"platform", WORLD_BODY} | {f"rod{i}" for i in range(6)} <= names
     # the free joint's qpos0 is the platform's pose in the world, as MuJoCo has it
-    state = cl.Configuration(mj, reference_configuration(mj))
+    state = cl.Configuration(mj, mj.reference_configuration())
     M = state.frame_placement("platform")
     np.testing.assert_allclose(M.translation, PLATFORM_XYZ, atol=1e-15)
     np.testing.assert_allclose(M.rotation, geometry()[2], atol=1e-15)
@@ -170,8 +170,8 @@ def test_sites_of_the_world_and_of_a_lone_root_body_without_joint_are_kept(tmp_p
 
 def test_natural_mjcf_equals_its_urdf_twin_and_the_stewart_formula(hexapods):
     mj, ur = hexapods
-    C_mj = cl.compliance(mj, reference_configuration(mj), "platform").C
-    q0 = reference_configuration(ur)
+    C_mj = cl.compliance(mj, mj.reference_configuration(), "platform").C
+    q0 = ur.reference_configuration()
     free = ur.model.joints[ur.joint_id("platform_free")].idx_q
     R = geometry()[2]
     q0[free : free + 7] = np.r_[PLATFORM_XYZ, Rotation.from_matrix(R).as_quat()]
@@ -230,7 +230,7 @@ def test_rotated_free_body_is_where_the_file_puts_it(tmp_path):
     for quat in ("1 0 0 0", "0.9 0.1 0.3 -0.2"):
         (tmp_path / "p.xml").write_text(pendulum_with_welded_platform(quat))
         robot = load_model(tmp_path / "p.xml", geometry=False)
-        state = cl.Configuration(robot, reference_configuration(robot))
+        state = cl.Configuration(robot, robot.reference_configuration())
         np.testing.assert_allclose(state.frame_placement("platform").translation, [0, 0, 0.5])
         assert state.closure_error < 1e-14
         C[quat] = cl.compliance(state, "platform").C
@@ -253,8 +253,8 @@ def test_gallery_stewart_mjcf_urdf_and_formula_agree():
     K = J^T diag(k) J, the geometry restated from scripts/gallery_spatial.py."""
     mj = load_model(REPO / "urdf" / "stewart.xml", geometry=False)
     ur = load_model(REPO / "urdf" / "stewart.urdf", REPO / "urdf" / "stewart.yaml", geometry=False)
-    C_mj = cl.compliance(mj, reference_configuration(mj), "platform").C
-    q0 = reference_configuration(ur)
+    C_mj = cl.compliance(mj, mj.reference_configuration(), "platform").C
+    q0 = ur.reference_configuration()
     free = ur.model.joints[ur.joint_id("platform_free")].idx_q
     q0[free : free + 3] = [0.0, 0.0, 1.0]  # start at the drawn platform pose
     C_ur = cl.compliance(ur, cl.assemble(ur, q0=q0).q, "platform").C
@@ -312,8 +312,8 @@ def test_gallery_rrr3_mjcf_urdf_and_formula_agree():
     from scripts/gallery_planar.py."""
     mj = load_model(REPO / "urdf" / "rrr3.xml", geometry=False)
     ur = load_model(REPO / "urdf" / "rrr3.urdf", REPO / "urdf" / "rrr3.yaml", geometry=False)
-    C_mj = cl.compliance(mj, reference_configuration(mj), "platform").C
-    q0 = reference_configuration(ur)
+    C_mj = cl.compliance(mj, mj.reference_configuration(), "platform").C
+    q0 = ur.reference_configuration()
     free = ur.model.joints[ur.joint_id("platform_free")].idx_q
     q0[free : free + 7] = [0.02, 0.01, 0.0, 0.0, 0.0, np.sin(0.05), np.cos(0.05)]
     C_ur = cl.compliance(ur, cl.assemble(ur, q0=q0).q, "platform").C
@@ -361,8 +361,8 @@ def test_gallery_delta_mjcf_urdf_and_formula_agree():
     the parallelograms stop every rotation. Geometry: scripts/gallery_spatial.py."""
     mj = load_model(REPO / "urdf" / "delta.xml", geometry=False)
     ur = load_model(REPO / "urdf" / "delta.urdf", REPO / "urdf" / "delta.yaml", geometry=False)
-    q_mj = reference_configuration(mj)
-    q_ur = reference_configuration(ur)
+    q_mj = mj.reference_configuration()
+    q_ur = ur.reference_configuration()
     for j in range(1, mj.model.njoints):
         a, b = mj.model.joints[j], ur.model.joints[ur.joint_id(mj.model.names[j])]
         q_ur[b.idx_q : b.idx_q + b.nq] = q_mj[a.idx_q : a.idx_q + a.nq]

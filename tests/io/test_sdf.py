@@ -19,7 +19,7 @@ from closedloop.cli.app import main
 from closedloop.common.conditioning import RANK_RTOL
 from closedloop.exceptions import ModelFileError
 from closedloop.io import sdf
-from closedloop.io.loader import load_model, reference_configuration, robot_data_dir
+from closedloop.io.loader import load_model, robot_data_dir
 from closedloop.kinematics.constraints import nullspace
 from closedloop.kinematics.limits import joints_outside_limits
 
@@ -133,7 +133,7 @@ def fourbar_sdf(version: str = "1.6", closing: str = "ball") -> str:
 def test_fourbar_sdf_equals_its_urdf_twin(tmp_path, fourbar_urdf, fourbar_yaml, version):
     robot = load_model(write(tmp_path, fourbar_sdf(version)))
     assert [c.name for c in robot.closures] == ["C_joint"]
-    state = cl.Configuration(robot, reference_configuration(robot))
+    state = cl.Configuration(robot, robot.reference_configuration())
     assert state.closure_error <= 1e-15  # drawn at an assembled pose
     twin = load_model(fourbar_urdf, fourbar_yaml)
     q_twin = cl.assemble(twin, actuated=[FOURBAR_ANGLES[0]]).q
@@ -185,7 +185,7 @@ def test_spring_reference_is_the_rest_configuration(tmp_path, fourbar_urdf, four
         "<spring_stiffness>50.0</spring_stiffness><spring_reference>0.25</spring_reference>",
     )
     robot = load_model(write(tmp_path, text))
-    rest = reference_configuration(robot)
+    rest = robot.reference_configuration()
     assert rest[robot.model.joints[robot.joint_id("crank")].idx_q] == 0.25
     # assembly keeps the spring at rest and closes the loop with the passive joints
     q = cl.assemble(robot, q0=rest).q
@@ -203,7 +203,7 @@ def test_free_base(tmp_path):
     assert robot.model.names[1] == "root_joint" and robot.model.nq == 7 + 22
     # the file's configuration: its tarsus crank and foot joints at 0, outside their
     # limits [-2.44, -0.61] rad; the placement of the pelvis is what is checked here
-    q = reference_configuration(robot)
+    q = robot.reference_configuration()
     state = cl.Configuration(robot, q, check_limits=False)
     np.testing.assert_allclose(state.frame_placement("pelvis").translation, [0, 0, 1.01])
     with pytest.raises(ModelFileError, match="free_base: SDF only"):
@@ -233,7 +233,7 @@ def test_pinocchio_parser_is_used_when_available(tmp_path, monkeypatch):
     robot = load_model(path, geometry=False)
     assert calls and calls[0][0] == str(path) and calls[0][1]["root_joint"] is None
     assert robot.stiffness[robot.joint_v_slice("crank_axial")] == 1e5
-    assert reference_configuration(robot)[robot.model.joints[robot.joint_id("crank")].idx_q] == 0.1
+    assert robot.reference_configuration()[robot.model.joints[robot.joint_id("crank")].idx_q] == 0.1
 
 
 # ------------------------------------------------------------------------------ Cassie
@@ -326,7 +326,7 @@ def test_cassie_assembles_with_the_motors_held():
     motor turned by -0.05 rad, assembly with the motors held and the springs at rest
     (their spring_reference, 0 in the file) closes the loops to 1e-10 m."""
     clm = load_model(cassie_path(), springs=motor_springs(math.inf), geometry=False)
-    rest = reference_configuration(clm)
+    rest = clm.reference_configuration()
     np.testing.assert_array_equal(rest, 0.0)
     passive = clm.stiffness == 0
     assert passive.sum() == 22 - 10 - 4  # motors locked, 4 springs
@@ -537,12 +537,12 @@ def test_loop_closing_pin_with_a_spring_equals_the_sprung_pin_in_the_tree(tmp_pa
     tree = load_model(write(tmp_path, slider_crank_sdf(True, pin_k=300.0), "t.sdf"),
                       geometry=False)  # fmt: skip
     assert cut.springs["pin_rz"] == 300.0 and tree.springs["pin"] == 300.0
-    a = cl.Configuration(cut, reference_configuration(cut))
-    b = cl.Configuration(tree, reference_configuration(tree))
+    a = cl.Configuration(cut, cut.reference_configuration())
+    b = cl.Configuration(tree, tree.reference_configuration())
     for frame in ("slider", "rod_end"):
         assert_close_in_norm(cl.compliance(a, frame).C, cl.compliance(b, frame).C, RTOL_TWIN)
     free = load_model(write(tmp_path, slider_crank_sdf(False), "f.sdf"), geometry=False)
-    C_free = cl.compliance(cl.Configuration(free, reference_configuration(free)), "rod_end").C
+    C_free = cl.compliance(cl.Configuration(free, free.reference_configuration()), "rod_end").C
     # the spring counts: the rod's rotation at C, 0.4% stiffer than without it
     assert abs(C_free[4, 4] - cl.compliance(a, "rod_end").C[4, 4]) > 1e-3 * C_free[4, 4]
 
@@ -562,7 +562,7 @@ def test_loop_closing_universal_joint_with_springs_holds_the_link_by_them(tmp_pa
     )
     robot = load_model(write(tmp_path, text), geometry=False)
     assert robot.springs == {"u_rz": 3.0, "u_rx": 5.0}
-    q = reference_configuration(robot)
+    q = robot.reference_configuration()
     C = cl.compliance(robot, q, "b").C
     np.testing.assert_allclose(C, np.diag([0, 0, 0, 1 / 3, 1 / 5, 0]), atol=1e-12)
 
@@ -894,8 +894,8 @@ def test_a_prismatic_loop_joint_equals_the_slider_in_the_tree(tmp_path, pin_type
                       geometry=False)  # fmt: skip
     assert [(c.name, c.kind) for c in closed.closures] == [("slide", "prismatic")]
     assert [c.kind for c in tree.closures] == [{"ball": "3d"}.get(pin_type, pin_type)]
-    a = cl.Configuration(closed, reference_configuration(closed))
-    b = cl.Configuration(tree, reference_configuration(tree))
+    a = cl.Configuration(closed, closed.reference_configuration())
+    b = cl.Configuration(tree, tree.reference_configuration())
     assert a.closure_error <= 1e-15 and b.closure_error <= 1e-15  # drawn assembled
     for frame in ("slider", "rod_end"):
         C = cl.compliance(a, frame).C
@@ -911,6 +911,6 @@ def test_a_prismatic_loop_joint_equals_the_slider_in_the_tree(tmp_path, pin_type
 def sdf_displacement(robot, wrench) -> np.ndarray:
     from closedloop.elastostatics.statics import frame_displacement
 
-    q = reference_configuration(robot)
+    q = robot.reference_configuration()
     eq = cl.solve_equilibrium(robot, q, "slider", wrench)
     return frame_displacement(robot, eq.q, q, "slider")

@@ -17,7 +17,7 @@ from helpers import assert_close_in_norm
 
 import closedloop as cl
 from closedloop.exceptions import BeamError
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 from closedloop.model.beams import map_configuration
 
 #: The same beam theory through different algebra (6x6 inverses, transports, the
@@ -53,7 +53,7 @@ def fourbar_compliance(path: Path, beams: dict) -> np.ndarray:
     """(6, 6) compliance at P of the four-bar at ``path`` with ``beams``, crank at 0.5 rad."""
     clm = load_model(path, beams=beams, geometry=False)
     plain = load_model(path, geometry=False)
-    q = cl.assemble(plain, [0.5], reference_configuration(plain)).q
+    q = cl.assemble(plain, [0.5], plain.reference_configuration()).q
     q = cl.assemble(clm, [0.5], map_configuration(plain.model, clm.model, q)).q
     return cl.compliance(clm, q, "P").C
 

@@ -21,7 +21,7 @@ import closedloop as cl
 from closedloop.elastostatics.compliance import energy_shares
 from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import ModelFileError
-from closedloop.io.loader import load_model, reference_configuration, robot_data_dir
+from closedloop.io.loader import load_model, robot_data_dir
 from closedloop.model.beam_theory import Shape, geometry_section
 from closedloop.model.beams import BeamError, map_configuration
 
@@ -596,11 +596,11 @@ def test_mjcf_side_file_beams_equal_urdf_closure_file_beams(tmp_path):
     mj = load_model(repo / "fourbar.xml", side, geometry=False)
     ur = load_model(repo / "fourbar.urdf", closure, geometry=False)
     assert "crank_link_beam" in mj.spring_blocks and "crank_link_beam" in ur.spring_blocks
-    q_mj = cl.assemble(mj, [0.5], reference_configuration(mj)).q
+    q_mj = cl.assemble(mj, [0.5], mj.reference_configuration()).q
     q_ur = cl.assemble(ur, [0.5], map_configuration(mj.model, ur.model, q_mj)).q
     C_mj, C_ur = cl.compliance(mj, q_mj, "P").C, cl.compliance(ur, q_ur, "P").C
     plain = load_model(repo / "fourbar.xml", geometry=False)
-    q_plain = cl.assemble(plain, [0.5], reference_configuration(plain)).q
+    q_plain = cl.assemble(plain, [0.5], plain.reference_configuration()).q
     rigid = cl.compliance(plain, q_plain, "P").C
     assert np.max(np.abs(C_mj - rigid)) > 1e-3 * np.max(np.abs(rigid))  # the rod is felt
     assert_close_in_norm(C_mj, C_ur, RTOL_EXACT)

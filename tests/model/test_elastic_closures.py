@@ -17,7 +17,7 @@ import pytest
 
 import closedloop as cl
 from closedloop.exceptions import InvalidInputError, MechanismError
-from closedloop.io.loader import load_model, reference_configuration
+from closedloop.io.loader import load_model
 from closedloop.kinematics.constraints import closure_residual
 
 #: Both sides are solved to rounding: the compliance of a 6x6 spring of condition ~1e4
@@ -89,7 +89,7 @@ def _held_body(tmp_path, kind: str, spring, second=None) -> tuple:
     clm = load_model(
         tmp_path / "held.urdf", tmp_path / "held.yaml", geometry=False, closure_springs=springs
     )
-    return clm, reference_configuration(clm)
+    return clm, clm.reference_configuration()
 
 
 def _bushing() -> np.ndarray:
@@ -186,7 +186,7 @@ def test_an_arm_tied_by_an_elastic_ball_whatever_the_ground_frame(tmp_path, rpy,
         f"closure_springs: {{0: {[*kt.tolist(), *rotations]}}}\n"
     )
     clm = load_model(tmp_path / "arm.urdf", tmp_path / "arm.yaml", geometry=False)
-    q = cl.assemble(clm, [0.0], reference_configuration(clm)).q
+    q = cl.assemble(clm, [0.0], clm.reference_configuration()).q
     Jp = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, -0.5]])
     Jw = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
     K = np.diag([100.0, 50.0]) + Jp.T @ np.diag(kt) @ Jp + Jw.T @ np.diag(rotations) @ Jw

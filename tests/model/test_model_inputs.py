@@ -19,7 +19,6 @@ from closedloop.exceptions import (
     NameNotFoundError,
 )
 from closedloop.io.closure_file import read_springs_file
-from closedloop.io.loader import reference_configuration
 from closedloop.io.sdf import load_sdf
 
 #: C = J K^-1 J^T computed two ways (Pinocchio's Jacobian here, the library's path):
@@ -44,7 +43,7 @@ def test_continuous_joints_are_actuated_springs_of_a_serial_robot():
     assert len(clm.actuated) == 6 and kinds.count(2) == 3
     np.testing.assert_array_equal(clm.stiffness, np.full(6, 1e4))
     angles = np.array([0.3, 2.9, 1.2, -0.7, 0.9, 0.4])
-    q = reference_configuration(clm)
+    q = clm.reference_configuration()
     clm.set_actuated(q, angles)
     np.testing.assert_allclose(clm.actuated_values(q), angles, rtol=0, atol=1e-15)
     assert pin.isNormalized(model, q)
@@ -54,7 +53,7 @@ def test_continuous_joints_are_actuated_springs_of_a_serial_robot():
     np.testing.assert_allclose(
         cl.compliance(clm, q, frame).C, J @ J.T / 1e4, rtol=RTOL_PRODUCT, atol=0
     )
-    a = cl.assemble(clm, angles, reference_configuration(clm))  # no loop: the inputs as set
+    a = cl.assemble(clm, angles, clm.reference_configuration())  # no loop: the inputs as set
     np.testing.assert_allclose(clm.actuated_values(a.q), angles, rtol=0, atol=1e-15)
 
 
