@@ -146,7 +146,7 @@ def _insert(model, geometries, site: BeamSite, name: str, carried=()):
     if moved_frames:  # their inertias move from the start to the tip
         dyn = model.inertias[site.joint].toDynamicParameters()
         dyn -= Mv.act(inertia_tip).toDynamicParameters()
-        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint].mass)
+        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint])
     for i, f in enumerate(model.frames):
         if i == 0:
             continue
@@ -233,19 +233,31 @@ def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
 
 
 #: Mass left on a beam's start after its tip's share moved, relative to the link's mass,
-#: below which it is rounding of a massless remainder.
+#: below which it is rounding of a massless remainder; likewise the eigenvalues of its
+#: rotational inertia, relative to the link's largest about its joint's origin.
 MASSLESS_RTOL = 1e-12
 
 
-def _inertia(dyn: np.ndarray, link_mass: float) -> pin.Inertia:
-    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
-    rotational inertia about the frame's origin [kg m^2]); a massless remainder keeps its
-    rotational part and a zero lever (Pinocchio would divide the first moment by 0)."""
-    if abs(dyn[0]) > MASSLESS_RTOL * max(link_mass, 1.0):
-        return pin.Inertia.FromDynamicParameters(dyn)
+def _rotational(dyn: np.ndarray) -> np.ndarray:
+    """(3, 3) rotational inertia [kg m^2] of the dynamic parameters ``dyn`` (10,)."""
     ixx, ixy, iyy, ixz, iyz, izz = dyn[4:]
-    rotational = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    return pin.Inertia(0.0, np.zeros(3), rotational)
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+def _inertia(dyn: np.ndarray, link: pin.Inertia) -> pin.Inertia:
+    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
+    rotational inertia about the frame's origin [kg m^2]) left on the link of inertia
+    ``link`` when its tips' inertias moved. A massless remainder keeps its rotational part
+    without its rounding (eigenvalues, negative ones too, within :data:`MASSLESS_RTOL` of
+    the link's: what is left when the tips took the whole mass) and a zero lever
+    (Pinocchio would divide the first moment by 0)."""
+    before = link.toDynamicParameters()
+    if abs(dyn[0]) > MASSLESS_RTOL * max(before[0], 1.0):
+        return pin.Inertia.FromDynamicParameters(dyn)
+    lam, V = np.linalg.eigh(_rotational(dyn))
+    scale = np.abs(np.linalg.eigvalsh(_rotational(before))).max()
+    lam[lam <= MASSLESS_RTOL * scale] = 0.0
+    return pin.Inertia(0.0, np.zeros(3), (V * lam) @ V.T)
 
 
 def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:
