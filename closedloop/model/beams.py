@@ -4,10 +4,11 @@ A flexible link is a rigid body with a 6-dof virtual spring at its end (Pashkevi
 Klimchik and Chablat's Virtual Joint Method). A *beam* on a link is straight, from the
 origin of the link's frame (its start, clamped) to the origin of its ``end`` joint (the
 tip): its length is that distance. The tip carries the ``end`` joint and everything beyond
-it; the link's other child joints stay rigid with the start. The ``end`` may also be a
-frame of the link (a site, an operational frame) or ``anchor:<closure name>``, a closure's
-anchor on the link: the tip then carries that frame or anchor only, every child joint of
-the link staying with the start (one at its origin too). :func:`apply_beams` puts a
+it; the link's other child joints stay rigid with the start (the end joint may be named
+by its child link). The ``end`` may also be a frame of the link (a site, an operational
+frame) or ``anchor:<closure name>``, a closure's anchor on the link: the tip then carries
+that frame or anchor only, every child joint of the link staying with the start (one at
+its origin too). :func:`apply_beams` puts a
 6-dof virtual joint (a Pinocchio free flyer named ``<link>_beam``) between the link and
 its ``end``, placed at the end joint's origin with the end joint's axes, and gives it the
 beam's tip stiffness as an SPD block spring (:mod:`closedloop.model.closed_loop`). Its coordinates
