@@ -8,8 +8,10 @@ import pytest
 from cahyman_pin.cli import main
 from cahyman_pin.paper import data as paper_data
 from cahyman_pin.paper import report
+from cahyman_pin.paper import tables as tables_module
+from cahyman_pin.paper.compare import table_values
 from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES
-from cahyman_pin.paper.document import Figure, Heading, Paragraph, Table
+from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
 from cahyman_pin.params import DEFAULT_PARAMS, SOURCES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -22,8 +24,8 @@ def built(tmp_path_factory):
 
 
 def _linearity_table():
-    doc = report.Document("t")
-    report._linearity(doc)
+    doc = Document("t")
+    tables_module.linearity_section(doc)
     return next(b for b in doc.blocks if isinstance(b, Table))
 
 
@@ -111,7 +113,7 @@ def test_linearity_is_computed_from_the_published_values(monkeypatch, tmp_path):
     changed = {k: v.copy() for k, v in TABLES.items()}
     changed["Table 2"][0, 2] += 1.0
     monkeypatch.setattr(paper_data, "TABLES", changed)
-    monkeypatch.setattr(report, "TABLES", changed)
+    monkeypatch.setattr(tables_module, "TABLES", changed)
     table = _linearity_table()
     assert float(table.rows[0][2]) == pytest.approx(1.0)
 
@@ -147,7 +149,7 @@ def test_rotation_median_ratio_against_the_generic_backend(built):
     _, doc = built
     ratios = []
     for pose in TABLE_POSES:
-        tv = report.table_values(pose, DEFAULT_PARAMS)
+        tv = table_values(pose, DEFAULT_PARAMS)
         m, p = tv.values["generic"][3:], tv.values["paper"][3:]
         keep = np.abs(m) > 0
         ratios.append(np.abs(p[keep]) / np.abs(m[keep]))
