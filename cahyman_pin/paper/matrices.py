@@ -41,6 +41,9 @@ def matrices_section(doc: Document, params: CaHyManParams) -> None:
     doc.add(
         Heading("Stiffness matrices at the three configurations"),
         Paragraph(
+            "The stiffness of the machine at the paper's three configurations, before any "
+            "comparison with the paper: K maps a small displacement of M (translation and "
+            "rotation) to the load at M (force and moment) that holds it. "
             "K at M, world axes, SI (N/m, N/rad, N m/rad), order dx dy dz rx ry rz, from the "
             "generic backend (a matrix acts on small rotation vectors rx, ry, rz about the "
             "world axes: the paper's angles, singular at the level plate, cannot be its "

@@ -1,4 +1,5 @@
-"""The comparison report: the paper's tables and figures against the three backends.
+"""The comparison report: CaHyMan's stiffness, and the paper's tables and figures against
+the three backends.
 
 :func:`build_report` writes ``report.md``, a self-contained ``report.html`` and the
 figures (PNG) into a folder (the command is ``cahyman report``, :mod:`cahyman_pin.cli.report`).
@@ -32,6 +33,9 @@ from cahyman_pin.paper.weight import weight_section
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.common.files import write_atomically
 from closedloop.exceptions import InvalidInputError
+
+#: The report's title: the machine's stiffness first, then the paper's tables checked.
+TITLE = "CaHyMan's stiffness at the paper's configurations, and the published tables checked"
 
 
 def build_report(
@@ -82,11 +86,12 @@ def build_report(
 def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) -> Document:
     """:func:`build_report` once its inputs are checked."""
     out.mkdir(parents=True, exist_ok=True)
-    doc = Document("CaHyMan stiffness: the published tables against three backends")
+    doc = Document(TITLE)
     tables = [table_values(pose, params) for pose in TABLE_POSES]
-    opening_section(doc)
-    summary_section(doc, params, tables)  # the findings first, then the figures (placed here,
-    at = len(doc.blocks)  # computed last: a section that fails stops the run before them)
+    opening_section(doc)  # the machine, the paper's claims and the terms first,
+    matrices_section(doc, params)  # then what a user of the machine wants,
+    summary_section(doc, params, tables)  # then the verdict and the figures (placed here,
+    at = len(doc.blocks)  # computed last: a section that fails stops the run before them),
     tables_section(doc, tables)
     linearity_section(doc)
     floor_section(doc, params)
@@ -96,7 +101,6 @@ def _write_report(out: Path, params: CaHyManParams, params_file: Path | None) ->
     sensitivity_section(doc, out, params)
     weight_section(doc, params)
     beams_section(doc, params)
-    matrices_section(doc, params)
     parameters_section(doc, params, params_file)
     conventions_section(doc, params, tables)
     figures = Document(doc.title)

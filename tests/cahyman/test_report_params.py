@@ -148,8 +148,11 @@ def test_springs_are_called_printed_only_when_they_are(params):
     leg = f"{np.degrees(1.0 / params.K_T):.3g} deg per N m for a leg motor (1/K_T)"
     assert f"{'printed' if printed else 'given'} torsional stiffnesses imply" in text
     assert leg in text
-    springs = "the printed springs" + ("" if printed else f" but K_T = {params.K_T:g}")
-    assert f"({springs}, K_s = {params.K_s:g} N/m)" in text
+    springs = "the other springs as the paper prints them" + (
+        "" if printed else f" but K_T = {params.K_T:g}"
+    )
+    assert f"K_s = {params.K_s:g} N/m, assumed (the paper prints" in text
+    assert f"and {springs}. With the printed K_s" in text
 
 
 def test_summary_largest_differences_skip_only_the_missing_cells():
