@@ -34,7 +34,7 @@ import pinocchio as pin
 
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
-from closedloop.model.closures import CLOSURE_TYPES, joint_id
+from closedloop.model.closures import CLOSURE_TYPES, joint_id, unknown_type
 from closedloop.model.spring_spec import check_locked_springs
 
 CLOSURE_KEYS = (
@@ -188,7 +188,7 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         )
     bad = [t for t in types if not isinstance(t, str) or t not in CLOSURE_TYPES]
     if bad:
-        raise ModelFileError(f"{where}: type {bad[0]!r}; expected one of {list(CLOSURE_TYPES)}")
+        raise ModelFileError(f"{where}: {unknown_type(bad[0])}")
     return ClosureSpec(
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),

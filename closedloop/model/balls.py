@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.exceptions import ModelFileError
+from closedloop.exceptions import ModelFileError, did_you_mean
 
 
 def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
@@ -34,9 +34,10 @@ def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
     joints = {j.get("name"): j for j in tree.getroot().findall("joint")}
     for name in balls:
         if name not in joints:
+            names = sorted(n for n in joints if n)
             raise ModelFileError(
-                f"balls: {name!r} is not a joint of {str(path)!r}; expected one of "
-                f"{sorted(n for n in joints if n)[:12]}"
+                f"balls: {name!r} is not a joint of {str(path)!r}{did_you_mean(name, names)}; "
+                f"expected one of {names[:12]}"
             )
         joint = joints[name]
         joint.set("type", "floating")

@@ -46,7 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.common.arrays import decimal, decimals
-from closedloop.exceptions import BeamError, ModelFileError
+from closedloop.exceptions import BeamError, ModelFileError, did_you_mean
 
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
@@ -419,7 +419,8 @@ def beam_site(
     """
     bodies = [f.name for f in model.frames if f.type == pin.BODY]
     if beam not in bodies:
-        raise BeamError(beam, f"unknown link; expected one of {bodies[:12]}")
+        raise BeamError(beam, f"unknown link{did_you_mean(beam, bodies)}; expected one of "
+                        f"{bodies[:12]}")  # fmt: skip
     fl = next(i for i, f in enumerate(model.frames) if f.type == pin.BODY and f.name == beam)
     link = model.frames[fl]
     kinds = (pin.JOINT, pin.FIXED_JOINT)
@@ -455,7 +456,8 @@ def beam_site(
             if known
             else "is not a joint of the model, nor a frame or a closure's anchor"
         )
-        raise BeamError(beam, f"end {end!r} {what}; expected one of {ends}")
+        raise BeamError(beam, f"end {end!r} {what}{did_you_mean(end, ends)}; expected one of "
+                        f"{ends}")  # fmt: skip
     fe = (children + frames)[at]
     frame = model.frames[fe]
     if frame.type == pin.JOINT:
