@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from closedloop.common.input_files import read_xml
 from closedloop.exceptions import ModelFileError, did_you_mean
 
 
@@ -26,10 +27,7 @@ def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
     Raises:
         ModelFileError: a name that is not a joint of the file.
     """
-    try:
-        tree = ET.parse(path)
-    except ET.ParseError as e:
-        raise ModelFileError(f"robot file {str(path)!r} is not valid XML: {e}") from None
+    tree = ET.ElementTree(read_xml(path, f"robot file {str(path)!r}"))
     # the joints of the robot, not the <joint> references of its <transmission>s
     joints = {j.get("name"): j for j in tree.getroot().findall("joint")}
     for name in balls:
