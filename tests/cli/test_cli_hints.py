@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import pytest
+from helpers import one_error_line as one_line
 
 from cahyman_pin.cli import SUBCOMMAND_MODULES as CAHYMAN_MODULES
 from cahyman_pin.cli import main as cahyman_main
@@ -18,14 +19,6 @@ def run(capsys, prog: str, *argv) -> tuple[int, str, str]:
     code = MAINS[prog]([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-def one_line(err: str) -> str:
-    """The single line of ``err``, an error line without a traceback."""
-    lines = err.strip().splitlines()
-    assert "Traceback" not in err and len(lines) == 1, err
-    assert lines[0].startswith("closedloop: error: "), err
-    return lines[0]
 
 
 @pytest.mark.parametrize(

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from helpers import one_error_line as one_line
 from xml_files import DAE, LAUGHS, SDF, hostile_copy
 
 from closedloop.cli.app import main as closedloop_main
@@ -17,14 +18,6 @@ def run(capsys, *argv) -> tuple[int, str, str]:
     code = closedloop_main([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-def one_line(err: str) -> str:
-    """The single line of ``err``, an error line without a traceback."""
-    lines = err.strip().splitlines()
-    assert "Traceback" not in err and len(lines) == 1, err
-    assert lines[0].startswith("closedloop: error: "), err
-    return lines[0]
 
 
 def test_an_overflowing_joint_stiffness_is_refused(capsys):
