@@ -241,14 +241,15 @@ def _params_file_values(path: str | Path) -> dict:
     """field -> value of a parameter file, numbers written as YAML 1.1 strings converted."""
     import yaml  # only when a file is read
 
+    from closedloop.common.arrays import decimal
+    from closedloop.common.input_files import read_text
     from closedloop.io import strict_yaml
 
     path = Path(path)
+    text = read_text(path, f"parameter file {str(path)!r}", "YAML")
     try:
-        doc = strict_yaml.load(path.read_text())
-    except OSError as e:
-        raise ModelFileError(f"parameter file {str(path)!r} cannot be read: {e.strerror}") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        doc = strict_yaml.load(text)
+    except yaml.YAMLError as e:
         msg = " ".join(str(e).split())
         raise ModelFileError(f"parameter file {str(path)!r} is not valid YAML: {msg}") from None
     if doc is None:
@@ -262,8 +263,8 @@ def _params_file_values(path: str | Path) -> dict:
     for name, value in doc.items():
         if isinstance(value, str):  # YAML 1.1 reads 1e5 as a string
             try:
-                value = float(value)
+                value = decimal(value.strip())
             except ValueError:
-                pass
+                pass  # refused as a string by the field's check
         values[str(name)] = value
     return values

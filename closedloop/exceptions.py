@@ -20,6 +20,26 @@ class ClosedLoopError(Exception):
     """Base class of every error raised by :mod:`closedloop`."""
 
 
+def close_names(name, valid: Iterable[str]) -> list[str]:
+    """The names of ``valid`` closest to ``name``, closest first, at most three (difflib's
+    ratio from :data:`CLOSE_NAME_RATIO`, case ignored: ``'3D'`` is ``'3d'``); [] for a
+    ``name`` that is not a str."""
+    if not isinstance(name, str):
+        return []
+    by_case: dict[str, list[str]] = {}
+    for n in valid:
+        by_case.setdefault(n.casefold(), []).append(n)
+    close = difflib.get_close_matches(name.casefold(), by_case, n=3, cutoff=CLOSE_NAME_RATIO)
+    return [n for key in close for n in by_case[key]][:3]
+
+
+def did_you_mean(name, valid: Iterable[str]) -> str:
+    """``" (did you mean 'a' or 'b'?)"`` with the :func:`close_names` of ``name``, or
+    ``""``: the hint of every message that refuses a name."""
+    close = close_names(name, valid)
+    return f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
+
+
 def _choices(names: list[str], limit: int = LISTED_NAMES) -> str:
     shown = ", ".join(repr(n) for n in names[:limit])
     return shown + (
@@ -41,13 +61,9 @@ class NameNotFoundError(ClosedLoopError, KeyError):
     def __init__(self, kind: str, name: str, valid: Iterable[str], hint: str = ""):
         self.kind, self.name = kind, name
         valid = list(dict.fromkeys(valid))  # once each, in the model's order
-        self.close = (
-            difflib.get_close_matches(name, valid, n=3, cutoff=CLOSE_NAME_RATIO)
-            if isinstance(name, str)
-            else []
-        )
+        self.close = close_names(name, valid)
         hint = f" ({hint})" if hint else ""
-        near = f" (did you mean {' or '.join(map(repr, self.close))}?)" if self.close else ""
+        near = did_you_mean(name, valid)
         super().__init__(f"unknown {kind} {name!r}{hint}{near}; expected one of: {_choices(valid)}")
 
     def __str__(self) -> str:  # KeyError would quote the message
@@ -67,7 +83,8 @@ class BeamError(InvalidInputError):
 
 
 class ModelFileError(ClosedLoopError, ValueError):
-    """A robot or closure file that is missing or cannot be parsed."""
+    """An input file (robot, closure, springs, measurement file, a mesh) that is missing,
+    larger than its kind allows, declares XML entities, or cannot be parsed."""
 
 
 class AssemblyError(ClosedLoopError):

@@ -298,6 +298,15 @@ def pendulum(k: float = 40.0, length: float = 0.5) -> ClosedLoopModel:
 
 
 # ---------------------------------------------------------------------------- command lines
+def one_error_line(err: str, prog: str = "closedloop") -> str:
+    """The single line of ``err`` (a command's stderr), checked to be an error line without
+    a traceback or a warning."""
+    assert "Traceback" not in err and "Warning" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{prog}: error: "), err
+    return lines[0]
+
+
 def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
     """``python -m MODULE ARGV`` with stdout a pipe whose reader has already gone (``| head``
     that stopped before the first line); stderr captured as text."""

@@ -102,9 +102,15 @@ def test_bundled_files_by_name_from_anywhere(monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
     robot = cl.load_model(data.path("fourbar.urdf"), data.path("fourbar.yaml"))
     assert robot.name == "fourbar" and len(robot.closures) == 1
-    with pytest.raises(ModelFileError, match=r"no bundled file 'fourbar.sdf'; expected one of"):
+    near = r"\(did you mean 'fourbar.urdf' or .*\)"
+    with pytest.raises(
+        ModelFileError, match=rf"no bundled file 'fourbar.sdf' {near}; expected one"
+    ):
         data.path("fourbar.sdf")
-    with pytest.raises(ModelFileError, match=r"unknown robot 'ur6'; expected one of .*'ur5'"):
+    with pytest.raises(
+        ModelFileError,
+        match=r"unknown robot 'ur6' \(did you mean 'ur5' or 'ur3'\?\); expected one of .*'ur5'",
+    ):
         data.robot_file("ur6")
     ur5 = cl.load_model(data.robot_file("ur5"), joint_stiffness=1e4)
     assert ur5.model.nq == 6 and ur5.actuated[0] == "shoulder_pan_joint"

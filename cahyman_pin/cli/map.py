@@ -47,6 +47,7 @@ from cahyman_pin.cli.options import (
     _masses,
     add_backend_arguments,
     finite_float,
+    radians_note,
 )
 from cahyman_pin.model import check_inputs
 from cahyman_pin.params import BEAM_FIELDS, DEFAULT_PARAMS, WEIGHT_FIELDS, CaHyManParams
@@ -162,6 +163,7 @@ def _inputs(args: argparse.Namespace) -> dict[str, tuple[np.ndarray, str, float]
     alpha = args.alpha or [np.array([a]) for a in DEFAULT_POSE["alpha"]]
     if len(alpha) not in (1, 3):
         raise UsageError(f"--alpha takes 1 or 3 values, got {len(alpha)}")
+    radians_note("--alpha", np.concatenate(alpha))
     given = {"alpha4": args.alpha4, "s4": args.s4}
     if len(alpha) == 1 and alpha[0].size > 1:
         given["alpha"] = alpha[0]  # alpha_1 = alpha_2 = alpha_3, swept together

@@ -12,9 +12,6 @@ stiffness --gravity``), with the weight's tangent stiffness.
 from __future__ import annotations
 
 import argparse
-import math
-
-import numpy as np
 
 from cahyman_pin.cli.options import (
     DEFAULT_PARAMS,
@@ -23,6 +20,7 @@ from cahyman_pin.cli.options import (
     _masses,
     add_pose_arguments,
     inputs_echo,
+    pose_si,
 )
 from closedloop.cli.outputs import print_json
 from closedloop.cli.parser import finite_float
@@ -70,7 +68,7 @@ def _run_modes(args: argparse.Namespace) -> int:
     masses = _masses(args, weight=False)
     params = params.replace(**masses, links_as_beams=args.links_as_beams)
     machine = cahyman_model(params)
-    q = machine.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    q = machine.assemble(*pose_si(args))
     machine.require_within_limits(q)
     gravity = (0.0, 0.0, -params.gravity) if args.gravity else None
     res = modes(machine.clm, q, n=args.n, frame="M", gravity=gravity, density=args.density)

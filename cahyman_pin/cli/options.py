@@ -135,9 +135,7 @@ def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
         warnings.warn("--gravity: every mass is 0, so the sag is 0; give the masses with "
                       "--mass NAME=KG", stacklevel=2)  # fmt: skip
     result = stiffness(
-        np.deg2rad(args.alpha),
-        math.radians(args.alpha4),
-        args.s4 / 1000.0,
+        *pose_si(args),
         params=params,
         backend=args.backend,
         weight=weight,
@@ -147,6 +145,27 @@ def stiffness_from_args(args: argparse.Namespace) -> CaHyManStiffness:
 
         require_stable(result.details["compliance"])
     return result
+
+
+def radians_note(option: str, values) -> None:
+    """Warn (one line on stderr from a command) when every value of the angle ``option``
+    [deg] looks like radians: each below 2 pi in magnitude with a fractional part
+    (``--alpha 0.785 1.047 1.309``); the values stay degrees."""
+    values = np.asarray(values, dtype=float).reshape(-1)
+    if values.size and np.all((np.abs(values) < 2 * math.pi) & (values != np.round(values))):
+        shown = " ".join(f"{v:g}" for v in values[:6]) + (" ..." if values.size > 6 else "")
+        warnings.warn(
+            f"{option} {shown}: every value is below 2 pi with a fraction, as angles in "
+            f"radians are; {option} is in degrees, and the values are taken as degrees",
+            stacklevel=2,
+        )
+
+
+def pose_si(args: argparse.Namespace) -> tuple[np.ndarray, float, float]:
+    """(alpha_1..3 (3,) [rad], alpha_4 [rad], s_4 [m]) of :func:`add_pose_arguments`'
+    options (deg, mm), with the note of :func:`radians_note` for ``--alpha``."""
+    radians_note("--alpha", args.alpha)
+    return np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0
 
 
 def inputs_echo(args: argparse.Namespace) -> dict:

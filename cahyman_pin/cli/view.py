@@ -18,12 +18,9 @@ model of :mod:`cahyman_pin.model`, hence ``--backend`` has the one choice ``gene
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
-import numpy as np
-
-from cahyman_pin.cli.options import add_pose_arguments
+from cahyman_pin.cli.options import add_pose_arguments, pose_si
 from cahyman_pin.model import cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import FRAME_M
@@ -38,7 +35,7 @@ def _stderr(line: str) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``cahyman view``; returns the exit status (0)."""
     model = cahyman_model(DEFAULT_PARAMS.with_ks(args.ks))
-    q = model.assemble(np.deg2rad(args.alpha), math.radians(args.alpha4), args.s4 / 1000.0)
+    q = model.assemble(*pose_si(args))
     model.require_within_limits(q)
     pose = (
         f"alpha = ({', '.join(f'{a:g}' for a in args.alpha)}) deg, alpha4 = {args.alpha4:g} deg, "

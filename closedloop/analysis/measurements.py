@@ -14,11 +14,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from closedloop.common.arrays import check_wrench, decimal, readonly, real_array
+from closedloop.common.arrays import check_wrench, readonly, real_array, real_number
+from closedloop.common.input_files import read_text
 from closedloop.exceptions import (
     InvalidInputError,
     ModelFileError,
 )
+from closedloop.io import strict_yaml
 
 
 @dataclass(frozen=True)
@@ -109,14 +111,16 @@ def read_measurements(path: str | Path) -> tuple[str, list[Measurement]]:
             key, several frames).
         InvalidInputError: a bad measurement (its index is named).
     """
+    kind = "CSV" if Path(path).suffix.lower() == ".csv" else "YAML"
+    text = read_text(path, f"measurement file {str(path)!r}", kind)  # a BOM dropped
     try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # a spreadsheet's BOM, if any
-        if Path(path).suffix.lower() == ".csv":
+        if kind == "CSV":
             frame, items = _csv_items(str(path), text)
         else:
-            frame, items = _yaml_items(str(path), yaml.safe_load(text))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, csv.Error) as e:
-        raise ModelFileError(f"cannot read measurement file {str(path)!r}: {e}") from None
+            frame, items = _yaml_items(str(path), strict_yaml.load(text))
+    except (yaml.YAMLError, csv.Error) as e:
+        msg = " ".join(str(e).split())
+        raise ModelFileError(f"cannot read measurement file {str(path)!r}: {msg}") from None
     out = []
     for i, item in enumerate(items):
         missing = [k for k in ("wrench", "twist", "sd") if k not in item]
@@ -189,17 +193,18 @@ def _csv_items(path: str, text: str) -> tuple[str, list[dict]]:
 
 def _number(value, depth: int = 0):
     """YAML 1.1 reads 1e-6 as a string, CSV gives strings: numbers, and lists of them, as
-    floats (a string in ASCII decimal notation, :func:`closedloop.common.arrays.decimal`, with
-    the spaces of an aligned column around it).
+    floats (:func:`closedloop.common.arrays.real_number`: a string in ASCII decimal
+    notation, with the spaces of an aligned column around it).
 
     Raises:
-        ValueError: a boolean (YAML's true/false), a string that is not such a number, or
-            a list inside a list.
+        ValueError: a boolean (YAML's true/false), a string that is not such a number
+            (``1e999`` neither), or a list inside a list.
     """
     if isinstance(value, list):
         if depth:
             raise ValueError(f"{value!r} is a list inside a list; expected numbers")
         return [_number(v, 1) for v in value]
-    if isinstance(value, bool):
-        raise ValueError(f"{value!r} is not a number")
-    return decimal(value.strip()) if isinstance(value, str) else value
+    try:
+        return real_number(value)
+    except TypeError:
+        raise ValueError(f"{value!r} is not a number") from None

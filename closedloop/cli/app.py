@@ -21,7 +21,8 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
   number of values, NaN, negative stiffness, joints outside their limits, an output
   path that cannot be written, a ``--q`` that does not close the loops): one line
   ``closedloop: error: <message>`` on stderr, a command-line syntax error included
-  (:class:`closedloop.cli.parser.UsageError`).
+  (:class:`closedloop.cli.parser.UsageError`); ``closedloop`` alone prints its help, the
+  list of commands, before that line.
 * ``3`` - the computation failed on valid input (loops that cannot be closed for these
   actuated values, no static equilibrium, a singular configuration or a mechanism, a result
   that is not finite): one line on stderr.
@@ -55,7 +56,8 @@ A configuration outside the joints' position limits is refused (angles in degree
 A --q of a model with loops must close them to 1e-6 (metres per size of the mechanism, rad).
 
 Springs: --joint-stiffness K gives stiffness K [N m/rad or N/m] to every actuated joint
-that has no spring in the closure file; --springs FILE is a YAML mapping joint -> stiffness
+that has no spring in the closure file (inf locks them; 1e999 is refused, not taken for
+inf); --springs FILE is a YAML mapping joint -> stiffness
 merged over the closure file's springs (.inf locks a joint). Actuated joints without a
 spring are rigid. A URDF without closure file is a serial robot: the joints of its main
 chain are actuated, joints beyond a branching (gripper fingers) are locked.

@@ -140,12 +140,19 @@ def run_main(
     """The entry point of a command line: parse ``argv`` (default ``sys.argv[1:]``) with
     ``parser_of(argv)`` and run the subcommand; returns the exit status. A usage error is
     one line ``prog: error: ...`` and :data:`EXIT_BAD_INPUT`; ``--help`` and ``--version``
-    return 0."""
+    return 0. No arguments at all: the help, which lists the commands, on stderr, then
+    the usage error's line "give a COMMAND" and :data:`EXIT_BAD_INPUT` (argparse's status
+    for a missing argument: a script that runs the bare command has failed)."""
     single_threaded_blas()  # small matrices: BLAS threads cost more than they give
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         try:
-            args = parser_of(argv).parse_args(argv)
+            parser = parser_of(argv)
+            if not argv:  # the commands listed; a usage error still, as argparse makes it
+                parser.print_help(sys.stderr)
+                raise UsageError(f"give a COMMAND, one of those above ({prog} COMMAND --help "
+                                 "describes it)")  # fmt: skip
+            args = parser.parse_args(argv)
         except SystemExit as e:  # --help, --version
             sys.stdout.flush()  # a closed or full stdout shows here
             return e.code if isinstance(e.code, int) else EXIT_OK

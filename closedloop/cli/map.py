@@ -24,7 +24,6 @@ import argparse
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -44,6 +43,7 @@ from closedloop.cli.map_options import (
 from closedloop.cli.outputs import output_folder
 from closedloop.cli.parser import UsageError, finite_float, path_text, positive_int
 from closedloop.common.arrays import decimal
+from closedloop.common.input_files import read_text
 from closedloop.exceptions import InvalidInputError
 
 #: Points timed first for the estimate of a long map, and the time [s] the probe aims at
@@ -103,13 +103,7 @@ def add_parser(sub, parent_arguments) -> None:
 
 
 def _points(path: str) -> np.ndarray:
-    try:
-        text = Path(path).read_text(encoding="utf-8").replace(",", " ")
-    except OSError as e:
-        raise InvalidInputError(f"--points {path!r}: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise InvalidInputError(f"--points {path!r}: not a text file (UTF-8); expected rows "
-                                "of numbers") from None  # fmt: skip
+    text = read_text(path, f"--points {path!r}", "CSV").replace(",", " ")
     try:
         rows = [[decimal(x) for x in line.split()] for line in text.splitlines() if line.strip()]
         points = np.array(rows, dtype=float)

@@ -7,17 +7,20 @@ from __future__ import annotations
 import argparse
 import math
 
-from closedloop.common.arrays import decimal
+from closedloop.common.arrays import decimal, overflowing
 
 
 def number(text: str) -> float:
     """Option type: a number in ASCII decimal notation (:func:`closedloop.common.arrays.decimal`:
-    not ``0_3`` nor other scripts' digits), ``inf`` and ``nan`` included."""
+    not ``0_3`` nor other scripts' digits), ``inf`` and ``nan`` included; ``1e999``, beyond
+    the double range, is refused, not taken for ``inf``."""
     try:
         return decimal(text)
-    except ValueError:
+    except ValueError as e:
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not a number; expected ASCII decimal notation (e.g. -1.5e3)"
+            str(e)
+            if overflowing(text)
+            else f"{text!r} is not a number; expected ASCII decimal notation (e.g. -1.5e3)"
         ) from None
 
 

@@ -44,15 +44,60 @@ def decimal(text: str) -> float:
     """The number written in ``text`` (:data:`DECIMAL`), which must be all of it.
 
     Python's ``float`` also reads digits grouped by ``_`` (``0_3`` is 3.0), the digits of
-    other scripts (Arabic-Indic, full-width) and surrounding white space; a typo or a
-    pasted character must not pass for a number, so these are refused.
+    other scripts (Arabic-Indic, full-width) and surrounding white space, and reads a
+    number beyond the double range (``1e999``) as infinity; a typo or a pasted character
+    must not pass for a number, nor an overflow for ``inf`` (a locked joint), so these are
+    refused.
 
     Raises:
-        ValueError: ``text`` is not such a number (as ``float`` raises).
+        ValueError: ``text`` is not such a number (as ``float`` raises), or is beyond the
+            double range without saying ``inf`` (:func:`overflowing`).
     """
     if not DECIMAL.fullmatch(text):
         raise ValueError(f"{text!r} is not a decimal number")
+    if overflowing(text):
+        raise ValueError(
+            f"{text!r} is beyond the floating point range (about 1.8e308); expected a "
+            "finite number, or inf"
+        )
     return float(text)
+
+
+def overflowing(text: str) -> bool:
+    """True when ``text``, a number written as a string, is beyond the double range (it
+    reads as infinity without saying ``inf``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        return False
+    return math.isinf(value) and "inf" not in text.lower()
+
+
+def real_number(value) -> float:
+    """``value`` as a float: a real number (Python's or numpy's int or float, a 0-d
+    array of them; not a bool: ``True`` is not 1) or a string in ASCII decimal notation
+    (:func:`decimal`; YAML 1.1 reads ``1e5`` as a string), spaces around it ignored.
+
+    Raises:
+        ValueError: a string that is not such a number, or an overflowing one.
+        TypeError: a bool (Python's or numpy's) or another object.
+    """
+    if isinstance(value, str):
+        return decimal(value.strip())
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if isinstance(value, bool | np.bool_) or not isinstance(
+        value, int | float | np.integer | np.floating
+    ):
+        raise TypeError(f"{value!r} is a {type(value).__name__}, not a number")
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond the float range
+        digits = str(value)
+        raise ValueError(
+            f"{digits[:20]}{'...' if len(digits) > 20 else ''} is beyond the floating point "
+            "range (about 1.8e308)"
+        ) from None
 
 
 def decimals(text: str) -> np.ndarray:

@@ -32,9 +32,10 @@ from pathlib import Path
 
 import pinocchio as pin
 
-from closedloop.common.arrays import decimal
+from closedloop.common.arrays import decimal, overflowing, real_number
+from closedloop.common.input_files import read_text
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
-from closedloop.model.closures import CLOSURE_TYPES, joint_id
+from closedloop.model.closures import CLOSURE_TYPES, joint_id, unknown_type
 from closedloop.model.spring_spec import check_locked_springs
 
 CLOSURE_KEYS = (
@@ -80,10 +81,9 @@ def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
     from closedloop.io import strict_yaml
 
     path = existing_path(path, what)
+    text = read_text(path, f"{what} {str(path)!r}", "YAML")
     try:
-        doc = strict_yaml.load(path.read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise ModelFileError(f"{what} {str(path)!r} cannot be read: {e}") from None
+        doc = strict_yaml.load(text)
     except yaml.YAMLError as e:
         msg = " ".join(str(e).split())
         raise ModelFileError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
@@ -96,30 +96,29 @@ def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
 
 
 def file_number(value, where: str, name: str) -> float:
-    if isinstance(value, str):
-        from closedloop.io.strict_yaml import (
-            overflowing,  # loaded with the file that holds the value
-        )
+    """The stiffness ``value`` of joint ``name`` read from a file (``where``): a number
+    >= 0 or a string in ASCII decimal notation (:func:`closedloop.common.arrays.real_number`).
 
-        if overflowing(value):
-            raise ModelFileError(
-                f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
-                "range (about 1.8e308); expected a number, or .inf to lock the joint"
-            )
-        try:
-            value = decimal(value.strip())
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    Raises:
+        ModelFileError: naming the file, the joint and the value.
+    """
+    if isinstance(value, str) and overflowing(value):
+        raise ModelFileError(
+            f"{where}: stiffness of joint {name!r} is {value!r}, beyond the floating point "
+            "range (about 1.8e308); expected a number, or .inf to lock the joint"
+        )
+    try:
+        value = real_number(value)
+    except (TypeError, ValueError):
         raise ModelFileError(
             f"{where}: stiffness of joint {name!r} is {value!r}; expected a number"
-        )
+        ) from None
     if math.isnan(value) or value < 0:
         raise ModelFileError(
             f"{where}: stiffness of joint {name!r} is {value!r}; expected a number >= 0 "
             "(0 = passive, .inf = locked)"
         )
-    return float(value)
+    return value
 
 
 def _check_springs(springs, where: str) -> dict[str, Stiffness]:
@@ -188,7 +187,7 @@ def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> C
         )
     bad = [t for t in types if not isinstance(t, str) or t not in CLOSURE_TYPES]
     if bad:
-        raise ModelFileError(f"{where}: type {bad[0]!r}; expected one of {list(CLOSURE_TYPES)}")
+        raise ModelFileError(f"{where}: {unknown_type(bad[0])}")
     return ClosureSpec(
         pairs=tuple((a, b) for a, b in pairs),
         types=tuple(types),

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from closedloop.exceptions import ModelFileError
+from closedloop.exceptions import ModelFileError, did_you_mean
 
 #: Bundled models by name: robot file and closure file (None: none) in :func:`data_dir`.
 #: ``NAME`` is the URDF ``NAME.urdf`` with its closure file ``NAME.yaml``, ``NAME_mjcf``
@@ -75,7 +75,9 @@ def path(name: str) -> Path:
     file = folder / name
     if not file.is_file():
         names = sorted(p.name for p in folder.iterdir() if p.is_file())
-        raise ModelFileError(f"no bundled file {name!r}; expected one of {names}")
+        raise ModelFileError(
+            f"no bundled file {name!r}{did_you_mean(name, names)}; expected one of {names}"
+        )
     return file
 
 
@@ -86,7 +88,9 @@ def robot_file(name: str) -> Path:
         ModelFileError: unknown name (the message lists them), example-robot-data missing.
     """
     if name not in ROBOTS:
-        raise ModelFileError(f"unknown robot {name!r}; expected one of {sorted(ROBOTS)}")
+        raise ModelFileError(
+            f"unknown robot {name!r}{did_you_mean(name, ROBOTS)}; expected one of {sorted(ROBOTS)}"
+        )
     return robot_data_dir() / ROBOTS[name]
 
 
@@ -105,7 +109,8 @@ def resolve(model: str | Path, closures: str | Path | None = None) -> tuple[Path
     if Path(text).exists() or (text not in BUNDLED_MODELS and text not in ROBOTS):
         if not Path(text).exists() and not Path(text).suffix:
             raise ModelFileError(
-                f"model {text!r} is neither a file nor a known name; expected a robot file "
+                f"model {text!r} is neither a file nor a known name"
+                f"{did_you_mean(text, [*BUNDLED_MODELS, *ROBOTS])}; expected a robot file "
                 f"or one of {sorted(BUNDLED_MODELS)} (bundled), {sorted(ROBOTS)} "
                 "(example-robot-data)"
             )

@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from closedloop.common.arrays import real_number
+from closedloop.common.input_files import read_xml, refuse_xml_entities
 from closedloop.exceptions import InvalidInputError, ModelFileError
 from closedloop.io.closure_file import (
     SIDE_FILE_KEYS,
@@ -183,10 +185,11 @@ def _read_urdf(
 def _read_urdf_tree(
     path: Path, spec, closures, geometry: bool, beams, elastic, shown=None
 ) -> _Tree:
+    root = read_xml(path, f"robot file {str(shown or path)!r}")  # before Pinocchio reads it
     # mimic joints follow their leader (nq = nv = 0), as the file says
     build = lambda: pin.buildModelFromUrdf(str(path), mimic=True)  # noqa: E731
     model = _parse(build, shown or path, "robot file")
-    _check_connected(model, path, shown or path)
+    _check_connected(model, root, shown or path)
     _check_masses(model, shown or path)
     _check_limits(model, shown or path)
     visual = _geometry(
@@ -235,10 +238,11 @@ def _read_urdf_tree(
                  beam_masses=tuple(masses.items()))  # fmt: skip
 
 
-def _check_connected(model: pin.Model, path: Path, shown: Path) -> None:
-    """:class:`ModelFileError` for links of the URDF file ``path`` that the model lacks:
-    those whose parent joints form a cycle away from the root (Pinocchio drops them)."""
-    links = [link.get("name") for link in ET.parse(path).getroot().iter("link")]
+def _check_connected(model: pin.Model, root: ET.Element, shown: Path) -> None:
+    """:class:`ModelFileError` for links of the URDF file (``root``, its root element) that
+    the model lacks: those whose parent joints form a cycle away from the root (Pinocchio
+    drops them)."""
+    links = [link.get("name") for link in root.iter("link")]
     lost = [name for name in links if name and not model.existBodyName(name)]
     if lost:
         raise ModelFileError(
@@ -353,7 +357,8 @@ def load_model(
             only ``name_mot``, ``springs``, ``locked``).
         springs: joint -> stiffness [N m/rad or N/m], merged over the files' springs.
         joint_stiffness: stiffness [N m/rad or N/m] of every actuated joint that has no
-            spring otherwise.
+            spring otherwise: a number >= 0 (``math.inf`` locks them) or a string in ASCII
+            decimal notation (``"1e999"``, beyond the double range, refused); not a bool.
         actuated: actuated joints, replacing those of the files or the serial default.
         geometry: also load the visual geometry (meshes must be found).
         file_format: ``"urdf"``, ``"mjcf"`` or ``"sdf"``; default: from the file suffix.
@@ -404,6 +409,9 @@ def load_model(
             if kind == "urdf"
             else _read_mjcf(path, closures, geometry)
         )
+    if tree.visual is not None:  # read by Pinocchio, whose assimp expands no entity
+        meshes = (g.meshPath for g in tree.visual.geometryObjects)
+        refuse_xml_entities(meshes, f"robot file {str(path)!r}")
     if actuated is None and tree.undriven:
         raise ModelFileError(
             f"robot file {str(path)!r}: actuator(s) {list(tree.undriven)} drive no joint "
@@ -424,7 +432,7 @@ def load_model(
     springs = {**tree.springs, **(springs or {})}
     if joint_stiffness is not None:
         try:
-            k = math.nan if isinstance(joint_stiffness, bool) else float(joint_stiffness)
+            k = real_number(joint_stiffness)  # not np.bool_(True), nor "1e999"
         except (TypeError, ValueError):
             k = math.nan
         if math.isnan(k) or k < 0:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from closedloop.common.input_files import read_xml
 from closedloop.exceptions import IgnoredFeatureWarning, ModelFileError
 from closedloop.io.mjcf_xml import (
     MJCF_EQUALITIES,
@@ -39,7 +40,6 @@ from closedloop.io.mjcf_xml import (
     element_name,
     flatten_frames,
     joints_with_defaults,
-    parse_xml,
     read_numbers,
     write_classes,
 )
@@ -131,7 +131,7 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             (a spring coupling joints). The message names the file.
     """
     where = f"robot file {str(path)!r}"
-    root = parse_xml(path, where)
+    root = read_xml(path, where)
     if root.find(".//include") is not None:
         raise ModelFileError(f"{where}: <include> is not supported; merge the included files")
     if root.find(".//replicate/*") is not None:  # Pinocchio drops what it holds
@@ -341,7 +341,7 @@ def pinocchio_copy(path: Path, folder: Path) -> Path:
         ModelFileError: the file is not valid XML.
     """
     where = f"robot file {str(path)!r}"
-    tree = ET.ElementTree(parse_xml(path, where))
+    tree = ET.ElementTree(read_xml(path, where))
     root = tree.getroot()
     worlds = root.findall("worldbody")
     for extra in worlds[1:]:

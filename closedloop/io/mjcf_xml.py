@@ -7,7 +7,6 @@ attributes, composite joints, active equalities.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -49,13 +48,6 @@ def check_numbers(root: ET.Element, where: str) -> None:
                                  "(Pinocchio reads a negative one as 0)")  # fmt: skip
         if e.tag == "connect" and e.get("anchor") is None:
             raise ModelFileError(f'{where}: {what} has no anchor; expected anchor="x y z"')
-
-
-def parse_xml(path: Path, where: str) -> ET.Element:
-    try:
-        return ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ModelFileError(f"{where} is not valid XML: {e}") from None
 
 
 def read_numbers(text: str, count: int, where: str, what: str) -> np.ndarray:

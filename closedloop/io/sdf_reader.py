@@ -14,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.common.arrays import decimals
+from closedloop.common.input_files import read_xml
 from closedloop.exceptions import ModelFileError
 
 #: SDF writes "no limit" as +-1e16.
@@ -29,10 +30,7 @@ class SdfReader:
 
     def __init__(self, path: Path):
         self.path, self.where = path, f"SDF file {str(path)!r}"
-        try:
-            root = ET.parse(path).getroot()
-        except (ET.ParseError, OSError) as e:
-            raise ModelFileError(f"{self.where} is not valid XML: {e}") from None
+        root = read_xml(path, self.where)
         if root.tag != "sdf":
             self.fail(f"root element is <{root.tag}>; expected <sdf>")
         version = root.get("version") or "1.6"

@@ -7,17 +7,20 @@ joint. Here both are errors; ``.inf`` (YAML's infinity) stays infinity. It also 
 YAML 1.1 says, a number with a leading zero as octal (``0100`` is 64) and one with colons
 in base 60 (``1:30`` is 90), digits grouped by ``_`` (``1_000`` is 1000, ``0_3`` is 3)
 and binary (``0b101`` is 5), where YAML 1.2 reads 100 and strings: all are errors.
-A number that YAML 1.1 reads as a string (``1e5``, without a decimal point) is read by
-the model files with :func:`closedloop.common.arrays.decimal` (ASCII decimal notation only).
+A hexadecimal number (``0x10``, 16 in both) is refused too: numbers are plain ASCII
+decimals. A number that YAML 1.1 reads as a string (``1e5``, without a decimal point) is
+read by the model files with :func:`closedloop.common.arrays.decimal` (ASCII decimal
+notation only, an overflowing ``1e999`` refused).
 """
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Hashable
 
 import yaml
+
+from closedloop.common.arrays import overflowing
 
 
 class _Loader(yaml.SafeLoader):
@@ -43,9 +46,15 @@ def _mapping(loader: _Loader, node: yaml.MappingNode) -> dict:
 
 def _check_base(node: yaml.ScalarNode, value) -> None:
     """Refuse a YAML 1.1 number that YAML 1.2 reads otherwise: digits grouped by ``_``,
-    binary, octal (leading zero) or base 60 (colons)."""
+    binary, octal (leading zero) or base 60 (colons); and a hexadecimal one, which both
+    read (``0x10`` is 16) but the project's rule does not: plain ASCII decimals."""
     digits = node.value.lstrip("+-")
-    octal = isinstance(value, int) and digits[:1] == "0" and digits[1:2] not in ("", "x", "b")
+    if digits[:2].lower() == "0x":
+        raise yaml.constructor.ConstructorError(
+            None, None, f"number {node.value} is hexadecimal ({value}); expected decimal "
+            "notation", node.start_mark,
+        )  # fmt: skip
+    octal = isinstance(value, int) and digits[:1] == "0" and digits[1:2] not in ("", "b")
     kind = (
         "digits grouped by _" if "_" in digits
         else "binary" if digits[:2] == "0b"
@@ -66,7 +75,7 @@ def _check_base(node: yaml.ScalarNode, value) -> None:
 def _float(loader: _Loader, node: yaml.ScalarNode) -> float:
     value = loader.construct_yaml_float(node)
     _check_base(node, value)
-    if math.isinf(value) and "inf" not in node.value.lower():
+    if overflowing(node.value):
         raise yaml.constructor.ConstructorError(
             None,
             None,
@@ -116,13 +125,3 @@ def load(text: str):
             f"nested too deep for the reader (Python's recursion limit, "
             f"{sys.getrecursionlimit()}); expected a shallower document"
         ) from None
-
-
-def overflowing(text: str) -> bool:
-    """True when ``text``, a number written as a string, is beyond the double range (it
-    reads as infinity without saying ``inf``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        return False
-    return math.isinf(value) and "inf" not in text.lower()

@@ -27,7 +27,7 @@ from closedloop.common.arrays import frozen
 from closedloop.common.conditioning import check_length
 from closedloop.exceptions import InvalidInputError, OpenLoopError, OutsideLimitsError
 from closedloop.kinematics.constraints import frame_jacobian_rows, jacobian_rows, residual_rows
-from closedloop.kinematics.limits import describe_limits, joints_outside_limits
+from closedloop.kinematics.limits import degrees_hint, describe_limits, joints_outside_limits
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import check_name
 
@@ -85,17 +85,10 @@ def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
     bad = joints_outside_limits(model, q)
     if not bad:
         return
-    pm = model.model
-    turned = [n for n, (x, _, _) in bad.items() if abs(x) > 2 * np.pi
-              and pm.joints[model.joint_id(n)].shortname().startswith("JointModelR")]  # fmt: skip
-    degrees = (
-        f"; {', '.join(turned)} beyond 2 pi: degrees? q is in radians (numpy.radians)"
-        if turned
-        else ""
-    )
     raise OutsideLimitsError(
         f"configuration of {model.name!r} outside the joint limits: {describe_limits(bad)}"
-        f"{degrees}; to query it anyway: check_limits=False (command line: --no-limits)",
+        f"{degrees_hint(model, bad, 'q is')}; to query it anyway: check_limits=False "
+        "(command line: --no-limits)",
         bad,
     )
 

@@ -18,7 +18,7 @@ from closedloop.kinematics.assembly import (
     close_loops,
     coordinate_scale,
 )
-from closedloop.kinematics.limits import describe_limits, joints_outside_limits
+from closedloop.kinematics.limits import degrees_hint, describe_limits, joints_outside_limits
 from closedloop.model.closed_loop import ClosedLoopModel
 
 __all__ = [
@@ -55,7 +55,10 @@ def assemble_within_limits(
     clm.set_actuated(q, check_actuated(clm, actuated))
     bad = {n: v for n, v in joints_outside_limits(clm, q).items() if n in clm.actuated}
     if bad and check_limits:
-        raise InvalidInputError(f"actuated joints outside their limits: {describe_limits(bad)}")
+        raise InvalidInputError(
+            f"actuated joints outside their limits: {describe_limits(bad)}"
+            + degrees_hint(clm, bad, "actuated values are")
+        )
     return close_loops(clm, q, jacobian=jacobian, origin=origin)
 
 

@@ -82,3 +82,16 @@ def describe_limits(bad: dict[str, tuple]) -> str:
     return ", ".join(
         f"{n} = {x:.12g} (limits [{lo:.6g}, {hi:.6g}])" for n, (x, lo, hi) in bad.items()
     )
+
+
+def degrees_hint(clm: ClosedLoopModel, bad: dict[str, tuple], values: str) -> str:
+    """``"; crank beyond 2 pi: degrees? <values> in radians (numpy.radians)"`` for the
+    revolute joints of ``bad`` (:func:`joints_outside_limits`) whose value exceeds 2 pi in
+    magnitude, the usual cause of an angle outside its limits; ``""`` when none does.
+    ``values``: what holds the angles (``"q is"``, ``"actuated values are"``)."""
+    joints = clm.model.joints
+    turned = [n for n, (x, _, _) in bad.items() if abs(x) > _TURN
+              and joints[clm.joint_id(n)].shortname().startswith("JointModelR")]  # fmt: skip
+    if not turned:
+        return ""
+    return f"; {', '.join(turned)} beyond 2 pi: degrees? {values} in radians (numpy.radians)"

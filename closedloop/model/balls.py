@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from closedloop.exceptions import ModelFileError
+from closedloop.common.input_files import read_xml
+from closedloop.exceptions import ModelFileError, did_you_mean
 
 
 def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
@@ -26,17 +27,15 @@ def urdf_with_balls(path: Path, balls: Sequence[str]) -> Path:
     Raises:
         ModelFileError: a name that is not a joint of the file.
     """
-    try:
-        tree = ET.parse(path)
-    except ET.ParseError as e:
-        raise ModelFileError(f"robot file {str(path)!r} is not valid XML: {e}") from None
+    tree = ET.ElementTree(read_xml(path, f"robot file {str(path)!r}"))
     # the joints of the robot, not the <joint> references of its <transmission>s
     joints = {j.get("name"): j for j in tree.getroot().findall("joint")}
     for name in balls:
         if name not in joints:
+            names = sorted(n for n in joints if n)
             raise ModelFileError(
-                f"balls: {name!r} is not a joint of {str(path)!r}; expected one of "
-                f"{sorted(n for n in joints if n)[:12]}"
+                f"balls: {name!r} is not a joint of {str(path)!r}{did_you_mean(name, names)}; "
+                f"expected one of {names[:12]}"
             )
         joint = joints[name]
         joint.set("type", "floating")

@@ -38,15 +38,15 @@ the size along box axis i + 2 (mod 3). The shape's length and position are not u
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import decimal, decimals
-from closedloop.exceptions import BeamError, ModelFileError
+from closedloop.common.arrays import decimals, real_number
+from closedloop.common.input_files import read_xml
+from closedloop.exceptions import BeamError, ModelFileError, did_you_mean
 
 THEORIES = ("euler-bernoulli", "timoshenko")
 SHAPES = {"circle": ("d",), "tube": ("d", "t"), "rectangle": ("b", "h")}
@@ -63,18 +63,9 @@ GEOMETRY = "geometry"
 ALIGN_TOLERANCE = 1e-3
 
 
-def _number(value) -> float:
-    """``value`` (a number, or a string such as YAML 1.1's ``"2.1e11"`` in ASCII decimal
-    notation, :func:`closedloop.common.arrays.decimal`) as a float; ValueError for a bool
-    (``True`` is not 1) or another string, TypeError for other objects."""
-    if isinstance(value, bool | np.bool_):
-        raise ValueError(f"{value!r} is a bool, not a number")
-    return decimal(value.strip()) if isinstance(value, str) else float(value)
-
-
 def _positive(beam: str, what: str, value) -> float:
     try:
-        x = _number(value)
+        x = real_number(value)  # YAML 1.1 reads 2.1e11 as a string; True is not 1
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected a number > 0") from None
     if not (math.isfinite(x) and x > 0):
@@ -140,7 +131,7 @@ def section_from_spec(beam: str, spec) -> Section:
         try:
             # a list, tuple or array of numbers; not a string, a mapping or a scalar
             seq = isinstance(y_axis, list | tuple | np.ndarray) and np.ndim(y_axis) == 1
-            y = np.asarray([_number(v) for v in y_axis]) if seq else None
+            y = np.asarray([real_number(v) for v in y_axis]) if seq else None
         except (TypeError, ValueError):
             y = None
         if y is None or y.shape != (3,) or not np.all(np.isfinite(y)) or not np.any(y):
@@ -192,7 +183,7 @@ def urdf_shapes(path) -> dict[str, list[Shape]]:
     """Link name -> its collision elements (its visual ones when it has none) of the URDF
     file ``path``, for ``section: geometry``."""
     out = {}
-    for link in ET.parse(path).getroot().iter("link"):
+    for link in read_xml(path, f"robot file {str(path)!r}").iter("link"):
         where = f"robot file {str(path)!r}: link {link.get('name')!r}"
         for source in ("collision", "visual"):
             shapes = []
@@ -344,7 +335,7 @@ def transport_stiffness(K: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _matrix(beam: str, what: str, value) -> np.ndarray:
     try:
-        K = np.array([_number(v) for v in np.asarray(value, dtype=object).reshape(-1)])
+        K = np.array([real_number(v) for v in np.asarray(value, dtype=object).reshape(-1)])
     except (TypeError, ValueError):
         raise BeamError(beam, f"{what} is {value!r}; expected 36 numbers") from None
     if K.size != 36:
@@ -419,7 +410,8 @@ def beam_site(
     """
     bodies = [f.name for f in model.frames if f.type == pin.BODY]
     if beam not in bodies:
-        raise BeamError(beam, f"unknown link; expected one of {bodies[:12]}")
+        raise BeamError(beam, f"unknown link{did_you_mean(beam, bodies)}; expected one of "
+                        f"{bodies[:12]}")  # fmt: skip
     fl = next(i for i, f in enumerate(model.frames) if f.type == pin.BODY and f.name == beam)
     link = model.frames[fl]
     kinds = (pin.JOINT, pin.FIXED_JOINT)
@@ -455,7 +447,8 @@ def beam_site(
             if known
             else "is not a joint of the model, nor a frame or a closure's anchor"
         )
-        raise BeamError(beam, f"end {end!r} {what}; expected one of {ends}")
+        raise BeamError(beam, f"end {end!r} {what}{did_you_mean(end, ends)}; expected one of "
+                        f"{ends}")  # fmt: skip
     fe = (children + frames)[at]
     frame = model.frames[fe]
     if frame.type == pin.JOINT:

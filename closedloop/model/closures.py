@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import pinocchio as pin
 
-from closedloop.exceptions import InvalidInputError, NameNotFoundError
+from closedloop.exceptions import InvalidInputError, NameNotFoundError, did_you_mean
 
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
 
@@ -82,10 +82,7 @@ class Closure:
         if not self.kind:
             object.__setattr__(self, "kind", "3d" if point else "6d")
         if self.kind not in CLOSURE_TYPES:
-            raise InvalidInputError(
-                f"closure {self.name!r} of type {self.kind!r}; expected one of "
-                f"{list(CLOSURE_TYPES)}"
-            )
+            raise InvalidInputError(f"closure {self.name!r} of {unknown_type(self.kind)}")
         if isinstance(self.constraint, AnchorConstraint) and point != (self.kind == "3d"):
             raise InvalidInputError(
                 f"closure {self.name!r} of type {self.kind!r} holds a "
@@ -165,6 +162,13 @@ def joint_id(model: pin.Model, name: str) -> int:
     raise NameNotFoundError("joint", name, list(model.names)[1:], hint)
 
 
+def unknown_type(kind) -> str:
+    """The message's words for a closure type that is not one of :data:`CLOSURE_TYPES`:
+    ``"type '3D' (did you mean '3d'?); expected one of [...]"``."""
+    expected = list(CLOSURE_TYPES)
+    return f"type {kind!r}{did_you_mean(kind, expected)}; expected one of {expected}"
+
+
 def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: str) -> Closure:
     """Closure of type ``kind`` between frames ``frame_a`` (A) and ``frame_b`` (B).
 
@@ -174,7 +178,7 @@ def closure_between_frames(model: pin.Model, frame_a: str, frame_b: str, kind: s
         kind: one of :data:`CLOSURE_TYPES`.
     """
     if kind not in CLOSURE_TYPES:
-        raise InvalidInputError(f"closure type {kind!r}; expected one of {list(CLOSURE_TYPES)}")
+        raise InvalidInputError(f"closure {unknown_type(kind)}")
     fa, fb = model.frames[frame_id(model, frame_a)], model.frames[frame_id(model, frame_b)]
     constraint = CLOSURE_TYPES[kind](
         model, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement

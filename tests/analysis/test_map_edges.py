@@ -136,7 +136,10 @@ def test_points_outside_the_joint_limits_are_invalid(fourbar_urdf, fourbar_yaml)
     assert list(m.status) == ["rank_deficient", "rank_deficient"] + ["invalid"] * 3 + [
         "rank_deficient"
     ]
-    assert m.reasons[2] == "actuated joints outside their limits: crank = 7 (limits [-6.3, 6.3])"
+    assert m.reasons[2] == (
+        "actuated joints outside their limits: crank = 7 (limits [-6.3, 6.3]); crank beyond "
+        "2 pi: degrees? actuated values are in radians (numpy.radians)"
+    )
     assert np.all(np.isnan(m.indices["min_translational"][2:5]))
     q = cl.assemble(clm, [0.6], clm.reference_configuration()).q  # after invalid points
     assert_close_in_norm(m.C[5], cl.compliance(clm, q, "P").C, CHUNK_RTOL)

@@ -102,8 +102,7 @@ def test_readable_outputs_name_their_units(capsys):
         ["deflect", "--force", "1", "2"],  # wrong count
         ["deflect", "--torque", "a", "b", "c"],  # not numbers
         ["frobnicate"],  # unknown subcommand
-        [],  # no subcommand
-    ],
+    ],  # no subcommand: its commands listed too (tests/cli/test_cli_input.py)
 )
 def test_bad_input_exits_2_with_one_line(capsys, argv):
     status, out, err = run(capsys, *argv)
@@ -154,7 +153,8 @@ def test_module_entry_point_in_a_subprocess():
         # singular: cranks on couplers, refused by the assembly (branches meet there)
         (["stiffness", "--alpha", "0", "0", "0"], "a singular configuration"),
         (["stiffness", "--alpha", "0", "0", "0", "--backend", "consistent"], "singular"),
-        (["deflect", "--alpha", "1e-7", "1e-7", "1e-7", "--force", "1", "0", "0"], "singular"),
+        # one whole angle: not all like radians, no note on stderr
+        (["deflect", "--alpha", "0", "1e-7", "1e-7", "--force", "1", "0", "0"], "singular"),
     ],
 )
 def test_computation_failures_exit_3_with_one_line(capsys, argv, match):
@@ -418,3 +418,29 @@ def test_a_pose_outside_the_limits_names_no_option_cahyman_lacks(command, tmp_pa
     assert code == 2 and err.count("\n") == 1, err
     assert "joints outside their limits" in err and VIRTUAL_JOINTS[0] in err, err
     assert "--no-limits" not in err and "check_limits" not in err, err
+
+
+@pytest.mark.parametrize("command", ["stiffness", "deflect", "modes"])
+def test_alpha_values_that_look_like_radians_get_a_note(capsys, command):
+    """--alpha 0.785 1.047 1.309 (45, 60, 75 deg in radians) ran at under 1 deg without a
+    word; it still runs, in degrees, with a one-line note."""
+    extra = ["--mass", "m_M4=1"] if command == "modes" else []
+    status, out, err = run(capsys, command, "--alpha", "0.785", "1.047", "1.309", *extra)
+    assert status in (0, 1) and out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cahyman: warning: --alpha 0.785 1.047 "
+                                                   "1.309"), err  # fmt: skip
+    assert "degrees" in lines[0]
+
+
+@pytest.mark.parametrize("alpha", [["45", "60", "75"], ["0", "0.5", "1"], ["0.5", "1.5", "7"]])
+def test_alpha_values_in_degrees_get_no_note(capsys, alpha):
+    """A whole number or a value beyond 2 pi among them: degrees, no note."""
+    _, _, err = run(capsys, "stiffness", "--alpha", *alpha)
+    assert "warning" not in err, err
+
+
+def test_a_map_of_alpha_values_that_look_like_radians_gets_the_note(capsys, tmp_path):
+    status, _, err = run(capsys, "map", "--alpha", "0.6,0.8,1.2", "--out", str(tmp_path / "m"))
+    assert status == 0
+    assert "cahyman: warning: --alpha 0.6 0.8 1.2: every value is below 2 pi" in err, err

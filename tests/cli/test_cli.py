@@ -180,7 +180,10 @@ ERRORS = {
     "unknown-joint": ("{ur5} --frame tool0 --springs {tmp}/k.yaml", "unknown joint 'elbow'"),
     "q-count": ("{ur5} --frame tool0 --q 0 0 0 0 0", "q has 5 values; expected nq=6"),
     "q-nan": ("{ur5} --frame tool0 --q 0 0 nan 0 0 0", "--q: 'nan' is not a finite number"),
-    "wrench-inf": ("{ur5} --frame tool0 --wrench 0 0 -1e400 0 0 0", "'-1e400' is not a finite"),
+    "wrench-inf": (
+        "{ur5} --frame tool0 --wrench 0 0 -1e400 0 0 0",
+        "'-1e400' is beyond the floating point range",
+    ),
     "usage": ("{ur5} --frame tool0 --axes up", "argument --axes: invalid choice: 'up'"),
     "negative-stiffness": ("{ur5} --frame tool0 --joint-stiffness -1", "expected a number >= 0"),
     "nan-stiffness": ("{ur5} --frame tool0 --joint-stiffness nan", "expected a number >= 0"),

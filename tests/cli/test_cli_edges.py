@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 from helpers import REPO, UR5_JOINTS, UR5_Q
+from helpers import one_error_line as one_line
 
 import closedloop as cl
 import closedloop.cli.map as cli_map
@@ -37,14 +38,6 @@ def run(entry, capsys, *argv) -> tuple[int, str, str]:
     code = entry([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-def one_line(err: str, prog: str = "closedloop") -> str:
-    """The single line of ``err``, checked to be an error line without a traceback."""
-    assert "Traceback" not in err and "Warning" not in err, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"{prog}: error: "), err
-    return lines[0]
 
 
 def fourbar_map(tmp_path, *extra) -> list:

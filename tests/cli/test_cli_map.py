@@ -67,7 +67,7 @@ def test_map_errors_are_one_line(tmp_path, fourbar_urdf, fourbar_yaml, capsys):
         (["--sweep", "0:1:3"], "expected JOINT=START:STOP:NUM"),
         (["--sweep", "crank=0:nan:3"], "has non-finite values"),
         (["--sweep", "crank=0:1:3", "--fixed", "x=nan"], "is not a finite number"),
-        (["--sweep", "crank=0:1:3", "--force", "0", "1e999", "0"], "is not a finite number"),
+        (["--sweep", "crank=0:1:3", "--force", "0", "1e999", "0"], "beyond the floating point"),
         (["--sweep", "nope=0:1:3"], "'nope' is not an actuated joint"),
         (["--sweep", "crank=0:1:3", "--out", str(tmp_path / "file")], "is a file"),
         (["--sweep", "crank=0:1:3", "--scheduler", "tcp://127.0.0.1:9"],

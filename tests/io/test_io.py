@@ -323,8 +323,8 @@ def test_unparsable_urdf_gives_one_message_and_no_native_output(tmp_path, capfd)
     with pytest.raises(ModelFileError, match=r"bad\.urdf' cannot be parsed: .*specify limits"):
         load_model(bad)
     assert capfd.readouterr().err == ""
-    with pytest.raises(ModelFileError, match="cannot be parsed"):
-        load_model(write(tmp_path, "cut.urdf", '<robot name="x"><link name="a"/>'))
+    with pytest.raises(ModelFileError, match=r"cut\.urdf' is not valid XML: no element found"):
+        load_model(write(tmp_path, "cut.urdf", '<robot name="x"><link name="a"/>'))  # as MJCF
 
 
 @pytest.mark.parametrize(
