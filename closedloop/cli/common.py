@@ -140,8 +140,11 @@ def run_main(
     """The entry point of a command line: parse ``argv`` (default ``sys.argv[1:]``) with
     ``parser_of(argv)`` and run the subcommand; returns the exit status. A usage error is
     one line ``prog: error: ...`` and :data:`EXIT_BAD_INPUT`; ``--help`` and ``--version``
-    return 0."""
+    return 0. Without ``argv`` (the process's own command line, which ends with the
+    command) the subcommand gets ``args.program = True``: a map then leaves SIGINT and
+    SIGTERM ignored once it has ended (:func:`closedloop.analysis.interrupts.stop_on_signals`)."""
     single_threaded_blas()  # small matrices: BLAS threads cost more than they give
+    program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         try:
@@ -156,4 +159,5 @@ def run_main(
         return closed_pipe()
     except OSError as e:  # --help > /dev/full
         return output_failed(prog, e)
+    args.program = program
     return run_command(prog, args)
