@@ -228,13 +228,19 @@ def map_title(result: SweepResult, index: str, fixed: dict) -> str:
 
 
 def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: dict) -> Path:
-    """Curve (one swept axis) or heat map (two) of ``index``; failed points left blank.
+    """Write the PNG ``path`` of :func:`map_figure` (same arguments); returns ``path``."""
+    save_figure(map_figure(result, index, shown, fixed), path, dpi=110)
+    return path
+
+
+def map_figure(result: SweepResult, index: str, shown: dict, fixed: dict):
+    """Curve (one swept axis) or heat map (two) of ``index``, failed points left blank: a
+    ``matplotlib.figure.Figure`` of pyplot (Agg).
 
     Args:
         result: the sweep (a grid).
         index: name of the index to show.
         shown: axis name -> (unit shown, factor from the shown unit to SI).
-        path: PNG file to write.
         fixed: as :func:`map_title`.
     """
     import matplotlib  # lazily: a second of start-up, for the figure only
@@ -275,8 +281,7 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: di
     note = f" ({failed} points without a value)" if failed else ""
     ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
     fig.tight_layout()
-    save_figure(fig, path, dpi=110)
-    return path
+    return fig
 
 
 def describe_point(result: SweepResult, i: int, shown: dict) -> str:

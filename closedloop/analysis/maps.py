@@ -185,9 +185,15 @@ def map_title(smap: StiffnessMap, index: str) -> str:
 
 
 def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
-    """PNG of ``index`` over the swept joints: a curve (one axis with more than one value,
-    or a list) or a heat map (two), with units, the fixed inputs, the load and the number
-    of points without a value in the title; failed points left blank."""
+    """Write the PNG ``path`` of :func:`map_figure`."""
+    save_figure(map_figure(smap, index), path)
+
+
+def map_figure(smap: StiffnessMap, index: str):
+    """The figure of ``index`` over the swept joints (a ``matplotlib.figure.Figure`` of
+    pyplot, Agg): a curve (one axis with more than one value, or a list) or a heat map
+    (two), with units, the fixed inputs, the load and the number of points without a value
+    in the title; failed points left blank."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -218,7 +224,7 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
     note = f" ({missing} points without a value)" if missing else ""
     ax.set_title(map_title(smap, index) + note, fontsize=9)
     fig.tight_layout()
-    save_figure(fig, path)
+    return fig
 
 
 def grid_points(
