@@ -67,6 +67,7 @@ from closedloop.cli.map_options import (
 )
 from closedloop.cli.outputs import output_folder
 from closedloop.cli.parser import path_text, positive_int
+from closedloop.common.figures import tidy_layout
 from closedloop.common.files import save_figure
 from closedloop.exceptions import InvalidInputError
 
@@ -280,7 +281,7 @@ def map_figure(result: SweepResult, index: str, shown: dict, fixed: dict):
     failed = int(np.count_nonzero(~np.isfinite(v)))
     note = f" ({failed} points without a value)" if failed else ""
     ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
-    fig.tight_layout()
+    tidy_layout(fig)  # tight, no tick labels on one another
     return fig
 
 

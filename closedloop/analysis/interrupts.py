@@ -4,9 +4,10 @@ Inside :func:`stop_on_signals` (in :func:`closedloop.analysis.tasks.gather`, and
 whole of a map command) the first signal raises :class:`Interrupted` (a
 ``KeyboardInterrupt``), which carries what was computed; once a command's map is computed
 and its files are being written, the signal is held until they are
-(:meth:`SignalStop.hold`). The worker processes of :func:`closedloop.analysis.tasks.run_tasks` are started
-with the signals blocked (:func:`signals_blocked`) and ignore SIGINT themselves, ending with
-their parent (:func:`start_worker`).
+(:meth:`SignalStop.hold`). The worker processes of
+:func:`closedloop.analysis.tasks.run_tasks` are started with the signals blocked
+(:func:`signals_blocked`) and ignore SIGINT themselves, ending with their parent
+(:func:`start_worker`).
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointDat
 from closedloop.analysis.model_source import ModelSource, model_of
 from closedloop.analysis.tasks import CHUNK, gather, run_tasks_by_point
 from closedloop.common.arrays import ReadOnlyArrays
+from closedloop.common.figures import tidy_layout
 from closedloop.common.files import save_figure, write_atomically
 from closedloop.elastostatics.compliance import UNITS
 from closedloop.exceptions import InvalidInputError
@@ -223,7 +224,7 @@ def map_figure(smap: StiffnessMap, index: str):
     missing = int(np.count_nonzero(np.isnan(smap.indices[index])))
     note = f" ({missing} points without a value)" if missing else ""
     ax.set_title(map_title(smap, index) + note, fontsize=9)
-    fig.tight_layout()
+    tidy_layout(fig)  # tight, no tick labels on one another
     return fig
 
 
