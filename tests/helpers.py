@@ -7,9 +7,11 @@ several modules use are in ``conftest.py``.
 
 from __future__ import annotations
 
+import base64
 import ctypes
 import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -19,6 +21,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg
+import umsgpack
 
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.constraints import closure_jacobian, closure_residual, frame_jacobian
@@ -339,3 +342,30 @@ def tangent_differences(model, fun, q, h=1e-6):
         e[b] = h
         cols.append((fun(pin.integrate(model, q, e)) - fun(pin.integrate(model, q, -e))) / (2 * h))
     return np.array(cols).T
+
+
+# ---------------------------------------------------------------------------- viewer pages
+#: A meshcat command in a static page: a base64 msgpack blob.
+BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")
+
+
+def commands(html: str) -> list[dict]:
+    """The meshcat commands embedded in a static page, in order."""
+    return [umsgpack.unpackb(base64.b64decode(b)) for b in BLOB.findall(html)]
+
+
+def robots_object(cmds: list[dict]) -> dict:
+    """The three.js JSON of both robots (the one set_object at /meshcat/robots)."""
+    (c,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/robots"]
+    return c["object"]
+
+
+def robot_groups(obj: dict, root: str) -> dict[str, dict]:
+    """Group name -> group of one robot ('nominal' or 'deflected')."""
+    (robot,) = [g for g in obj["object"]["children"] if g["name"] == root]
+    return {g["name"]: g for g in robot["children"]}
+
+
+def json_matrix(o: dict) -> np.ndarray:
+    """(4, 4) matrix of a three.js object (column-major in its JSON)."""
+    return np.array(o["matrix"], dtype=float).reshape(4, 4).T
