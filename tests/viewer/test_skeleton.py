@@ -180,3 +180,44 @@ def test_a_urdf_without_visual_elements_is_viewed_from_the_command_line(
     assert "no visual geometry: drawn as its skeleton" in page
     shapes = _shapes(commands(page), "deflected")
     assert set(shapes) == {"SphereGeometry", "CylinderGeometry"}
+
+
+#: A double pendulum in MJCF without any geom: masses in <inertial>, springs on the joints.
+BARE_MJCF = """<mujoco model="bare">
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="j1" type="hinge" axis="0 1 0" stiffness="100"/>
+      <inertial pos="0 0 -0.25" mass="1" diaginertia="0.01 0.01 0.01"/>
+      <body name="lower" pos="0 0 -0.5">
+        <joint name="j2" type="hinge" axis="0 1 0" stiffness="100"/>
+        <inertial pos="0 0 -0.25" mass="1" diaginertia="0.01 0.01 0.01"/>
+        <site name="tip" pos="0 0 -0.5"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_an_mjcf_without_geoms_is_drawn_as_its_skeleton(tmp_path):
+    """The world to the first joint, the upper link, the lower link to its site: three rods
+    on the joints' and the site's origins, two spheres."""
+    path = tmp_path / "bare.xml"
+    path.write_text(BARE_MJCF, encoding="utf-8")
+    clm = load_model(path)
+    q = np.array([0.3, 0.4])
+    scene = deflection_scene(clm, q, "tip", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    with DeflectionViewer(clm) as viewer:
+        viewer.show(scene)
+        cmds = commands(viewer.static_html())
+    assert viewer.skeleton
+    data = clm.model.createData()
+    pin.framesForwardKinematics(clm.model, data, q)
+    shapes = _shapes(cmds, "nominal")
+    centres = np.array(sorted(T[:3, 3].tolist() for T, _ in shapes["SphereGeometry"]))
+    expected = sorted(m.translation.tolist() for m in data.oMi[1:])
+    np.testing.assert_allclose(centres, np.array(expected), atol=ATOL_PLACEMENT)
+    rods = [_rod_ends(T, g) for T, g in shapes["CylinderGeometry"]]
+    segments = _segments(clm.model, np.array([m.homogeneous for m in data.oMi]), frames=("tip",))
+    assert len(segments) == len(rods) == 3
+    _assert_drawn(segments, rods)
