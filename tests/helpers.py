@@ -320,6 +320,25 @@ def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
         os.close(write)
 
 
+def map_argv(prog: str, n: int) -> list[str]:
+    """``python -m`` arguments of an n x n map: ``closedloop map`` of the delta robot over
+    two arms (the third at 0), ``cahyman map`` over alpha_1 and alpha_2."""
+    if prog == "closedloop":
+        return ["-m", "closedloop", "map", str(REPO / "urdf/delta.urdf"), "--closures",
+                str(REPO / "urdf/delta.yaml"), "--frame", "platform", "--sweep",
+                f"arm0=-0.3:0.3:{n}", "--sweep", f"arm1=-0.3:0.3:{n}", "--fixed",
+                "arm2=0"]  # fmt: skip
+    return ["-m", "cahyman_pin", "map", "--alpha1", f"30:90:{n}", "--alpha2", f"30:90:{n}"]
+
+
+def default_sigint() -> None:
+    """In a child process before it runs: SIGINT as a terminal's (a background shell may
+    have ignored it)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]:
     """Configurations (nq,) of a one-input mechanism driven from its neutral configuration
     through the input values ``inputs`` [rad, m] in order, by steps of at most ``step``,

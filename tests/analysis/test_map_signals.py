@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
-from helpers import REPO
+from helpers import REPO, default_sigint, map_argv
 
 from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.map_results import STATUS, ChunkResult
@@ -39,17 +39,9 @@ REAP_TIMEOUT = 3.0
 #: ``closedloop map`` of 8100 points (the delta robot, 1-2 ms a point; CSV written) and
 #: ``cahyman map`` of 19600 (generic backend from the neighbour, about 0.3 ms a point).
 COMMANDS = {
-    "closedloop": (
-        ["-m", "closedloop", "map", str(REPO / "urdf/delta.urdf"), "--closures",
-         str(REPO / "urdf/delta.yaml"), "--frame", "platform", "--sweep", "arm0=-0.3:0.3:90",
-         "--sweep", "arm1=-0.3:0.3:90", "--fixed", "arm2=0", "--chunk", "20"],
-        "map points: ",
-    ),
-    "cahyman": (
-        ["-m", "cahyman_pin", "map", "--alpha1", "30:90:140", "--alpha2", "30:90:140",
-         "--start", "neighbour", "--chunk-size", "20"],
-        "generic sweep: ",
-    ),
+    "closedloop": ([*map_argv("closedloop", 90), "--chunk", "20"], "map points: "),
+    "cahyman": ([*map_argv("cahyman", 140), "--start", "neighbour", "--chunk-size", "20"],
+                "generic sweep: "),
 }  # fmt: skip
 
 
@@ -66,11 +58,6 @@ def _left(processes: list) -> list:
     for process in alive:
         process.kill()
     return alive
-
-
-def _default_sigint() -> None:
-    """In the child: SIGINT as a terminal's (a background shell may have ignored it)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _computing_map(out: Path) -> tuple[subprocess.Popen, list]:
@@ -101,7 +88,7 @@ def _interrupted_run(prog: str, sig: signal.Signals, out: Path):
     proc = subprocess.Popen(
         [sys.executable, *argv, "--workers", "2", "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
-        start_new_session=True, preexec_fn=_default_sigint,
+        start_new_session=True, preexec_fn=default_sigint,
     )  # fmt: skip
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_lines, args=(proc.stderr, lines), daemon=True).start()

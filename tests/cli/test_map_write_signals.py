@@ -20,7 +20,7 @@ from pathlib import Path
 import matplotlib.image
 import numpy as np
 import pytest
-from helpers import REPO
+from helpers import REPO, default_sigint, map_argv
 
 #: Seconds a command may take from its start to its last line.
 RUN_TIMEOUT = 120.0
@@ -36,26 +36,12 @@ PIPE_SIZE = 4096
 
 #: A 10 x 10 map of each command, serial: (argv, its last progress line, its files).
 COMMANDS = {
-    "closedloop": (
-        ["-m", "closedloop", "map", str(REPO / "urdf/delta.urdf"), "--closures",
-         str(REPO / "urdf/delta.yaml"), "--frame", "platform", "--sweep", "arm0=-0.3:0.3:10",
-         "--sweep", "arm1=-0.3:0.3:10", "--fixed", "arm2=0", "--index", "min_translational"],
-        "map points: 100/100",
-        ("map.npz", "map.csv", "map.png"),
-    ),
-    "cahyman": (
-        ["-m", "cahyman_pin", "map", "--alpha1", "30:90:10", "--alpha2", "30:90:10",
-         "--workers", "1"],
-        "generic sweep: 100/100",
-        ("map.npz", "map.csv", "map_det_K.png"),
-    ),
+    "closedloop": ([*map_argv("closedloop", 10), "--index", "min_translational"],
+                   "map points: 100/100", ("map.npz", "map.csv", "map.png")),
+    "cahyman": ([*map_argv("cahyman", 10), "--workers", "1"],
+                "generic sweep: 100/100", ("map.npz", "map.csv", "map_det_K.png")),
 }  # fmt: skip
 POINTS = 100
-
-
-def _default_sigint() -> None:
-    """In the child: SIGINT as a terminal's (a background shell may have ignored it)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _start(prog: str, out: Path) -> subprocess.Popen:
@@ -63,7 +49,7 @@ def _start(prog: str, out: Path) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, *argv, "--out", str(out)], stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
-        preexec_fn=_default_sigint,
+        preexec_fn=default_sigint,
     )  # fmt: skip
 
 
