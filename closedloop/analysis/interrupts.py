@@ -43,11 +43,13 @@ class Interrupted(KeyboardInterrupt):
         signum: the signal (SIGINT, also for a plain ``KeyboardInterrupt``, or SIGTERM).
         data: the :class:`~closedloop.analysis.map_results.PointData` so far, or None
             (stopped outside a map): the points of the chunks not received have status
-            ``not_computed`` and the reason :attr:`reason`, NaN values.
+            ``not_computed`` and the reason :attr:`reason`, NaN values (none, for a signal
+            held while a computed map's files were written: :meth:`SignalStop.hold`).
         partial: the map's result built on ``data`` (a
             :class:`~closedloop.analysis.maps.StiffnessMap` or a
             :class:`~cahyman_pin.sweep.SweepResult`), or None.
-        written: the folder ``partial`` was written to (:meth:`write`), or None.
+        written: the folder ``partial`` was written to (:meth:`write`), or that of the
+            files written while the signal was held, or None.
     """
 
     def __init__(self, signum: int = signal.SIGINT):
