@@ -7,9 +7,11 @@ several modules use are in ``conftest.py``.
 
 from __future__ import annotations
 
+import base64
 import ctypes
 import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -19,6 +21,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg
+import umsgpack
 
 from closedloop.kinematics.assembly import assemble
 from closedloop.kinematics.constraints import closure_jacobian, closure_residual, frame_jacobian
@@ -326,6 +329,25 @@ def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
         os.close(write)
 
 
+def map_argv(prog: str, n: int) -> list[str]:
+    """``python -m`` arguments of an n x n map: ``closedloop map`` of the delta robot over
+    two arms (the third at 0), ``cahyman map`` over alpha_1 and alpha_2."""
+    if prog == "closedloop":
+        return ["-m", "closedloop", "map", str(REPO / "urdf/delta.urdf"), "--closures",
+                str(REPO / "urdf/delta.yaml"), "--frame", "platform", "--sweep",
+                f"arm0=-0.3:0.3:{n}", "--sweep", f"arm1=-0.3:0.3:{n}", "--fixed",
+                "arm2=0"]  # fmt: skip
+    return ["-m", "cahyman_pin", "map", "--alpha1", f"30:90:{n}", "--alpha2", f"30:90:{n}"]
+
+
+def default_sigint() -> None:
+    """In a child process before it runs: SIGINT as a terminal's (a background shell may
+    have ignored it)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]:
     """Configurations (nq,) of a one-input mechanism driven from its neutral configuration
     through the input values ``inputs`` [rad, m] in order, by steps of at most ``step``,
@@ -348,3 +370,30 @@ def tangent_differences(model, fun, q, h=1e-6):
         e[b] = h
         cols.append((fun(pin.integrate(model, q, e)) - fun(pin.integrate(model, q, -e))) / (2 * h))
     return np.array(cols).T
+
+
+# ---------------------------------------------------------------------------- viewer pages
+#: A meshcat command in a static page: a base64 msgpack blob.
+BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")
+
+
+def commands(html: str) -> list[dict]:
+    """The meshcat commands embedded in a static page, in order."""
+    return [umsgpack.unpackb(base64.b64decode(b)) for b in BLOB.findall(html)]
+
+
+def robots_object(cmds: list[dict]) -> dict:
+    """The three.js JSON of both robots (the one set_object at /meshcat/robots)."""
+    (c,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/robots"]
+    return c["object"]
+
+
+def robot_groups(obj: dict, root: str) -> dict[str, dict]:
+    """Group name -> group of one robot ('nominal' or 'deflected')."""
+    (robot,) = [g for g in obj["object"]["children"] if g["name"] == root]
+    return {g["name"]: g for g in robot["children"]}
+
+
+def json_matrix(o: dict) -> np.ndarray:
+    """(4, 4) matrix of a three.js object (column-major in its JSON)."""
+    return np.array(o["matrix"], dtype=float).reshape(4, 4).T

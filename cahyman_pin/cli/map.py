@@ -26,15 +26,15 @@ receives ``map.npz`` (everything, SI), ``map.csv`` when the map is small and
 closed-form geometry instead of the previous point (faster; see :mod:`cahyman_pin.sweep.engine`).
 ``--index lowest_frequency`` (generic backend) also computes the lowest natural frequency
 [Hz] at every point, of the masses given with ``--mass NAME=KG`` (0 by default: give some).
-SIGINT (Ctrl-C) or SIGTERM stops the map at once, its workers with it, writes the points
-computed (the others with status ``not_computed``) and ends with one line, exit 130
-(SIGINT) or 143 (SIGTERM).
+SIGINT and SIGTERM: as ``closedloop map``'s
+(:data:`~closedloop.cli.map_options.SIGNALS_EPILOG`, the epilog of the help).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import textwrap
 from pathlib import Path
 
@@ -55,9 +55,10 @@ from cahyman_pin.sweep import INDEX_UNITS, SweepResult, grid, sweep
 from cahyman_pin.sweep.execution import STARTS
 from cahyman_pin.sweep.points import param_unit
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.interrupts import Interrupted, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, SignalStop, stop_on_signals
 from closedloop.analysis.maps import load_text
 from closedloop.cli.map_options import (
+    SIGNALS_EPILOG,
     SpecError,
     check_map_size,
     index_line,
@@ -67,6 +68,7 @@ from closedloop.cli.map_options import (
 )
 from closedloop.cli.outputs import output_folder
 from closedloop.cli.parser import path_text, positive_int
+from closedloop.common.figures import tidy_layout
 from closedloop.common.files import save_figure
 from closedloop.exceptions import InvalidInputError
 
@@ -110,6 +112,7 @@ def add_parser(subparsers) -> None:
         help="a stiffness index over swept inputs (NPZ, CSV, PNG)",
         description="A stiffness index over one or two swept inputs: V, START:STOP:NUM or "
         "V1,V2,... (pose in deg and mm; --param in SI).",
+        epilog=SIGNALS_EPILOG,
     )
     d = DEFAULT_POSE
     p.add_argument("--alpha", nargs="+", type=parse_values, metavar="SPEC",
@@ -228,13 +231,19 @@ def map_title(result: SweepResult, index: str, fixed: dict) -> str:
 
 
 def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: dict) -> Path:
-    """Curve (one swept axis) or heat map (two) of ``index``; failed points left blank.
+    """Write the PNG ``path`` of :func:`map_figure` (same arguments); returns ``path``."""
+    save_figure(map_figure(result, index, shown, fixed), path, dpi=110)
+    return path
+
+
+def map_figure(result: SweepResult, index: str, shown: dict, fixed: dict):
+    """Curve (one swept axis) or heat map (two) of ``index``, failed points left blank: a
+    ``matplotlib.figure.Figure`` of pyplot (Agg).
 
     Args:
         result: the sweep (a grid).
         index: name of the index to show.
         shown: axis name -> (unit shown, factor from the shown unit to SI).
-        path: PNG file to write.
         fixed: as :func:`map_title`.
     """
     import matplotlib  # lazily: a second of start-up, for the figure only
@@ -274,9 +283,8 @@ def plot_map(result: SweepResult, index: str, shown: dict, path: Path, fixed: di
     failed = int(np.count_nonzero(~np.isfinite(v)))
     note = f" ({failed} points without a value)" if failed else ""
     ax.set_title(map_title(result, index, fixed) + note, fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)
-    return path
+    tidy_layout(fig)  # tight, no tick labels on one another
+    return fig
 
 
 def describe_point(result: SweepResult, i: int, shown: dict) -> str:
@@ -324,6 +332,13 @@ def _check_values(inputs: dict, params: CaHyManParams) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    """Run ``cahyman map``; SIGINT and SIGTERM are handled from here to the last line of
+    output (see the module docstring)."""
+    with stop_on_signals(ignore_after=getattr(args, "program", False)) as signals:
+        return _run_map(args, signals)
+
+
+def _run_map(args: argparse.Namespace, signals: SignalStop) -> int:
     inputs = _inputs(args)
     swept = {k: v for k, v in inputs.items() if v[0].size > 1}
     if not swept:
@@ -370,7 +385,7 @@ def _run(args: argparse.Namespace) -> int:
             (out / f"map_{other}.png").unlink(missing_ok=True)
         return paths
 
-    with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
+    with dask_executor(args.scheduler, args.worker_timeout) as executor:
         try:
             result = sweep(
                 points,
@@ -386,6 +401,7 @@ def _run(args: argparse.Namespace) -> int:
         except Interrupted as stop:  # the points computed, written before the one line
             stop.write(save, out)
             raise
+        signals.hold(result.data, out)  # every point computed: a signal lets the files be written
     paths = save(result)
     print(result.summary())
     print(index_line(args.index, result.indices[args.index], INDEX_UNITS[args.index]))
@@ -396,4 +412,5 @@ def _run(args: argparse.Namespace) -> int:
         print(f"... and {len(failures) - SHOWN_FAILURES} more (status and reason of every point "
               f"in {out / 'map.npz'})")  # fmt: skip
     print("wrote " + ", ".join(str(p) for p in paths))
+    sys.stdout.flush()  # while a signal is held
     return 0

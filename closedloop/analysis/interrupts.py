@@ -1,10 +1,13 @@
 """A map stopped by SIGINT (Ctrl-C) or SIGTERM, and what the signals do in its workers.
 
-Inside :func:`stop_on_signals` (in :func:`closedloop.analysis.tasks.gather`) the first
-signal raises :class:`Interrupted` (a ``KeyboardInterrupt``), which carries what was
-computed; the worker processes of :func:`closedloop.analysis.tasks.run_tasks` are started
-with the signals blocked (:func:`signals_blocked`) and ignore SIGINT themselves, ending with
-their parent (:func:`start_worker`).
+Inside :func:`stop_on_signals` (in :func:`closedloop.analysis.tasks.gather`, and around the
+whole of a map command) the first signal raises :class:`Interrupted` (a
+``KeyboardInterrupt``), which carries what was computed; once a command's map is computed
+and its files are being written, the signal is held until they are
+(:meth:`SignalStop.hold`). The worker processes of
+:func:`closedloop.analysis.tasks.run_tasks` are started with the signals blocked
+(:func:`signals_blocked`) and ignore SIGINT themselves, ending with their parent
+(:func:`start_worker`).
 """
 
 from __future__ import annotations
@@ -40,11 +43,13 @@ class Interrupted(KeyboardInterrupt):
         signum: the signal (SIGINT, also for a plain ``KeyboardInterrupt``, or SIGTERM).
         data: the :class:`~closedloop.analysis.map_results.PointData` so far, or None
             (stopped outside a map): the points of the chunks not received have status
-            ``not_computed`` and the reason :attr:`reason`, NaN values.
+            ``not_computed`` and the reason :attr:`reason`, NaN values (none, for a signal
+            held while a computed map's files were written: :meth:`SignalStop.hold`).
         partial: the map's result built on ``data`` (a
             :class:`~closedloop.analysis.maps.StiffnessMap` or a
             :class:`~cahyman_pin.sweep.SweepResult`), or None.
-        written: the folder ``partial`` was written to (:meth:`write`), or None.
+        written: the folder ``partial`` was written to (:meth:`write`), or that of the
+            files written while the signal was held, or None.
     """
 
     def __init__(self, signum: int = signal.SIGINT):
@@ -74,31 +79,86 @@ class Interrupted(KeyboardInterrupt):
         return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
 
 
-@contextlib.contextmanager
-def stop_on_signals():
-    """Inside the block, SIGINT and SIGTERM raise :class:`Interrupted`, once: a later one is
-    ignored until the block ends, so that the clean-up after the first (workers ended, a
-    partial map written) is not cut short. Only in the main thread (where Python runs its
-    signal handlers), and only for a signal whose handler is Python's default (SIGINT:
-    ``KeyboardInterrupt``; SIGTERM: the end of the process): an ignored signal, a
-    handler of the program's own or of an enclosing block stay as they are."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
-    received: list[int] = []
+class SignalStop:
+    """What :func:`stop_on_signals` yields: the signal received in its block, and whether
+    the block holds it (:meth:`hold`) instead of raising :class:`Interrupted` at once.
 
-    def stop(signum, frame):
-        if not received:
-            received.append(signum)
+    Attributes:
+        signum: the first SIGINT or SIGTERM received in the block, or None.
+    """
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._raising = True  # the first signal raises at once (until held)
+        self._raised = False
+        self._data: PointData | None = None
+        self._folder = None
+
+    def hold(self, data: PointData | None, folder) -> None:
+        """From now to the end of the block, a signal is held: the block goes on (the files
+        of a map that is computed are written whole) and ends by raising
+        :class:`Interrupted` with ``data`` (every point's outcome) and ``written`` the
+        ``folder`` its body has written them to; without a signal, nothing is raised."""
+        self._raising = False
+        self._data, self._folder = data, folder
+
+    def received(self, signum: int) -> None:
+        """The block's signal handler: the first signal raises :class:`Interrupted` unless
+        held; a later one is ignored."""
+        if self.signum is not None:
+            return
+        self.signum = signum
+        if self._raising:
+            self._raised = True
             raise Interrupted(signum)
 
-    previous = {s: signal.signal(s, stop) for s, h in defaults.items() if signal.getsignal(s) is h}
+    def end(self) -> None:
+        """The block has ended normally: raise the signal held, if any."""
+        if self.signum is None or self._raised:
+            return
+        stop = Interrupted(self.signum)
+        stop.data, stop.written = self._data, self._folder
+        raise stop
+
+
+@contextlib.contextmanager
+def stop_on_signals(ignore_after: bool = False):
+    """Inside the block, SIGINT and SIGTERM raise :class:`Interrupted`, once: a later one is
+    ignored until the block ends, so that the clean-up after the first (workers ended, a
+    partial map written) is not cut short; after :meth:`SignalStop.hold` (a map computed,
+    its files being written), the first is held and raised when the block ends. Only in
+    the main thread (where Python runs its signal handlers), and only for a signal whose
+    handler is Python's default (SIGINT: ``KeyboardInterrupt``; SIGTERM: the end of the
+    process): an ignored signal, a handler of the program's own or of an enclosing block
+    stay as they are.
+
+    Args:
+        ignore_after: leave the signals the block handled ignored after it, instead of
+            their default: a command line that ends its process then (a signal during the
+            interpreter's exit, a few tenths of a second, finds nothing to stop and would
+            otherwise kill the process without a word), never a library call.
+
+    Yields:
+        the block's :class:`SignalStop`.
+    """
+    stop = SignalStop()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+
+    def handler(signum, frame):
+        stop.received(signum)
+
+    previous = {s: signal.signal(s, handler) for s, h in defaults.items()
+                if signal.getsignal(s) is h}  # fmt: skip
     try:
-        yield
+        yield stop
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        stop._raising = False  # a signal while the handlers are set back is held, not raised
+        for s, h in previous.items():
+            signal.signal(s, signal.SIG_IGN if ignore_after else h)
+    stop.end()
 
 
 def start_worker() -> None:

@@ -29,6 +29,7 @@ from closedloop.analysis.map_results import OK, RANK_DEFICIENT, STATUS, PointDat
 from closedloop.analysis.model_source import ModelSource, model_of
 from closedloop.analysis.tasks import CHUNK, gather, run_tasks_by_point
 from closedloop.common.arrays import ReadOnlyArrays
+from closedloop.common.figures import tidy_layout
 from closedloop.common.files import save_figure, write_atomically
 from closedloop.elastostatics.compliance import UNITS
 from closedloop.exceptions import InvalidInputError
@@ -185,9 +186,15 @@ def map_title(smap: StiffnessMap, index: str) -> str:
 
 
 def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
-    """PNG of ``index`` over the swept joints: a curve (one axis with more than one value,
-    or a list) or a heat map (two), with units, the fixed inputs, the load and the number
-    of points without a value in the title; failed points left blank."""
+    """Write the PNG ``path`` of :func:`map_figure`."""
+    save_figure(map_figure(smap, index), path)
+
+
+def map_figure(smap: StiffnessMap, index: str):
+    """The figure of ``index`` over the swept joints (a ``matplotlib.figure.Figure`` of
+    pyplot, Agg): a curve (one axis with more than one value, or a list) or a heat map
+    (two), with units, the fixed inputs, the load and the number of points without a value
+    in the title; failed points left blank."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,8 +224,8 @@ def plot_map(smap: StiffnessMap, index: str, path: Path) -> None:
     missing = int(np.count_nonzero(np.isnan(smap.indices[index])))
     note = f" ({missing} points without a value)" if missing else ""
     ax.set_title(map_title(smap, index) + note, fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path)
+    tidy_layout(fig)  # tight, no tick labels on one another
+    return fig
 
 
 def grid_points(

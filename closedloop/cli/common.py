@@ -142,8 +142,12 @@ def run_main(
     one line ``prog: error: ...`` and :data:`EXIT_BAD_INPUT`; ``--help`` and ``--version``
     return 0. No arguments at all: the help, which lists the commands, on stderr, then
     the usage error's line "give a COMMAND" and :data:`EXIT_BAD_INPUT` (argparse's status
-    for a missing argument: a script that runs the bare command has failed)."""
+    for a missing argument: a script that runs the bare command has failed). Without
+    ``argv`` (the process's own command line, which ends with the command) the subcommand
+    gets ``args.program = True``: a map then leaves SIGINT and SIGTERM ignored once it has
+    ended (:func:`closedloop.analysis.interrupts.stop_on_signals`)."""
     single_threaded_blas()  # small matrices: BLAS threads cost more than they give
+    program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         try:
@@ -163,4 +167,5 @@ def run_main(
         return closed_pipe()
     except OSError as e:  # --help > /dev/full
         return output_failed(prog, e)
+    args.program = program
     return run_command(prog, args)

@@ -13,9 +13,8 @@ as any other. The files are written by
 distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
 ``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
 with too many workers or a run without any worker for ``--worker-timeout`` seconds stops
-with one line (exit 3). SIGINT (Ctrl-C) or SIGTERM stops the map at once, its workers
-with it, writes the points computed (the others with status ``not_computed``) and ends
-with one line, exit 130 (SIGINT) or 143 (SIGTERM).
+with one line (exit 3). SIGINT and SIGTERM: the epilog of the help,
+:data:`closedloop.cli.map_options.SIGNALS_EPILOG`.
 """
 
 from __future__ import annotations
@@ -28,11 +27,12 @@ import time
 import numpy as np
 
 from closedloop.analysis.cluster import add_worker_timeout, dask_executor
-from closedloop.analysis.interrupts import Interrupted, stop_on_signals
+from closedloop.analysis.interrupts import Interrupted, SignalStop, stop_on_signals
 from closedloop.analysis.maps import ALL_INDICES, stiffness_map
 from closedloop.analysis.model_source import ModelSource
 from closedloop.analysis.tasks import CHUNK
 from closedloop.cli.map_options import (
+    SIGNALS_EPILOG,
     SpecError,
     check_map_size,
     index_line,
@@ -71,7 +71,8 @@ def add_parser(sub, parent_arguments) -> None:
     p = sub.add_parser(
         "map",
         help="a stiffness index over a grid of actuated inputs (NPZ, CSV, PNG)",
-        description=__doc__.split("\n\n", 1)[1],
+        description=__doc__.split("\n\n", 1)[1].rsplit(" SIGINT and SIGTERM", 1)[0],
+        epilog=SIGNALS_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parent_arguments(p)
@@ -151,7 +152,13 @@ def model_source(args) -> ModelSource:
 
 
 def run_map(args) -> int:
-    """Run ``closedloop map``; returns the exit code (0)."""
+    """Run ``closedloop map``; returns the exit code (0). SIGINT and SIGTERM are handled from
+    here to the last line of output (see the module docstring)."""
+    with stop_on_signals(ignore_after=getattr(args, "program", False)) as signals:
+        return _run_map(args, signals)
+
+
+def _run_map(args, signals: SignalStop) -> int:
     wrench = map_wrench(args.index, args.force, args.torque)
     grid = _grid(args)
     sizes = [len(grid["points"])] if "points" in grid else [v.size for v in grid["sweeps"].values()]
@@ -164,7 +171,7 @@ def run_map(args) -> int:
     options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk,
                "modes": args.index == "lowest_frequency",
                "check_limits": not args.no_limits}  # fmt: skip
-    with stop_on_signals(), dask_executor(args.scheduler, args.worker_timeout) as executor:
+    with dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)
             share = max(1, args.workers or 1)
@@ -182,12 +189,14 @@ def run_map(args) -> int:
         except Interrupted as stop:  # the points computed, written before the one line
             stop.write(lambda partial: partial.save(out, args.index), out)
             raise
+        signals.hold(result.data, out)  # every point computed: a signal lets the files be written
     paths = result.save(out, args.index)
     counts = {s: int(np.sum(result.status == s)) for s in np.unique(result.status)}
     print(f"{n} points: " + ", ".join(f"{c} {s}" for s, c in counts.items()))
     print(index_line(args.index, result.indices[args.index], ALL_INDICES[args.index]))
     for path in paths:
         print(f"wrote {path}")
+    sys.stdout.flush()  # while a signal is held
     return 0
 
 

@@ -1,6 +1,6 @@
 """The options of a map, both command lines: value specifications (``V``,
 ``START:STOP:NUM``, ``V1,V2,...``), its size checked before any work, its load, and the
-summary of its plotted index.
+summary of its plotted index, what the signals do to it.
 """
 
 from __future__ import annotations
@@ -12,6 +12,15 @@ import numpy as np
 from closedloop.cli.parser import INTEGER, UsageError
 from closedloop.common.arrays import decimal
 
+#: What SIGINT and SIGTERM do to a map, both commands (the epilog of their help).
+SIGNALS_EPILOG = """\
+SIGINT (Ctrl-C) or SIGTERM while the map computes stops it at once, its workers with it,
+writes the points computed (the others with status not_computed) and ends with one line,
+exit 130 (SIGINT) or 143 (SIGTERM). Once every point is computed, a signal lets the files
+be written whole and the output printed, then ends the same way ("wrote 400 of 400 points
+to DIR"). A second signal meanwhile is ignored; no file is left half-written, nor a
+temporary file.
+"""
 #: Most points a map may have (a guard against typing one zero too many), both commands.
 MAX_MAP_POINTS = 2_000_000
 

@@ -107,6 +107,8 @@ def legend_info(
     pose: str | None = None,
     colour_max: float | None = None,
     visual_model: pin.GeometryModel | None = None,
+    *,
+    skeleton: bool = False,
 ) -> dict:
     """What the legend shows (:func:`closedloop.viewer.page.legend_rows`) for ``scene``.
 
@@ -118,6 +120,7 @@ def legend_info(
             by displacement magnitude (the colour bar's top), else None (model colours).
         visual_model: the geometry drawn, whose colours the legend shows (default: the
             model's).
+        skeleton: the geometry drawn is the model's skeleton (it has no visual geometry).
     """
     if pose is None:
         pose = "q = (" + ", ".join(f"{x:.4g}" for x in scene.q) + ") rad or m"
@@ -161,6 +164,7 @@ def legend_info(
         "colour_max": colour_max,
         "colormap": COLORMAP,
         "mode": scene.mode,
+        "skeleton": skeleton,
     }
 
 

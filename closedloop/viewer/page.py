@@ -161,6 +161,9 @@ def legend_rows(info: dict) -> list[str]:
     w = np.asarray(info["wrench"], dtype=float)
     frame = info["frame"]
     rows = [f"pose: {info['pose']}"]
+    if info.get("skeleton"):
+        rows.append("no visual geometry: drawn as its skeleton, a sphere at each joint and "
+                    "rods to the joints and frames each link carries")  # fmt: skip
     if info.get("mode"):
         return [html.escape(r) for r in rows + _mode_rows(info)]
     if np.any(w):

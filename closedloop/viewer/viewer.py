@@ -35,7 +35,8 @@ camera placed so that everything drawn (robots, arrows, ellipsoids, beams) is in
 its clipping distances per its size (``CAMERA_NEAR``, ``CAMERA_FAR``: a model of
 millimetres or of hundreds of metres is drawn); meshcat's axes follow, so they still
 mark the world origin. An unbounded visual object (an MJCF floor plane) is not drawn: the
-grid stands for it.
+grid stands for it. A model without visual geometry is drawn as its skeleton, spheres at
+the joints and rods between them (:mod:`closedloop.viewer.skeleton`).
 
 Example::
 
@@ -107,6 +108,7 @@ from closedloop.viewer.server import (
     start_server,
     stop_server,
 )
+from closedloop.viewer.skeleton import skeleton_model
 
 #: Seconds between two checks of the live page's slider while serving.
 CONTROL_POLL = 0.2
@@ -126,22 +128,27 @@ class DeflectionViewer:
     """Meshcat scene of a model's nominal and deflected poses (module docstring).
 
     Args:
-        clm: model with visual geometry (load it with ``geometry=True``); unbounded
-            objects (an MJCF floor plane) are not drawn (:func:`drawn_geometry`).
+        clm: the model, drawn with its visual geometry (load it with ``geometry=True``;
+            unbounded objects, an MJCF floor plane, are not drawn) or, without any, as its
+            skeleton (:func:`drawn_geometry`).
         viewer: a meshcat visualizer to draw into; default: a new one, with its own
             meshcat server on 127.0.0.1 (:mod:`closedloop.viewer.server`), stopped by
             :meth:`close`. The legend and the page script are in the live page of that
             server only (and in :meth:`static_html` always).
 
+    Attributes:
+        skeleton: the model is drawn as its skeleton (it has no visual geometry).
+
     Raises:
-        InvalidInputError: the model has no visual geometry, or a geometry that cannot be
-            drawn.
+        InvalidInputError: a geometry that cannot be drawn, or neither visual geometry nor
+            joints.
         ViewerError: the meshcat server cannot be started (the message says why).
     """
 
     def __init__(self, clm: ClosedLoopModel, viewer: meshcat.Visualizer | None = None):
         self.clm = clm
-        self.robots = RobotPair(clm.model, drawn_geometry(clm), GHOST_RGBA)
+        drawn, self.skeleton = drawn_geometry(clm)
+        self.robots = RobotPair(clm.model, drawn, GHOST_RGBA)
         self._server = None
         if viewer is None:
             try:
@@ -232,7 +239,8 @@ class DeflectionViewer:
             clips = self._animate(scene)
         info = None
         if legend:
-            info = legend_info(self.clm, scene, pose_text, colour_max, self.robots.visual_model)
+            info = legend_info(self.clm, scene, pose_text, colour_max, self.robots.visual_model,
+                               skeleton=self.skeleton)  # fmt: skip
         meshes = 2 * self.robots.visual_model.ngeoms
         args = {"meshes": meshes, "clips": clips, "autoplay": autoplay, "robots": ROBOTS}
         self.overlay = overlay(info, **args)
@@ -376,21 +384,24 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, previous)
 
 
-def drawn_geometry(clm: ClosedLoopModel) -> pin.GeometryModel:
-    """The visual geometry of ``clm`` that the viewer draws (:func:`drawn_model`: an MJCF
-    floor plane left out).
+def drawn_geometry(clm: ClosedLoopModel) -> tuple[pin.GeometryModel, bool]:
+    """The geometry of ``clm`` that the viewer draws, and whether it is the skeleton: its
+    visual geometry (:func:`drawn_model`: an MJCF floor plane left out), or, when it has
+    none (a robot file without visual elements other than a floor plane, or a model loaded
+    without geometry), its skeleton (:func:`closedloop.viewer.skeleton.skeleton_model`).
 
     Raises:
-        InvalidInputError: there is none.
+        InvalidInputError: a model without any joint (no skeleton either).
     """
     drawn = None if clm.visual_model is None else drawn_model(clm.visual_model)
-    if drawn is None or drawn.ngeoms == 0:
+    if drawn is not None and drawn.ngeoms > 0:
+        return drawn, False
+    if clm.model.njoints < 2:
         raise InvalidInputError(
-            f"model {clm.name!r} has no visual geometry to show (a robot file without "
-            "visual elements other than a floor plane, or loaded without geometry); "
-            "expected a model loaded with its visual geometry"
+            f"model {clm.name!r} has no visual geometry and no joint to draw; expected a "
+            "model with joints or visual elements"
         )
-    return drawn
+    return skeleton_model(clm), True
 
 
 def check_output_path(html: str | Path) -> Path:

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
-from helpers import REPO
+from helpers import REPO, default_sigint, map_argv
 
-from closedloop.analysis.interrupts import Interrupted
+from closedloop.analysis.interrupts import Interrupted, stop_on_signals
 from closedloop.analysis.map_results import STATUS, ChunkResult
 from closedloop.analysis.maps import StiffnessMap, stiffness_map
 from closedloop.analysis.model_source import ModelSource
@@ -39,17 +39,9 @@ REAP_TIMEOUT = 3.0
 #: ``closedloop map`` of 8100 points (the delta robot, 1-2 ms a point; CSV written) and
 #: ``cahyman map`` of 19600 (generic backend from the neighbour, about 0.3 ms a point).
 COMMANDS = {
-    "closedloop": (
-        ["-m", "closedloop", "map", str(REPO / "urdf/delta.urdf"), "--closures",
-         str(REPO / "urdf/delta.yaml"), "--frame", "platform", "--sweep", "arm0=-0.3:0.3:90",
-         "--sweep", "arm1=-0.3:0.3:90", "--fixed", "arm2=0", "--chunk", "20"],
-        "map points: ",
-    ),
-    "cahyman": (
-        ["-m", "cahyman_pin", "map", "--alpha1", "30:90:140", "--alpha2", "30:90:140",
-         "--start", "neighbour", "--chunk-size", "20"],
-        "generic sweep: ",
-    ),
+    "closedloop": ([*map_argv("closedloop", 90), "--chunk", "20"], "map points: "),
+    "cahyman": ([*map_argv("cahyman", 140), "--start", "neighbour", "--chunk-size", "20"],
+                "generic sweep: "),
 }  # fmt: skip
 
 
@@ -66,11 +58,6 @@ def _left(processes: list) -> list:
     for process in alive:
         process.kill()
     return alive
-
-
-def _default_sigint() -> None:
-    """In the child: SIGINT as a terminal's (a background shell may have ignored it)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _computing_map(out: Path) -> tuple[subprocess.Popen, list]:
@@ -101,7 +88,7 @@ def _interrupted_run(prog: str, sig: signal.Signals, out: Path):
     proc = subprocess.Popen(
         [sys.executable, *argv, "--workers", "2", "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
-        start_new_session=True, preexec_fn=_default_sigint,
+        start_new_session=True, preexec_fn=default_sigint,
     )  # fmt: skip
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_lines, args=(proc.stderr, lines), daemon=True).start()
@@ -246,6 +233,59 @@ def test_a_worker_killed_mid_map_stops_the_command_in_one_line(tmp_path):
     own = [line for line in err if not line.startswith(COMMANDS["closedloop"][1])]
     assert own == ["closedloop: error: a worker process of the map ended abruptly (killed, or "
                    "out of memory?); the map stopped, the others ended"]  # fmt: skip
+
+
+def _computed(n: int):
+    """The data of a map of ``n`` points, every one computed (gathered from one chunk)."""
+    chunk = ChunkResult.empty(n)
+    chunk.C[:] = np.eye(6)
+    return gather(n, [np.arange(n)], iter([(0, chunk)]))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_once_the_map_is_held_is_raised_when_the_block_ends(sig):
+    """Held (its files being written), the first signal lets the block run to its end, a
+    second is ignored; then Interrupted, with the map and the folder written; the handlers
+    are set back."""
+    defaults = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    data = _computed(3)
+    done = []
+    with pytest.raises(Interrupted) as caught:
+        with stop_on_signals() as signals:
+            signals.hold(data, "out")
+            os.kill(os.getpid(), sig)  # its handler runs before os.kill returns
+            done.append("written")
+            os.kill(os.getpid(), signal.SIGINT)
+            done.append("printed")
+    assert done == ["written", "printed"]
+    stop = caught.value
+    assert stop.signum == sig and stop.data is data
+    assert str(stop) == f"interrupted ({sig.name}): wrote 3 of 3 points to out"
+    assert {s: signal.getsignal(s) for s in defaults} == defaults
+
+
+def test_a_signal_before_the_hold_stops_the_block_at_once():
+    with pytest.raises(Interrupted) as caught:
+        with stop_on_signals():
+            os.kill(os.getpid(), signal.SIGTERM)
+            pytest.fail("not stopped")
+    assert caught.value.signum == signal.SIGTERM
+    assert str(caught.value) == "interrupted (SIGTERM); nothing written"
+
+
+def test_a_block_that_ends_its_process_leaves_the_signals_ignored():
+    """``ignore_after``: a signal after the block (the process exiting) is ignored; a block
+    without a signal raises nothing."""
+    defaults = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    assert defaults == {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    try:
+        with stop_on_signals(ignore_after=True) as signals:
+            signals.hold(_computed(2), "out")
+        assert all(signal.getsignal(s) == signal.SIG_IGN for s in defaults)
+        os.kill(os.getpid(), signal.SIGTERM)  # ignored: this test goes on
+    finally:
+        for s, handler in defaults.items():
+            signal.signal(s, handler)
 
 
 @pytest.mark.parametrize("received", [0, 1])

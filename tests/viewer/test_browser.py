@@ -333,6 +333,25 @@ def test_a_model_of_millimetres_is_drawn(fourbar_shots, fourbar_urdf, fourbar_ya
     assert content(img) > content(fourbar_shots["empty"][0]) + MIN_EXTRA_CONTENT
 
 
+def test_a_model_without_visuals_renders_as_its_skeleton(fourbar_shots, fourbar_urdf,
+                                                         fourbar_yaml, tmp_path):  # fmt: skip
+    """The four-bar loaded without geometry: its page renders the skeleton, each joint's
+    sphere moved by as much as the scene moves the joint."""
+    clm = load_model(fourbar_urdf, fourbar_yaml, geometry=False)
+    scene = deflection_scene(clm, assemble(clm, [0.3]).q, "P", FOURBAR_WRENCH)
+    with DeflectionViewer(clm) as viewer:
+        viewer.show(scene)
+        page = viewer.save_html(tmp_path / "skeleton.html")
+    img, report = render(page.as_uri(), tmp_path / "skeleton.png", tmp_path / "p")
+    assert report["ready"] == "ready" and report["errors"] == []
+    assert content(img) > content(fourbar_shots["empty"][0]) + MIN_EXTRA_CONTENT
+    seen = group_distances(report)
+    for j in range(1, clm.model.njoints):
+        moved = np.linalg.norm(scene.poses_deflected[j][:3, 3] - scene.poses[j][:3, 3])
+        key = node_name(DEFLECTED, f"joint {clm.model.names[j]}")[len(DEFLECTED) + 1 :]
+        np.testing.assert_allclose(seen[key], moved, atol=ATOL_BROWSER)
+
+
 # ------------------------------------------------------------------ UR5 (Collada), CaHyMan
 @pytest.mark.parametrize("robot", ["ur5", "cahyman"])
 def test_robot_page_renders_with_a_translucent_ghost(robot_pages, robot):

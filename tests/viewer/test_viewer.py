@@ -10,7 +10,6 @@ the page in a real browser in ``test_browser.py``.
 from __future__ import annotations
 
 import asyncio
-import base64
 import json
 import re
 import urllib.request
@@ -19,8 +18,15 @@ from collections import Counter
 import numpy as np
 import pinocchio as pin
 import pytest
-import umsgpack
-from helpers import UR5_BEAM_ENDS, UR5_Q, rigid_link_poses
+from helpers import (
+    UR5_BEAM_ENDS,
+    UR5_Q,
+    commands,
+    json_matrix,
+    rigid_link_poses,
+    robot_groups,
+    robots_object,
+)
 from tornado.websocket import websocket_connect
 
 from cahyman_pin.model import cahyman_model
@@ -65,13 +71,7 @@ UR5_WRENCH = [10.0, -5.0, -40.0, 0.0, 0.0, 2.0]
 PANDA_Q = [0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8, 0.02]  # the second finger mimics the first
 #: The issue's bound for the UR5 page (18.7 MB with every mesh twice as Collada text).
 UR5_MAX_PAGE_BYTES = 10_000_000
-BLOB = re.compile(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)")
 EXTERNAL = re.compile(r"<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*[\"']?https?:", re.I)
-
-
-def commands(html: str) -> list[dict]:
-    """The meshcat commands embedded in a static page, in order."""
-    return [umsgpack.unpackb(base64.b64decode(b)) for b in BLOB.findall(html)]
 
 
 def by_path(cmds: list[dict], kind: str) -> dict[str, dict]:
@@ -291,12 +291,6 @@ def test_bad_inputs_raise(fourbar):
         deflection_scene(clm, q, "P", [0.0, np.nan, 0.0, 0.0, 0.0, 0.0])
 
 
-def test_model_without_geometry_is_refused(fourbar_urdf, fourbar_yaml):
-    clm = load_model(fourbar_urdf, fourbar_yaml, geometry=False)
-    with pytest.raises(InvalidInputError, match="visual geometry"):
-        DeflectionViewer(clm)
-
-
 def test_overflowing_load_is_refused(fourbar):
     clm, q = fourbar
     with pytest.raises(InvalidInputError, match="too large"):
@@ -321,22 +315,6 @@ def test_grid_step_is_a_round_length_near_an_eighth_of_the_size(size, step):
 
 
 # ------------------------------------------------------------------ exported page
-def robots_object(cmds: list[dict]) -> dict:
-    """The three.js JSON of both robots (the one set_object at /meshcat/robots)."""
-    (c,) = [c for c in cmds if c["type"] == "set_object" and c["path"] == "/meshcat/robots"]
-    return c["object"]
-
-
-def robot_groups(obj: dict, root: str) -> dict[str, dict]:
-    """Group name -> group of one robot ('nominal' or 'deflected')."""
-    (robot,) = [g for g in obj["object"]["children"] if g["name"] == root]
-    return {g["name"]: g for g in robot["children"]}
-
-
-def json_matrix(o: dict) -> np.ndarray:
-    return np.array(o["matrix"], dtype=float).reshape(4, 4).T
-
-
 def test_static_page_is_self_contained_and_titled(fourbar_export):
     _, html, cmds = fourbar_export
     assert "<script" in html and EXTERNAL.search(html) is None
