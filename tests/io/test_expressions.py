@@ -58,7 +58,7 @@ def _apply(f, *args):
         return e
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(expressions())
 def test_values_are_those_of_the_same_operations(case):
     text, expected = case
@@ -120,7 +120,7 @@ def test_strings_only_where_xacro_compares_them():
     assert names_in(checked("sqrt(d) * L + pi")) == {"d", "L", "pi"}
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.floats(allow_nan=False, allow_infinity=False))
 def test_number_text_reads_back_exactly_in_yaml(x):
     text = number_text(x)
