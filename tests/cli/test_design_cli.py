@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
 import queue
 import signal
@@ -17,6 +18,7 @@ from pathlib import Path
 import psutil
 import pytest
 import yaml
+from dask.distributed import LocalCluster
 from helpers import REPO
 
 from closedloop.cli.app import main
@@ -64,18 +66,23 @@ def test_design_writes_its_files(tmp_path, capsys):
         assert (out / name).stat().st_size > 0, name
 
 
+def run_evaluations(tmp_path: Path, name: str, *extra: str) -> list:
+    """The (parameters, values) of each design of a run with seed 4 and budget 12."""
+    assert main(["design", str(problem_file(tmp_path)), "--seed", "4", "--budget", "12",
+                 "--out", str(tmp_path / name), *extra]) == 0  # fmt: skip
+    doc = json.loads((tmp_path / name / "design.json").read_text())
+    return [(e["parameters"], e["values"]) for e in doc["evaluations"]]
+
+
 @two_cores
-def test_two_processes_give_the_same_run(tmp_path, capsys):
-    path = problem_file(tmp_path)
-    runs = []
-    for workers, out in ((None, "one"), ("2", "two")):
-        extra = [] if workers is None else ["--workers", workers]
-        assert main(["design", str(path), "--seed", "4", "--budget", "12", "--out",
-                     str(tmp_path / out), *extra]) == 0  # fmt: skip
-        doc = json.loads((tmp_path / out / "design.json").read_text())
-        runs.append([(e["parameters"], e["values"]) for e in doc["evaluations"]])
-    assert runs[0] == runs[1]
-    assert not psutil.Process().children(recursive=True)
+def test_two_processes_and_dask_give_the_same_run(tmp_path, capsys):
+    serial = run_evaluations(tmp_path, "one")
+    assert run_evaluations(tmp_path, "two", "--workers", "2") == serial
+    assert not psutil.Process().children(recursive=True)  # the pool ended with the run
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, silence_logs=logging.CRITICAL)  # fmt: skip
+    with cluster:
+        assert run_evaluations(tmp_path, "dask", "--scheduler", cluster.scheduler_address) == serial
 
 
 def test_no_feasible_design_exits_3(tmp_path, capsys):
