@@ -40,6 +40,7 @@ from closedloop.analysis.model_source import ModelSource
 from closedloop.common.argtypes import SpecError, parse_values
 from closedloop.common.arrays import decimal
 from closedloop.exceptions import InvalidInputError, ModelFileError
+from closedloop.io.closure_file import read_yaml_mapping
 
 #: Every index a problem may name, and its unit.
 DESIGN_INDICES = {**ALL_INDICES, "mass": "kg"}
@@ -111,7 +112,8 @@ class Constraint:
 
 @dataclass(frozen=True)
 class DesignProblem:
-    """A design problem, checked (module docstring; read by :func:`design_problem`).
+    """A design problem (module docstring), as :func:`design_problem` reads and checks it
+    (one built field by field is taken as it is).
 
     Attributes:
         model, closures: the model's files (absolute paths; closures None without one).
@@ -206,19 +208,7 @@ class _Reader:
         return self.error(f"{self.where}: {key}: {message}")
 
     def read_file(self, path: Path) -> DesignProblem:
-        import yaml
-
-        from closedloop.io import strict_yaml
-
-        try:
-            doc = strict_yaml.load(path.read_text())
-        except (OSError, UnicodeDecodeError) as e:
-            raise ModelFileError(f"{self.where} cannot be read: {e}") from None
-        except yaml.YAMLError as e:
-            message = " ".join(str(e).split())
-            raise ModelFileError(f"{self.where} is not valid YAML: {message}") from None
-        if not isinstance(doc, dict):
-            raise ModelFileError(f"{self.where}: expected a mapping at top level")
+        path, doc = read_yaml_mapping(path, "design problem")
         return self.read(doc, path.resolve().parent)
 
     def read(self, doc: Mapping, base: Path) -> DesignProblem:

@@ -77,9 +77,17 @@ def existing_path(path: str | Path, what: str) -> Path:
     return path
 
 
-def _read_yaml_mapping(
+def read_yaml_mapping(
     path: str | Path, what: str, arguments: Arguments | None = None
 ) -> tuple[Path, dict]:
+    """(path, the mapping of a YAML file) read strictly (:mod:`closedloop.io.strict_yaml`),
+    its ``${expr}`` placeholders computed first (:func:`closedloop.io.expressions.substitute`,
+    the names of ``arguments``); ``what`` names the file in the errors (``"closure file"``).
+
+    Raises:
+        ModelFileError: a missing or unreadable file, invalid YAML, not a mapping.
+        ExpressionError: a placeholder refused or without a value.
+    """
     import yaml  # on demand, as below: a model without such a file reads no YAML
 
     from closedloop.io import strict_yaml
@@ -177,7 +185,7 @@ def read_closure_file(
             value; the message names the file and the fault.
         ExpressionError: a placeholder refused or without a value (its line and name).
     """
-    path, doc = _read_yaml_mapping(path, "closure file", arguments)
+    path, doc = read_yaml_mapping(path, "closure file", arguments)
     where = f"closure file {str(path)!r}"
     unknown = set(doc) - set(keys)
     if unknown:
@@ -301,5 +309,5 @@ def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
     Raises:
         ModelFileError: missing file, invalid YAML, a value that is not a number >= 0.
     """
-    path, doc = _read_yaml_mapping(path, "springs file")
+    path, doc = read_yaml_mapping(path, "springs file")
     return _check_springs(doc, f"springs file {str(path)!r}")

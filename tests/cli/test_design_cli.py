@@ -97,7 +97,7 @@ def test_no_feasible_design_exits_3(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("args", "match"),
     [
-        (["missing.yaml"], "design problem 'missing.yaml' cannot be read"),
+        (["missing.yaml"], "design problem 'missing.yaml' does not exist or is not a file"),
         (["{problem}", "--seed", "-3"], "argument --seed: '-3': expected an integer >= 0"),
         (["{problem}", "--workers", "2", "--scheduler", "tcp://h:1"], "not allowed with"),
     ],
