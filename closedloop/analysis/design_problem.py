@@ -79,7 +79,7 @@ class Constraint:
     Attributes:
         index: the index.
         min, max: its bounds (SI), one of them at least.
-        tolerance: relative tolerance: ``min`` is met by a value >= min - tolerance |min|
+        tolerance: relative tolerance: ``min`` is met by a value >= min - tolerance abs(min)
             (an absolute ``tolerance`` for a bound of 0).
     """
 

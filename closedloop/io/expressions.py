@@ -205,7 +205,7 @@ def number_text(x: float) -> str:
 
 class Arguments:
     """The arguments of a parametric model (``load_model(..., args=)``), checked once, with
-    the numeric defaults of its xacro file's ``<xacro:arg>``s and the names its files use.
+    the numeric defaults of its xacro file's ``<xacro:arg>`` elements and the names its files use.
 
     Args:
         values: name -> value (SI), or None.

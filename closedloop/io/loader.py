@@ -20,7 +20,7 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
 * Keyword ``joint_stiffness``: given to every actuated joint that has no spring yet.
 
 Parametric models: a xacro file (``*.xacro``, a URDF after :mod:`closedloop.io.xacro_files`)
-with its ``<xacro:arg>``s, and a closure or side file with ``${expr}`` placeholders
+with its ``<xacro:arg>`` elements, and a closure or side file with ``${expr}`` placeholders
 (:mod:`closedloop.io.expressions`), take their values from the keyword ``args``.
 """
 
@@ -391,7 +391,7 @@ def load_model(
             configurations (:meth:`ClosedLoopModel.reference_configuration`) are extended
             with the values of the joints added at the cuts.
         args: the values of a parametric model's arguments, name -> number (SI): a xacro
-            file's ``<xacro:arg>``s and the closure file's placeholders' names; each must
+            file's ``<xacro:arg>`` elements and the closure file's placeholders' names; each must
             be used by one of the files.
 
     Raises:

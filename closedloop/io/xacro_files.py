@@ -1,7 +1,7 @@
 """xacro files (``*.xacro``): parametric URDF, read as data.
 
 :func:`expanded_urdf` expands a xacro file (the ``xacro`` package of the package index,
-ROS's macro language) with its ``<xacro:arg>``s set from ``load_model(..., args=)`` into a
+ROS's macro language) with its ``<xacro:arg>`` elements set from ``load_model(..., args=)`` into a
 temporary URDF beside it, which the URDF reader then loads.
 
 **Trust model.** xacro computes its ``${...}`` expressions with Python's ``eval``, builtins
@@ -44,7 +44,7 @@ from xml.parsers import expat
 from closedloop.exceptions import ExpressionError, ModelFileError
 from closedloop.io.expressions import NAME, Arguments, Refused, checked, number_text
 
-#: Most nested ``<xacro:include>``s followed.
+#: Most nested ``<xacro:include>`` elements followed.
 MAX_INCLUDE_DEPTH = 32
 #: ``$(arg NAME)``, the one substitution argument taken.
 ARG = re.compile(r"\$\(\s*arg\s+([A-Za-z][A-Za-z0-9_]*)\s*\)")
