@@ -56,6 +56,9 @@ napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_use_rtype = False
 nitpicky = False
+#: No "smart" quotes or dashes: docutils would turn the ``--`` of an option into an en dash
+#: in the command-line reference (argparse's help and epilogs), and a copied command fails.
+smartquotes = False
 suppress_warnings = ["myst.domains"]
 
 html_theme = "furo"

@@ -63,7 +63,11 @@ SEARCH_DONE = """(function () {
 def site() -> Path:
     folder = os.environ.get(ENV)
     if not folder:
-        pytest.skip(f"documentation site tests skipped: {ENV} is not set (.ci/run sets it)")
+        pytest.skip(
+            f"documentation site tests skipped: {ENV} is not set; build the site with "
+            "`python -m sphinx -b html docs docs/_build/html` and set "
+            f"{ENV}=docs/_build/html (.ci/run does both)"
+        )
     site = Path(folder)
     assert (site / "index.html").is_file(), f"{ENV}={folder}: no built site (index.html)"
     return site
@@ -215,3 +219,17 @@ def test_every_public_name_has_an_api_entry(site):
         and not any(i.startswith(f"{package.__name__}.{n}.") for i in ids)
     ]
     assert not missing, f"public names without an entry in docs/api/: {missing}"
+
+
+#: An en or em dash where a command's option would start (`` –frame``): smart dashes
+#: from docutils, or typed into a docstring, make a copied command fail.
+SMART_DASH_OPTION = re.compile(r"(?:^|[\s>(\[])[\u2013\u2014][A-Za-z]")
+
+
+def test_no_smart_dash_before_an_option_name(site):
+    bad = []
+    for page in sorted(site.rglob("*.html")):
+        text = re.sub(r"<[^>]+>", " ", page.read_text(encoding="utf-8"))
+        bad += [f"{page.relative_to(site)}: ...{text[max(m.start() - 30, 0):m.end() + 20]!r}"
+                for m in SMART_DASH_OPTION.finditer(text)]  # fmt: skip
+    assert not bad, "\n".join(bad[:20])

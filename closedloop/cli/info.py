@@ -19,6 +19,7 @@ import numpy as np
 from closedloop.cli.outputs import print_json
 from closedloop.exceptions import EXIT_OK
 from closedloop.kinematics.limits import UNBOUNDED_LIMIT
+from closedloop.model.beams import inserted_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 
 #: Joint kinds by the start of Pinocchio's short name (after ``JointModel``), first match.
@@ -33,8 +34,6 @@ JOINT_KINDS = (
     ("Mimic", "mimic"),
     ("Composite", "composite"),
 )
-#: Suffix of the virtual joint that carries a beam (:mod:`closedloop.model.beams`).
-BEAM_SUFFIX = "_beam"
 
 
 def add_parser(sub, source_arguments) -> None:
@@ -62,8 +61,9 @@ def _bound(value: float) -> float | None:
     return value if math.isfinite(value) and abs(value) < UNBOUNDED_LIMIT else None
 
 
-def _joint(clm: ClosedLoopModel, j: int) -> dict:
-    """One joint's entry of :func:`model_info`."""
+def _joint(clm: ClosedLoopModel, j: int, beams: set[str]) -> dict:
+    """One joint's entry of :func:`model_info`; ``beams``: the names of the beams' virtual
+    joints."""
     pm = clm.model
     jm, name = pm.joints[j], pm.names[j]
     kind = joint_kind(jm.shortname())
@@ -79,7 +79,7 @@ def _joint(clm: ClosedLoopModel, j: int) -> dict:
         return entry
     finite = k[np.isfinite(k)]
     if name in clm.spring_blocks:
-        entry["role"] = "beam" if name.endswith(BEAM_SUFFIX) else "sprung"
+        entry["role"] = "beam" if name in beams else "sprung"
         entry["spring"] = np.asarray(clm.spring_blocks[name]).tolist()
         return entry
     if name in clm.actuated:
@@ -104,7 +104,8 @@ def model_info(clm: ClosedLoopModel) -> dict:
     (body name -> why its inertia is not the robot file's: no natural frequencies, no
     gravity: ``ClosedLoopModel.unweighed_bodies``)."""
     pm = clm.model
-    joints = [_joint(clm, j) for j in range(1, pm.njoints)]
+    beams = {b.name for b in inserted_beams(pm)}  # by the model's structure, not by name
+    joints = [_joint(clm, j, beams) for j in range(1, pm.njoints)]
     return {
         "model": clm.name,
         "nq": pm.nq,

@@ -171,7 +171,6 @@ class _Tree:
     beam_joints: tuple[str, ...] = ()  # virtual joints of the beams (URDF), springs of their own
     balls: tuple[str, ...] = ()  # URDF joints read as balls: their springs on the rotations
     beam_masses: tuple = ()  # (virtual joint name, closedloop.model.beams.BeamMass) of the beams
-    elastic: tuple[int, ...] = ()  # SDF: the loops closed by a joint with a spring
     unweighed: tuple = ()  # MJCF: (body name, why Pinocchio's inertia of it is wrong)
 
 
@@ -333,7 +332,7 @@ def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False,
     _check_masses(robot.model, path)
     spec, springs = read_side_file(robot.model, side_file, robot.springs, arguments)
     return _Tree(robot.model, robot.closures, spec.actuated or (), springs, spec.locked,
-                 robot.visual, elastic=robot.elastic)  # fmt: skip
+                 robot.visual)  # fmt: skip
 
 
 def load_model(
@@ -479,20 +478,18 @@ def load_model(
         if side or beams:
             clm = clm.with_beams({**side, **(beams or {})})
         if closure_springs:
-            clm = _with_closure_springs(clm, closure_springs, path, tree.elastic)
+            clm = _with_closure_springs(clm, closure_springs, path)
     arguments.check_used([str(path), *([str(closures)] if closures else [])])
     return clm
 
 
-def _with_closure_springs(
-    clm: ClosedLoopModel, springs: Mapping, path: Path, elastic: tuple[int, ...]
-) -> ClosedLoopModel:
+def _with_closure_springs(clm: ClosedLoopModel, springs: Mapping, path: Path) -> ClosedLoopModel:
     """An MJCF or SDF model with the closures of ``springs`` made elastic
-    (:meth:`ClosedLoopModel.with_closure_springs`); ``elastic``: the
-    indices of the loops the file made elastic already (an SDF loop joint's spring)."""
+    (:meth:`ClosedLoopModel.with_closure_springs`), refused on a loop that the file made
+    elastic already (an SDF loop joint's spring)."""
     with in_file(f"robot file {str(path)!r}, closure_springs= of load_model"):
         checked = check_closure_springs(list(clm.closures), springs)
-        taken = sorted(set(checked) & set(elastic))
+        taken = sorted(i for i in checked if clm.closures[i].cut)
         if taken:
             raise InvalidInputError(
                 f"closure_springs given to the loops {taken} ("

@@ -78,7 +78,6 @@ class SdfRobot:
         rest: (nq,) rest configuration (also ``model.referenceConfigurations[REST]``).
         visual: visual geometry, or None when not asked for.
         closing_joints: names of the joints that close loops, in file order.
-        elastic: indices in ``closures`` of the loops closed by a joint with a spring.
     """
 
     model: pin.Model
@@ -87,7 +86,6 @@ class SdfRobot:
     rest: np.ndarray
     visual: pin.GeometryModel | None
     closing_joints: tuple[str, ...]
-    elastic: tuple[int, ...] = ()
 
 
 def _joint_model(r: SdfReader, name: str, kind: str):
@@ -242,7 +240,7 @@ def read_sdf(path: str | Path, *, free_base: bool = False, geometry: bool = True
         lower[i], upper[i] = lo, hi
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     visual = _visuals(r, model, body) if geometry else None
-    return SdfRobot(model, closures, springs, rest, visual, tuple(closing), tuple(elastic))
+    return SdfRobot(model, closures, springs, rest, visual, tuple(closing))
 
 
 def _z_along(axis: np.ndarray) -> pin.SE3:

@@ -401,7 +401,9 @@ def beam_site(
 ) -> BeamSite:
     """Where the beam on link ``beam`` sits in ``model``, ending at ``end``: a child joint
     of the link, a frame of the link (a fixed joint's, a site, an operational frame) or
-    ``anchor:<closure name>``, one of ``anchors`` (None: the link's only child joint).
+    ``anchor:<closure name>``, one of ``anchors`` (None: the link's only child joint); a
+    name that is none of those may be the child link of a child joint (``coupler_end`` for
+    ``coupler_end_joint``): that joint.
 
     Args:
         model: the kinematic tree.
@@ -440,7 +442,12 @@ def beam_site(
     if end in on_link:
         j, M = on_link[end]
         return BeamSite(fl, j, end, None, None, pin.SE3(link.placement.rotation, M.translation))
-    if end not in ends:
+    carried = [  # the child joints whose child link is named end
+        k for k, i in enumerate(children)
+        if any(f.type == pin.BODY and f.parentFrame == i and f.name == end for f in model.frames)
+    ]  # fmt: skip
+    at = ends.index(end) if end in ends else carried[0] if len(carried) == 1 else None
+    if at is None:
         known = model.existJointName(end) or model.existFrame(end)
         known = known or any(k == end for k, _, _ in anchors)
         what = (
@@ -449,7 +456,7 @@ def beam_site(
             else "is not a joint of the model, nor a frame or a closure's anchor"
         )
         raise BeamError(beam, f"end {end!r} {what}; expected one of {ends}")
-    fe = (children + frames)[ends.index(end)]
+    fe = (children + frames)[at]
     frame = model.frames[fe]
     if frame.type == pin.JOINT:
         j = frame.parentJoint

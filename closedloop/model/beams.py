@@ -4,10 +4,11 @@ A flexible link is a rigid body with a 6-dof virtual spring at its end (Pashkevi
 Klimchik and Chablat's Virtual Joint Method). A *beam* on a link is straight, from the
 origin of the link's frame (its start, clamped) to the origin of its ``end`` joint (the
 tip): its length is that distance. The tip carries the ``end`` joint and everything beyond
-it; the link's other child joints stay rigid with the start. The ``end`` may also be a
-frame of the link (a site, an operational frame) or ``anchor:<closure name>``, a closure's
-anchor on the link: the tip then carries that frame or anchor only, every child joint of
-the link staying with the start (one at its origin too). :func:`apply_beams` puts a
+it; the link's other child joints stay rigid with the start (the end joint may be named
+by its child link). The ``end`` may also be a frame of the link (a site, an operational
+frame) or ``anchor:<closure name>``, a closure's anchor on the link: the tip then carries
+that frame or anchor only, every child joint of the link staying with the start (one at
+its origin too). :func:`apply_beams` puts a
 6-dof virtual joint (a Pinocchio free flyer named ``<link>_beam``) between the link and
 its ``end``, placed at the end joint's origin with the end joint's axes, and gives it the
 beam's tip stiffness as an SPD block spring (:mod:`closedloop.model.closed_loop`). Its coordinates
@@ -146,7 +147,7 @@ def _insert(model, geometries, site: BeamSite, name: str, carried=()):
     if moved_frames:  # their inertias move from the start to the tip
         dyn = model.inertias[site.joint].toDynamicParameters()
         dyn -= Mv.act(inertia_tip).toDynamicParameters()
-        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint].mass)
+        new.inertias[index[site.joint]] = _inertia(dyn, model.inertias[site.joint])
     for i, f in enumerate(model.frames):
         if i == 0:
             continue
@@ -233,19 +234,31 @@ def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
 
 
 #: Mass left on a beam's start after its tip's share moved, relative to the link's mass,
-#: below which it is rounding of a massless remainder.
+#: below which it is rounding of a massless remainder; likewise the eigenvalues of its
+#: rotational inertia, relative to the link's largest about its joint's origin.
 MASSLESS_RTOL = 1e-12
 
 
-def _inertia(dyn: np.ndarray, link_mass: float) -> pin.Inertia:
-    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
-    rotational inertia about the frame's origin [kg m^2]); a massless remainder keeps its
-    rotational part and a zero lever (Pinocchio would divide the first moment by 0)."""
-    if abs(dyn[0]) > MASSLESS_RTOL * max(link_mass, 1.0):
-        return pin.Inertia.FromDynamicParameters(dyn)
+def _rotational(dyn: np.ndarray) -> np.ndarray:
+    """(3, 3) rotational inertia [kg m^2] of the dynamic parameters ``dyn`` (10,)."""
     ixx, ixy, iyy, ixz, iyz, izz = dyn[4:]
-    rotational = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    return pin.Inertia(0.0, np.zeros(3), rotational)
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+def _inertia(dyn: np.ndarray, link: pin.Inertia) -> pin.Inertia:
+    """The inertia of the dynamic parameters ``dyn`` (10,) (m [kg], m c [kg m], the
+    rotational inertia about the frame's origin [kg m^2]) left on the link of inertia
+    ``link`` when its tips' inertias moved. A massless remainder keeps its rotational part
+    without its rounding (eigenvalues, negative ones too, within :data:`MASSLESS_RTOL` of
+    the link's: what is left when the tips took the whole mass) and a zero lever
+    (Pinocchio would divide the first moment by 0)."""
+    before = link.toDynamicParameters()
+    if abs(dyn[0]) > MASSLESS_RTOL * max(before[0], 1.0):
+        return pin.Inertia.FromDynamicParameters(dyn)
+    lam, V = np.linalg.eigh(_rotational(dyn))
+    scale = np.abs(np.linalg.eigvalsh(_rotational(before))).max()
+    lam[lam <= MASSLESS_RTOL * scale] = 0.0
+    return pin.Inertia(0.0, np.zeros(3), (V * lam) @ V.T)
 
 
 def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarray:

@@ -439,7 +439,12 @@ class ClosedLoopModel:
     def with_closure_springs(self, springs: Mapping) -> ClosedLoopModel:
         """This model with the closures of ``springs`` (closure index -> 6 values or a 6x6
         [N/m, N m/rad]) made elastic by joints at each cut, reference configurations
-        extended (:func:`closedloop.model.elastic_closures.with_elastic_closures`)."""
+        extended (:func:`closedloop.model.elastic_closures.with_elastic_closures`).
+
+        Raises:
+            InvalidInputError: a bad spring, or a closure that is elastic already (two
+                springs in parallel on one pair are two closures of it, each given one).
+        """
         model, closures, cut = with_elastic_closures(self.model, list(self.closures), springs)
         geoms = [self.visual_model, self.collision_model]
         return self._grown(model, closures, cut, geoms, {})

@@ -16,7 +16,9 @@ of the two frames), a display name and its type (:data:`CLOSURE_TYPES`):
 * ``universal``: the origins coincide and A's z axis is perpendicular to B's (4 rows:
   3 [m], 1 [rad]).
 
-A closure may be made elastic (:mod:`closedloop.model.elastic_closures`).
+A closure may be made elastic (:mod:`closedloop.model.elastic_closures`). The closures of a
+model have a name each: a second closure of the same name (the same pair of frames listed
+twice) is named ``<name>#2`` (:func:`distinct_names`).
 
 The rows themselves are built in :mod:`closedloop.kinematics.constraints`. Frames and
 joints are looked up by name with errors that list the valid ones.
@@ -25,7 +27,7 @@ joints are looked up by name with errors that list the valid ones.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import pinocchio as pin
 
@@ -62,14 +64,18 @@ class Closure:
 
     Attributes:
         constraint: the anchor constraint between frame A (side 1) and frame B (side 2).
-        name: display name.
+        name: display name (one a closure of a model: :func:`checked_closures`).
         kind: one of :data:`CLOSURE_TYPES`; empty: ``"3d"`` for a point anchor, ``"6d"``
             for a frame anchor.
+        cut: the names of the joints that carry the spring of an elastic closure, the
+            constraint closing their chain (:mod:`closedloop.model.elastic_closures`);
+            empty for a rigid closure.
     """
 
     constraint: AnchorConstraint
     name: str
     kind: str = ""
+    cut: tuple[str, ...] = ()
 
     def __post_init__(self):
         point = isinstance(self.constraint, pin.PointAnchorConstraintModel)
@@ -100,7 +106,8 @@ class Closure:
     def on(self, model: pin.Model, end1: tuple, end2: tuple) -> Closure:
         """The same closure on ``model`` with its ends at ``end1``, ``end2`` (joint index,
         placement in that joint's frame)."""
-        return Closure(type(self.constraint)(model, *end1, *end2), self.name, self.kind)
+        constraint = type(self.constraint)(model, *end1, *end2)
+        return Closure(constraint, self.name, self.kind, self.cut)
 
 
 def check_name(kind: str, name) -> None:
@@ -188,8 +195,26 @@ def joint_names(what: str, names) -> tuple[str, ...]:
     return names
 
 
+def distinct_names(closures: Iterable[Closure]) -> list[Closure]:
+    """``closures`` with a name each: the second of a name (two closures of one pair of
+    frames, ``A<->B``) renamed ``<name>#2``, the third ``<name>#3``, ... (the joints at an
+    elastic closure's cut are named after it)."""
+    closures = list(closures)
+    taken, out = {c.name for c in closures}, []
+    for c in closures:
+        if any(c.name == d.name for d in out):
+            n = 2
+            while f"{c.name}#{n}" in taken:
+                n += 1
+            c = replace(c, name=f"{c.name}#{n}")
+            taken.add(c.name)
+        out.append(c)
+    return out
+
+
 def checked_closures(model: pin.Model, closures) -> tuple[Closure, ...]:
-    """The closures as :class:`Closure` objects, each joining two bodies of ``model``."""
+    """The closures as :class:`Closure` objects, each joining two bodies of ``model``, one
+    name a closure (:func:`distinct_names`)."""
     if isinstance(closures, str) or not isinstance(closures, Iterable):
         raise InvalidInputError(
             f"closures must be a list of Closure or anchor constraints, got {closures!r}"
@@ -215,4 +240,4 @@ def checked_closures(model: pin.Model, closures) -> tuple[Closure, ...]:
                 "close)"
             )
         out.append(c)
-    return tuple(out)
+    return tuple(distinct_names(out))

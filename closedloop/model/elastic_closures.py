@@ -41,13 +41,18 @@ Three non-rigid rotations of which some are free and some sprung are refused (a 
 three rotations has a gimbal lock), as are a universal pair's free cross rotation (a ball:
 a ``3d`` pair) and a 6x6 on a universal pair.
 
-The joints are springs like any other (an elastic one has its value as joint spring, a
-free one none: passive). Their rest state is the pair met as its type says, the springs at
-rest at the configuration analysed. The model's reference configurations (an MJCF
-``qpos0``, an SDF rest, a URDF's drawing) are extended with the joints' values there
-(:func:`chain_values`), so that an assembly started from them closes an elastic closure
-as the file draws it. The energy of a loaded equilibrium is that of the joints'
-coordinates (exact to first order about the rest, as above).
+The joints are named after their closure, whose name is the model's only
+(:func:`closedloop.model.closures.distinct_names`: two closures of one pair of frames,
+``A<->B`` and ``A<->B#2``, are two springs in parallel, of the summed stiffness); the
+closure keeps their names (``Closure.cut``) and is not made elastic again (a second
+spring there would be in series with the first). The joints are springs like any other
+(an elastic one has its value as joint spring, a free one none: passive). Their rest
+state is the pair met as its type says, the springs at rest at the configuration
+analysed. The model's reference configurations (an MJCF ``qpos0``, an SDF rest, a URDF's
+drawing) are extended with the joints' values there (:func:`chain_values`), so that an
+assembly started from them closes an elastic closure as the file draws it. The energy of
+a loaded equilibrium is that of the joints' coordinates (exact to first order about the
+rest, as above).
 """
 
 from __future__ import annotations
@@ -61,7 +66,7 @@ import pinocchio as pin
 
 from closedloop.common.arrays import real_array, symmetrized
 from closedloop.exceptions import InvalidInputError
-from closedloop.model.closures import CLOSURE_TYPES, Closure
+from closedloop.model.closures import CLOSURE_TYPES, Closure, distinct_names
 
 #: Directions of the relative motion of frame B with respect to frame A, in A's axes at
 #: A's origin: translations [m], then rotations [rad]; the order of ``closure_springs``.
@@ -325,9 +330,18 @@ def with_elastic_closures(
     Raises:
         InvalidInputError: an index out of range, a spring of the wrong length, a 6x6 not
             symmetric positive semi-definite or not finite, ``inf`` on a free direction,
-            rotations partly free and partly sprung, a spring at a universal closure.
+            rotations partly free and partly sprung, a spring at a universal closure, a
+            spring at a closure elastic already, a joint to add whose name the model has.
     """
+    closures = distinct_names(closures)
     checked = check_closure_springs(closures, springs)
+    again = [closures[i] for i in checked if closures[i].cut]
+    if again:
+        raise InvalidInputError(
+            f"closure {again[0].name!r} is elastic already (its spring on the joints "
+            f"{list(again[0].cut)}); expected each closure's spring once (two springs on one "
+            "pair act in parallel as two closures of the pair, each with its spring)"
+        )
     cuts = {}
     for i, K in checked.items():
         free = FREE_DIRECTIONS[closures[i].kind]
@@ -342,17 +356,23 @@ def with_elastic_closures(
             out_closures.append(c.on(out_model, *_ends(c)))
             continue
         j, M = cuts[i].start
-        for joint in cuts[i].joints:
-            name, k = f"{c.name}_{joint.suffix}", joint.spring
+        names = [f"{c.name}_{joint.suffix}" for joint in cuts[i].joints]
+        for joint, name in zip(cuts[i].joints, names, strict=True):
+            if out_model.existJointName(name):
+                raise InvalidInputError(
+                    f"the spring of closure {c.name!r} needs a joint {name!r}, a name the "
+                    "model has already; expected joint names that are not <closure>_<suffix> "
+                    "of an elastic closure (rename the joint)"
+                )
+            k = joint.spring
             j = out_model.addJoint(j, joint.model, M * joint.placement, name)
             out_model.addJointFrame(j)
             M = pin.SE3.Identity()
             if k is not None:
                 out[name] = k if np.ndim(k) == 2 or np.size(k) > 1 else float(k)
         M, kind = cuts[i].tip, cuts[i].end_kind
-        out_closures.append(
-            Closure(CLOSURE_TYPES[kind](out_model, j, M, *cuts[i].end), c.name, kind)
-        )
+        constraint = CLOSURE_TYPES[kind](out_model, j, M, *cuts[i].end)
+        out_closures.append(Closure(constraint, c.name, kind, tuple(names)))
     for entry in model.referenceConfigurations:
         q = entry.data()
         out_model.referenceConfigurations[entry.key()] = np.concatenate(

@@ -1,18 +1,32 @@
-"""The comparison report: every table cell and figure present, linearity from the data."""
+"""The comparison report: every table cell and figure present, linearity from the data; a
+reader without the paper first meets the machine, its matrices and the report's terms."""
 
 import re
 
 import numpy as np
 import pytest
 
+from cahyman_pin.api import stiffness
 from cahyman_pin.cli import main
 from cahyman_pin.paper import data as paper_data
 from cahyman_pin.paper import report
+from cahyman_pin.paper import tables as tables_module
+from cahyman_pin.paper.compare import table_values
 from cahyman_pin.paper.data import LOAD_LABELS, TABLE_POSES, TABLES
-from cahyman_pin.paper.document import Figure, Heading, Paragraph, Table
-from cahyman_pin.params import DEFAULT_PARAMS, SOURCES
+from cahyman_pin.paper.document import Document, Figure, Heading, Paragraph, Table
+from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, SOURCES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: report.md prints the summary's translations to 4 significant digits: rounding <= 5e-4.
+PRINTED_RTOL = 5e-4
+#: No rotation of M depends on K_s (its joint moves M along the arm): the rotation rows of
+#: C with K_s = 0.697 and 0.697e6 N/m agree to the rounding of the solve (measured: exactly
+#: 0); 1e-9 of the largest rotation entry leaves a wide margin, while the translation rows
+#: differ by w w^T / K_s (1.4 m/N), whose trace holds to the same relative 1e-9.
+ROTATION_RTOL = 1e-9
+#: The three terms the report defines, and its definition of each (the term emphasised).
+TERMS = {"eq. (": "*eq. (n)* is", "damaged place": "A *damaged place* is",
+         "backend": "A *backend* is"}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +36,8 @@ def built(tmp_path_factory):
 
 
 def _linearity_table():
-    doc = report.Document("t")
-    report._linearity(doc)
+    doc = Document("t")
+    tables_module.linearity_section(doc)
     return next(b for b in doc.blocks if isinstance(b, Table))
 
 
@@ -54,17 +68,20 @@ def test_html_is_self_contained(built):
 
 
 def test_findings_come_first_and_the_contents_reach_every_section(built):
-    """The summary and the figures before the tables, the parameters at the end; the
-    contents after the title link to the id of every heading of report.html."""
+    """The machine, its matrices, then the summary and the figures before the tables, the
+    parameters at the end; the contents after the title link to the id of every heading
+    of report.html."""
     out, doc = built
     headings = [b.text for b in doc.blocks if isinstance(b, Heading) and b.level == 2]
-    assert headings[:3] == ["Summary", "Figures", "Tables 1-3: displacement of M"]
+    assert headings[:5] == ["CaHyMan and the paper", "Stiffness matrices at the three "
+                            "configurations", "Summary", "Figures",
+                            "Tables 1-3: displacement of M"]  # fmt: skip
     assert headings[-1] == "Parameters and conventions"
     html = (out / "report.html").read_text()
     ids = re.findall(r'<h[2-6] id="([^"]+)"', html)
     links = re.findall(r'<a href="#([^"]+)"', html)
     assert ids == links and len(ids) == sum(isinstance(b, Heading) for b in doc.blocks)
-    assert html.index("<strong>Contents</strong>") < html.index('<h2 id="summary">')
+    assert html.index("<strong>Contents</strong>") < html.index('<h2 id="cahyman-and-the-paper">')
 
 
 def test_every_table_cell_present(built):
@@ -111,7 +128,7 @@ def test_linearity_is_computed_from_the_published_values(monkeypatch, tmp_path):
     changed = {k: v.copy() for k, v in TABLES.items()}
     changed["Table 2"][0, 2] += 1.0
     monkeypatch.setattr(paper_data, "TABLES", changed)
-    monkeypatch.setattr(report, "TABLES", changed)
+    monkeypatch.setattr(tables_module, "TABLES", changed)
     table = _linearity_table()
     assert float(table.rows[0][2]) == pytest.approx(1.0)
 
@@ -147,7 +164,7 @@ def test_rotation_median_ratio_against_the_generic_backend(built):
     _, doc = built
     ratios = []
     for pose in TABLE_POSES:
-        tv = report.table_values(pose, DEFAULT_PARAMS)
+        tv = table_values(pose, DEFAULT_PARAMS)
         m, p = tv.values["generic"][3:], tv.values["paper"][3:]
         keep = np.abs(m) > 0
         ratios.append(np.abs(p[keep]) / np.abs(m[keep]))
@@ -216,10 +233,141 @@ def test_counts_in_the_text_are_those_of_the_class_table(built):
 def test_printed_k_s_given_has_no_k_s_effect(tmp_path):
     """With K_s = 0.697 N/m given, the 'K_s value' effect changes nothing: its note and the
     K_s section say so (they read "0.697 -> 0.697e6" with changes of 0)."""
-    from cahyman_pin.params import K_S_PRINTED
-
     doc = report.build_report(tmp_path, DEFAULT_PARAMS.replace(K_s=K_S_PRINTED))
     text = _text(doc)
+    # the summary's K_s sentence: the parameters' value printed, the other one assumed
+    assert f"K_s = {K_S_PRINTED:g} N/m, as the paper prints it in its section 4" in text
+    assert f"With the assumed K_s = {K_S_ASSUMED:g} N/m (1e+06 times the printed" in text
     assert "none here: the parameters take K_s as printed, 0.697 N/m." in text
     assert "'K_s value' effect is zero here" in text
     assert "-> the assumed" not in text
+
+
+def _reading_text(out) -> str:
+    """report.md as it is read: the title, then the body, without the table of contents."""
+    title, rest = (out / "report.md").read_text().split("\n", 1)
+    return title + rest[rest.index("\n## ") :]
+
+
+def _section_text(doc, heading: str) -> str:
+    """The paragraphs of the level-2 section ``heading``."""
+    start = doc.blocks.index(Heading(heading))
+    end = next((k for k, b in enumerate(doc.blocks) if k > start and isinstance(b, Heading)
+                and b.level == 2), len(doc.blocks))  # fmt: skip
+    return " ".join(b.text for b in doc.blocks[start:end] if isinstance(b, Paragraph))
+
+
+def test_the_report_opens_with_the_machine_then_its_matrices(built):
+    """First the machine and what the paper claims (its configurations and loads, as typed
+    from the paper), then the stiffness matrices, then the verdict and the forensics."""
+    out, doc = built
+    body = _reading_text(out).split("\n", 1)[1]
+    assert body.startswith("## CaHyMan and the paper\n\nCaHyMan (Cassino Hybrid Manipulator) is")
+    assert doc.blocks[0] == Heading("CaHyMan and the paper")
+    machine = doc.blocks[1].text
+    for words in (
+        "CaPaMan",
+        "telescopic arm",
+        "three legs",
+        "parallelogram",
+        "mobile plate",
+        "extremity M",
+        "force F_e",
+        "moment N_e",
+        "torsional spring K_T ",
+        "K_b and K_d",
+        "K_T4",
+        "K_s",
+        "K_4",
+        "Tables 1-3",
+        "Fig. 5",
+        "Figs. 6 and 7",
+    ):
+        assert words in machine, words
+    for pose in TABLE_POSES:
+        alphas = ", ".join(f"{a:g}" for a in pose.alpha_deg)
+        assert (f"{pose.label}: alpha_1..3 = {alphas} deg, alpha_4 = {pose.alpha4_deg:g} deg, "
+                f"s_4 = {pose.s4_mm:g} mm") in machine  # fmt: skip
+    assert all(label in machine for label in LOAD_LABELS)
+    sections = [b.text for b in doc.blocks if isinstance(b, Heading) and b.level == 2]
+    matrices = sections.index("Stiffness matrices at the three configurations")
+    assert matrices == 1
+    forensics = ("Summary", "Tables 1-3: displacement of M", "Linearity of the published tables",
+                 "Could any stiffness values or dimensions produce the tables?",
+                 "Every published cell: reproduced, explained or unexplained",
+                 "Where the differences come from")  # fmt: skip
+    assert all(sections.index(h) > matrices for h in forensics)
+    # the verdict table (the summary's) after the three K tables
+    k_tables = [k for k, b in enumerate(doc.blocks)
+                if isinstance(b, Table) and b.caption.startswith("K (generic)")]  # fmt: skip
+    verdict = next(
+        k
+        for k, b in enumerate(doc.blocks)
+        if isinstance(b, Table) and "largest rotation difference [deg]" in b.header
+    )
+    assert len(k_tables) == len(TABLE_POSES) and max(k_tables) < verdict
+
+
+@pytest.mark.parametrize("term", TERMS)
+def test_terms_are_defined_where_they_first_appear(built, term):
+    """The first time report.md says "eq. (", "damaged place" or "backend" (title
+    included, any case) is in the sentence that defines it."""
+    out, _ = built
+    text = _reading_text(out)
+    first, at = text.lower().index(term.lower()), text.index(TERMS[term])
+    assert at <= first < at + len(TERMS[term]), text[max(first - 100, 0) : first + 100]
+    # "eqs. (n)-(m)" only after the definition of eq. (n), in its paragraph
+    first_eqs = text.index("eqs. (")
+    assert text.index(TERMS["eq. ("]) < first_eqs < text.index("\n", text.index(TERMS["eq. ("]))
+
+
+def test_the_k_s_sentence_names_two_values_with_their_sources(built):
+    """The summary's K_s sentence: the assumed value, the printed one and where each comes
+    from (it called both "printed", with the same ratio for both and no reason why)."""
+    _, doc = built
+    summary = _section_text(doc, "Summary")
+    assert K_S_ASSUMED != K_S_PRINTED
+    assert (f"K_s = {K_S_ASSUMED:g} N/m, assumed (the paper prints {K_S_PRINTED:g} N/m in its "
+            "section 4; the report takes 1e+06 times that)") in summary  # fmt: skip
+    assert f"With the printed K_s = {K_S_PRINTED:g} N/m instead" in summary
+    printed = re.findall(r"printed K_s = (\S+) N/m", summary)
+    assert printed and all(float(x) == K_S_PRINTED for x in printed)
+    assert "printed springs, K_s" not in summary
+
+
+def test_k_s_turns_nothing_and_sets_the_translations(built):
+    """What the K_s sentence claims, recomputed with the generic backend: the rotation rows
+    of C do not depend on K_s, so the median ratio is the same for both values; the largest
+    translations differ, as printed."""
+    _, doc = built
+    summary = _section_text(doc, "Summary")
+    params = {K: DEFAULT_PARAMS.replace(K_s=K) for K in (K_S_ASSUMED, K_S_PRINTED)}
+    for pose in TABLE_POSES:
+        C = {K: stiffness(*pose.si, params=p).C for K, p in params.items()}
+        rot = np.abs(C[K_S_ASSUMED][3:]).max()
+        np.testing.assert_allclose(
+            C[K_S_PRINTED][3:], C[K_S_ASSUMED][3:], rtol=0, atol=ROTATION_RTOL * rot
+        )
+        # K_s adds w w^T / K_s to the translations (w: the arm's unit direction), trace 1/K_s
+        added = np.trace(C[K_S_PRINTED][:3, :3] - C[K_S_ASSUMED][:3, :3])
+        np.testing.assert_allclose(added, 1 / K_S_PRINTED - 1 / K_S_ASSUMED, rtol=ROTATION_RTOL)
+    median, largest = {}, {}
+    for K, p in params.items():
+        values = [table_values(pose, p).values for pose in TABLE_POSES]
+        rot = np.concatenate([v["generic"][3:].ravel() for v in values])
+        paper = np.concatenate([v["paper"][3:].ravel() for v in values])
+        keep = np.abs(rot) > 0
+        median[K] = np.median(np.abs(paper[keep]) / np.abs(rot[keep]))
+        largest[K] = max(np.abs(v["generic"][:3]).max() for v in values)
+    assert f"about {median[K_S_ASSUMED]:.0f} times (median) larger" in summary
+    assert f"the median ratio is the same, {median[K_S_PRINTED]:.0f}:" in summary
+    m = re.search(
+        r"largest translation in the tables is (\S+) mm with K_s = (\S+) N/m and "
+        r"(\S+) mm with (\S+) N/m, against at most (\S+) mm published",
+        summary,
+    )
+    assert float(m[2]) == K_S_ASSUMED and float(m[4]) == K_S_PRINTED
+    np.testing.assert_allclose(
+        [float(m[1]), float(m[3])], [largest[K_S_ASSUMED], largest[K_S_PRINTED]], rtol=PRINTED_RTOL
+    )
+    assert float(m[5]) == np.abs([TABLES[p.label][:3] for p in TABLE_POSES]).max()

@@ -15,12 +15,12 @@ from cahyman_pin.backends.published import PublishedOptions, a_d_printed, publis
 from cahyman_pin.geometry import plate_pose
 from cahyman_pin.model import cahyman_model
 from cahyman_pin.paper import beams as beams_module
-from cahyman_pin.paper import report
 from cahyman_pin.paper.cells import model_values
 from cahyman_pin.paper.compare import table_values
 from cahyman_pin.paper.data import LOADS, TABLE_POSES
 from cahyman_pin.paper.document import Document, Paragraph
 from cahyman_pin.paper.effects import EFFECTS
+from cahyman_pin.paper.parameters import conventions_section, parameters_section
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import beams, springs
 from closedloop.exceptions import SingularConfigurationError
@@ -39,7 +39,7 @@ def _text(doc: Document) -> str:
 def _intro_text(params=DEFAULT_PARAMS) -> str:
     """The text of the section 'Parameters and conventions' on the parameters."""
     doc = Document("t")
-    report._parameters(doc, params)
+    parameters_section(doc, params)
     return _text(doc)
 
 
@@ -98,7 +98,7 @@ def test_the_published_column_is_not_a_twist_at_M():
         assert np.linalg.norm(moved - parts) > 0.1 * np.linalg.norm(parts), j
     doc = Document("t")
     tables = [table_values(p, DEFAULT_PARAMS) for p in TABLE_POSES]
-    report._conventions(doc, DEFAULT_PARAMS, tables)
+    conventions_section(doc, DEFAULT_PARAMS, tables)
     text = _text(doc)
     assert (
         "not a twist at M: translations of H (the plate, eq. 9) plus the arm's "

@@ -19,10 +19,13 @@ import pytest
 
 from cahyman_pin.backends.consistent import consistent_breakdown
 from cahyman_pin.cli import main
-from cahyman_pin.paper import figures, report
+from cahyman_pin.paper import figures
 from cahyman_pin.paper.compare import ROWS_LEVEL, table_values
 from cahyman_pin.paper.data import FIG5BCD, TABLE_POSES
+from cahyman_pin.paper.differences import effects_section
 from cahyman_pin.paper.document import Document, Paragraph, Table
+from cahyman_pin.paper.matrices import matrices_section
+from cahyman_pin.paper.summary import summary_section
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_PRINTED
 
 P = DEFAULT_PARAMS
@@ -60,7 +63,7 @@ def _blocks(doc, kind):
 
 def _matrices(params):
     doc = Document("t")
-    report._matrices(doc, params)
+    matrices_section(doc, params)
     return doc
 
 
@@ -138,15 +141,18 @@ def test_springs_are_called_printed_only_when_they_are(params):
     motor in deg per N m, called printed only at the paper's K_T."""
     tables = [table_values(pose, params) for pose in TABLE_POSES]
     doc = Document("t")
-    report._summary(doc, params, tables)
-    report._effects(doc, params, tables)
+    summary_section(doc, params, tables)
+    effects_section(doc, params, tables)
     text = " ".join(p.text for p in _blocks(doc, Paragraph))
     printed = params.K_T == P.K_T
     leg = f"{np.degrees(1.0 / params.K_T):.3g} deg per N m for a leg motor (1/K_T)"
     assert f"{'printed' if printed else 'given'} torsional stiffnesses imply" in text
     assert leg in text
-    springs = "the printed springs" + ("" if printed else f" but K_T = {params.K_T:g}")
-    assert f"({springs}, K_s = {params.K_s:g} N/m)" in text
+    springs = "the other springs as the paper prints them" + (
+        "" if printed else f" but K_T = {params.K_T:g}"
+    )
+    assert f"K_s = {params.K_s:g} N/m, assumed (the paper prints" in text
+    assert f"and {springs}. With the printed K_s" in text
 
 
 def test_summary_largest_differences_skip_only_the_missing_cells():
@@ -155,7 +161,7 @@ def test_summary_largest_differences_skip_only_the_missing_cells():
     tables = [table_values(pose, P) for pose in TABLE_POSES]
     tables[0].values["published"][:] = np.nan
     doc = Document("t")
-    report._summary(doc, P, tables)
+    summary_section(doc, P, tables)
     summary = next(t for t in _blocks(doc, Table) if t.header[0] == "backend")
     row = next(r for r in summary.rows if r[0] == "published")
     rest = [tv.values["published"] - tv.values["paper"] for tv in tables[1:]]

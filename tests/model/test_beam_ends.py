@@ -18,7 +18,7 @@ from helpers import assert_close_in_norm
 import closedloop as cl
 from closedloop.exceptions import BeamError
 from closedloop.io.loader import load_model
-from closedloop.model.beams import map_configuration
+from closedloop.model.beams import inserted_beams, map_configuration
 
 #: The same beam theory through different algebra (6x6 inverses, transports, the
 #: closure's reduction); condition of the stiffness ~1e8: rounding ~1e-12 relative.
@@ -159,3 +159,44 @@ def test_a_frame_of_another_link_is_refused_naming_the_frames(tmp_path):
     with pytest.raises(BeamError, match=r"end 'rod_end' is not a child joint of the link.*"
                        r"expected one of \['piston', 'top'\]"):  # fmt: skip
         cylinder(tmp_path, "rod_end")
+
+
+# ---------------------------------------------------------------------- child link end
+def _fourbar_urdf_compliance(beams: dict) -> np.ndarray:
+    """(6, 6) compliance at P of the bundled URDF four-bar with ``beams``, crank 0.5 rad."""
+    plain = load_model(REPO / "fourbar.urdf", REPO / "fourbar.yaml", geometry=False)
+    clm = load_model(REPO / "fourbar.urdf", REPO / "fourbar.yaml", beams=beams, geometry=False)
+    q = cl.assemble(plain, [0.5], plain.reference_configuration()).q
+    q = cl.assemble(clm, [0.5], map_configuration(plain.model, clm.model, q)).q
+    return cl.compliance(clm, q, "P").C
+
+
+@pytest.mark.parametrize(
+    ("link", "child", "joint"),
+    [("coupler_link", "coupler_end", "coupler_end_joint"),  # a fixed joint's child
+     ("crank_link", "crank_end", "crank_axial")],  # a moving joint's child
+)  # fmt: skip
+def test_an_end_may_name_the_end_joints_child_link(link, child, joint):
+    """``end: coupler_end`` is the beam to ``coupler_end_joint``, whose child link it is
+    (it was refused: not a child joint of the link, nor one of its frames), alone and in
+    a list of beams (its virtual joint named after the end as written)."""
+    C = _fourbar_urdf_compliance({link: rod(child)})
+    np.testing.assert_array_equal(C, _fourbar_urdf_compliance({link: rod(joint)}))
+    assert np.max(np.abs(C - _fourbar_urdf_compliance({}))) > 1e-3 * np.max(np.abs(C))
+    listed = load_model(REPO / "fourbar.urdf", REPO / "fourbar.yaml", geometry=False,
+                        beams={link: [rod(child)]})  # fmt: skip
+    assert f"{link}_beam_{child}" in listed.spring_blocks
+
+
+def test_a_frame_of_the_link_named_as_a_child_link_is_the_end(tmp_path):
+    """A name that is a site of the link (at its far end) and the child link of one of its
+    joints (the piston's rod, at its origin; MJCF keeps bodies and sites apart): the
+    link's own frame, as before (the rod would be a beam of length 0, refused)."""
+    q = pin.Quaternion(ROTATION)
+    text = CYLINDER.format(quat=f"{q.w} {q.x} {q.y} {q.z}", top=" ".join(map(str, L_CYL * AXIS)),
+                           axis=" ".join(map(str, AXIS)), k=K_PISTON)  # fmt: skip
+    top = f'<site name="top" pos="{" ".join(map(str, L_CYL * AXIS))}"/>'
+    (tmp_path / "cylinder.xml").write_text(text.replace(top, top.replace("top", "rod"), 1))
+    clm = cl.load_model(tmp_path / "cylinder.xml", beams={"cylinder": rod("rod")}, geometry=False)
+    (beam,) = inserted_beams(clm.model)
+    np.testing.assert_allclose(beam.rest.translation, L_CYL * AXIS, rtol=0.0, atol=1e-12)

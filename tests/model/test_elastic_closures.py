@@ -16,6 +16,7 @@ import pinocchio as pin
 import pytest
 
 import closedloop as cl
+from closedloop.elastostatics.compliance import energy_shares
 from closedloop.exceptions import InvalidInputError, MechanismError
 from closedloop.io.loader import load_model
 from closedloop.kinematics.constraints import closure_residual
@@ -57,12 +58,13 @@ def _origin(M: pin.SE3) -> str:
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
-def _held_body(tmp_path, kind: str, spring, second=None) -> tuple:
+def _held_body(tmp_path, kind: str, spring, second=None, pair2=("A2", "B2")) -> tuple:
     """A body on a passive free flyer, held to the ground by one elastic closure of type
     ``kind`` between A (on the ground) and B (the body's origin) at :data:`AT_REST`; the
     body's frame ``at_A`` coincides with A (U for a universal pair: :data:`SPRING_FRAME`)
     at rest; ``second``: the spring of a second closure of the same type between the same
-    places (frames A2 and B2). Returns (model, q at rest)."""
+    places (frames ``pair2``: A2 and B2, or A and body themselves).
+    Returns (model, q at rest)."""
     B_world = A_WORLD * AT_REST[kind]
     inertial = ('<inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" '
                 'ixy="0" ixz="0" iyz="0"/></inertial>')  # fmt: skip
@@ -83,7 +85,7 @@ def _held_body(tmp_path, kind: str, spring, second=None) -> tuple:
     listed = lambda x: x.tolist() if isinstance(x, np.ndarray) else x  # noqa: E731
     pairs, springs = [["A", "body"]], {0: listed(spring)}
     if second is not None:
-        pairs, springs[1] = [*pairs, ["A2", "B2"]], listed(second)
+        pairs, springs[1] = [*pairs, list(pair2)], listed(second)
     types = ", ".join([f"'{kind}'"] * len(pairs))
     (tmp_path / "held.yaml").write_text(f"closed_loop: {pairs}\ntype: [{types}]\nname_mot: []\n")
     clm = load_model(
@@ -143,6 +145,71 @@ def test_a_singular_bushing_in_parallel_with_a_diagonal_spring(tmp_path, kind, f
     alone, q = _held_body(tmp_path, kind, K)
     with pytest.raises(MechanismError):
         cl.compliance(alone, q, "at_A")
+
+
+def _parallel_check(clm, q, springs) -> None:
+    """The body held by ``springs`` (each (6,) diagonal or (6, 6)) in parallel: compliance
+    (sum K)^-1 at at_A in A's axes, and a load's work split between the closures as each
+    spring's energy d^T K_i d / d^T (sum K) d, d the deflection (K_i in A's axes, at rest)."""
+    Ks = [np.diag(K) if np.ndim(K) == 1 else np.asarray(K) for K in springs]
+    result = cl.compliance(clm, q, "at_A", axes="local")
+    expected = np.linalg.inv(sum(Ks))
+    unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
+    np.testing.assert_allclose(result.C / unit, expected / unit, rtol=0.0, atol=RTOL_EXACT)
+    w = np.array([2.0, -3.0, 4.0, 0.02, -0.03, 0.01])  # A's axes, at A
+    d = expected @ w
+    shares = energy_shares(clm, result, w)
+    names = [c.name for c in clm.closures]
+    assert len(set(names)) == len(names)  # one closure, one name
+    by_closure = [sum(v for n, v in shares.items() if n.startswith(f"{c}_")) for c in names]
+    np.testing.assert_allclose(
+        by_closure, [d @ K @ d / (w @ d) for K in Ks], rtol=0.0, atol=RTOL_EXACT
+    )
+
+
+@pytest.mark.parametrize(("kind", "second"), [("6d", "bushing"), ("3d", "diagonal"),
+                                              ("revolute", "diagonal")])  # fmt: skip
+def test_two_elastic_closures_on_one_pair_act_in_parallel(tmp_path, kind, second):
+    """Two entries of a closure file on the same frames A and body, each with a spring:
+    two bushings in parallel, the compliance (K1 + K2)^-1 (the second's joints were named
+    as the first's and left passive: the compliance was K1^-1, each share listed once)."""
+    K2 = _bushing() if second == "bushing" else 2.0 * DIAGONAL
+    clm, q = _held_body(tmp_path, kind, DIAGONAL, second=K2, pair2=("A", "body"))
+    names = list(clm.model.names)
+    assert len(set(names)) == len(names)
+    _parallel_check(clm, q, [DIAGONAL, K2])
+
+
+def test_closure_springs_given_to_two_closures_of_one_pair_act_in_parallel(tmp_path):
+    """``with_closure_springs`` on a model with two rigid closures on the same frames, at
+    once or one call a closure: (K1 + K2)^-1."""
+    rigid, _ = _held_body(tmp_path, "6d", [INF] * 6, second=[INF] * 6, pair2=("A", "body"))
+    K2 = _bushing()
+    at_once = rigid.with_closure_springs({0: DIAGONAL, 1: K2})
+    _parallel_check(at_once, at_once.reference_configuration(), [DIAGONAL, K2])
+    one_by_one = rigid.with_closure_springs({0: DIAGONAL}).with_closure_springs({1: K2})
+    _parallel_check(one_by_one, one_by_one.reference_configuration(), [DIAGONAL, K2])
+
+
+def test_a_closure_made_elastic_twice_is_refused_naming_it(tmp_path):
+    """A second ``with_closure_springs`` on a closure made elastic by the first (its cut
+    closed by the joints of its spring) would add a second chain in series, not in
+    parallel: refused, naming the closure (it built a chain of the same joint names,
+    springless)."""
+    clm, _ = _held_body(tmp_path, "6d", DIAGONAL)
+    for spring in (DIAGONAL, _bushing()):
+        with pytest.raises(InvalidInputError, match=r"closure 'A<->body' is elastic already"):
+            clm.with_closure_springs({0: spring})
+
+
+def test_a_cut_joint_named_as_a_joint_of_the_robot_is_refused(tmp_path):
+    """Joint names stay unique: a robot joint named as a joint the cut would add."""
+    clm, _ = _held_body(tmp_path, "6d", [INF] * 6)
+    renamed = pin.Model(clm.model)
+    renamed.names[1] = "A<->body_rz"  # the free flyer
+    plain = cl.ClosedLoopModel(renamed, clm.closures)
+    with pytest.raises(InvalidInputError, match=r"'A<->body_rz'.*already"):
+        plain.with_closure_springs({0: DIAGONAL})
 
 
 def test_a_ball_rotation_spring_is_one_ball_joint_and_a_free_one_none(tmp_path):

@@ -307,7 +307,7 @@ def test_report_weight_section_is_the_preloaded_compliance(given):
     from cahyman_pin.model import CaHyManModel
     from cahyman_pin.paper.data import TABLE_POSES
     from cahyman_pin.paper.effects import ILLUSTRATIVE_MASS, NAMED_MASSES
-    from cahyman_pin.paper.report import weight_rows
+    from cahyman_pin.paper.weight import weight_rows
     from cahyman_pin.params import DEFAULT_PARAMS
 
     params = DEFAULT_PARAMS.replace(**given)

@@ -235,3 +235,69 @@ def test_chained_beams_under_compression_are_a_beam_column(tmp_path):
     np.testing.assert_allclose(across @ C[:3, :3] @ across, exact, rtol=RTOL_BEAM_COLUMN)
     C2 = cl.compliance(split, q2, "tip", preload=preload).C
     assert_close_in_norm(C, C2, RTOL_EXACT)
+
+
+#: Each end's (mass [kg], centre of mass [m] and rotational inertia about it [kg m^2], in
+#: the end link's frame), the end joints' placements on the massless hub (xyz [m], rpy).
+END_MASSES = {
+    "a": (1.0, [0.01, -0.02, 0.03], [0.01, 0.02, 0.03], [0.4, -0.1, 0.2], [0.3, -0.5, 1.1]),
+    "b": (2.5, [0.0, 0.04, 0.0], [0.05, 0.04, 0.06], [-0.1, 0.3, 0.1], [-0.7, 0.2, 0.4]),
+}
+
+
+def massless_hub(tmp_path, chained: bool) -> str:
+    """A massless link ``hub`` on a hinge, its fixed child links ``a`` and ``b`` carrying
+    the masses of :data:`END_MASSES` (``chained``: b's joint on a, else on the hub)."""
+    links, joints = ['<link name="base"/><link name="hub"/>'], []
+    for n, (m, c, I, xyz, rpy) in END_MASSES.items():
+        links.append(
+            f'<link name="{n}"><inertial><origin xyz="{" ".join(map(str, c))}"/><mass '
+            f'value="{m}"/><inertia ixx="{I[0]}" iyy="{I[1]}" izz="{I[2]}" ixy="0" ixz="0" '
+            'iyz="0"/></inertial></link>'
+        )
+        parent = "a" if chained and n == "b" else "hub"
+        joints.append(
+            f'<joint name="j{n}" type="fixed"><parent link="{parent}"/><child link="{n}"/>'
+            f'<origin xyz="{" ".join(map(str, xyz))}" rpy="{" ".join(map(str, rpy))}"/></joint>'
+        )
+    hinge = (
+        '<joint name="hinge" type="revolute"><parent link="base"/><child link="hub"/>'
+        '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+    )
+    path = tmp_path / "hub.urdf"
+    path.write_text(f'<robot name="hub">{"".join(links)}{hinge}{"".join(joints)}</robot>')
+    return str(path)
+
+
+@pytest.mark.parametrize("chained", [False, True])
+def test_a_massless_link_with_beams_to_masses_loads_them_on_the_tips(tmp_path, chained):
+    """A massless link whose beams end at fixed links with masses: two beams, a and b
+    each at the tip of its own, or one beam to a that carries b beyond it (``chained``).
+    Each virtual joint (placed at its end joint, in its axes) carries the mass, centre of
+    mass and inertia of its end link as the URDF gives them (with b's beyond it), the
+    link's joint none (it was Pinocchio's RuntimeError "The 3d inertia should be positive",
+    from the rounding left on the massless link)."""
+    path = massless_hub(tmp_path, chained)
+    beams = {"hub": rod("ja") if chained else [rod("ja"), rod("jb")]}
+    model = load_model(path, beams=beams, geometry=False).model
+    hinge = model.inertias[model.getJointId("hinge")]
+    # rounding of the subtraction of the tips' inertias about the hinge (~0.5 kg m^2)
+    np.testing.assert_allclose(hinge.mass, 0.0, atol=1e-12)
+    np.testing.assert_allclose(hinge.inertia, np.zeros((3, 3)), atol=1e-12)
+    if chained:  # b by hand: its inertial in the frame of a (the tip), about a's origin
+        (m_a, c_a, I_a, _, _), (m_b, c_b, I_b, xyz, rpy) = END_MASSES.values()
+        M = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(xyz))
+        c_b = M.act(np.array(c_b))
+        c = (m_a * np.array(c_a) + m_b * c_b) / (m_a + m_b)
+        I_b = M.rotation @ np.diag(I_b) @ M.rotation.T
+        parallel = lambda m, r: m * (r @ r * np.eye(3) - np.outer(r, r))  # noqa: E731
+        I = np.diag(I_a) + parallel(m_a, c_a - c) + I_b + parallel(m_b, c_b - c)
+        expected = {"hub_beam": (m_a + m_b, c, I)}
+    else:
+        expected = {f"hub_beam_j{n}": (m, c, np.diag(I)) for n, (m, c, I, _, _) in
+                    END_MASSES.items()}  # fmt: skip
+    for joint, (m, c, I) in expected.items():
+        inertia = model.inertias[model.getJointId(joint)]
+        np.testing.assert_allclose(inertia.mass, m, rtol=1e-12)
+        np.testing.assert_allclose(inertia.lever, c, atol=1e-12)
+        np.testing.assert_allclose(inertia.inertia, I, atol=1e-12)
