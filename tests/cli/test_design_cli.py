@@ -67,8 +67,8 @@ def test_design_writes_its_files(tmp_path, capsys):
 
 
 def run_evaluations(tmp_path: Path, name: str, *extra: str) -> list:
-    """The (parameters, values) of each design of a run with seed 4 and budget 12."""
-    assert main(["design", str(problem_file(tmp_path)), "--seed", "4", "--budget", "12",
+    """The (parameters, values) of each design of a run with seed 4 and budget 8."""
+    assert main(["design", str(problem_file(tmp_path)), "--seed", "4", "--budget", "8",
                  "--out", str(tmp_path / name), *extra]) == 0  # fmt: skip
     doc = json.loads((tmp_path / name / "design.json").read_text())
     return [(e["parameters"], e["values"]) for e in doc["evaluations"]]
@@ -79,7 +79,8 @@ def test_two_processes_and_dask_give_the_same_run(tmp_path, capsys):
     serial = run_evaluations(tmp_path, "one")
     assert run_evaluations(tmp_path, "two", "--workers", "2") == serial
     assert not psutil.Process().children(recursive=True)  # the pool ended with the run
-    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+    # a worker thread in this process: Dask's executor as a cluster's, without its start-up
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                            dashboard_address=None, silence_logs=logging.CRITICAL)  # fmt: skip
     with cluster:
         assert run_evaluations(tmp_path, "dask", "--scheduler", cluster.scheduler_address) == serial
