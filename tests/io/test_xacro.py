@@ -184,3 +184,12 @@ def test_command_line_takes_args(capsys, tmp_path):
     assert main(args) == 2  # d missing: one line naming the file, the line and the name
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cantilever.yaml', line 5: ${d}: unknown name 'd'" in err
+
+
+def test_placeholders_in_an_mjcf_side_file(tmp_path):
+    side = tmp_path / "side.yaml"
+    side.write_text("springs:\n  crank: ${2 * k}\n")
+    mjcf = REPO / "urdf" / "fourbar.xml"
+    assert load_model(mjcf, side, args={"k": 60.0}).springs["crank"] == 120.0
+    with pytest.raises(ExpressionError, match=r"side.yaml', line 2: .*unknown name 'k'"):
+        load_model(mjcf, side)
