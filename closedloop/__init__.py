@@ -16,7 +16,7 @@ The package is laid out in layers, each importing only those below it:
 model, beams, gravity) -> :mod:`closedloop.io` (model files) and
 :mod:`closedloop.kinematics` (configurations, assembly, limits) ->
 :mod:`closedloop.elastostatics` (compliance, statics) -> :mod:`closedloop.analysis`
-(indices, identification, maps, natural frequencies) -> :mod:`closedloop.viewer` ->
+(indices, identification, maps, natural frequencies, design) -> :mod:`closedloop.viewer` ->
 :mod:`closedloop.cli`.
 """
 
@@ -42,6 +42,7 @@ _EXPORTS = {
             "BeamError",
             "ClosedLoopError",
             "EquilibriumError",
+            "ExpressionError",
             "IgnoredFeatureWarning",
             "InvalidInputError",
             "JointLimitError",
@@ -72,10 +73,18 @@ _EXPORTS = {
         ("closure_curvature", "geometric_stiffness", "tangent_stiffness"), ".elastostatics.tangent"
     ),
     **dict.fromkeys(("ModesResult", "batch_modes", "modes"), ".analysis.vibration"),
+    **dict.fromkeys(("DesignProblem", "design_problem"), ".analysis.design_problem"),
+    "DesignEvaluation": ".analysis.design_evaluation",
+    "DesignResult": ".analysis.design_result",
+    "optimize_design": ".analysis.design_optimizer",
 }
 _SUBMODULES = frozenset({"data"})
 
 if TYPE_CHECKING:  # the names as static analysis sees them
+    from closedloop.analysis.design_evaluation import DesignEvaluation
+    from closedloop.analysis.design_optimizer import optimize_design
+    from closedloop.analysis.design_problem import DesignProblem, design_problem
+    from closedloop.analysis.design_result import DesignResult
     from closedloop.analysis.indices import StiffnessIndices
     from closedloop.analysis.vibration import ModesResult, batch_modes, modes
     from closedloop.common.conditioning import ILL_CONDITIONED, RANK_RTOL
@@ -94,6 +103,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
         BeamError,
         ClosedLoopError,
         EquilibriumError,
+        ExpressionError,
         IgnoredFeatureWarning,
         InvalidInputError,
         JointLimitError,
@@ -148,8 +158,12 @@ __all__ = [
     "ClosedLoopModel",
     "ComplianceResult",
     "Configuration",
+    "DesignEvaluation",
+    "DesignProblem",
+    "DesignResult",
     "Equilibrium",
     "EquilibriumError",
+    "ExpressionError",
     "GravityLoad",
     "IgnoredFeatureWarning",
     "InvalidInputError",
@@ -176,9 +190,11 @@ __all__ = [
     "compliance",
     "compliances",
     "data",
+    "design_problem",
     "geometric_stiffness",
     "load_model",
     "modes",
+    "optimize_design",
     "preloaded_compliance",
     "robot_data_dir",
     "solve_equilibrium",

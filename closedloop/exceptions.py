@@ -87,6 +87,26 @@ class ModelFileError(ClosedLoopError, ValueError):
     larger than its kind allows, declares XML entities, or cannot be parsed."""
 
 
+class ExpressionError(ModelFileError):
+    """An expression of a parametric model file refused or without a value: a closure
+    file's ``${expr}`` placeholder, a xacro file's ``${expr}`` or ``$(arg NAME)``
+    (:mod:`closedloop.io.expressions`, :mod:`closedloop.io.xacro_files`). An unknown name, a
+    missing argument, a result that is not a finite real number, or what the whitelist of
+    the files' arithmetic does not hold (attribute access, calls of other functions).
+
+    Attributes:
+        file: the file, as given (str).
+        line: the line of the expression (1-based).
+        name: the unknown or missing name, or None.
+        expression: the expression's text (inside ``${...}``), or None.
+    """
+
+    def __init__(self, message: str, file: str, line: int, name: str | None = None,
+                 expression: str | None = None):  # fmt: skip
+        self.file, self.line, self.name, self.expression = file, line, name, expression
+        super().__init__(message)
+
+
 class AssemblyError(ClosedLoopError):
     """The loop closures cannot be satisfied for the given inputs (unreachable pose)."""
 
@@ -260,7 +280,8 @@ def exit_status(error: ClosedLoopError) -> int:
     :class:`JointLimitError`), :class:`MechanismError`, :class:`NumericalError`,
     :class:`SingularConfigurationError` and :class:`ViewerError`,
     :data:`EXIT_BAD_INPUT` for the others (:class:`InvalidInputError`,
-    :class:`ModelFileError`, :class:`NameNotFoundError`, :class:`OpenLoopError`).
+    :class:`ModelFileError` and its :class:`ExpressionError`, :class:`NameNotFoundError`,
+    :class:`OpenLoopError`).
     """
     if isinstance(error, RigidDirectionsError):
         return EXIT_RANK_DEFICIENT

@@ -1,5 +1,5 @@
-"""Benchmark closedloop (issues 10, 11, 37): UR5 serial query, growth of the query with nv,
-UR5 with its links as beams, CaHyMan's natural frequencies."""
+"""Benchmark closedloop (issues 10, 11, 37, 43): UR5 serial query, growth of the query with
+nv, UR5 with its links as beams, CaHyMan's natural frequencies, the design optimiser."""
 
 from __future__ import annotations
 
@@ -182,6 +182,33 @@ def bench_modes(table: Table, mode: Mode) -> None:
               "-", f"{t.ratio:.2f} queries", f"{fmt_time(t.seconds)} per pose")  # fmt: skip
 
 
+#: Designs evaluated by row 14 (the optimiser on the four-bar with tube links).
+DESIGN_BUDGET = {"smoke": 8, "quick": 40, "full": 150}
+
+
+def bench_design(table: Table, mode: Mode) -> None:
+    """Rows 14, 14b: ``optimize_design`` of the bundled fourbar_design.yaml (the four-bar with
+    its three bars as tubes, 25 workspace points, two diameters) on two processes: designs
+    evaluated per second, and the optimiser's own time against the evaluations'."""
+    from closedloop.analysis.design_optimizer import optimize_design
+    from closedloop.io.data import path
+
+    problem = path("fourbar_design.yaml")
+    optimize_design(problem, seed=0, budget=2)  # imports and caches, before the clock
+    result = optimize_design(problem, workers=2, seed=0, budget=DESIGN_BUDGET[mode.name])
+    t, n = result.timing, len(result.evaluations)
+    share = t["kernels"] / (2 * t["evaluations"])  # of the two processes' time, evaluating
+    table.row("14", "four-bar with 3 tube links over 25 workspace points, `optimize_design` "
+              "on 2 processes: designs evaluated per second", "-", f"{n / t['total']:.3g} "
+              f"designs/s", f"{n} designs in {fmt_time(t['total'])}; one design "
+              f"{fmt_time(t['kernels'] / n)} in its process; processes busy {share:.0%} "
+              "of the evaluations' time")  # fmt: skip
+    table.row("14b", "the design optimiser's own time (differential evolution, SLSQP, "
+              "bookkeeping), share of the evaluations' time", "< 10 % (issue 43)",
+              f"{100 * t['optimizer'] / t['evaluations']:.2g} %",
+              f"{fmt_time(t['optimizer'])} of {fmt_time(t['total'])}")  # fmt: skip
+
+
 def main() -> None:
     mode = parse_mode(__doc__)
     table = Table("closedloop benchmarks", mode)
@@ -189,6 +216,7 @@ def main() -> None:
     bench_ur5_beams(table, mode)
     bench_growth(table, mode)
     bench_modes(table, mode)
+    bench_design(table, mode)
     table.close()
 
 

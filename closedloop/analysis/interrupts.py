@@ -47,7 +47,8 @@ class Interrupted(KeyboardInterrupt):
             held while a computed map's files were written: :meth:`SignalStop.hold`).
         partial: the map's result built on ``data`` (a
             :class:`~closedloop.analysis.maps.StiffnessMap` or a
-            :class:`~cahyman_pin.sweep.SweepResult`), or None.
+            :class:`~cahyman_pin.sweep.SweepResult`), a design run's
+            :class:`~closedloop.analysis.design_result.DesignResult` so far, or None.
         written: the folder ``partial`` was written to (:meth:`write`), or that of the
             files written while the signal was held, or None.
     """
@@ -73,8 +74,10 @@ class Interrupted(KeyboardInterrupt):
 
     def __str__(self) -> str:
         text = f"interrupted ({self.signum.name})"
-        if self.data is None or self.written is None:
+        if self.written is None:
             return f"{text}; nothing written"
+        if self.data is None:  # not a map (a design run): its results so far
+            return f"{text}: wrote the results so far to {self.written}"
         done = int(np.count_nonzero(self.data.codes != NOT_COMPUTED))
         return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
 

@@ -13,13 +13,15 @@ from closedloop.model.closed_loop import ClosedLoopModel
 class ModelSource:
     """Where a model comes from, so that worker processes can load it themselves.
 
-    Attributes: the arguments of :func:`closedloop.io.loader.load_model` (paths as strings).
+    Attributes: the arguments of :func:`closedloop.io.loader.load_model` (paths as strings;
+    ``springs`` and ``args`` as sorted (name, value) pairs).
     """
 
     path: str
     closures: str | None = None
     springs: tuple = ()
     joint_stiffness: float | None = None
+    args: tuple = ()
 
     def load(self) -> ClosedLoopModel:
         """The model (loaded once per process)."""
@@ -34,6 +36,7 @@ def _load(source: ModelSource) -> ClosedLoopModel:
         source.closures,
         springs=springs or None,
         joint_stiffness=source.joint_stiffness,
+        args=dict(source.args) or None,
     )
 
 

@@ -9,6 +9,7 @@ depend on the executor. :func:`gather` puts their results into a
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import multiprocessing
 import os
@@ -107,6 +108,34 @@ def run_tasks(
             pool.shutdown()
         elif pool is not None:
             _end_pool(pool, others)
+
+
+@contextlib.contextmanager
+def local_processes(workers: int | None):
+    """A pool of ``workers`` local processes kept for several :func:`run_tasks` (its
+    ``executor``; an optimiser's generations), or None (this process) for None or 1.
+
+    The processes start in :func:`run_tasks`, as its own do (signals blocked, then
+    :func:`~closedloop.analysis.interrupts.start_worker`); the pool is shut down at the end
+    of the block, or its processes ended at once, their running tasks with them, when the
+    block ends by an exception (an interruption).
+
+    Raises:
+        InvalidInputError: ``workers`` not a positive integer.
+    """
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    if (workers or 1) == 1:
+        yield None
+        return
+    others = set(multiprocessing.active_children())  # not the pool's
+    pool = ProcessPoolExecutor(min(workers, os.cpu_count() or 1), initializer=start_worker)
+    try:
+        yield pool
+    except BaseException:
+        _end_pool(pool, others)
+        raise
+    pool.shutdown()
 
 
 def run_tasks_by_point(

@@ -191,6 +191,23 @@ def mass_matrix(
     return M
 
 
+def total_mass(clm: ClosedLoopModel, density: float | None = None) -> float:
+    """Total mass of a model [kg]: every body's inertia (the links welded to the world too,
+    which Pinocchio merges into the universe's inertia) and each beam's own mass rho A L
+    (its ``density:`` key, else ``density`` [kg/m^3]; a beam without either weighs
+    nothing besides its link's inertia), the masses :func:`mass_matrix` moves.
+
+    Raises:
+        InvalidInputError: a body whose inertia is not the robot file's
+            (:meth:`ClosedLoopModel.require_inertias`).
+    """
+    clm.require_inertias("the total mass")
+    bodies = math.fsum(inertia.mass for inertia in clm.model.inertias)
+    beams = math.fsum((s.density or density or 0.0) * s.A * length
+                      for _, _, _, length, s in _beam_sites(clm))  # fmt: skip
+    return bodies + beams
+
+
 def _beam_sites(clm: ClosedLoopModel) -> tuple:
     """Per beam with a section: (link frame, tip frame (the virtual joint's), (the beam
     axes in the link frame, in the tip frame at rest), length [m], its BeamMass); once a

@@ -140,15 +140,17 @@ def _grid(args) -> dict:
 
 
 def model_source(args) -> ModelSource:
-    """The :class:`ModelSource` of the MODEL, --closures and springs options."""
+    """The :class:`ModelSource` of the MODEL, --closures, springs and --arg options."""
+    from closedloop.cli.options import model_arguments
     from closedloop.io.data import resolve
     from closedloop.io.loader import read_springs_file
 
     robot, closures = resolve(args.model, args.closures)
     springs = read_springs_file(args.springs) if args.springs else {}
     frozen = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in springs.items()))
+    values = tuple(sorted((model_arguments(args) or {}).items()))
     return ModelSource(str(robot), None if closures is None else str(closures), frozen,
-                       args.joint_stiffness)  # fmt: skip
+                       args.joint_stiffness, values)  # fmt: skip
 
 
 def run_map(args) -> int:

@@ -1,16 +1,15 @@
 """The options of a map, both command lines: value specifications (``V``,
-``START:STOP:NUM``, ``V1,V2,...``), its size checked before any work, its load, and the
-summary of its plotted index, what the signals do to it.
+``START:STOP:NUM``, ``V1,V2,...``; :func:`closedloop.common.argtypes.parse_values`, read by
+design problems too), its size checked before any work, its load, the summary of its
+plotted index, and what the signals do to it.
 """
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
-from closedloop.cli.parser import INTEGER, UsageError
-from closedloop.common.arrays import decimal
+from closedloop.cli.parser import UsageError
+from closedloop.common.argtypes import MAX_MAP_POINTS, SHOWN_SPEC, SpecError, parse_values, quoted
 
 #: What SIGINT and SIGTERM do to a map, both commands (the epilog of their help).
 SIGNALS_EPILOG = """\
@@ -21,8 +20,9 @@ be written whole and the output printed, then ends the same way ("wrote 400 of 4
 to DIR"). A second signal meanwhile is ignored; no file is left half-written, nor a
 temporary file.
 """
-#: Most points a map may have (a guard against typing one zero too many), both commands.
-MAX_MAP_POINTS = 2_000_000
+
+__all__ = ["MAX_MAP_POINTS", "SHOWN_SPEC", "SIGNALS_EPILOG", "SpecError", "check_map_size",
+           "index_line", "map_wrench", "parse_values", "quoted"]  # fmt: skip
 
 
 def check_map_size(n: int) -> None:
@@ -61,67 +61,3 @@ def index_line(name: str, values: np.ndarray, unit: str) -> str:
         return f"{name}: values at {int(finite.sum())} points [{unit}]{note}"
     v = values[finite, 0]
     return f"{name}: min {v.min():.6g}, max {v.max():.6g} [{unit}]{note}"
-
-
-class SpecError(argparse.ArgumentTypeError):
-    """A value specification that cannot be read."""
-
-
-#: Longest specification echoed whole in an error; a longer one is cut (its length said).
-SHOWN_SPEC = 60
-
-
-def quoted(text: str) -> str:
-    """``text`` quoted for an error message, cut after :data:`SHOWN_SPEC` characters."""
-    if len(text) <= SHOWN_SPEC:
-        return repr(text)
-    return f"{text[:SHOWN_SPEC]!r}... ({len(text)} characters)"
-
-
-def parse_values(text: str) -> np.ndarray:
-    """Values of a specification ``V``, ``START:STOP:NUM`` or ``V1,V2,...`` (no unit change).
-
-    Raises:
-        SpecError: the text does not follow one of the three forms (the message names the
-            first value that is not a number, and cuts a long text).
-    """
-    if ":" in text:
-        parts = text.split(":")
-        try:
-            start, stop, num = parts
-            if not INTEGER.fullmatch(num):
-                raise ValueError(num)
-            count = int(num)
-        except ValueError:
-            raise SpecError(
-                f"{quoted(text)} is not START:STOP:NUM (numbers, NUM an integer)"
-            ) from None
-        if not 1 <= count <= MAX_MAP_POINTS:  # checked before any array is made
-            raise SpecError(f"{quoted(text)}: NUM must be from 1 to {MAX_MAP_POINTS}")
-        items = [start, stop]
-    else:
-        items = text.split(",")
-    try:
-        numbers = [decimal(v) for v in items]
-    except ValueError:
-        bad = next(v for v in items if not _is_number(v))
-        where = "" if bad == text else f"{quoted(text)}: "
-        raise SpecError(
-            f"{where}{quoted(bad)} is not a number; expected a value, START:STOP:NUM or V1,V2,..."
-        ) from None
-    if ":" in text:
-        with np.errstate(invalid="ignore", over="ignore"):  # refused below
-            values = np.linspace(numbers[0], numbers[1], count)
-    else:
-        values = np.array(numbers)
-    if not np.all(np.isfinite(values)):
-        raise SpecError(f"{quoted(text)} has non-finite values")
-    return values
-
-
-def _is_number(text: str) -> bool:
-    try:
-        decimal(text)
-    except ValueError:
-        return False
-    return True

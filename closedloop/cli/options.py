@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from closedloop.cli.parser import finite_float, needs_gravity, number, path_text
+from closedloop.cli.parser import UsageError, finite_float, needs_gravity, number, path_text
 from closedloop.exceptions import InvalidInputError, OpenLoopError
 from closedloop.io.data import BUNDLED_MODELS, ROBOTS, resolve
 from closedloop.io.loader import load_model, read_springs_file
@@ -45,7 +45,7 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
         "model",
         type=path_text,
         metavar="MODEL",
-        help="robot file (.urdf, .xml/.mjcf MJCF, .sdf), a bundled model by name "
+        help="robot file (.urdf, .xacro, .xml/.mjcf MJCF, .sdf), a bundled model by name "
         f"({', '.join(BUNDLED_MODELS)}) or an example-robot-data robot by name "
         f"({', '.join(ROBOTS)})",
     )
@@ -55,6 +55,11 @@ def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None
         metavar="FILE",
         help="closure file (URDF) or side file with name_mot/springs/locked (MJCF, SDF)",
     )
+    p.add_argument(
+        "--arg", type=model_argument, action="append", default=[], metavar="NAME=VALUE",
+        help="an argument of a parametric model (repeatable): a xacro file's <xacro:arg>, "
+        "a name of the closure file's ${...} placeholders",
+    )  # fmt: skip
     if frame:
         p.add_argument("--frame", required=True, metavar="NAME", help="loaded frame")
     springs = p.add_mutually_exclusive_group()
@@ -169,8 +174,31 @@ def configuration(
         ) from None
 
 
+def model_argument(text: str) -> tuple[str, float]:
+    """Option type of ``--arg NAME=VALUE``: (name, finite number)."""
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: expected NAME=VALUE (VALUE a number, SI)")
+    return name.strip(), finite_float(value)
+
+
+def model_arguments(args: argparse.Namespace) -> dict[str, float] | None:
+    """name -> value of the ``--arg`` options, or None without any.
+
+    Raises:
+        UsageError: a name given twice.
+    """
+    names = [name for name, _ in args.arg]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise UsageError(f"--arg {twice[0]}=... given {names.count(twice[0])} times; expected "
+                         "one value a name")  # fmt: skip
+    return dict(args.arg) or None
+
+
 def load_from_args(args: argparse.Namespace, geometry: bool = False) -> ClosedLoopModel:
-    """The model of :func:`add_source_arguments`' options (MODEL, --closures, springs)."""
+    """The model of :func:`add_source_arguments`' options (MODEL, --closures, springs,
+    --arg)."""
     springs = read_springs_file(args.springs) if args.springs else None
     robot, closures = resolve(args.model, args.closures)
     return load_model(
@@ -179,6 +207,7 @@ def load_from_args(args: argparse.Namespace, geometry: bool = False) -> ClosedLo
         springs=springs,
         joint_stiffness=args.joint_stiffness,
         geometry=geometry,
+        args=model_arguments(args),
     )
 
 

@@ -9,8 +9,9 @@ import argparse
 import re
 import sys
 
+from closedloop.common.argtypes import INTEGER as INTEGER  # option types, shared below the CLI
 from closedloop.common.argtypes import (
-    finite_float as finite_float,  # option types, shared below the CLI
+    finite_float as finite_float,
 )
 from closedloop.common.argtypes import number as number
 from closedloop.exceptions import InvalidInputError
@@ -22,8 +23,6 @@ class UsageError(InvalidInputError):
 
 #: A command-line value that reads as a negative number (``-1e5``, ``-.5``, ``-inf``).
 _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|infinity|nan"
-#: An integer as a command line takes it: ASCII digits after an optional sign.
-INTEGER = re.compile(r"[-+]?[0-9]+")
 #: A value that starts with a minus sign: a number, or a specification whose first number
 #: is negative (``-90:90:3``, ``-1,0,1``), not an option.
 NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})([:,][-+.\w]*)*$", re.I | re.ASCII)

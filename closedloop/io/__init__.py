@@ -1,2 +1,2 @@
-"""Model files in: URDF + closure files, MJCF, SDF, bundled and example-robot-data
-models, strict YAML."""
+"""Model files in: URDF + closure files, xacro, MJCF, SDF, bundled and example-robot-data
+models, strict YAML, the arithmetic of parametric files."""

@@ -19,7 +19,9 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
                                            # section: geometry = the link's URDF shape
 
 A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
-number (``1e5``, which YAML 1.1 leaves as a string) is accepted.
+number (``1e5``, which YAML 1.1 leaves as a string) is accepted. A value may be a
+placeholder ``${expr}`` of the model's arguments (``load_model(..., args=)``), computed
+before the YAML is read (:func:`closedloop.io.expressions.substitute`).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ import pinocchio as pin
 from closedloop.common.arrays import decimal, overflowing, real_number
 from closedloop.common.input_files import read_text
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
+from closedloop.io.expressions import Arguments, substitute
 from closedloop.model.closures import CLOSURE_TYPES, joint_id, unknown_type
 from closedloop.model.spring_spec import check_locked_springs
 
@@ -75,13 +78,25 @@ def existing_path(path: str | Path, what: str) -> Path:
     return path
 
 
-def _read_yaml_mapping(path: str | Path, what: str) -> tuple[Path, dict]:
+def read_yaml_mapping(
+    path: str | Path, what: str, arguments: Arguments | None = None
+) -> tuple[Path, dict]:
+    """(path, the mapping of a YAML file) read strictly (:mod:`closedloop.io.strict_yaml`),
+    its ``${expr}`` placeholders computed first (:func:`closedloop.io.expressions.substitute`,
+    the names of ``arguments``); ``what`` names the file in the errors (``"closure file"``).
+
+    Raises:
+        ModelFileError: a missing or unreadable file, invalid YAML, not a mapping.
+        ExpressionError: a placeholder refused or without a value.
+    """
     import yaml  # on demand, as below: a model without such a file reads no YAML
 
     from closedloop.io import strict_yaml
 
     path = existing_path(path, what)
     text = read_text(path, f"{what} {str(path)!r}", "YAML")
+    if "${" in text:  # placeholders: their values first (no argument: the constants)
+        text = substitute(text, arguments or Arguments(), path, what)
     try:
         doc = strict_yaml.load(text)
     except yaml.YAMLError as e:
@@ -153,18 +168,22 @@ def _name_list(doc: dict, key: str, where: str) -> tuple[str, ...] | None:
     return tuple(names)
 
 
-def read_closure_file(path: str | Path, keys: Sequence[str] = CLOSURE_KEYS) -> ClosureSpec:
+def read_closure_file(
+    path: str | Path, keys: Sequence[str] = CLOSURE_KEYS, arguments: Arguments | None = None
+) -> ClosureSpec:
     """Parse and validate a closure file.
 
     Args:
         path: YAML file (see the module docstring).
         keys: keys allowed at top level (:data:`SIDE_FILE_KEYS` for an MJCF side file).
+        arguments: the values of its ``${expr}`` placeholders' names (None: none).
 
     Raises:
         ModelFileError: missing or unreadable file, invalid YAML, unknown key, malformed
             value; the message names the file and the fault.
+        ExpressionError: a placeholder refused or without a value (its line and name).
     """
-    path, doc = _read_yaml_mapping(path, "closure file")
+    path, doc = read_yaml_mapping(path, "closure file", arguments)
     where = f"closure file {str(path)!r}"
     unknown = set(doc) - set(keys)
     if unknown:
@@ -268,12 +287,15 @@ def check_spec_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
         check_locked_springs(spec.springs, spec.locked)
 
 
-def read_side_file(model: pin.Model, side_file, springs: dict) -> tuple[ClosureSpec, dict]:
+def read_side_file(
+    model: pin.Model, side_file, springs: dict, arguments: Arguments | None = None
+) -> tuple[ClosureSpec, dict]:
     """(the side file's contents, its joint names checked; the robot file's ``springs``
-    with those of the side file merged over them, those of the joints it locks removed)."""
+    with those of the side file merged over them, those of the joints it locks removed);
+    ``arguments``: its placeholders' values."""
     if side_file is None:
         return ClosureSpec(), springs
-    spec = read_closure_file(side_file, SIDE_FILE_KEYS)
+    spec = read_closure_file(side_file, SIDE_FILE_KEYS, arguments)
     check_spec_names(model, spec, f"closure file {str(side_file)!r}")
     kept = {n: k for n, k in springs.items() if n not in spec.locked}
     return spec, {**kept, **spec.springs}
@@ -285,5 +307,5 @@ def read_springs_file(path: str | Path) -> dict[str, Stiffness]:
     Raises:
         ModelFileError: missing file, invalid YAML, a value that is not a number >= 0.
     """
-    path, doc = _read_yaml_mapping(path, "springs file")
+    path, doc = read_yaml_mapping(path, "springs file")
     return _check_springs(doc, f"springs file {str(path)!r}")

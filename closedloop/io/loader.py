@@ -18,10 +18,15 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
   it locks losing the robot file's spring). An SDF's side file likewise.
 * Keyword ``springs``: merged over all of the above.
 * Keyword ``joint_stiffness``: given to every actuated joint that has no spring yet.
+
+Parametric models: a xacro file (``*.xacro``, a URDF after :mod:`closedloop.io.xacro_files`)
+with its ``<xacro:arg>`` elements, and a closure or side file with ``${expr}`` placeholders
+(:mod:`closedloop.io.expressions`), take their values from the keyword ``args``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -56,6 +61,7 @@ from closedloop.io.data import BUNDLED_MODELS, ROBOTS
 from closedloop.io.data import (
     robot_data_dir as robot_data_dir,  # its former home; cl.robot_data_dir
 )
+from closedloop.io.expressions import Arguments
 from closedloop.io.mjcf import (
     anchor_equalities,
     match_parsed,
@@ -71,7 +77,8 @@ from closedloop.model.closures import Closure, closure_between_frames, joint_nam
 from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
 
 #: Model-file suffixes and their format.
-MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf"}
+MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf",
+                  ".xacro": "xacro"}  # fmt: skip
 
 
 def _by_name_hint(path: str | os.PathLike) -> str:
@@ -170,16 +177,20 @@ class _Tree:
 
 
 def _read_urdf(
-    path: Path, closures: str | Path | None, geometry: bool, beams=None, elastic=None
-) -> _Tree:
-    spec = read_closure_file(closures) if closures is not None else ClosureSpec()
-    if spec.balls:
-        copy = urdf_with_balls(path, spec.balls)
-        try:
-            return _read_urdf_tree(copy, spec, closures, geometry, beams, elastic, shown=path)
-        finally:
-            copy.unlink()
-    return _read_urdf_tree(path, spec, closures, geometry, beams, elastic)
+    path: Path, closures: str | Path | None, geometry: bool, beams=None, elastic=None,
+    arguments: Arguments | None = None, xacro: bool = False,
+) -> _Tree:  # fmt: skip
+    with contextlib.ExitStack() as stack:
+        source = path
+        if xacro:  # expanded first: its arguments' defaults are the placeholders' too
+            from closedloop.io.xacro_files import expanded_urdf
+
+            source = stack.enter_context(expanded_urdf(path, arguments or Arguments()))
+        spec = read_closure_file(closures, arguments=arguments) if closures else ClosureSpec()
+        if spec.balls:
+            source = urdf_with_balls(source, spec.balls)
+            stack.callback(source.unlink)
+        return _read_urdf_tree(source, spec, closures, geometry, beams, elastic, shown=path)
 
 
 def _read_urdf_tree(
@@ -277,9 +288,9 @@ def _check_limits(model: pin.Model, path: Path) -> None:
             )
 
 
-def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool, arguments=None) -> _Tree:
     try:
-        return _read_mjcf_tree(path, side_file, geometry)
+        return _read_mjcf_tree(path, side_file, geometry, arguments)
     except RecursionError:  # the readers follow the bodies and defaults recursively
         raise ModelFileError(
             f"MJCF file {str(path)!r}: its elements (bodies, default classes) are nested too "
@@ -288,7 +299,7 @@ def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool) -> _Tre
         ) from None
 
 
-def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) -> _Tree:
+def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool, arguments) -> _Tree:
     extras = read_mjcf_extras(path)  # the file checked before Pinocchio reads it
     with tempfile.TemporaryDirectory() as folder:  # Pinocchio reads a copy (closedloop.io.mjcf)
         parsed = str(pinocchio_copy(path, Path(folder)))
@@ -304,7 +315,7 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
         )
     where = f"robot file {str(path)!r}"
     springs = {n: k for n, v in extras.stiffness.items() if (k := file_number(v, where, n)) > 0}
-    spec, springs = read_side_file(model, side_file, springs)
+    spec, springs = read_side_file(model, side_file, springs, arguments)
     if spec.actuated is None:  # the actuators' joints
         check_spec_names(model, ClosureSpec(actuated=extras.actuated), where)
     return _Tree(
@@ -319,10 +330,11 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool) ->
     )
 
 
-def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False) -> _Tree:
+def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False,
+              arguments=None) -> _Tree:  # fmt: skip
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.io.sdf
     _check_masses(robot.model, path)
-    spec, springs = read_side_file(robot.model, side_file, robot.springs)
+    spec, springs = read_side_file(robot.model, side_file, robot.springs, arguments)
     return _Tree(robot.model, robot.closures, spec.actuated or (), springs, spec.locked,
                  robot.visual)  # fmt: skip
 
@@ -339,8 +351,17 @@ def load_model(
     free_base: bool = False,
     beams: Mapping[str, Mapping] | None = None,
     closure_springs: Mapping[int, Sequence] | None = None,
+    args: Mapping[str, float] | None = None,
 ) -> ClosedLoopModel:
-    """Load a URDF (``.urdf``), MJCF (``.xml``, ``.mjcf``) or SDF (``.sdf``) model.
+    """Load a URDF (``.urdf``), xacro (``.xacro``), MJCF (``.xml``, ``.mjcf``) or SDF
+    (``.sdf``) model.
+
+    A xacro file is a URDF with macros, properties and ``<xacro:arg>`` arguments (ROS's
+    macro language), expanded with its arguments set from ``args`` once every file it
+    reads is checked (:mod:`closedloop.io.xacro_files`: no code runs, no other file is
+    read). A closure or side file may hold ``${expr}`` placeholders: arithmetic on the
+    names of ``args`` (and the xacro file's numeric defaults), ``pi``, ``e``, ``tau`` and
+    math functions (:mod:`closedloop.io.expressions`), e.g. ``d: ${0.1 * L}``.
 
     An SDF model's loops are its loop-closing joints and its springs the joints'
     ``spring_stiffness`` (:mod:`closedloop.io.sdf`; it names no actuated joint: give them as
@@ -373,13 +394,19 @@ def load_model(
             (:mod:`closedloop.model.elastic_closures`); the model's reference
             configurations (:meth:`ClosedLoopModel.reference_configuration`) are extended
             with the values of the joints added at the cuts.
+        args: the values of a parametric model's arguments, name -> number (SI): a xacro
+            file's ``<xacro:arg>`` elements and the closure file's placeholders' names; each must
+            be used by one of the files.
 
     Raises:
         ModelFileError: missing or unparsable robot or closure file, unknown format; the
             message names the file and the fault.
         NameNotFoundError: a frame or joint name that the model does not have.
         InvalidInputError: a negative or NaN stiffness given as keyword; a path that is
-            not a str or os.PathLike.
+            not a str or os.PathLike; an argument of ``args`` that is not a finite number
+            or that no file uses.
+        ExpressionError: a placeholder or xacro expression that is refused or has no
+            value, a missing argument; the message names the file, the line and the name.
     """
     for name, value in (("path", path), ("closures", closures)):
         if not isinstance(value, str | os.PathLike) and (name == "path" or value is not None):
@@ -393,22 +420,22 @@ def load_model(
             raise InvalidInputError(
                 f"load_model: {name} must be a mapping {what}, got {type(value).__name__}"
             )
+    arguments = Arguments(args)
     kind = file_format or MODEL_SUFFIXES.get(Path(path).suffix.lower())
-    if kind not in ("urdf", "mjcf", "sdf") or (free_base and kind != "sdf"):
+    if kind not in ("urdf", "mjcf", "sdf", "xacro") or (free_base and kind != "sdf"):
         raise ModelFileError(
             f"robot file {str(path)!r}: unknown format {kind or Path(path).suffix!r}; expected "
-            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf' or 'sdf' "
-            "(free_base: SDF only)" + _by_name_hint(path)
+            f"a suffix {', '.join(MODEL_SUFFIXES)} or file_format 'urdf', 'mjcf', 'sdf' or "
+            "'xacro' (free_base: SDF only)" + _by_name_hint(path)
         )
     path = existing_path(path, "robot file")
     if kind == "sdf":
-        tree = _read_sdf(path, closures, geometry, free_base)
+        tree = _read_sdf(path, closures, geometry, free_base, arguments)
+    elif kind == "mjcf":
+        tree = _read_mjcf(path, closures, geometry, arguments)
     else:
-        tree = (
-            _read_urdf(path, closures, geometry, beams or {}, closure_springs)
-            if kind == "urdf"
-            else _read_mjcf(path, closures, geometry)
-        )
+        tree = _read_urdf(path, closures, geometry, beams or {}, closure_springs, arguments,
+                          xacro=kind == "xacro")  # fmt: skip
     if tree.visual is not None:  # read by Pinocchio, whose assimp expands no entity
         meshes = (g.meshPath for g in tree.visual.geometryObjects)
         refuse_xml_entities(meshes, f"robot file {str(path)!r}")
@@ -454,12 +481,13 @@ def load_model(
         beam_masses=dict(tree.beam_masses),
         unweighed_bodies=dict(tree.unweighed),
     )
-    if kind != "urdf":  # MJCF, SDF: the beams of the side file and the keyword
-        side = read_closure_file(closures, SIDE_FILE_KEYS).beams if closures else {}
+    if kind not in ("urdf", "xacro"):  # MJCF, SDF: the beams of the side file and the keyword
+        side = read_closure_file(closures, SIDE_FILE_KEYS, arguments).beams if closures else {}
         if side or beams:
             clm = clm.with_beams({**side, **(beams or {})})
         if closure_springs:
             clm = _with_closure_springs(clm, closure_springs, path)
+    arguments.check_used([str(path), *([str(closures)] if closures else [])])
     return clm
 
 
