@@ -62,10 +62,11 @@ IK_TOL = ASSEMBLY_TOL
 TARGET_STEP = INPUT_STEP
 #: Gauss-Newton iterations per continuation step.
 MAX_ITER = 30
-#: Halvings in a row of a continuation step that does not converge before the target
-#: counts as unreachable (down to a step of 1e-3 of TARGET_STEP: 5e-5 L); a step that
-#: converges doubles the next one, up to TARGET_STEP.
-MAX_HALVINGS = 10
+#: A continuation step that does not converge is halved, one that converges doubles the
+#: next (up to TARGET_STEP); the target counts as unreachable when a step falls below
+#: 2^-MAX_HALVINGS TARGET_STEP (5e-5 L) or after MAX_FAILURES steps that failed (a way
+#: that creeps up to the workspace's boundary in ever smaller steps).
+MAX_HALVINGS, MAX_FAILURES = 10, 30
 
 
 def inverse_kinematics(
@@ -185,19 +186,19 @@ def reach(
     goal = task.completed(start)
     d_t, d_r = distance(start, goal)
     n = max(1, math.ceil(max(d_t / clm.length, d_r) / TARGET_STEP))
-    s, ds, halvings, iterations = 0.0, 1.0 / n, 0, 0
+    s, ds, failures, iterations = 0.0, 1.0 / n, 0, 0
     while s < 1.0:
         s_try = 1.0 if s + ds >= 1.0 - 1e-12 else s + ds
         rows.task = task if s_try == 1.0 else task.at(interpolate(start, goal, s_try))
         q_new, ok, it = _solve(clm, rows, q)
         iterations += it
         if ok and not task.flipped(rows.placement()):
-            q, s, halvings, ds = q_new, s_try, 0, min(2.0 * ds, 1.0 / n)
+            q, s, ds = q_new, s_try, min(2.0 * ds, 1.0 / n)
             continue
-        halvings += 1
-        if halvings > MAX_HALVINGS:
-            raise _unreachable(clm, rows, task, q, s)
+        failures += 1
         ds *= 0.5
+        if failures > MAX_FAILURES or ds < 0.5**MAX_HALVINGS / n:
+            raise _unreachable(clm, rows, task, q, s)
     a = close_loops(clm, q, tol=tol)  # an Assembly, checked regular (not a change point)
     _check_pose(clm, rows, a.q)
     bad = joints_outside_limits(clm, a.q)
