@@ -45,6 +45,8 @@ class Interrupted(KeyboardInterrupt):
             :class:`~closedloop.analysis.maps.StiffnessMap` or a
             :class:`~cahyman_pin.sweep.SweepResult`), or None.
         written: the folder ``partial`` was written to (:meth:`write`), or None.
+        progress: (points computed, points in all) of a run without ``data`` (a path,
+            :func:`closedloop.analysis.paths.follow_path`), or None.
     """
 
     def __init__(self, signum: int = signal.SIGINT):
@@ -53,6 +55,7 @@ class Interrupted(KeyboardInterrupt):
         self.data: PointData | None = None
         self.partial = None
         self.written = None
+        self.progress: tuple[int, int] | None = None
 
     @property
     def reason(self) -> str:
@@ -68,10 +71,12 @@ class Interrupted(KeyboardInterrupt):
 
     def __str__(self) -> str:
         text = f"interrupted ({self.signum.name})"
-        if self.data is None or self.written is None:
+        counts = self.progress
+        if self.data is not None:
+            counts = (int(np.count_nonzero(self.data.codes != NOT_COMPUTED)), len(self.data.codes))
+        if counts is None or self.written is None:
             return f"{text}; nothing written"
-        done = int(np.count_nonzero(self.data.codes != NOT_COMPUTED))
-        return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
+        return f"{text}: wrote {counts[0]} of {counts[1]} points to {self.written}"
 
 
 @contextlib.contextmanager
