@@ -181,7 +181,7 @@ def reach(
     continuation of the module docstring, then the answer checked (regular, within the
     limits)."""
     rows = _Rows(clm, frame, task, tol)
-    rows.residual(q)
+    generic = _rank_loss(clm, rows, q)[0]  # rows the mechanism never moves (a planar one's z)
     start = rows.placement()
     goal = task.completed(start)
     d_t, d_r = distance(start, goal)
@@ -198,9 +198,9 @@ def reach(
         failures += 1
         ds *= 0.5
         if failures > MAX_FAILURES or ds < 0.5**MAX_HALVINGS / n:
-            raise _unreachable(clm, rows, task, q, s)
+            raise _unreachable(clm, rows, task, q, s, generic)
     a = close_loops(clm, q, tol=tol)  # an Assembly, checked regular (not a change point)
-    _check_pose(clm, rows, a.q)
+    _check_pose(clm, rows, a.q, generic)
     bad = joints_outside_limits(clm, a.q)
     if bad and check_limits:
         raise OutsideLimitsError(
@@ -243,25 +243,28 @@ def _rank_loss(clm: ClosedLoopModel, rows: _Rows, q: np.ndarray) -> tuple[int, f
     return lost, smallest
 
 
-def _check_pose(clm: ClosedLoopModel, rows: _Rows, q: np.ndarray) -> None:
-    """Refuse a configuration at which the task's rows lose rank (a singular pose)."""
+def _check_pose(clm: ClosedLoopModel, rows: _Rows, q: np.ndarray, generic: int) -> None:
+    """Refuse a configuration at which the task's rows lose rank (a singular pose): more of
+    them than the ``generic`` ones lost at the start (rows the mechanism moves nowhere near,
+    a planar mechanism's out-of-plane ones, are not a singularity)."""
     lost, smallest = _rank_loss(clm, rows, q)
-    if lost > 0:
+    if lost > generic:
         raise SingularConfigurationError(
             f"frame {rows.frame!r} of {clm.name!r} meets its target ({_described(rows.task)}) "
-            f"at a singular pose: the joints cannot move it along {lost} of the task's "
+            f"at a singular pose: the joints cannot move it along {lost - generic} of the task's "
             f"{rows.task.size} directions there (unit-free singular value ratio "
             f"{smallest:.1e}), so the branch is not determined; give a target away from it"
         )
 
 
-def _unreachable(clm: ClosedLoopModel, rows: _Rows, task: FrameTask, q, s: float):
-    """The UnreachableError of a way that stops at the fraction s, at q."""
+def _unreachable(clm: ClosedLoopModel, rows: _Rows, task: FrameTask, q, s: float, generic: int):
+    """The UnreachableError of a way that stops at the fraction s, at q (``generic``: the
+    task's rows lost at the start, :func:`_check_pose`)."""
     rows.task = task
     r = rows.residual(q)[0]
     M = rows.placement()
     left = distance(M, task.completed(M))
-    lost, _ = _rank_loss(clm, rows, q)
+    lost = _rank_loss(clm, rows, q)[0] - generic
     where = (
         f", at a singular pose (the joints cannot move the frame along {lost} of the task's "
         "directions there: the workspace's boundary or a singularity on the way)"

@@ -30,7 +30,7 @@ ATOL_SAME = 1e-9
 
 @pytest.fixture(scope="module")
 def ur5(ur5_urdf):
-    return load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4))
+    return load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4), geometry=False)
 
 
 def _target(clm, q, frame):
@@ -140,7 +140,7 @@ def test_singular_pose_is_refused(ur5):
 
 
 def test_joint_limits_are_named(ur5_urdf):
-    ur5 = load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4))
+    ur5 = load_urdf(ur5_urdf, springs=dict.fromkeys(UR5_JOINTS, 1e4), geometry=False)
     ur5.model.upperPositionLimit[2] = 1.0  # the elbow, at 1.5 rad in UR5_Q
     with pytest.raises(cl.OutsideLimitsError, match="elbow_joint") as info:
         cl.inverse_kinematics(ur5, "tool0", _target(ur5, UR5_Q, "tool0"), q0=UR5_Q - 0.6)
@@ -164,3 +164,14 @@ def test_bad_input(ur5, kwargs, message):
     args = {"target": np.r_[0.5, 0.1, 0.4, 0, 0, 0, 1.0], **kwargs}
     with pytest.raises(cl.InvalidInputError, match=message):
         cl.inverse_kinematics(ur5, "tool0", args.pop("target"), q0=UR5_Q, **args)
+
+
+def test_planar_five_bar_meets_a_position():
+    """A planar mechanism never moves its frame out of its plane: that row of the position
+    task is no singularity; the inputs of a pose come back."""
+    clm = cl.load_model(cl.data.path("fivebar5.urdf"), cl.data.path("fivebar5.yaml"))
+    q0 = cl.assemble(clm, None, clm.reference_configuration()).q
+    inputs = clm.actuated_values(q0) + np.array([0.1, -0.05])
+    q1 = cl.assemble(clm, inputs, q0).q
+    a = cl.inverse_kinematics(clm, "E", _target(clm, q1, "E"), task="position", q0=q0)
+    np.testing.assert_allclose(clm.actuated_values(a.q), inputs, atol=ATOL_SAME)
