@@ -32,7 +32,7 @@ RTOL_DEFLECTION = 1e-9
 def spindle(ur5_urdf):
     """The UR5 with a spindle whose axis is parallel to the flange's, 12 cm off it and 10 cm
     beyond: a turn about the spindle's axis swings the wrist around it."""
-    ur5 = load_urdf(ur5_urdf, springs=dict(zip(UR5_JOINTS, SPRINGS, strict=True)))
+    ur5 = load_urdf(ur5_urdf, springs=dict(zip(UR5_JOINTS, SPRINGS, strict=True)), geometry=False)
     model = pin.Model(ur5.model)
     f = model.frames[model.getFrameId("tool0")]
     head = pin.SE3(np.eye(3), np.array([0.12, 0.0, 0.1]))
