@@ -22,7 +22,8 @@ class ModelSource:
     joint_stiffness: float | None = None
 
     def load(self) -> ClosedLoopModel:
-        """The model (loaded once per process)."""
+        """The model (loaded once per process), without its visual geometry: nothing is
+        drawn where a model is loaded so (the meshes of a UR5 take seconds to read)."""
         return _load(self)
 
 
@@ -34,6 +35,7 @@ def _load(source: ModelSource) -> ClosedLoopModel:
         source.closures,
         springs=springs or None,
         joint_stiffness=source.joint_stiffness,
+        geometry=False,
     )
 
 

@@ -98,6 +98,7 @@ class PathStatics:
         self.weight, self.check_limits = weight, check_limits
         # the last point's q_target, q_loaded, q_compensated and tau
         self._last: tuple | None = None
+        self._compensation = None  # the last point's, whose Newton matrix starts the next
 
     def solve(self, q_target: np.ndarray, wrench: np.ndarray) -> PointStatics:
         """The statics of the point whose unloaded configuration is q_target (nq,),
@@ -119,7 +120,7 @@ class PathStatics:
         )
         task = FrameTask(self.held, P)
         start = q_loaded if last is None else carried(clm, last[2], last[0], q_target)
-        comp = compensate(clm, frame, task, q_target, load, start)
+        comp = compensate(clm, frame, task, q_target, load, start, self._compensation)
         rest = rest_at(clm, q_target, comp.commands)
         if branch_sign(clm, frame, rest, comp.q, load) * tau <= 0.0:
             raise EquilibriumError(
@@ -138,7 +139,7 @@ class PathStatics:
         q_first, _ = loaded_equilibrium(
             clm, frame, first, load, comp.q, sign=tau, enforce_limits=False
         )
-        self._last = (q_target, q_loaded, comp.q, tau)
+        self._last, self._compensation = (q_target, q_loaded, comp.q, tau), comp
         return PointStatics(
             q_loaded=q_loaded,
             error=pose_error(placement(clm, q_loaded, frame), P),

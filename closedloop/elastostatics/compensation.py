@@ -19,7 +19,9 @@ G)_A the generalised force that the actuators' springs k_A hold (u = q_A for a r
 actuator). The unknowns are the actuated coordinates and the free ones together: Newton
 with the held model's tangent stiffness (:func:`closedloop.elastostatics.tangent.tangent_stiffness`,
 which carries the geometric stiffness of the load, the loop curvature and the weight's),
-whose answer is exact to the statics' tolerance, not only to first order. A serial arm
+its matrix kept for the next iterates, and the next point's, while they converge (chord
+steps, :data:`CHORD_RATE`), whose answer is exact to the statics' tolerance, not only to
+first order. A serial arm
 with springs on its actuators only has nothing to settle: q is the unloaded pose and
 u = q - K^-1 (J^T w - G(q)), the closed form.
 
@@ -32,7 +34,8 @@ wherever that Newton fails or is not kept.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -57,6 +60,10 @@ from closedloop.model.gravity import Load
 TASK_TOL = 1e-12
 #: Newton iterations of a compensation, and of a warm-started loaded equilibrium.
 MAX_ITER = 20
+#: A compensation's Newton matrix is kept for the next iterate (a chord step: no new
+#: tangent stiffness) while the residual falls by this factor a step at least; from a warm
+#: start it falls like the square of the first step's, far below it.
+CHORD_RATE = 0.1
 #: A warm-started equilibrium is kept when Newton ends within WARM_RATIO of the guess's
 #: deflection from its start (plus the resolution of the equilibria, JUMP_FLOOR): the
 #: statics' bound on an increment's corrector (JUMP_RATIO), against a jump to another
@@ -193,6 +200,8 @@ class Compensation:
             free coordinates but the actuated ones [N m, N] (the actuators' springs hold
             theirs at ``commands`` by construction).
         iterations: Newton iterations.
+        system: the last Newton matrix (with its basis of the equilibrium's rows), for the
+            next point (``compensate(..., previous=)``), or None.
     """
 
     q: np.ndarray
@@ -201,6 +210,7 @@ class Compensation:
     closure_residual: float
     force_residual: float
     iterations: int
+    system: tuple | None = field(default=None, repr=False)
 
 
 def compensate(
@@ -210,6 +220,7 @@ def compensate(
     q_rest: np.ndarray,
     load: Load,
     guess: np.ndarray,
+    previous: Compensation | None = None,
 ) -> Compensation:
     """The commands whose equilibrium under ``load`` meets ``task`` (module docstring).
 
@@ -222,6 +233,8 @@ def compensate(
         load: the wrench at the frame and the weight.
         guess: (nq,) start of Newton (the uncompensated equilibrium, or the last point's
             compensated one carried along the path).
+        previous: the last point's compensation, whose Newton matrix starts this one's
+            iterations (chord steps, replaced by a new one where they do not converge).
 
     Raises:
         EquilibriumError: Newton does not converge in :data:`MAX_ITER` iterations (the
@@ -236,6 +249,8 @@ def compensate(
     task_scale = np.where(task.linear, clm.length, 1.0)
     row_tol = units.rows * CLOSURE_TOL
     q, fid = np.array(guess, dtype=float), clm.frame_id(frame)
+    # the Newton matrix (with its basis), the last residual
+    system, last = (None if previous is None else previous.system), math.inf
     for it in range(MAX_ITER + 1):
         st = eqs.evaluate(q, load)  # the kinematics of q in held.data
         M = held.data.oMf[fid]
@@ -253,7 +268,18 @@ def compensate(
                 st["force"],
                 1.0,
             )
-        step = _step(held, eqs, q, load, st, task, M, unknown, cols, task_scale)
+        fresh = system is None
+        if fresh:
+            system = _matrix(held, eqs, q, load, st, task, M, unknown, cols, task_scale)
+        rhs = _rhs(eqs, st, system, t)
+        size = float(np.max(np.abs(rhs)))
+        if not fresh and not size <= CHORD_RATE * last:  # the chord no longer contracts
+            system = _matrix(held, eqs, q, load, st, task, M, unknown, cols, task_scale)
+            rhs = _rhs(eqs, st, system, t)
+            size = math.inf  # a new matrix: no contraction asked of its first step
+        last = size
+        step = np.zeros(clm.model.nv)
+        step[unknown] = cols * min_norm_solve(system[0], -rhs)
         ratio = float(np.max(np.abs(step[unknown]) / (MAX_STEP * cols), initial=0.0))
         if ratio > 1.0:
             step /= ratio
@@ -274,31 +300,36 @@ def compensate(
         closure_residual=st["closure"],
         force_residual=st["force"],
         iterations=it,
+        system=system,
     )
 
 
-def _step(held, eqs, q, load, st, task, M, unknown, cols, task_scale) -> np.ndarray:
-    """(nv,) Newton step of :func:`compensate` on the ``unknown`` coordinates (the held
-    model's free ones, then the actuated ones), scaled by ``cols``: the closures, the
-    equilibrium on the held model's admissible motions (rows on the scale of its stiffest
-    spring, :meth:`EquilibriumEquations.motions`) and the task's rows, solved together
-    (minimum norm where the actuators leave freedom)."""
-    free, units, nv = eqs.free, eqs.units, held.model.nv
-    c, Jc = st["c"], st["Jc"]
+def _matrix(held, eqs, q, load, st, task, M, unknown, cols, task_scale) -> tuple:
+    """(matrix, B, scale) of a Newton step of :func:`compensate` at q on the ``unknown``
+    coordinates (the held model's free ones, then the actuated ones), scaled by ``cols``:
+    the closures' rows, the equilibrium's on the held model's admissible motions B (on the
+    scale of its stiffest spring, :meth:`EquilibriumEquations.motions`) with the held
+    model's tangent stiffness, and the task's, stacked; solved by minimum-norm least squares
+    (where the actuators leave freedom)."""
+    free, units = eqs.free, eqs.units
     J = frame_jacobian(held, q, eqs.frame, "world", update=False)
     H = tangent_stiffness(
         held, q, eqs.q_rest, eqs.frame, load.wrench, st["lam"], gravity=load, update=False
     )
     B, scale = eqs.motions(st)
     rows = [
-        Jc[:, unknown] * cols / units.rows[:, None],
+        st["Jc"][:, unknown] * cols / units.rows[:, None],
         B.T @ (eqs.free_scales[:, None] * H[np.ix_(free, unknown)] * cols) / scale,
         task.jacobian(M, J)[:, unknown] * cols / task_scale[:, None],
     ]
-    rhs = np.concatenate(
-        [c / units.rows, B.T @ (eqs.free_scales * st["F"]) / scale, task.residual(M) / task_scale]
-    )
-    x = min_norm_solve(np.vstack(rows), -rhs)
-    step = np.zeros(nv)
-    step[unknown] = cols * x
-    return step
+    return np.vstack(rows), B, scale
+
+
+def _rhs(eqs, st: dict, system: tuple, task_rows: np.ndarray) -> np.ndarray:
+    """The residuals that a step of ``system`` (:func:`_matrix`) cancels: the closures,
+    the unbalanced force on the motions B of the system (zero at equilibrium whatever the
+    basis, so that a matrix of an earlier iterate still applies: a chord step) and the
+    task's rows (scaled, ``task_rows``)."""
+    _, B, scale = system
+    unbalanced = B.T @ (eqs.free_scales * st["unbalanced"]) / scale
+    return np.concatenate([st["c"] / eqs.units.rows, unbalanced, task_rows])
