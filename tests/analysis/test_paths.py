@@ -59,17 +59,23 @@ def ur5_path(ur5):
     return path, cl.follow_path(ur5, "tool0", path, wrench=WRENCH, gravity=GRAVITY, q0=UR5_START)
 
 
+def _jacobian_and_weight(model, theta):
+    """(tool0's Jacobian (6, 6), world axes at its origin; the generalised gravity G (6,)
+    [N m]) at theta, from Pinocchio."""
+    fid = model.getFrameId("tool0")
+    J = pin.computeFrameJacobian(model, model.createData(), theta, fid, pin.LOCAL_WORLD_ALIGNED)
+    heavy = pin.Model(model)
+    heavy.gravity = pin.Motion(np.r_[GRAVITY, np.zeros(3)])
+    return J, pin.computeGeneralizedGravity(heavy, heavy.createData(), theta)
+
+
 def test_serial_arm_compensation_is_the_closed_form(ur5, ur5_path):
     """With springs on its actuators only, a serial arm holds the target pose at the
     unloaded configuration itself, with theta_cmd = theta - K^-1 (J^T w - G(theta))."""
     path, r = ur5_path
-    model, data = ur5.model, ur5.model.createData()
-    heavy = pin.Model(model)
-    heavy.gravity = pin.Motion(np.r_[GRAVITY, np.zeros(3)])
-    fid = model.getFrameId("tool0")
+    model = ur5.model
     for i, theta in enumerate(r.q_target):
-        J = pin.computeFrameJacobian(model, data, theta, fid, pin.LOCAL_WORLD_ALIGNED)
-        G = pin.computeGeneralizedGravity(heavy, heavy.createData(), theta)
+        J, G = _jacobian_and_weight(model, theta)
         expected = theta - (J.T @ WRENCH - G) / np.array(UR5_SPRINGS)
         np.testing.assert_allclose(r.commands[i], expected, rtol=0, atol=ATOL_SAME)
         np.testing.assert_allclose(r.q_compensated[i], theta, rtol=0, atol=ATOL)
@@ -101,13 +107,9 @@ def test_first_order_compensation_mirrors_the_linear_deflection(ur5, ur5_path):
     the linear deflection J K^-1 (J^T w - G) (written here); under the load they leave a
     residual, the second-order error the exact compensation removes."""
     _, r = ur5_path
-    model, data = ur5.model, ur5.model.createData()
-    heavy = pin.Model(model)
-    heavy.gravity = pin.Motion(np.r_[GRAVITY, np.zeros(3)])
-    fid = model.getFrameId("tool0")
+    model = ur5.model
     for i, theta in enumerate(r.q_target):
-        J = pin.computeFrameJacobian(model, data, theta, fid, pin.LOCAL_WORLD_ALIGNED)
-        G = pin.computeGeneralizedGravity(heavy, heavy.createData(), theta)
+        J, G = _jacobian_and_weight(model, theta)
         twist = J @ ((J.T @ WRENCH - G) / np.array(UR5_SPRINGS))
         np.testing.assert_allclose(r.deflection_first_order[i], twist, rtol=1e-10, atol=0)
         P = placement(model, theta, "tool0")
