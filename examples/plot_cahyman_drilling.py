@@ -57,15 +57,17 @@ top.set_title("CaHyMan, 50 N of thrust along the tool axis")
 fig.tight_layout()
 
 # %%
-# The commands: each input moves by a fraction of a milliradian (the stroke s_4 by
-# micrometres) to hold the tool on the line.
-shift = result.commands - np.array([robot.actuated_values(q) for q in result.q_target])
-fig, ax = plt.subplots(figsize=(6.4, 3.2))
-for name, unit, column in zip(result.joints, result.joint_units, shift.T, strict=True):
-    scale, label = (1e6, "um") if unit == "m" else (1e3, "mrad")
-    ax.plot(x, scale * column, label=f"{name} [{label}]")
-ax.set_xlabel("position along the line [mm]")
-ax.set_ylabel("command - unloaded value")
-ax.legend(fontsize=8, ncol=3)
-ax.set_title("The compensating change of each input")
+# The commands at the middle of the line, against their unloaded values: the angles move by
+# fractions of a milliradian, the stroke s_4 by about a tenth of a millimetre (the thrust
+# pushes along the telescope).
+middle = len(path) // 2
+shift = result.commands[middle] - robot.actuated_values(result.q_target[middle])
+angles = [u == "rad" for u in result.joint_units]
+fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.0), width_ratios=(4, 1))
+left.bar(np.array(result.joints)[angles], 1e3 * shift[angles])
+left.set_ylabel("command - unloaded value [mrad]")
+right.bar(np.array(result.joints)[~np.array(angles)], 1e6 * shift[~np.array(angles)],
+          color="tab:purple")  # fmt: skip
+right.set_ylabel("[um]")
+fig.suptitle("The compensating change of each input, mid-line")
 fig.tight_layout()

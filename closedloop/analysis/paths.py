@@ -139,14 +139,13 @@ def follow_path(
         show_progress: progress on stderr, in points.
 
     Raises:
-        The error of the first point that fails, its message starting with ``path point
-        i of n``, with attributes ``point`` (i) and ``partial`` (a :class:`PathResult` of
-        the points before it): :class:`~closedloop.exceptions.UnreachableError`,
-        :class:`~closedloop.exceptions.SingularConfigurationError`,
-        :class:`~closedloop.exceptions.OutsideLimitsError` (inverse kinematics),
-        :class:`~closedloop.exceptions.EquilibriumError` (a limit load, or a compensation
-        that does not converge), :class:`~closedloop.exceptions.JointLimitError` (an
-        equilibrium or commands beyond the limits), :class:`~closedloop.exceptions.MechanismError`.
+        UnreachableError, SingularConfigurationError, OutsideLimitsError: a point's
+            inverse kinematics fails. EquilibriumError (a limit load, or a compensation
+            that does not converge), JointLimitError (an equilibrium or commands beyond the
+            limits), MechanismError: a point's statics fail. The error of the first point
+            that fails has a message that starts with "path point i of n" and the
+            attributes ``point`` (i) and ``partial`` (a :class:`PathResult` of the points
+            before it).
         InvalidInputError, NameNotFoundError: bad arguments (before any point).
         AssemblyError: q0 cannot be assembled.
         Interrupted: SIGINT or SIGTERM; its ``partial`` the points computed.
