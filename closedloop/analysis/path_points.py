@@ -136,8 +136,8 @@ class PathStatics:
         twist = frame_jacobian(clm, q_target, frame) @ linear_deflection(clm, q_target, frame, load)
         mirrored = pin.SE3(pin.exp3(-twist[3:]) @ P.rotation, P.translation - twist[:3])
         first = np.array(reach(clm, frame, task.at(mirrored), q_target, check_limits=False).q)
-        q_first, _ = loaded_equilibrium(
-            clm, frame, first, load, comp.q, sign=tau, enforce_limits=False
+        q_first, _ = loaded_equilibrium(  # near the compensated one, on its branch
+            clm, frame, first, load, comp.q, enforce_limits=False, stability=False
         )
         self._last, self._compensation = (q_target, q_loaded, comp.q, tau), comp
         return PointStatics(

@@ -73,7 +73,7 @@ class PathResult(ReadOnlyArrays):
             :func:`closedloop.analysis.path_points.compensated_rows`).
         joints: names of the actuated joints, the columns of the commands.
         joint_units: their units, ``"rad"`` or ``"m"``.
-        targets: (n, 7) the path's targets, XYZQUAT.
+        targets: (n, 7) the path's targets, XYZQUAT (quaternions normalised, qw >= 0).
         wrenches: (n, 6) the process wrench at each point [N, N m], world axes, at the
             frame origin (dead load).
         gravity: the weight of links and payloads acting with the wrench, or None.

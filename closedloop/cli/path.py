@@ -26,8 +26,8 @@ robot at the point of largest deflection with the path and the deflected path. A
 cannot be computed (out of reach, a singular pose, a joint limit, a limit load) ends the
 run with one line naming it (exit 3, or 2 for a joint limit of the inverse kinematics),
 the points before it written. SIGINT (Ctrl-C) or SIGTERM stops the run and writes the
-points computed (exit 130 or 143). Long paths run on --workers processes or a Dask
---scheduler (not with --stiffest).
+points computed (exit 130 or 143). Long paths run their statics on --workers processes or
+a Dask --scheduler, once every configuration is found here (each continuing the last).
 """
 
 from __future__ import annotations
@@ -166,8 +166,6 @@ def run_path(args) -> int:
 
     if args.max_change is not None and not args.stiffest:
         raise UsageError(f"--max-change {args.max_change:g} without --stiffest")
-    if args.stiffest and (args.workers or args.scheduler):
-        raise UsageError("--stiffest searches point after point: no --workers or --scheduler")
     path = read_columns(args.path, "--path", PATH_COLUMNS)
     wrench = _wrenches(args, len(path))
     preload = preload_from_args(args)

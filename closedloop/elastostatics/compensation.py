@@ -123,7 +123,8 @@ def loaded_equilibrium(
     *,
     sign: float | None = None,
     enforce_limits: bool = True,
-) -> tuple[np.ndarray, float]:
+    stability: bool = True,
+) -> tuple[np.ndarray, float | None]:
     """(q, tau): the equilibrium q (nq,) under ``load`` whose rest configuration is q_rest
     (nq,), assembled, unloaded, on the branch from rest, and tau, the signed smallest
     singular value of its spring-scaled tangent stiffness
@@ -134,7 +135,9 @@ def loaded_equilibrium(
     when it converges within :data:`WARM_RATIO` of the guess's deflection from its start
     and its tau has the sign ``sign`` (the last point's): no singularity crossed, no jump
     to another branch. Else, or without a guess, the load continuation from rest
-    (:func:`closedloop.elastostatics.statics.solve_equilibrium`) decides.
+    (:func:`closedloop.elastostatics.statics.solve_equilibrium`) decides. ``stability``
+    False: tau is not computed (None) and the warm answer is kept on the distance test
+    alone (a guess that is itself an equilibrium of the branch under this load, nearby).
 
     Raises:
         EquilibriumError: no equilibrium on the branch from rest (a limit load on the way,
@@ -154,8 +157,8 @@ def loaded_equilibrium(
             step_limit=eqs.units.limit(None, MAX_STEP),
             radius=WARM_RATIO * distance(eqs, q_rest, guess) + JUMP_FLOOR,
         )
-        tau = None if q is None else eqs.stability(q, load)[1]
-        if tau is not None and (sign is None or tau * sign > 0.0):
+        tau = None if q is None or not stability else eqs.stability(q, load)[1]
+        if q is not None and (tau is None or sign is None or tau * sign > 0.0):
             bad = joints_outside_limits(clm, q)
             if bad and enforce_limits:
                 raise JointLimitError(
@@ -178,7 +181,7 @@ def loaded_equilibrium(
         enforce_limits=enforce_limits,
     )
     q = np.array(eq.q)
-    return q, eqs.stability(q, load)[1]
+    return q, eqs.stability(q, load)[1] if stability else None
 
 
 def branch_sign(clm: ClosedLoopModel, frame: str, q_rest, q, load: Load) -> float:
