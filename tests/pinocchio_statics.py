@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from helpers import tangent_differences
 
 #: Step [rad, m] of the central differences of the closure gaps: their error, h^2 times
 #: the third derivative (of the order of the links' size, 1 m), 1e-12 of the Jacobian,
@@ -40,15 +41,8 @@ def gaps(clm, q: np.ndarray) -> np.ndarray:
 
 def gap_jacobian(clm, q: np.ndarray) -> np.ndarray:
     """(3 k, nv) Jacobian of :func:`gaps` along ``pin.integrate``, central differences."""
-    nv = clm.model.nv
-    columns = []
-    for i in range(nv):
-        e = np.zeros(nv)
-        e[i] = GAP_STEP
-        plus = gaps(clm, pin.integrate(clm.model, q, e))
-        minus = gaps(clm, pin.integrate(clm.model, q, -e))
-        columns.append((plus - minus) / (2.0 * GAP_STEP))
-    return np.array(columns).T.reshape(-1, nv)
+    J = tangent_differences(clm.model, lambda x: gaps(clm, x), q, GAP_STEP)
+    return J.reshape(-1, clm.model.nv)
 
 
 def unbalance(clm, q, q_rest, frame: str, wrench, gravity=None) -> float:
