@@ -28,7 +28,8 @@ top face, z up, x towards leg 1):
   ``arm`` (QM2, along its local x); ``arm_axial`` (prismatic, spring K_4) at distance L
   from Q, to ``M2``; ``s_4`` (prismatic, actuated, spring K_s) along the arm, to the
   sliding link ``telescope``; frame ``M`` at its tip, x axis along the arm direction w:
-  M = Q + (L + s_4) w at rest.
+  M = Q + (L + s_4) w at rest; frame ``tool`` at M, its z axis along w (the axis of a
+  tool carried by the telescope, :data:`FRAME_TOOL`).
 
 Masses (``CaHyManParams.m_*``, default 0: no ``<inertial>`` is written), placed where the
 lever arms of the paper's eq. (11) put them (an interpretation: the paper gives the arms,
@@ -72,6 +73,9 @@ LEGS = (1, 2, 3)
 ACTUATED = ("alpha_1", "alpha_2", "alpha_3", "alpha_4", "s_4")
 #: Name of the frame at the arm extremity M and at the plate centre H.
 FRAME_M, FRAME_H = "M", "H"
+#: Name of the tool frame at M whose z axis is the arm's direction w (M's x axis): the
+#: axis of a drill or a spindle carried by the telescope, which a 5-axis task fixes.
+FRAME_TOOL = "tool"
 #: Virtual joints standing for link compliance (rest value 0).
 VIRTUAL_JOINTS = (*(f"{c}_{k}_axial" for c in "bd" for k in LEGS), "arm_axial")
 #: Free-flyer joint of the mobile plate.
@@ -320,6 +324,8 @@ def _plate_and_arm(p: CaHyManParams, z: _Sizes) -> list[str]:
         *sliding,
         telescope,
         *_fixed_frame(FRAME_M, "telescope", (0, 0, 0), _visual(_sphere(z.ball), "red")),
+        _joint(f"{FRAME_TOOL}_fixed", "fixed", FRAME_M, FRAME_TOOL, rpy=_ROD_ALONG_X),
+        _link(FRAME_TOOL),
     ]  # fmt: skip
     return out
 

@@ -10,6 +10,7 @@ The whole workflow from one import::
     res.K, res.rank, res.condition_number, res.ill_conditioned
     cl.compliances(robot, Q, "P").C            # (n, 6, 6) for n configurations Q (n, nq)
     cl.StiffnessIndices.from_result(res).min_translational_stiffness
+    cl.follow_path(robot, "P", path, wrench=w).residual   # a path: error, compensation
 
 The package is laid out in layers, each importing only those below it:
 :mod:`closedloop.common` (shared utilities) -> :mod:`closedloop.model` (the closed-loop
@@ -57,6 +58,7 @@ _EXPORTS = {
             "OutsideLimitsError",
             "RigidDirectionsError",
             "SingularConfigurationError",
+            "UnreachableError",
             "ViewerError",
         ),
         ".exceptions",
@@ -77,6 +79,9 @@ _EXPORTS = {
     "DesignEvaluation": ".analysis.design_evaluation",
     "DesignResult": ".analysis.design_result",
     "optimize_design": ".analysis.design_optimizer",
+    "inverse_kinematics": ".kinematics.inverse",
+    "follow_path": ".analysis.paths",
+    "PathResult": ".analysis.path_results",
 }
 _SUBMODULES = frozenset({"data"})
 
@@ -86,6 +91,8 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from closedloop.analysis.design_problem import DesignProblem, design_problem
     from closedloop.analysis.design_result import DesignResult
     from closedloop.analysis.indices import StiffnessIndices
+    from closedloop.analysis.path_results import PathResult
+    from closedloop.analysis.paths import follow_path
     from closedloop.analysis.vibration import ModesResult, batch_modes, modes
     from closedloop.common.conditioning import ILL_CONDITIONED, RANK_RTOL
     from closedloop.elastostatics.batch import BatchCompliance, compliances
@@ -118,6 +125,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
         OutsideLimitsError,
         RigidDirectionsError,
         SingularConfigurationError,
+        UnreachableError,
         ViewerError,
     )
     from closedloop.io import data
@@ -125,6 +133,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from closedloop.io.loader import load_model
     from closedloop.kinematics.assembly import Assembly, assemble
     from closedloop.kinematics.configuration import CLOSURE_TOL, Configuration
+    from closedloop.kinematics.inverse import inverse_kinematics
     from closedloop.model.closed_loop import ClosedLoopModel
     from closedloop.model.gravity import STANDARD_GRAVITY, GravityLoad, Payload
 
@@ -178,11 +187,13 @@ __all__ = [
     "NumericalError",
     "OpenLoopError",
     "OutsideLimitsError",
+    "PathResult",
     "Payload",
     "PreloadedCompliance",
     "RigidDirectionsError",
     "SingularConfigurationError",
     "StiffnessIndices",
+    "UnreachableError",
     "ViewerError",
     "assemble",
     "batch_modes",
@@ -191,7 +202,9 @@ __all__ = [
     "compliances",
     "data",
     "design_problem",
+    "follow_path",
     "geometric_stiffness",
+    "inverse_kinematics",
     "load_model",
     "modes",
     "optimize_design",

@@ -115,6 +115,26 @@ class AssemblyError(ClosedLoopError):
         super().__init__(f"{message} (closure residual reached: {residual:.3e})")
 
 
+class UnreachableError(AssemblyError):
+    """Inverse kinematics: the frame cannot reach its target on the start's branch (the
+    way there leaves the workspace or crosses a singular pose).
+
+    Attributes:
+        distance: (distance [m], angle [rad]) left between the pose reached and the target,
+            in the components the task fixes.
+        fraction: the fraction of the way from the start's pose that was reached (0 to 1).
+        residual: infinity norm of the residual rows (closures and task) left at the pose
+            reached [m, rad].
+    """
+
+    def __init__(
+        self, message: str, distance: tuple[float, float], fraction: float, residual: float
+    ):
+        self.distance, self.fraction = (float(distance[0]), float(distance[1])), float(fraction)
+        self.residual = float(residual)
+        ClosedLoopError.__init__(self, message)
+
+
 class OpenLoopError(InvalidInputError):
     """A configuration that does not close the loops (assemble it first).
 

@@ -5,8 +5,9 @@ First one loop (the four-bar), then serial arms from their files (UR5, the redun
 Panda), the parallel robots from the most general (Stewart) to the planar ones, a leg
 from an SDF file (Cassie), the hybrid showcase (CaHyMan); then what a model can add or
 answer: links as beams, a spring at a loop's cut, gravity and payloads, a map over the
-workspace, springs identified from measurements, dimensions designed for stiffness; last,
-two implementations of CaHyMan that agree.
+workspace, a path under a process load (CaHyMan's compensated drilling, the UR5's stiffest
+rotation about its tool axis), springs identified from measurements, dimensions designed for
+stiffness; last, two implementations of CaHyMan that agree.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ ORDER = (
     "plot_elastic_closure.py",
     "plot_gravity_sag.py",
     "plot_stiffness_map.py",
+    "plot_cahyman_drilling.py",
+    "plot_ur5_stiffest.py",
     "plot_identification.py",
     "plot_design_cahyman.py",
     "plot_validation_cahyman.py",

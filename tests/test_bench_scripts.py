@@ -13,7 +13,23 @@ import pytest
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 #: Row ids each script prints (issue 10's table: 1-7; b, c... are the variants).
 ROWS = {
-    "bench_closedloop.py": ["2", "2b", "2c", "6a", "6b", "6c", "6d", "8", "9", "9b", "14", "14b"],
+    "bench_closedloop.py": [
+        "2",
+        "2b",
+        "2c",
+        "6a",
+        "6b",
+        "6c",
+        "6d",
+        "8",
+        "9",
+        "9b",
+        "10",
+        "10b",
+        "10c",
+        "14",
+        "14b",
+    ],
     "bench_cahyman.py": ["1a", "1b", "1c", "1d", "1e", "1f", "3a", "3b", "3c", "4", "5", "7"],
 }
 NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", re.IGNORECASE)

@@ -51,6 +51,8 @@ class Interrupted(KeyboardInterrupt):
             :class:`~closedloop.analysis.design_result.DesignResult` so far, or None.
         written: the folder ``partial`` was written to (:meth:`write`), or that of the
             files written while the signal was held, or None.
+        progress: (points computed, points in all) of a run without ``data`` (a path,
+            :func:`closedloop.analysis.paths.follow_path`), or None.
     """
 
     def __init__(self, signum: int = signal.SIGINT):
@@ -59,6 +61,7 @@ class Interrupted(KeyboardInterrupt):
         self.data: PointData | None = None
         self.partial = None
         self.written = None
+        self.progress: tuple[int, int] | None = None
 
     @property
     def reason(self) -> str:
@@ -76,10 +79,12 @@ class Interrupted(KeyboardInterrupt):
         text = f"interrupted ({self.signum.name})"
         if self.written is None:
             return f"{text}; nothing written"
-        if self.data is None:  # not a map (a design run): its results so far
+        counts = self.progress
+        if self.data is not None:
+            counts = (int(np.count_nonzero(self.data.codes != NOT_COMPUTED)), len(self.data.codes))
+        if counts is None:  # neither a map nor a path (a design run): its results so far
             return f"{text}: wrote the results so far to {self.written}"
-        done = int(np.count_nonzero(self.data.codes != NOT_COMPUTED))
-        return f"{text}: wrote {done} of {len(self.data.codes)} points to {self.written}"
+        return f"{text}: wrote {counts[0]} of {counts[1]} points to {self.written}"
 
 
 class SignalStop:

@@ -24,7 +24,8 @@ class ModelSource:
     args: tuple = ()
 
     def load(self) -> ClosedLoopModel:
-        """The model (loaded once per process)."""
+        """The model (loaded once per process), without its visual geometry: nothing is
+        drawn where a model is loaded so (the meshes of a UR5 take seconds to read)."""
         return _load(self)
 
 
@@ -37,6 +38,7 @@ def _load(source: ModelSource) -> ClosedLoopModel:
         springs=springs or None,
         joint_stiffness=source.joint_stiffness,
         args=dict(source.args) or None,
+        geometry=False,
     )
 
 

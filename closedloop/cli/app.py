@@ -5,7 +5,8 @@ under a wrench in a meshcat viewer (see :mod:`closedloop.viewer.viewer`); ``clos
 prints it (:mod:`closedloop.cli.deflect`), ``closedloop info MODEL`` lists what a model
 holds (:mod:`closedloop.cli.info`), ``closedloop modes MODEL ...`` gives the natural
 frequencies (:mod:`closedloop.cli.modes`), ``closedloop design PROBLEM.yaml`` optimises a
-parametric model (:mod:`closedloop.cli.design`).
+parametric model (:mod:`closedloop.cli.design`), ``closedloop path MODEL ...`` follows a path
+under a process load and compensates its deflection (:mod:`closedloop.cli.path`).
 
 MODEL is a robot file, a bundled model by name (``fourbar``, ``stewart``, ... with its
 closure file; ``fourbar_mjcf``, ... the MJCF: :data:`closedloop.io.data.BUNDLED_MODELS`) or an
@@ -93,6 +94,10 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
     "info": ("closedloop.cli.info", "joints, frames, closures, springs and sizes of a model"),
     "deflect": ("closedloop.cli.deflect", "twist of a frame and joint deflections under a load"),
     "design": ("closedloop.cli.design", "optimise a parametric model over its workspace"),
+    "path": (
+        "closedloop.cli.path",
+        "a path under a process load: its deflection and compensation (CSV, NPZ, PNG)",
+    ),
 }
 
 

@@ -80,9 +80,12 @@ PAYLOAD_HELP = (
 )
 
 
-def add_preload_arguments(p: argparse.ArgumentParser, payload_help: str = PAYLOAD_HELP) -> None:
+def add_preload_arguments(
+    p: argparse.ArgumentParser, payload_help: str = PAYLOAD_HELP, preload: bool = True
+) -> None:
     """--gravity [GX GY GZ], --payload MASS [X Y Z], --preload FX FY FZ NX NY NZ (SI);
-    ``payload_help`` the help of ``--payload`` (a command whose payload means more)."""
+    ``payload_help`` the help of ``--payload`` (a command whose payload means more);
+    ``preload`` False: no --preload (a command with a load of its own)."""
     p.add_argument(
         "--gravity", nargs="*", type=finite_float, metavar="G",
         help="weigh the model's link inertias: GX GY GZ [m/s^2], world axes (no values: "
@@ -90,6 +93,9 @@ def add_preload_arguments(p: argparse.ArgumentParser, payload_help: str = PAYLOA
         "result the tangent compliance where the mechanism settles, with its sag",
     )  # fmt: skip
     p.add_argument("--payload", nargs="+", type=finite_float, metavar="V", help=payload_help)
+    if not preload:
+        p.set_defaults(preload=None)
+        return
     p.add_argument(
         "--preload", nargs=6, type=finite_float, metavar="W",
         help="dead-load wrench fx fy fz [N] nx ny nz [N m] at the frame, world axes",

@@ -88,7 +88,8 @@ class EquilibriumEquations:
         """State at q under the load w (a :class:`Load`, or a wrench (6,)): residuals,
         multipliers, SVD of J_c.
 
-        Keys: ``c`` (m,) closure residual; ``closure`` its infinity norm [m, rad]; ``F``
+        Keys: ``c`` (m,) closure residual, ``Jc`` (m, nv) its Jacobian; ``closure`` its
+        infinity norm [m, rad]; ``F``
         the generalised force g + G - J^T w on the free coordinates [N m, N] (G: the
         weight, if any); ``force`` the
         infinity norm of its unbalanced part F + J_c^T lambda (the vector: ``unbalanced``);
@@ -100,8 +101,8 @@ class EquilibriumEquations:
         Leaves the kinematics of q in ``clm.data``.
         """
         clm, free = self.clm, self.free
-        c, A = closure_gap(clm, q)
-        A = A[:, free]
+        c, Jc = closure_gap(clm, q)
+        A = Jc[:, free]
         J = frame_jacobian(clm, q, self.frame, "world", update=False)
         e = deflection(clm, self.q_rest, q)
         g = deflection_jacobian(clm, self.q_rest, q).T @ spring_law(clm, e)[0]
@@ -119,6 +120,7 @@ class EquilibriumEquations:
         unbalanced = (F_y - R @ (R.T @ F_y)) / cols  # F + A^T lam, its component along N
         return {
             "c": c,
+            "Jc": Jc,
             "closure": float(np.max(np.abs(c), initial=0.0)),
             "F": F,
             "force": float(np.max(np.abs(unbalanced), initial=0.0)),
@@ -168,8 +170,7 @@ class EquilibriumEquations:
         # the scale of the stiffest (a soft spring beside a stiff one is solved for, however
         # far apart), the spring-free ones as they are; a direction resisted less than
         # RANK_RTOL^2 of that scale is left out (spring-free, or beyond the solve)
-        T, Z, top = self._sprung_motions(st)
-        B = np.hstack([T * top, Z])
+        B, _ = self.motions(st)
         with np.errstate(over="ignore", invalid="ignore"):  # a load beyond the doubles
             lhs, rhs = B.T @ H @ B, B.T @ rhs
         if not (np.all(np.isfinite(lhs)) and np.all(np.isfinite(rhs))):
@@ -179,6 +180,14 @@ class EquilibriumEquations:
         v = np.zeros(self.clm.model.nv)
         v[free] = cols * dy
         return v, B.shape[1] - rank
+
+    def motions(self, st: dict) -> tuple[np.ndarray, float]:
+        """(B, top^2): B (n_free, d) the admissible motions of ``st`` on y = x / cols, the
+        sprung ones normalised by their springs and set on the scale of the stiffest (B^T
+        K_q B = top^2 I on them), then the spring-free ones, orthonormal; top^2 the scale
+        [N m] (the basis of :meth:`step`'s solve)."""
+        T, Z, top = self._sprung_motions(st)
+        return np.hstack([T * top, Z]), top * top
 
     def _sprung_motions(self, st: dict) -> tuple[np.ndarray, np.ndarray, float]:
         """The admissible motions of ``st`` (on y = x / cols) split as the spring factor of

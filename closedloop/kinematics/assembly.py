@@ -122,14 +122,21 @@ def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray, tols) -> tuple:
     placements are not updated)."""
     pin.computeJointJacobians(clm.model, data, q)
     r = residual_rows(clm, data, datas)
+    return (r, *within(r, tols))
+
+
+def within(r: np.ndarray, tols) -> tuple[float, bool]:
+    """(squared 2-norm of the residual r (m,), whether each row is within its tolerance)
+    (``tols``: (tolerance of each row or one for all, the smallest, the largest), as
+    :func:`_row_tolerances` gives them)."""
     size2 = float(r.dot(r))
     rows, low, high = tols
     # |r|_inf <= |r|_2 <= sqrt(m) |r|_inf: the rows one by one only when these leave it open
     if size2 <= low * low:
-        return r, size2, True
+        return size2, True
     if size2 > r.size * high * high or size2 != size2:  # NaN: not closed
-        return r, size2, False
-    return r, size2, bool((abs(r) <= rows).all())
+        return size2, False
+    return size2, bool((abs(r) <= rows).all())
 
 
 def assemble(
@@ -272,7 +279,7 @@ def close_loops(
             r, size2, closed = _residual(clm, data, datas, q, tols)
     while not closed and it < max_iter and size2 == size2:
         it += 1
-        found = _descend(clm, q, r, size2, free, tols)
+        found = descend(clm, q, r, size2, free, tols)
         if found is None:
             break
         q, r, size2, closed = found
@@ -311,19 +318,29 @@ def close_loops(
     return result
 
 
-def _descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = False):
+def descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = False, rows=None):
     """One Gauss-Newton step from q (residual r, its squared norm size2) on the passive
     coordinates ``free``, halved until the residual decreases or the loops close (with
     ``strict``, past the tolerance: until its square halves at least, less being the
     rounding's play): (q, r, size2, closed) of the new point, or None when 30 halvings do
     not do it. The workspace holds the kinematics of q on entry, of the last point tried
-    on exit."""
+    on exit.
+
+    ``rows``: the equations solved, by default the closures (tolerances ``tols``); or a
+    pair of functions, ``residual(q) -> (r, size2, closed)`` that leaves q's kinematics in
+    the workspace and ``jacobian() -> (m, nv)`` of r at the q last evaluated (the inverse
+    kinematics: :mod:`closedloop.kinematics.inverse`); ``free`` then the coordinates it
+    moves."""
     data, datas = clm.workspace()
+    residual, jacobian = rows or (
+        lambda x: _residual(clm, data, datas, x, tols),
+        lambda: jacobian_rows(clm, data, datas, calc=False),
+    )
     step = np.zeros(clm.model.nv)
-    step[free] = -min_norm_solve(jacobian_rows(clm, data, datas, calc=False)[:, free], r)
+    step[free] = -min_norm_solve(jacobian()[:, free], r)
     for _ in range(30):
         q_try = pin.integrate(clm.model, q, step)
-        r_try, size2_try, closed_try = _residual(clm, data, datas, q_try, tols)
+        r_try, size2_try, closed_try = residual(q_try)
         if (size2_try <= 0.5 * size2) if strict else (size2_try < size2 or closed_try):
             return q_try, r_try, size2_try, closed_try
         step *= 0.5
@@ -373,7 +390,7 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float, 
     if not s[-1] > POLISH_FACTOR * np.sqrt(tol) * s[0]:
         size2 = float(r.dot(r))
         for _ in range(polish):
-            found = _descend(clm, q, r, size2, free, tols, strict=True)
+            found = descend(clm, q, r, size2, free, tols, strict=True)
             if found is None:
                 break
             q, r, size2, _ = found
