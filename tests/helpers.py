@@ -20,7 +20,7 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 
-from closedloop.kinematics.assembly import assemble
+from closedloop.kinematics.assembly import assemble, close_at
 from closedloop.kinematics.constraints import closure_jacobian, closure_residual, frame_jacobian
 from closedloop.model.closed_loop import ClosedLoopModel, Closure
 
@@ -326,11 +326,22 @@ def closed_pipe_run(module: str, *argv) -> subprocess.CompletedProcess:
         os.close(write)
 
 
+def one_solve(clm: ClosedLoopModel, actuated, q0=None) -> np.ndarray:
+    """(nq,) the loops closed in one solve from q0 (default: neutral) with the actuated
+    values written, without driving them there: what ``cl.assemble`` did before it drove
+    from the reference configuration (#45); far from q0 it may land on another mode (the
+    bundled four-bar from neutral at crank 1.0 rad: its rocker at -3.17 rad)."""
+    start = pin.neutral(clm.model) if q0 is None else np.asarray(q0, dtype=float)
+    return np.array(close_at(clm, start, np.asarray(actuated, dtype=float)).q)
+
+
 def driven(clm: ClosedLoopModel, inputs, step: float = 0.01) -> list[np.ndarray]:
-    """Configurations (nq,) of a one-input mechanism driven from its neutral configuration
+    """Configurations (nq,) of a one-input mechanism driven from its reference
+    configuration (the start of every assembly: ``ClosedLoopModel.reference_configuration``)
     through the input values ``inputs`` [rad, m] in order, by steps of at most ``step``,
     each assembled from the last: the assembly mode a robot driven there is on."""
-    q, out, value = pin.neutral(clm.model), [], 0.0
+    q, out = clm.reference_configuration(), []
+    value = float(clm.actuated_values(q)[0])
     for target in inputs:
         for v in np.linspace(value, target, 2 + int(abs(target - value) / step)):
             q = assemble(clm, [v], q).q
