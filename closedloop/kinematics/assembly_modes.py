@@ -41,6 +41,7 @@ from closedloop.kinematics.assembly import (
     assemble,
     check_actuated,
     close_at,
+    close_loops,
     coordinate_scale,
     free_coordinates,
     scaled_passive_jacobian,
@@ -132,8 +133,8 @@ def assembly_modes(
     Returns:
         One :class:`~closedloop.kinematics.assembly.Assembly` per mode, each with its
         closure residuals and Jacobian (:attr:`Assembly.closure`), the configuration
-        first found of the mode (a passive revolute joint as the solve left it, maybe
-        wound by whole turns); sorted by the largest scaled difference
+        first found of the mode (from a random start, the angles of its passive revolute
+        joints within pi of the reference configuration's); sorted by the largest scaled difference
         (:func:`scaled_difference`) of their passive coordinates from the default
         assembly's, which comes first (when it closes; else from the reference
         configuration). Empty when no start closes the loops.
@@ -159,7 +160,7 @@ def assembly_modes(
     for i, start in enumerate(_starts(clm, reference, target, firsts, samples, seed)):
         try:
             a = (assemble(clm, target, start, jacobian=True) if i <= len(firsts)
-                 else close_at(clm, start, target, jacobian=True))  # fmt: skip
+                 else _unwound(clm, close_at(clm, start, target).q, reference))  # fmt: skip
         except _NO_MODE:
             continue
         if i == 0:
@@ -199,6 +200,19 @@ def _starts(clm, reference, target, firsts, samples: int, seed: int):
         q = pin.integrate(model, q, v)
         clm.set_actuated(q, target)
         yield q
+
+
+def _unwound(clm: ClosedLoopModel, q: np.ndarray, reference: np.ndarray) -> Assembly:
+    """The assembly of q (nq,), closed, with the angles of its passive revolute joints
+    taken within pi of the reference's (a whole turn moves nothing), its closure residuals
+    and Jacobian computed there (:func:`closedloop.kinematics.assembly.close_loops`)."""
+    model, q = clm.model, q.copy()
+    for name in passive_joints(clm):
+        jm = model.joints[model.getJointId(name)]
+        if jm.nq == 1 and jm.shortname().startswith("JointModelR"):
+            i = jm.idx_q
+            q[i] = reference[i] + np.remainder(q[i] - reference[i] + np.pi, 2 * np.pi) - np.pi
+    return close_loops(clm, q, jacobian=True)
 
 
 def _seen_directions(clm: ClosedLoopModel, a: Assembly, free: np.ndarray) -> np.ndarray:
