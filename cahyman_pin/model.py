@@ -23,10 +23,10 @@ from cahyman_pin.urdf_builder import (
     FRAME_H,
     FRAME_M,
     LEGS,
-    PLATE_JOINT,
     REVOLUTE_LIMIT,
     VIRTUAL_JOINTS,
     build_urdf,
+    closed_form_values,
     closure_spec,
 )
 from closedloop.common.arrays import readonly, real_array
@@ -249,18 +249,10 @@ class CaHyManModel:
         Raises:
             AssemblyError: the legs cannot carry the plate at some pose.
         """
-        alpha = np.asarray(alpha, dtype=float)
-        pose = geometry.plate_pose(alpha, self.params)
         q = np.tile(pin.neutral(self.clm.model), (len(alpha), 1))
-        ix = self._q_index
-        for k, leg in enumerate(LEGS):
-            a = alpha[:, k]
-            q[:, ix[f"alpha_{leg}"]], q[:, ix[f"c_{leg}"]], q[:, ix[f"d_{leg}"]] = a, -a, a
-            q[:, ix[f"s_{leg}"]] = pose.s[:, k]
-        i = ix[PLATE_JOINT]
-        q[:, i : i + 3] = pose.H
-        q[:, i + 3 : i + 7] = [pin.Quaternion(R).coeffs() for R in pose.R]
-        q[:, ix["alpha_4"]], q[:, ix["s_4"]] = alpha4, s4
+        for name, values in closed_form_values(alpha, alpha4, s4, self.params).items():
+            i = self._q_index[name]
+            q[:, i : i + values.shape[1]] = values
         return q
 
     def assemble(self, alpha, alpha4, s4, *, q0=None, full_output: bool = False,

@@ -5,7 +5,8 @@ The whole workflow from one import::
     import closedloop as cl
 
     robot = cl.load_model("fourbar.urdf", "fourbar.yaml")   # tree + closures + springs
-    state = cl.Configuration(robot, cl.assemble(robot, actuated=[0.3]).q)
+    state = cl.Configuration(robot, cl.assemble(robot, actuated=[0.3]).q)  # mode of its start
+    cl.assembly_modes(robot, [0.3])            # the assembly modes found there
     res = cl.compliance(state, "P")            # 6x6 C [SI] at the origin of frame P
     res.K, res.rank, res.condition_number, res.ill_conditioned
     cl.compliances(robot, Q, "P").C            # (n, 6, 6) for n configurations Q (n, nq)
@@ -33,6 +34,7 @@ from typing import TYPE_CHECKING
 _EXPORTS = {
     "data": ".io.data",
     **dict.fromkeys(("Assembly", "assemble"), ".kinematics.assembly"),
+    "assembly_modes": ".kinematics.assembly_modes",
     **dict.fromkeys(("BatchCompliance", "compliances"), ".elastostatics.batch"),
     **dict.fromkeys(("ComplianceResult", "compliance"), ".elastostatics.compliance"),
     **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".common.conditioning"),
@@ -132,6 +134,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from closedloop.io.data import robot_data_dir
     from closedloop.io.loader import load_model
     from closedloop.kinematics.assembly import Assembly, assemble
+    from closedloop.kinematics.assembly_modes import assembly_modes
     from closedloop.kinematics.configuration import CLOSURE_TOL, Configuration
     from closedloop.kinematics.inverse import inverse_kinematics
     from closedloop.model.closed_loop import ClosedLoopModel
@@ -196,6 +199,7 @@ __all__ = [
     "UnreachableError",
     "ViewerError",
     "assemble",
+    "assembly_modes",
     "batch_modes",
     "closure_curvature",
     "compliance",

@@ -269,9 +269,24 @@ def delta_urdf() -> tuple[str, str]:
             f"type: [{', '.join(['3d'] * len(pairs))}]",
             "name_mot: [arm0, arm1, arm2]",
             "springs: {" + ", ".join(f"arm{i}: {k!r}" for i, k in enumerate(DELTA_K)) + "}",
+            "# The start of the assembly (its mode: the platform below the base, the arms",
+            "# outward and down), the pose of delta.xml's qpos0: every floating body's",
+            "# x y z qx qy qz qw [m] (the URDF puts them all at the origin).",
+            "start:",
+            f"  platform_free: [{', '.join(map(repr, _free_pose(DELTA_P, np.eye(3))))}]",
+            *(
+                f"  rod{i}{ab}_free: [{', '.join(map(repr, _free_pose(T, R)))}]"
+                for i in range(3)
+                for ab, T, R in zip("ab", g["T"][i], g["R"][i], strict=True)
+            ),
         ]
     )
     return "\n".join(lines) + "\n", closures + "\n"
+
+
+def _free_pose(p: np.ndarray, R: np.ndarray) -> list[float]:
+    """A free flyer's configuration x y z qx qy qz qw of position p (3,) [m], rotation R."""
+    return [*map(float, p), *map(float, Rotation.from_matrix(R).as_quat())]
 
 
 def delta_mjcf() -> str:

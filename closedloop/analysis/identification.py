@@ -191,17 +191,19 @@ def _start(clm: ClosedLoopModel, names, groups, start) -> np.ndarray:
     return theta0
 
 
-def _configurations(clm: ClosedLoopModel, measurements, check_limits: bool) -> list[np.ndarray]:
+def _configurations(clm: ClosedLoopModel, measurements, check_limits: bool,
+                    q0=None) -> list[np.ndarray]:  # fmt: skip
     """The configuration of each measurement (its index named in an error): its actuated
-    values driven from the file's configuration, else its q (within the limits, with
-    ``check_limits``)."""
+    values driven from q0 (default: the reference configuration), else its q (within the
+    limits, with ``check_limits``)."""
     if isinstance(measurements, Measurement | str) or not isinstance(measurements, Sequence):
         raise InvalidInputError(
             f"measurements must be a list of Measurement, got {_shown(measurements)}"
         )
     if not measurements or not all(isinstance(m, Measurement) for m in measurements):
         raise InvalidInputError("measurements must be a non-empty list of Measurement")
-    out, start = [], clm.reference_configuration()  # the file's, as the command line's
+    out = []
+    start = clm.reference_configuration() if q0 is None else clm.check_configuration(q0)
     for i, m in enumerate(measurements):
         try:  # actuated values: their count and values checked by the assembly
             q = None if m.q is None else clm.check_configuration(m.q)
@@ -226,6 +228,7 @@ def identify(
     *,
     start: Mapping[str, float] | None = None,
     check_limits: bool = True,
+    q0: np.ndarray | None = None,
 ) -> Fit:
     """Fit spring values to measured deflections (see the module docstring).
 
@@ -240,6 +243,9 @@ def identify(
             block's factor], overriding the model's.
         check_limits: refuse a measurement outside the joints' position limits (a q, or
             actuated values); False: take them as they are (``--no-limits``).
+        q0: (nq,) the configuration the ``actuated`` measurements are driven from, on its
+            assembly mode (default: the model's reference configuration, as
+            :func:`closedloop.kinematics.assembly.assemble`).
 
     Warns:
         ModelMisfitWarning: the model does not fit the data (``Fit.consistent`` False:
@@ -264,7 +270,7 @@ def identify(
     if not groups:
         raise InvalidInputError("nothing to fit: give at least one joint name")
     names = tuple("+".join(g) for g in groups)
-    configs = _configurations(clm, measurements, check_limits)
+    configs = _configurations(clm, measurements, check_limits, q0)
     clm.frame_id(frame)  # NameNotFoundError listing the frames
     n_measured = sum(int(np.isfinite(m.sd).sum()) for m in measurements)
     if n_measured < len(groups):

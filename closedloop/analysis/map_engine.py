@@ -234,12 +234,14 @@ def assemble_chunk(chunk: MapChunk) -> ChunkResult:
     return out
 
 
-def path_start(clm: ClosedLoopModel, points: np.ndarray, check_limits: bool = True) -> np.ndarray:
-    """(nq,) start of a map's path: its first point assembled on the mode of the file's
-    configuration (:func:`closedloop.kinematics.driving.assemble_connected`), as ``closedloop
-    stiffness --actuated`` assembles it; the file's configuration where that fails (the
-    point's own assembly then reports why)."""
-    reference = clm.reference_configuration()
+def path_start(clm: ClosedLoopModel, points: np.ndarray, check_limits: bool = True,
+               q0: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """(nq,) start of a map's path: its first point assembled on the mode of q0 (nq,),
+    default the model's reference configuration
+    (:func:`closedloop.kinematics.driving.assemble_connected`), as ``closedloop stiffness
+    --actuated`` assembles it; q0 where that fails (the point's own assembly then reports
+    why)."""
+    reference = clm.reference_configuration() if q0 is None else q0
     if not len(points):
         return reference
     try:
@@ -269,7 +271,7 @@ def _free(clm: ClosedLoopModel) -> bool:
 
 
 def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int],
-                  check_limits: bool = True) -> list:  # fmt: skip
+                  check_limits: bool = True, q0: np.ndarray | None = None) -> list:  # fmt: skip
     """Start configuration of each chunk, by a serial continuation along the path.
 
     The pass assembles the points of :func:`continuation_points` (steps of at most
@@ -291,11 +293,13 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
     Args:
         points: (n, n_act) actuated values in path order [rad, m].
         firsts: path positions of the chunks' first points (ascending, from 0).
+        q0: (nq,) the configuration the path starts from (:func:`path_start`).
 
     Returns:
-        One (nq,) configuration, or None for the first chunk (the reference), per border.
+        One (nq,) configuration per border, the first the path's start.
     """
-    q = path_start(clm, points, check_limits)
+    q = path_start(clm, points, check_limits, q0)
+    first = q
     wanted = set(firsts[1:])
     last = max(wanted, default=-1)
     visit = sorted(wanted | set(continuation_points(clm, points[: last + 1])))
@@ -323,7 +327,7 @@ def border_starts(clm: ClosedLoopModel, points: np.ndarray, firsts: Sequence[int
         ahead = visit if ok else crossing
         k = bisect.bisect_right(ahead, p)
         p = ahead[k] if k < len(ahead) else last + 1
-    return [None, *(found.get(p) for p in firsts[1:])][: len(firsts)]
+    return [first, *(found.get(p) for p in firsts[1:])][: len(firsts)]
 
 
 def continuation_points(clm: ClosedLoopModel, points: np.ndarray) -> list[int]:

@@ -288,6 +288,7 @@ def stiffness_map(
     points: np.ndarray | None = None,
     wrench: np.ndarray | None = None,
     start: Callable | None = None,
+    q0: np.ndarray | None = None,
     workers: int | None = None,
     executor: Executor | None = None,
     chunk: int = CHUNK,
@@ -307,6 +308,10 @@ def stiffness_map(
         start: start provider ``start(clm, points (c, n_act)) -> (c, nq)``: every point
             starts from its own configuration (e.g. a closed-form guess) instead of the
             previous point's; picklable for process executors. Default None.
+        q0: (nq,) the configuration the path starts from: its first point is driven
+            there from q0, on q0's assembly mode (default: the model's reference
+            configuration, as :func:`closedloop.kinematics.assembly.assemble`); not with
+            ``start``.
         workers: local processes (a :class:`ModelSource` is required), default serial.
         executor: any ``concurrent.futures.Executor`` (e.g. Dask's) instead.
         chunk: points per task; the results depend on it only within the assembly
@@ -323,7 +328,7 @@ def stiffness_map(
             (the command line's ``--no-limits``).
 
     Raises:
-        InvalidInputError: bad grid, points, wrench, workers or chunk; ``modes`` on a model
+        InvalidInputError: bad grid, points, wrench, q0, workers or chunk; ``modes`` on a model
             whose link inertias are not the robot file's
             (:meth:`closedloop.model.closed_loop.ClosedLoopModel.require_inertias`).
         NameNotFoundError: unknown frame.
@@ -360,6 +365,10 @@ def stiffness_map(
                 f"({list(clm.actuated)}), got {got}"
             )
         shape, order, swept = (len(pts),), np.arange(len(pts)), tuple(clm.actuated)
+    if q0 is not None:
+        if start is not None:
+            raise InvalidInputError("give a start provider (start) or q0, not both")
+        q0 = clm.check_configuration(q0)
     if not isinstance(chunk, int) or chunk < 1:
         raise InvalidInputError(f"chunk must be a positive integer, got {chunk!r}")
     if (workers or 1) > 1 and executor is None and not isinstance(model, ModelSource):
@@ -370,7 +379,7 @@ def stiffness_map(
 
     def results():
         borders = ([None] * len(firsts) if start
-                   else border_starts(clm, pts[order], firsts, check_limits))  # fmt: skip
+                   else border_starts(clm, pts[order], firsts, check_limits, q0))  # fmt: skip
         tasks = [MapChunk(model, frame, pts[p], q, start, w, modes, check_limits)
                  for p, q in zip(pieces, borders, strict=True)]  # fmt: skip
         sizes = [len(piece) for piece in pieces]

@@ -10,10 +10,11 @@ measurements: a data set that fits names none, but once in a million) misfits; t
 named worst first (:func:`worst_measurements`).
 
 **Another assembly mode.** The ``actuated`` values of a measurement are assembled as the
-command line assembles them: driven from the model file's configuration
-(:func:`closedloop.kinematics.driving.assemble_connected`). A robot driven otherwise may be
-on another assembly mode at the same values, and its twists are then those of another
-configuration: a misfit the residuals alone do not explain. Two checks
+command line assembles them: driven from the model's reference configuration (or the
+``q0`` of the identification; :func:`closedloop.kinematics.driving.assemble_connected`).
+A robot driven otherwise may be on another assembly mode at the same values, and its
+twists are then those of another configuration: a misfit the residuals alone do not
+explain. Two checks
 (:func:`other_modes`), each comparing two closed configurations of the same actuated
 values, assembled from two starts (equal to within :data:`SAME_BRANCH` on one branch):
 
@@ -33,11 +34,10 @@ values, assembled from two starts (equal to within :data:`SAME_BRANCH` on one br
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 import scipy.special
 
 from closedloop.exceptions import AssemblyError, InvalidInputError, SingularConfigurationError
-from closedloop.kinematics.assembly import coordinate_scale
+from closedloop.kinematics.assembly_modes import scaled_difference
 from closedloop.kinematics.driving import (
     assemble_connected,
     assemble_within_limits,
@@ -82,10 +82,8 @@ def worst_measurements(r: np.ndarray, sd: np.ndarray, significance: float) -> tu
 
 def _distance(clm: ClosedLoopModel, q1: np.ndarray, q2: np.ndarray) -> float:
     """Largest scaled difference of two configurations (rad, lengths per L), angles taken
-    modulo 2 pi (a revolute joint wound once more is where it was)."""
-    d = pin.difference(clm.model, q1, q2)
-    d = np.where(clm.linear_coordinates, d, np.remainder(d + np.pi, 2 * np.pi) - np.pi)
-    return float(np.max(np.abs(d) / coordinate_scale(clm)))
+    modulo 2 pi (:func:`closedloop.kinematics.assembly_modes.scaled_difference`)."""
+    return float(np.max(np.abs(scaled_difference(clm, q1, q2))))
 
 
 def _stated_branch(clm, m, q, check_limits: bool) -> float | None:

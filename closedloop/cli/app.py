@@ -51,8 +51,11 @@ from closedloop.cli.view import add_view_arguments, view
 
 EPILOG = """\
 Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
-gives the actuated joints' values and the loops are closed by moving the passive joints
-(start: MJCF qpos0, else the neutral configuration). Without either: that start, assembled.
+gives the actuated joints' values, driven there from the start in small steps while the
+passive joints close the loops, on the start's assembly mode (start: the model's reference
+configuration: its closure file's start:, MJCF qpos0, the springs' rest, else neutral;
+--start Q or --near JOINT=VALUE: another start, another mode). Without either: the start,
+assembled. The output names the passive joints' values of the mode used.
 A configuration outside the joints' position limits is refused (angles in degrees are);
 --no-limits takes it as it is.
 A --q of a model with loops must close them to 1e-6 (metres per size of the mechanism, rad).

@@ -18,11 +18,13 @@ import argparse
 
 import numpy as np
 
+from closedloop.cli.options import mode_line
 from closedloop.cli.outputs import print_json
 from closedloop.common.conditioning import twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.elastostatics.compliance import TWIST_LABELS, describe_directions, energy_shares
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
+from closedloop.kinematics.assembly_modes import passive_values
 
 
 def add_parser(sub, source_arguments) -> None:
@@ -45,9 +47,10 @@ def add_parser(sub, source_arguments) -> None:
 
 def deflection_report(clm, res, wrench: np.ndarray) -> dict:
     """JSON-ready deflection of ``res`` (a world-axes compliance of ``clm``) under
-    ``wrench`` (6,) [N, N m]: twist (6,) [m, rad], joint deflections by coordinate (joint
-    name, index in the tangent of q, value [rad or m]), energy shares, rank, length L [m]
-    of the unit-free rules."""
+    ``wrench`` (6,) [N, N m]: the configuration q and its assembly mode (the passive
+    joints' values [rad, m], and the line that shows them), twist (6,) [m, rad], joint
+    deflections by coordinate (joint name, index in the tangent of q, value [rad or m]),
+    energy shares, rank, length L [m] of the unit-free rules."""
     twist = res.deflection(wrench)
     dq = res.joint_deflection(wrench)
     units = np.where(clm.linear_coordinates, "m", "rad")
@@ -57,6 +60,8 @@ def deflection_report(clm, res, wrench: np.ndarray) -> dict:
         "axes": res.axes,
         "point": res.point.tolist(),
         "q": res.q.tolist(),
+        "passive": passive_values(clm, res.q),
+        "mode": mode_line(clm, res.q),
         "wrench": wrench.tolist(),
         "twist": twist.tolist(),
         "order": list(TWIST_LABELS),
@@ -87,6 +92,7 @@ def format_deflection(doc: dict) -> str:
     lines = [
         f"model {doc['model']!r}, frame {doc['frame']!r}, world-aligned axes, at the frame "
         f"origin {', '.join(f'{x:.6g}' for x in doc['point'])} m",
+        *filter(None, [doc["mode"]]),
         f"load: force {' '.join(f'{x:.6g}' for x in w[:3])} N, "
         f"torque {' '.join(f'{x:.6g}' for x in w[3:])} N m",
         f"displacement dx dy dz: {' '.join(f'{x:.6g}' for x in t[:3])} m "

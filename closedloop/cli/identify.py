@@ -1,11 +1,15 @@
 """``closedloop identify``: spring stiffnesses fitted to measured deflections.
 
     closedloop identify MODEL [--closures F] --measurements FILE --fit NAME [NAME ...]
-        [--joint-stiffness K | --springs FILE] [--no-limits] [--json]
+        [--joint-stiffness K | --springs FILE] [--start Q ... | --near JOINT=VALUE ...]
+        [--no-limits] [--json]
 
 ``--fit`` names joints; ``a+b`` ties joints a and b to one value; a joint with a block
 spring (a beam's ``<link>_beam``) is fitted as a factor of its block. Start values come
-from the model file (or ``--joint-stiffness`` / ``--springs``). The measurement file is the
+from the model file (or ``--joint-stiffness`` / ``--springs``). The ``actuated`` values of a
+measurement are driven from the model's reference configuration on its assembly mode, as
+``closedloop stiffness --actuated`` drives them (``--start``, ``--near``: from that start
+instead). The measurement file is the
 YAML or CSV of :func:`closedloop.analysis.measurements.read_measurements`. Each estimate is
 printed with its unit (N m/rad, N/m, or 1 for a block's factor). Exit status: 0 every
 parameter identified and the model fits the data, 1 some cannot be identified from these
@@ -20,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 
+from closedloop.cli.options import add_start_arguments, start_from_args
 from closedloop.cli.outputs import print_json
 from closedloop.cli.parser import path_text
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, NumericalError
@@ -35,6 +40,7 @@ def add_parser(sub, model_arguments) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     model_arguments(p, frame=False)
+    add_start_arguments(p)
     p.add_argument("--measurements", required=True, type=path_text, metavar="FILE",
                    help="YAML or CSV")  # fmt: skip
     p.add_argument("--fit", required=True, nargs="+", metavar="NAME", help="joints (a+b: tied)")
@@ -58,7 +64,8 @@ def run_identify(args) -> int:
     clm = model_source(args).load()
     frame, data = read_measurements(args.measurements)
     groups = [tuple(name.split("+")) if "+" in name else name for name in args.fit]
-    fit = identify(clm, data, frame, groups, check_limits=not args.no_limits)
+    fit = identify(clm, data, frame, groups, check_limits=not args.no_limits,
+                   q0=start_from_args(clm, args))  # fmt: skip
     status = EXIT_RANK_DEFICIENT if fit.unidentifiable or not fit.consistent else EXIT_OK
     if not fit.success:
         raise NumericalError(

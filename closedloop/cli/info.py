@@ -4,9 +4,13 @@
 
 Prints the sizes (nq, nv), the characteristic length L, every joint (type, position limits,
 role: actuated, passive, locked or sprung, its spring), the beams, the closures with their
-types, the mimic joints and every frame: the names that ``--frame``, ``--springs`` and the
-closure files take. The springs are those of the model with the options given, as a query
-would use them. Exit status: 0; 2 bad input (a missing file, an unknown name).
+types, the mimic joints, the start of the assembly (the model's reference configuration:
+a closure file's ``start:``, MJCF ``qpos0``, the springs' rest configuration or neutral)
+with the assembly mode there (the passive joints' values once its loops are closed; the
+mode every query continues from unless given ``--start`` or ``--near``), and every frame:
+the names that ``--frame``, ``--springs`` and the closure files take. The springs are those
+of the model with the options given, as a query would use them. Exit status: 0; 2 bad
+input (a missing file, an unknown name).
 """
 
 from __future__ import annotations
@@ -17,10 +21,13 @@ import math
 import numpy as np
 
 from closedloop.cli.outputs import print_json
-from closedloop.exceptions import EXIT_OK
+from closedloop.exceptions import EXIT_OK, AssemblyError, SingularConfigurationError
+from closedloop.kinematics.assembly import assemble
+from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.kinematics.limits import UNBOUNDED_LIMIT
 from closedloop.model.beams import inserted_beams
 from closedloop.model.closed_loop import ClosedLoopModel
+from closedloop.model.reference import REST, START, reference_key
 
 #: Joint kinds by the start of Pinocchio's short name (after ``JointModel``), first match.
 JOINT_KINDS = (
@@ -34,6 +41,13 @@ JOINT_KINDS = (
     ("Mimic", "mimic"),
     ("Composite", "composite"),
 )
+#: What each key of :data:`closedloop.model.reference.REFERENCE_KEYS` is (None: neutral).
+START_SOURCES = {
+    START: "the closure file's start:",
+    "qpos0": "the MJCF qpos0",
+    REST: "the springs' rest configuration",
+    None: "the neutral configuration",
+}
 
 
 def add_parser(sub, source_arguments) -> None:
@@ -102,7 +116,9 @@ def model_info(clm: ClosedLoopModel) -> dict:
     :data:`closedloop.model.closures.CLOSURE_TYPES`), beams, mimic
     joints, frames (name, type, parent joint), in the model's order; unweighed bodies
     (body name -> why its inertia is not the robot file's: no natural frequencies, no
-    gravity: ``ClosedLoopModel.unweighed_bodies``)."""
+    gravity: ``ClosedLoopModel.unweighed_bodies``); the start of the assembly (source, and
+    the passive joints' values of its assembly mode, or the error that the assembly
+    gives)."""
     pm = clm.model
     beams = {b.name for b in inserted_beams(pm)}  # by the model's structure, not by name
     joints = [_joint(clm, j, beams) for j in range(1, pm.njoints)]
@@ -125,7 +141,21 @@ def model_info(clm: ClosedLoopModel) -> dict:
             for f in pm.frames
         ],
         "unweighed_bodies": dict(clm.unweighed_bodies),
+        "start": _start(clm),
     }
+
+
+def _start(clm: ClosedLoopModel) -> dict:
+    """The start of the assembly: where it comes from, and the assembly mode there (the
+    passive joints' values [rad, m] of the reference configuration assembled), or why it
+    does not assemble."""
+    out: dict = {"source": START_SOURCES[reference_key(clm.model)], "passive": None}
+    if clm.closures:
+        try:
+            out["passive"] = passive_values(clm, assemble(clm).q)
+        except (AssemblyError, SingularConfigurationError) as e:
+            out["error"] = " ".join(str(e).split())
+    return out
 
 
 def _spring_text(entry: dict) -> str:
@@ -178,6 +208,15 @@ def format_info(info: dict) -> str:
     lines += ["", f"closures ({len(info['closures'])}): {closures or 'none (a serial robot)'}"]
     lines.append(f"beams: {', '.join(info['beams']) or 'none'}")
     lines.append(f"mimic joints: {', '.join(info['mimic']) or 'none'}")
+    start = info["start"]
+    lines.append(f"assembly start: {start['source']}")
+    if start["passive"] is not None:
+        from closedloop.cli.options import passive_text
+
+        lines.append(f"assembly mode there: passive joints {passive_text(start['passive'])} "
+                     "[rad, m]")  # fmt: skip
+    elif "error" in start:
+        lines.append(f"assembly mode there: none, the loops do not close ({start['error']})")
     lines += [
         f"inertia not the file's (no modes, no gravity; give it an <inertial>): {b} ({why})"
         for b, why in info["unweighed_bodies"].items()

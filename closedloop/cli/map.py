@@ -2,13 +2,17 @@
 
     closedloop map MODEL [--closures F] --frame NAME --sweep JOINT=START:STOP:NUM
         [--sweep ...] [--fixed JOINT=VALUE ...] | --points FILE
+        [--start Q ... | --near JOINT=VALUE ...]
         [--index NAME] [--force FX FY FZ] [--torque NX NY NZ]
         [--workers N | --scheduler ADDRESS [--worker-timeout S]] [--no-limits] [--out DIR]
 
 Values are SI (rad, m). ``--points`` reads a text file of actuated values, one point a row
 (whitespace or comma separated, the model's actuated order). A point whose actuated values
 are outside their joints' limits has the status ``invalid``; ``--no-limits`` computes it
-as any other. The files are written by
+as any other. The path's first point is driven there from the model's reference
+configuration, on its assembly mode, and each point from the last (``--start`` or
+``--near``: from that start instead, on its mode; so a sprung passive joint gets its rest
+value). The files are written by
 :meth:`closedloop.analysis.maps.StiffnessMap.save`. ``--scheduler`` runs the chunks on a Dask
 distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
 ``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
@@ -40,6 +44,7 @@ from closedloop.cli.map_options import (
     parse_values,
     quoted,
 )
+from closedloop.cli.options import add_start_arguments, start_from_args
 from closedloop.cli.outputs import output_folder
 from closedloop.cli.parser import UsageError, finite_float, path_text, positive_int
 from closedloop.common.arrays import decimal
@@ -86,6 +91,7 @@ def add_parser(sub, parent_arguments) -> None:
     )
     what.add_argument("--points", metavar="FILE", help="actuated values, one point a row")
     p.add_argument("--fixed", type=_fixed, action="append", default=[], metavar="JOINT=VALUE")
+    add_start_arguments(p)
     p.add_argument("--index", choices=sorted(ALL_INDICES), default="det_K", help="index to plot")
     for name, unit in (("--force", "N"), ("--torque", "N m")):
         p.add_argument(name, nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
@@ -172,7 +178,7 @@ def _run_map(args, signals: SignalStop) -> int:
     out = output_folder(args.out)  # before any computation
     options = {"frame": args.frame, "wrench": wrench, "chunk": args.chunk,
                "modes": args.index == "lowest_frequency",
-               "check_limits": not args.no_limits}  # fmt: skip
+               "check_limits": not args.no_limits, "q0": start_from_args(clm, args)}  # fmt: skip
     with dask_executor(args.scheduler, args.worker_timeout) as executor:
         if n > PROBE:  # an estimate before a long run, from a few points computed here
             per_point = _time_per_point(clm, grid, n, options)

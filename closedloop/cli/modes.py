@@ -58,7 +58,8 @@ def add_parser(sub, model_arguments) -> None:
 def run_modes(args: argparse.Namespace) -> int:
     """Run ``closedloop modes``; returns the exit code (0)."""
     from closedloop.analysis.vibration import modes
-    from closedloop.cli.options import model_from_args, preload_from_args
+    from closedloop.cli.options import mode_line, model_from_args, preload_from_args
+    from closedloop.kinematics.assembly_modes import passive_values
 
     if args.preload is not None:
         raise UsageError("--preload: modes take the weight (--gravity), not a dead load")
@@ -83,9 +84,10 @@ def run_modes(args: argparse.Namespace) -> int:
     if page is not None:
         play_mode(clm, res, args.mode, page, args.scale)
     elif args.json:
-        print_json({"model": clm.name, **res.to_dict(), "q": res.q.tolist()})
+        print_json({"model": clm.name, **res.to_dict(), "q": res.q.tolist(),
+                    "passive": passive_values(clm, res.q)})  # fmt: skip
         return EXIT_OK
-    print(format_modes(clm.name, res))
+    print(format_modes(clm.name, res, mode_line(clm, res.q)))
     return EXIT_OK
 
 
@@ -108,11 +110,13 @@ def play_mode(clm, res, number: int, page, scale: float | None) -> None:
               f"amplified x{scene.scale:.4g})")  # fmt: skip
 
 
-def format_modes(name: str, res) -> str:
+def format_modes(name: str, res, mode: str = "") -> str:
     """The modes as text: one line a mode, frequency [Hz] and, with a frame, the effective
-    masses at it (translations [kg], rotations [kg m^2])."""
+    masses at it (translations [kg], rotations [kg m^2]); ``mode`` the line of the
+    configuration's assembly mode (:func:`closedloop.cli.options.mode_line`) if any."""
     lines = [
         f"model: {name}",
+        *filter(None, [mode]),
         f"modes: {res.frequencies.size} of {res.n_modes} (admissible motions {res.mobility}, "
         f"massless condensed {res.n_massless}, left out {res.n_internal}; mass condition "
         f"{res.mass_condition:.3g})",

@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from closedloop.cli.parser import UsageError, finite_float, needs_gravity, number, path_text
+from closedloop.common.rounding import without_rounding
 from closedloop.exceptions import InvalidInputError, OpenLoopError
 from closedloop.io.data import BUNDLED_MODELS, ROBOTS, resolve
 from closedloop.io.loader import load_model, read_springs_file
 from closedloop.kinematics.assembly import assemble
+from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.kinematics.configuration import Configuration
 from closedloop.kinematics.driving import assemble_connected
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -31,12 +35,102 @@ def add_model_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None:
     config.add_argument(
         "--actuated", nargs="+", type=finite_float, metavar="A", help="actuated joint values"
     )
+    add_start_arguments(p)
     p.add_argument(
         "--no-limits",
         action="store_true",
         help="accept a configuration outside the joints' position limits (refused by default: "
         "an angle in degrees is the usual cause)",
     )
+
+
+def add_start_arguments(p: argparse.ArgumentParser) -> None:
+    """--start Q | --near JOINT=VALUE: the start of the assembly, which picks its mode."""
+    start = p.add_mutually_exclusive_group()
+    start.add_argument(
+        "--start", nargs="+", type=finite_float, metavar="Q",
+        help="start of the assembly, a full configuration (nq values, SI), which picks the "
+        "assembly mode (default: the model's reference configuration, its start: key, "
+        "MJCF qpos0 or springs' rest)",
+    )  # fmt: skip
+    start.add_argument(
+        "--near", nargs="+", type=joint_value, metavar="JOINT=VALUE",
+        help="start of the assembly: the reference configuration with these joints' values "
+        "(V1,V2,... for a multi-coordinate joint; SI), e.g. a passive joint near another "
+        "assembly mode, or the rest value of a sprung joint",
+    )  # fmt: skip
+
+
+def joint_value(text: str) -> tuple[str, tuple[float, ...]]:
+    """Option type of ``--near``: ``JOINT=VALUE`` or ``JOINT=V1,V2,...`` [rad, m]."""
+    name, sep, values = text.partition("=")
+    try:
+        if sep and name:
+            return name, tuple(finite_float(v) for v in values.split(","))
+    except argparse.ArgumentTypeError:
+        pass
+    raise argparse.ArgumentTypeError(
+        f"{text!r}: expected JOINT=VALUE or JOINT=V1,V2,... (finite numbers, SI)"
+    )
+
+
+def start_from_args(clm: ClosedLoopModel, args: argparse.Namespace):
+    """(nq,) the start of ``--start`` or ``--near`` (:func:`add_start_arguments`), or None
+    (the model's reference configuration).
+
+    Raises:
+        InvalidInputError: a ``--start`` of the wrong size or not normalised, a ``--near``
+            joint that is actuated (its value is ``--actuated``'s) or given the wrong
+            number of values.
+        NameNotFoundError: a ``--near`` joint the model does not have.
+    """
+    if args.start is not None:
+        try:
+            return clm.check_configuration(np.array(args.start))
+        except InvalidInputError as e:
+            raise InvalidInputError(f"--start: {e}") from None
+    if args.near is None:
+        return None
+    q, model = clm.reference_configuration(), clm.model
+    for name, values in args.near:
+        jm = model.joints[clm.joint_id(name)]
+        shown = f"--near {name}={','.join(f'{v:g}' for v in values)}"
+        if name in clm.actuated:
+            raise InvalidInputError(f"{shown}: {name!r} is actuated; give its value with "
+                                    "--actuated (--near: passive and sprung joints)")  # fmt: skip
+        if len(values) != jm.nq:
+            raise InvalidInputError(f"{shown}: {len(values)} value(s); joint {name!r} has "
+                                    f"{jm.nq} configuration value(s)")  # fmt: skip
+        q[jm.idx_q : jm.idx_q + jm.nq] = values
+    try:
+        return clm.check_configuration(q)
+    except InvalidInputError as e:
+        raise InvalidInputError(f"--near: {e}") from None
+
+
+def passive_text(values: dict) -> str:
+    """``name value, name (v1 v2 ...)`` of passive joints' values (joint -> a number or a
+    list, :func:`closedloop.kinematics.assembly_modes.passive_values`), rounding noise
+    shown as 0 (:func:`closedloop.common.rounding.without_rounding`), or "none"."""
+    flat = without_rounding([x for v in values.values() for x in np.ravel(v)])
+    parts, k = [], 0
+    for name, v in values.items():
+        n = np.size(v)
+        shown = " ".join(f"{x:.6g}" for x in flat[k : k + n])
+        parts.append(f"{name} {shown}" if isinstance(v, float) else f"{name} ({shown})")
+        k += n
+    return ", ".join(parts) or "none"
+
+
+def mode_line(clm: ClosedLoopModel, q) -> str:
+    """The assembly mode of q (nq,) in a line: its passive joints' values
+    (:func:`closedloop.kinematics.assembly_modes.passive_values`), "" for a model without
+    loops."""
+    if not clm.closures:
+        return ""
+    return (f"assembly mode: passive joints {passive_text(passive_values(clm, q))} [rad, m] "
+            "(another mode: --start Q or --near JOINT=VALUE; closedloop.assembly_modes lists "
+            "those found)")  # fmt: skip
 
 
 def add_source_arguments(p: argparse.ArgumentParser, frame: bool = True) -> None:
@@ -144,9 +238,11 @@ def add_wrench_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def configuration(
-    clm: ClosedLoopModel, q=None, actuated=None, check_limits: bool = True
+    clm: ClosedLoopModel, q=None, actuated=None, check_limits: bool = True, start=None
 ) -> Configuration:
-    """The configuration of the analysis from ``--q`` or ``--actuated`` values.
+    """The configuration of the analysis from ``--q`` or ``--actuated`` values, the
+    latter driven from ``start`` (nq,; ``--start``, ``--near``; default the reference
+    configuration) on its assembly mode (:func:`closedloop.kinematics.assembly.assemble`).
 
     ``check_limits`` False (``--no-limits``): the joints' position limits are not checked;
     neither are they for the file's own configuration (no values given: a file may count
@@ -164,7 +260,7 @@ def configuration(
     """
     given = q is not None or actuated is not None  # else the file's own configuration
     if q is None:
-        start = clm.reference_configuration()
+        start = clm.reference_configuration() if start is None else start
         if actuated is None:
             q = assemble(clm, None, start).q  # the file's own configuration, as drawn
         else:  # driven there on the start's assembly mode, limits checked or not
@@ -223,4 +319,9 @@ def model_from_args(args: argparse.Namespace, geometry: bool = False):
     clm = load_from_args(args, geometry)
     if args.frame is not None:
         clm.frame_id(args.frame)  # unknown frame: fail before any assembly
-    return clm, configuration(clm, args.q, args.actuated, not args.no_limits)
+    if args.q is not None and (args.start is not None or args.near is not None):
+        raise UsageError(f"{'--start' if args.start is not None else '--near'} with --q: --q "
+                         "is a closed configuration already; give --actuated values to assemble "
+                         "from the start, or --q alone")  # fmt: skip
+    start = start_from_args(clm, args)
+    return clm, configuration(clm, args.q, args.actuated, not args.no_limits, start)

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from closedloop.cli.options import model_from_args, preload_from_args
+from closedloop.cli.options import mode_line, model_from_args, preload_from_args
 from closedloop.cli.outputs import print_json
 from closedloop.cli.parser import UsageError
 from closedloop.common.conditioning import ILL_CONDITIONED, twist_scaling
@@ -23,6 +23,7 @@ from closedloop.elastostatics.compliance import (
     energy_shares,
 )
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
+from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.model.closed_loop import ClosedLoopModel
 
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
@@ -53,6 +54,7 @@ def format_report(clm: ClosedLoopModel, res: ComplianceResult) -> str:
     lines = [
         f"model {clm.name!r}, frame {res.frame!r}",
         f"q = {np.array2string(res.q, precision=6, separator=', ')} [rad, m]",
+        *filter(None, [mode_line(clm, res.q)]),
         f"reference point (frame origin, world) = "
         f"{np.array2string(res.point, precision=6, separator=', ')} m; {axes}",
         f"closure residual {res.closure_residual:.1e} [m, rad]; rank of C {res.rank}/6",
@@ -101,7 +103,8 @@ def stiffness(args: argparse.Namespace) -> int:
         require_stable(res)
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
-        doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist()}
+        doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist(),
+               "passive": passive_values(clm, res.q)}  # fmt: skip
         print_json(doc | ({} if shares is None else {"energy_shares": shares}))
     else:
         print(format_report(clm, res))

@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from closedloop.cli.options import PROG, add_wrench_arguments, model_from_args
+from closedloop.cli.options import PROG, add_wrench_arguments, mode_line, model_from_args
 from closedloop.cli.parser import finite_float, path_text
 from closedloop.exceptions import EXIT_OK
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -101,5 +101,13 @@ def view(args: argparse.Namespace) -> int:
     """Run ``closedloop view``; returns the exit code (0)."""
     clm, state = model_from_args(args, geometry=True)
     given = args.q is not None or args.actuated is not None  # else the file's configuration
-    view_from_args(clm, state.q, args.frame, args, check_limits=given and not args.no_limits)
+    mode = [line for line in [mode_line(clm, state.q)] if line]
+
+    def out(line: str) -> None:  # the assembly mode first, once the view is computed
+        if mode:
+            print(mode.pop())
+        print(line)
+
+    view_from_args(clm, state.q, args.frame, args, out=out,
+                   check_limits=given and not args.no_limits)  # fmt: skip
     return EXIT_OK

@@ -17,6 +17,15 @@ Closure file (YAML), after the "Extended URDF" convention, extended with springs
     beams: {link: {end: joint, E: 2.1e11, G: 8.1e10, section: {shape: circle, d: 0.03}}}
                                            # optional flexible links (closedloop.model.beams);
                                            # section: geometry = the link's URDF shape
+    start: {joint: value | [v1, ..., v_nq], ...}  # optional start of the assembly [rad, m]
+
+``start:`` gives the assembly's start configuration, which picks the assembly mode: the
+joints it names at their values (a list of the joint's nq values for a multi-coordinate
+joint: a free flyer's x y z qx qy qz qw), the others as in the model's own reference
+configuration (MJCF ``qpos0``, SDF springs' rest, else neutral); it is stored as
+``model.referenceConfigurations["start"]``, which
+:meth:`closedloop.model.closed_loop.ClosedLoopModel.reference_configuration` returns first.
+It may also stand in the side file of an MJCF or SDF model.
 
 A stiffness is a number >= 0 (``.inf`` locks the joint); a string that reads as a
 number (``1e5``, which YAML 1.1 leaves as a string) is accepted. A value may be a
@@ -32,19 +41,21 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pinocchio as pin
 
 from closedloop.common.arrays import decimal, overflowing, real_number
 from closedloop.common.input_files import read_text
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from closedloop.io.expressions import Arguments, substitute
+from closedloop.model.closed_loop import UNIT_NORM_TOL
 from closedloop.model.closures import CLOSURE_TYPES, joint_id, unknown_type
+from closedloop.model.reference import START, reference_of
 from closedloop.model.spring_spec import check_locked_springs
 
-CLOSURE_KEYS = (
-    "closed_loop", "type", "closure_springs", "name_mot", "springs", "locked", "beams", "balls"
-)  # fmt: skip
-SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams")
+CLOSURE_KEYS = ("closed_loop", "type", "closure_springs", "name_mot", "springs", "locked",
+                "beams", "balls", "start")  # fmt: skip
+SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams", "start")
 Stiffness = float | list[float]
 
 
@@ -63,6 +74,7 @@ class ClosureSpec:
     beams: dict[str, dict] = field(default_factory=dict)  # link -> beam (closedloop.model.beams)
     balls: tuple[str, ...] = ()  # URDF joints read as ball joints (closedloop.model.balls)
     closure_springs: dict = field(default_factory=dict)  # pair index -> 6 values or 6x6
+    start: dict[str, tuple[float, ...]] = field(default_factory=dict)  # joint -> its q values
 
 
 def existing_path(path: str | Path, what: str) -> Path:
@@ -216,7 +228,63 @@ def read_closure_file(
         locked=_name_list(doc, "locked", where) or (),
         beams=_check_beams(_value(doc, "beams", {}), where),
         balls=_name_list(doc, "balls", where) or (),
+        start=_start(_value(doc, "start", {}), where),
     )
+
+
+def _start(start, where: str) -> dict[str, tuple[float, ...]]:
+    """``start:``: joint name -> a finite number or a list of them
+    (:func:`closedloop.common.arrays.real_number`), as tuples; the counts are checked
+    against the model (:func:`start_configuration`)."""
+    if not isinstance(start, dict) or not all(isinstance(k, str) for k in start):
+        raise ModelFileError(
+            f"{where}: start must be a mapping joint name -> value [rad, m] (a list of its "
+            f"nq values for a multi-coordinate joint), got {start!r}"
+        )
+    out = {}
+    for name, value in start.items():
+        given = value if isinstance(value, list) and value else [value]
+        try:
+            values = tuple(map(real_number, given))
+        except (TypeError, ValueError):
+            values = (math.nan,)
+        if not all(map(math.isfinite, values)):
+            raise ModelFileError(
+                f"{where}: start of joint {name!r} is {value!r}; expected a finite number "
+                "[rad, m] or a list of the joint's nq values"
+            )
+        out[name] = values
+    return out
+
+
+def start_configuration(model: pin.Model, start: dict, where: str) -> np.ndarray:
+    """(nq,) the start configuration of ``start`` (:attr:`ClosureSpec.start`, its names
+    checked by :func:`check_spec_names`): ``model``'s reference configuration
+    (:func:`closedloop.model.closed_loop.reference_of`) with the named joints at their
+    values.
+
+    Raises:
+        ModelFileError: a joint given a wrong number of values, or a quaternion or unit
+            complex number not of norm 1 (to
+            :data:`closedloop.model.closed_loop.UNIT_NORM_TOL`).
+    """
+    q = reference_of(model)
+    for name, values in start.items():
+        jm = model.joints[model.getJointId(name)]
+        if len(values) != jm.nq:
+            raise ModelFileError(
+                f"{where}: start of joint {name!r} has {len(values)} value(s); expected its "
+                f"{jm.nq} configuration value(s)"
+            )
+        q[jm.idx_q : jm.idx_q + jm.nq] = values
+        alone = pin.neutral(model)
+        alone[jm.idx_q : jm.idx_q + jm.nq] = values
+        if not pin.isNormalized(model, alone, UNIT_NORM_TOL):
+            raise ModelFileError(
+                f"{where}: start of joint {name!r} is {list(values)}: its quaternion or unit "
+                f"complex number is not of norm 1 (to {UNIT_NORM_TOL:g})"
+            )
+    return pin.normalize(model, q)
 
 
 def _closure_springs(doc: dict, n: int, where: str) -> dict:
@@ -282,21 +350,30 @@ def check_spec_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
     for a joint of the file's ``name_mot``, ``springs`` or ``locked`` that ``model`` lacks,
     or one both locked and given a spring there."""
     with in_file(where):
-        for name in (*(spec.actuated or ()), *spec.springs, *spec.locked):
+        for name in (*(spec.actuated or ()), *spec.springs, *spec.locked, *spec.start):
             joint_id(model, name)
         check_locked_springs(spec.springs, spec.locked)
+
+
+def apply_start(model: pin.Model, spec: ClosureSpec, where: str) -> None:
+    """The file's ``start:`` (its names checked) written into
+    ``model.referenceConfigurations`` (:data:`closedloop.model.closed_loop.START`), if any."""
+    if spec.start:
+        model.referenceConfigurations[START] = start_configuration(model, spec.start, where)
 
 
 def read_side_file(
     model: pin.Model, side_file, springs: dict, arguments: Arguments | None = None
 ) -> tuple[ClosureSpec, dict]:
-    """(the side file's contents, its joint names checked; the robot file's ``springs``
-    with those of the side file merged over them, those of the joints it locks removed);
-    ``arguments``: its placeholders' values."""
+    """(the side file's contents, its joint names checked and its ``start:`` applied
+    (:func:`apply_start`); the robot file's ``springs`` with those of the side file
+    merged over them, those of the joints it locks removed); ``arguments``: its
+    placeholders' values."""
     if side_file is None:
         return ClosureSpec(), springs
     spec = read_closure_file(side_file, SIDE_FILE_KEYS, arguments)
     check_spec_names(model, spec, f"closure file {str(side_file)!r}")
+    apply_start(model, spec, f"closure file {str(side_file)!r}")
     kept = {n: k for n, k in springs.items() if n not in spec.locked}
     return spec, {**kept, **spec.springs}
 

@@ -47,6 +47,7 @@ from closedloop.io.closure_file import (
     SIDE_FILE_KEYS,
     ClosureSpec,
     Stiffness,
+    apply_start,
     check_spec_names,
     existing_path,
     file_number,
@@ -72,9 +73,10 @@ from closedloop.io.mjcf import (
 from closedloop.io.sdf import load_sdf
 from closedloop.model.balls import ball_springs, urdf_with_balls
 from closedloop.model.beams import apply_beams
-from closedloop.model.closed_loop import REST, ClosedLoopModel
+from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import Closure, closure_between_frames, joint_names
 from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
+from closedloop.model.reference import REST
 
 #: Model-file suffixes and their format.
 MODEL_SUFFIXES = {".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf", ".sdf": "sdf",
@@ -231,6 +233,7 @@ def _read_urdf_tree(
                      beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
     where = f"closure file {str(closures)!r}"
     check_spec_names(model, spec, where)
+    apply_start(model, spec, where)  # before the cut's joints, which extend it
     with in_file(where):
         loops = [
             closure_between_frames(model, a, b, t)

@@ -59,9 +59,9 @@ import pinocchio as pin
 from closedloop.exceptions import ModelFileError
 from closedloop.io.data import robot_data_dir
 from closedloop.io.sdf_reader import SdfReader
-from closedloop.model.closed_loop import REST
 from closedloop.model.closures import CLOSURE_TYPES, Closure
 from closedloop.model.elastic_closures import DIRECTIONS, FREE_DIRECTIONS, with_elastic_closures
+from closedloop.model.reference import REST
 
 #: Joint types read.
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "ball", "universal", "fixed")

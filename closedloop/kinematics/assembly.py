@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,6 +11,7 @@ import pinocchio as pin
 from closedloop.common import lapack
 from closedloop.common.arrays import ReadOnlyArrays, check_count, check_positive, frozen, real_array
 from closedloop.common.conditioning import rule_rank, svd
+from closedloop.common.lapack import min_norm_solve
 from closedloop.exceptions import AssemblyError, InvalidInputError, SingularConfigurationError
 from closedloop.kinematics.configuration import CLOSURE_TOL
 from closedloop.kinematics.constraints import flipped_closures, jacobian_rows, residual_rows
@@ -52,7 +54,8 @@ class Assembly(ReadOnlyArrays):
     Attributes:
         q: (nq,) configuration (read-only) satisfying every closure.
         residual: infinity norm of the closure residual [m, rad] (unscaled).
-        iterations: Gauss-Newton iterations used.
+        iterations: Gauss-Newton iterations of the last solve (of a driven assembly, its
+            last step).
         closure: when asked for (``jacobian=True``), the closure residuals (m,) [m; m, rad]
             and their Jacobian (m, nv) at q
             (:func:`closedloop.kinematics.constraints.closure_residual` and
@@ -76,33 +79,6 @@ def coordinate_scale(clm: ClosedLoopModel) -> np.ndarray:
     """(nv,) the unit of each tangent coordinate in :data:`INPUT_STEP`: L [m] for a
     length, 1 for an angle (once per model)."""
     return clm.memo("coordinate_scale", lambda: np.where(clm.linear_coordinates, clm.length, 1.0))
-
-
-def min_norm_solve(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
-    """Minimum-norm least-squares solution x (n,) of A x = b, A (m, n), b (m,).
-
-    LAPACK ``dgelsy``: QR with column pivoting, the effective rank being the largest
-    leading block of R whose estimated condition number stays below 1 / ``rcond``, then a
-    complete orthogonal decomposition. Same answer as ``numpy.linalg.lstsq`` (an SVD) up
-    to rounding when the rank decision agrees, and several times faster on small matrices.
-    No row (no closure) or no column: x = 0, without LAPACK (which refuses empty arrays).
-    """
-    m, n = A.shape
-    if m == 0 or n == 0:
-        return np.zeros(n)
-    if m >= n:
-        rhs = b  # dgelsy works on a copy
-    else:
-        rhs = np.zeros(n)
-        rhs[:m] = b
-    a = np.array(A, dtype=float, order="F")  # overwritten by dgelsy
-    _, x, _, _, info = lapack.dgelsy(
-        a, rhs, np.zeros(n, dtype=np.int32), rcond, overwrite_a=1,
-        lwork=max(min(m, n) + 3 * n + 1, 2 * min(m, n) + 1),
-    )  # fmt: skip
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dgelsy failed (info={info})")
-    return x[:n]
 
 
 def _row_tolerances(clm: ClosedLoopModel, tol: float) -> tuple[np.ndarray | float, float, float]:
@@ -148,46 +124,114 @@ def assemble(
     max_iter: int = 50,
     jacobian: bool = False,
 ) -> Assembly:
-    """Close every loop by moving the passive coordinates only.
+    """Close every loop by moving the passive coordinates only, on the assembly mode
+    continuous from a start.
 
-    Actuated coordinates are set to ``actuated``; spring and locked coordinates keep the
-    values they have in ``q0`` (their rest values). The passive coordinates are found by
-    :func:`close_loops`; from an assembled q0, its first step follows q0's branch to first
-    order (``origin`` of :func:`close_loops`).
-
-    Passive coordinates that no closure row moves (a model without loops: a serial chain
-    has its actuated values set, and nothing else) keep their values of ``q0``: nothing
-    determines them, and a stiffness query at a frame they move reports them as a
-    mechanism (:class:`~closedloop.exceptions.MechanismError`).
+    The start is ``q0``, by default the model's reference configuration
+    (:meth:`ClosedLoopModel.reference_configuration`), as for the command line, the maps
+    and the identification. The actuated values are driven from the start's to
+    ``actuated`` in steps of at most :data:`INPUT_STEP`, each closed from the last
+    (:func:`drive`), not reached in one solve, which may land on another mode (the bundled
+    four-bar at crank 1.0 rad solved at once from neutral: rocker -3.17 rad, the lower
+    mode; driven from its start on the upper mode: 0.52 rad). Where a step cannot be
+    closed (the start's mode ends on the way, at a singular configuration), the one solve
+    from the start is taken. :func:`closedloop.assembly_modes` lists the modes found.
+    Spring and locked coordinates keep their start values (their rest values); so do
+    passive coordinates that no closure row moves (a serial chain has its actuated values
+    set, and nothing else; a query at a frame they move reports a mechanism).
 
     Args:
         clm: the model.
         actuated: (n_act,) values of the actuated coordinates [rad or m], in the order of
-            ``clm.actuated``; ``None`` keeps those of ``q0``.
-        q0: (nq,) start configuration, which picks the assembly branch (default: neutral):
-            a sweep passes the last configuration assembled, at a small step of the inputs
-            (a step that crosses a singular configuration may change branch).
+            ``clm.actuated``; ``None`` keeps those of the start.
+        q0: (nq,) start configuration, which picks the assembly mode (default: the
+            reference configuration); a sweep passes the last configuration assembled.
         tol: closure tolerance, > 0: infinity norm of the residual with its rows in metres
             divided by the model's length L (radians as they are; :data:`ASSEMBLY_TOL`).
-        max_iter: iteration limit (an integer >= 0; 0 only checks the start).
+        max_iter: iteration limit of a solve (an integer >= 0; 0 only checks the start,
+            its actuated values written).
         jacobian: also return the closure residuals and Jacobian at the solution
             (:attr:`Assembly.closure`).
 
     Raises:
         AssemblyError: the closures cannot be satisfied from this start (unreachable
-            input), or close only with the z axes of a revolute or cylindrical closure
-            opposite; the message gives the residual reached.
+            input; joints with springs whose start values do not let the loops close), or
+            close only with the z axes of a revolute or cylindrical closure opposite; the
+            message gives the residual reached.
         SingularConfigurationError: the closures are met at a singular configuration of
-            the assembly, where its branches meet (a change point): the passive
-            coordinates are not determined there (:func:`close_loops`).
+            the assembly, where its branches meet: the passive coordinates are not
+            determined there (:func:`close_loops`).
         InvalidInputError: bad ``actuated``, ``q0``, ``tol`` or ``max_iter``.
     """
     check_positive("tol", tol, "metres / L, rad")
     check_count("max_iter", max_iter, 0)
-    q = clm.check_configuration(pin.neutral(clm.model) if q0 is None else q0)
-    origin = None if q0 is None else q.copy()
-    if actuated is not None:
-        clm.set_actuated(q, check_actuated(clm, actuated))
+    q = clm.check_configuration(clm.reference_configuration() if q0 is None else q0)
+    target = None if actuated is None else check_actuated(clm, actuated)
+    return drive(clm, q, target, tol=tol, max_iter=max_iter, jacobian=jacobian)
+
+
+#: Most steps of :func:`drive` (a longer way takes longer steps).
+MAX_INPUT_STEPS = 1000
+
+
+def input_scale(clm: ClosedLoopModel) -> np.ndarray:
+    """(n_act,) the unit of each actuated value in :data:`INPUT_STEP` (the largest change
+    of an actuated value per step of :func:`drive`): L [m] for a length, 1 for an angle
+    (once per model)."""
+    return clm.memo("input_scale", lambda: coordinate_scale(clm)[clm.actuated_v_indices])
+
+
+def drive(
+    clm: ClosedLoopModel,
+    q: np.ndarray,
+    target: np.ndarray | None,
+    *,
+    tol: float = ASSEMBLY_TOL,
+    max_iter: int = 50,
+    jacobian: bool = False,
+    check=None,
+) -> Assembly:
+    """The continuation of :func:`assemble` from a start q (nq,) that its caller has
+    validated (not modified) to the checked actuated values ``target`` (n_act,) [rad, m]
+    (None: q's own), in at most :data:`MAX_INPUT_STEPS` steps, each closed from the last
+    by :func:`close_at`; where one fails, the one solve from q. ``check(q)`` (the
+    joints' limits: :func:`closedloop.kinematics.driving.assemble_connected`) is called on
+    each step's start, its actuated values written, and raises InvalidInputError to
+    refuse it: on the way, the one solve from q is then taken; at the target, it is raised.
+    """
+    start = clm.actuated_values(q)
+    target = start if target is None else target
+    with np.errstate(over="ignore"):  # inputs near the float range: one step, refused there
+        steps = float(np.max(np.abs(target - start) / input_scale(clm), initial=0)) / INPUT_STEP
+    n = min(MAX_INPUT_STEPS, math.ceil(steps)) if math.isfinite(steps) and max_iter else 1
+    path = q
+    try:
+        for k in range(1, n):
+            path = close_at(clm, path, start + k / n * (target - start), tol=tol,
+                            max_iter=max_iter, check=check).q  # fmt: skip
+    except (AssemblyError, InvalidInputError, SingularConfigurationError):
+        path = q
+    return close_at(clm, path, target, tol=tol, max_iter=max_iter, jacobian=jacobian, check=check)
+
+
+def close_at(
+    clm: ClosedLoopModel,
+    origin: np.ndarray,
+    actuated: np.ndarray,
+    *,
+    tol: float = ASSEMBLY_TOL,
+    max_iter: int = 50,
+    jacobian: bool = False,
+    check=None,
+) -> Assembly:
+    """One solve (:func:`close_loops`) from ``origin`` (nq,), validated (not modified),
+    with its actuated values set to ``actuated`` (n_act,) [rad, m], checked: from a closed
+    origin a step of at most 2 :data:`INPUT_STEP` follows its branch to first order.
+    ``check`` as for :func:`drive`."""
+    q = origin.copy()
+    clm.set_actuated(q, actuated)
+    if check is not None:
+        check(q)
     return close_loops(clm, q, tol=tol, max_iter=max_iter, jacobian=jacobian, origin=origin)
 
 
@@ -227,18 +271,14 @@ def close_loops(
     the residual.
 
     Near a singular configuration the first step from a start whose inputs have just
-    moved is large (the passive Jacobian is nearly rank deficient and the residual holds
-    the second-order terms of the input step) and may land on another assembly branch:
-    the parallelogram four-bar 0.1 rad from its change point, the crank moved by 0.05 rad
-    towards it, went to the crossed branch. With an ``origin`` at most 2 :data:`INPUT_STEP`
-    away, the first step is instead the first-order continuation of the origin
-    (:func:`_continued`): the passive coordinates move along the tangent of the origin's
-    branch. (An origin at a singular configuration, where branches meet, picks none.)
-
-    A closed configuration is then checked not to be a singular one
-    (:func:`_check_regular`): at the parallelogram four-bar's change point (bars collinear)
-    the tolerance admitted poses up to 2.6e-6 rad from it, a different one from each start,
-    each with its own compliance; it is a SingularConfigurationError instead.
+    moved is large (the residual holds the second-order terms of the input step) and
+    may land on another branch (the parallelogram four-bar 0.1 rad from its change point,
+    the crank moved 0.05 rad towards it). With an ``origin`` at most 2 :data:`INPUT_STEP`
+    away, the first step is instead the first-order continuation of the origin's branch
+    (:func:`_continued`; an origin where branches meet picks none). A closed
+    configuration is then checked not to be a singular one (:func:`_check_regular`: at
+    the change point the tolerance admitted poses up to 2.6e-6 rad from it, each with its
+    own compliance; it is a SingularConfigurationError instead).
 
     Args:
         clm: the model.
@@ -296,7 +336,9 @@ def close_loops(
             f"cannot close the loops of {clm.name!r} with actuated "
             f"{dict(zip(clm.actuated, clm.actuated_values(q).tolist(), strict=True))}"
             + (f" (the joints with springs or locked, {held}, keep their start values: "
-               "a loop that needs them to move cannot close)" if held else ""),
+               "a loop that needs them to move cannot close; give them start values that "
+               "close it: q0, on the command line --near JOINT=VALUE or --start Q)"
+               if held else ""),
             err,
         )  # fmt: skip
     if flipped := flipped_closures(clm, datas):
@@ -347,7 +389,7 @@ def descend(clm: ClosedLoopModel, q, r, size2, free, tols, *, strict: bool = Fal
     return None
 
 
-def _scaled_passive_jacobian(clm: ClosedLoopModel, J: np.ndarray, free: np.ndarray):
+def scaled_passive_jacobian(clm: ClosedLoopModel, J: np.ndarray, free: np.ndarray):
     """(m, p) columns ``free`` (the passive coordinates) of the closure Jacobian J (m, nv),
     unit-free: rows in metres divided by L, columns of lengths multiplied by L."""
     rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
@@ -366,7 +408,7 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float, 
     (residual r, kinematics in the workspace), made sure not to be a singular one of the
     assembly.
 
-    Where the scaled passive Jacobian A (:func:`_scaled_passive_jacobian`) is nearly
+    Where the scaled passive Jacobian A (:func:`scaled_passive_jacobian`) is nearly
     rank deficient, the tolerance admits poses up to about sqrt(2 tol) from a singular
     solution, each a different answer: q is then iterated further (at most ``polish``
     iterations, :data:`POLISH_FACTOR`) while the residual decreases, towards the solution
@@ -386,7 +428,7 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float, 
     """
     data, datas = clm.workspace()
     J = jacobian_rows(clm, data, datas, calc=False)
-    s = _singular_values(_scaled_passive_jacobian(clm, J, free))
+    s = _singular_values(scaled_passive_jacobian(clm, J, free))
     if not s[-1] > POLISH_FACTOR * np.sqrt(tol) * s[0]:
         size2 = float(r.dot(r))
         for _ in range(polish):
@@ -397,11 +439,11 @@ def _check_regular(clm: ClosedLoopModel, q, r, it: int, free, tols, tol: float, 
             it += 1
         _residual(clm, data, datas, q, tols)  # q's kinematics back in the workspace
         J = jacobian_rows(clm, data, datas, calc=False)
-        s = _singular_values(_scaled_passive_jacobian(clm, J, free))
+        s = _singular_values(scaled_passive_jacobian(clm, J, free))
     rank = rule_rank(s)
     if rank == len(free) or rank == len(r):  # nothing unseen, or every row in the range
         return q, r, it, J
-    U, s, Vt = svd(_scaled_passive_jacobian(clm, J, free))
+    U, s, Vt = svd(scaled_passive_jacobian(clm, J, free))
     rank = rule_rank(s)
     rows = np.where(clm.linear_rows, 1.0 / clm.length, 1.0)
     scale = coordinate_scale(clm)[free]

@@ -45,13 +45,8 @@ from closedloop.model.closures import (
     joint_names,
 )
 from closedloop.model.elastic_closures import with_elastic_closures
+from closedloop.model.reference import reference_of
 from closedloop.model.spring_spec import joint_stiffness
-
-#: Name of the rest configuration in ``model.referenceConfigurations`` (springs at rest).
-REST = "spring_rest"
-#: Keys of ``model.referenceConfigurations`` taken as the reference configuration, first
-#: found first (:meth:`ClosedLoopModel.reference_configuration`).
-REFERENCE_KEYS = ("qpos0", REST)
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
@@ -506,12 +501,8 @@ class ClosedLoopModel:
 
     def reference_configuration(self) -> np.ndarray:
         """(nq,) new array: the model's reference configuration, the start of an assembly
-        that is not given one: the MJCF ``qpos0`` or the rest configuration
-        (:data:`REST`: springs at their SDF ``spring_reference``, or the URDF's drawing with
-        the cut's joints of elastic closures) if the model has one, else neutral."""
-        refs = self.model.referenceConfigurations
-        key = next((k for k in REFERENCE_KEYS if k in refs), None)
-        return np.array(refs[key] if key else pin.neutral(self.model), dtype=float)
+        that is not given one (:func:`closedloop.model.reference.reference_of`)."""
+        return reference_of(self.model)
 
     def __repr__(self) -> str:
         return (

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 import scipy.stats
-from helpers import driven
+from helpers import driven, one_solve
 
 import closedloop as cl
 from closedloop.analysis.identification import Measurement, identify
@@ -17,9 +17,9 @@ from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT, ModelMisfitWarni
 from closedloop.kinematics.driving import assemble_connected
 
 TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
-#: Crank angles [rad] where the four-bar driven from its file's configuration and
-#: cl.assemble from the neutral one (a single solve) are on two assembly modes (beyond
-#: 0.9 rad; checked below).
+#: Crank angles [rad] where the four-bar driven from its start and one solve from the
+#: neutral configuration (helpers.one_solve) are on two assembly modes (beyond 0.9 rad;
+#: checked below).
 CRANKS = (1.0, 1.1, 1.2, 1.3, 1.4)
 #: The measurements (by crank) taken with the robot on the other assembly mode.
 OTHER = (1, 3)
@@ -33,7 +33,7 @@ def _data(clm, other=OTHER, stated_q=True, seed=3):
     ``other`` (those of the other mode), with the actuated values and (``stated_q``) the
     q the robot was in; and the indices of the measurements on the other mode."""
     on_path = driven(clm, CRANKS)
-    single = [cl.assemble(clm, actuated=[a]).q for a in CRANKS]
+    single = [one_solve(clm, [a]) for a in CRANKS]
     assert min(np.abs(a - b).max() for a, b in zip(on_path, single, strict=True)) > 1.0
     rng, data, wrong = np.random.default_rng(seed), [], []
     for i, crank in enumerate(CRANKS):
@@ -90,7 +90,7 @@ def test_measurements_assembled_off_their_neighbours_mode_are_named(fourbar_true
     would): the ones apart from their neighbours are named, whatever their twists."""
     data, wrong = _data(fourbar_true, stated_q=False)
     on_path = driven(fourbar_true, CRANKS)
-    configs = [cl.assemble(fourbar_true, actuated=m.actuated).q if i in wrong
+    configs = [one_solve(fourbar_true, m.actuated) if i in wrong
                else on_path[CRANKS.index(m.actuated[0])] for i, m in enumerate(data)]  # fmt: skip
     assert other_modes(fourbar_true, data, configs) == dict.fromkeys(wrong, "neighbours")
 

@@ -8,7 +8,7 @@ import mechanisms as mech
 import numpy as np
 import pytest
 import scipy.stats
-from helpers import driven
+from helpers import driven, one_solve
 
 import closedloop as cl
 from closedloop.analysis.identification import FIT_SIGNIFICANCE, Measurement, identify
@@ -16,9 +16,10 @@ from closedloop.cli.app import main
 from closedloop.exceptions import EXIT_RANK_DEFICIENT, ModelMisfitWarning
 
 FOURBAR_TRUE = {"crank": 50.0, "crank_axial": 1e5, "rocker_axial": 2e5}
-#: Two assembly modes of the four-bar: below 0.8 rad both assemblies agree, beyond it
-#: cl.assemble (from the neutral configuration) lands on the other mode than the one a
-#: robot driven from its file's configuration is on (and that `actuated:` gives).
+#: Two assembly modes of the four-bar: below 0.8 rad both assemblies agree, beyond it one
+#: solve from the neutral configuration (helpers.one_solve, cl.assemble before #45) lands
+#: on the other mode than the one a robot driven from its start is on (that `actuated:`
+#: gives).
 CRANKS = (0.2, 0.6, 1.0, 1.4)
 #: The limit of the test is a chi-square quantile written two ways (scipy.special's
 #: inverse survival function, scipy.stats'): they agree to rounding of the inversion.
@@ -43,11 +44,11 @@ def _fourbar(fourbar_urdf, fourbar_yaml):
 
 
 def test_data_of_the_other_assembly_mode_are_flagged(fourbar_urdf, fourbar_yaml):
-    """The audit's case: twists computed on cl.assemble's configurations (the other mode
+    """The audit's case: twists computed on one solve's configurations (the other mode
     beyond 0.8 rad), stated by their actuated values (the driven mode): one spring cannot
     explain them. Before, the fit said nothing (RMS 4e6, exit 0)."""
     clm = _fourbar(fourbar_urdf, fourbar_yaml)
-    configs = [cl.assemble(clm, actuated=[a]).q for a in CRANKS]
+    configs = [one_solve(clm, [a]) for a in CRANKS]
     on_path = driven(clm, CRANKS)
     assert np.abs(configs[-1] - on_path[-1]).max() > 1.0  # two modes, on purpose
     rows = _measured(clm, configs, np.random.default_rng(5), sd=0.0)
@@ -108,7 +109,7 @@ def test_standard_deviations_stated_too_small_are_flagged(understated):
 def test_the_command_says_the_model_does_not_fit_and_exits_1(tmp_path, capsys):
     """The audit's file: actuated values of the driven mode, twists of the other one."""
     clm = cl.load_model(cl.data.path("fourbar.urdf"), cl.data.path("fourbar.yaml"))
-    rows = _measured(clm, [cl.assemble(clm, actuated=[a]).q for a in CRANKS],
+    rows = _measured(clm, [one_solve(clm, [a]) for a in CRANKS],
                      np.random.default_rng(5), sd=0.0, n_wrench=2)  # fmt: skip
     lines = ["frame,actuated_0,fx,fy,fz,nx,ny,nz,dx,dy,dz,rx,ry,rz,sd"]
     lines += [",".join(["P", *(repr(float(x)) for x in (q[0], *w, *d, 1e-9))]) for q, w, d in rows]

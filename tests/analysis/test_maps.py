@@ -4,8 +4,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import mechanisms as mech
 import numpy as np
+import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import assert_close_in_norm, driven, one_solve
 
 import closedloop as cl
 from closedloop.analysis.maps import INDICES, grid_points, stiffness_map
@@ -131,9 +132,9 @@ CHUNK_RTOL = 1e-9
 
 
 def test_tiny_chunks_on_processes_follow_the_serial_branch(fourbar_urdf, fourbar_yaml):
-    """Over this crank range the four-bar assembled from its reference configuration lands
-    on the other assembly mode for cranks 1.0-1.9: a chunk starting there from the
-    reference would switch branch. Each chunk starts from the serial continuation."""
+    """Over this crank range the four-bar solved at once from the neutral configuration
+    lands on the other assembly mode for cranks 1.0-1.9: a chunk restarting so would
+    switch branch. Each chunk starts from the serial continuation."""
     clm = cl.load_model(fourbar_urdf, fourbar_yaml)
     source = ModelSource(str(fourbar_urdf), str(fourbar_yaml))
     cranks = np.linspace(0.1, 2.9, 29)
@@ -146,31 +147,32 @@ def test_tiny_chunks_on_processes_follow_the_serial_branch(fourbar_urdf, fourbar
     assert_close_in_norm(tiny.C.reshape(-1, 36), serial.C.reshape(-1, 36), CHUNK_RTOL)
     for name, values in serial.indices.items():
         np.testing.assert_allclose(tiny.indices[name], values, rtol=CHUNK_RTOL, err_msg=name)
-    # the test bites: from the reference, the border point at crank 1.1 is on the other mode
+    # the test bites: solved at once, the border point at crank 1.1 is on the other mode
     i = int(np.flatnonzero(np.isclose(cranks, 1.1))[0])
     assert i % 2 == 0  # a chunk border of the tiny map
-    q = cl.assemble(clm, [cranks[i]], clm.reference_configuration()).q
+    q = one_solve(clm, [cranks[i]])
     other = cl.compliance(clm, q, "P").C
     assert np.linalg.norm(other - serial.C[i]) > 1e-3 * np.linalg.norm(serial.C[i])
 
 
-def from_reference(clm, points):
-    """A start provider: every point from the reference configuration."""
-    return np.tile(clm.reference_configuration(), (len(points), 1))
+def from_neutral(clm, points):
+    """A start provider: every point from the neutral configuration."""
+    return np.tile(pin.neutral(clm.model), (len(points), 1))
 
 
 def test_start_provider_sets_every_start(fourbar_urdf, fourbar_yaml):
-    """With a provider each point starts where it says, not from its neighbour: here the
-    reference configuration, so the map follows the other assembly mode at cranks 1.0-1.9,
-    as direct queries from the reference do (the same computation: RTOL_SAME)."""
+    """With a provider each point starts where it says, in one solve, not from its
+    neighbour: here the neutral configuration, so the map follows the other assembly mode
+    at cranks 1.0-1.9, as one solve from neutral does (the same computation: RTOL_SAME)."""
     source = ModelSource(str(fourbar_urdf), str(fourbar_yaml))
     clm = source.load()
     cranks = np.linspace(0.1, 2.9, 29)
-    m = stiffness_map(source, "P", sweeps={"crank": cranks}, start=from_reference, workers=2,
+    m = stiffness_map(source, "P", sweeps={"crank": cranks}, start=from_neutral, workers=2,
                       chunk=5)  # fmt: skip
     for i, crank in enumerate(cranks):
-        q = cl.assemble(clm, [crank], clm.reference_configuration()).q
+        q = one_solve(clm, [crank])
         assert_close_in_norm(m.C[i], cl.compliance(clm, q, "P").C, RTOL_SAME)
+    assert np.abs(one_solve(clm, [1.0])[3] - driven(clm, [1.0])[0][3]) > 1.0  # two modes
 
 
 def test_condition_numbers_of_a_near_singular_map_are_the_single_query_s(ur5_urdf):

@@ -18,6 +18,7 @@ import closedloop as cl
 from closedloop import data
 from closedloop.cli.app import main
 from closedloop.common.rounding import ROUNDING_RTOL, without_rounding
+from closedloop.kinematics.driving import assemble_within_limits
 
 UR5_Q = [0.0, -1.0, 1.5, -0.5, 1.2, 0.3]  # [rad]
 UR5_DEGREES = [0, -57, 86, -29, 69, 17]  # the same pose typed in degrees
@@ -52,7 +53,8 @@ def test_no_limits_drives_the_actuated_values_on_the_start_mode(capsys):
     q, q_free = (np.array(json.loads(o)["q"]) for o in (out, out_free))
     np.testing.assert_allclose(q_free, q, rtol=0, atol=1e-9)  # the assembly's tolerance
     robot = cl.load_model(data.path("fourbar.urdf"), data.path("fourbar.yaml"))
-    direct = cl.assemble(robot, actuated=[1.0]).q  # one solve from neutral: the other mode
+    neutral = pin.neutral(robot.model)
+    direct = assemble_within_limits(robot, [1.0], neutral).q  # one solve: the other mode
     assert np.max(np.abs(direct - q)) > 1.0
 
 

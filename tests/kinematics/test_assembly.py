@@ -202,7 +202,7 @@ def test_cahyman_warm_start_puts_virtual_springs_back_to_rest():
 def test_min_norm_solve_is_lstsq_and_leaves_its_inputs(m, n):
     """dgelsy's minimum-norm solution against numpy's SVD lstsq (rounding of two
     backward-stable solvers on well-conditioned matrices); A and b are not modified."""
-    from closedloop.kinematics.assembly import min_norm_solve
+    from closedloop.common.lapack import min_norm_solve
 
     rng = np.random.default_rng(m * 10 + n)
     A, b = rng.normal(size=(m, n)), rng.normal(size=m)
@@ -245,11 +245,12 @@ def test_actuated_values_are_assembled_on_the_mode_of_the_start(crank, capsys):
     """assemble_connected drives the input from the start's value to the target: the
     four-bar from crank 0 ends where a fine continuation (steps of 0.01 rad, each solve
     from the last) ends. One solve from crank 0 lands on the other mode at crank 1.0, 1.2,
-    1.9 and 2.6 (P 0.13-0.16 m lower), and the command line's --actuated took it."""
+    1.9 and 2.6 (P 0.13-0.16 m lower), and the command line's --actuated took it; so did
+    cl.assemble, which now drives from the model's start as the command line does."""
     import json
 
     from closedloop.cli.app import main
-    from closedloop.kinematics.driving import assemble_connected
+    from closedloop.kinematics.driving import assemble_connected, assemble_within_limits
 
     clm = fourbar()
     q = pin.neutral(clm.model)
@@ -259,8 +260,9 @@ def test_actuated_values_are_assembled_on_the_mode_of_the_start(crank, capsys):
     np.testing.assert_allclose(got, q, rtol=0, atol=1e-9)  # both closed to 1e-12 L
     assert main(["stiffness", "fourbar", "--frame", "P", "--actuated", repr(crank), "--json"]) == 1
     np.testing.assert_allclose(json.loads(capsys.readouterr().out)["q"], q, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(assemble(clm, [crank]).q, q, rtol=0, atol=1e-9)
     if crank in (1.0, 1.2, 1.9, 2.6):  # what one solve gives: another mode
-        direct = assemble(clm, [crank]).q
+        direct = assemble_within_limits(clm, [crank], pin.neutral(clm.model)).q
         assert np.max(np.abs(pin.difference(clm.model, direct, q))) > 0.1
 
 
