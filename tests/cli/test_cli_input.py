@@ -81,7 +81,6 @@ def test_every_command_refuses_xml_entities_in_one_line(
     "argv",
     [
         ["view", "--html", "{out}/view.html"],
-        ["map", "--sweep", "crank=0:1:3", "--out", "{out}/map"],
     ],
 )
 def test_commands_that_read_meshes_refuse_xml_entities_in_them(
@@ -94,6 +93,19 @@ def test_commands_that_read_meshes_refuse_xml_entities_in_them(
                          "--springs", springs, *rest)  # fmt: skip
     assert (code, out) == (EXIT_BAD_INPUT, "")
     assert "laughs.dae' declares the XML entity 'lol'" in one_line(err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_map_reads_no_mesh(capsys, tmp_path, hostile_files):
+    """A map loads its model without visual geometry (its main process and its workers):
+    the hostile mesh is never opened, the command goes on to its own checks (here the
+    sweep of a joint that is not actuated)."""
+    springs = tmp_path.parent / f"{tmp_path.name}-springs.yaml"
+    springs.write_text("crank: 1.0\n")
+    code, out, err = run(capsys, "map", hostile_files["mesh"], "--frame", "arm", "--springs",
+                         springs, "--sweep", "crank=0:1:3", "--out", tmp_path / "map")  # fmt: skip
+    assert (code, out) == (EXIT_BAD_INPUT, "")
+    assert "'crank' is not an actuated joint" in one_line(err)
     assert list(tmp_path.iterdir()) == []
 
 
