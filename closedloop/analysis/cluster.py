@@ -242,7 +242,20 @@ def dask_executor(address: str | None, worker_timeout: float | None = None):
             yield executor
         finally:
             executor.shutdown()
-            client.close()
+            _close(client)
+
+
+def _close(client) -> None:
+    """Close ``client``. With its scheduler lost, distributed's own reconnection may fail
+    while it closes (a ``RuntimeError`` from its futures changing under iteration, a
+    ``TimeoutError`` or ``OSError``); the run's outcome (its result, or the error that
+    names the lost scheduler) is already decided, and is what the caller reports. The
+    client is then marked closed, or its finaliser would try again (20 s, then a traceback
+    on stderr at exit)."""
+    try:
+        client.close()
+    except (RuntimeError, TimeoutError, OSError):
+        client.status = "closed"
 
 
 #: Loggers (with their children) muted while a Dask run lasts: Dask's own, and those of
