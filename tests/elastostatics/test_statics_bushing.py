@@ -125,3 +125,15 @@ def test_a_pin_held_by_a_tilted_bushing_turns_as_the_closed_form(
         eq.joint_deflection, expected, rtol=0, atol=rtol_theta(stiff) * abs(theta)
     )
 
+
+def test_rounding_that_stalls_newton_is_called_so(tmp_path):
+    """The spring forces evaluated as the product K e (as they were): Newton's steps stall
+    at the rounding (1e-9 rad at 1e10 against 20; the convergence test wants 1e-12), in
+    every increment; the error says so and proposes neither more iterations nor smaller
+    increments, which do not help (max_increment 0.01 fails alike)."""
+    clm, q, _ = pinned(tmp_path, TILTS[0], 1e10)
+    clm.spring_forces = lambda dq: clm.spring_matrix @ dq
+    for options in ({}, {"max_increment": 0.01}):
+        with pytest.raises(cl.EquilibriumError, match="Newton stalls at the rounding") as err:
+            cl.solve_equilibrium(clm, q, "tip", np.r_[0.0, 0.0, 0.0, 20.0 * AXIS], **options)
+        assert not err.value.limit_load and "try" not in str(err.value)
