@@ -45,7 +45,7 @@ from mechanisms import (
 
 import closedloop as cl
 from closedloop.common.conditioning import twist_scaling
-from closedloop.elastostatics.batch import QUERY_ERRORS, answered
+from closedloop.elastostatics.batch import COND_GRAM, QUERY_ERRORS, answered
 from closedloop.elastostatics.compliance import energy_shares
 from closedloop.model.closed_loop import ClosedLoopModel, Closure
 
@@ -56,6 +56,23 @@ PATHS = ("auto", "null-space")
 def tol(cond: float) -> float:
     """Relative tolerance of a quantity recomputed with other rounding (module docstring)."""
     return 64.0 * EPS * max(1.0, math.sqrt(cond))
+
+
+#: A batch row's condition number up to COND_GRAM is the ratio of the eigenvalues of the
+#: formed C_s (:func:`closedloop.elastostatics.batch._ranks`): each eigenvalue to about
+#: eps |C_s|, the smallest relative eps cond, not eps sqrt(cond) (measured: 2.6 eps cond
+#: at most between two batches, 1.5 against the single query, on 1900 random UR5 poses
+#: with OpenBLAS's Haswell, SandyBridge and Katmai kernels): GRAM_ULPS eps cond.
+GRAM_ULPS = 16.0
+
+
+def tol_batch_cond(cond: float) -> float:
+    """Relative tolerance of a batch row's condition number against another computation
+    of it: :func:`tol`, or GRAM_ULPS eps cond where the row may have it from the formed
+    C_s (up to twice COND_GRAM: the other side may have decided on the other side of it)."""
+    if cond <= 2.0 * COND_GRAM:
+        return max(tol(cond), GRAM_ULPS * EPS * cond)
+    return tol(cond)
 
 
 # ---------------------------------------------------------------------------- cases
@@ -272,7 +289,9 @@ def test_springs_times_s_in_the_batch():
                 assert scaled_error(b.C[i] * s, ref.C[i], ref.length) <= rtol
                 assert relative_error(b.G[i] * s, ref.G[i]) <= rtol
                 np.testing.assert_allclose(
-                    b.condition_number[i], ref.condition_number[i], rtol=rtol
+                    b.condition_number[i],
+                    ref.condition_number[i],
+                    rtol=tol_batch_cond(ref.condition_number[i]),
                 )
 
 
@@ -341,7 +360,11 @@ def test_the_batch_under_a_change_of_length_unit():
         for i in range(len(Q)):
             rtol = tol(ref.condition_number[i])
             assert scaled_error(b.C[i] / np.outer(D, D), ref.C[i], ref.length) <= rtol
-            np.testing.assert_allclose(b.condition_number[i], ref.condition_number[i], rtol=rtol)
+            np.testing.assert_allclose(
+                b.condition_number[i],
+                ref.condition_number[i],
+                rtol=tol_batch_cond(ref.condition_number[i]),
+            )
 
 
 # ---------------------------------------------------------------------------- 3. world
@@ -505,7 +528,9 @@ def test_each_row_of_the_batch_is_the_single_query(rows, axes):
         rtol = tol(r.condition_number)
         assert scaled_error(b.C[i], r.C, r.length) <= rtol
         assert relative_error(b.G[i], r.G) <= rtol
-        np.testing.assert_allclose(b.condition_number[i], r.condition_number, rtol=rtol)
+        np.testing.assert_allclose(
+            b.condition_number[i], r.condition_number, rtol=tol_batch_cond(r.condition_number)
+        )
     if rows is not _cahyman_rows:  # near a singular pose: some rows left to the single query
         assert not b.stacked.all()
 
@@ -548,7 +573,9 @@ def test_every_row_answered_or_its_own_error():
         assert rank[i] == r.rank
         assert scaled_error(C[i], r.C, r.length) <= rtol
         assert relative_error(G[i], r.G) <= rtol
-        np.testing.assert_allclose(cond[i], r.condition_number, rtol=rtol)
+        np.testing.assert_allclose(
+            cond[i], r.condition_number, rtol=tol_batch_cond(r.condition_number)
+        )
 
 
 # ---------------------------------------------------------------------------- 6. properties
