@@ -310,11 +310,12 @@ class ClosedLoopModel:
         (tangent of q [rad, m]); 0 on passive and locked coordinates.
 
         A block's forces are taken in its eigenbasis, K_j dq_j = V (lambda * (V^T dq_j)):
-        their rounding is then that of the forces of a deflection within eps |dq_j| of
-        dq_j, along each direction in proportion to its stiffness. The product K_j dq_j
-        would leave eps |K_j| |dq_j| on every direction: on a soft direction of a stiff
-        coupled block (a bushing of 1e9 beside 20 N m/rad) cond(K_j) eps of its force, a
-        rounding that the nonlinear statics' balance test cannot get below.
+        their rounding is then that of the forces of a deflection within eps norm(dq_j)
+        of dq_j, along each direction in proportion to its stiffness. The product
+        K_j dq_j would leave eps norm(K_j) norm(dq_j) on every direction: on a soft
+        direction of a stiff coupled block (a bushing of 1e9 beside 20 N m/rad)
+        cond(K_j) eps of its force, a rounding that the nonlinear statics' balance test
+        cannot get below.
         """
         k = self.stiffness
         f = np.where(np.isinf(k), 0.0, k) * dq
