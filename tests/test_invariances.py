@@ -24,6 +24,11 @@ eps (the springs, the lengths) times the sensitivity of the problem: the square-
 factor gives every quantity to about eps sqrt(cond(K_s)) relative
 (:mod:`closedloop.common.conditioning`), so the bound is ``tol(cond)`` = 64 eps max(1, sqrt(cond)).
 K C - I carries eps cond(K_s) (K and C are inverses: their product sees the whole spread).
+G, solved for in joint space, also carries the spread of the springs (``tol_joint``); det K
+the rounding of its six eigenvalues; a batch row's condition number up to COND_GRAM that of
+the eigenvalues of the formed C_s, eps cond (``tol_batch_cond``). Each bound holds with a
+margin on OpenBLAS's Haswell, SandyBridge and Nehalem kernels (OPENBLAS_CORETYPE), one
+thread or two.
 """
 
 from __future__ import annotations
@@ -45,8 +50,9 @@ from mechanisms import (
 
 import closedloop as cl
 from closedloop.common.conditioning import twist_scaling
-from closedloop.elastostatics.batch import QUERY_ERRORS, answered
+from closedloop.elastostatics.batch import COND_GRAM, QUERY_ERRORS, answered
 from closedloop.elastostatics.compliance import energy_shares
+from closedloop.elastostatics.partition import model_scaling
 from closedloop.model.closed_loop import ClosedLoopModel, Closure
 
 EPS = np.finfo(float).eps
@@ -56,6 +62,37 @@ PATHS = ("auto", "null-space")
 def tol(cond: float) -> float:
     """Relative tolerance of a quantity recomputed with other rounding (module docstring)."""
     return 64.0 * EPS * max(1.0, math.sqrt(cond))
+
+
+def tol_joint(clm: ClosedLoopModel, cond: float, length: float) -> float:
+    """Relative tolerance of G (joint deflections per wrench) recomputed with other
+    rounding: G is solved for in joint space, whose square-root factor spans the springs'
+    square roots (scaled at ``length``: their spread, partition.model_scaling) as well as
+    K_s: :func:`tol` of the larger (the four-bar, crank 50 N m/rad beside axial springs of
+    1e5 N/m, spread 21 against sqrt(cond) 7.6, measured 49 eps sqrt(cond) on its
+    null-space path with the world moved: 18 eps of this)."""
+    return tol(max(cond, model_scaling(clm, length).spread ** 2))
+
+
+#: det K is the product of six eigenvalues, each known to tol(cond): DET_TERMS tol(cond).
+DET_TERMS = 6
+
+
+#: A batch row's condition number up to COND_GRAM is the ratio of the eigenvalues of the
+#: formed C_s (:func:`closedloop.elastostatics.batch._ranks`): each eigenvalue to about
+#: eps |C_s|, the smallest relative eps cond, not eps sqrt(cond) (measured: 2.6 eps cond
+#: at most between two batches, 1.5 against the single query, on 1900 random UR5 poses
+#: with OpenBLAS's Haswell, SandyBridge and Katmai kernels): GRAM_ULPS eps cond.
+GRAM_ULPS = 16.0
+
+
+def tol_batch_cond(cond: float) -> float:
+    """Relative tolerance of a batch row's condition number against another computation
+    of it: :func:`tol`, or GRAM_ULPS eps cond where the row may have it from the formed
+    C_s (up to twice COND_GRAM: the other side may have decided on the other side of it)."""
+    if cond <= 2.0 * COND_GRAM:
+        return max(tol(cond), GRAM_ULPS * EPS * cond)
+    return tol(cond)
 
 
 # ---------------------------------------------------------------------------- cases
@@ -198,13 +235,15 @@ def reordered(clm: ClosedLoopModel, order, swap, spring_order) -> ClosedLoopMode
     return rebuilt(clm, clm.model, [closures[i] for i in order], {n: springs[n] for n in names})
 
 
-def assert_same_answer(r, ref, rtol, scale=1.0) -> None:
-    """r is ref (C, G divided by ``scale``) to rtol: C, G, rank, rigid directions,
+def assert_same_answer(r, ref, clm, scale=1.0) -> None:
+    """r is ref (C, G divided by ``scale``) of the model ``clm`` (or one of the same
+    springs) to rounding (:func:`tol`, :func:`tol_joint`): C, G, rank, rigid directions,
     condition number, path."""
+    rtol = tol(ref.condition_number)
     assert r.rank == ref.rank
     assert r.path == ref.path
     assert scaled_error(r.C * scale, ref.C, ref.length) <= rtol
-    assert relative_error(r.G * scale, ref.G) <= rtol
+    assert relative_error(r.G * scale, ref.G) <= tol_joint(clm, ref.condition_number, ref.length)
     np.testing.assert_allclose(r.condition_number, ref.condition_number, rtol=rtol)
     np.testing.assert_allclose(
         projector(r.rigid_directions), projector(ref.rigid_directions), atol=rtol
@@ -222,7 +261,7 @@ def test_springs_times_s_divide_the_compliance_by_s(name, path):
     ref = cl.compliance(m, q, f, path=path)
     for s in SPRING_SCALES:
         r = cl.compliance(times_springs(m, s), q, f, path=path)
-        assert_same_answer(r, ref, tol(ref.condition_number), scale=s)
+        assert_same_answer(r, ref, m, scale=s)
 
 
 def test_springs_times_s_on_the_rank_deficient_side_of_a_singular_pose():
@@ -236,7 +275,7 @@ def test_springs_times_s_on_the_rank_deficient_side_of_a_singular_pose():
             assert ref.rank == 5
             for s in (1e-150, 1e150):
                 r = cl.compliance(times_springs(m, s), qe, f, path=path)
-                assert_same_answer(r, ref, tol(ref.condition_number), scale=s)
+                assert_same_answer(r, ref, m, scale=s)
 
 
 def test_the_two_paths_agree_under_spring_scaling():
@@ -251,7 +290,7 @@ def test_the_two_paths_agree_under_spring_scaling():
             rtol = tol(a.condition_number)
             assert a.rank == b.rank, name
             assert scaled_error(b.C, a.C, a.length) <= rtol, name
-            assert relative_error(b.G, a.G) <= rtol, name
+            assert relative_error(b.G, a.G) <= tol_joint(ms, a.condition_number, a.length), name
             np.testing.assert_allclose(b.condition_number, a.condition_number, rtol=rtol)
 
 
@@ -270,9 +309,12 @@ def test_springs_times_s_in_the_batch():
             for i in range(len(configurations)):
                 rtol = tol(ref.condition_number[i])
                 assert scaled_error(b.C[i] * s, ref.C[i], ref.length) <= rtol
-                assert relative_error(b.G[i] * s, ref.G[i]) <= rtol
+                rtol_G = tol_joint(model, ref.condition_number[i], ref.length)
+                assert relative_error(b.G[i] * s, ref.G[i]) <= rtol_G
                 np.testing.assert_allclose(
-                    b.condition_number[i], ref.condition_number[i], rtol=rtol
+                    b.condition_number[i],
+                    ref.condition_number[i],
+                    rtol=tol_batch_cond(ref.condition_number[i]),
                 )
 
 
@@ -298,7 +340,8 @@ def test_lengths_times_s_scale_the_compliance_by_the_unit(name, path):
         assert r.rank == ref.rank and r.path == ref.path
         np.testing.assert_allclose(r.length, s * ref.length, rtol=4 * EPS)
         assert scaled_error(r.C / np.outer(D, D), ref.C, ref.length) <= rtol
-        assert relative_error(r.G / np.outer(rows, D), ref.G) <= rtol
+        rtol_G = tol_joint(m, ref.condition_number, ref.length)
+        assert relative_error(r.G / np.outer(rows, D), ref.G) <= rtol_G
         np.testing.assert_allclose(r.condition_number, ref.condition_number, rtol=rtol)
         # null(C) = D^-1 null(C_1): D maps the rigid directions back. Each is an SI unit
         # vector, its entries to eps absolute: D amplifies that by max(s, 1/s) relative
@@ -325,7 +368,9 @@ def test_a_change_of_length_unit_keeps_det_K(name):
         r = cl.compliance(times_springs(m2, s), q2, f)
         D = np.r_[np.full(3, s), np.ones(3)]
         assert scaled_error(r.C * s / np.outer(D, D), ref.C, ref.length) <= rtol
-        np.testing.assert_allclose(cl.StiffnessIndices.from_result(r).determinant, det, rtol=rtol)
+        np.testing.assert_allclose(
+            cl.StiffnessIndices.from_result(r).determinant, det, rtol=DET_TERMS * rtol
+        )
 
 
 def test_the_batch_under_a_change_of_length_unit():
@@ -341,7 +386,11 @@ def test_the_batch_under_a_change_of_length_unit():
         for i in range(len(Q)):
             rtol = tol(ref.condition_number[i])
             assert scaled_error(b.C[i] / np.outer(D, D), ref.C[i], ref.length) <= rtol
-            np.testing.assert_allclose(b.condition_number[i], ref.condition_number[i], rtol=rtol)
+            np.testing.assert_allclose(
+                b.condition_number[i],
+                ref.condition_number[i],
+                rtol=tol_batch_cond(ref.condition_number[i]),
+            )
 
 
 # ---------------------------------------------------------------------------- 3. world
@@ -376,7 +425,7 @@ def test_a_rigid_motion_of_the_world_turns_the_world_axes_compliance(name, path)
         w = ref["world"]
         assert r.rank == w.rank and local.rank == w.rank
         assert scaled_error(r.C, R6 @ w.C @ R6.T, L) <= rtol
-        assert relative_error(r.G, w.G @ R6.T) <= rtol
+        assert relative_error(r.G, w.G @ R6.T) <= tol_joint(m, w.condition_number, L)
         assert scaled_error(local.C, ref["local"].C, L) <= rtol
         np.testing.assert_allclose(r.point, M.act(w.point), atol=rtol * L)
         np.testing.assert_allclose(r.condition_number, w.condition_number, rtol=rtol)
@@ -386,10 +435,10 @@ def test_a_rigid_motion_of_the_world_turns_the_world_axes_compliance(name, path)
         if w.rank == 6:
             det = cl.StiffnessIndices.from_result(w).determinant
             np.testing.assert_allclose(
-                cl.StiffnessIndices.from_result(r).determinant, det, rtol=rtol
+                cl.StiffnessIndices.from_result(r).determinant, det, rtol=DET_TERMS * rtol
             )
             np.testing.assert_allclose(
-                cl.StiffnessIndices.from_result(local).determinant, det, rtol=rtol
+                cl.StiffnessIndices.from_result(local).determinant, det, rtol=DET_TERMS * rtol
             )
 
 
@@ -452,7 +501,7 @@ def test_the_order_of_closures_frames_and_springs_does_not_matter(name):
         ref = cl.compliance(m, q, f, path=path)
         for order, swap, spring_order in variants:
             r = cl.compliance(reordered(m, order, swap, spring_order), q, f, path=path)
-            assert_same_answer(r, ref, tol(ref.condition_number))
+            assert_same_answer(r, ref, m)
             assert (r.mobility, r.internal_mobilities) == (ref.mobility, ref.internal_mobilities)
 
 
@@ -504,8 +553,10 @@ def test_each_row_of_the_batch_is_the_single_query(rows, axes):
             continue
         rtol = tol(r.condition_number)
         assert scaled_error(b.C[i], r.C, r.length) <= rtol
-        assert relative_error(b.G[i], r.G) <= rtol
-        np.testing.assert_allclose(b.condition_number[i], r.condition_number, rtol=rtol)
+        assert relative_error(b.G[i], r.G) <= tol_joint(m, r.condition_number, r.length)
+        np.testing.assert_allclose(
+            b.condition_number[i], r.condition_number, rtol=tol_batch_cond(r.condition_number)
+        )
     if rows is not _cahyman_rows:  # near a singular pose: some rows left to the single query
         assert not b.stacked.all()
 
@@ -547,8 +598,10 @@ def test_every_row_answered_or_its_own_error():
         rtol = tol(r.condition_number)
         assert rank[i] == r.rank
         assert scaled_error(C[i], r.C, r.length) <= rtol
-        assert relative_error(G[i], r.G) <= rtol
-        np.testing.assert_allclose(cond[i], r.condition_number, rtol=rtol)
+        assert relative_error(G[i], r.G) <= tol_joint(m, r.condition_number, r.length)
+        np.testing.assert_allclose(
+            cond[i], r.condition_number, rtol=tol_batch_cond(r.condition_number)
+        )
 
 
 # ---------------------------------------------------------------------------- 6. properties

@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.elastostatics.equations import EquilibriumEquations
-from closedloop.elastostatics.newton import distance
+from closedloop.elastostatics.newton import CAPPED, CONVERGING, STALLED, WANDERED, distance
 from closedloop.exceptions import EquilibriumError
 
 #: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences
@@ -35,10 +35,29 @@ JUMP_RATIO = 0.5
 JUMP_FLOOR, JUMP_RTOL = 1e-9, 1e-6
 
 
-def advice(eqs: EquilibriumEquations, q) -> str:
-    """What to try after a failed continuation: a smaller step, unless the part of the
+#: The continuation stopped after :data:`closedloop.elastostatics.statics.MAX_LOAD_STEPS`
+#: increments (a kind of failure beside those of :func:`~closedloop.elastostatics.newton.newton`).
+LONG = "long"
+#: What helps after each kind of failure: followed, the continuation reaches further on
+#: the same branch (the jump tests refuse any other) or fails again.
+ADVICE = {
+    CONVERGING: "try a larger max_iter (Newton was still converging when its iterations ran "
+    "out) or a smaller max_increment",
+    CAPPED: "try a larger max_step (Newton's steps were still cut to it when its iterations "
+    "ran out)",
+    WANDERED: "try a smaller max_increment or a larger max_halvings (Newton went off from "
+    "the prediction of the smallest increment allowed, or converged away from it)",
+    STALLED: "Newton stalls at the rounding of the equations (its steps no longer shrink), "
+    "which neither more iterations nor smaller increments get below",
+    LONG: "give a smaller load or a larger max_increment",
+}
+
+
+def advice(eqs: EquilibriumEquations, q, how: str) -> str:
+    """What to try after a failed continuation that ended as ``how`` says (a key of
+    :data:`ADVICE`; '' gives that of a :data:`WANDERED` failure), unless the part of the
     load reached already turns a joint coordinate by a radian or more (a load far beyond
-    the springs, which no step size helps)."""
+    the springs, which no option helps)."""
     clm = eqs.clm
     turn = np.where(clm.linear_coordinates, 0.0, np.abs(pin.difference(clm.model, eqs.q_rest, q)))
     i = int(np.argmax(turn)) if turn.size else 0
@@ -48,7 +67,7 @@ def advice(eqs: EquilibriumEquations, q) -> str:
             f"{turn[i]:.3g} rad from rest: the load is far beyond what the springs hold; "
             "expected a smaller load"
         )
-    return "try a smaller max_increment or a larger max_iter"
+    return ADVICE[how or WANDERED]
 
 
 def branch_rate(eqs: EquilibriumEquations, q, t: float, w, st: dict) -> np.ndarray:
@@ -105,13 +124,16 @@ def jump(eqs: EquilibriumEquations, points, taus, allowed: float, across: bool) 
     return ""
 
 
-def failure(eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iterations, state, history):
+def failure(
+    eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iterations, state, history, how
+):
     """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
 
     (q, t): the last equilibrium and its load fraction; ``s_fail`` the load fraction that
     failed; ``state``: the :meth:`evaluate` state whose residuals the error reports;
-    ``history``: (t, tau) of the last three equilibria. A limit load when tau extrapolates
-    to zero within the failed increment: the fold is bracketed by [t, s_fail].
+    ``history``: (t, tau) of the last three equilibria; ``how``: how the last failed
+    increment failed (:func:`advice`). A limit load when tau extrapolates to zero within
+    the failed increment: the fold is bracketed by [t, s_fail].
     """
     margin, tau = eqs.stability(q, t * w)
     fold = fold_distance(history)
@@ -130,7 +152,7 @@ def failure(eqs: EquilibriumEquations, q, t, s_fail, w, where, detail, iteration
             f"the solver failed to converge {where}: {detail}; not a limit load (the "
             f"spring-scaled tangent stiffness is regular at {t:.6g} of the load: smallest "
             f"singular value {abs(tau):.3g}{near}, stability margin {margin:.3g}): "
-            f"{advice(eqs, q)}"
+            f"{advice(eqs, q, how)}"
         )
     return EquilibriumError(
         reason,

@@ -61,6 +61,7 @@ import pinocchio as pin
 from closedloop.common.arrays import check_count, check_positive, check_wrench, readonly
 from closedloop.elastostatics.continuation import (
     JUMP_FLOOR,
+    LONG,
     allowed_corrector,
     branch_rate,
     failure,
@@ -69,7 +70,7 @@ from closedloop.elastostatics.continuation import (
 )
 from closedloop.elastostatics.equations import EquilibriumEquations
 from closedloop.elastostatics.equilibrium import Equilibrium, frame_displacement
-from closedloop.elastostatics.newton import distance, newton
+from closedloop.elastostatics.newton import WANDERED, distance, newton
 from closedloop.elastostatics.springs import check_spread, spring_factor
 from closedloop.exceptions import (
     AssemblyError,
@@ -211,10 +212,13 @@ def solve_equilibrium(
             relative width :data:`FOLD_RTOL` (the failed increment, wider, when
             ``max_halvings`` ran out first); False when Newton failed to converge (or
             only converged on another branch) with the tangent stiffness regular:
-            ``stability_margin`` holds the margin at the last equilibrium. A smaller
-            ``max_increment`` or more ``max_iter`` / ``max_halvings`` then may reach
-            further, never another branch. :class:`JointLimitError` (a subclass) with
-            ``enforce_limits``.
+            ``stability_margin`` holds the margin at the last equilibrium. Its advice
+            names what the failure calls for (:data:`closedloop.elastostatics.continuation
+            .ADVICE`): more ``max_iter`` when Newton was still converging, a smaller
+            ``max_increment`` or more ``max_halvings`` when it went off, a larger
+            ``max_step`` when its steps were cut, none when it stalls at the rounding of
+            the equations; followed, it may reach further, never another branch.
+            :class:`JointLimitError` (a subclass) with ``enforce_limits``.
     """
     _check_options(tol, max_iter, max_halvings, max_step, max_increment)
     if payloads and gravity is None:
@@ -237,6 +241,7 @@ def solve_equilibrium(
     step_limit = units.limit(max_step, MAX_STEP)
     increment_limit = units.limit(max_increment, MAX_INCREMENT)
     q, t, dt, iterations, steps, halvings = q_rest.copy(), 0.0, 1.0, 0, 0, 0
+    how = ""  # how the last increment refused failed (newton's kinds), for the advice
     st = eqs.evaluate(q, 0.0 * w)
     if enforce_limits:
         _enforce_limits(clm, q, st, 0.0, where)
@@ -262,17 +267,17 @@ def solve_equilibrium(
         s_try = 1.0 if t + ds >= 1.0 - 1e-12 else t + ds
         if not s_try > t:
             detail = f"no progress, the load increment {ds:.3g} vanishes at {t:.6g} of the load"
-            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
+            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history, how)
         if steps >= MAX_LOAD_STEPS:  # a deflection of thousands of increments: hours
             detail = (
                 f"{steps} load increments reached only {t:.3g} of the load (each moving the "
                 f"joints by at most max_increment, now {ds:.3g} of the load): a deflection "
-                "far beyond the mechanism's size; give a smaller load or a larger max_increment"
+                "far beyond the mechanism's size"
             )
-            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history)
+            raise failure(eqs, q, t, s_try, w, where, detail, iterations, st, history, LONG)
         guess = pin.integrate(clm.model, q, (s_try - t) * rate) if np.any(rate) else q
         allowed = allowed_corrector(eqs, q, guess)
-        q_new, st_try, it = newton(
+        q_new, st_try, it, how = newton(
             eqs,
             guess,
             s_try * w,
@@ -292,13 +297,14 @@ def solve_equilibrium(
             across = probe or t == 0.0
             points = (q, guess, q_new, back)
             why = jump(eqs, points, (history[-1][1], tau_new), allowed, across)
+            how = WANDERED if why else how
         if why:
             if probe or halvings >= max_halvings:
                 detail = (
                     f"{why} at {s_try:.9g} of the load, {iterations} iterations in all "
                     f"({steps} increments, {halvings} halvings)"
                 )
-                raise failure(eqs, q, t, s_try, w, where, detail, iterations, st_try, history)
+                raise failure(eqs, q, t, s_try, w, where, detail, iterations, st_try, history, how)
             halvings += 1
             dt = 0.5 * ds
             continue

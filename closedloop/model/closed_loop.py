@@ -302,11 +302,29 @@ class ClosedLoopModel:
 
     def spring_forces(self, dq: np.ndarray) -> np.ndarray:
         """(nv,) generalised spring forces K_q dq [N m, N] of a deflection dq (nv,)
-        (tangent of q [rad, m]); 0 on passive and locked coordinates."""
-        if not self.spring_blocks:
-            k = self.stiffness
-            return np.where(np.isinf(k), 0.0, k) * dq
-        return self.spring_matrix @ dq
+        (tangent of q [rad, m]); 0 on passive and locked coordinates.
+
+        A block's forces are taken in its eigenbasis, K_j dq_j = V (lambda * (V^T dq_j)):
+        their rounding is then that of the forces of a deflection within eps norm(dq_j)
+        of dq_j, along each direction in proportion to its stiffness. The product
+        K_j dq_j would leave eps norm(K_j) norm(dq_j) on every direction: on a soft
+        direction of a stiff coupled block (a bushing of 1e9 beside 20 N m/rad)
+        cond(K_j) eps of its force, a rounding that the nonlinear statics' balance test
+        cannot get below.
+        """
+        k = self.stiffness
+        f = np.where(np.isinf(k), 0.0, k) * dq
+        for v, lam, V in self.memo("spring_spectra", self._spring_spectra):
+            f[v] = V @ (lam * (V.T @ dq[v]))
+        return f
+
+    def _spring_spectra(self) -> tuple:
+        """(velocity slice, eigenvalues, eigenvectors) of each spring block."""
+        out = []
+        for name, block in self.spring_blocks.items():
+            lam, V = np.linalg.eigh(block)
+            out.append((self.joint_v_slice(name), frozen(lam), frozen(V)))
+        return tuple(out)
 
     # ------------------------------------------------------------------ naming helpers
     def frame_id(self, name: str) -> int:

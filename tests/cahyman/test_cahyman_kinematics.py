@@ -18,6 +18,11 @@ from closedloop.exceptions import AssemblyError, InvalidInputError
 POSITION_TOL = 1e-12
 #: Rotation-matrix entries (dimensionless), same reasoning.
 ROTATION_TOL = 1e-12
+#: Rotation matrices from their angles, here and by scipy (quaternions): entries of
+#: products of up to three rotations of sines and cosines, each to an ulp or so (numpy's
+#: SIMD sin and cos differ by a few ulp between CPUs), through two formulas: 16 eps
+#: (measured 1.5 eps).
+ATOL_ROTATION_ROUNDING = 16 * np.finfo(float).eps
 #: Closure residual after assembly [m]: the assembly tolerance.
 RESIDUAL_TOL = 1e-12
 #: Paper angles [rad] away from the phi = 90 deg singularity (cos phi > COS_PHI_MIN):
@@ -213,8 +218,10 @@ def test_elementary_rotations_are_scipys():
     angles = np.array([[0.0, 0.3], [-2.0, np.pi]])
     for rot, axis in ((geometry.rot_z, "z"), (geometry.rot_y, "y")):
         expected = Rotation.from_euler(axis, angles.reshape(-1, 1)).as_matrix()
-        np.testing.assert_allclose(rot(angles), expected.reshape(2, 2, 3, 3), rtol=0, atol=1e-15)
-        np.testing.assert_allclose(rot(0.3), expected[1], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(
+            rot(angles), expected.reshape(2, 2, 3, 3), rtol=0, atol=ATOL_ROTATION_ROUNDING
+        )
+        np.testing.assert_allclose(rot(0.3), expected[1], rtol=0, atol=ATOL_ROTATION_ROUNDING)
 
 
 def test_plate_rotation_is_the_product_of_eq_6():
@@ -230,10 +237,10 @@ def test_plate_rotation_is_the_product_of_eq_6():
     assert got.shape == (5, 4, 3, 3)
     angles = np.stack(np.broadcast_arrays(theta, np.pi / 2 - phi, psi), axis=-1)
     expected = Rotation.from_euler("ZYZ", angles.reshape(-1, 3)).as_matrix().reshape(5, 4, 3, 3)
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=ATOL_ROTATION_ROUNDING)
     np.testing.assert_allclose(geometry.plate_rotation(0.2, -1.0, 2.5),
                                Rotation.from_euler("ZYZ", [-1.0, np.pi / 2 - 0.2, 2.5]).as_matrix(),
-                               rtol=0, atol=1e-15)  # fmt: skip
+                               rtol=0, atol=ATOL_ROTATION_ROUNDING)  # fmt: skip
 
 
 def test_one_value_given_as_a_list_or_array_is_that_value(model):

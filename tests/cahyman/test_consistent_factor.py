@@ -32,8 +32,9 @@ EPS = np.finfo(float).eps
 #: K from the SVD of a factor: its smallest singular value carries eps times the largest,
 #: i.e. eps sqrt(cond(K_s)) relative, twice that in K_s ~ U diag(beta^-2) U^T, and the
 #: singular vectors about as much; det K from six eigenvalues each as accurate. Measured:
-#: up to 0.5 eps sqrt(cond); K from the formed C (the old code) erred by eps cond, 1e6
-#: times this bound at cond 5e12.
+#: up to 0.5 eps sqrt(cond) in K, 1.5 in det K (OpenBLAS's Haswell, SandyBridge and
+#: Nehalem kernels); K from the formed C (the old code) erred by eps cond, 1e6 times this
+#: bound at cond 5e12.
 ULPS_SQRT_COND = 8
 #: Default springs (cond(K_s) ~ 3e3): the two backends agree on K and det K to rounding.
 DEFAULT_RTOL = 1e-12

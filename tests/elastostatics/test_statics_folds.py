@@ -306,11 +306,30 @@ def test_the_advice_of_a_newton_failure_leads_to_the_same_branch(fourbar):
     iterations, smaller increments) gives the answer of the finer continuation."""
     clm, q0 = fourbar
     w = np.array([300.0, 0, -300.0, 0, 0, 0])
-    with pytest.raises(cl.EquilibriumError, match="try a smaller max_increment") as err:
+    with pytest.raises(
+        cl.EquilibriumError, match=r"try a larger max_iter .* or a smaller max_increment"
+    ) as err:
         solve_equilibrium(clm, q0, "P", w, max_iter=2, max_halvings=2)
     assert not err.value.limit_load and err.value.fold_bracket is None
     fine = solve_or_error(clm, q0, "P", w, max_increment=0.01)
-    for options in ({"max_iter": 30, "max_halvings": 2}, {"max_iter": 2, "max_increment": 0.02}):
-        eq = solve_or_error(clm, q0, "P", w, **options)
+    for options in ({"max_iter": 30}, {"max_increment": 0.02}):
+        eq = solve_or_error(clm, q0, "P", w, **{"max_iter": 2, "max_halvings": 2, **options})
+        assert isinstance(eq, cl.Equilibrium), str(eq)
+        assert_same_deflection(eq.joint_deflection, fine.joint_deflection)
+
+
+def test_the_advice_when_newton_goes_off_leads_to_the_same_branch(fourbar):
+    """900 N in one increment (max_increment inf) and no halving: Newton goes off from
+    the linear prediction; the advice (a smaller max_increment, or a halving) gives the
+    answer of the finer continuation, below the fold at about 990 N."""
+    clm, q0 = fourbar
+    w = np.array([900.0, 0, -900.0, 0, 0, 0])
+    failing = {"max_halvings": 0, "max_increment": np.inf}
+    err = solve_or_error(clm, q0, "P", w, **failing)
+    assert isinstance(err, cl.EquilibriumError) and not err.limit_load
+    assert "try a smaller max_increment or a larger max_halvings" in str(err)
+    fine = solve_or_error(clm, q0, "P", w, max_increment=0.01)
+    for options in ({"max_increment": 0.5}, {"max_halvings": 1}):
+        eq = solve_or_error(clm, q0, "P", w, **{**failing, **options})
         assert isinstance(eq, cl.Equilibrium), str(eq)
         assert_same_deflection(eq.joint_deflection, fine.joint_deflection)
