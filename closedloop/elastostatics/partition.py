@@ -142,7 +142,8 @@ def model_scaling(clm: ClosedLoopModel, L: float) -> _Scaling:
 
 
 #: The partitioned path is taken when the passive part of the scaled closure Jacobian is
-#: well conditioned (reciprocal condition estimate above this): then both paths give C
+#: well conditioned (reciprocal 1-norm condition number above this, of its triangle R11
+#: and the inverse of it that X needs, as the batch's): then both paths give C
 #: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
 #: decides, with the rank rule.
 PARTITION_RCOND = 1e-6
@@ -163,8 +164,9 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
 
     One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
     -J_p = Q1 R11, X = R11^-1 R12 (dtrtri: unlike dgels' triangular solve, it does not
-    wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F. With
-    many passive coordinates, one such QR per independent block of loops.
+    wake a multi-threaded BLAS on a small matrix), cond_1(R11) = |R11|_1 |R11^-1|_1 (dlantr)
+    and |R22|_F = |J_s + J_p X|_F. With many passive coordinates, one such QR per
+    independent block of loops.
     """
     p = sc.passive.size
     if sc.loop_blocks is not None:
@@ -176,13 +178,15 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
     scale = PARTITION_RTOL * abs(A[:, p:]).max()
     qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
     R = qr * sc.upper  # the triangle (Householder vectors below it)
-    if info != 0 or lapack.dtrcon(R[:p, :p])[0] <= PARTITION_RCOND:
-        return None
     residual = R[p:, p:]
-    if np.vdot(residual, residual) > scale * scale:
+    if info != 0 or np.vdot(residual, residual) > scale * scale:
         return None
-    R_inv, info = lapack.dtrtri(R[:p, :p], overwrite_c=1)
-    return R_inv @ R[:p, p:] if info == 0 else None
+    R11 = R[:p, :p]
+    R_inv, info = lapack.dtrtri(R11)  # a zero pivot: info > 0; near one, a large inverse
+    cond = lapack.dlantr(b"1", R11) * lapack.dlantr(b"1", R_inv) if info == 0 else math.inf
+    if not cond * PARTITION_RCOND < 1.0:  # (an inverse with inf or NaN fails it too)
+        return None
+    return R_inv @ R[:p, p:]
 
 
 def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
@@ -190,7 +194,7 @@ def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None
     at once, each gathered from the closure Jacobian Jc (m, nv) on its own rows and
     columns (scaled, the common ancestors' columns, rounding of a zero, set to 0). The
     QR of a block diagonal -J_p is block diagonal, and so are R and R^-1, whose 1-norms
-    are the largest of the blocks' (the exact 1-norm condition, which dtrcon estimates);
+    are the largest of the blocks' (the 1-norm condition of :func:`_passive_motion`);
     the residual J_s + J_p X is checked on the blocks' spring columns, the others being
     zero."""
     X = np.zeros((sc.passive.size, sc.sprung.size))

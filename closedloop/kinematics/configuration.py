@@ -46,7 +46,7 @@ def joint_reach(model: ClosedLoopModel, Q: np.ndarray) -> np.ndarray | float:
     plus the largest anchor offset, plus the absolute values of the translational
     coordinates of q (prismatic joints, the position of a free flyer). A float for one q.
     """
-    offset, translational = model.memo("joint_reach", lambda: _reach_terms(model))
+    offset, translational = model.memo("joint_reach", _reach_terms, model)
     if Q.ndim == 1:  # one configuration (every query): Python floats, inf past the range
         return offset + sum(map(abs, Q[translational].tolist()))
     with np.errstate(over="ignore"):  # beyond the float range: inf, refused
@@ -110,8 +110,13 @@ def residual_rounding(model: ClosedLoopModel, Q: np.ndarray, length: float) -> n
     (..., nq), at length L [m]: each joint placement composed from the world origin errs by
     eps times the distance (:func:`joint_reach`), and a chain has at most njoints of them.
     A float for one q."""
-    factor = model.memo("reach_rounding", lambda: model.model.njoints * np.finfo(float).eps)
+    factor = model.memo("reach_rounding", _rounding_factor, model.model)
     return factor * joint_reach(model, Q) / length
+
+
+def _rounding_factor(model: pin.Model) -> float:
+    """eps per joint placement composed from the world origin, njoints of them."""
+    return model.njoints * float(np.finfo(float).eps)
 
 
 class Configuration:
