@@ -106,10 +106,11 @@ def compliance(
         InvalidInputError: a q, frame name, axes, path, length, gravity or preload that is
             not what the arguments above expect (the message names it).
     """
-    if isinstance(model, Configuration) and q is not None and frame is None:
-        q, frame = None, q  # compliance(state, frame): a configuration carries its own q
-    elif isinstance(model, Configuration) and isinstance(q, str):  # (state, frame, axes)
-        q, frame, axes = None, q, frame
+    if isinstance(model, Configuration):
+        if q is not None and frame is None:  # compliance(state, frame): its own q
+            q, frame = None, q
+        elif isinstance(q, str):  # (state, frame, axes)
+            q, frame, axes = None, q, frame
     if frame is None:
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)

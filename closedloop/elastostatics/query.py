@@ -264,11 +264,10 @@ def query_plan(
         InvalidInputError, NameNotFoundError: as :class:`ComplianceQuery`.
     """
     L = model.length if length is None else length
-    make = lambda: _Plan(model, frame, axes, path, L)  # noqa: E731
     try:
-        return model.memo(("query", frame, axes, path, L), make)
+        return model.memo(("query", frame, axes, path, L), _Plan, model, frame, axes, path, L)
     except TypeError:  # an unhashable argument, which the plan refuses
-        return make()
+        return _Plan(model, frame, axes, path, L)
 
 
 def unloaded_compliance(state: Configuration, frame: str, axes: str, path: str) -> ComplianceResult:
