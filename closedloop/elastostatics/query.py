@@ -75,9 +75,11 @@ class ComplianceQuery:
         NameNotFoundError: unknown frame.
 
     Attributes:
-        model, frame, axes, path, check_limits: as given.
-        length: the characteristic length L [m] of the results.
+        model, frame, axes, path, check_limits: as given (read-only).
+        length: the characteristic length L [m] of the results (read-only).
     """
+
+    __slots__ = ("_check_limits", "_model", "_plan")
 
     def __init__(
         self,
@@ -93,9 +95,15 @@ class ComplianceQuery:
             raise InvalidInputError(
                 f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
             )
+        self._model, self._check_limits = model, check_limits
         self._plan = query_plan(model, frame, axes, path, length)
-        self.model, self.frame, self.axes, self.path = model, frame, axes, path
-        self.length, self.check_limits = self._plan.length, check_limits
+
+    model = property(lambda self: self._model, doc="The model (read-only).")
+    frame = property(lambda self: self._plan.frame, doc="The loaded frame's name.")
+    axes = property(lambda self: self._plan.axes, doc='``"world"`` or ``"local"``.')
+    path = property(lambda self: self._plan.path, doc='``"auto"`` or ``"null-space"``.')
+    length = property(lambda self: self._plan.length, doc="Characteristic length L [m].")
+    check_limits = property(lambda self: self._check_limits, doc="Whether q's limits count.")
 
     def __call__(self, q) -> ComplianceResult:
         """The compliance of the frame at q.
@@ -103,6 +111,10 @@ class ComplianceQuery:
         Args:
             q: (nq,) assembled configuration [rad, m; quaternions of norm 1]
                 (:func:`closedloop.assemble`).
+
+        Returns:
+            The :class:`ComplianceResult` at the frame's origin, in the query's axes (the
+            plain query's, :func:`closedloop.compliance`).
 
         Raises:
             InvalidInputError: q is not (nq,) finite real numbers (quaternions of norm 1).
@@ -112,8 +124,9 @@ class ComplianceQuery:
             SingularConfigurationError: the compliance overflows; on the null-space path,
                 springs too far apart (as :func:`closedloop.compliance`).
         """
-        state = Configuration(self.model, q, length=self.length, check_limits=self.check_limits)
-        return self._plan.at(state.require_closed())
+        plan = self._plan
+        state = Configuration(self._model, q, length=plan.length, check_limits=self._check_limits)
+        return plan.at(state.require_closed())
 
     def __repr__(self) -> str:
         return (

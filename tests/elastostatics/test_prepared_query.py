@@ -65,8 +65,11 @@ def test_the_prepared_query_is_the_plain_query_on_every_path(name, path):
 def test_the_prepared_query_at_a_length_and_without_limits(fourbar):
     clm, q = fourbar
     query = cl.ComplianceQuery(clm, "P", length=2.5, check_limits=False)
-    assert query.length == 2.5
+    assert (query.model, query.frame, query.axes, query.path) == (clm, "P", "world", "auto")
+    assert (query.length, query.check_limits) == (2.5, False)
     assert_same_result(query(q), cl.compliance(clm, q, "P", length=2.5, check_limits=False))
+    with pytest.raises(AttributeError):  # what was resolved stays so
+        query.length = 1.0
 
 
 def test_typed_and_elastic_closures_give_the_plain_query(fourbars, pins):
