@@ -73,10 +73,6 @@ class ComplianceQuery:
         InvalidInputError: ``model`` is not a :class:`ClosedLoopModel`, the frame name not a
             str, bad axes, path or length, or a model without any moving joint (nv = 0).
         NameNotFoundError: unknown frame.
-
-    Attributes:
-        model, frame, axes, path, check_limits: as given (read-only).
-        length: the characteristic length L [m] of the results (read-only).
     """
 
     __slots__ = ("_check_limits", "_model", "_plan")
@@ -98,12 +94,17 @@ class ComplianceQuery:
         self._model, self._check_limits = model, check_limits
         self._plan = query_plan(model, frame, axes, path, length)
 
-    model = property(lambda self: self._model, doc="The model (read-only).")
-    frame = property(lambda self: self._plan.frame, doc="The loaded frame's name.")
-    axes = property(lambda self: self._plan.axes, doc='``"world"`` or ``"local"``.')
+    # what was resolved, read-only
+    model = property(lambda self: self._model, doc="The model.")
+    frame = property(lambda self: self._plan.frame, doc="Name of the loaded frame.")
+    axes = property(
+        lambda self: self._plan.axes, doc='Axes of the results, ``"world"`` or ``"local"``.'
+    )
     path = property(lambda self: self._plan.path, doc='``"auto"`` or ``"null-space"``.')
-    length = property(lambda self: self._plan.length, doc="Characteristic length L [m].")
-    check_limits = property(lambda self: self._check_limits, doc="Whether q's limits count.")
+    length = property(
+        lambda self: self._plan.length, doc="Characteristic length L [m] of the results."
+    )
+    check_limits = property(lambda self: self._check_limits, doc="Whether q's limits are checked.")
 
     def __call__(self, q) -> ComplianceResult:
         """The compliance of the frame at q.
