@@ -115,8 +115,9 @@ def generic_backend(
     """
     model = cahyman_model(params)
     q = model.assemble(alpha, alpha4, s4)
-    model.require_within_limits(q)  # refused in CaHyMan's words, before Configuration does
-    state = Configuration(model.clm, q, length=params.length)
+    # q checked once, here; its limits in CaHyMan's words (not again by Configuration)
+    state = Configuration(model.clm, q, length=params.length, check_limits=False)
+    model.require_within_limits(state)
     gravity = (0.0, 0.0, -params.gravity) if weight else None
     result = compliance(state, FRAME_M, gravity=gravity)
     if weight:  # the plate Jacobian at the sagged configuration (its limits: the statics')

@@ -32,9 +32,9 @@ from cahyman_pin.urdf_builder import (
 from closedloop.common.arrays import readonly, real_array
 from closedloop.exceptions import InvalidInputError, OutsideLimitsError
 from closedloop.kinematics.assembly import close_loops
+from closedloop.kinematics.configuration import Configuration
 from closedloop.kinematics.constraints import closure_residual, update_kinematics
 from closedloop.kinematics.limits import describe_limits, joints_outside_limits
-from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import closure_between_frames
 
@@ -187,6 +187,8 @@ def build_closed_loop_model(p: CaHyManParams = DEFAULT_PARAMS) -> ClosedLoopMode
     spec = closure_spec(p)
     springs, masses = spec.springs, {}
     if spec.beams:
+        from closedloop.model.beams import apply_beams  # beam theory: with beams only
+
         model, (visual,), blocks, _, masses = apply_beams(model, [visual], spec.beams)
         springs = {**springs, **blocks}
     closures = [
@@ -308,12 +310,15 @@ class CaHyManModel:
         return close_loops(self.clm, q, jacobian=jacobian)
 
     def require_within_limits(self, q) -> None:
-        """:class:`OutsideLimitsError` when joints of an assembled configuration q (nq,)
-        are outside their limits (:func:`closedloop.kinematics.limits.joints_outside_limits`),
-        in CaHyMan's words: its inputs are checked (:func:`check_inputs`) and the
-        ``cahyman`` command has no way past the limits, hence no ``--no-limits`` hint.
+        """:class:`OutsideLimitsError` when joints of an assembled configuration q (nq,),
+        or of a :class:`closedloop.kinematics.configuration.Configuration` (its q checked
+        already), are outside their limits
+        (:func:`closedloop.kinematics.limits.joints_outside_limits`), in CaHyMan's words: its
+        inputs are checked (:func:`check_inputs`) and the ``cahyman`` command has no way past
+        the limits, hence no ``--no-limits`` hint.
         """
-        bad = joints_outside_limits(self.clm, self.clm.check_configuration(q))
+        q = q.q if isinstance(q, Configuration) else self.clm.check_configuration(q)
+        bad = joints_outside_limits(self.clm, q)
         if bad:
             raise OutsideLimitsError(
                 f"the pose assembles with joints outside their limits: {describe_limits(bad)}; "

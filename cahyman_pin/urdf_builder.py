@@ -67,7 +67,7 @@ import pinocchio as pin
 
 from cahyman_pin.geometry import DELTA, T, U, plate_pose
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
-from closedloop.io.loader import ClosureSpec
+from closedloop.io.closure_file import ClosureSpec
 
 LEGS = (1, 2, 3)
 #: Actuated joints, in the order of the inputs (alpha_1, alpha_2, alpha_3, alpha_4, s_4).

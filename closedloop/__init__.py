@@ -8,6 +8,7 @@ The whole workflow from one import::
     state = cl.Configuration(robot, cl.assemble(robot, actuated=[0.3]).q)  # mode of its start
     cl.assembly_modes(robot, [0.3])            # the assembly modes found there
     res = cl.compliance(state, "P")            # 6x6 C [SI] at the origin of frame P
+    query = cl.ComplianceQuery(robot, "P")     # prepared: query(q) at many configurations
     res.K, res.rank, res.condition_number, res.ill_conditioned
     cl.compliances(robot, Q, "P").C            # (n, 6, 6) for n configurations Q (n, nq)
     cl.StiffnessIndices.from_result(res).min_translational_stiffness
@@ -37,6 +38,7 @@ _EXPORTS = {
     "assembly_modes": ".kinematics.assembly_modes",
     **dict.fromkeys(("BatchCompliance", "compliances"), ".elastostatics.batch"),
     **dict.fromkeys(("ComplianceResult", "compliance"), ".elastostatics.compliance"),
+    "ComplianceQuery": ".elastostatics.query",
     **dict.fromkeys(("ILL_CONDITIONED", "RANK_RTOL"), ".common.conditioning"),
     **dict.fromkeys(("CLOSURE_TOL", "Configuration"), ".kinematics.configuration"),
     **dict.fromkeys(
@@ -101,6 +103,7 @@ if TYPE_CHECKING:  # the names as static analysis sees them
     from closedloop.elastostatics.compliance import ComplianceResult, compliance
     from closedloop.elastostatics.equilibrium import Equilibrium
     from closedloop.elastostatics.preload import PreloadedCompliance, preloaded_compliance
+    from closedloop.elastostatics.query import ComplianceQuery
     from closedloop.elastostatics.statics import solve_equilibrium
     from closedloop.elastostatics.tangent import (
         closure_curvature,
@@ -168,6 +171,7 @@ __all__ = [
     "BeamError",
     "ClosedLoopError",
     "ClosedLoopModel",
+    "ComplianceQuery",
     "ComplianceResult",
     "Configuration",
     "DesignEvaluation",

@@ -6,7 +6,6 @@ front end can print it on one line.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Iterable
 
 #: Most names a :class:`NameNotFoundError` lists (every one of a robot's joints and frames;
@@ -59,6 +58,8 @@ class NameNotFoundError(ClosedLoopError, KeyError):
     """
 
     def __init__(self, kind: str, name: str, valid: Iterable[str], hint: str = ""):
+        import difflib  # on demand: an error's, not every import's
+
         self.kind, self.name = kind, name
         valid = list(dict.fromkeys(valid))  # once each, in the model's order
         self.close = close_names(name, valid)

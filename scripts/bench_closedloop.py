@@ -1,18 +1,30 @@
-"""Benchmark closedloop: UR5 serial query, growth of the query with nv, UR5 with its links as
-beams, CaHyMan's natural frequencies, paths under a load, the design optimiser."""
+"""Benchmark closedloop: the UR5 query (plain and prepared) against its floor, growth of the
+query with nv, UR5 with its links as beams, CaHyMan's natural frequencies, paths under a
+load, the design optimiser, the start-up of the command line."""
 
 from __future__ import annotations
 
+import sys
 from functools import partial
 
 import numpy as np
 import pinocchio as pin
-from benchtools import Mode, Table, fmt_time, growth_exponent, interleaved, parse_mode
+from benchtools import (
+    START_MODES,
+    Mode,
+    Table,
+    fmt_time,
+    growth_exponent,
+    interleaved,
+    parse_mode,
+    wall_ratio,
+)
 
 from closedloop.analysis.vibration import batch_modes, modes
 from closedloop.common import lapack
 from closedloop.elastostatics.batch import compliances
 from closedloop.elastostatics.compliance import compliance
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.io.loader import load_urdf, robot_data_dir
 from closedloop.model.closed_loop import ClosedLoopModel
 
@@ -94,17 +106,26 @@ def bench_ur5(table: Table, mode: Mode) -> None:
     path = robot_data_dir() / "ur_description/urdf/ur5_robot.urdf"
     ur5 = load_urdf(path, joint_stiffness=1e4, geometry=False)
     unit = unit_of(ur5, UR5_Q)
-    for key, p, target in (("2", "auto", "<= 10 units"), ("2b", "null-space", "-")):
-        t = interleaved(lambda p=p: compliance(ur5, UR5_Q, "tool0", path=p), unit, mode)
-        taken = compliance(ur5, UR5_Q, "tool0", path=p).path
-        table.units(key, f"UR5 (serial) query, `compliance(..., path={p!r})` -> {taken}",
-                    target, t)  # fmt: skip
     floor = partial(ur5_floor, ur5.model, ur5.model.createData(), UR5_Q,
                     ur5.model.getFrameId("tool0"), 1.0 / np.sqrt(ur5.stiffness))  # fmt: skip
-    t = interleaved(floor, unit, mode)
-    table.note(f"2: the floor of its numbers written out without any check (scripts/"
-               f"bench_closedloop.py ur5_floor: the frame Jacobian, C = J K^-1 J^T, the SVD of "
-               f"the rank rule) {t.ratio:.1f} units = {fmt_time(t.seconds)}")  # fmt: skip
+    t_floor = interleaved(floor, unit, mode)
+    table.units("2f", "UR5 floor: its numbers written out without any check (scripts/"
+                "bench_closedloop.py ur5_floor: the frame Jacobian, C = J K^-1 J^T, the SVD of "
+                "the rank rule)", "-", t_floor)  # fmt: skip
+    query = ComplianceQuery(ur5, "tool0")
+    rows = (
+        ("2", "plain `compliance(model, q, 'tool0')`", "<= 3x floor",
+         lambda: compliance(ur5, UR5_Q, "tool0")),
+        ("2p", "prepared `ComplianceQuery(model, 'tool0')(q)`", "<= 1.5x floor",
+         lambda: query(UR5_Q)),
+    )  # fmt: skip
+    for key, what, target, func in rows:
+        t = interleaved(func, floor, mode)  # against the floor itself, batch by batch
+        table.against_floor(key, f"UR5 (serial) query, {what} -> {func().path}", target,
+                            t_floor, t)  # fmt: skip
+    t = interleaved(lambda: compliance(ur5, UR5_Q, "tool0", path="null-space"), unit, mode)
+    table.units("2b", "UR5 (serial) query, `compliance(..., path='null-space')` -> null-space",
+                "-", t)  # fmt: skip
     Q = np.random.default_rng(0).uniform(-2.5, 2.5, (100, 6))
     t = interleaved(lambda: compliances(ur5, Q, "tool0"), unit, mode, per=len(Q))
     table.units("2c", f"UR5 `closedloop.compliances`, {len(Q)} poses at once (C, G, rank)", "-",
@@ -121,7 +142,7 @@ def bench_ur5_beams(table: Table, mode: Mode) -> None:
     t = interleaved(lambda: compliance(beams, q, "tool0"), unit_of(beams, q), mode)
     taken = compliance(beams, q, "tool0").path
     table.units("8", f"UR5 with its 6 links as beams (nv = {beams.model.nv}), `compliance` -> "
-                f"{taken}", "<= 100 units (issue 11)", t)  # fmt: skip
+                f"{taken}", "<= 100 units", t)  # fmt: skip
 
 
 def bench_growth(table: Table, mode: Mode) -> None:
@@ -169,7 +190,7 @@ def bench_modes(table: Table, mode: Mode) -> None:
     query = partial(compliance, clm, q, "M")  # the unit: one compliance query, this run
     t = interleaved(lambda: modes(clm, q, n=10, frame="M"), query, mode)
     table.row("9", "CaHyMan, lowest 10 modes at one pose (`modes(..., n=10, frame='M')`), in "
-              "units of one compliance query at M", "<= 3 queries (issue 37)",
+              "units of one compliance query at M", "<= 3 queries",
               f"{t.ratio:.2f} queries",
               f"{fmt_time(t.seconds)}; query {fmt_time(t.unit)}")  # fmt: skip
     rng = np.random.default_rng(0)
@@ -204,7 +225,7 @@ def bench_design(table: Table, mode: Mode) -> None:
               f"{fmt_time(t['kernels'] / n)} in its process; processes busy {share:.0%} "
               "of the evaluations' time")  # fmt: skip
     table.row("14b", "the design optimiser's own time (differential evolution, SLSQP, "
-              "bookkeeping), share of the evaluations' time", "< 10 % (issue 43)",
+              "bookkeeping), share of the evaluations' time", "< 10 %",
               f"{100 * t['optimizer'] / t['evaluations']:.2g} %",
               f"{fmt_time(t['optimizer'])} of {fmt_time(t['total'])}")  # fmt: skip
 
@@ -228,8 +249,8 @@ def bench_paths(table: Table, mode: Mode) -> None:
     ur5 = load_urdf(path, joint_stiffness=1e4, geometry=False)
     machine = cahyman_model(DEFAULT_PARAMS)
     q_cahyman = machine.assemble(np.deg2rad([60.0, 60.0, 60.0]), np.deg2rad(45.0), 0.025)
-    cases = (("10", "UR5, pose task, tool0", ur5, UR5_Q, "tool0", "pose"),
-             ("10b", "CaHyMan, tool-axis task, tool", machine.clm, q_cahyman, "tool",
+    cases = (("11", "UR5, pose task, tool0", ur5, UR5_Q, "tool0", "pose"),
+             ("11b", "CaHyMan, tool-axis task, tool", machine.clm, q_cahyman, "tool",
               "tool-axis"))  # fmt: skip
     for key, label, clm, q, frame, task in cases:
         M = placement(clm, q, frame)
@@ -247,7 +268,7 @@ def bench_paths(table: Table, mode: Mode) -> None:
                         partial(compliance, clm, q1, frame), mode)  # fmt: skip
         table.row(key, f"{label}: a path point's exact compensation warm-started from the "
                   "last point (`compensate`), in units of one compliance query there",
-                  "<= ~5 queries (issue 42)", f"{t.ratio:.2f} queries",
+                  "<= ~5 queries", f"{t.ratio:.2f} queries",
                   f"{fmt_time(t.seconds)}; query {fmt_time(t.unit)}")  # fmt: skip
     n = 40 if mode.smoke else 1000
     angles = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
@@ -260,10 +281,29 @@ def bench_paths(table: Table, mode: Mode) -> None:
     follow_path(source, "tool0", targets, wrench=[0.0, 0.0, -50.0, 0.0, 0.0, 0.0], q0=UR5_Q,
                 workers=2, chunk=-(-n // 2))  # fmt: skip
     wall = time.perf_counter() - start
-    table.row("10c", f"UR5, a {n}-point circle under 50 N on 2 processes (`follow_path(..., "
+    table.row("11c", f"UR5, a {n}-point circle under 50 N on 2 processes (`follow_path(..., "
               "workers=2)`: inverse kinematics, loaded equilibrium, exact and first-order "
-              "compensation)", "well under 10 s for 1000 points (issue 42)", f"{wall:.3g} s",
+              "compensation)", "well under 10 s for 1000 points", f"{wall:.3g} s",
               f"{fmt_time(wall / n)} a point")  # fmt: skip
+
+
+#: The command lines timed against ``python -c "import pinocchio"``: id, command, target.
+COMMANDS = (
+    ("10a", ["stiffness", "ur5", "--frame", "tool0", "--q", "0", "-1.0", "1.5", "-0.5", "1.2",
+             "0.3", "--joint-stiffness", "1e4"], "<= 1.5x"),
+    ("10b", ["info", "ur5"], "-"),
+)  # fmt: skip
+
+
+def bench_cli(table: Table, mode: Mode) -> None:
+    """The start-up of ``closedloop`` commands (``python -m closedloop``) against
+    ``python -c "import pinocchio"``, their bytecode cached and compiled from source."""
+    reference = [sys.executable, "-c", "import pinocchio"]
+    for key, words, target in COMMANDS:
+        for start, suffix in zip(START_MODES, ("", "s"), strict=True):
+            t = wall_ratio([sys.executable, "-m", "closedloop", *words], reference, mode, start)
+            name = f"`closedloop {' '.join(words)}` wall vs `python -c 'import pinocchio'`"
+            table.command(f"{key}{suffix}", name, target, t, start)
 
 
 def main() -> None:
@@ -275,6 +315,7 @@ def main() -> None:
     bench_modes(table, mode)
     bench_design(table, mode)
     bench_paths(table, mode)
+    bench_cli(table, mode)
     table.close()
 
 

@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import platform
+import resource
+import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -72,27 +77,36 @@ UNIT_SHARE = 0.1
 
 @dataclass(frozen=True)
 class Timing:
-    """Medians over repeats: time of one call [s], of one unit call [s], and their ratio."""
+    """Medians over repeats: time of one call [s], of one unit call [s], and their ratio
+    (command lines: also the ratio of their CPU times)."""
 
     seconds: float
     unit: float
     ratio: float
     repeats: int = 1
+    cpu_ratio: float = math.nan
+
+
+#: The clock of the timed batches: the CPU time of this process (its BLAS threads
+#: included), so that the time it waits for a core of a loaded machine (shared with others)
+#: does not count; what the other processes do to the caches still does, which the
+#: alternating batches share out.
+clock = time.process_time
 
 
 def _calls(func: Callable[[], object], seconds: float) -> int:
     """Calls per batch so that a batch lasts about ``seconds`` (after one warm-up call)."""
-    start = time.perf_counter()
+    start = clock()
     func()
-    one = time.perf_counter() - start
+    one = clock() - start
     return max(1, int(seconds / max(one, 1e-9)))
 
 
 def _batch(func: Callable[[], object], calls: int) -> float:
-    start = time.perf_counter()
+    start = clock()
     for _ in range(calls):
         func()
-    return (time.perf_counter() - start) / calls
+    return (clock() - start) / calls
 
 
 def interleaved(
@@ -114,10 +128,10 @@ def interleaved(
     n_func = 1 if once else _calls(func, mode.batch_seconds)
     n_unit = _calls(unit, max(mode.batch_seconds, UNIT_BATCH_SECONDS))
     times, units, ratios = [], [], []
-    start = time.perf_counter()
+    start = clock()
     after = _batch(unit, n_unit)
     for _ in range(mode.repeats):
-        if times and time.perf_counter() - start > budget:
+        if times and clock() - start > budget:
             break
         before = after
         call = _batch(func, n_func)
@@ -134,24 +148,57 @@ def interleaved(
     )
 
 
-def wall_ratio(command: Sequence[str], reference: Sequence[str], mode: Mode) -> Timing:
-    """Median wall time of a command and of a reference command, run alternately, as an
-    installed package runs: with its bytecode cached (``PYTHONDONTWRITEBYTECODE`` is left
-    out of their environment, so that the first run writes the cache)."""
+#: How a command line is started in :func:`wall_ratio`: as an installed package runs, its
+#: bytecode cached (``PYTHONDONTWRITEBYTECODE`` left out, a first run writes the cache), or
+#: compiled from its source at every run (a copy of the packages without bytecode, with
+#: ``PYTHONDONTWRITEBYTECODE=1``; the libraries underneath as installed).
+START_MODES = ("bytecode cached", "compiled from source")
+#: The packages and data a command line needs, copied for a start from source.
+SOURCE_TREE = ("closedloop", "cahyman_pin", "urdf")
+
+
+@contextlib.contextmanager
+def source_copy():
+    """A folder with a copy of :data:`SOURCE_TREE` (no ``__pycache__``), for
+    ``PYTHONPATH``; removed afterwards."""
+    repo = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as folder:
+        for name in SOURCE_TREE:
+            shutil.copytree(repo / name, Path(folder, name),
+                            ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+        yield folder
+
+
+def wall_ratio(
+    command: Sequence[str], reference: Sequence[str], mode: Mode, start: str = START_MODES[0]
+) -> Timing:
+    """Median wall time of a command and of a reference command, run alternately (``start``:
+    one of :data:`START_MODES`); the ratio is the median of the pairs' ratios. The medians
+    of their CPU times (user + system, children's accounting) are in ``cpu_ratio``."""
     runs = 1 if mode.smoke else 5 if mode.name == "quick" else 9
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
-    def run(cmd: Sequence[str]) -> float:
-        start = time.perf_counter()
+    def run(cmd: Sequence[str], env: dict) -> tuple[float, float]:
+        before, start_time = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=env)
-        return time.perf_counter() - start
+        wall, after = time.perf_counter() - start_time, resource.getrusage(resource.RUSAGE_CHILDREN)
+        return wall, (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 
-    run(command)  # warm the file cache and write the bytecode
-    pairs = [(run(reference), run(command)) for _ in range(runs)]
-    ref = [r for r, _ in pairs]
-    cmd = [c for _, c in pairs]
-    ratios = [c / r for r, c in pairs]
-    return Timing(statistics.median(cmd), statistics.median(ref), statistics.median(ratios), runs)
+    def pairs(env: dict) -> list[tuple]:
+        run(command, env)  # warm the file cache (and write the bytecode when cached)
+        return [(run(reference, env), run(command, env)) for _ in range(runs)]
+
+    if start == START_MODES[0]:
+        measured = pairs(env)
+    else:
+        with source_copy() as folder:
+            path = os.pathsep.join([folder, *filter(None, [env.get("PYTHONPATH")])])
+            measured = pairs({**env, "PYTHONPATH": path, "PYTHONDONTWRITEBYTECODE": "1"})
+    ratios = [c[0] / r[0] for r, c in measured]
+    cpu = statistics.median(c[1] / r[1] for r, c in measured if r[1] > 0)
+    return Timing(statistics.median(c[0] for _, c in measured),
+                  statistics.median(r[0] for r, _ in measured),
+                  statistics.median(ratios), runs, cpu)  # fmt: skip
 
 
 def growth_exponent(nv: Sequence[int], seconds: Sequence[float]) -> float:
@@ -205,7 +252,7 @@ class Table:
     load average at the end after it.
     """
 
-    HEADER = ("id", "row (issue 10)", "target", "measured", "absolute")
+    HEADER = ("id", "row", "target", "measured", "absolute")
 
     def __init__(self, title: str, mode: Mode):
         import pinocchio as pin
@@ -216,7 +263,8 @@ class Table:
               f"; {total} cores ({usable} usable); load average at start: {load()}")  # fmt: skip
         print(lapack_probe())
         print("unit = one pinocchio.computeJointJacobians call on the same model, timed in "
-              "alternating batches with the row\n")  # fmt: skip
+              "alternating batches with the row; times: CPU time of the benchmark's process "
+              "(command lines: wall time)\n")  # fmt: skip
         print("| " + " | ".join(self.HEADER) + " |")
         print("|" + " --- |" * len(self.HEADER), flush=True)
         self.notes: list[str] = []
@@ -228,6 +276,19 @@ class Table:
         """A row measured in units of the computeJointJacobians call."""
         unit = f"unit {fmt_time(t.unit)}"
         self.row(key, name, target, f"{t.ratio:.1f} units", f"{fmt_time(t.seconds)}{what}; {unit}")
+
+    def against_floor(self, key: str, name: str, target: str, floor: Timing, t: Timing) -> None:
+        """A row measured against its floor ``floor`` (the floor's timing in units): ``t``
+        timed in alternating batches with the floor's numbers, its ratio to them."""
+        units = t.ratio * floor.ratio
+        absolute = f"{fmt_time(t.seconds)} = {units:.1f} units; floor {fmt_time(t.unit)}"
+        self.row(key, name, target, f"{t.ratio:.2f}x floor", absolute)
+
+    def command(self, key: str, name: str, target: str, t: Timing, start: str) -> None:
+        """A command line's wall time against a reference command's (``start``: how both
+        were started, one of :data:`START_MODES`)."""
+        absolute = f"{fmt_time(t.seconds)} vs {fmt_time(t.unit)}; CPU {t.cpu_ratio:.2f}x"
+        self.row(key, f"{name} ({start})", target, f"{t.ratio:.2f}x", absolute)
 
     def note(self, text: str) -> None:
         self.notes.append(text)

@@ -11,27 +11,14 @@ from pathlib import Path
 import pytest
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
-#: Row ids each script prints (issue 10's table: 1-7; b, c... are the variants).
+#: Row ids each script prints (b, c... are the variants; s: a command line started from
+#: source).
 ROWS = {
-    "bench_closedloop.py": [
-        "2",
-        "2b",
-        "2c",
-        "6a",
-        "6b",
-        "6c",
-        "6d",
-        "8",
-        "9",
-        "9b",
-        "10",
-        "10b",
-        "10c",
-        "14",
-        "14b",
-    ],
-    "bench_cahyman.py": ["1a", "1b", "1c", "1d", "1e", "1f", "3a", "3b", "3c", "4", "5", "7"],
-}
+    "bench_closedloop.py": ["2", "2b", "2c", "2f", "2p", "6a", "6b", "6c", "6d", "8", "9", "9b",
+                            "10a", "10as", "10b", "10bs", "11", "11b", "11c", "14", "14b"],
+    "bench_cahyman.py": ["1a", "1b", "1c", "1d", "1e", "1f", "1g", "1h", "3a", "3b", "3c", "4",
+                         "5", "7", "7s"],
+}  # fmt: skip
 NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", re.IGNORECASE)
 
 

@@ -86,6 +86,64 @@ def test_the_closedloop_stiffness_command_loads_no_map_machinery():
     }
 
 
+#: What a query of a serial URDF robot does not use: the other formats' readers, beam
+#: theory, balls and elastic closures, gravity and the assembly (a --q is given), the
+#: distributions' metadata (the robot files are found on sys.path), temporary files.
+NOT_FOR_A_URDF_QUERY = {
+    "closedloop.io.mjcf",
+    "closedloop.io.mjcf_xml",
+    "closedloop.io.sdf",
+    "closedloop.io.sdf_reader",
+    "closedloop.model.beam_theory",
+    "closedloop.model.beams",
+    "closedloop.model.balls",
+    "closedloop.model.elastic_closures",
+    "closedloop.model.gravity",
+    "closedloop.kinematics.assembly",
+    "closedloop.elastostatics.preload",
+    "closedloop.elastostatics.statics",
+    "closedloop.viewer",
+    "closedloop.cli.view",
+    "importlib.metadata",
+    "tempfile",
+    "numpy.ma",
+    "difflib",
+}
+UR5_STIFFNESS = ["stiffness", "ur5", "--frame", "tool0", "--q", "0", "-1.0", "1.5", "-0.5",
+                 "1.2", "0.3", "--joint-stiffness", "1e4"]  # fmt: skip
+
+
+def _command_modules(module: str, argv: list[str], status: int) -> set[str]:
+    return modules_after(
+        f"import os; from {module} import main; sys.stdout = open(os.devnull, 'w'); "
+        f"assert main({argv!r}) == {status}; sys.stdout = sys.__stdout__"
+    )
+
+
+def test_a_urdf_stiffness_query_imports_only_what_it_uses():
+    modules = _command_modules("closedloop.cli.app", UR5_STIFFNESS, 0)
+    assert "closedloop.elastostatics.query" in modules  # the query ran
+    assert not modules & NOT_FOR_A_URDF_QUERY, sorted(modules & NOT_FOR_A_URDF_QUERY)
+    loaded = {name.split(".")[0] for name in modules}
+    assert not loaded & {"matplotlib", "meshcat", "yaml", "dask", "tqdm"}
+
+
+def test_closedloop_info_imports_no_compliance():
+    modules = _command_modules("closedloop.cli.app", ["info", "ur5"], 0)
+    assert "closedloop.cli.info" in modules
+    assert not modules & {"closedloop.elastostatics", "closedloop.cli.stiffness"}
+    assert not modules & NOT_FOR_A_URDF_QUERY, sorted(modules & NOT_FOR_A_URDF_QUERY)
+
+
+def test_the_cahyman_stiffness_command_reads_no_model_file():
+    """CaHyMan's model is built in memory: no reader of robot files, no beam theory
+    without its links as beams."""
+    modules = _command_modules("cahyman_pin.cli", ["stiffness", "--json"], 0)
+    assert "closedloop.elastostatics.query" in modules
+    absent = NOT_FOR_A_URDF_QUERY - {"closedloop.kinematics.assembly"} | {"closedloop.io.loader"}
+    assert not modules & absent, sorted(modules & absent)
+
+
 def test_the_api_layout_page_lists_every_module_of_every_layer():
     from helpers import REPO
 

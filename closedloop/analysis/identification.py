@@ -80,7 +80,7 @@ from closedloop.analysis.misfit import (
     worst_measurements,
 )
 from closedloop.common.arrays import readonly
-from closedloop.elastostatics.compliance import compliance
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.exceptions import (
     InvalidInputError,
     MechanismError,
@@ -291,10 +291,11 @@ def identify(
             for n, (_, u) in zip(g, parts[c], strict=True)
         }
         model = clm.with_springs({**springs, **values}, locked)
+        query = ComplianceQuery(model, frame, check_limits=False)  # the limits checked above
         pred, sens = np.empty((len(configs), 6)), np.empty((len(configs), 6, len(groups)))
         for m, q in enumerate(configs):
             try:
-                res = compliance(model, q, frame, check_limits=False)  # checked above
+                res = query(q)
             except OpenLoopError as e:
                 raise OpenLoopError(f"measurement {m}: {e}", e.residual, e.tolerance) from None
             except (MechanismError, SingularConfigurationError) as e:

@@ -41,7 +41,7 @@ from closedloop.analysis.map_results import OK, POINT_ERRORS, RANK_DEFICIENT, Ch
 from closedloop.analysis.model_source import ModelSource, model_of
 from closedloop.common.conditioning import ILL_CONDITIONED
 from closedloop.elastostatics.batch import STACK, answered
-from closedloop.elastostatics.compliance import compliance
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.kinematics.assembly import free_coordinates
 from closedloop.kinematics.driving import (
     INPUT_STEP,
@@ -131,10 +131,13 @@ def _query_points(clm, frame, out, assembled: list, axes: str, length, check_lim
     out.iterations[done] = [a.iterations for (_, a), s in zip(assembled, ok, strict=True) if s]
     for k, e in errors.items():
         out.fail(positions[k], e)
+    query = None
     for k in np.flatnonzero(ok & (cond > ILL_CONDITIONED)):  # the single query's K (and C)
         i = positions[k]
         try:
-            r = compliance(clm, Q[k], frame, axes, length=length, check_limits=check_limits)
+            if query is None:  # made once (one that cannot be made raises at each point)
+                query = ComplianceQuery(clm, frame, axes, length=length, check_limits=check_limits)
+            r = query(Q[k])
         except POINT_ERRORS as e:
             out.fail(i, e)
             continue

@@ -29,6 +29,16 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
   actuated values, no static equilibrium, a singular configuration or a mechanism, a result
   that is not finite): one line on stderr.
 * ``141`` - standard output was closed early (``| head``); nothing more is written.
+
+Start-up: a command imports only what it runs. The parser of the command named on the
+command line is the only one built in full (:func:`build_parser`); the others stand in by
+their help line. A subcommand lives in a module of its own with ``add_parser(subparsers,
+arguments)`` and its function, listed in :data:`SUBCOMMAND_MODULES` (imported only when
+it runs: :func:`closedloop.cli.common.add_subcommands`); ``stiffness`` and ``view``, built
+here, import their modules when they run too. Below the command, heavy readers are imported
+where a file needs them (:mod:`closedloop.io.loader`: the MJCF and SDF readers, beam
+theory, balls and elastic closures). ``python -X importtime -m closedloop ...`` lists what
+a command loads; ``tests/test_package.py`` checks it for ``stiffness`` and ``info``.
 """
 
 from __future__ import annotations
@@ -46,8 +56,6 @@ from closedloop.cli.options import (
     add_source_arguments,
 )
 from closedloop.cli.parser import Parser, finite_float
-from closedloop.cli.stiffness import stiffness
-from closedloop.cli.view import add_view_arguments, view
 
 EPILOG = """\
 Configuration: --q gives every coordinate of the model (nq values, SI: rad, m); --actuated
@@ -104,18 +112,16 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
 }
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """Argument parser of the ``closedloop`` command; of the subcommands of
-    :data:`SUBCOMMAND_MODULES`, only ``command``'s module is imported."""
-    parser = Parser(
-        prog=PROG,
-        description="Stiffness and compliance of robots with closed loops. " + EXIT_HELP,
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+#: Help lines of the subcommands built here.
+STIFFNESS_HELP = "Cartesian stiffness K and compliance C of a frame"
+VIEW_HELP = "meshcat view of the deflection under a wrench"
+
+
+def _add_stiffness(sub) -> None:
+    """The parser of ``closedloop stiffness``."""
     p = sub.add_parser(
         "stiffness",
-        help="Cartesian stiffness K and compliance C of a frame",
+        help=STIFFNESS_HELP,
         description="Cartesian stiffness K and compliance C of a frame (SI units).",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -130,10 +136,22 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         "work)",
     )  # fmt: skip
     add_preload_arguments(p)
-    p.set_defaults(func=stiffness)
+    p.set_defaults(func=_stiffness)
+
+
+def _stiffness(args: argparse.Namespace) -> int:
+    from closedloop.cli.stiffness import stiffness  # the query's modules, when it runs
+
+    return stiffness(args)
+
+
+def _add_view(sub) -> None:
+    """The parser of ``closedloop view``."""
+    from closedloop.cli.view import add_view_arguments, view
+
     v = sub.add_parser(
         "view",
-        help="meshcat view of the deflection under a wrench",
+        help=VIEW_HELP,
         description="Nominal pose (translucent ghost), amplified deflected pose, wrench arrows,\n"
         "compliance ellipsoids and an HTML legend (load, amplification, real displacements\n"
         "in mm and deg, colour key) in a meshcat viewer. --html writes a self-contained\n"
@@ -144,6 +162,23 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     add_model_arguments(v)
     add_view_arguments(v)
     v.set_defaults(func=view)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Argument parser of the ``closedloop`` command; only ``command``'s parser is built
+    in full, only its module imported (module docstring)."""
+    parser = Parser(
+        prog=PROG,
+        description="Stiffness and compliance of robots with closed loops. " + EXIT_HELP,
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (add, help_line) in {"stiffness": (_add_stiffness, STIFFNESS_HELP),
+                                   "view": (_add_view, VIEW_HELP)}.items():  # fmt: skip
+        if command == name:
+            add(sub)
+        else:  # its help line (as add_subcommands)
+            sub.add_parser(name, help=help_line, add_help=False)
     add_subcommands(sub, SUBCOMMAND_MODULES, command, add_source_arguments)
     return parser
 

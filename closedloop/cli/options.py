@@ -14,12 +14,8 @@ from closedloop.common.rounding import without_rounding
 from closedloop.exceptions import InvalidInputError, OpenLoopError
 from closedloop.io.data import BUNDLED_MODELS, ROBOTS, resolve
 from closedloop.io.loader import load_model, read_springs_file
-from closedloop.kinematics.assembly import assemble
-from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.kinematics.configuration import Configuration
-from closedloop.kinematics.driving import assemble_connected
 from closedloop.model.closed_loop import ClosedLoopModel
-from closedloop.model.gravity import Payload
 
 PROG = "closedloop"
 
@@ -128,6 +124,8 @@ def mode_line(clm: ClosedLoopModel, q) -> str:
     loops."""
     if not clm.closures:
         return ""
+    from closedloop.kinematics.assembly_modes import passive_values  # a model with loops only
+
     return (f"assembly mode: passive joints {passive_text(passive_values(clm, q))} [rad, m] "
             "(another mode: --start Q or --near JOINT=VALUE; closedloop.assembly_modes lists "
             "those found)")  # fmt: skip
@@ -213,6 +211,8 @@ def preload_from_args(args: argparse.Namespace) -> dict:
             )
         needs_gravity(f"--payload {' '.join(f'{v:g}' for v in args.payload)}",
                       args.gravity is not None)  # fmt: skip
+        from closedloop.model.gravity import Payload  # with a payload only: start-up
+
         offset = args.payload[1:] or [0.0, 0.0, 0.0]
         out["payloads"] = [Payload(args.payload[0], args.frame, offset)]
     if args.preload is not None:
@@ -259,7 +259,10 @@ def configuration(
         AssemblyError: the loops cannot be closed for these actuated values.
     """
     given = q is not None or actuated is not None  # else the file's own configuration
-    if q is None:
+    if q is None:  # the assembly's modules only then: a --q loads none (start-up)
+        from closedloop.kinematics.assembly import assemble
+        from closedloop.kinematics.driving import assemble_connected
+
         start = clm.reference_configuration() if start is None else start
         if actuated is None:
             q = assemble(clm, None, start).q  # the file's own configuration, as drawn

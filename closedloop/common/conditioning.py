@@ -57,6 +57,9 @@ RANK_RTOL = 1e-7
 ILL_CONDITIONED = 1e8
 #: Tolerance on the scaled (dimensionless) compliance for symmetry and semi-definiteness.
 SCALED_TOL = 1e-8
+#: Bound of the entries of a computed matrix (C, G, K) below which it is finite without a
+#: look at each entry, far enough below the largest float (1.8e308) for any rounding.
+FINITE_BOUND = 1e300
 
 
 #: Rows of the pairwise distances :func:`characteristic_length` forms at once (memory
@@ -142,20 +145,33 @@ def twist_scalings(lengths: np.ndarray) -> np.ndarray:
     return np.where(np.arange(6) < 3, 1.0 / np.asarray(lengths, dtype=float)[:, None], 1.0)
 
 
+#: Size (the smaller side) up to which :func:`svd` calls ``dgesvd`` first: LAPACK's
+#: divide and conquer ``dgesdd`` solves such a bidiagonal problem by the same QR iteration
+#: (its SMLSIZ), after more set-up (10 % more time on a 6 x 6 matrix).
+SMALL_SVD = 25
+
+
 def svd(A: np.ndarray, full_matrices: bool = True):
     """SVD A = U diag(s) Vt of a small matrix (m, n), straight from LAPACK.
 
-    ``dgesdd`` (a fraction of ``numpy.linalg.svd``'s call cost on 6x6 matrices), with
-    ``dgesvd`` as the fall-back when it does not converge.
+    ``dgesvd`` up to :data:`SMALL_SVD`, else ``dgesdd`` (each a fraction of
+    ``numpy.linalg.svd``'s call cost on 6x6 matrices), with the other as the fall-back when
+    it does not converge.
 
     Raises:
         numpy.linalg.LinAlgError: neither converges (non-finite input).
     """
-    A = np.asarray(A, dtype=float)
+    if type(A) is not np.ndarray or A.dtype != np.float64:
+        A = np.asarray(A, dtype=float)
     flag = int(full_matrices)
-    U, s, Vt, info = lapack.dgesdd(A, compute_uv=1, full_matrices=flag)
+    first, then = (
+        (lapack.dgesvd, lapack.dgesdd)
+        if min(A.shape) <= SMALL_SVD
+        else (lapack.dgesdd, lapack.dgesvd)
+    )
+    U, s, Vt, info = first(A, 1, flag)  # compute_uv, full_matrices
     if info > 0:
-        U, s, Vt, info = lapack.dgesvd(A, compute_uv=1, full_matrices=flag)
+        U, s, Vt, info = then(A, 1, flag)
     if info != 0:
         raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK info {info})")
     return U, s, Vt
@@ -255,13 +271,27 @@ def spectrum_from_factor(
         scales: (d (6,), outer(d, d) (6, 6)) of :func:`twist_scaling` at ``length``, when
             the caller has them.
     """
+    return factor_spectrum(B_s, length, range_factor, spread, scales)[0]
+
+
+def factor_spectrum(
+    B_s: np.ndarray,
+    length: float,
+    range_factor: np.ndarray | Callable[[], np.ndarray] | None = None,
+    spread: float = 1.0,
+    scales: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[Spectrum, float, float]:
+    """:func:`spectrum_from_factor` (same arguments), and the largest and the smallest kept
+    singular values of B_s (0.0 and 1.0 without any) [rad/sqrt(N m)]: bounds of C's and
+    K's entries (C_s = B_s B_s^T, K_s = U diag(beta^-2) U^T)."""
     d, dd = scales if scales is not None else (twist_scaling(length), None)
     if not (isinstance(B_s, np.ndarray) and B_s.ndim == 2):
         B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
     # the left singular vectors U (6, 6) are all needed (rigid directions): the thin SVD
     # has them when r >= 6
     U, beta, _ = svd(B_s, B_s.shape[1] < 6) if B_s.size else (np.eye(6), np.zeros(0), None)
-    if beta.size >= 6 and beta[5] > RANK_RTOL * spread * beta[0]:
+    b = beta.tolist()  # Python floats: the tests below on a few numbers
+    if len(b) >= 6 and b[5] > RANK_RTOL * spread * b[0]:
         rank, basis = 6, U  # full rank, and so is the range factor (spread >= 1)
     else:
         rank, basis = rule_rank(beta), U
@@ -272,12 +302,41 @@ def spectrum_from_factor(
                 rank = rule_rank(s_k)
             else:  # no compliant coordinate at all: every direction is rigid
                 basis, rank = np.eye(6), 0
-    cond = float((beta[0] / beta[rank - 1]) ** 2) if rank else 1.0
+    top, bottom = (b[0], b[rank - 1]) if rank else (0.0, 1.0)
+    ratio = top / bottom
+    # (a float's ** 2 raises OverflowError where the product is inf)
+    cond = ratio * ratio if rank else 1.0
     K = None
     if rank == 6:
-        Ub = U / beta  # K_s = U diag(beta^-2) U^T (symmetric: numpy's A @ A.T is a syrk)
-        K = frozen((Ub @ Ub.T) * (np.outer(d, d) if dd is None else dd))
-    return Spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
+        entry = max(1.0, 1.0 / length) / bottom  # |K_ij| <= entry^2
+        if entry * entry < FINITE_BOUND:
+            K = _stiffness(U, beta, d, dd)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow: the caller's error
+                K = _stiffness(U, beta, d, dd)
+    spectrum = _spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
+    return spectrum, top, bottom
+
+
+def _stiffness(U: np.ndarray, beta: np.ndarray, d: np.ndarray, dd) -> np.ndarray:
+    """(6, 6) read-only K = D K_s D, K_s = U diag(beta^-2) U^T (``dd``: outer(d, d) or None)."""
+    Ub = U / beta
+    K = Ub.dot(Ub.T)
+    K *= np.outer(d, d) if dd is None else dd
+    K.setflags(write=False)
+    return K
+
+
+def _spectrum(rank: int, rigid: np.ndarray, cond: float, length: float, K) -> Spectrum:
+    """A :class:`Spectrum` of checked fields, set without the frozen dataclass's
+    ``__init__`` (a field at a time through ``object.__setattr__``: a tenth of a query of
+    a serial robot)."""
+    spectrum = object.__new__(Spectrum)
+    spectrum.__dict__.update(
+        {"rank": rank, "rigid_directions": rigid, "condition_number": cond, "length": length,
+         "K": K}
+    )  # fmt: skip
+    return spectrum
 
 
 def spectrum_of_matrix(C: np.ndarray, length: float, range_factor: np.ndarray) -> Spectrum:

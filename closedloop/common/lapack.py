@@ -1,7 +1,7 @@
 """The LAPACK routines of the library, SciPy's compiled wrappers without ``scipy.linalg``.
 
 The queries call LAPACK directly on small matrices (SVD ``dgesdd``/``dgesvd``, QR
-``dgeqrf`` and with column pivoting ``dgeqp3``, ``dorgqr``, triangular ``dtrcon``,
+``dgeqrf`` and with column pivoting ``dgeqp3``, ``dorgqr``, triangular ``dlantr``,
 ``dtrtri``, ``dtrtrs`` and rank-revealing least squares ``dgelsy``), which numpy does not
 expose. ``scipy.linalg.lapack`` re-exports them from the extension module
 ``scipy.linalg._flapack``, but importing it first runs the package ``scipy.linalg``, which
@@ -27,7 +27,7 @@ from types import ModuleType
 import numpy as np
 
 #: The routines the library calls (``tests/common/test_lapack.py`` checks them against SciPy's).
-ROUTINES = ("dgesdd", "dgesvd", "dgeqrf", "dgeqp3", "dorgqr", "dtrcon", "dtrtri", "dtrtrs",
+ROUTINES = ("dgesdd", "dgesvd", "dgeqrf", "dgeqp3", "dorgqr", "dlantr", "dtrtri", "dtrtrs",
             "dgelsy")  # fmt: skip
 
 
@@ -90,7 +90,7 @@ dgesvd = _refusing_empty("dgesvd")
 dgeqrf = _refusing_empty("dgeqrf")
 dgeqp3 = _refusing_empty("dgeqp3")
 dorgqr = _refusing_empty("dorgqr")
-dtrcon = _refusing_empty("dtrcon")
+dlantr = _refusing_empty("dlantr")
 dtrtri = _refusing_empty("dtrtri")
 dtrtrs = _refusing_empty("dtrtrs")
 dgelsy = _refusing_empty("dgelsy")

@@ -30,8 +30,8 @@ import pinocchio as pin
 
 from closedloop.common.arrays import ReadOnlyArrays, frozen, real_array, upper_triangular_inverses
 from closedloop.common.conditioning import RANK_RTOL, check_length
-from closedloop.elastostatics.compliance import compliance
 from closedloop.elastostatics.partition import PARTITION_RCOND, PARTITION_RTOL, model_scaling
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, OutsideLimitsError
 from closedloop.kinematics.configuration import (
     CLOSURE_TOL,
@@ -201,10 +201,12 @@ def answered(
             np.full(n, -1),
             np.full(n, np.nan),
         )
-    stacked, errors = rank >= 0, {}
+    stacked, errors, query = rank >= 0, {}, None
     for i in np.flatnonzero(~stacked):
         try:
-            r = compliance(clm, Q[i], frame, axes, length=length, check_limits=check_limits)
+            if query is None:  # made (its arguments checked) once, or raising at each
+                query = ComplianceQuery(clm, frame, axes, length=length, check_limits=check_limits)
+            r = query(Q[i])
         except catch as e:
             errors[int(i)] = e
             if first_error:

@@ -1,7 +1,9 @@
 """Cartesian compliance and stiffness of a closed-loop mechanism with joint springs: the
 query :func:`compliance`, unloaded (:mod:`closedloop.elastostatics.unloaded`, whose method and
-numerics its docstring explains) or about the equilibrium under gravity, payloads or a preload
-(:mod:`closedloop.elastostatics.preload`).
+numerics its docstring explains; the prepared query of one frame,
+:class:`closedloop.elastostatics.query.ComplianceQuery`, whose kernel it shares) or about the
+equilibrium under gravity, payloads or a preload (:mod:`closedloop.elastostatics.preload`,
+imported only then).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from closedloop.common.arrays import check_wrench
-from closedloop.elastostatics.preload import preloaded_compliance
+from closedloop.elastostatics.query import ComplianceQuery, unloaded_compliance
 from closedloop.elastostatics.springs import (
     PATHS,
     SpringFactor,
@@ -17,7 +19,6 @@ from closedloop.elastostatics.springs import (
     spring_factor,
     spring_subspace,
 )
-from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.elastostatics.unloaded import (
     TWIST_LABELS,
     UNITS,
@@ -26,7 +27,6 @@ from closedloop.elastostatics.unloaded import (
     describe_directions,
     energy_shares,
     finite_product,
-    unloaded_compliance,
 )
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.configuration import Configuration, as_configuration
@@ -39,6 +39,7 @@ __all__ = [
     "PATHS",
     "TWIST_LABELS",
     "UNITS",
+    "ComplianceQuery",
     "ComplianceResult",
     "SpringFactor",
     "compliance",
@@ -105,10 +106,11 @@ def compliance(
         InvalidInputError: a q, frame name, axes, path, length, gravity or preload that is
             not what the arguments above expect (the message names it).
     """
-    if isinstance(model, Configuration) and q is not None and frame is None:
-        q, frame = None, q  # compliance(state, frame): a configuration carries its own q
-    elif isinstance(model, Configuration) and isinstance(q, str):  # (state, frame, axes)
-        q, frame, axes = None, q, frame
+    if isinstance(model, Configuration):
+        if q is not None and frame is None:  # compliance(state, frame): its own q
+            q, frame = None, q
+        elif isinstance(q, str):  # (state, frame, axes)
+            q, frame, axes = None, q, frame
     if frame is None:
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)
@@ -116,8 +118,10 @@ def compliance(
     state = as_configuration(model, q, length=length, check_limits=check_limits)
     state.require_closed()
     if gravity is not None or payloads or preload is not None:
+        from closedloop.elastostatics.preload import preloaded_compliance  # on demand: start-up
+        from closedloop.elastostatics.statics import solve_equilibrium
+
         w0 = np.zeros(6) if preload is None else check_wrench(preload, "preload")
         eq = solve_equilibrium(state, frame, w0, gravity=gravity, payloads=payloads)
         return preloaded_compliance(state.model, eq, axes, length=state.length)
-    with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error of _result
-        return unloaded_compliance(state, frame, axes, path)
+    return unloaded_compliance(state, frame, axes, path)

@@ -10,6 +10,7 @@ closures and passive joints the spring coordinates themselves are the admissible
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -40,9 +41,15 @@ class _Scaling(NamedTuple):
     s_p: np.ndarray  # (p, 1) s_q of the passive coordinates
     # (m, p + s) scale of Jc[:, order]: [-J_p, J_s] scaled (rows per L, columns per s_q)
     scale_order: np.ndarray
+    # (p + s, nv) when every closure row has one scale (else None): (gather Jc^T)^T is
+    # Jc[:, order] * scale_order to the last bit (one product a column, the rest zeros), in
+    # one matrix product, in Fortran order
+    gather: np.ndarray | None
     upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
     d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
     dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
+    d_rows: np.ndarray  # (6, s) d in every column: D B = B * d_rows (no broadcasting)
+    scales: tuple  # (d, dd), the scales argument of spectrum_from_factor
     sigma: np.ndarray  # (s,) the spring factor's singular values on y = dq_s
     spread: float  # max(sigma) / min(sigma), 1 without springs
     W: np.ndarray | None  # (s, s) V diag(1 / sigma) with spring blocks, else None
@@ -52,6 +59,8 @@ class _Scaling(NamedTuple):
     passive_coef: np.ndarray | None  # (p, s) outer(s_p, 1 / sigma), diagonal springs only
     P_diagonal: np.ndarray | None  # (nv,) P0 = diag(s_q / sigma) when every coordinate has
     # a diagonal spring (a serial robot), else None
+    P_rows: np.ndarray | None  # (6, nv) P_diagonal in every row (J P = J * P_rows), or None
+    P_max: float  # the largest |entry| of P_diagonal, or inf
     # the blocks of loops of _loop_blocks, with BLOCK_PASSIVE passive coordinates or more,
     # else None
     loop_blocks: tuple | None
@@ -86,6 +95,13 @@ class _Scaling(NamedTuple):
             P0[sprung] = s_q[sprung, None] * W
             passive_coef = None
         frozen(P0)
+        scale_order = row_scale * (sign * s_q[order])
+        gather = None
+        if passive.size and row_scale.size and np.all(row_scale == row_scale[0]):
+            gather = np.zeros((order.size, k.size))
+            gather[np.arange(order.size), order] = scale_order[0]
+        dd = frozen(np.outer(d, d))
+        P_diagonal = frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None
         return cls(
             s_q,
             row_scale,
@@ -96,16 +112,21 @@ class _Scaling(NamedTuple):
             root,
             order,
             s_q[passive, None],
-            row_scale * (sign * s_q[order]),
+            scale_order,
+            gather,
             np.triu(np.ones((row_scale.size, order.size))),
-            d,
-            np.outer(d, d),
+            frozen(d),
+            dd,
+            frozen(np.repeat(d[:, None], sprung.size, axis=1)),
+            (d, dd),
             sigma,
             float(sigma.max() / sigma.min()) if sigma.size else 1.0,
             W,
             P0,
             passive_coef,
-            frozen(P0.diagonal().copy()) if W is None and sprung.size == k.size else None,
+            P_diagonal,
+            None if P_diagonal is None else frozen(np.tile(P_diagonal, (6, 1))),
+            float(abs(P_diagonal).max(initial=0.0)) if P_diagonal is not None else math.inf,
             loops,
         )
 
@@ -121,7 +142,8 @@ def model_scaling(clm: ClosedLoopModel, L: float) -> _Scaling:
 
 
 #: The partitioned path is taken when the passive part of the scaled closure Jacobian is
-#: well conditioned (reciprocal condition estimate above this): then both paths give C
+#: well conditioned (reciprocal 1-norm condition number above this, of its triangle R11
+#: and the inverse of it that X needs, as the batch's): then both paths give C
 #: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
 #: decides, with the rank rule.
 PARTITION_RCOND = 1e-6
@@ -142,23 +164,29 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
 
     One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
     -J_p = Q1 R11, X = R11^-1 R12 (dtrtri: unlike dgels' triangular solve, it does not
-    wake a multi-threaded BLAS on a small matrix) and |R22|_F = |J_s + J_p X|_F. With
-    many passive coordinates, one such QR per independent block of loops.
+    wake a multi-threaded BLAS on a small matrix), cond_1(R11) = |R11|_1 |R11^-1|_1 (dlantr)
+    and |R22|_F = |J_s + J_p X|_F. With many passive coordinates, one such QR per
+    independent block of loops.
     """
     p = sc.passive.size
     if sc.loop_blocks is not None:
         return _passive_motion_by_blocks(Jc, sc)
-    A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
+    if sc.gather is not None:
+        A = sc.gather.dot(Jc.T).T
+    else:
+        A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
     scale = PARTITION_RTOL * abs(A[:, p:]).max()
     qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
     R = qr * sc.upper  # the triangle (Householder vectors below it)
-    if info != 0 or lapack.dtrcon(R[:p, :p])[0] <= PARTITION_RCOND:
-        return None
     residual = R[p:, p:]
-    if np.vdot(residual, residual) > scale * scale:
+    if info != 0 or np.vdot(residual, residual) > scale * scale:
         return None
-    R_inv, info = lapack.dtrtri(R[:p, :p], overwrite_c=1)
-    return R_inv @ R[:p, p:] if info == 0 else None
+    R11 = R[:p, :p]
+    R_inv, info = lapack.dtrtri(R11)  # a zero pivot: info > 0; near one, a large inverse
+    cond = lapack.dlantr(b"1", R11) * lapack.dlantr(b"1", R_inv) if info == 0 else math.inf
+    if not cond * PARTITION_RCOND < 1.0:  # (an inverse with inf or NaN fails it too)
+        return None
+    return R_inv @ R[:p, p:]
 
 
 def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
@@ -166,7 +194,7 @@ def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None
     at once, each gathered from the closure Jacobian Jc (m, nv) on its own rows and
     columns (scaled, the common ancestors' columns, rounding of a zero, set to 0). The
     QR of a block diagonal -J_p is block diagonal, and so are R and R^-1, whose 1-norms
-    are the largest of the blocks' (the exact 1-norm condition, which dtrcon estimates);
+    are the largest of the blocks' (the 1-norm condition of :func:`_passive_motion`);
     the residual J_s + J_p X is checked on the blocks' spring columns, the others being
     zero."""
     X = np.zeros((sc.passive.size, sc.sprung.size))

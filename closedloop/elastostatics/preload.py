@@ -32,6 +32,7 @@ from closedloop.common.conditioning import (
     twist_scaling,
 )
 from closedloop.elastostatics.equilibrium import Equilibrium
+from closedloop.elastostatics.query import unloaded_compliance
 from closedloop.elastostatics.springs import spring_factor
 from closedloop.elastostatics.tangent import (
     CRITICAL_RTOL,
@@ -44,11 +45,7 @@ from closedloop.elastostatics.tangent import (
     stability_margin,
     tangent_stiffness,
 )
-from closedloop.elastostatics.unloaded import (
-    ComplianceResult,
-    compliance_result,
-    unloaded_compliance,
-)
+from closedloop.elastostatics.unloaded import ComplianceResult, compliance_result
 from closedloop.exceptions import EquilibriumError, SingularConfigurationError
 from closedloop.kinematics.configuration import Configuration
 from closedloop.model.closed_loop import ClosedLoopModel

@@ -1,4 +1,5 @@
-"""Compliance and stiffness about an unloaded configuration: the result type and its kernel.
+"""Compliance and stiffness about an unloaded configuration: the method, the result type
+and how it is made (the kernel: :mod:`closedloop.elastostatics.query`).
 
 Method (the Jacobian method K = J^-T K_q J^-1 generalised to loops). Let N (nv, d) span
 the tangent motions dq that keep every closure and locked joint (``J_c N = 0``), K_q the
@@ -34,17 +35,17 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
-from closedloop.common.arrays import ReadOnlyArrays, check_wrench, frozen, readonly
+from closedloop.common.arrays import ReadOnlyArrays, check_wrench, readonly
 from closedloop.common.conditioning import (
+    FINITE_BOUND,
     ILL_CONDITIONED,
     RANK_RTOL,
     Spectrum,
-    spectrum_from_factor,
     twist_scaling,
 )
-from closedloop.elastostatics.partition import kinematic_factor, partition, scaling
-from closedloop.elastostatics.springs import SpringFactor, spring_factor
+from closedloop.elastostatics.springs import SpringFactor
 from closedloop.exceptions import (
     InvalidInputError,
     RigidDirectionsError,
@@ -193,71 +194,6 @@ def describe_directions(V: np.ndarray) -> str:
     return ", ".join(parts)
 
 
-def unloaded_compliance(state: Configuration, frame: str, axes: str, path: str) -> ComplianceResult:
-    """Compliance of a closed configuration without preload: the kernel of
-    :func:`closedloop.elastostatics.compliance.compliance` without gravity, payloads or preload, its
-    arguments already checked.
-
-    Args:
-        state: a closed configuration.
-        frame: name of the loaded frame.
-        axes: ``"world"`` or ``"local"``.
-        path: ``"auto"`` (the partitioned fast path where it applies) or ``"nullspace"``.
-    """
-    J = state.frame_jacobian(frame, axes)
-    sc = scaling(state)
-    fast = partition(state, sc) if path == "auto" else None
-    if fast is not None:
-        return _fast_compliance(state, frame, axes, J, sc, *fast)
-    f = spring_factor(state, J, frame)
-    NV = f.NV
-    JNV = (J @ NV) * sc.d[:, None]  # scaled, kinematic
-    B_s = JNV / f.sigma  # C_s = B_s B_s^T
-    spread = f.sigma.max() / f.sigma.min() if f.sigma.size else 1.0
-    spectrum = spectrum_from_factor(B_s, state.length, range_factor=JNV, spread=spread)
-    P = NV / f.sigma
-    B = J @ P  # C = B B^T
-    return compliance_result(state, frame, axes, B @ B.T, P @ B.T, f, spectrum)
-
-
-def _fast_compliance(
-    state: Configuration, frame: str, axes: str, J: np.ndarray, sc, path: str, X
-) -> ComplianceResult:
-    """The serial and partitioned paths without forming N (nv, s).
-
-    In the scaled spring coordinates y = dq_s / s_q the joints move by dq = T y, with
-    T = diag(s_q) on the sprung coordinates and s_p X on the passive ones
-    (:func:`closedloop.elastostatics.partition.partition`), and K_r = W^-T W^-1 (W = diag(1/sqrt_k),
-    or V diag(1/sigma) with spring blocks). With P = T W (nv, s): C = B B^T, B = J P (6, s),
-    and G = P B^T, the same factor as the null-space path's (module docstring) on the same
-    spectrum rule. The rank rule reads J on an orthonormal basis of the admissible
-    motions, as the null-space path's J N V does: B diag(sigma) = J T V when T selects
-    the sprung coordinates (serial), else
-    :func:`closedloop.elastostatics.partition.kinematic_factor`
-    (the singular values of J T V differ from those by up to cond(T), which would move
-    the rank decision of a pose near the threshold; the spread of the full-rank test
-    widens by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
-    """
-    if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
-        B = J * sc.P_diagonal
-        G = B.T * sc.P_diagonal[:, None]
-    else:
-        P = sc.P0.copy()
-        if X is not None:  # dq_p = s_p X y
-            P[sc.passive] = X * sc.passive_coef if sc.W is None else (X @ sc.W) * sc.s_p
-        B = J @ P
-        G = P @ B.T
-    B_s = B * sc.d[:, None]
-    if X is None:  # T selects the sprung coordinates: J T V is the orthonormal-basis factor
-        kinematic, spread = (lambda: B_s * sc.sigma), sc.spread
-    else:  # T = [I; X] is not orthonormal: cond(T) <= sqrt(1 + |X|_F^2) widens the spread
-        cond_T = math.sqrt(1.0 + float(np.vdot(X, X)))
-        kinematic = lambda: kinematic_factor(J, sc, X, B_s * sc.sigma, cond_T)  # noqa: E731
-        spread = sc.spread * cond_T
-    spectrum = spectrum_from_factor(B_s, state.length, kinematic, spread, scales=(sc.d, sc.dd))
-    return _result(state, frame, axes, B @ B.T, G, spectrum, sc.sigma.size, 0, path)
-
-
 def compliance_result(
     state: Configuration,
     frame: str,
@@ -275,9 +211,71 @@ def compliance_result(
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
-    mobility, internal = f.N.shape[1], f.n_internal
+    _require_finite(state, frame, C, G, spectrum.K)
+    fid, mobility, internal = state.model.frame_id(frame), f.N.shape[1], f.n_internal
     return _result(
-        state, frame, axes, C, G, spectrum, mobility, internal, "null-space", cls, **extra
+        state, frame, axes, C, G, spectrum, fid, mobility, internal, "null-space", cls, **extra
+    )
+
+
+def fast_result(
+    state: Configuration,
+    frame: str,
+    axes: str,
+    C: np.ndarray,
+    G: np.ndarray,
+    spectrum: Spectrum,
+    fid: int,
+    mobility: int,
+    path: str,
+    top: float,
+    bottom: float,
+    g_scale: float | None = None,
+) -> ComplianceResult:
+    """A checked :class:`ComplianceResult` of a fast path (``"serial"`` or
+    ``"partitioned"``: ``mobility`` admissible motions, each with a spring) at frame index
+    ``fid``, with C = B B^T.
+
+    C, G and K are finite when bounds of their entries are: ``top`` and ``bottom``, the
+    largest and smallest kept singular values of the scaled factor B_s = D B
+    (:func:`closedloop.common.conditioning.factor_spectrum`), bound |B_jk| <= max(1, L) top,
+    |C_ij| <= |B|^2 and |K_ij| <= (max(1, 1/L) / bottom)^2; ``g_scale`` bounds |G_kj| /
+    |B_jk| (None: G's entries are summed). Rounding adds less than a factor 1 + 1e-12 to
+    any of these; beyond :data:`FINITE_BOUND`, or NaN, every entry is looked at.
+
+    Raises:
+        SingularConfigurationError: C, G or K are not finite (overflow).
+    """
+    L = spectrum.length
+    b = max(1.0, L) * top
+    k = max(1.0, 1.0 / L) / bottom
+    if not (  # a NaN fails each test
+        b * b < FINITE_BOUND
+        and (spectrum.K is None or k * k < FINITE_BOUND)
+        and (g_scale * b < FINITE_BOUND if g_scale is not None else _finite(G))
+    ):
+        _require_finite(state, frame, C, G, spectrum.K)
+    return _result(state, frame, axes, C, G, spectrum, fid, mobility, 0, path)
+
+
+def _finite(a: np.ndarray) -> bool:
+    """No NaN nor inf in ``a`` (its sum is finite, or, when that overflows, each entry;
+    called where numpy's overflow warnings are off)."""
+    return math.isfinite(np.add.reduce(a, None)) or bool(np.isfinite(a).all())
+
+
+@np.errstate(over="ignore", invalid="ignore")
+def _require_finite(state: Configuration, frame: str, C, G, K) -> None:
+    """:class:`SingularConfigurationError` unless C, G and K (or None) are finite."""
+    if _finite(C) and _finite(G) and (K is None or _finite(K)):
+        return
+    k = state.model.stiffness
+    k = k[(k > 0) & np.isfinite(k)]
+    springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"
+    raise SingularConfigurationError(
+        f"the compliance or stiffness at frame {frame!r} of {state.model.name!r} overflows "
+        f"the floating point range ({springs}; expected springs well within 1e-300..1e300, "
+        "away from a singular configuration)"
     )
 
 
@@ -288,45 +286,39 @@ def _result(
     C: np.ndarray,
     G: np.ndarray,
     spectrum: Spectrum,
+    fid: int,
     mobility: int,
     n_internal: int,
     path: str,
     cls: type[ComplianceResult] | None = None,
     **extra,
 ) -> ComplianceResult:
-    """:func:`compliance_result` from the numbers of the spring factor."""
-    K, add = spectrum.K, np.add.reduce
-    total = add(C, None) + add(G, None) + (0.0 if K is None else add(K, None))
-    if not math.isfinite(total) and not (  # a NaN or inf anywhere; or a sum that overflows
-        np.isfinite(C).all() and np.isfinite(G).all() and (K is None or np.isfinite(K).all())
-    ):
-        k = state.model.stiffness
-        k = k[(k > 0) & np.isfinite(k)]
-        springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"
-        raise SingularConfigurationError(
-            f"the compliance or stiffness at frame {frame!r} of {state.model.name!r} overflows "
-            f"the floating point range ({springs}; expected springs well within 1e-300..1e300, "
-            "away from a singular configuration)"
-        )
-    fields = dict(
-        C=frozen(C),
-        frame=frame,
-        axes=axes,
-        point=readonly(state.data.oMf[state.model.frame_id(frame)].translation),
-        q=state.q,
-        rank=spectrum.rank,
-        rigid_directions=spectrum.rigid_directions,
-        closure_residual=state.residual_norm,
-        mobility=mobility,
-        internal_mobilities=n_internal,
-        G=frozen(G),
-        length=spectrum.length,
-        condition_number=spectrum.condition_number,
-        stiffness_matrix=K,
-        path=path,
-        note=spring_note(state.model) if spectrum.rank == 0 else "",
-    )
-    if cls is None:  # every field given, checked above: set without the dataclass __init__
+    """:func:`compliance_result` from the numbers of the spring factor (``fid``: the
+    frame's index), C, G and K checked finite."""
+    C.setflags(write=False)
+    G.setflags(write=False)
+    # the frame's placement computed again: faster than reading it through data.oMf
+    point = np.array(pin.updateFramePlacement(state.model.model, state.data, fid).translation)
+    point.setflags(write=False)
+    fields = {
+        "C": C,
+        "frame": frame,
+        "axes": axes,
+        "point": point,
+        "q": state.q,
+        "rank": spectrum.rank,
+        "rigid_directions": spectrum.rigid_directions,
+        "closure_residual": state.residual_norm,
+        "mobility": mobility,
+        "internal_mobilities": n_internal,
+        "G": G,
+        "length": spectrum.length,
+        "condition_number": spectrum.condition_number,
+        "stiffness_matrix": spectrum.K,
+        "path": path,
+        "note": spring_note(state.model) if spectrum.rank == 0 else "",
+    }
+    if cls is None:  # every field given, checked: set without the dataclass __init__
         result = object.__new__(ComplianceResult)
         result.__dict__.update(fields)
         return result

@@ -22,6 +22,9 @@ Sources of actuated joints and springs, later ones overriding earlier ones:
 Parametric models: a xacro file (``*.xacro``, a URDF after :mod:`closedloop.io.xacro_files`)
 with its ``<xacro:arg>`` elements, and a closure or side file with ``${expr}`` placeholders
 (:mod:`closedloop.io.expressions`), take their values from the keyword ``args``.
+
+The readers of a format, of beams, balls and elastic closures are imported when a file
+needs them: a URDF query loads no MJCF or SDF reader, nor beam theory without beams.
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ import contextlib
 import math
 import os
 import sys
-import tempfile
 import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
@@ -63,19 +65,8 @@ from closedloop.io.data import (
     robot_data_dir as robot_data_dir,  # its former home; cl.robot_data_dir
 )
 from closedloop.io.expressions import Arguments
-from closedloop.io.mjcf import (
-    anchor_equalities,
-    match_parsed,
-    pinocchio_copy,
-    place_free_joints,
-    read_mjcf_extras,
-)
-from closedloop.io.sdf import load_sdf
-from closedloop.model.balls import ball_springs, urdf_with_balls
-from closedloop.model.beams import apply_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import Closure, closure_between_frames, joint_names
-from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
 from closedloop.model.reference import REST
 
 #: Model-file suffixes and their format.
@@ -112,7 +103,7 @@ def _parse(build: Callable, path: Path, what: str):
     failure = None
     # file descriptor 2 is the process's: one parser at a time redirects it (two threads
     # loading models at once would each restore the other's file, leaving it in place)
-    with _PARSE_LOCK, tempfile.TemporaryFile() as tmp:
+    with _PARSE_LOCK, _scratch_file() as tmp:
         saved = os.dup(2)
         os.dup2(tmp.fileno(), 2)
         try:
@@ -131,6 +122,17 @@ def _parse(build: Callable, path: Path, what: str):
         return result
     msg = " ".join(f"{failure or 'an element is dropped:'} {detail}".split())
     raise ModelFileError(f"{what} {str(path)!r} cannot be parsed: {msg}")
+
+
+def _scratch_file():
+    """An anonymous file in memory (Linux), else a temporary file: what a parser writes."""
+    try:
+        return open(os.memfd_create("closedloop-parser"), "w+b")
+    except (AttributeError, OSError):  # not on Linux, or not allowed
+        pass
+    import tempfile  # with shutil, bz2, lzma...: on demand
+
+    return tempfile.TemporaryFile()
 
 
 def _geometry(wanted: bool, build: Callable, path: Path) -> pin.GeometryModel | None:
@@ -190,6 +192,8 @@ def _read_urdf(
             source = stack.enter_context(expanded_urdf(path, arguments or Arguments()))
         spec = read_closure_file(closures, arguments=arguments) if closures else ClosureSpec()
         if spec.balls:
+            from closedloop.model.balls import urdf_with_balls
+
             source = urdf_with_balls(source, spec.balls)
             stack.callback(source.unlink)
         return _read_urdf_tree(source, spec, closures, geometry, beams, elastic, shown=path)
@@ -214,6 +218,8 @@ def _read_urdf_tree(
     )
     tree, blocks, masses = model, {}, {}
     if spec.beams or beams:  # before the closures, whose frames may sit at beam tips
+        from closedloop.model.beams import apply_beams
+
         both = {**spec.beams, **beams}
         model, (visual,), blocks, _, masses = apply_beams(model, [visual], both, urdf=path)
     clash = sorted(set(spec.springs) & set(blocks))
@@ -231,6 +237,8 @@ def _read_urdf_tree(
         actuated, locked = _serial_defaults(tree, path)
         return _Tree(model, [], actuated, blocks, locked, visual, by_default=True,
                      beam_joints=tuple(blocks), beam_masses=tuple(masses.items()))  # fmt: skip
+    from closedloop.model.elastic_closures import check_closure_springs, with_elastic_closures
+
     where = f"closure file {str(closures)!r}"
     check_spec_names(model, spec, where)
     apply_start(model, spec, where)  # before the cut's joints, which extend it
@@ -303,6 +311,16 @@ def _read_mjcf(path: Path, side_file: str | Path | None, geometry: bool, argumen
 
 
 def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool, arguments) -> _Tree:
+    import tempfile
+
+    from closedloop.io.mjcf import (
+        anchor_equalities,
+        match_parsed,
+        pinocchio_copy,
+        place_free_joints,
+        read_mjcf_extras,
+    )
+
     extras = read_mjcf_extras(path)  # the file checked before Pinocchio reads it
     with tempfile.TemporaryDirectory() as folder:  # Pinocchio reads a copy (closedloop.io.mjcf)
         parsed = str(pinocchio_copy(path, Path(folder)))
@@ -335,6 +353,8 @@ def _read_mjcf_tree(path: Path, side_file: str | Path | None, geometry: bool, ar
 
 def _read_sdf(path: Path, side_file, geometry: bool, free_base: bool = False,
               arguments=None) -> _Tree:  # fmt: skip
+    from closedloop.io.sdf import load_sdf
+
     robot = load_sdf(path, free_base=free_base, geometry=geometry)  # closedloop.io.sdf
     _check_masses(robot.model, path)
     spec, springs = read_side_file(robot.model, side_file, robot.springs, arguments)
@@ -473,6 +493,8 @@ def load_model(
         for name in actuated:
             springs.setdefault(name, k)
     if tree.balls:  # the keyword's springs of a ball too: on its rotations, as the file's
+        from closedloop.model.balls import ball_springs
+
         springs = ball_springs(springs, tree.balls, locked=locked, keyword=given, file=closures)
     clm = ClosedLoopModel(
         tree.model,
@@ -498,6 +520,8 @@ def _with_closure_springs(clm: ClosedLoopModel, springs: Mapping, path: Path) ->
     """An MJCF or SDF model with the closures of ``springs`` made elastic
     (:meth:`ClosedLoopModel.with_closure_springs`), refused on a loop that the file made
     elastic already (an SDF loop joint's spring)."""
+    from closedloop.model.elastic_closures import check_closure_springs
+
     with in_file(f"robot file {str(path)!r}, closure_springs= of load_model"):
         checked = check_closure_springs(list(clm.closures), springs)
         taken = sorted(i for i in checked if clm.closures[i].cut)

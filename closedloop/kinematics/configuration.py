@@ -19,6 +19,7 @@ that put the joints so far away that this exceeds the tolerance close no loop (s
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -45,7 +46,7 @@ def joint_reach(model: ClosedLoopModel, Q: np.ndarray) -> np.ndarray | float:
     plus the largest anchor offset, plus the absolute values of the translational
     coordinates of q (prismatic joints, the position of a free flyer). A float for one q.
     """
-    offset, translational = model.memo("joint_reach", lambda: _reach_terms(model))
+    offset, translational = model.memo("joint_reach", _reach_terms, model)
     if Q.ndim == 1:  # one configuration (every query): Python floats, inf past the range
         return offset + sum(map(abs, Q[translational].tolist()))
     with np.errstate(over="ignore"):  # beyond the float range: inf, refused
@@ -93,13 +94,22 @@ def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
     )
 
 
+#: The residual of a configuration without closures: (0,), read-only.
+_NO_RESIDUAL = frozen(np.empty(0))
+
+
 def residual_rounding(model: ClosedLoopModel, Q: np.ndarray, length: float) -> np.ndarray | float:
     """(...,) bound of the rounding of the scaled closure residual at the configurations Q
     (..., nq), at length L [m]: each joint placement composed from the world origin errs by
     eps times the distance (:func:`joint_reach`), and a chain has at most njoints of them.
     A float for one q."""
-    factor = model.memo("reach_rounding", lambda: model.model.njoints * np.finfo(float).eps)
+    factor = model.memo("reach_rounding", _rounding_factor, model.model)
     return factor * joint_reach(model, Q) / length
+
+
+def _rounding_factor(model: pin.Model) -> float:
+    """eps per joint placement composed from the world origin, njoints of them."""
+    return model.njoints * float(np.finfo(float).eps)
 
 
 class Configuration:
@@ -147,7 +157,8 @@ class Configuration:
                 f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
             )
         self.model = model
-        self.q = q = frozen(model.check_configuration(q))
+        self.q = q = model.check_configuration(q)
+        q.setflags(write=False)
         if check_limits:
             require_within_limits(model, q)
         pm = model.model
@@ -155,18 +166,21 @@ class Configuration:
         pin.computeJointJacobians(pm, self.data, q)
         pin.updateFramePlacements(pm, self.data)
         self.length = model.length if length is None else check_length(length)
-        self.residual = frozen(residual_rows(model, self.data, self._constraint_datas))
         self._rounding = 0.0  # of the scaled residual; no closure: none
-        if self.residual.size:
+        if not model.closures:  # a serial robot closes no loop
+            self.residual, self.residual_norm, self.closure_error = _NO_RESIDUAL, 0.0, 0.0
+        else:
+            self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
             self._rounding = residual_rounding(model, q, self.length)
-            size = abs(self.residual)
-            self.residual_norm = float(size.max())
+            values = r.tolist()  # a few rows: Python floats cost less than numpy's calls
+            if math.isfinite(sum(values)):  # (a NaN would pass Python's max unseen)
+                self.residual_norm = max(map(abs, values))
+            else:
+                self.residual_norm = float(abs(r).max())
             if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
                 self.closure_error = self.residual_norm / self.length
             else:
-                self.closure_error = float((size * self._row_scale()).max())
-        else:  # a serial robot closes no loop
-            self.residual_norm = self.closure_error = 0.0
+                self.closure_error = float((abs(r) * self._row_scale()).max())
         self._closure_jacobian: np.ndarray | None = None
         self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
 

@@ -23,7 +23,7 @@ def reference_frame(axes: str) -> pin.ReferenceFrame:
     Raises:
         InvalidInputError: unknown ``axes``.
     """
-    if axes not in REFERENCE_FRAMES:
+    if not isinstance(axes, str) or axes not in REFERENCE_FRAMES:
         raise InvalidInputError(f"axes {axes!r}; expected one of {sorted(REFERENCE_FRAMES)}")
     return REFERENCE_FRAMES[axes]
 
@@ -38,13 +38,17 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
     pin.updateFramePlacements(clm.model, clm.data)
 
 
-def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[str, ...]]:
-    """(the constraints of the closures, their types), once per model."""
+def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[str, ...], bool]:
+    """(the constraints of the closures, their types, whether all are point closures of a
+    model with more than one coordinate: Jacobians stacked as Pinocchio gives them), once
+    per model."""
     closures = clm.closures
-    return clm.memo(
-        "closures",
-        lambda: (tuple(c.constraint for c in closures), tuple(c.kind for c in closures)),
-    )
+
+    def build():
+        points = clm.model.nv > 1 and all(c.kind == "3d" for c in closures)
+        return tuple(c.constraint for c in closures), tuple(c.kind for c in closures), points
+
+    return clm.memo("closures", build)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -108,7 +112,7 @@ def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.
     Pinocchio's for points (R_A^T (p_B - p_A)) and welds (log6 of B in A), those of
     :func:`typed_residual` for the joint types."""
     model = clm.model
-    constraints, kinds = _closures(clm)
+    constraints, kinds, _ = _closures(clm)
     parts = []
     for c, cd, kind in zip(constraints, constraint_datas, kinds, strict=True):
         c.calc(model, data, cd)
@@ -131,11 +135,14 @@ def jacobian_rows(
             done it with the same datas).
     """
     model = clm.model
-    constraints, kinds = _closures(clm)
+    constraints, kinds, points = _closures(clm)
     if not constraints:
         return np.empty((0, model.nv))
     if calc:
         residual_rows(clm, data, constraint_datas)
+    if points:  # each (3, nv) as it is
+        pairs = zip(constraints, constraint_datas, strict=True)
+        return np.concatenate([c.jacobian(model, data, cd) for c, cd in pairs])
     parts = []
     for c, cd, kind in zip(constraints, constraint_datas, kinds, strict=True):
         if kind == "3d":

@@ -9,6 +9,7 @@ outside them (:mod:`closedloop.elastostatics.statics`), a map marks a point ``in
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 
@@ -36,12 +37,15 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
     (value, lower, upper) [rad or m] for every coordinate more than :data:`LIMIT_TOL`
     outside, in joint order.
     """
-    model, (names, i, wound) = clm.model, _limited_coordinates(clm)
-    # the limits are read each time (a model's may be set after loading); a loop over
+    names, i, wound, lower, upper = _limited_coordinates(clm)  # the limits' values read now
+    if i is not None:
+        lower, q, upper = lower[i], q[i], upper[i]
     # Python floats: a few joints, where numpy's calls cost more than the arithmetic
-    lower, upper = model.lowerPositionLimit[i].tolist(), model.upperPositionLimit[i].tolist()
+    lower, values, upper = lower.tolist(), q.tolist(), upper.tolist()
+    if all(map(operator.le, lower, values)) and all(map(operator.le, values, upper)):
+        return {}  # every value within its limits: none out, whatever the rule below
     out = {}
-    for name, lo, hi, x, turns in zip(names, lower, upper, q[i].tolist(), wound, strict=True):
+    for name, lo, hi, x, turns in zip(names, lower, upper, values, wound, strict=True):
         if not lo < hi:
             continue
         low, high, y = abs(lo) < UNBOUNDED_LIMIT, abs(hi) < UNBOUNDED_LIMIT, x
@@ -59,22 +63,28 @@ def joints_outside_limits(clm: ClosedLoopModel, q: np.ndarray) -> dict[str, tupl
 _TURN = 2.0 * math.pi
 
 
-def _limited_coordinates(clm: ClosedLoopModel) -> tuple[list[str], np.ndarray, list[bool]]:
-    """(names, q indices (k,), wound) of the one-coordinate revolute and prismatic joints,
-    in joint order; ``wound``: revolute and not actuated. Once per model."""
+def _limited_coordinates(clm: ClosedLoopModel) -> tuple:
+    """(names, q indices (k,), wound, lower, upper) of the one-coordinate revolute and
+    prismatic joints, in joint order; ``wound``: revolute and not actuated; the indices None
+    when they are all of q in order (a serial robot's); lower and upper (nq,) views of the
+    Pinocchio model's own limits (a new value is written into them: these views see it).
+    Once per model."""
+    return clm.memo("limited_coordinates", _find_limited, clm)
 
-    def build():
-        model, rows = clm.model, []
-        for j in range(1, model.njoints):
-            jm = model.joints[j]
-            kind = jm.shortname()
-            if jm.nq == 1 and kind.startswith(("JointModelR", "JointModelP")):
-                turns = kind.startswith("JointModelR") and model.names[j] not in clm.actuated
-                rows.append((model.names[j], jm.idx_q, turns))
-        names, idx, wound = zip(*rows, strict=True) if rows else ((), (), ())
-        return list(names), np.array(idx, dtype=int), list(wound)
 
-    return clm.memo("limited_coordinates", build)
+def _find_limited(clm: ClosedLoopModel) -> tuple:
+    model, rows = clm.model, []
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        kind = jm.shortname()
+        if jm.nq == 1 and kind.startswith(("JointModelR", "JointModelP")):
+            turns = kind.startswith("JointModelR") and model.names[j] not in clm.actuated
+            rows.append((model.names[j], jm.idx_q, turns))
+    names, idx, wound = zip(*rows, strict=True) if rows else ((), (), ())
+    idx = np.array(idx, dtype=int)
+    every = np.array_equal(idx, np.arange(model.nq))
+    limits = model.lowerPositionLimit, model.upperPositionLimit
+    return list(names), None if every else idx, list(wound), *limits
 
 
 def describe_limits(bad: dict[str, tuple]) -> str:

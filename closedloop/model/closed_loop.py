@@ -35,7 +35,6 @@ import pinocchio as pin
 from closedloop.common.arrays import frozen, real_array
 from closedloop.common.conditioning import characteristic_length
 from closedloop.exceptions import InvalidInputError
-from closedloop.model.beams import apply_beams
 from closedloop.model.closures import (
     AnchorConstraint,
     Closure,
@@ -44,7 +43,6 @@ from closedloop.model.closures import (
     joint_id,
     joint_names,
 )
-from closedloop.model.elastic_closures import with_elastic_closures
 from closedloop.model.reference import reference_of
 from closedloop.model.spring_spec import joint_stiffness
 
@@ -53,6 +51,8 @@ POOL_SIZE = 4
 #: Entries of :meth:`ClosedLoopModel.memo` past which those whose key carries a
 #: parameter are dropped (a few tens of kB each on CaHyMan: the scaling at a length L).
 MEMO_SIZE = 64
+#: The dtype of a configuration that needs no conversion (numpy's native float64).
+_FLOAT64 = np.dtype(np.float64)
 #: Largest change of a coordinate when the quaternions and unit complex numbers of q are
 #: normalised: a q further from the configuration manifold is refused, a nearer one
 #: normalised (7 typed digits are within it).
@@ -144,6 +144,7 @@ class ClosedLoopModel:
                 f"ClosedLoopModel: model must be a pinocchio.Model, got {type(model).__name__}"
             )
         self.model = model
+        self._nq, self._unit_coordinates = model.nq, model.nq != model.nv
         self._local = threading.local()
         self._pool: list[tuple[pin.Data, list]] = []
         self._memo: dict = {}
@@ -213,8 +214,9 @@ class ClosedLoopModel:
         if len(self._pool) < POOL_SIZE:
             self._pool.append(workspace)
 
-    def memo(self, key, factory):
-        """``factory()``, computed once per ``key`` for this model (immutable results only).
+    def memo(self, key, factory, *args):
+        """``factory(*args)``, computed once per ``key`` for this model (immutable results
+        only).
 
         A key with a parameter is a tuple (e.g. ``("scaling", L)``): past
         :data:`MEMO_SIZE` entries those are dropped, so that a sweep of the parameter does
@@ -224,7 +226,7 @@ class ClosedLoopModel:
             return self._memo[key]
         except KeyError:
             pass
-        value = factory()  # outside the handler: its errors without the KeyError
+        value = factory(*args)  # outside the handler: its errors without the KeyError
         if isinstance(key, tuple) and len(self._memo) >= MEMO_SIZE:
             # a new dict, swapped in at once: a thread that reads the old one meanwhile
             # only computes its entry again
@@ -438,6 +440,8 @@ class ClosedLoopModel:
         Raises:
             BeamError: a bad specification (the message names the beam and the value).
         """
+        from closedloop.model.beams import apply_beams  # beam theory: on demand
+
         geoms = [self.visual_model, self.collision_model]
         ends = [(k.joint1_id, k.joint1_placement) for c in self.closures for k in [c.constraint]]
         ends += [(k.joint2_id, k.joint2_placement) for c in self.closures for k in [c.constraint]]
@@ -458,6 +462,8 @@ class ClosedLoopModel:
             InvalidInputError: a bad spring, or a closure that is elastic already (two
                 springs in parallel on one pair are two closures of it, each given one).
         """
+        from closedloop.model.elastic_closures import with_elastic_closures  # on demand
+
         model, closures, cut = with_elastic_closures(self.model, list(self.closures), springs)
         geoms = [self.visual_model, self.collision_model]
         return self._grown(model, closures, cut, geoms, {})
@@ -480,7 +486,7 @@ class ClosedLoopModel:
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """Validated copy of a configuration vector q (nq,)."""
-        if type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1:
+        if type(q) is np.ndarray and q.dtype is _FLOAT64 and q.ndim == 1:
             q = q.copy()  # the common case, without the conversions of real_array
         else:
             q = real_array(q, "q")
@@ -490,12 +496,12 @@ class ClosedLoopModel:
                     f"{q.shape} (many configurations: closedloop.compliances)"
                 )
             q = q.reshape(-1)
-        if q.shape != (self.model.nq,):
-            raise InvalidInputError(f"q has {q.size} values; expected nq={self.model.nq}")
+        if len(q) != self._nq:  # q is one-dimensional here
+            raise InvalidInputError(f"q has {q.size} values; expected nq={self._nq}")
         # a sum of floats is finite when every one is (it may overflow: then look at each)
         if not math.isfinite(sum(q.tolist())) and not np.isfinite(q).all():
             raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
-        if self.memo("unit_coordinates", lambda: self.model.nq != self.model.nv):
+        if self._unit_coordinates:  # quaternions or unit complex numbers
             q = self._unit_norms(q)
         return q
 

@@ -37,8 +37,9 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.common.arrays import check_wrench, readonly
-from closedloop.elastostatics.compliance import ComplianceResult, compliance
+from closedloop.elastostatics.compliance import ComplianceResult
 from closedloop.elastostatics.equilibrium import Equilibrium
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.assembly import assemble
@@ -239,6 +240,7 @@ def deflection_scene(
     rotational: bool = False,
     frames: int = ANIMATION_FRAMES,
     check_limits: bool = True,
+    query: ComplianceQuery | None = None,
 ) -> DeflectionScene:
     """Poses, amplification, ellipsoids and load ramp for a wrench at ``frame``.
 
@@ -256,11 +258,15 @@ def deflection_scene(
         frames: number of poses of the load ramp (>= 2).
         check_limits: refuse a q outside the joints' limits (as
             :func:`closedloop.elastostatics.compliance.compliance`; False draws it as it is).
+        query: the compliance of ``frame`` in world axes on ``clm`` with ``check_limits``,
+            prepared once by a caller that draws many scenes of the frame
+            (:class:`closedloop.elastostatics.query.ComplianceQuery`); default: made here.
 
     Raises:
         InvalidInputError: bad wrench, scale or frame count; a wrench whose deflection
             overflows; a scale that draws the deflection larger than
-            ``MAX_SHOWN_FRACTION`` model sizes.
+            ``MAX_SHOWN_FRACTION`` model sizes; a ``query`` of another model, frame, axes
+            or limits rule.
         NameNotFoundError: unknown frame.
         MechanismError: a spring-free motion moves the frame.
         EquilibriumError: (nonlinear) no equilibrium on the branch of q.
@@ -269,7 +275,16 @@ def deflection_scene(
     """
     w = check_wrench(wrench)
     _check_counts(scale, frames)
-    res = compliance(clm, q, frame, "world", check_limits=check_limits)
+    if query is None:
+        query = ComplianceQuery(clm, frame, "world", check_limits=check_limits)
+    elif (query.model, query.frame, query.axes) != (clm, frame, "world") or (
+        query.check_limits != check_limits
+    ):
+        raise InvalidInputError(
+            f"query {query!r} does not ask for frame {frame!r} of {clm.name!r} in world axes "
+            f"with check_limits={check_limits}; expected the query of this scene"
+        )
+    res = query(q)
     q = res.q
     poses = model_poses(clm, q)
     ramp = np.linspace(0.0, 1.0, int(frames))

@@ -62,6 +62,7 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.common.files import write_atomically
+from closedloop.elastostatics.query import ComplianceQuery
 from closedloop.exceptions import ClosedLoopError, InvalidInputError, ViewerError
 from closedloop.kinematics.configuration import accepts_configuration
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -469,8 +470,10 @@ def run_view(
     )
     if warn is not None and not np.any(scene.wrench):
         warn("no load (--force, --torque): the view shows the unloaded pose")
+    # the slider's scenes, at one q: the frame's compliance prepared once
+    query = ComplianceQuery(clm, frame, "world", check_limits=check_limits)
     options = {"nonlinear": nonlinear, "close_loops": close_loops, "rotational": rotational,
-               "check_limits": check_limits}  # fmt: skip
+               "check_limits": check_limits, "query": query}  # fmt: skip
     with DeflectionViewer(clm) as viewer:
         viewer.show(scene, autoplay=autoplay, legend=legend, pose_text=pose)
         out(scene.summary())

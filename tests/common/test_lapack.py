@@ -92,7 +92,7 @@ EMPTY_CALLS = {
     "dgeqrf": lambda: lapack.dgeqrf(np.zeros((0, 3))),
     "dgeqp3": lambda: lapack.dgeqp3(np.zeros((0, 0))),
     "dorgqr": lambda: lapack.dorgqr(np.zeros((0, 0)), np.zeros(0)),
-    "dtrcon": lambda: lapack.dtrcon(np.zeros((0, 0))),
+    "dlantr": lambda: lapack.dlantr(b"1", np.zeros((0, 0))),
     "dtrtri": lambda: lapack.dtrtri(np.zeros((0, 0))),
     "dtrtrs": lambda: lapack.dtrtrs(np.zeros((0, 0)), np.zeros((0, 2))),
     "dgelsy": lambda: lapack.dgelsy(np.zeros((0, 3), order="F"), np.zeros(3),
