@@ -25,6 +25,8 @@ def close_names(name, valid: Iterable[str]) -> list[str]:
     ``name`` that is not a str."""
     if not isinstance(name, str):
         return []
+    import difflib  # on demand: an error's, not every import's
+
     by_case: dict[str, list[str]] = {}
     for n in valid:
         by_case.setdefault(n.casefold(), []).append(n)
@@ -58,8 +60,6 @@ class NameNotFoundError(ClosedLoopError, KeyError):
     """
 
     def __init__(self, kind: str, name: str, valid: Iterable[str], hint: str = ""):
-        import difflib  # on demand: an error's, not every import's
-
         self.kind, self.name = kind, name
         valid = list(dict.fromkeys(valid))  # once each, in the model's order
         self.close = close_names(name, valid)

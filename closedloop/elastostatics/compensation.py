@@ -148,7 +148,7 @@ def loaded_equilibrium(
     """
     eqs = EquilibriumEquations(clm, q_rest, frame)
     if guess is not None:
-        q, st, _ = newton(
+        q, st, _, _ = newton(
             eqs,
             guess,
             load,
