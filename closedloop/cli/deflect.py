@@ -24,7 +24,6 @@ from closedloop.common.conditioning import twist_scaling
 from closedloop.common.rounding import without_rounding
 from closedloop.elastostatics.compliance import TWIST_LABELS, describe_directions, energy_shares
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
-from closedloop.kinematics.assembly_modes import passive_values
 
 
 def add_parser(sub, source_arguments) -> None:
@@ -51,6 +50,8 @@ def deflection_report(clm, res, wrench: np.ndarray) -> dict:
     joints' values [rad, m], and the line that shows them), twist (6,) [m, rad], joint
     deflections by coordinate (joint name, index in the tangent of q, value [rad or m]),
     energy shares, rank, length L [m] of the unit-free rules."""
+    from closedloop.kinematics.assembly_modes import passive_values  # what the output needs
+
     twist = res.deflection(wrench)
     dq = res.joint_deflection(wrench)
     units = np.where(clm.linear_coordinates, "m", "rad")

@@ -22,10 +22,8 @@ import numpy as np
 
 from closedloop.cli.outputs import print_json
 from closedloop.exceptions import EXIT_OK, AssemblyError, SingularConfigurationError
-from closedloop.kinematics.assembly import assemble
-from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.kinematics.limits import UNBOUNDED_LIMIT
-from closedloop.model.beams import inserted_beams
+from closedloop.model.beam_joints import inserted_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.reference import REST, START, reference_key
 
@@ -150,7 +148,10 @@ def _start(clm: ClosedLoopModel) -> dict:
     passive joints' values [rad, m] of the reference configuration assembled), or why it
     does not assemble."""
     out: dict = {"source": START_SOURCES[reference_key(clm.model)], "passive": None}
-    if clm.closures:
+    if clm.closures:  # the assembly's modules for a model with loops only (start-up)
+        from closedloop.kinematics.assembly import assemble
+        from closedloop.kinematics.assembly_modes import passive_values
+
         try:
             out["passive"] = passive_values(clm, assemble(clm).q)
         except (AssemblyError, SingularConfigurationError) as e:

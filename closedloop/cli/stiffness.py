@@ -23,7 +23,6 @@ from closedloop.elastostatics.compliance import (
     energy_shares,
 )
 from closedloop.exceptions import EXIT_OK, EXIT_RANK_DEFICIENT
-from closedloop.kinematics.assembly_modes import passive_values
 from closedloop.model.closed_loop import ClosedLoopModel
 
 WRENCH_LABELS = ("fx", "fy", "fz", "nx", "ny", "nz")
@@ -103,6 +102,8 @@ def stiffness(args: argparse.Namespace) -> int:
         require_stable(res)
     shares = energy_shares(clm, res, args.wrench) if args.wrench else None
     if args.json:
+        from closedloop.kinematics.assembly_modes import passive_values  # JSON only
+
         doc = {"model": clm.name, **res.to_dict(), "q": res.q.tolist(),
                "passive": passive_values(clm, res.q)}  # fmt: skip
         print_json(doc | ({} if shares is None else {"energy_shares": shares}))

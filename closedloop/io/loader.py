@@ -44,7 +44,7 @@ import pinocchio as pin
 
 from closedloop.common.arrays import real_number
 from closedloop.common.input_files import read_xml, refuse_xml_entities
-from closedloop.exceptions import InvalidInputError, ModelFileError
+from closedloop.exceptions import InvalidInputError, ModelFileError, close_names
 from closedloop.io.closure_file import (
     SIDE_FILE_KEYS,
     ClosureSpec,
@@ -83,6 +83,9 @@ def _by_name_hint(path: str | os.PathLike) -> str:
     if name in BUNDLED_MODELS:
         files = ", ".join(f"cl.data.path({f!r})" for f in BUNDLED_MODELS[name] if f)
         return f"; the bundled model {name!r} is cl.load_model({files})"
+    close = close_names(name, [*BUNDLED_MODELS, *ROBOTS])
+    if close and not Path(name).suffix and not Path(name).exists():  # a mistyped name
+        return f" (did you mean {' or '.join(map(repr, close))}?){_by_name_hint(close[0])}"
     return ""
 
 

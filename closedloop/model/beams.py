@@ -33,7 +33,8 @@ anchors beyond the tip follow it.
 Elements and mass: ``elements: N`` (default 1) splits the beam into N equal elements, a
 6-dof virtual joint at each node, ``<link>_beam_1`` .. ``<link>_beam_{N-1}``, then
 ``<link>_beam`` at the tip, all in the end joint's axes, each with the clamped stiffness of
-length L / N (:func:`inserted_beams` lists the elements, each from its start node).
+length L / N (:func:`closedloop.model.beam_joints.inserted_beams` lists the elements, each
+from its start node).
 ``density`` [kg/m^3] gives the beam a mass of its own (:class:`BeamMass`, the consistent
 mass of :mod:`closedloop.analysis.vibration`), with a section only.
 
@@ -48,12 +49,12 @@ it is the block above: the unloaded compliance does not depend on it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from closedloop.exceptions import BeamError, InvalidInputError
+from closedloop.model.beam_joints import beam_link, inserted_beams, virtual_frames
 from closedloop.model.beam_theory import (
     ANCHOR_END,
     GEOMETRY,
@@ -174,65 +175,6 @@ def _insert(model, geometries, site: BeamSite, name: str, carried=()):
     return new, out, index
 
 
-@dataclass(frozen=True)
-class InsertedBeam:
-    """A beam of a model built by :func:`apply_beams`: its virtual joint ``joint`` (index)
-    named ``name``, the link's frame ``link_frame`` (index, the beam's clamped start), and
-    ``rest`` the virtual joint's placement at rest in the link frame (its translation, (3,)
-    [m], is the undeflected beam from start to tip)."""
-
-    name: str
-    link_frame: int
-    joint: int
-    rest: pin.SE3
-
-
-def _virtual_frames(model: pin.Model) -> set[int]:
-    """The JOINT frames that may be beams' virtual joints, whatever their names: those of
-    free flyers from which no BODY frame hangs. Every joint a robot file's parser builds
-    carries the BODY frame of its child link; :func:`apply_beams` gives its virtual joints
-    none (the frames they carry keep their parent frames)."""
-    bodies = {f.parentFrame for f in model.frames if f.type == pin.BODY}
-    return {
-        i for i, f in enumerate(model.frames)
-        if f.type == pin.JOINT and i not in bodies
-        and model.joints[f.parentJoint].shortname() == "JointModelFreeFlyer"
-    }  # fmt: skip
-
-
-def _beam_link(model: pin.Model, frame: int, virtual: set[int]) -> str | None:
-    """The link of the beam whose virtual joint has the JOINT frame ``frame`` (index): the
-    BODY frame reached through its parent frames, all ``virtual``
-    (:func:`_virtual_frames`) and named ``<link>_beam`` or ``<link>_beam_*``; None if there
-    is none."""
-    chain = []
-    while frame in virtual:
-        chain.append(model.frames[frame].name)
-        frame = model.frames[frame].parentFrame
-    link = model.frames[frame]
-    if not chain or link.type != pin.BODY:
-        return None
-    ok = all(n == f"{link.name}_beam" or n.startswith(f"{link.name}_beam_") for n in chain)
-    return link.name if ok else None
-
-
-def inserted_beams(model: pin.Model) -> list[InsertedBeam]:
-    """The beams (their elements) of ``model``, as :func:`apply_beams` builds them: the
-    JOINT frames of its virtual joints (free flyers that carry no BODY frame), each on the
-    joint's parent joint, whose parent frame (``link_frame``, the beam's or element's
-    start) is the link's body frame or the frame of another virtual joint of the link, all
-    named ``<link>_beam`` or ``<link>_beam_*``. An ordinary joint so named is no beam."""
-    out, virtual = [], _virtual_frames(model)
-    for i in sorted(virtual):
-        f = model.frames[i]
-        start = model.frames[f.parentFrame]
-        j = f.parentJoint
-        if start.parentJoint == model.parents[j] and _beam_link(model, i, virtual) is not None:
-            rest = start.placement.actInv(model.jointPlacements[j])
-            out.append(InsertedBeam(f.name, f.parentFrame, j, rest))
-    return out
-
-
 #: Mass left on a beam's start after its tip's share moved, relative to the link's mass,
 #: below which it is rounding of a massless remainder; likewise the eigenvalues of its
 #: rotational inertia, relative to the link's largest about its joint's origin.
@@ -316,10 +258,10 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
     shapes = urdf_shapes(urdf) if wanted and urdf is not None else None
     for link, spec in beams.items():
         plan = _plan(link, spec)
-        virtual = _virtual_frames(model)
+        virtual = virtual_frames(model)
         had = [
             b.name for b in inserted_beams(model)
-            if _beam_link(model, model.getFrameId(b.name, pin.JOINT), virtual) == link
+            if beam_link(model, model.getFrameId(b.name, pin.JOINT), virtual) == link
         ]  # fmt: skip
         clash = had + [name for name, _, _ in plan if model.existJointName(name)]
         if clash:  # before the stiffness, which would measure the link from the existing

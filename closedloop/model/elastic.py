@@ -33,7 +33,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from closedloop.model.beams import inserted_beams
+from closedloop.model.beam_joints import inserted_beams
 from closedloop.model.closed_loop import ClosedLoopModel
 
 
@@ -60,7 +60,7 @@ def shortening_form(axis: np.ndarray, length: float) -> np.ndarray:
 
 
 def beam_joints(clm: ClosedLoopModel) -> tuple[BeamJoint, ...]:
-    """The beams' virtual joints of ``clm`` (:func:`closedloop.model.beams.inserted_beams`)
+    """The beams' virtual joints of ``clm`` (:func:`closedloop.model.beam_joints.inserted_beams`)
     that carry a spring (computed once per model)."""
     return clm.memo("beam_joints", lambda: _beam_joints(clm))
 

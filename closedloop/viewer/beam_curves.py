@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from closedloop.common.arrays import readonly
-from closedloop.model.beams import inserted_beams
+from closedloop.model.beam_joints import inserted_beams
 from closedloop.viewer.motion import frame_pose
 
 #: Points of each drawn beam curve, start and tip included (evenly spaced parameter).

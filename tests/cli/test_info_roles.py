@@ -1,5 +1,5 @@
 """``closedloop info`` tells a beam's virtual joint from a spring by the model's structure
-(:func:`closedloop.model.beams.inserted_beams`), not by its name: several beams on a link
+(:func:`closedloop.model.beam_joints.inserted_beams`), not by its name: several beams on a link
 (``<link>_beam_<end>``) and a beam split into elements (``<link>_beam_1``, ...) are beams,
 an ordinary joint named ``<link>_beam`` with a block spring is a spring."""
 

@@ -53,3 +53,20 @@ def test_did_you_mean_ignores_case_for_every_name(fourbar):
     """The rule of NameNotFoundError too: 'CRANK' is the joint 'crank'."""
     with pytest.raises(NameNotFoundError, match=r"did you mean 'crank'"):
         fourbar[0].joint_id("CRANK")
+
+
+@pytest.mark.parametrize(
+    ("name", "hint"),
+    [
+        ("ur55", "(did you mean 'ur5'?); the robot 'ur5' by name is "
+                 "cl.load_model(cl.data.robot_file('ur5'))"),
+        ("fourbarr", "the bundled model 'fourbar' is cl.load_model(cl.data.path('fourbar.urdf'), "
+                     "cl.data.path('fourbar.yaml'))"),
+    ],
+)  # fmt: skip
+def test_load_model_with_a_mistyped_name_offers_the_close_one(name, hint):
+    """From Python a model name is no path: a mistyped one gets the close name and how to
+    load it (the command line's did-you-mean)."""
+    with pytest.raises(cl.ModelFileError) as err:
+        cl.load_model(name)
+    assert hint in str(err.value)

@@ -18,7 +18,8 @@ from helpers import assert_close_in_norm
 import closedloop as cl
 from closedloop.exceptions import BeamError
 from closedloop.io.loader import load_model
-from closedloop.model.beams import inserted_beams, map_configuration
+from closedloop.model.beam_joints import inserted_beams
+from closedloop.model.beams import map_configuration
 
 #: The same beam theory through different algebra (6x6 inverses, transports, the
 #: closure's reduction); condition of the stiffness ~1e8: rounding ~1e-12 relative.

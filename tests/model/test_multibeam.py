@@ -15,7 +15,8 @@ from test_beams import STEEL, _skew, round_tip_compliance, urdf_of
 import closedloop as cl
 from closedloop.exceptions import BeamError
 from closedloop.io.loader import load_model
-from closedloop.model.beams import inserted_beams, map_configuration
+from closedloop.model.beam_joints import inserted_beams
+from closedloop.model.beams import map_configuration
 from closedloop.model.elastic import beam_joints
 
 #: The same beam theory through different algebra (6x6 inverses and transports of a
