@@ -26,7 +26,20 @@ def frozen(a: np.ndarray) -> np.ndarray:
 
 class ReadOnlyArrays:
     """Base of the result classes whose arrays are read-only: an unpickled copy keeps
-    them read-only (numpy unpickles writable arrays), arrays in dict fields included."""
+    them read-only (numpy unpickles writable arrays), arrays in dict fields included.
+
+    A field declared :class:`OnFirstRead` may be held as the function that computes it
+    (in the dict ``_on_first_read`` of the instance, field name -> function), which is
+    called on its first read; a pickled (or copied) result carries the computed values.
+    """
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__
+        if "_on_first_read" in state:  # each field computed, as a reader would see it
+            state = {k: v for k, v in state.items() if k != "_on_first_read"}
+            for name in self.__dict__["_on_first_read"]:
+                state[name] = getattr(self, name)
+        return state
 
     def __setstate__(self, state: dict) -> None:
         for value in state.values():
@@ -34,6 +47,35 @@ class ReadOnlyArrays:
                 if isinstance(a, np.ndarray):
                     a.flags.writeable = False
         self.__dict__.update(state)
+
+
+class OnFirstRead:
+    """A field of a (frozen) :class:`ReadOnlyArrays` dataclass that an instance may compute
+    on its first read (set on the class after the dataclass is made:
+    ``Result.K = OnFirstRead("K")``).
+
+    An instance made with the field's value holds it as any field; one made without it
+    holds, in its dict ``_on_first_read``, the function that returns the value (read-only,
+    the same bits at every call: the computation it saved). The first read calls it and
+    keeps the value; every later read, in any thread, returns that same array. Two
+    threads reading it first at once may both call the function: the first value kept is
+    the one both return.
+    """
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            return self
+        fields = instance.__dict__
+        try:
+            compute = fields["_on_first_read"][self.name]
+        except KeyError:
+            raise AttributeError(self.name) from None
+        return fields.setdefault(self.name, compute())
 
 
 #: A number as text: ASCII digits with an optional sign, decimal point and exponent

@@ -149,6 +149,7 @@ def twist_scalings(lengths: np.ndarray) -> np.ndarray:
 #: divide and conquer ``dgesdd`` solves such a bidiagonal problem by the same QR iteration
 #: (its SMLSIZ), after more set-up (10 % more time on a 6 x 6 matrix).
 SMALL_SVD = 25
+_FLOAT64 = np.dtype(np.float64)
 
 
 def svd(A: np.ndarray, full_matrices: bool = True):
@@ -161,13 +162,17 @@ def svd(A: np.ndarray, full_matrices: bool = True):
     Raises:
         numpy.linalg.LinAlgError: neither converges (non-finite input).
     """
-    if type(A) is not np.ndarray or A.dtype != np.float64:
+    if type(A) is not np.ndarray or A.dtype is not _FLOAT64:
         A = np.asarray(A, dtype=float)
+    m, n = A.shape
+    if m == 0 or n == 0:  # which LAPACK refuses (closedloop.common.lapack)
+        raise np.linalg.LinAlgError(f"svd called with an empty array of shape {A.shape}")
     flag = int(full_matrices)
+    routines = lapack.unchecked
     first, then = (
-        (lapack.dgesvd, lapack.dgesdd)
-        if min(A.shape) <= SMALL_SVD
-        else (lapack.dgesdd, lapack.dgesvd)
+        (routines.dgesvd, routines.dgesdd)
+        if m <= SMALL_SVD or n <= SMALL_SVD
+        else (routines.dgesdd, routines.dgesvd)
     )
     U, s, Vt, info = first(A, 1, flag)  # compute_uv, full_matrices
     if info > 0:
@@ -287,6 +292,33 @@ def factor_spectrum(
     d, dd = scales if scales is not None else (twist_scaling(length), None)
     if not (isinstance(B_s, np.ndarray) and B_s.ndim == 2):
         B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
+    rank, rigid, cond, U, beta, top, bottom = factor_rank(B_s, range_factor, spread, d)
+    K = None
+    if rank == 6:
+        entry = max(1.0, 1.0 / length) / bottom  # |K_ij| <= entry^2
+        if entry * entry < FINITE_BOUND:
+            K = stiffness_from_factor(U, beta, d, dd)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow: the caller's error
+                K = stiffness_from_factor(U, beta, d, dd)
+    return _spectrum(rank, rigid, cond, float(length), K), top, bottom
+
+
+def factor_rank(
+    B_s: np.ndarray,
+    range_factor: np.ndarray | Callable[[], np.ndarray] | None,
+    spread: float,
+    d: np.ndarray,
+) -> tuple:
+    """The rule of :func:`factor_spectrum` on B_s (6, r) without K (``d``: the twist
+    scaling at the length, :func:`twist_scaling`).
+
+    Returns:
+        rank, rigid directions (6, 6 - rank) read-only, cond(K_s), the left singular
+        vectors U (6, 6) and the singular values beta (descending) of B_s, the largest and
+        the smallest kept of them (0.0 and 1.0 without any): K = D U diag(beta^-2) U^T D
+        when the rank is 6 (:func:`stiffness_from_factor`).
+    """
     # the left singular vectors U (6, 6) are all needed (rigid directions): the thin SVD
     # has them when r >= 6
     U, beta, _ = svd(B_s, B_s.shape[1] < 6) if B_s.size else (np.eye(6), np.zeros(0), None)
@@ -306,20 +338,12 @@ def factor_spectrum(
     ratio = top / bottom
     # (a float's ** 2 raises OverflowError where the product is inf)
     cond = ratio * ratio if rank else 1.0
-    K = None
-    if rank == 6:
-        entry = max(1.0, 1.0 / length) / bottom  # |K_ij| <= entry^2
-        if entry * entry < FINITE_BOUND:
-            K = _stiffness(U, beta, d, dd)
-        else:
-            with np.errstate(over="ignore", invalid="ignore"):  # an overflow: the caller's error
-                K = _stiffness(U, beta, d, dd)
-    spectrum = _spectrum(rank, _rigid_directions(basis, rank, d), cond, float(length), K)
-    return spectrum, top, bottom
+    return rank, _rigid_directions(basis, rank, d), cond, U, beta, top, bottom
 
 
-def _stiffness(U: np.ndarray, beta: np.ndarray, d: np.ndarray, dd) -> np.ndarray:
-    """(6, 6) read-only K = D K_s D, K_s = U diag(beta^-2) U^T (``dd``: outer(d, d) or None)."""
+def stiffness_from_factor(U: np.ndarray, beta: np.ndarray, d: np.ndarray, dd) -> np.ndarray:
+    """(6, 6) read-only K = D K_s D [SI], K_s = U diag(beta^-2) U^T, from the SVD of a scaled
+    factor of full rank (:func:`factor_rank`; ``dd``: outer(d, d) or None)."""
     Ub = U / beta
     K = Ub.dot(Ub.T)
     K *= np.outer(d, d) if dd is None else dd

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from closedloop.common.arrays import check_wrench
-from closedloop.elastostatics.query import ComplianceQuery, unloaded_compliance
+from closedloop.elastostatics.query import ComplianceQuery, query_plan, unloaded_compliance
 from closedloop.elastostatics.springs import (
     PATHS,
     SpringFactor,
@@ -115,9 +115,12 @@ def compliance(
         raise InvalidInputError("compliance() needs the name of the loaded frame (a str)")
     check_name("frame", frame)
     check_path(path)
+    unloaded = gravity is None and not payloads and preload is None
+    if unloaded and isinstance(model, ClosedLoopModel) and q is not None:  # the prepared query's
+        return query_plan(model, frame, axes, path, length).query(model, q, check_limits)
     state = as_configuration(model, q, length=length, check_limits=check_limits)
     state.require_closed()
-    if gravity is not None or payloads or preload is not None:
+    if not unloaded:
         from closedloop.elastostatics.preload import preloaded_compliance  # on demand: start-up
         from closedloop.elastostatics.statics import solve_equilibrium
 

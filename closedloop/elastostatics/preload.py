@@ -45,7 +45,7 @@ from closedloop.elastostatics.tangent import (
     stability_margin,
     tangent_stiffness,
 )
-from closedloop.elastostatics.unloaded import ComplianceResult, compliance_result
+from closedloop.elastostatics.unloaded import ComplianceResult, compliance_result, result_fields
 from closedloop.exceptions import EquilibriumError, SingularConfigurationError
 from closedloop.kinematics.configuration import Configuration
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -192,7 +192,7 @@ def preloaded_compliance(
     if not np.any(P):
         base = unloaded_compliance(state, frame, axes, "auto")
         return PreloadedCompliance(
-            **base.__dict__, preload=readonly(w0), stability_margin=1.0, **about
+            **result_fields(base), preload=readonly(w0), stability_margin=1.0, **about
         )
     s = T.shape[1]
     Z = f.Z / (f.sigma[0] if f.sigma.size else 1.0)  # on the scale of the stiffest spring

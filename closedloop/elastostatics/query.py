@@ -27,6 +27,7 @@ the last bit.
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
@@ -34,14 +35,23 @@ import pinocchio as pin
 from closedloop.common.conditioning import (
     FINITE_BOUND,
     check_length,
-    factor_spectrum,
+    factor_rank,
     spectrum_from_factor,
 )
 from closedloop.elastostatics.partition import kinematic_factor, model_scaling, partition
 from closedloop.elastostatics.springs import check_path, spring_factor
-from closedloop.elastostatics.unloaded import ComplianceResult, compliance_result, fast_result
+from closedloop.elastostatics.unloaded import (
+    ComplianceResult,
+    FastFields,
+    compliance_result,
+    fast_result,
+)
 from closedloop.exceptions import InvalidInputError
-from closedloop.kinematics.configuration import Configuration, joint_reach
+from closedloop.kinematics.configuration import (
+    Configuration,
+    checked_configuration,
+    joint_reach,
+)
 from closedloop.kinematics.constraints import reference_frame
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import check_name
@@ -125,9 +135,7 @@ class ComplianceQuery:
             SingularConfigurationError: the compliance overflows; on the null-space path,
                 springs too far apart (as :func:`closedloop.compliance`).
         """
-        plan = self._plan
-        state = Configuration(self._model, q, length=plan.length, check_limits=self._check_limits)
-        return plan.at(state.require_closed())
+        return self._plan.query(self._model, q, self._check_limits)
 
     def __repr__(self) -> str:
         return (
@@ -145,8 +153,8 @@ class _Plan:
     to the model (a model keeps its plans)."""
 
     __slots__ = (
-        "_bounded", "_fid", "_reference", "_scaling", "_serial", "axes", "frame", "length",
-        "path",
+        "_bounded", "_fid", "_fields", "_reference", "_scaling", "_serial", "axes", "frame",
+        "length", "path",
     )  # fmt: skip
 
     def __init__(self, model: ClosedLoopModel, frame: str, axes: str, path: str, length):
@@ -166,31 +174,66 @@ class _Plan:
         self._serial = path == "auto" and not model.closures and not sc.passive.size
         self._serial = self._serial and sc.sprung.size > 0
         self._bounded = self._serial and _bounded(model, self._fid, sc, self.length)
+        # what the fast paths' results take from the plan
+        self._fields = {
+            taken: FastFields(frame, axes, self.length, taken, sc.sigma.size, self._fid,
+                              sc.scales)
+            for taken in ("serial", "partitioned")
+        }  # fmt: skip
+
+    def query(self, model: ClosedLoopModel, q, check_limits: bool) -> ComplianceResult:
+        """The compliance at q (nq,) of ``model`` (the plan's), q checked here, once
+        (:class:`ComplianceQuery`): a configuration of a model with loops or passive
+        joints is made a :class:`Configuration` and must close the loops; a serial robot's
+        is checked (:func:`closedloop.kinematics.configuration.checked_configuration`)
+        and its kinematics computed in a workspace of the model's pool
+        (:meth:`ClosedLoopModel.acquire_workspace`), without the closure residual, frame
+        placements and Jacobians that a configuration keeps and the serial path does not
+        read."""
+        if not self._serial:
+            state = Configuration(model, q, length=self.length, check_limits=check_limits)
+            return self.at(state.require_closed())
+        q = checked_configuration(model, q, check_limits)
+        workspace = model.acquire_workspace()
+        try:
+            pin.computeJointJacobians(model.model, workspace[0], q)
+            return self._serial_at(model, workspace[0], q)
+        finally:
+            model.release_workspace(workspace)
 
     def at(self, state: Configuration) -> ComplianceResult:
         """The compliance at a closed configuration of the model at the plan's length (not
         checked again: :class:`ComplianceQuery` and :func:`closedloop.compliance` make and
         check it)."""
+        if self._serial:
+            return self._serial_at(state.model, state.data, state.q)
         J = pin.getFrameJacobian(state.model.model, state.data, self._fid, self._reference)
         if J.ndim == 1:  # a one-dof model gives a (6,) vector
             J = J.reshape(6, 1)
-        if self._bounded:  # nothing overflows: numpy's error state as it is
-            return self._fast(state, J, self._scaling, "serial", None)
         return self._guarded(state, J)
+
+    def _serial_at(self, model: ClosedLoopModel, data: pin.Data, q: np.ndarray):
+        """The serial path at q (checked), whose joint Jacobians and placements are in
+        ``data``."""
+        J = pin.getFrameJacobian(model.model, data, self._fid, self._reference)
+        if J.ndim == 1:  # a one-dof model gives a (6,) vector
+            J = J.reshape(6, 1)
+        if self._bounded:  # nothing overflows: numpy's error state as it is
+            return self._fast(model, data, q, 0.0, J, "serial", None)
+        with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error
+            return self._fast(model, data, q, 0.0, J, "serial", None)
 
     @np.errstate(over="ignore", invalid="ignore")  # overflows: the result's typed error
     def _guarded(self, state: Configuration, J: np.ndarray) -> ComplianceResult:
-        """:meth:`at` where numbers may overflow (numpy's warnings off)."""
-        sc = self._scaling
-        if self._serial:
-            return self._fast(state, J, sc, "serial", None)
-        fast = partition(state, sc) if self.path == "auto" else None
+        """:meth:`at` on a model with loops or passive joints (numpy's warnings off)."""
+        fast = partition(state, self._scaling) if self.path == "auto" else None
         if fast is not None:
-            return self._fast(state, J, sc, *fast)
-        return self._null_space(state, J, sc)
+            return self._fast(state.model, state.data, state.q, state.residual_norm, J, *fast)
+        return self._null_space(state, J, self._scaling)
 
-    def _fast(self, state, J: np.ndarray, sc, path: str, X) -> ComplianceResult:
-        """The serial and partitioned paths without forming N (nv, s).
+    def _fast(self, model, data, q, residual: float, J: np.ndarray, path: str, X):
+        """The serial and partitioned paths without forming N (nv, s), at q (nq,) with its
+        kinematics in ``data`` and the infinity norm of its closure residual.
 
         In the scaled spring coordinates y = dq_s / s_q the joints move by dq = T y, with
         T = diag(s_q) on the sprung coordinates and s_p X on the passive ones
@@ -205,11 +248,10 @@ class _Plan:
         rank decision of a pose near the threshold; the spread of the full-rank test widens
         by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
         """
+        sc = self._scaling
         if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
             B = np.multiply(J, sc.P_rows, out=J)  # J is this call's own
-            G = B * sc.P_rows
-            G.setflags(write=False)  # (its transpose, a view, is then read-only too)
-            G, g_scale = G.T, sc.P_max  # |G_kj| = |B_jk| |P_k|
+            G, g_scale = partial(_transposed_product, B, sc.P_rows), sc.P_max  # on first read
         else:
             P = sc.P0.copy()
             if X is not None:  # dq_p = s_p X y
@@ -223,9 +265,9 @@ class _Plan:
             cond_T = math.sqrt(1.0 + float(np.vdot(X, X)))
             kinematic = lambda: kinematic_factor(J, sc, X, B_s * sc.sigma, cond_T)  # noqa: E731
             spread = sc.spread * cond_T
-        spectrum, top, bottom = factor_spectrum(B_s, self.length, kinematic, spread, sc.scales)
-        return fast_result(state, self.frame, self.axes, B.dot(B.T), G, spectrum, self._fid,
-                           sc.sigma.size, path, top, bottom, g_scale)  # fmt: skip
+        spectrum = factor_rank(B_s, kinematic, spread, sc.d)
+        C = B.dot(B.T)
+        return fast_result(self._fields[path], model, data, q, residual, C, G, g_scale, spectrum)
 
     def _null_space(self, state, J: np.ndarray, sc) -> ComplianceResult:
         """The general path: the admissible motions N and the spring factor
@@ -246,6 +288,14 @@ class _Plan:
 ROTATION_JOINTS = ("JointModelR", "JointModelSpherical", "JointModelUniversal")
 
 
+def _transposed_product(B: np.ndarray, P_rows: np.ndarray) -> np.ndarray:
+    """(nv, 6) read-only G = P B^T of the serial path with diagonal P, from B (6, nv) and
+    P's diagonal in every row, P_rows (6, nv): |G_kj| = |B_jk| |P_k|."""
+    G = B * P_rows
+    G.setflags(write=False)  # (its transpose, a view, is then read-only too)
+    return G.T
+
+
 def _bounded(model: ClosedLoopModel, fid: int, sc, L: float) -> bool:
     """True when the serial path with a spring on every coordinate cannot overflow at any
     configuration: every joint rotates about its origin (:data:`ROTATION_JOINTS`), so
@@ -254,7 +304,7 @@ def _bounded(model: ClosedLoopModel, fid: int, sc, L: float) -> bool:
     the same at every q), and with P the largest of P_diagonal |B| <= j P, |G| <= j P^2,
     |C| <= s (j P)^2, |D B diag(sigma)| <= j P max(1, 1/L) max(sigma), all below
     :data:`FINITE_BOUND` (the spring factor's own K is guarded where it is made,
-    :func:`closedloop.common.conditioning.factor_spectrum`)."""
+    :func:`closedloop.elastostatics.unloaded.fast_result`)."""
     pm = model.model
     if sc.P_diagonal is None or not 0.0 < sc.P_max < math.inf:
         return False

@@ -31,18 +31,22 @@ inv(C), which would lose cond(C) = cond(J)^2 digits.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import ReadOnlyArrays, check_wrench, readonly
+from closedloop.common.arrays import OnFirstRead, ReadOnlyArrays, check_wrench, frozen, readonly
 from closedloop.common.conditioning import (
     FINITE_BOUND,
     ILL_CONDITIONED,
     RANK_RTOL,
     Spectrum,
+    stiffness_from_factor,
     twist_scaling,
 )
 from closedloop.elastostatics.springs import SpringFactor
@@ -69,6 +73,12 @@ UNITS = {
 @dataclass(frozen=True)
 class ComplianceResult(ReadOnlyArrays):
     """Compliance of a mechanism at one frame and configuration (arrays read-only).
+
+    A result of the serial or partitioned path computes its ``stiffness_matrix`` (and, on
+    the serial path with one spring a coordinate, ``G``) on their first read, from the
+    factors its query kept, by the arithmetic the query would have used: the same values
+    to the last bit, read-only, computed once (a read in any thread then returns the same
+    array; :class:`closedloop.common.arrays.OnFirstRead`), kept by a pickled copy.
 
     Attributes:
         C: (6, 6) compliance [SI], twist (dx, dy, dz, rx, ry, rz) per wrench
@@ -171,6 +181,17 @@ class ComplianceResult(ReadOnlyArrays):
         }
 
 
+# computed on first read by the results of the fast paths (fast_result)
+ComplianceResult.G = OnFirstRead("G")
+ComplianceResult.stiffness_matrix = OnFirstRead("stiffness_matrix")
+
+
+def result_fields(result: ComplianceResult) -> dict:
+    """Field name -> value of every field of a :class:`ComplianceResult` (those computed
+    on first read included), as its constructor takes them."""
+    return {f.name: getattr(result, f.name) for f in dataclasses.fields(ComplianceResult)}
+
+
 def finite_product(product, what: str, wrench) -> np.ndarray:
     """``product()`` (a map applied to the wrench), read-only, or :class:`InvalidInputError`
     if it overflows (the message names ``what`` and the wrench)."""
@@ -211,51 +232,108 @@ def compliance_result(
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
-    _require_finite(state, frame, C, G, spectrum.K)
+    _require_finite(state.model, frame, C, G, spectrum.K)
     fid, mobility, internal = state.model.frame_id(frame), f.N.shape[1], f.n_internal
     return _result(
         state, frame, axes, C, G, spectrum, fid, mobility, internal, "null-space", cls, **extra
     )
 
 
+class FastFields:
+    """What the results of a fast path take from the plan of a frame, axes and length:
+    the fields that do not depend on q (frame, axes, length, path, mobility: every
+    admissible motion has a spring, no internal one), the frame's index ``fid``, the
+    scales (d, outer(d, d)) at the length L and max(1, L), max(1, 1/L) of
+    :func:`fast_result`'s bounds."""
+
+    __slots__ = ("b_scale", "fid", "fields", "frame", "k_scale", "scales")
+
+    def __init__(self, frame, axes, length, path, mobility, fid, scales):
+        self.fields = {"frame": frame, "axes": axes, "length": length, "path": path,
+                       "mobility": mobility, "internal_mobilities": 0, "note": ""}  # fmt: skip
+        self.frame, self.fid, self.scales = frame, fid, scales
+        self.b_scale, self.k_scale = max(1.0, length), max(1.0, 1.0 / length)
+
+
 def fast_result(
-    state: Configuration,
-    frame: str,
-    axes: str,
+    plan: FastFields,
+    model: ClosedLoopModel,
+    data: pin.Data,
+    q: np.ndarray,
+    residual: float,
     C: np.ndarray,
-    G: np.ndarray,
-    spectrum: Spectrum,
-    fid: int,
-    mobility: int,
-    path: str,
-    top: float,
-    bottom: float,
-    g_scale: float | None = None,
+    G: np.ndarray | Callable[[], np.ndarray],
+    g_scale: float | None,
+    spectrum: tuple,
 ) -> ComplianceResult:
     """A checked :class:`ComplianceResult` of a fast path (``"serial"`` or
-    ``"partitioned"``: ``mobility`` admissible motions, each with a spring) at frame index
-    ``fid``, with C = B B^T.
+    ``"partitioned"``: the plan's), with C = B B^T, at q (nq,) checked, whose kinematics
+    are in ``data`` and the infinity norm of whose closure residual is ``residual``.
+
+    ``spectrum``: the rank, rigid directions, condition number, U, beta, top and bottom of
+    :func:`closedloop.common.conditioning.factor_rank` on the scaled factor B_s = D B.
+    ``g_scale`` bounds |G_kj| / |B_jk|, G being then the function that computes G; None:
+    G is given.
 
     C, G and K are finite when bounds of their entries are: ``top`` and ``bottom``, the
-    largest and smallest kept singular values of the scaled factor B_s = D B
-    (:func:`closedloop.common.conditioning.factor_spectrum`), bound |B_jk| <= max(1, L) top,
-    |C_ij| <= |B|^2 and |K_ij| <= (max(1, 1/L) / bottom)^2; ``g_scale`` bounds |G_kj| /
-    |B_jk| (None: G's entries are summed). Rounding adds less than a factor 1 + 1e-12 to
-    any of these; beyond :data:`FINITE_BOUND`, or NaN, every entry is looked at.
+    largest and smallest kept singular values of B_s, bound |B_jk| <= max(1, L) top,
+    |C_ij| <= |B|^2 and |K_ij| <= (max(1, 1/L) / bottom)^2; G's entries are bounded by
+    ``g_scale`` or summed. Rounding adds less than a factor 1 + 1e-12 to any of these;
+    beyond :data:`FINITE_BOUND`, or NaN, every entry is computed and looked at. Within
+    it, K (from U and beta, :func:`closedloop.common.conditioning.stiffness_from_factor`)
+    and a G given as a function are computed on their first read, by the same arithmetic
+    (:class:`closedloop.common.arrays.OnFirstRead`).
 
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
     """
-    L = spectrum.length
-    b = max(1.0, L) * top
-    k = max(1.0, 1.0 / L) / bottom
-    if not (  # a NaN fails each test
+    rank, rigid, cond, U, beta, top, bottom = spectrum
+    b = plan.b_scale * top
+    k = plan.k_scale / bottom
+    C.setflags(write=False)
+    values = plan.fields.copy()
+    if (  # a NaN fails each test
         b * b < FINITE_BOUND
-        and (spectrum.K is None or k * k < FINITE_BOUND)
+        and (rank < 6 or k * k < FINITE_BOUND)
         and (g_scale * b < FINITE_BOUND if g_scale is not None else _finite(G))
     ):
-        _require_finite(state, frame, C, G, spectrum.K)
-    return _result(state, frame, axes, C, G, spectrum, fid, mobility, 0, path)
+        later = {}
+        if g_scale is None:
+            G.setflags(write=False)
+            values["G"] = G
+        else:
+            later["G"] = G
+        if rank == 6:
+            later["stiffness_matrix"] = partial(stiffness_from_factor, U, beta, *plan.scales)
+        else:
+            values["stiffness_matrix"] = None
+        values["_on_first_read"] = later
+    else:  # every entry computed (an overflow without numpy's warnings) and looked at
+        with np.errstate(over="ignore", invalid="ignore"):
+            G = G() if g_scale is not None else frozen(G)
+            K = stiffness_from_factor(U, beta, *plan.scales) if rank == 6 else None
+        _require_finite(model, plan.frame, C, G, K)
+        values["G"], values["stiffness_matrix"] = G, K
+    values["C"] = C
+    values["point"] = _point(model, data, plan.fid)
+    values["q"] = q
+    values["rank"] = rank
+    values["rigid_directions"] = rigid
+    values["closure_residual"] = residual
+    values["condition_number"] = cond
+    if rank == 0:
+        values["note"] = spring_note(model)
+    result = object.__new__(ComplianceResult)
+    object.__setattr__(result, "__dict__", values)
+    return result
+
+
+def _point(model: ClosedLoopModel, data: pin.Data, fid: int) -> np.ndarray:
+    """(3,) read-only position [m] of frame ``fid`` in the world, from the joint placements
+    in ``data`` (computed again: faster than reading it through data.oMf)."""
+    point = np.array(pin.updateFramePlacement(model.model, data, fid).translation)
+    point.setflags(write=False)
+    return point
 
 
 def _finite(a: np.ndarray) -> bool:
@@ -265,15 +343,15 @@ def _finite(a: np.ndarray) -> bool:
 
 
 @np.errstate(over="ignore", invalid="ignore")
-def _require_finite(state: Configuration, frame: str, C, G, K) -> None:
+def _require_finite(model: ClosedLoopModel, frame: str, C, G, K) -> None:
     """:class:`SingularConfigurationError` unless C, G and K (or None) are finite."""
     if _finite(C) and _finite(G) and (K is None or _finite(K)):
         return
-    k = state.model.stiffness
+    k = model.stiffness
     k = k[(k > 0) & np.isfinite(k)]
     springs = f"springs from {k.min():.3g} to {k.max():.3g} [SI]" if k.size else "no spring"
     raise SingularConfigurationError(
-        f"the compliance or stiffness at frame {frame!r} of {state.model.name!r} overflows "
+        f"the compliance or stiffness at frame {frame!r} of {model.name!r} overflows "
         f"the floating point range ({springs}; expected springs well within 1e-300..1e300, "
         "away from a singular configuration)"
     )
@@ -297,14 +375,11 @@ def _result(
     frame's index), C, G and K checked finite."""
     C.setflags(write=False)
     G.setflags(write=False)
-    # the frame's placement computed again: faster than reading it through data.oMf
-    point = np.array(pin.updateFramePlacement(state.model.model, state.data, fid).translation)
-    point.setflags(write=False)
     fields = {
         "C": C,
         "frame": frame,
         "axes": axes,
-        "point": point,
+        "point": _point(state.model, state.data, fid),
         "q": state.q,
         "rank": spectrum.rank,
         "rigid_directions": spectrum.rigid_directions,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 
 import numpy as np
 import pinocchio as pin
@@ -83,6 +84,12 @@ def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
     names each joint, its value and its limits, and asks "degrees?" when a revolute value
     exceeds 2 pi in magnitude.
     """
+    # every coordinate within the model's limits as they are now (a comparison of Python
+    # floats, cheaper than the rule's index sets for a few joints): inside by the rule
+    lower, upper = model.memo("position_limits", _position_limits, model.model)
+    lower, values, upper = lower.tolist(), q.tolist(), upper.tolist()
+    if all(map(operator.le, lower, values)) and all(map(operator.le, values, upper)):
+        return
     bad = joints_outside_limits(model, q)
     if not bad:
         return
@@ -92,6 +99,23 @@ def require_within_limits(model: ClosedLoopModel, q: np.ndarray) -> None:
         "(command line: --no-limits)",
         bad,
     )
+
+
+def checked_configuration(model: ClosedLoopModel, q, check_limits: bool = True) -> np.ndarray:
+    """(nq,) read-only copy of q, checked (:meth:`ClosedLoopModel.check_configuration`:
+    finite, quaternions normalised) and, with ``check_limits``, inside the joints'
+    limits (:func:`require_within_limits`)."""
+    q = model.check_configuration(q)
+    q.setflags(write=False)
+    if check_limits:
+        require_within_limits(model, q)
+    return q
+
+
+def _position_limits(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
+    """(nq,) views of the model's lower and upper position limits (a new value written
+    into them is seen)."""
+    return model.lowerPositionLimit, model.upperPositionLimit
 
 
 #: The residual of a configuration without closures: (0,), read-only.
@@ -157,32 +181,35 @@ class Configuration:
                 f"expected a ClosedLoopModel (closedloop.load_model), got {type(model).__name__}"
             )
         self.model = model
-        self.q = q = model.check_configuration(q)
-        q.setflags(write=False)
-        if check_limits:
-            require_within_limits(model, q)
+        self.q = q = checked_configuration(model, q, check_limits)
         pm = model.model
-        self.data, self._constraint_datas = model.acquire_workspace()
-        pin.computeJointJacobians(pm, self.data, q)
-        pin.updateFramePlacements(pm, self.data)
+        self.data, self._constraint_datas = data, _ = model.acquire_workspace()
+        pin.computeJointJacobians(pm, data, q)
+        pin.updateFramePlacements(pm, data)
         self.length = model.length if length is None else check_length(length)
-        self._rounding = 0.0  # of the scaled residual; no closure: none
-        if not model.closures:  # a serial robot closes no loop
-            self.residual, self.residual_norm, self.closure_error = _NO_RESIDUAL, 0.0, 0.0
+        if model.closures:  # a serial robot closes no loop: the class's residual, none
+            self._closure_residual()
+
+    #: Without closures: no residual (the class's values; a model with closures sets its own).
+    residual, residual_norm, closure_error, _rounding = _NO_RESIDUAL, 0.0, 0.0, 0.0
+    _closure_jacobian: np.ndarray | None = None  # computed on first use (per configuration)
+    _frame_jacobians: dict | None = None
+
+    def _closure_residual(self) -> None:
+        """The closure residual at q, its norms and the bound of its rounding (module
+        docstring)."""
+        model = self.model
+        self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
+        self._rounding = residual_rounding(model, self.q, self.length)
+        values = r.tolist()  # a few rows: Python floats cost less than numpy's calls
+        if math.isfinite(sum(values)):  # (a NaN would pass Python's max unseen)
+            self.residual_norm = max(map(abs, values))
         else:
-            self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
-            self._rounding = residual_rounding(model, q, self.length)
-            values = r.tolist()  # a few rows: Python floats cost less than numpy's calls
-            if math.isfinite(sum(values)):  # (a NaN would pass Python's max unseen)
-                self.residual_norm = max(map(abs, values))
-            else:
-                self.residual_norm = float(abs(r).max())
-            if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
-                self.closure_error = self.residual_norm / self.length
-            else:
-                self.closure_error = float((abs(r) * self._row_scale()).max())
-        self._closure_jacobian: np.ndarray | None = None
-        self._frame_jacobians: dict[tuple[str, str], np.ndarray] = {}
+            self.residual_norm = float(abs(r).max())
+        if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
+            self.closure_error = self.residual_norm / self.length
+        else:
+            self.closure_error = float((abs(r) * self._row_scale()).max())
 
     def __copy__(self) -> Configuration:
         """A new configuration of the same model and q, with a workspace of its own (two
@@ -265,6 +292,8 @@ class Configuration:
         """
         check_name("frame", frame)  # before the cache, which hashes it
         key = (frame, axes)
+        if self._frame_jacobians is None:
+            self._frame_jacobians = {}
         if key not in self._frame_jacobians:
             self._frame_jacobians[key] = frozen(
                 frame_jacobian_rows(self.model, self.data, frame, axes)

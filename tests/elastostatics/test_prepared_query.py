@@ -225,7 +225,7 @@ def test_a_query_checks_q_and_its_limits_once(monkeypatch, ur5):
     clm, q = ur5
     query = cl.ComplianceQuery(clm, "tool0")
     checks = Calls(monkeypatch, ClosedLoopModel, "check_configuration")
-    limits = Calls(monkeypatch, configuration, "joints_outside_limits")
+    limits = Calls(monkeypatch, configuration, "require_within_limits")
     query(q)
     cl.compliance(clm, q, "tool0")
     assert (checks.n, limits.n) == (2, 2)  # once a query
