@@ -243,7 +243,8 @@ def test_no_smart_dash_before_an_option_name(site):
 
 #: The task index as the browser shows it, once its content is there: its tasks (the
 #: third-level sections, each with its links), every link of the page (resolved by the
-#: browser), and the text of its command-line blocks as a reader selects and copies it.
+#: browser), the text of its command-line blocks as a reader selects and copies it, and any
+#: error message the theme's style sheet draws (Furo draws one over a table of contents).
 TASKS_READ = """(function () {
   const article = document.querySelector('article');
   if (!article || !article.querySelector('div.highlight-bash pre')) return null;
@@ -253,7 +254,10 @@ TASKS_READ = """(function () {
   const links = Array.from(document.querySelectorAll('a[href]')).map(a => a.href);
   const code = Array.from(article.querySelectorAll('div.highlight-bash pre'))
     .map(p => p.textContent);
-  return JSON.stringify({tasks: tasks, links: links, code: code});
+  const shown = Array.from(article.querySelectorAll('*'))  // the theme's warnings are drawn
+    .map(e => getComputedStyle(e, '::before').content)     // by its style sheet, not text
+    .filter(c => /error/i.test(c));
+  return JSON.stringify({tasks: tasks, links: links, code: code, shown: shown});
 })()"""
 #: At least this many tasks on the task index (the page lists about twenty).
 MIN_TASKS = 20
@@ -289,6 +293,7 @@ def test_task_index_lists_its_tasks_with_working_links(site, server, tmp_path):
     check_page(result, url)
     assert result["value"], "the task index shows no command-line block"
     page = json.loads(result["value"])
+    assert not page["shown"], page["shown"]  # an error drawn on the page (the theme's)
     tasks = page["tasks"]
     assert len(tasks) >= MIN_TASKS, [t["title"] for t in tasks]
     for task in tasks:  # each task: its guide section (and, where there is one, its example)
