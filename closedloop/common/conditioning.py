@@ -160,26 +160,26 @@ def svd(A: np.ndarray, full_matrices: bool = True):
     it does not converge.
 
     Raises:
-        numpy.linalg.LinAlgError: neither converges (non-finite input).
+        numpy.linalg.LinAlgError: neither converges (non-finite input), or A is empty.
     """
     if type(A) is not np.ndarray or A.dtype is not _FLOAT64:
         A = np.asarray(A, dtype=float)
     m, n = A.shape
     if m == 0 or n == 0:  # which LAPACK refuses (closedloop.common.lapack)
         raise np.linalg.LinAlgError(f"svd called with an empty array of shape {A.shape}")
-    flag = int(full_matrices)
-    routines = lapack.unchecked
-    first, then = (
-        (routines.dgesvd, routines.dgesdd)
-        if m <= SMALL_SVD or n <= SMALL_SVD
-        else (routines.dgesdd, routines.dgesvd)
-    )
-    U, s, Vt, info = first(A, 1, flag)  # compute_uv, full_matrices
+    first, then = _SMALL_FIRST if m <= SMALL_SVD or n <= SMALL_SVD else _LARGE_FIRST
+    U, s, Vt, info = first(A, 1, full_matrices)  # compute_uv, full_matrices
     if info > 0:
-        U, s, Vt, info = then(A, 1, flag)
+        U, s, Vt, info = then(A, 1, full_matrices)
     if info != 0:
         raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK info {info})")
     return U, s, Vt
+
+
+#: The SVD routines of :func:`svd`, in the order it tries them: LAPACK's own, the arrays'
+#: sizes checked there (:data:`closedloop.common.lapack.unchecked`).
+_SMALL_FIRST = (lapack.unchecked.dgesvd, lapack.unchecked.dgesdd)
+_LARGE_FIRST = _SMALL_FIRST[::-1]
 
 
 @dataclass(frozen=True)
@@ -347,7 +347,7 @@ def stiffness_from_factor(U: np.ndarray, beta: np.ndarray, d: np.ndarray, dd) ->
     Ub = U / beta
     K = Ub.dot(Ub.T)
     K *= np.outer(d, d) if dd is None else dd
-    K.setflags(write=False)
+    K.setflags(False)  # write=False (positional: half the cost)
     return K
 
 

@@ -27,7 +27,6 @@ the last bit.
 from __future__ import annotations
 
 import math
-from functools import partial
 
 import numpy as np
 import pinocchio as pin
@@ -251,7 +250,7 @@ class _Plan:
         sc = self._scaling
         if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
             B = np.multiply(J, sc.P_rows, out=J)  # J is this call's own
-            G, g_scale = partial(_transposed_product, B, sc.P_rows), sc.P_max  # on first read
+            G, g_scale = (_transposed_product, B, sc.P_rows), sc.P_max  # on first read
         else:
             P = sc.P0.copy()
             if X is not None:  # dq_p = s_p X y
@@ -292,7 +291,7 @@ def _transposed_product(B: np.ndarray, P_rows: np.ndarray) -> np.ndarray:
     """(nv, 6) read-only G = P B^T of the serial path with diagonal P, from B (6, nv) and
     P's diagonal in every row, P_rows (6, nv): |G_kj| = |B_jk| |P_k|."""
     G = B * P_rows
-    G.setflags(write=False)  # (its transpose, a view, is then read-only too)
+    G.setflags(False)  # write=False; its transpose, a view, is then read-only too
     return G.T
 
 

@@ -106,7 +106,7 @@ def checked_configuration(model: ClosedLoopModel, q, check_limits: bool = True) 
     finite, quaternions normalised) and, with ``check_limits``, inside the joints'
     limits (:func:`require_within_limits`)."""
     q = model.check_configuration(q)
-    q.setflags(write=False)
+    q.setflags(False)  # write=False (positional: half the cost)
     if check_limits:
         require_within_limits(model, q)
     return q
