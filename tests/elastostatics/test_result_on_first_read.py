@@ -80,29 +80,51 @@ def test_a_partitioned_result_computes_k_on_first_read(monkeypatch):
     assert K_calls.n == 1
 
 
-def test_values_read_later_are_those_of_the_eager_arithmetic(ur5):
-    """B = J P with P = diag(1 / sqrt(k)) (revolute joints: s_q = 1), B_s = D B: K is
-    the eager spectrum's (closedloop.common.conditioning.spectrum_from_factor) and G = P B^T,
-    one product an entry, bit for bit; K inverts C and K_q G w = J^T w."""
-    clm, q = ur5
+def eager_fields(clm, q: np.ndarray, length: float) -> dict:
+    """K, G and C of the UR5 at q written out from Pinocchio's Jacobian, computed at once:
+    B = J P with P = diag(1 / sqrt(k)) (revolute joints: s_q = 1), B_s = D B; K from the
+    eager spectrum (closedloop.common.conditioning.spectrum_from_factor, what the query
+    computed before K was deferred), G = P B^T and C = B B^T, one product an entry."""
     model, data = clm.model, clm.model.createData()
-    k = clm.stiffness
-    P = 1.0 / np.sqrt(k)
+    P = 1.0 / np.sqrt(clm.stiffness)
+    pin.computeJointJacobians(model, data, q)
+    J = pin.getFrameJacobian(model, data, model.getFrameId("tool0"), pin.LOCAL_WORLD_ALIGNED)
+    B = J * P
+    d = twist_scaling(length)
+    K = spectrum_from_factor(B * d[:, None], length).K
+    return {"stiffness_matrix": K, "G": P[:, None] * B.T, "C": B.dot(B.T), "J": J, "d": d}
+
+
+def test_values_read_later_are_those_of_the_eager_arithmetic(ur5):
+    """K and G read later are the eager arithmetic's bit for bit (:func:`eager_fields`); K
+    inverts C and K_q G w = J^T w (the springs balance the wrench)."""
+    clm, q = ur5
     query = cl.ComplianceQuery(clm, "tool0")
     for q_i in [q, *poses(q, 5)]:
         result = query(q_i)
-        pin.computeJointJacobians(model, data, q_i)
-        J = pin.getFrameJacobian(model, data, model.getFrameId("tool0"), pin.LOCAL_WORLD_ALIGNED)
-        B = J * P
-        d = twist_scaling(result.length)
-        eager = spectrum_from_factor(B * d[:, None], result.length)
-        np.testing.assert_array_equal(result.K, eager.K, strict=True)
-        np.testing.assert_array_equal(result.G, P[:, None] * B.T, strict=True)
-        np.testing.assert_array_equal(result.C, B.dot(B.T), strict=True)
+        eager = eager_fields(clm, q_i, result.length)
+        np.testing.assert_array_equal(result.K, eager["stiffness_matrix"], strict=True)
+        np.testing.assert_array_equal(result.G, eager["G"], strict=True)
+        np.testing.assert_array_equal(result.C, eager["C"], strict=True)
         rtol = INVERSE_MARGIN * np.finfo(float).eps * result.condition_number
-        assert_close_in_norm(result.K, np.linalg.inv(result.C), rtol, scale=1.0 / d)
+        assert_close_in_norm(result.K, np.linalg.inv(result.C), rtol, scale=1.0 / eager["d"])
         w = np.array([10.0, -20.0, 5.0, 1.0, -2.0, 0.5])
-        assert_close_in_norm(k * (result.G @ w), J.T @ w, BALANCE_RTOL)
+        assert_close_in_norm(clm.stiffness * (result.G @ w), eager["J"].T @ w, BALANCE_RTOL)
+
+
+def test_a_partitioned_k_read_later_is_the_null_space_paths(ur5):
+    """CaHyMan's K, read after the query (partitioned path), against the general path's
+    (null-space, computed at once, another factorisation of the same springs) and against
+    inv(C): each within eps cond(K_s) times the margin, scaled."""
+    clm, q, frame = cahyman_case()
+    result = cl.compliance(clm, q, frame)
+    general = cl.compliance(clm, q, frame, path="null-space")
+    assert (result.path, general.path) == ("partitioned", "null-space")
+    assert "stiffness_matrix" in vars(general) and "stiffness_matrix" not in vars(result)
+    rtol = INVERSE_MARGIN * np.finfo(float).eps * result.condition_number
+    scale = 1.0 / twist_scaling(result.length)
+    assert_close_in_norm(result.K, general.K, rtol, scale=scale)
+    assert_close_in_norm(result.K, np.linalg.inv(result.C), rtol, scale=scale)
 
 
 def test_the_fields_are_read_only(ur5):
@@ -151,21 +173,28 @@ def test_threads_reading_first_at_once_get_one_array(ur5):
 
 
 def test_a_pickled_or_copied_result_carries_the_fields(ur5):
-    """Pickled before any read (a map's workers send their results so), copied, replaced:
-    the fields are there, equal, read-only; the summary and repr are the eager result's."""
+    """Pickled before any read (a map's workers send their results so) or after, copied,
+    deep-copied: the fields are the eager arithmetic's (:func:`eager_fields`), read-only,
+    and the summary and repr are those of a result made by the constructor."""
     clm, q = ur5
-    result, twin = cl.compliance(clm, q, "tool0"), cl.compliance(clm, q, "tool0")
-    state = result.__getstate__()
+    eager = eager_fields(clm, q, cl.compliance(clm, q, "tool0").length)
+    unread = cl.compliance(clm, q, "tool0")
+    state = unread.__getstate__()
     assert "_on_first_read" not in state and set(ON_FIRST_READ) <= set(state)
-    eager = dataclasses.replace(twin)  # made by the constructor: every field given
-    assert set(ON_FIRST_READ) <= set(vars(eager))
-    for other in (pickle.loads(pickle.dumps(result)), copy.copy(result), copy.deepcopy(twin)):
+    copies = [pickle.loads(pickle.dumps(unread)), copy.copy(cl.compliance(clm, q, "tool0")),
+              copy.deepcopy(cl.compliance(clm, q, "tool0"))]  # fmt: skip
+    read = cl.compliance(clm, q, "tool0")
+    read.K, read.G  # noqa: B018 (read first, then pickled)
+    copies.append(pickle.loads(pickle.dumps(read)))
+    made = dataclasses.replace(read)  # by the constructor: every field given
+    for other in copies:
+        assert "_on_first_read" not in vars(other)
         for name in ON_FIRST_READ:
             value = getattr(other, name)
-            np.testing.assert_array_equal(value, getattr(eager, name), strict=True)
+            np.testing.assert_array_equal(value, eager[name], strict=True)
             assert not value.flags.writeable, name
-        assert other.to_dict() == eager.to_dict()
-    assert repr(result) == repr(eager)
+        assert other.to_dict() == made.to_dict()
+        assert repr(other) == repr(made)
 
 
 def test_a_zero_preload_gives_the_fields_of_the_unloaded_result(ur5):
