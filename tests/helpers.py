@@ -166,6 +166,19 @@ ATOL_CLOSURE = 1e-12
 
 
 # ---------------------------------------------------------------------------- assertions
+class Calls:
+    """Counts the calls of a function patched into a module (pytest's monkeypatch)."""
+
+    def __init__(self, monkeypatch, owner, name):
+        self.n, original = 0, getattr(owner, name)
+
+        def counted(*args, **kwargs):
+            self.n += 1
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(owner, name, counted)
+
+
 def assert_close_in_norm(actual, desired, rtol, scale=None) -> None:
     """Entries agree to rtol of themselves, with an absolute floor rtol * max|desired|.
 

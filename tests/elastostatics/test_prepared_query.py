@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pinocchio as pin
 import pytest
+from helpers import Calls
 from mechanisms import PATH_CASES, cahyman_case, serial_with_block, ur5_case
 
 import closedloop as cl
@@ -206,19 +207,6 @@ def test_bad_configurations_are_the_plain_query_errors(fourbar, ur5):
 
 
 # ------------------------------------------------------------------ checked once
-class Calls:
-    """Counts the calls of a function patched into a module (pytest's monkeypatch)."""
-
-    def __init__(self, monkeypatch, owner, name):
-        self.n, original = 0, getattr(owner, name)
-
-        def counted(*args, **kwargs):
-            self.n += 1
-            return original(*args, **kwargs)
-
-        monkeypatch.setattr(owner, name, counted)
-
-
 def test_a_query_checks_q_and_its_limits_once(monkeypatch, ur5):
     import closedloop.kinematics.configuration as configuration
 

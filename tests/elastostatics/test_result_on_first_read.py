@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import assert_close_in_norm
+from helpers import Calls, assert_close_in_norm
 from mechanisms import cahyman_case
 
 import closedloop as cl
@@ -35,19 +35,6 @@ INVERSE_MARGIN = 100.0
 #: K_q G w = J^T w (the springs balance the wrench): one product per entry of G, then
 #: J^T w and K_q dq of about max |J| |w| each, relative to it.
 BALANCE_RTOL = 1e-13
-
-
-class Calls:
-    """Counts the calls of a function patched into a module (pytest's monkeypatch)."""
-
-    def __init__(self, monkeypatch, owner, name):
-        self.n, original = 0, getattr(owner, name)
-
-        def counted(*args, **kwargs):
-            self.n += 1
-            return original(*args, **kwargs)
-
-        monkeypatch.setattr(owner, name, counted)
 
 
 def poses(q: np.ndarray, n: int, seed: int = 2) -> list[np.ndarray]:
