@@ -218,8 +218,8 @@ class EquilibriumEquations:
         smallest eigenvalue of the symmetric part of N^T K_t N on the motions with a restoring
         spring, scaled by their spring stiffness; 1 unloaded, 0 where K_t turns singular,
         < 0 if unstable. Spring-free motions the load does not act on (a rod spinning about
-        its axis) are left out; the sprung ones are those that move a sprung coordinate
-        (:meth:`_sprung_motions`). The spring-free ones that the load acts on (a link
+        its axis) are left out; the sprung ones are those that move a sprung coordinate.
+        The spring-free ones that the load acts on (a link
         hanging on a passive joint) settle with them (:func:`settled_tangent`,
         :func:`stability_margin`).
         """

@@ -203,7 +203,7 @@ class _Plan:
         (serial), else :func:`closedloop.elastostatics.partition.kinematic_factor` (the
         singular values of J T V differ from those by up to cond(T), which would move the
         rank decision of a pose near the threshold; the spread of the full-rank test widens
-        by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
+        by cond(T) <= sqrt(1 + ``|X|_F^2``) for the same reason).
         """
         if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
             B = np.multiply(J, sc.P_rows, out=J)  # J is this call's own
@@ -249,10 +249,10 @@ ROTATION_JOINTS = ("JointModelR", "JointModelSpherical", "JointModelUniversal")
 def _bounded(model: ClosedLoopModel, fid: int, sc, L: float) -> bool:
     """True when the serial path with a spring on every coordinate cannot overflow at any
     configuration: every joint rotates about its origin (:data:`ROTATION_JOINTS`), so
-    every entry of the frame Jacobian is at most j = max(1, 2 R + |frame offset|) (R: the
+    every entry of the frame Jacobian is at most j = max(1, 2 R + ``|frame offset|``) (R: the
     reach of the joint origins, :func:`closedloop.kinematics.configuration.joint_reach`,
-    the same at every q), and with P the largest of P_diagonal |B| <= j P, |G| <= j P^2,
-    |C| <= s (j P)^2, |D B diag(sigma)| <= j P max(1, 1/L) max(sigma), all below
+    the same at every q), and with P the largest of P_diagonal ``|B|`` <= j P, ``|G|`` <= j P^2,
+    ``|C|`` <= s (j P)^2, ``|D B diag(sigma)|`` <= j P max(1, 1/L) max(sigma), all below
     :data:`FINITE_BOUND` (the spring factor's own K is guarded where it is made,
     :func:`closedloop.common.conditioning.factor_spectrum`)."""
     pm = model.model

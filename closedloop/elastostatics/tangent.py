@@ -272,7 +272,7 @@ def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> n
     (revolute, prismatic) and the other vector-space joints Je is constant and the second
     term vanishes; for a sprung joint on a Lie group (free flyer, spherical, planar:
     nq != nv) it is the derivative of Je^T f_e at fixed f_e, by central differences with
-    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f_e|), zero at zero deflection.
+    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of ``|f_e|``), zero at zero deflection.
     Locked coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
     """
     model = clm.model
@@ -355,10 +355,10 @@ def scaled_tangent(
             (:func:`closedloop.elastostatics.compliance.spring_subspace`).
 
     Returns:
-        M: (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I), dimensionless:
-            the identity without preload, singular at a critical load.
-        P: (d, d) preload part N^T (K_t - K_q) N of the restricted tangent stiffness.
-        T: (d, s) the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
+        (M, P, T): M (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I),
+        dimensionless: the identity without preload, singular at a critical load; P (d, d)
+        the preload part N^T (K_t - K_q) N of the restricted tangent stiffness; T (d, s)
+        the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
     """
     P = N.T @ (Kt - clm.spring_matrix) @ N
     T = V / np.sqrt(ls)

@@ -14,7 +14,7 @@ and a wrench w at the frame does the work w^T J N y, so at equilibrium
 
 Passive joints and redundant closure rows need no special case: they only shape N.
 A null direction z of K_r is a motion without any restoring spring. If it moves the
-frame (J N z != 0) there is no equilibrium (:class:`MechanismError`); if not, it is an
+frame (J N z != 0) there is no equilibrium (:class:`~closedloop.MechanismError`); if not, it is an
 internal mobility (e.g. a link spinning about its own axis) and is left out.
 
 Numerics (:mod:`closedloop.common.conditioning`). Everything is computed in unit-free
@@ -238,10 +238,11 @@ def fast_result(
 
     C, G and K are finite when bounds of their entries are: ``top`` and ``bottom``, the
     largest and smallest kept singular values of the scaled factor B_s = D B
-    (:func:`closedloop.common.conditioning.factor_spectrum`), bound |B_jk| <= max(1, L) top,
-    |C_ij| <= |B|^2 and |K_ij| <= (max(1, 1/L) / bottom)^2; ``g_scale`` bounds |G_kj| /
-    |B_jk| (None: G's entries are summed). Rounding adds less than a factor 1 + 1e-12 to
-    any of these; beyond :data:`FINITE_BOUND`, or NaN, every entry is looked at.
+    (:func:`closedloop.common.conditioning.factor_spectrum`), bound ``|B_jk|`` <= max(1, L)
+    top, ``|C_ij|`` <= ``|B|^2`` and ``|K_ij|`` <= (max(1, 1/L) / bottom)^2; ``g_scale``
+    bounds ``|G_kj|`` / ``|B_jk|`` (None: G's entries are summed). Rounding adds less than
+    a factor 1 + 1e-12 to any of these; beyond :data:`FINITE_BOUND`, or NaN, every entry is
+    looked at.
 
     Raises:
         SingularConfigurationError: C, G or K are not finite (overflow).
