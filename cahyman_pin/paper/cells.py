@@ -77,6 +77,7 @@ class Quantity:
 
     @property
     def label(self) -> str:
+        """Where the value is printed: table, load and row."""
         return f"{self.table} {LOAD_SHORT[self.load]} {self.row}"
 
 

@@ -173,6 +173,10 @@ class DaskExecutor(Executor):
                 pass
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop the watch thread and shut Dask's executor down without waiting for it
+        (the cluster is the user's); ``wait``: until the watch thread has ended.
+        ``cancel_futures`` is accepted for :class:`concurrent.futures.Executor`'s
+        signature and has no effect."""
         self._stop.set()
         self._inner.shutdown(wait=False)
         if wait:

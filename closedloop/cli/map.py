@@ -16,8 +16,8 @@ value). The files are written by ``closedloop.analysis.maps.StiffnessMap.save``.
 ``--scheduler`` runs the chunks on a Dask distributed cluster (``pip install .[dask]``;
 start one with ``dask scheduler`` and ``dask worker ADDRESS``): a lost worker's chunks are
 retried on the others, a chunk lost with too many workers or a run without any worker for
-``--worker-timeout`` seconds stops with one line (exit 3). SIGINT and SIGTERM: the epilog of the help,
-:data:`closedloop.cli.map_options.SIGNALS_EPILOG`.
+``--worker-timeout`` seconds stops with one line (exit 3). SIGINT and SIGTERM: the epilog
+of the help, :data:`closedloop.cli.map_options.SIGNALS_EPILOG`.
 """
 
 from __future__ import annotations

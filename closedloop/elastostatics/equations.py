@@ -43,6 +43,8 @@ class SolverUnits:
 
     @classmethod
     def of(cls, clm: ClosedLoopModel) -> SolverUnits:
+        """The scales of ``clm``, from its length and which of its coordinates are
+        translations."""
         L, model = clm.length, clm.model
         coords = np.where(clm.linear_coordinates, L, 1.0)
         q = np.ones(model.nq)

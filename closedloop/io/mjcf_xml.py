@@ -125,6 +125,7 @@ def joints_with_defaults(root: ET.Element) -> list[tuple[ET.Element, dict[str, s
 
 
 def element_name(element: ET.Element) -> str:
+    """The quoted ``name`` attribute of ``element`` for a message, or ``(unnamed)``."""
     return repr(element.get("name")) if element.get("name") else "(unnamed)"
 
 

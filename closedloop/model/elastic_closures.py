@@ -102,8 +102,9 @@ _Z_ONTO_X = pin.SE3(pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0), np.zeros(3))
 SYMMETRY_RTOL = 1e-9
 #: Eigenvalues of a 6x6 closure spring (unit-balanced: its translations scaled by the
 #: spring's own length, the square root of its mean rotational over its mean translational
-#: diagonal stiffness) below this times its largest are its free directions: its entries are known to about its symmetry's
-#: precision (:data:`SYMMETRY_RTOL`), which moves its eigenvalues by as much.
+#: diagonal stiffness) below this times its largest are its free directions: its entries
+#: are known to about its symmetry's precision (:data:`SYMMETRY_RTOL`), which moves its
+#: eigenvalues by as much.
 NULL_RTOL = 1e-9
 #: Eigenvalues below this times the largest are the rounding of a zero (a symmetric
 #: eigensolver's error on a 6x6 is a few eps times its largest, 2.2e-16 each; a margin of
