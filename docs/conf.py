@@ -24,7 +24,11 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "docs"))  # gallery_order, module_pages, references
 
 from module_pages import write_module_pages  # noqa: E402
-from references import alias_exported_names, resolve_in_source_module  # noqa: E402
+from references import (  # noqa: E402
+    alias_exported_names,
+    link_module_docstrings,
+    resolve_in_source_module,
+)
 
 import closedloop  # noqa: E402
 from closedloop.common.blas import single_threaded_blas  # noqa: E402
@@ -148,8 +152,10 @@ class ProseAttributeDocstring(GoogleDocstring):
 
 
 def google_docstring(app, what, name, obj, options, lines: list[str]) -> None:
-    """Convert a docstring's Google-style sections to reST, in place (autodoc's event)."""
+    """Convert a docstring's Google-style sections to reST, in place (autodoc's event), its
+    pointers to the module docstring made links to the module's page."""
     lines[:] = ProseAttributeDocstring(lines, app.config, app, what, name, obj, options).lines()
+    link_module_docstrings(what, name, obj, lines)
 
 
 def skip_tuple_fields(app, what, name, obj, skip, options) -> bool | None:

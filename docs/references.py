@@ -12,6 +12,10 @@ it names in Python, and leave any other unresolved (a warning, an error in CI):
   document it again;
 * :func:`resolve_in_source_module`: a reference Sphinx did not find is looked up as Python
   would in the module whose docstring holds it.
+
+A docstring's pointer to "the module docstring" (how the module works, the choices it makes)
+becomes a link to the module's page, where that docstring is rendered
+(:func:`link_module_docstrings`).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import functools
 import importlib
 import importlib.util
 import inspect
+import re
 import sys
 from types import ModuleType
 
@@ -172,3 +177,38 @@ def resolve_in_source_module(app, env, node, contnode):
     return py.resolve_xref(
         env, node["refdoc"], app.builder, node["reftype"], found[0], retry, contnode
     )
+
+
+#: "module docstring" (or "module doc"), possibly broken across lines, not already in markup.
+MODULE_DOCSTRING = re.compile(r"(?<![`<])\bmodule(\s+)doc(string)?\b")
+
+
+def defining_module(name: str, obj) -> str | None:
+    """The module whose docstring a pointer in the docstring of ``obj``, documented as
+    ``name``, means: that of the function, class or property, else (a constant) the module of
+    the name it is exported as, else the longest module prefix of ``name``."""
+    target = obj.fget if isinstance(obj, property) else obj
+    module = getattr(target, "__module__", None) if callable(target) else None
+    if isinstance(module, str) and module.partition(".")[0] in PACKAGES:
+        return module
+    homes = {public: full for full, public in exported_names().items()}
+    name = homes.get(name, name)
+    parts = name.split(".")
+    for i in range(len(parts) - 1, 0, -1):
+        if ".".join(parts[:i]) in sys.modules:
+            return ".".join(parts[:i])
+    return None
+
+
+def link_module_docstrings(what: str, name: str, obj, lines: list[str]) -> None:
+    """Make each pointer to "the module docstring" in ``lines`` (reST, in place) a link to
+    the page of the module that wrote it (:func:`defining_module`)."""
+    if what == "module":
+        return
+    module = defining_module(name, obj)
+    if module is None:
+        return
+    text = "\n".join(lines)
+    linked = MODULE_DOCSTRING.sub(lambda m: f":mod:`module{m[1]}doc{m[2] or ''} <{module}>`", text)
+    if linked != text:
+        lines[:] = linked.split("\n")
