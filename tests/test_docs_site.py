@@ -5,11 +5,14 @@ docs/_build/html``), which sets ``CLOSEDLOOP_DOCS_HTML`` to the build folder. Wi
 variable the tests are skipped, saying so; with it set and no built site there, they fail.
 The pages are served on 127.0.0.1 from the build folder and loaded over the DevTools
 protocol: the index page, the API page of ``closedloop.compliance``, the four-bar gallery
-page (with the viewer's page embedded), the theory page and the search page. On each page:
-no JavaScript exception or console error, no request that fails, every image decoded and
-every embedded page loaded; the equations typeset offline; the search page finds
-``compliance``. And every public name of ``closedloop`` and ``cahyman_pin`` has an entry
-in the API reference.
+page (with the viewer's page embedded), the theory page, the search page, the task index
+and a guide page with its glossary links. On each page: no JavaScript exception or console
+error, no request that fails, every image decoded and every embedded page loaded; the
+equations typeset offline; the search page finds ``compliance``; the task index lists its
+tasks, each linked to the guide, every link of it reaches an existing page and anchor, and
+its commands read as typed (``--frame``, never an en dash); a glossary link of the guide
+lands on its term. And every public name of ``closedloop`` and ``cahyman_pin`` has an
+entry in the API reference.
 """
 
 from __future__ import annotations
@@ -20,11 +23,14 @@ import http.server
 import json
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
 import threading
 import time
+import urllib.parse
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -233,3 +239,123 @@ def test_no_smart_dash_before_an_option_name(site):
         bad += [f"{page.relative_to(site)}: ...{text[max(m.start() - 30, 0):m.end() + 20]!r}"
                 for m in SMART_DASH_OPTION.finditer(text)]  # fmt: skip
     assert not bad, "\n".join(bad[:20])
+
+
+#: The task index as the browser shows it, once its content is there: its tasks (the
+#: third-level sections, each with its links), every link of the page (resolved by the
+#: browser), the text of its command-line blocks as a reader selects and copies it, and any
+#: error message the theme's style sheet draws (Furo draws one over a table of contents).
+TASKS_READ = """(function () {
+  const article = document.querySelector('article');
+  if (!article || !article.querySelector('div.highlight-bash pre')) return null;
+  const tasks = Array.from(article.querySelectorAll('section section section')).map(s => ({
+    id: s.id, title: s.querySelector('h3').textContent.replace(/\u00b6|#$/g, '').trim(),
+    links: Array.from(s.querySelectorAll('a[href]')).map(a => a.href)}));
+  const links = Array.from(document.querySelectorAll('a[href]')).map(a => a.href);
+  const code = Array.from(article.querySelectorAll('div.highlight-bash pre'))
+    .map(p => p.textContent);
+  const shown = Array.from(article.querySelectorAll('*'))  // the theme's warnings are drawn
+    .map(e => getComputedStyle(e, '::before').content)     // by its style sheet, not text
+    .filter(c => /error/i.test(c));
+  return JSON.stringify({tasks: tasks, links: links, code: code, shown: shown});
+})()"""
+#: At least this many tasks on the task index (the page lists about twenty).
+MIN_TASKS = 20
+#: Smart dashes and quotes: a command copied with one of them fails.
+SMART = re.compile("[\u2010-\u2015\u2018\u2019\u201c\u201d]")
+
+
+def check_link(url: str, server: str, pages: dict) -> str | None:
+    """Why ``url`` (an absolute URL the browser resolved) does not reach a page and anchor
+    of the site served at ``server``, or None; ``pages`` caches the pages read (URL -> HTML).
+    A link outside the site is not followed (the tests run offline)."""
+    page, _, anchor = url.partition("#")
+    if not page.startswith(server):
+        return None
+    if page not in pages:
+        try:
+            with urllib.request.urlopen(page, timeout=10) as reply:
+                pages[page] = reply.read().decode("utf-8", "replace")
+        except OSError as error:  # urllib's HTTPError (a 404) is an OSError
+            pages[page] = None
+            return f"{url}: {error}"
+    if pages[page] is None:
+        return f"{url}: the page does not load"
+    anchor = urllib.parse.unquote(anchor)
+    if anchor and f'id="{anchor}"' not in pages[page]:
+        return f"{url}: no element with id {anchor!r} on the page"
+    return None
+
+
+def test_task_index_lists_its_tasks_with_working_links(site, server, tmp_path):
+    url = server + "tasks.html"
+    result = visit(url, tmp_path, TASKS_READ)
+    check_page(result, url)
+    assert result["value"], "the task index shows no command-line block"
+    page = json.loads(result["value"])
+    assert not page["shown"], page["shown"]  # an error drawn on the page (the theme's)
+    tasks = page["tasks"]
+    assert len(tasks) >= MIN_TASKS, [t["title"] for t in tasks]
+    for task in tasks:  # each task: its guide section (and, where there is one, its example)
+        assert any("/guide/" in link for link in task["links"]), task
+    assert sum(any("/gallery/plot_" in link for link in t["links"]) for t in tasks) >= 15
+    pages: dict = {}
+    broken = [
+        why for link in sorted(set(page["links"])) if (why := check_link(link, server, pages))
+    ]
+    assert not broken, "\n".join(broken)
+    assert len(pages) >= 30  # the guide pages, the gallery, the glossary: all followed
+
+
+def test_a_command_copied_from_the_task_index_reads_as_typed(site, server, tmp_path):
+    """The text of the task index's command-line blocks, as the browser renders it: no
+    smart dash or quote anywhere, the options with their two hyphens; a copied command
+    is taken by the command line's parser."""
+    from closedloop.cli.app import build_parser
+
+    url = server + "tasks.html"
+    result = visit(url, tmp_path, TASKS_READ)
+    check_page(result, url)
+    code = json.loads(result["value"])["code"]
+    text = "\n".join(code)
+    assert not SMART.findall(text), sorted(set(SMART.findall(text)))
+    for option in ("--frame", "--joint-stiffness", "--q", "--actuated", "--force", "--out"):
+        assert f" {option} " in text, option
+    line = next(row for row in text.splitlines() if row.startswith("closedloop stiffness ur5 "))
+    assert line == (
+        "closedloop stiffness ur5 --frame tool0 --q 0 -1.0 1.5 -0.5 1.2 0.3 --joint-stiffness 1e4"
+    )
+    args = build_parser("stiffness").parse_args(shlex.split(line)[1:])
+    assert (args.frame, args.joint_stiffness) == ("tool0", 1e4)
+
+
+#: On a guide page: the link of a glossary term, once the page is there.
+GLOSSARY_LINK = """(function () {
+  const a = document.querySelector('article a[href*="glossary.html#term-rank-rule"]');
+  return a ? a.href : null;
+})()"""
+#: On the glossary: the element that the address's anchor names, and the term it defines.
+TERM_AT_ANCHOR = """(function () {
+  const id = decodeURIComponent(location.hash.slice(1));
+  const dt = id && document.getElementById(id);
+  if (!dt) return null;
+  let dd = dt.nextElementSibling;  // a term of several names: its other dt first
+  while (dd && dd.tagName !== 'DD') dd = dd.nextElementSibling;
+  return JSON.stringify({tag: dt.tagName, term: dt.firstChild.textContent.trim(),
+                         definition: dd ? dd.textContent : ''});
+})()"""
+
+
+def test_a_glossary_link_of_the_guide_lands_on_its_term(site, server, tmp_path):
+    url = server + "guide/conditioning.html"
+    result = visit(url, tmp_path, GLOSSARY_LINK)
+    check_page(result, url)
+    link = result["value"]
+    assert link and link.startswith(server + "glossary.html#term-"), link
+    (tmp_path / "glossary").mkdir()  # a fresh browser profile
+    landed = visit(link, tmp_path / "glossary", TERM_AT_ANCHOR)
+    check_page(landed, link)
+    assert landed["value"], f"{link}: the glossary has no element of the link's anchor"
+    term = json.loads(landed["value"])
+    assert term["tag"] == "DT" and term["term"] == "rank rule", term
+    assert "RANK_RTOL" in term["definition"], term

@@ -173,8 +173,8 @@ def mass_matrix(
     symmetric."""
     clm = state.model
     if payloads:
-        model = GravityLoad(clm, (0.0, 0.0, 0.0), payloads).model
-        M = pin.crba(model, model.createData(), state.q)
+        load = GravityLoad(clm, (0.0, 0.0, 0.0), payloads)
+        M = pin.crba(load.model, load.data, state.q)
     else:  # the configuration's own Data, at its q: the kinematics it holds stay the same
         M = pin.crba(clm.model, state.data, state.q).copy()
     M = np.triu(M) + np.triu(M, 1).T  # CRBA fills the upper triangle

@@ -100,6 +100,15 @@ _Z_ONTO_X = pin.SE3(pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0), np.zeros(3))
 
 #: Relative asymmetry max|K - K^T| / max|K| above which a 6x6 closure spring is refused.
 SYMMETRY_RTOL = 1e-9
+#: Eigenvalues of a 6x6 closure spring (unit-balanced, :func:`_balance`) below this times
+#: its largest are its free directions: its entries are known to about its symmetry's
+#: precision (:data:`SYMMETRY_RTOL`), which moves its eigenvalues by as much.
+NULL_RTOL = 1e-9
+#: Eigenvalues below this times the largest are the rounding of a zero (a symmetric
+#: eigensolver's error on a 6x6 is a few eps times its largest, 2.2e-16 each; a margin of
+#: about 100): free directions. Between it and :data:`NULL_RTOL` a spring is refused, being
+#: neither clearly free nor resolved (1e11 against 20 N m/rad is 2e-10).
+EIGEN_ROUNDING = 1e-13
 
 #: Suffix of the 6-dof joint of a full 6x6 closure spring (a bushing).
 BUSHING = "bushing"
@@ -153,6 +162,15 @@ def closure_spring(closure: Closure, value) -> np.ndarray:
             f"{what} given the 6x6 spring {value!r}, not positive semi-definite "
             f"(eigenvalues {np.linalg.eigvalsh(K).tolist()}); expected a symmetric positive "
             "semi-definite matrix"
+        )
+    soft = lam[(lam > EIGEN_ROUNDING * lam[-1]) & (lam <= NULL_RTOL * lam[-1])] / lam[-1]
+    if soft.size:  # neither a free direction (rounding of zero) nor a spring it resolves
+        raise InvalidInputError(
+            f"{what} given the 6x6 spring {value!r}, whose stiffness along {soft.size} "
+            f"direction(s) is {soft.tolist()} of its stiffest (unit-balanced): below "
+            f"{NULL_RTOL:g}, where a 6x6 cannot tell a spring from a free direction; "
+            "expected 0 there (free), a spring above that share, or 6 values in the "
+            "pair's axes"
         )
     return K
 
@@ -276,9 +294,6 @@ def _layout(closure: Closure, K: np.ndarray) -> _Cut:
     return _Cut(a, b, chain, "3d" if free else "6d", closure.kind)
 
 
-#: Eigenvalues of a 6x6 closure spring (unit-balanced, :func:`_balance`) below this times
-#: its largest are its free directions.
-NULL_RTOL = 1e-9
 #: Components of a free direction (unit-balanced, unit norm) below this are rounding.
 ROUNDING = 1e-12
 

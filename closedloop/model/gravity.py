@@ -15,6 +15,7 @@ spring forces and dG/dq to the tangent stiffness.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -130,21 +131,31 @@ class GravityLoad:
                 f"{WEIGHT_MAX:.0e}"
             )
         self._exact_derivatives = pinocchio_second_order_exact(model)
+        self._local = threading.local()
+
+    @property
+    def data(self) -> pin.Data:
+        """This thread's Data of :attr:`model`, made once (a Data costs more than the weight's
+        computations: 0.2 s for a model of nv = 129, as CaHyMan's links as beams)."""
+        try:
+            return self._local.data
+        except AttributeError:
+            self._local.data = data = self.model.createData()
+            return data
 
     def forces(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """(nv,) generalised gravity scale G(q) [N m, N]: the weight's dV/dq."""
-        return scale * pin.computeGeneralizedGravity(self.model, self.model.createData(), q)
+        return scale * pin.computeGeneralizedGravity(self.model, self.data, q)
 
     def stiffness(self, q: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """(nv, nv) scale dG/dq [N m/rad, N/m, mixed]: the weight's part of K_t."""
         if not self._exact_derivatives:  # closedloop.common.derivatives
             return scale * central_differences(self.model, q, self.forces)
-        data = self.model.createData()
-        return scale * pin.computeGeneralizedGravityDerivatives(self.model, data, q)
+        return scale * pin.computeGeneralizedGravityDerivatives(self.model, self.data, q)
 
     def potential(self, q: np.ndarray) -> float:
         """Potential energy V(q) of the weight [J] (zero at the world origin)."""
-        return float(pin.computePotentialEnergy(self.model, self.model.createData(), q))
+        return float(pin.computePotentialEnergy(self.model, self.data, q))
 
     def to_dict(self) -> dict:
         """JSON-ready description: gravity [m/s^2], moving mass [kg] (links and payloads

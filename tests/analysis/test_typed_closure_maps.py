@@ -84,9 +84,9 @@ def test_a_map_over_the_sprung_pin_at_a_revolute_cut_equals_the_sprung_pin_in_th
     """The issue's pin (``closure_springs`` PIN: 20 N m/rad about the cut's z) on a
     'revolute' closure, against the pin in the tree with the same spring. A map's assembly
     holds the springs where it starts (the pin in the tree as a joint spring, the closure
-    as if rigid: docs/guide/models.md), so each point starts from the tree's assembly with
-    the pin free (driven from the drawing, on its branch), carried over (the pin's angle,
-    minus it at the cut)."""
+    as if rigid: docs/guide/elastic_closures.md), so each point starts from the tree's
+    assembly with the pin free (driven from the drawing, on its branch), carried over (the
+    pin's angle, minus it at the cut)."""
     free = fourbars["pin in the tree, rocker welded"][0]
 
     def start(clm, points):

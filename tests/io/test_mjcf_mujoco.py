@@ -51,7 +51,7 @@ N_RANDOM = 3
 
 BUNDLED = ("fourbar", "fivebar5", "rrr3", "delta", "stewart")
 INERTIAL = '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
-#: Small files, each exercising corrections of Pinocchio's reading (docs/guide/models.md).
+#: Small files, each exercising corrections of Pinocchio's reading (docs/guide/mjcf_sdf.md).
 FILES = {
     # rotated free-jointed bodies among several root bodies; a ball joint; worldbody sites
     "free": f"""<mujoco model="free"><compiler angle="radian"/><worldbody>

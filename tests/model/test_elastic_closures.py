@@ -147,6 +147,30 @@ def test_a_singular_bushing_in_parallel_with_a_diagonal_spring(tmp_path, kind, f
         cl.compliance(alone, q, "at_A")
 
 
+def test_a_bushing_too_soft_to_tell_from_free_is_refused(tmp_path):
+    """1e11 in five directions against 20 along a general twist (2e-10 of the stiffest,
+    unit-balanced) was read as free: the soft spring dropped without a word. It is refused,
+    naming the share; the same matrix with 0 there is a free direction, and 20 against 1e7
+    a spring that the compliance resolves."""
+    Q, _ = np.linalg.qr(np.random.default_rng(3).normal(size=(6, 6)))
+    for soft, stiff, outcome in ((20.0, 1e11, "refused"), (0.0, 1e11, "free"),
+                                 (20.0, 1e7, "spring")):  # fmt: skip
+        K = (Q * np.r_[[stiff] * 5, soft]) @ Q.T
+        if outcome == "refused":
+            with pytest.raises(InvalidInputError, match=r"cannot tell a spring from a free"):
+                _held_body(tmp_path, "6d", K)
+            continue
+        clm, q = _held_body(tmp_path, "6d", K, second=np.full(6, 1e3))
+        assert len([n for n in clm.model.names if "_free" in n]) == (outcome == "free")
+        C = cl.compliance(clm, q, "at_A", axes="local").C
+        expected = np.linalg.inv(K + 1e3 * np.eye(6))
+        unit = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
+        # both sides solved to rounding of a stiffness of condition up to 1e8 (1e11 / 1e3):
+        # eps * cond, with a margin of 100
+        tol = 100 * np.finfo(float).eps * np.linalg.cond(K + 1e3 * np.eye(6))
+        np.testing.assert_allclose(C / unit, expected / unit, rtol=0.0, atol=tol)
+
+
 def _parallel_check(clm, q, springs) -> None:
     """The body held by ``springs`` (each (6,) diagonal or (6, 6)) in parallel: compliance
     (sum K)^-1 at at_A in A's axes, and a load's work split between the closures as each
