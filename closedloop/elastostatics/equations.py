@@ -81,6 +81,11 @@ def _free_coordinates(clm: ClosedLoopModel) -> tuple:
     return frozen(free), units, frozen(scales), frozen(sprung), frozen(root)
 
 
+def solver_units(clm: ClosedLoopModel) -> SolverUnits:
+    """The :class:`SolverUnits` of ``clm`` (once per model, read-only)."""
+    return clm.memo("equilibrium_equations", _free_coordinates, clm)[1]
+
+
 class EquilibriumEquations:
     """The equilibrium equations F = 0, c = 0 of one model, loaded frame and rest q.
 
