@@ -101,12 +101,13 @@ def rest_at(clm: ClosedLoopModel, q_rest: np.ndarray, commands: np.ndarray) -> n
 
 
 def extrapolated(clm: ClosedLoopModel, q_rest: np.ndarray, last: list) -> np.ndarray:
-    """(nq,) a warm start at the rest configuration q_rest (nq,) from the last points'
-    (rest, answer) pairs ``last`` (one or two, the older first; each (nq,)): q_rest + d
-    with d the deflection difference(rest, answer) of the last point, plus, from two,
-    its change from the point before times the step to q_rest along the last step
-    (s = <dr, dr_last> / |dr_last|^2 on the tangent space, lengths in units of L,
-    between 0 and :data:`EXTRAPOLATION_LIMIT`): linear extrapolation along the path.
+    """(nq,) a warm start [rad, m] at the rest configuration q_rest (nq,) from the last
+    points' (rest, answer) pairs ``last`` (one or two, the older first; each (nq,)):
+    q_rest + d, with d the last point's deflection difference(rest, answer) plus, given
+    two, its change from the point before times s, the step dr from the last rest to
+    q_rest along the last step dr_last (s = <dr, dr_last> / <dr_last, dr_last> on the
+    tangent space, lengths in units of L, clamped to [0, :data:`EXTRAPOLATION_LIMIT`]):
+    linear extrapolation along the path.
     """
     model = clm.model
     rest, answer = last[-1]
