@@ -83,9 +83,9 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
         axes, length: as :func:`closedloop.elastostatics.compliance.compliance`.
         inputs: (c, m) inputs of the chunk's points, or None. Given, a point whose step
             from the last point repeats the step before (to :data:`EQUAL_STEP_RTOL`)
-            starts from an extrapolation of the last points (linear, or quadratic after
-            two such steps) instead of the last one (fewer Gauss-Newton iterations along a
-            grid line).
+            starts from an extrapolation of the last points (linear after two equal steps
+            in a row, quadratic after three, on the configuration manifold) instead of the
+            last one (fewer Gauss-Newton iterations along a grid line).
         check_limits: as for :func:`closedloop.elastostatics.compliance.compliance`.
     """
     history: list = []  # q of the last three assembled points, in a row

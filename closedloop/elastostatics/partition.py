@@ -154,8 +154,8 @@ PARTITION_RTOL = 1e-9
 
 
 #: From this many passive coordinates on, the passive motion is solved loop by loop
-#: (on the blocks of the closure Jacobian that each loop makes): the cost then grows with
-#: the number of loops, not its cube.
+#: (on the independent blocks of the closure Jacobian: loops that share no passive
+#: coordinate are solved apart): the cost then grows with the number of loops, not its cube.
 BLOCK_PASSIVE = 48
 
 
