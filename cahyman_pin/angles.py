@@ -20,7 +20,7 @@ import numpy as np
 
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 
-#: |cos phi| below which the angle increments are not defined.
+#: ``|cos phi|`` below which the angle increments are not defined.
 COS_PHI_MIN = 1e-9
 
 
@@ -65,7 +65,7 @@ def rotvec_to_euler_increments(omega, phi, theta) -> np.ndarray:
         (..., 3) array (dphi, dtheta, dpsi) [rad].
 
     Raises:
-        SingularConfigurationError: |cos phi| < COS_PHI_MIN (only theta + psi is defined).
+        SingularConfigurationError: ``|cos phi|`` < COS_PHI_MIN (only theta + psi is defined).
         InvalidInputError: non-finite input or wrong shape.
     """
     omega, phi, theta = _as_angles(omega, phi, theta)
@@ -89,7 +89,7 @@ def yaw_tilt_increments(omega, phi, theta) -> tuple[np.ndarray, np.ndarray]:
 
     Both are defined at phi = 90 deg (plate parallel to the fixed plate), where the
     separate increments are not. The tilt is the angle by which the normal z_p turns,
-    |omega x z_p| >= 0; at phi = 90 deg the elevation increment is dphi = -tilt.
+    ``|omega x z_p|`` >= 0; at phi = 90 deg the elevation increment is dphi = -tilt.
 
     Args:
         omega: (..., 3) small rotation vector [rad], world axes.

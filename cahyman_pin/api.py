@@ -395,8 +395,8 @@ def _indices(result: BackendResult, params: CaHyManParams, backend: str, inputs:
             generic backend refuses the same poses as a mechanism: its spring-free rule
             works on the motions of the sprung joints), or, for a backend that gives C
             alone, springs many orders apart, whose compliances C cannot tell from
-            rigidity by the rank rule. The message says which
-            (:func:`_rank_deficiency_reason`).
+            rigidity by the rank rule. The message says which (the pose, if C is still
+            rank deficient with the paper's springs; else the spread of the springs).
     """
     if "compliance" in result.details:
         return StiffnessIndices.from_result(result.details["compliance"], length=params.length)

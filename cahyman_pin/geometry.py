@@ -127,7 +127,7 @@ def plate_pose(alpha, p: CaHyManParams) -> PlatePose:
         p: parameters.
 
     Raises:
-        AssemblyError: the legs cannot carry the plate (cos phi > 1 or |sin(theta+psi)| > 1).
+        AssemblyError: the legs cannot carry the plate (cos phi > 1 or ``|sin(theta+psi)|`` > 1).
     """
     alpha = _check_alpha(alpha)
     y, z = leg_plane_coordinates(alpha, p)

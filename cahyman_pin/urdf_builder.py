@@ -1,4 +1,4 @@
-"""Generate the CaHyMan URDF tree and its closure file from a :class:`CaHyManParams`.
+"""Generate the CaHyMan URDF tree and its closure file from a :class:`~cahyman_pin.CaHyManParams`.
 
 Tree (every pose in metres and radians, world frame at the centre of the fixed plate's
 top face, z up, x towards leg 1):

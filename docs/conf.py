@@ -15,12 +15,20 @@ import sys
 from pathlib import Path
 
 import matplotlib
+from sphinx.ext.napoleon.docstring import GoogleDocstring
 
 matplotlib.use("Agg")
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "docs"))  # gallery_order, the gallery's sort key
+sys.path.insert(0, str(ROOT / "docs"))  # gallery_order, module_pages, references
+
+from module_pages import write_module_pages  # noqa: E402
+from references import (  # noqa: E402
+    alias_exported_names,
+    link_module_docstrings,
+    resolve_in_source_module,
+)
 
 import closedloop  # noqa: E402
 from closedloop.common.blas import single_threaded_blas  # noqa: E402
@@ -52,10 +60,23 @@ autodoc_member_order = "bysource"
 autodoc_typehints = "description"
 autodoc_typehints_description_target = "documented"
 autodoc_default_options = {"members": True, "show-inheritance": False}
-napoleon_google_docstring = True
+#: Google-style sections through :func:`google_docstring` (Napoleon's own hook off).
+napoleon_google_docstring = False
 napoleon_numpy_docstring = False
 napoleon_use_rtype = False
-nitpicky = False
+#: Every cross-reference must resolve (a warning otherwise, an error in CI), but those to
+#: names outside the two packages that have no inventory on a machine without network.
+nitpicky = True
+nitpick_ignore_regex = [
+    (r"py:.*", r"numpy\..*"),  # NumPy's arrays, random generators, linalg errors
+    (r"py:.*", r"(pinocchio|pin)\..*"),  # Pinocchio's models, data, SE3 (Boost.Python)
+    (r"py:.*", r"collections\.abc\..*"),  # Sequence, Mapping, Callable, Iterable
+    (r"py:.*", r"meshcat\..*"),  # the viewer's server and visualizer
+    (r"py:.*", r"yaml\..*"),  # PyYAML's errors
+    (r"py:class", r"argparse\..*"),  # parsers, namespaces, argument type errors
+    (r"py:class", r"pathlib\.Path"),
+    (r"py:class", r"concurrent\.futures\..*"),  # executors and futures
+]
 #: No "smart" quotes or dashes: docutils would turn the ``--`` of an option into an en dash
 #: in the command-line reference (argparse's help and epilogs), and a copied command fails.
 smartquotes = False
@@ -120,5 +141,33 @@ def write_views(app) -> None:
     subprocess.run(command, check=True, env=env, capture_output=True, text=True)
 
 
+class ProseAttributeDocstring(GoogleDocstring):
+    """Napoleon's Google style, except that the first line of a data or attribute docstring
+    stays text: the project's ``#:`` comments are prose, which Napoleon would split at their
+    first colon into a type and a description."""
+
+    def _consume_inline_attribute(self) -> tuple[str, list[str]]:
+        lines = [self._lines.next(), *self._dedent(self._consume_to_end())]
+        return "", self.__class__(lines, self._config).lines()
+
+
+def google_docstring(app, what, name, obj, options, lines: list[str]) -> None:
+    """Convert a docstring's Google-style sections to reST, in place (autodoc's event), its
+    pointers to the module docstring made links to the module's page."""
+    lines[:] = ProseAttributeDocstring(lines, app.config, app, what, name, obj, options).lines()
+    link_module_docstrings(what, name, obj, lines)
+
+
+def skip_tuple_fields(app, what, name, obj, skip, options) -> bool | None:
+    """Skip a NamedTuple's fields ("Alias for field number 0"): its Attributes section
+    documents them."""
+    return True if (getattr(obj, "__doc__", None) or "").startswith("Alias for field") else None
+
+
 def setup(app):
+    app.connect("autodoc-process-docstring", google_docstring)
+    app.connect("autodoc-skip-member", skip_tuple_fields)
     app.connect("builder-inited", write_views)
+    app.connect("builder-inited", write_module_pages)
+    app.connect("env-updated", alias_exported_names)
+    app.connect("missing-reference", resolve_in_source_module)

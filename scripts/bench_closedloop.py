@@ -241,7 +241,7 @@ def bench_paths(table: Table, mode: Mode) -> None:
     from closedloop.analysis.model_source import ModelSource
     from closedloop.analysis.path_points import placement
     from closedloop.analysis.paths import follow_path
-    from closedloop.elastostatics.compensation import carried, compensate
+    from closedloop.elastostatics.compensation import compensate, extrapolated
     from closedloop.kinematics.frame_task import FrameTask, xyzquat
     from closedloop.model.gravity import Load
 
@@ -255,19 +255,17 @@ def bench_paths(table: Table, mode: Mode) -> None:
     for key, label, clm, q, frame, task in cases:
         M = placement(clm, q, frame)
         targets = [xyzquat(pin.SE3(M.rotation, M.translation + np.array([0.0, 1e-3 * k, 0.0])))
-                   for k in range(2)]  # fmt: skip
+                   for k in range(3)]  # fmt: skip
         w = np.r_[-50.0 * M.rotation[:, 2], 0.0, 0.0, 0.0]
         r = follow_path(clm, frame, targets, wrench=w, task=task, q0=q)
-        q1 = np.array(r.q_target[1])
-        held = FrameTask(r.held, placement(clm, q1, frame))
-        guess = carried(clm, r.q_compensated[0], r.q_target[0], q1)
-        first = compensate(clm, frame, FrameTask(r.held, placement(clm, r.q_target[0], frame)),
-                           r.q_target[0], Load(w), r.q_compensated[0])  # fmt: skip
-        t = interleaved(lambda c=clm, f=frame, h=held, q1=q1, g=guess, w=w, p=first:
-                        compensate(c, f, h, q1, Load(w), g, p),
-                        partial(compliance, clm, q1, frame), mode)  # fmt: skip
+        q2 = np.array(r.q_target[2])
+        held = FrameTask(r.held, placement(clm, q2, frame))
+        guess = extrapolated(clm, q2, [(r.q_target[k], r.q_compensated[k]) for k in range(2)])
+        t = interleaved(lambda c=clm, f=frame, h=held, q2=q2, g=guess, w=w:
+                        compensate(c, f, h, q2, Load(w), g),
+                        partial(compliance, clm, q2, frame), mode)  # fmt: skip
         table.row(key, f"{label}: a path point's exact compensation warm-started from the "
-                  "last point (`compensate`), in units of one compliance query there",
+                  "last two points (`compensate`), in units of one compliance query there",
                   "<= ~5 queries", f"{t.ratio:.2f} queries",
                   f"{fmt_time(t.seconds)}; query {fmt_time(t.unit)}")  # fmt: skip
     n = 40 if mode.smoke else 1000

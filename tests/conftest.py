@@ -70,6 +70,17 @@ def cahyman():
     return cahyman_model(DEFAULT_PARAMS)
 
 
+@pytest.fixture(scope="session")
+def default_report(tmp_path_factory):
+    """(folder, Document) of the CaHyMan report with the default parameters, built once for
+    the tests that read it (the report takes seconds: its fits and figures); never modified
+    by a test."""
+    from cahyman_pin.paper import report
+
+    out = tmp_path_factory.mktemp("default_report")
+    return out, report.build_report(out)
+
+
 # ------------------------------------------------ the spatial four-bar cut at its pin C
 @pytest.fixture(scope="module")
 def fourbars(tmp_path_factory):

@@ -1,6 +1,6 @@
 """The built documentation site in a real browser (headless Chromium).
 
-The site is built by ``.ci/run`` (``python -m sphinx -W --keep-going -b html docs
+The site is built by ``.ci/run`` (``python -m sphinx -n -W --keep-going -b html docs
 docs/_build/html``), which sets ``CLOSEDLOOP_DOCS_HTML`` to the build folder. Without that
 variable the tests are skipped, saying so; with it set and no built site there, they fail.
 The pages are served on 127.0.0.1 from the build folder and loaded over the DevTools
@@ -12,11 +12,13 @@ equations typeset offline; the search page finds ``compliance``; the task index 
 tasks, each linked to the guide, every link of it reaches an existing page and anchor, and
 its commands read as typed (``--frame``, never an en dash); a glossary link of the guide
 lands on its term. And every public name of ``closedloop`` and ``cahyman_pin`` has an
-entry in the API reference.
+entry in the API reference; the command-line reference lists every option of every
+subcommand of both commands.
 """
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import functools
 import http.server
@@ -239,6 +241,42 @@ def test_no_smart_dash_before_an_option_name(site):
         bad += [f"{page.relative_to(site)}: ...{text[max(m.start() - 30, 0):m.end() + 20]!r}"
                 for m in SMART_DASH_OPTION.finditer(text)]  # fmt: skip
     assert not bad, "\n".join(bad[:20])
+
+
+def cli_sections(site: Path) -> dict[str, str]:
+    """The HTML of each section of the command-line reference by its id, up to the next
+    section (``closedloop-stiffness``, ``closedloop-stiffness-named-arguments``, ...)."""
+    chunks = (site / "cli.html").read_text(encoding="utf-8").split('<section id="')[1:]
+    return {chunk.split('"', 1)[0]: chunk for chunk in chunks}
+
+
+@pytest.mark.parametrize("prog", ["closedloop", "cahyman"])
+def test_the_cli_reference_shows_every_subcommand_s_options(site, prog):
+    """Each subcommand of both commands has its section on the command-line reference,
+    every option of it listed there (the command's own parser holds the subcommands'
+    help lines only: the page is built from :func:`reference_parser`)."""
+    from cahyman_pin.cli import reference_parser as cahyman_reference
+    from closedloop.cli.app import reference_parser as closedloop_reference
+
+    parser = {"closedloop": closedloop_reference, "cahyman": cahyman_reference}[prog]()
+    (action,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    sections = cli_sections(site)
+    missing = []
+    for name, sub in action.choices.items():
+        html = "".join(v for k, v in sections.items() if k == f"{prog}-{name}"
+                       or k.startswith(f"{prog}-{name}-"))  # fmt: skip
+        assert html, f"cli.html has no section for {prog} {name}"
+        missing += [
+            f"{prog} {name} {option}"
+            for a in sub._actions
+            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
+            for option in a.option_strings
+            if option.startswith("--") and f"<kbd>{option}</kbd>" not in html
+        ]
+    assert not missing, missing
+    examples = {"closedloop": ("stiffness", "--frame"), "cahyman": ("map", "--param")}
+    name, option = examples[prog]
+    assert f"<kbd>{option}</kbd>" in sections[f"{prog}-{name}-named-arguments"]
 
 
 #: The task index as the browser shows it, once its content is there: its tasks (the

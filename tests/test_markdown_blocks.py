@@ -42,6 +42,11 @@ NOT_RUN_HERE = {
     'pip install ".[docs]" && python -m sphinx -W --keep-going -b html docs docs/_build/html': (
         "installs from the network and builds the site (minutes); .ci/run builds it"
     ),
+    "cahyman report --out my-report": (
+        "the default report (seconds of fits and figures), given in the CaHyMan guide and the "
+        "task index; tests/cahyman/test_report.py builds it and reads every section, and the "
+        "guide's `cahyman report --params ...` runs here"
+    ),
     "python scripts/bench_closedloop.py": (
         "takes minutes and needs the repository's scripts/; tests/test_bench_scripts.py "
         "runs its --smoke mode"

@@ -44,7 +44,7 @@ from cahyman_pin.geometry import EZ, PlatePose, T, U, arm_direction, extremity, 
 from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 from closedloop.exceptions import InvalidInputError, SingularConfigurationError
 
-#: |sin alpha_k| below which the parallelogram is singular (cranks along the coupler).
+#: ``|sin alpha_k|`` below which the parallelogram is singular (cranks along the coupler).
 SIN_ALPHA_MIN = 1e-9
 
 
@@ -432,7 +432,7 @@ def plate_stiffness(alpha, params: CaHyManParams = DEFAULT_PARAMS) -> np.ndarray
     """(..., 6, 6) stiffness K_H of the plate on its three legs, at H, world axes.
 
     (f [N], n [N m]) at H = K_H (dH [m], r [rad]); G^T blockdiag(C_leg^-1) G, each
-    C_leg^-1 from the leg's factor (:func:`_plate_stiffness`).
+    C_leg^-1 from the leg's factor (:func:`leg_factor`).
     """
     alpha = _check_alpha(alpha, params)
     G = twist_H_to_leg_displacements(plate_pose(alpha, params).R, params)

@@ -260,16 +260,21 @@ class PublishedResult:
 
     Attributes:
         options, pose, load: inputs (load (6,) or None; it only enters the weight terms).
-        R_PAR (3, 3), R_SP (6, 6): eqs. (5, 6). Kss, As (3, 3): eqs. (7, 8), planar arm.
-        K_SER (6, 6): R_SP [Kss As^+] embedded (eq. 4, plate slots; rank <= 2).
-        C_SER (6, 6): the arm term K_SER^-1 of eq. (3) actually used.
-        M_FT (6, 6): eq. (10) incl. weight terms (or the transport); M_FN (6, 6): eq. (12)
-            (or G^T). K_pkk, C_pkk (3, 3, 3): eqs. (14, 17); K_P, C_P (6, 6): their first
-            2x2 blocks (eqs. 13, 16, as printed). leg_compliance (3, 2, 2): the leg blocks
-            used, (R_xk, R_zk) [N] -> (dy_k, dz_k) [m]. A_d (6, 6): eq. (18) or Jacobian.
-        C_PAR (6, 6): K_PAR^-1 = A_d C_P K_P^-1 M_FN^-1 M_FT, plate displacement at H.
-        K_PAR (6, 6): eq. (9). C_PAR_M: the plate term of eq. (3) (= C_PAR, or transported).
-        C, K (6, 6): K_CaHyMan^-1 and K_CaHyMan (eq. 3); coordinates in the module docstring.
+        R_PAR: (3, 3) eq. (6).
+        R_SP: (6, 6) eq. (5).
+        Kss, As: (3, 3) eqs. (7, 8), planar arm.
+        K_SER: (6, 6) R_SP [Kss As^+] embedded (eq. 4, plate slots; rank <= 2).
+        C_SER: (6, 6) the arm term K_SER^-1 of eq. (3) actually used.
+        M_FT: (6, 6) eq. (10) incl. weight terms (or the transport).
+        M_FN: (6, 6) eq. (12) (or G^T).
+        K_pkk, C_pkk: (3, 3, 3) eqs. (14, 17).
+        K_P, C_P: (6, 6) their first 2x2 blocks (eqs. 13, 16, as printed).
+        leg_compliance: (3, 2, 2) the leg blocks used, (R_xk, R_zk) [N] -> (dy_k, dz_k) [m].
+        A_d: (6, 6) eq. (18) or Jacobian.
+        C_PAR: (6, 6) K_PAR^-1 = A_d C_P K_P^-1 M_FN^-1 M_FT, plate displacement at H.
+        K_PAR: (6, 6) eq. (9).
+        C_PAR_M: the plate term of eq. (3) (= C_PAR, or transported).
+        C, K: (6, 6) K_CaHyMan^-1 and K_CaHyMan (eq. 3); coordinates in the module docstring.
     """
 
     options: PublishedOptions

@@ -8,7 +8,8 @@ Inputs are in the paper's units (degrees, millimetres); outputs are SI (JSON wit
 
 Subcommands: every module named in :data:`SUBCOMMAND_MODULES` provides
 ``add_parser(subparsers)``, which adds its parser and sets ``func`` (``args -> int``) as
-its default; :func:`add_pose_arguments` and :func:`stiffness_from_args` are shared. Only
+its default; :func:`~cahyman_pin.cli.options.add_pose_arguments` and
+:func:`~cahyman_pin.cli.options.stiffness_from_args` are shared. Only
 the module of the subcommand that runs is imported (the others stand in by their help
 line), so that ``cahyman stiffness`` does not pay for matplotlib or the sweep machinery.
 
@@ -40,13 +41,14 @@ SUBCOMMAND_MODULES: dict[str, tuple[str, str]] = {
 
 
 # ------------------------------------------------------------------ entry point
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, *, every: bool = False) -> argparse.ArgumentParser:
     """Parser with the built-in subcommands and those of :data:`SUBCOMMAND_MODULES`.
 
     Args:
         command: the subcommand that will run: only its module is imported; the other
             modules' subcommands are placeholders that carry their help line (enough for
             ``cahyman --help`` and for the list of choices of an unknown command).
+        every: every subcommand built in full (:func:`reference_parser`).
     """
     parser = Parser(
         prog=PROG, description="Stiffness of CaHyMan (Cassino Hybrid Manipulator). " + EXIT_HELP
@@ -55,8 +57,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     add_stiffness(subparsers)
     add_deflect(subparsers)
-    add_subcommands(subparsers, SUBCOMMAND_MODULES, command)
+    add_subcommands(subparsers, SUBCOMMAND_MODULES, command, every=every)
     return parser
+
+
+def reference_parser() -> argparse.ArgumentParser:
+    """The parser with every subcommand built in full (options, description, epilog), for
+    the command-line reference; it imports every subcommand's module, which the command
+    itself never does."""
+    return build_parser(every=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -87,6 +87,7 @@ def _run_stiffness(args: argparse.Namespace) -> int:
 
 
 def add_stiffness(subparsers) -> None:
+    """Add ``cahyman stiffness`` (K and C at M) to ``subparsers``."""
     p = subparsers.add_parser("stiffness", help="6x6 stiffness and compliance at M",
                               description="Stiffness K and compliance C at M (SI).",
                               epilog=EXIT_HELP)  # fmt: skip
@@ -142,6 +143,7 @@ def _run_deflect(args: argparse.Namespace) -> int:
 
 
 def add_deflect(subparsers) -> None:
+    """Add ``cahyman deflect`` (the deflection under a wrench at M) to ``subparsers``."""
     p = subparsers.add_parser("deflect", help="deflection of M and of the platform under a load",
                               description="Small deflection under a wrench at M.",
                               epilog=EXIT_HELP)  # fmt: skip

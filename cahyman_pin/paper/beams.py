@@ -1,4 +1,5 @@
-"""The report's section "lumped springs vs beam links" (:func:`beams_section`).
+"""The report's section "lumped springs vs beam links"
+(:func:`~cahyman_pin.paper.beams.beams_section`).
 
 At the three table poses, the compliance at M (world axes; the Pinocchio model, generic
 backend) of the paper's model, whose links are rigid but for the lumped axial springs

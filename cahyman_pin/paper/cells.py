@@ -4,7 +4,7 @@ The 54 printed cells (3 tables x 6 rows x 3 loads, :data:`cahyman_pin.paper.data
 are compared through *quantities* in the paper's coordinates
 (:func:`cahyman_pin.paper.compare.paper_coordinates`): at a regular pose (Table 3) each
 cell is one quantity; where the plate is level (phi = 90 deg, Tables 1 and 2) dphi is
-compared as the tilt |dphi| and dpsi, dtheta together as the yaw dpsi + dtheta, so 54
+compared as the tilt ``|dphi|`` and dpsi, dtheta together as the yaw dpsi + dtheta, so 54
 cells give 48 quantities. Values are in mm (translations) and deg (rotations).
 
 Weights. The tables print two decimals, so each printed cell carries a rounding error
@@ -77,6 +77,7 @@ class Quantity:
 
     @property
     def label(self) -> str:
+        """Where the value is printed: table, load and row."""
         return f"{self.table} {LOAD_SHORT[self.load]} {self.row}"
 
 
@@ -143,7 +144,7 @@ class FloorTriple:
         indices: (3,) indices of the quantities of loads F, N, F+N.
         residual: column 3 - column 1 - column 2 of the published values [mm or deg].
         rms_floor: the least distance (root sum of squares over the three cells) of any
-            triple with column 3 = column 1 + column 2 from the published one, |r|/sqrt(3).
+            triple with column 3 = column 1 + column 2 from the published one, ``|r|``/sqrt(3).
         chi2_floor: the least weighted sum of squares, r^2 / (sd_1^2 + sd_2^2 + sd_3^2).
         nearest: (3,) the weighted nearest triple with column 3 = column 1 + column 2
             (the one of ``chi2_floor``): the published values moved by -s_k r sd_k^2 /
@@ -186,8 +187,8 @@ def linearity_floor(params: CaHyManParams) -> tuple[FloorTriple, ...]:
 
 
 def tilt_triangle_ok(params: CaHyManParams) -> dict[str, bool]:
-    """Per level table: do the published tilts |dphi| of the three loads satisfy the
-    triangle inequality |t1 - t2| <= t3 <= t1 + t2, as the tilt of any linear model does?"""
+    """Per level table: do the published tilts ``|dphi|`` of the three loads satisfy the
+    triangle inequality ``|t1 - t2|`` <= t3 <= t1 + t2, as the tilt of any linear model does?"""
     qs = quantities(params)
     out = {}
     for pose in TABLE_POSES:

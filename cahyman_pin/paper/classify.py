@@ -5,12 +5,12 @@ level plate dphi through the tilt, dpsi and dtheta through their sum). With p th
 published value, m the consistent model with the report's parameters and h the half-width
 of the rounding of the printed digits, the first rule that holds gives the class:
 
-1. *reproduced*: |m - p| <= h;
+1. *reproduced*: ``|m - p|`` <= h;
 2. *explained* by the fitted stiffness values, or by the fitted dimensions
    (:mod:`cahyman_pin.paper.fit`): the fit is within h of p; size: its change of the cell;
 3. *explained* by a damaged place of the paper's equations
    (:data:`cahyman_pin.paper.effects.EFFECTS`): the change d that repairing it alone makes
-   at the as-published backend matches the gap, |m - d - p| <= h (a first-order reading:
+   at the as-published backend matches the gap, ``|m - d - p|`` <= h (a first-order reading:
    the damages are taken as additive); size: -d. An effect shown with illustrative
    parameters (the masses of eq. (11)) explains nothing: the report's model has no such
    term;

@@ -5,7 +5,7 @@ rotation of the arm as increments of the paper's angles (dphi, dpsi, dtheta [deg
 R = Rz(theta) Ry(pi/2 - phi) Rz(psi), evaluated at the plate's pose. At phi = 90 deg
 (Tables 1 and 2: all alpha_k equal, plate level) only theta + psi is defined: there the
 rotation is compared as yaw d(theta + psi) and tilt (angle by which the plate normal
-turns, = |dphi| there).
+turns, = ``|dphi|`` there).
 """
 
 from __future__ import annotations
@@ -24,8 +24,9 @@ from closedloop.exceptions import ClosedLoopError
 
 #: Backends compared, in table-column order, with their titles (their registered names).
 BACKENDS = {"published": "published", "consistent": "consistent", "generic": "generic"}
-#: Row labels at a regular pose, and at phi = 90 deg.
+#: Row labels at a regular pose.
 ROWS_REGULAR = ("dx [mm]", "dy [mm]", "dz [mm]", "dphi [deg]", "dpsi [deg]", "dtheta [deg]")
+#: Row labels at phi = 90 deg (a level plate: theta and psi are one turn, the tilt ``|dphi|``).
 ROWS_LEVEL = ("dx [mm]", "dy [mm]", "dz [mm]", "tilt [deg]", "yaw d(theta+psi) [deg]")
 
 
@@ -67,7 +68,7 @@ def paper_coordinates(twist: np.ndarray, phi: float, theta: float) -> np.ndarray
 
 
 def published_in_level_rows(table: np.ndarray) -> np.ndarray:
-    """Published (6, 3) table -> (5, 3) rows of :data:`ROWS_LEVEL` (tilt = |dphi|)."""
+    """Published (6, 3) table -> (5, 3) rows of :data:`ROWS_LEVEL` (tilt = ``|dphi|``)."""
     return np.vstack([table[:3], np.abs(table[3]), table[4] + table[5]])
 
 

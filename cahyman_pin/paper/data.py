@@ -45,6 +45,7 @@ class PaperPose:
         return np.deg2rad(self.alpha_deg), float(np.deg2rad(self.alpha4_deg)), self.s4_mm * 1e-3
 
     def describe(self) -> str:
+        """The pose's inputs in the paper's units (deg, mm), one line."""
         a = ", ".join(f"{x:g}" for x in self.alpha_deg)
         return f"alpha_1..3 = {a} deg, alpha_4 = {self.alpha4_deg:g} deg, s_4 = {self.s4_mm:g} mm"
 

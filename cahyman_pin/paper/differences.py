@@ -18,6 +18,8 @@ from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, CaHyMan
 
 
 def effects_section(doc: Document, params: CaHyManParams, tables: list[TableValues]) -> None:
+    """Add the section (module docstring) to ``doc``, for ``params`` and the computed
+    ``tables``."""
     doc.add(
         Heading("Where the differences come from"),
         Paragraph(

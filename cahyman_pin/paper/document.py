@@ -35,17 +35,24 @@ def _md_row(cells) -> str:
 
 @dataclass(frozen=True)
 class Heading:
+    """A section heading; ``level`` is its Markdown level (2: ``##``, below the report's
+    title), every heading listed in the table of contents, nested by level."""
+
     text: str
     level: int = 2
 
 
 @dataclass(frozen=True)
 class Paragraph:
+    """A paragraph of Markdown text."""
+
     text: str
 
 
 @dataclass(frozen=True)
 class Table:
+    """A table: its header cells, its rows of cells and an optional caption."""
+
     header: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
     caption: str = ""
@@ -53,6 +60,8 @@ class Table:
 
 @dataclass(frozen=True)
 class Figure:
+    """An image file and its caption."""
+
     path: Path
     caption: str
 
@@ -116,6 +125,7 @@ class Document:
     blocks: list[Block] = field(default_factory=list)
 
     def add(self, *blocks: Block) -> None:
+        """Append ``blocks`` to the report, in order."""
         self.blocks.extend(blocks)
 
     def to_markdown(self, relative_to: Path) -> str:

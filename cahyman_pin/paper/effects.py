@@ -75,6 +75,8 @@ def _ks_effect_note(K_s: float) -> str:
     return f"{K_S_PRINTED:g} N/m as printed -> {which} {K_s:g} N/m"
 
 
+#: The effects, one per damaged place (:data:`cahyman_pin.backends.published.CHOICES`), in
+#: the order the report lists them.
 EFFECTS = (
     Effect("lever arm of eq. (3)", {"lever_arm": True},
            "plate twist at H transported to M (rotation x lever arm) before the sum"),

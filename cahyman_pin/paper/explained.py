@@ -67,7 +67,7 @@ def _rms(x: np.ndarray) -> float:
 def fit_summary_rows(params: CaHyManParams) -> list[tuple[str, float, float, float]]:
     """(model, chi^2, RMS translation residual [mm], RMS rotation residual [deg]) of the
     reference model, both fits, a rigid machine (zero displacement) and the floor of any
-    linear model (RMS of |r|/sqrt(3) per row spread over its three cells)."""
+    linear model (RMS of ``|r|``/sqrt(3) per row spread over its three cells)."""
     p, sd, rot = published_values(params), standard_deviations(params), _is_rotation(params)
     rows = []
     for name, v in (("reference model (the report's parameters)", model_values(params)),

@@ -57,7 +57,7 @@ FIT_TOL = 1e-8
 #: Evaluation limit of each trust-region search of the dimension fit. Its cost has a flat
 #: valley (a and h act almost alike) that runs towards the bounds, where scipy's trf and
 #: dogbox crawl: measured, 200, 1000 and 2000 evaluations lower chi^2 from 4492 (60) to
-#: 4462, 4449 and 4447 without converging. The active set of :func:`_polish` converges
+#: 4462, 4449 and 4447 without converging. An active-set polish of the result converges
 #: instead (measured: 1.1 s in all at the report's parameters, to a local optimum).
 DIMENSION_EVALUATIONS = 60
 #: Singular values of the weighted sensitivity below this share of the largest: not
@@ -98,7 +98,8 @@ class FitResult:
         unidentifiable: names in the null space of that sensitivity, or acting on no
             quantity.
         converged: False when the fit stopped at its evaluation limit (a flat valley);
-            for the dimension fit, True only at a local optimum (:func:`_polish`).
+            for the dimension fit, True only at a local optimum (its active-set polish
+            converged).
     """
 
     names: tuple[str, ...]

@@ -38,6 +38,7 @@ def _eigenvalues_text(ev: np.ndarray) -> str:
 
 
 def matrices_section(doc: Document, params: CaHyManParams) -> None:
+    """Add the section (module docstring) to ``doc``, for ``params``."""
     doc.add(
         Heading("Stiffness matrices at the three configurations"),
         Paragraph(

@@ -153,12 +153,12 @@ def _translations(params: CaHyManParams) -> np.ndarray:
 
 
 def _largest_translation(params: CaHyManParams) -> float:
-    """Largest |translation| of M [mm] of the consistent model over the tables' cells."""
+    """Largest ``|translation|`` of M [mm] of the consistent model over the tables' cells."""
     return float(np.max(np.abs(model_values(params)[_translations(params)])))
 
 
 def rotation_ratio(params: CaHyManParams) -> float:
-    """Median over the rotation quantities of |published| / |consistent model| (model
+    """Median over the rotation quantities of ``|published|`` / ``|consistent model|`` (model
     values that are exactly 0 left out)."""
     m, p = model_values(params), published_values(params)
     rot = np.array([q.row.endswith("[deg]") for q in quantities(params)]) & (np.abs(m) > 0)

@@ -14,6 +14,8 @@ def _diff(v: float, ref: float) -> str:
 
 
 def tables_section(doc: Document, tables: list[TableValues]) -> None:
+    """Add Tables 1-3 to ``doc``: every published cell of ``tables`` next to the
+    backends' values."""
     doc.add(Heading("Tables 1-3: displacement of M"))
     for tv in tables:
         pose = tv.pose
@@ -45,6 +47,7 @@ def tables_section(doc: Document, tables: list[TableValues]) -> None:
 
 
 def linearity_section(doc: Document) -> None:
+    """Add the section on the linearity of the published tables to ``doc``."""
     doc.add(
         Heading("Linearity of the published tables"),
         Paragraph(

@@ -34,6 +34,7 @@ def weight_rows(params: CaHyManParams) -> list[tuple[str, np.ndarray, float]]:
 
 
 def weight_section(doc: Document, params: CaHyManParams) -> None:
+    """Add the section (module docstring) to ``doc``, for ``params``."""
     doc.add(
         Heading("The weight as a preload (what eq. (11) tries)"),
         Paragraph(

@@ -23,9 +23,10 @@ into chunks of contiguous points, one task each for a ``concurrent.futures.Execu
 local processes by default, or any executor, e.g. Dask's ``Client.get_executor()``
 (``pip install .[dask]``). Results do not depend on the executor. The path, the
 chunks, the executors, the per-point arrays and the indices are those of every map of the
-project (:mod:`closedloop.analysis.maps`, :func:`closedloop.analysis.indices.batch_indices`; at a
-point of cond(K_s) above 1e8, det K and the condition numbers of :func:`cahyman_pin.api.stiffness`,
-:func:`closedloop.analysis.map_engine.resolve_ill_conditioned`): the ``condition_number`` is the
+project (:mod:`closedloop.analysis.maps`,
+:func:`closedloop.analysis.batch_indices.batch_indices`; at a point of cond(K_s) above 1e8,
+det K and the condition numbers of :func:`cahyman_pin.api.stiffness`,
+:func:`closedloop.analysis.complete.resolve_ill_conditioned`): the ``condition_number`` is the
 unit-free one of the scaled K, ``condition_number_si`` that of the SI matrix
 (:attr:`cahyman_pin.api.CaHyManStiffness.condition_number`). Only the kernels are
 CaHyMan's (:mod:`cahyman_pin.sweep.execution`).
@@ -72,6 +73,7 @@ CSV_MAX_POINTS = 20_000
 INDEX_UNITS = ALL_INDICES
 #: Chunk size limits: long chunks amortise a task's overhead, many chunks balance the load.
 MAX_CHUNK = {"consistent": 20_000}
+#: Chunk size limit of a backend that :data:`MAX_CHUNK` does not name.
 DEFAULT_MAX_CHUNK = 1_000
 #: Chunks per worker by default: the last chunks, finishing alone, leave a core idle for
 #: at most 1/16 of the run (a task costs about 1 ms of overhead).
@@ -91,7 +93,7 @@ class SweepResult:
         wrench: (6,) wrench at M for the deflection [N, N m], or None.
         indices: name -> (n,) value [SI] (units in :data:`INDEX_UNITS`), NaN where it does
             not exist; ``deflection`` (n, 6) when a wrench was given.
-        data: the per-point arrays (:class:`closedloop.analysis.map_engine.PointData`: C, rank,
+        data: the per-point arrays (:class:`closedloop.analysis.map_results.PointData`: C, rank,
             status and reason codes, assembly iterations).
         seconds: wall time of the computation [s].
     """
@@ -118,7 +120,7 @@ class SweepResult:
 
     @property
     def status(self) -> np.ndarray:
-        """(n,) status names (:data:`closedloop.analysis.map_engine.STATUS`): ``ok``,
+        """(n,) status names (:data:`closedloop.analysis.map_results.STATUS`): ``ok``,
         ``rank_deficient`` (C exists, K does not), ``invalid``, ``unreachable``, ``singular``,
         ``failed``, ``not_computed`` (the sweep was interrupted first)."""
         return np.asarray(STATUS)[self.data.codes]
@@ -378,7 +380,7 @@ def sweep(
             A point that cannot be computed does not raise: it is marked in ``status`` and
             ``reasons``.
         Interrupted: a ``KeyboardInterrupt`` (Ctrl-C, SIGINT) or SIGTERM during the sweep
-            (:class:`closedloop.analysis.map_engine.Interrupted`, itself a ``KeyboardInterrupt``):
+            (:class:`closedloop.analysis.interrupts.Interrupted`, itself a ``KeyboardInterrupt``):
             the worker processes are ended at once (none is left), and the sweep so far is
             its ``partial``: a :class:`SweepResult` whose points not computed have status
             ``not_computed`` and reason ``interrupted by SIGINT`` (or ``SIGTERM``), values

@@ -1,5 +1,5 @@
 """The kernel of CaHyMan's sweeps: one chunk of points, for
-:func:`closedloop.analysis.map_engine.run_tasks`.
+:func:`closedloop.analysis.tasks.run_tasks`.
 
 A sweep is cut into chunks of points that are contiguous along its path (see
 :mod:`cahyman_pin.sweep.engine`); each chunk is one task, computed by :func:`run_chunk`
@@ -27,8 +27,8 @@ point whose scaled condition number exceeds ``ILL_CONDITIONED`` (1e8) takes its 
 query's C and K (K from a square-root factor where the query has one: the formed C loses
 cond(K_s) times the rounding): the generic kernel's in
 :func:`closedloop.analysis.map_engine.assemble_points`, the others'
-:func:`cahyman_pin.api.stiffness` (:func:`_single_queries`), so that its indices are that
-query's.
+:func:`cahyman_pin.api.stiffness` (after the backend's kernel, for those points only), so
+that its indices are that query's.
 """
 
 from __future__ import annotations

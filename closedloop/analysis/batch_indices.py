@@ -31,7 +31,7 @@ BATCH_INDICES = {
 def block_spectrum(C: np.ndarray, block: slice, length) -> tuple[np.ndarray, ...]:
     """Eigenvalues c (n, 3) ascending and vectors V (n, 3, 3) of a 3x3 block of n
     compliances C (n, 6, 6) [SI], and which directions are rigid (n, 3): those whose
-    scaled compliance is at most ``RANK_RTOL``^2 of the largest diagonal entry of the
+    scaled compliance is at most ``RANK_RTOL^2`` of the largest diagonal entry of the
     scaled C_s (lengths L (n,) or one [m]; the rank rule on eigenvalues, on the scale of
     C_s: its largest eigenvalue is 1 to 6 times that entry), so that a block of rounding
     beside a compliant other block is rigid (a Delta's rotations: 1e-32 beside 1e-4, read
@@ -87,7 +87,7 @@ def batch_indices(
       resolve it.
     * ``min/max_translational``, ``min/max_rotational``: extreme principal stiffnesses of
       the 3x3 blocks of C [N/m, N m/rad].
-    * ``deflection_translation``, ``deflection_rotation``: |d| [m], |r| [rad] of the twist
+    * ``deflection_translation``, ``deflection_rotation``: ``|d|`` [m], ``|r|`` [rad] of the twist
       C w under ``wrench`` (only with a wrench).
 
     A non-symmetric C (a closed form in its own coordinates, e.g. CaHyMan's published

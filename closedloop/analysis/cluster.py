@@ -69,7 +69,7 @@ class DaskExecutor(Executor):
     Each task's future is a future of its own, completed from Dask's: an error of Dask's
     machinery (e.g. ``KilledWorker`` once a task has lost ``allowed-failures`` workers)
     becomes a :class:`ClusterError` naming the scheduler; a task whose result Dask's
-    executor lost with its worker (:func:`_raised_by_dask`) runs once more. A lost
+    executor lost with its worker (an error raised in Dask's own code) runs once more. A lost
     worker's tasks are retried by Dask on the others, so a map stays identical to the
     serial one. A watch thread checks every ``poll`` seconds that a worker is connected
     while tasks are pending; after ``worker_timeout`` seconds without one (or without the
@@ -91,6 +91,8 @@ class DaskExecutor(Executor):
         self._watch.start()
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
+        """``fn(*args, **kwargs)`` on the cluster: a future of its own, completed from Dask's
+        (an error of Dask's machinery as a :class:`ClusterError`)."""
         attempts = [self._inner.submit(fn, *args, **kwargs)]  # Dask's futures, the last current
         outer: Future = Future()
         with self._lock:
@@ -171,6 +173,10 @@ class DaskExecutor(Executor):
                 pass
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop the watch thread and shut Dask's executor down without waiting for it
+        (the cluster is the user's); ``wait``: until the watch thread has ended.
+        ``cancel_futures`` is accepted for :class:`concurrent.futures.Executor`'s
+        signature and has no effect."""
         self._stop.set()
         self._inner.shutdown(wait=False)
         if wait:

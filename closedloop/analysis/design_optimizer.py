@@ -1,4 +1,4 @@
-"""The optimiser of design problems: :func:`optimize_design`.
+"""The optimiser of design problems: :func:`~closedloop.optimize_design`.
 
 One objective: scipy's ``differential_evolution`` (a population over the parameters' box,
 each generation evaluated at once), then a bounded local polish from its best design
@@ -6,7 +6,7 @@ each generation evaluated at once), then a bounded local polish from its best de
 an optimum on a constraint is found to the constraint's tolerance, not to the population's
 spread. Differential evolution ranks the designs by Deb's rule: any design that meets the
 constraints before any that does not, those by their violation, the others by their
-objective (:func:`_energies`). Two or more objectives: NSGA-II
+objective. Two or more objectives: NSGA-II
 (:mod:`closedloop.analysis.nsga2`); the Pareto front is the non-dominated set of every
 design evaluated.
 
@@ -211,7 +211,7 @@ def _result(problem, evaluator: _Evaluator, seed, budget, t0, stopped: str) -> D
 def _energies(evaluations, objective, scale: float) -> np.ndarray:
     """Values whose order is Deb's rule, for differential evolution (minimized): a
     feasible design's scaled objective x = sign f / scale mapped into (-1, 1) by x / (1 +
-    |x|) (monotone); an infeasible one's violation v into (1, 2) by 1 + v / (1 + v); one
+    ``|x|``) (monotone); an infeasible one's violation v into (1, 2) by 1 + v / (1 + v); one
     that failed (v infinite) 2."""
     out = np.empty(len(evaluations))
     for i, e in enumerate(evaluations):

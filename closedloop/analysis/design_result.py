@@ -1,6 +1,6 @@
 """The result of :func:`closedloop.analysis.design_optimizer.optimize_design`: the best design,
 the Pareto front, every evaluation and the history, and the files that show them
-(:meth:`DesignResult.save`: ``design.json``, ``evaluations.csv``, ``convergence.png``,
+(:meth:`~closedloop.DesignResult.save`: ``design.json``, ``evaluations.csv``, ``convergence.png``,
 ``pareto.png`` with two objectives, and the stiffness map of the best design).
 """
 

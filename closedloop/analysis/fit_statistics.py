@@ -1,8 +1,10 @@
 """Statistics of a weighted least-squares fit (:mod:`closedloop.analysis.identification`)
 from its weighted residuals r (n, 6) and sensitivities S (6 n, p) at the solution: the
-rank of S and the parameters it does not see (:func:`null_directions`), the covariance of
-the parameters (:func:`covariance`), and the largest residual RMS that the chi-square test
-of the fit accepts (:func:`chi_square_rms_limit`).
+rank of S and the parameters it does not see
+(:func:`~closedloop.analysis.fit_statistics.null_directions`), the covariance of the
+parameters (:func:`~closedloop.analysis.fit_statistics.covariance`), and the largest
+residual RMS that the chi-square test of the fit accepts
+(:func:`~closedloop.analysis.fit_statistics.chi_square_rms_limit`).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ frame origin) and the measured twist of that frame d (6,) (dx, dy, dz [m], rx, r
 measured, e.g. the rotations when a laser tracker gives positions only: its twist may
 then be NaN, and it weighs nothing). The model predicts d = C(k) w
 (:func:`closedloop.elastostatics.compliance.compliance`); the fitted parameters are spring values
-k_g, one per group of joints tied to one value, found by weighted nonlinear least squares
+k_g, one per group of joints tied to one value, found by weighted nonlinear least squares::
 
     min_theta  sum_m |(C_m(k) w_m - d_m) / sd_m|^2,   k_g = exp(theta_g)
 
@@ -40,7 +40,8 @@ only along what the data see: two springs in series keep the sum of their compli
 small weight on the offsets from the start keeps the unseen directions there);
 ``confounded`` names the parameters of each null direction. The errors of the identified
 parameters, outside every null direction, are exact. Before the fit, one common log
-offset brings the start to the scale of the data (:func:`_common_offset`).
+offset brings the start to the scale of the data (the log offset that best fits the
+measured twists with every spring scaled alike).
 
 The standard errors assume that the model fits the data: the weighted residuals are then
 draws of a unit normal, and their sum of squares a chi-square variable of n_c - rank(S)

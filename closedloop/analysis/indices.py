@@ -307,8 +307,8 @@ class StiffnessIndices:
         return readonly(np.linalg.eigvalsh(K) if lam is None else lam)
 
     def _condition(self, t: np.ndarray) -> float:
-        """cond(T^-1 K T^-1): max |lambda| / min |lambda| of a symmetric C, the 2-norm condition
-        number of a non-symmetric one (as
+        """cond(T^-1 K T^-1): max ``|lambda|`` / min ``|lambda|`` of a symmetric C, the 2-norm
+        condition number of a non-symmetric one (as
         :func:`~closedloop.analysis.batch_indices.batch_indices`)."""
         self._require_full_rank("the condition number of K")
         if not self.is_symmetric:

@@ -83,8 +83,9 @@ def assemble_points(clm, frame, out, rows, solve, first=None, starts=None, axes=
         axes, length: as :func:`closedloop.elastostatics.compliance.compliance`.
         inputs: (c, m) inputs of the chunk's points, or None. Given, a point whose step
             from the last point repeats the step before (to :data:`EQUAL_STEP_RTOL`)
-            starts from an extrapolation of the last points (:func:`_extrapolated`)
-            instead of the last one (fewer Gauss-Newton iterations along a grid line).
+            starts from an extrapolation of the last points (linear after two equal steps
+            in a row, quadratic after three, on the configuration manifold) instead of the
+            last one (fewer Gauss-Newton iterations along a grid line).
         check_limits: as for :func:`closedloop.elastostatics.compliance.compliance`.
     """
     history: list = []  # q of the last three assembled points, in a row
@@ -205,11 +206,12 @@ class MapChunk:
 
 
 def assemble_chunk(chunk: MapChunk) -> ChunkResult:
-    """The kernel of :func:`stiffness_map`: every point of ``chunk``, warm-started, and
-    their indices. Each point starts from the last one assembled, and is driven there in
-    steps of at most :data:`closedloop.kinematics.driving.INPUT_STEP` where it is further
-    (:func:`closedloop.kinematics.driving.assemble_connected`); with a start provider, from its
-    start in one solve."""
+    """The kernel of :func:`~closedloop.analysis.maps.stiffness_map`: every point of
+    ``chunk``, warm-started, and their indices. Each point starts from the last one
+    assembled, and is driven there in steps of at most
+    :data:`closedloop.kinematics.driving.INPUT_STEP` where it is further
+    (:func:`closedloop.kinematics.driving.assemble_connected`); with a start provider, from
+    its start in one solve."""
     clm = model_of(chunk.model)
     out = ChunkResult.empty(len(chunk))
     starts = None if chunk.start is None else chunk.start(clm, chunk.points)

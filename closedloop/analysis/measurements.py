@@ -1,7 +1,8 @@
 """Measured deflections for the identification of springs
-(:mod:`closedloop.analysis.identification`): one :class:`Measurement` (configuration, wrench, twist
-and its standard deviation) each, given in Python or read from a YAML or CSV file
-(:func:`read_measurements`).
+(:mod:`closedloop.analysis.identification`): one
+:class:`~closedloop.analysis.measurements.Measurement` (configuration, wrench, twist and its
+standard deviation) each, given in Python or read from a YAML or CSV file
+(:func:`~closedloop.analysis.measurements.read_measurements`).
 """
 
 from __future__ import annotations
@@ -86,9 +87,12 @@ def _finite(value, name: str) -> np.ndarray:
     return readonly(values)
 
 
-#: Columns of a measurement CSV file (besides ``frame`` and q_i or actuated_i).
+#: Columns of a measurement CSV file (besides ``frame`` and q_i or actuated_i): the wrench
+#: [N, N m], the twist [m, rad] and, optional, the twist's standard deviations.
 CSV_WRENCH = ("fx", "fy", "fz", "nx", "ny", "nz")
+#: The twist's columns (see :data:`CSV_WRENCH`).
 CSV_TWIST = ("dx", "dy", "dz", "rx", "ry", "rz")
+#: The standard deviations' columns (see :data:`CSV_WRENCH`).
 CSV_SD = tuple(f"sd_{c}" for c in CSV_TWIST)
 _KEYS = ("q", "actuated", "wrench", "twist", "sd")
 

@@ -43,4 +43,5 @@ def _load(source: ModelSource) -> ClosedLoopModel:
 
 
 def model_of(model: ClosedLoopModel | ModelSource) -> ClosedLoopModel:
+    """``model`` itself, or the model a :class:`ModelSource` loads (once per process)."""
     return model.load() if isinstance(model, ModelSource) else model

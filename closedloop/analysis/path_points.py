@@ -24,8 +24,8 @@ import pinocchio as pin
 
 from closedloop.elastostatics.compensation import (
     branch_sign,
-    carried,
     compensate,
+    extrapolated,
     linear_deflection,
     loaded_equilibrium,
     rest_at,
@@ -75,7 +75,8 @@ class PointStatics:
 
 class PathStatics:
     """The statics of consecutive path points (module docstring), each Newton started from
-    the last point's answers carried along the path.
+    the last two points' answers extrapolated along the path
+    (:func:`~closedloop.elastostatics.compensation.extrapolated`).
 
     Args:
         clm: the model.
@@ -96,9 +97,8 @@ class PathStatics:
     ):
         self.clm, self.frame, self.held = clm, frame, held
         self.weight, self.check_limits = weight, check_limits
-        # the last point's q_target, q_loaded, q_compensated and tau
-        self._last: tuple | None = None
-        self._compensation = None  # the last point's, whose Newton matrix starts the next
+        # the last two points' q_target, q_loaded, q_compensated and tau, the older first
+        self._last: list[tuple] = []
 
     def solve(self, q_target: np.ndarray, wrench: np.ndarray) -> PointStatics:
         """The statics of the point whose unloaded configuration is q_target (nq,),
@@ -113,14 +113,16 @@ class PathStatics:
         load = Load(np.asarray(wrench, dtype=float), self.weight)
         P = placement(clm, q_target, frame)
         warm, sign = (
-            (None, None) if last is None else (carried(clm, last[1], last[0], q_target), last[3])
+            (None, None)
+            if not last
+            else (extrapolated(clm, q_target, [(x[0], x[1]) for x in last]), last[-1][3])
         )
         q_loaded, tau = loaded_equilibrium(
             clm, frame, q_target, load, warm, sign=sign, enforce_limits=self.check_limits
         )
         task = FrameTask(self.held, P)
-        start = q_loaded if last is None else carried(clm, last[2], last[0], q_target)
-        comp = compensate(clm, frame, task, q_target, load, start, self._compensation)
+        start = extrapolated(clm, q_target, [(x[0], x[2]) for x in last]) if last else q_loaded
+        comp = compensate(clm, frame, task, q_target, load, start)
         rest = rest_at(clm, q_target, comp.commands)
         if branch_sign(clm, frame, rest, comp.q, load) * tau <= 0.0:
             raise EquilibriumError(
@@ -139,7 +141,7 @@ class PathStatics:
         q_first, _ = loaded_equilibrium(  # near the compensated one, on its branch
             clm, frame, first, load, comp.q, enforce_limits=False, stability=False
         )
-        self._last, self._compensation = (q_target, q_loaded, comp.q, tau), comp
+        self._last = [*last[-1:], (q_target, q_loaded, comp.q, tau)]
         return PointStatics(
             q_loaded=q_loaded,
             error=pose_error(placement(clm, q_loaded, frame), P),

@@ -1,6 +1,6 @@
 """A path under a process load: the inverse kinematics point to point, the deflection under
 the load, its exact and first-order compensation, and the stiffest posture
-(:func:`follow_path`).
+(:func:`~closedloop.follow_path`).
 
 Every point is first given its unloaded configuration, the inverse kinematics of its target
 continued from the last point's (:func:`closedloop.kinematics.inverse.reach`; with

@@ -6,9 +6,9 @@ The *default path* is the task's inverse kinematics continued from point to poin
 turns the default pose of a point by the free coordinates z and solves the whole pose there
 (:func:`closedloop.kinematics.inverse.reach`, continued from a neighbouring candidate, within
 the joints' limits: a posture outside them, singular, or one the way does not reach, is
-not a candidate). Its cost is the translational deflection of the frame, |(J dq)_xyz| [m],
+not a candidate). Its cost is the translational deflection of the frame, ``|(J dq)_xyz|`` [m],
 of the linear model at that unloaded configuration under the point's load (the wrench and
-the weight, :func:`closedloop.elastostatics.compensation.linear_deflection`; |(C w)_xyz|
+the weight, :func:`closedloop.elastostatics.compensation.linear_deflection`; ``|(C w)_xyz|``
 for a wrench alone).
 
 * ``"tool-axis"``: z is the angle [rad] about the tool's z axis, from the default posture.
@@ -145,7 +145,7 @@ class StiffestSearch:
         self.weight, self.check_limits, self.max_change = weight, check_limits, float(max_change)
 
     def deflection(self, q: np.ndarray, load: Load) -> float:
-        """|(J dq)_xyz| [m] of the linear model at q (nq,) under ``load``."""
+        """``|(J dq)_xyz|`` [m] of the linear model at q (nq,) under ``load``."""
         clm, frame = self.clm, self.frame
         twist = frame_jacobian(clm, q, frame) @ linear_deflection(clm, q, frame, load)
         return float(np.linalg.norm(twist[:3]))

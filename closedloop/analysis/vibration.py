@@ -41,7 +41,7 @@ out (internal mobilities). On the massive motions, a = diag(mu_a)^-1/2 c turns t
 problem into the standard symmetric one diag(mu_a)^-1/2 K_c diag(mu_a)^-1/2 c =
 omega^2 c (LAPACK's dsyevd), whose conditioning is bounded by the kept mass range (at
 most 1 / MASSLESS_RTOL). A mode with omega^2 at or below :data:`RIGID_RTOL` times the
-largest |omega^2| (the rank rule of :mod:`closedloop.common.conditioning`, RANK_RTOL on the
+largest ``|omega^2|`` (the rank rule of :mod:`closedloop.common.conditioning`, RANK_RTOL on the
 square-root factor, read on omega^2) is a rigid-body mode: a mechanism's motion with no
 restoring spring, reported with frequency exactly 0. A mode below minus that bound is an
 unstable equilibrium (a weight that overturns its springs): refused.
@@ -73,7 +73,7 @@ from closedloop.model.gravity import GravityLoad, Payload
 #: largest eigenvalue, and a real mass this far below the heaviest would vibrate 1e6 times
 #: faster than the rest (beyond any model's validity), so it is better taken as massless.
 MASSLESS_RTOL = 1e-12
-#: omega^2 at or below this fraction of the largest |omega^2| is a rigid-body mode
+#: omega^2 at or below this fraction of the largest ``|omega^2|`` is a rigid-body mode
 #: (frequency 0): the rank rule RANK_RTOL (1e-7) of the compliance on the square-root
 #: factor of the stiffness, here on omega, squared.
 RIGID_RTOL = RANK_RTOL**2

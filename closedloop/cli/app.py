@@ -32,7 +32,8 @@ Exit codes (the same for ``cahyman``; :func:`closedloop.exceptions.exit_status`)
 
 Start-up: a command imports only what it runs. The parser of the command named on the
 command line is the only one built in full (:func:`build_parser`); the others stand in by
-their help line. A subcommand lives in a module of its own with ``add_parser(subparsers,
+their help line (the command-line reference documents the parser with all of them in full,
+:func:`reference_parser`). A subcommand lives in a module of its own with ``add_parser(subparsers,
 arguments)`` and its function, listed in :data:`SUBCOMMAND_MODULES` (imported only when
 it runs: :func:`closedloop.cli.common.add_subcommands`); ``stiffness`` and ``view``, built
 here, import their modules when they run too. Below the command, heavy readers are imported
@@ -164,9 +165,10 @@ def _add_view(sub) -> None:
     v.set_defaults(func=view)
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, *, every: bool = False) -> argparse.ArgumentParser:
     """Argument parser of the ``closedloop`` command; only ``command``'s parser is built
-    in full, only its module imported (module docstring)."""
+    in full, only its module imported (module docstring); ``every``: all of them
+    (:func:`reference_parser`)."""
     parser = Parser(
         prog=PROG,
         description="Stiffness and compliance of robots with closed loops. " + EXIT_HELP,
@@ -175,12 +177,19 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (add, help_line) in {"stiffness": (_add_stiffness, STIFFNESS_HELP),
                                    "view": (_add_view, VIEW_HELP)}.items():  # fmt: skip
-        if command == name:
+        if every or command == name:
             add(sub)
         else:  # its help line (as add_subcommands)
             sub.add_parser(name, help=help_line, add_help=False)
-    add_subcommands(sub, SUBCOMMAND_MODULES, command, add_source_arguments)
+    add_subcommands(sub, SUBCOMMAND_MODULES, command, add_source_arguments, every=every)
     return parser
+
+
+def reference_parser() -> argparse.ArgumentParser:
+    """The parser with every subcommand built in full (options, description, epilog), for
+    the command-line reference; it imports every subcommand's module, which the command
+    itself never does."""
+    return build_parser(every=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

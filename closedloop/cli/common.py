@@ -84,8 +84,9 @@ def one_line_warnings(prog: str):
 def run_command(prog: str, args: argparse.Namespace) -> int:
     """Run a parsed subcommand ``args.func(args)`` and return its exit status; a closed
     pipe, a typed error or a LAPACK failure end as one line and the documented status
-    (:func:`closedloop.exceptions.exit_status`; a :class:`ClusterError` is a failed
-    computation, :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``);
+    (:func:`closedloop.exceptions.exit_status`; a
+    :class:`~closedloop.exceptions.ClusterError` is a failed computation,
+    :data:`EXIT_FAILED`; so is output that cannot be written, ``> /dev/full``);
     a Ctrl-C, or a map stopped by a signal (:class:`closedloop.analysis.interrupts.Interrupted`),
     ends as ``prog: interrupted (SIGNAL)...`` and 128 + the signal's number (130, 143).
     Shared by both command lines."""
@@ -120,13 +121,16 @@ def command_of(argv: Sequence[str]) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
-def add_subcommands(subparsers, modules: dict[str, tuple[str, str]], command, *args) -> None:
+def add_subcommands(
+    subparsers, modules: dict[str, tuple[str, str]], command, *args, every: bool = False
+) -> None:
     """Subcommands defined in modules (name -> (module with ``add_parser(subparsers,
     *args)``, help line)): only the module of ``command``, the one that will run, is
     imported; the others stand in by their help line (enough for ``--help`` and for the
-    choices of an unknown command), so that a command does not pay for the others."""
+    choices of an unknown command), so that a command does not pay for the others.
+    ``every``: all of them built in full (the command-line reference)."""
     for name, (module, help_line) in modules.items():
-        if command == name:
+        if every or command == name:
             importlib.import_module(module).add_parser(subparsers, *args)
         else:
             subparsers.add_parser(name, help=help_line, add_help=False)

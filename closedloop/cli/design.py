@@ -22,7 +22,7 @@ import sys
 
 from closedloop.analysis.cluster import add_worker_timeout
 from closedloop.cli.outputs import output_folder
-from closedloop.cli.parser import Parser, path_text, positive_int
+from closedloop.cli.parser import path_text, positive_int
 from closedloop.exceptions import EXIT_FAILED
 
 
@@ -42,19 +42,6 @@ def add_parser(sub, parent_arguments) -> None:
         description=__doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    _add_arguments(p)
-
-
-def reference_parser() -> argparse.ArgumentParser:
-    """``closedloop design``'s parser on its own, for the command-line reference (the
-    ``closedloop`` parser holds its subcommands' help lines only)."""
-    p = Parser(prog="closedloop design", description=__doc__.split("\n\n", 1)[1],
-               formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    _add_arguments(p)
-    return p
-
-
-def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("problem", type=path_text, metavar="PROBLEM.yaml", help="design problem")
     run = p.add_mutually_exclusive_group()
     run.add_argument("--workers", type=positive_int, metavar="N", help="local processes")

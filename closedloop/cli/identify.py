@@ -10,7 +10,7 @@ from the model file (or ``--joint-stiffness`` / ``--springs``). The ``actuated``
 measurement are driven from the model's reference configuration on its assembly mode, as
 ``closedloop stiffness --actuated`` drives them (``--start``, ``--near``: from that start
 instead). The measurement file is the
-YAML or CSV of :func:`closedloop.analysis.measurements.read_measurements`. Each estimate is
+YAML or CSV of ``closedloop.analysis.measurements.read_measurements``. Each estimate is
 printed with its unit (N m/rad, N/m, or 1 for a block's factor). Exit status: 0 every
 parameter identified and the model fits the data, 1 some cannot be identified from these
 data (named, no value) or the model does not fit them (a residual RMS above what the sd

@@ -12,13 +12,12 @@ are outside their joints' limits has the status ``invalid``; ``--no-limits`` com
 as any other. The path's first point is driven there from the model's reference
 configuration, on its assembly mode, and each point from the last (``--start`` or
 ``--near``: from that start instead, on its mode; so a sprung passive joint gets its rest
-value). The files are written by
-:meth:`closedloop.analysis.maps.StiffnessMap.save`. ``--scheduler`` runs the chunks on a Dask
-distributed cluster (``pip install .[dask]``; start one with ``dask scheduler`` and
-``dask worker ADDRESS``): a lost worker's chunks are retried on the others, a chunk lost
-with too many workers or a run without any worker for ``--worker-timeout`` seconds stops
-with one line (exit 3). SIGINT and SIGTERM: the epilog of the help,
-:data:`closedloop.cli.map_options.SIGNALS_EPILOG`.
+value). The files are written by ``closedloop.analysis.maps.StiffnessMap.save``.
+``--scheduler`` runs the chunks on a Dask distributed cluster (``pip install .[dask]``;
+start one with ``dask scheduler`` and ``dask worker ADDRESS``): a lost worker's chunks are
+retried on the others, a chunk lost with too many workers or a run without any worker for
+``--worker-timeout`` seconds stops with one line (exit 3). SIGINT and SIGTERM: the epilog
+of the help, :data:`closedloop.cli.map_options.SIGNALS_EPILOG`.
 """
 
 from __future__ import annotations

@@ -317,8 +317,8 @@ def load_from_args(args: argparse.Namespace, geometry: bool = False) -> ClosedLo
 
 
 def model_from_args(args: argparse.Namespace, geometry: bool = False):
-    """(model, :class:`Configuration`) from :func:`add_model_arguments`' options (a frame
-    checked when one is given)."""
+    """(model, :class:`~closedloop.Configuration`) from :func:`add_model_arguments`' options
+    (a frame checked when one is given)."""
     clm = load_from_args(args, geometry)
     if args.frame is not None:
         clm.frame_id(args.frame)  # unknown frame: fail before any assembly

@@ -1,6 +1,6 @@
 """The parser of both command lines (``closedloop``, ``cahyman``) and their option types:
 negative numbers in e-notation are values, an option given twice or abbreviated is refused,
-a usage error is one line (:class:`UsageError`, exit 2).
+a usage error is one line (:class:`~closedloop.cli.parser.UsageError`, exit 2).
 """
 
 from __future__ import annotations
@@ -47,9 +47,11 @@ class Parser(argparse.ArgumentParser):
         self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message: str):
+        """Raise :class:`UsageError` (argparse's prints the usage block and exits)."""
         raise UsageError(message)
 
     def parse_known_args(self, args=None, namespace=None):
+        """argparse's, once no option is given twice (a :class:`UsageError` otherwise)."""
         args = sys.argv[1:] if args is None else list(args)
         seen: dict = {}
         for token in args:

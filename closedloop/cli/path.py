@@ -215,8 +215,9 @@ def run_path(args) -> int:
 
 
 def summary_lines(summary: dict) -> list[str]:
-    """The text of a path's summary (:meth:`PathResult.summary`): points, and the largest
-    error without compensation, with the first-order and with the exact one (mm, mrad)."""
+    """The text of a path's summary (:meth:`~closedloop.PathResult.summary`): points, and
+    the largest error without compensation, with the first-order and with the exact one
+    (mm, mrad)."""
     lines = [
         f"{summary['points']} points, frame {summary['frame']!r}, task {summary['task']} "
         f"(compensated: {summary['compensated']})"

@@ -13,7 +13,7 @@ are uniform in rad/(N m) and N m/rad. Multiplying every length by 1000 multiplie
 Decisions are taken on a square-root factor B_s (C_s = B_s B_s^T, from the springs, see
 :mod:`closedloop.elastostatics.compliance`), never on C_s itself: its singular values beta carry the
 square roots of the eigenvalues of C_s, so an SVD resolves a 1e-16 eigenvalue ratio that
-an eigen-decomposition of C_s (absolute error eps |C_s|) would turn into noise or a
+an eigen-decomposition of C_s (absolute error eps ``|C_s|``) would turn into noise or a
 negative number. The same rule decides which motions have no restoring spring, on the
 kinematics alone: the rows of the sprung coordinates of the orthonormal (scaled) basis N
 of the admissible motions. A motion they see less than RANK_RTOL times the one they see
@@ -127,7 +127,7 @@ def twist_scaling(length: float) -> np.ndarray:
 
 
 def scaled_asymmetry(C: np.ndarray, lengths) -> np.ndarray | float:
-    """max |C_s - C_s^T| / max |C_s| of compliances C (..., 6, 6) [SI] scaled at the
+    """max ``|C_s - C_s^T|`` / max ``|C_s|`` of compliances C (..., 6, 6) [SI] scaled at the
     lengths L (...,) [m] (C_s = D C D, :func:`twist_scaling`), 0 for a zero C: the
     asymmetry that :data:`SCALED_TOL` bounds, unit-free, and blind to entries that vanish
     but for rounding (an entry-by-entry test takes them for an asymmetry)."""

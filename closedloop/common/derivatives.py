@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 #: Step [rad or m] of the central differences. The error of a central difference is
-#: h^2/6 |f'''| (truncation) + eps |f| / h (rounding), smallest near h = (3 eps)^(1/3) ~
+#: h^2/6 ``|f'''|`` (truncation) + eps ``|f|`` / h (rounding), smallest near h = (3 eps)^(1/3) ~
 #: 1e-5, where both are ~1e-10 relative to f for links of metre scale.
 DIFFERENCE_STEP = 1e-5
 #: Joints whose motion subspace depends on q (Pinocchio's second-order algorithms are

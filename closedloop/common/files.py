@@ -19,15 +19,15 @@ def write_atomically(
     """Write ``path`` through ``write(f)`` so that it is either complete or unchanged.
 
     ``write`` gets an open file (binary, or UTF-8 text with ``text``; ``newline`` as for
-    :func:`open`): a hidden temporary file (``.NAME.<random>.tmp``) in the folder of
-    ``path``, flushed to the disk and moved onto ``path`` with :func:`os.replace` once
+    ``open()``): a hidden temporary file (``.NAME.<random>.tmp``) in the folder of
+    ``path``, flushed to the disk and moved onto ``path`` with ``os.replace`` once
     ``write`` has returned. On any error (a full disk, an exception of ``write``,
     Ctrl-C) the temporary file is removed and the error raised again, with ``path`` as
     its file name where it named the temporary file; an existing file ``path`` is then left
     as it was. The new file gets the permissions of the file it replaces, or else
-    ``0o666`` less the umask, as :func:`open` would give; a symbolic link ``path`` is
+    ``0o666`` less the umask, as ``open()`` would give; a symbolic link ``path`` is
     followed (its target is replaced). A file that the user may not write is refused
-    (:class:`PermissionError`, as by :func:`open`); a target that is not a regular file
+    (:class:`PermissionError`, as by ``open()``); a target that is not a regular file
     (a device such as ``/dev/null``, a pipe such as ``/dev/stdout``) is written into
     directly. Returns ``path``.
     """

@@ -24,6 +24,7 @@ from typing import TextIO, TypeVar
 
 from tqdm import tqdm
 
+#: The type of the items.
 T = TypeVar("T")
 
 #: Seconds between the lines written when the stream is not a terminal.

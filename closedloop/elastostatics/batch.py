@@ -1,6 +1,6 @@
 """Compliances of many configurations of one model at once.
 
-:func:`compliance` answers one configuration; a map or a sweep asks thousands, and most
+:func:`~closedloop.compliance` answers one configuration; a map or a sweep asks thousands, and most
 of a single query's time is the fixed cost of its small numpy and LAPACK calls. Here the
 kinematics are evaluated configuration by configuration (Pinocchio), and the fast paths
 of :mod:`closedloop.elastostatics.springs` (serial, partitioned) run once on the whole stack:
@@ -15,8 +15,8 @@ margin (:data:`MARGIN`): the closure residual within its tolerance and resolved 
 1-norm condition, which bounds the estimate of the single query), the closure equations
 solved, no singular value of the rank rule near its threshold, C, G and K finite. Every other
 configuration (near a singular pose, the null-space path, open loops, a mechanism) goes
-through :func:`compliance` itself, so that the answer, or the error, is that of the single
-query. Results agree with the single query to rounding (the stacked LAPACK calls differ
+through :func:`~closedloop.compliance` itself, so that the answer, or the error, is that of
+the single query. Results agree with the single query to rounding (the stacked LAPACK calls differ
 from the single ones only in their order of operations).
 """
 
@@ -55,7 +55,7 @@ MARGIN = 2.0
 #: stack stays within tens of MB.
 STACK = 1024
 #: Largest entry of K [SI] the stacked computation answers (the single query's overflow
-#: check, with room): beyond it the configuration goes through :func:`compliance`.
+#: check, with room): beyond it the configuration goes through :func:`~closedloop.compliance`.
 K_MAX = 1e290
 #: Factor above the rank rule's threshold (RANK_RTOL spread)^2 on the eigenvalue ratio
 #: lambda_min / lambda_max of the formed C_s = B_s B_s^T by which a configuration is full
@@ -132,10 +132,10 @@ def compliances(
         NameNotFoundError: unknown frame.
         OutsideLimitsError: ``check_limits`` and a configuration outside the limits (a
             note names its index).
-        ClosedLoopError: the error of :func:`closedloop.elastostatics.compliance.compliance` at the
-        first configuration that has one (open loops, a mechanism, an overflow), with a note
-        naming the configuration's index (an error of the frame, axes or length concerns no
-        configuration: it has no such note).
+        ClosedLoopError: the error of :func:`closedloop.compliance` at the first
+            configuration that has one (open loops, a mechanism, an overflow), with a note
+            naming the configuration's index (an error of the frame, axes or length
+            concerns no configuration: it has no such note).
     """
     Q = _check_configurations(clm, Q)
     _check_query(clm, frame, axes, length)  # before any configuration
@@ -321,7 +321,7 @@ def _ranks(B_s: np.ndarray, C_s: np.ndarray, sc, cond_T: np.ndarray):
 
     The rule reads the kinematic factor on an orthonormal basis of the admissible motions
     (:func:`closedloop.elastostatics.partition.kinematic_factor`); the factors here are on
-    T = [I; X], whose condition numbers, at most ``cond_T`` (n,) (sqrt(1 + |X|_F^2), 1 for a
+    T = [I; X], whose condition numbers, at most ``cond_T`` (n,) (sqrt(1 + ``|X|_F^2``), 1 for a
     serial robot), widen the thresholds: a decision taken here is the rule's.
 
     Most configurations are clearly full rank: the eigenvalues of C_s = B_s B_s^T (n, 6, 6)

@@ -19,29 +19,36 @@ G)_A the generalised force that the actuators' springs k_A hold (u = q_A for a r
 actuator). The unknowns are the actuated coordinates and the free ones together: Newton
 with the held model's tangent stiffness (:func:`closedloop.elastostatics.tangent.tangent_stiffness`,
 which carries the geometric stiffness of the load, the loop curvature and the weight's),
-its matrix kept for the next iterates, and the next point's, while they converge (chord
-steps, :data:`CHORD_RATE`), whose answer is exact to the statics' tolerance, not only to
-first order. A serial arm
-with springs on its actuators only has nothing to settle: q is the unloaded pose and
-u = q - K^-1 (J^T w - G(q)), the closed form.
+its matrix kept for the next iterates while they converge (chord steps,
+:data:`CHORD_RATE`), whose answer is exact to the statics' tolerance, not only to first
+order. A serial arm with springs on its actuators only has nothing to settle: q is the
+unloaded pose and u = q - K^-1 (J^T w - G(q)), the closed form.
 
-**Loaded equilibria along a path** (:func:`loaded_equilibrium`): Newton from the last
-point's deflection carried to this point's rest configuration, kept when it stays near its
-start and crosses no singularity; the load continuation from rest
-(:func:`closedloop.elastostatics.statics.solve_equilibrium`) at the first point, and
-wherever that Newton fails or is not kept.
+**Warm starts along a path** (:func:`extrapolated`): the last points' deflections from
+their rest configurations, extrapolated to this point's. From the last point alone the
+start is off by the change of the deflection between the points (first order in the
+step); from the last two, by its curvature along the path (second order): CaHyMan's
+compensation on a line of 1 mm steps then converges in one Newton step (two evaluations
+of the equations and one tangent), where a start carried from the last point takes two,
+and chord steps on the last point's Newton matrix three or four, each an evaluation of
+the equations, which together cost more than the one new tangent.
+
+**Loaded equilibria along a path** (:func:`loaded_equilibrium`): Newton from the warm
+start, kept when it stays near its start and crosses no singularity; the load continuation
+from rest (:func:`closedloop.elastostatics.statics.solve_equilibrium`) at the first point,
+and wherever that Newton fails or is not kept.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from closedloop.elastostatics.continuation import JUMP_FLOOR, JUMP_RATIO
-from closedloop.elastostatics.equations import EquilibriumEquations
+from closedloop.elastostatics.equations import EquilibriumEquations, solver_units
 from closedloop.elastostatics.newton import STEP_TOL, balanced, closed, distance, newton
 from closedloop.elastostatics.springs import spring_factor
 from closedloop.elastostatics.statics import CLOSURE_TOL, MAX_STEP, solve_equilibrium
@@ -64,6 +71,9 @@ MAX_ITER = 20
 #: tangent stiffness) while the residual falls by this factor a step at least; from a warm
 #: start it falls like the square of the first step's, far below it.
 CHORD_RATE = 0.1
+#: Most a warm start extrapolates (:func:`extrapolated`): the step to this point at most
+#: this many times the last one along it (a path whose steps grow faster is carried).
+EXTRAPOLATION_LIMIT = 4.0
 #: A warm-started equilibrium is kept when Newton ends within WARM_RATIO of the guess's
 #: deflection from its start (plus the resolution of the equilibria, JUMP_FLOOR): the
 #: statics' bound on an increment's corrector (JUMP_RATIO), against a jump to another
@@ -90,11 +100,27 @@ def rest_at(clm: ClosedLoopModel, q_rest: np.ndarray, commands: np.ndarray) -> n
     return q
 
 
-def carried(clm: ClosedLoopModel, q: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """(nq,) the configuration q (nq,) moved with its reference from ``old`` to ``new``:
-    new + (q - old), the difference taken on the tangent space (a warm start)."""
+def extrapolated(clm: ClosedLoopModel, q_rest: np.ndarray, last: list) -> np.ndarray:
+    """(nq,) a warm start [rad, m] at the rest configuration q_rest (nq,) from the last
+    points' (rest, answer) pairs ``last`` (one or two, the older first; each (nq,)):
+    q_rest + d, with d the last point's deflection difference(rest, answer) plus, given
+    two, its change from the point before times s, the step dr from the last rest to
+    q_rest along the last step dr_last (s = <dr, dr_last> / <dr_last, dr_last> on the
+    tangent space, lengths in units of L, clamped to [0, :data:`EXTRAPOLATION_LIMIT`]):
+    linear extrapolation along the path.
+    """
     model = clm.model
-    return pin.integrate(model, new, pin.difference(model, old, q))
+    rest, answer = last[-1]
+    d = pin.difference(model, rest, answer)
+    if len(last) > 1:
+        before, answer_before = last[-2]
+        coords = solver_units(clm).coords
+        step = pin.difference(model, rest, q_rest) / coords
+        back = pin.difference(model, before, rest) / coords
+        size = float(back @ back)
+        s = min(max(float(step @ back) / size, 0.0), EXTRAPOLATION_LIMIT) if size else 0.0
+        d += s * (d - pin.difference(model, before, answer_before))
+    return pin.integrate(model, q_rest, d)
 
 
 def linear_deflection(clm: ClosedLoopModel, q: np.ndarray, frame: str, load: Load) -> np.ndarray:
@@ -131,10 +157,11 @@ def loaded_equilibrium(
     (:meth:`EquilibriumEquations.stability`: 1 unloaded, its sign changes only where the
     branch meets a singularity).
 
-    Newton from ``guess`` (nq,) (the last point's equilibrium carried along the path), kept
-    when it converges within :data:`WARM_RATIO` of the guess's deflection from its start
-    and its tau has the sign ``sign`` (the last point's): no singularity crossed, no jump
-    to another branch. Else, or without a guess, the load continuation from rest
+    Newton from ``guess`` (nq,) (the last points' equilibria extrapolated along the path,
+    :func:`extrapolated`), kept when it converges within :data:`WARM_RATIO` of the
+    guess's deflection from its start and its tau has the sign ``sign`` (the last
+    point's): no singularity crossed, no jump to another branch. Else, or without a
+    guess, the load continuation from rest
     (:func:`closedloop.elastostatics.statics.solve_equilibrium`) decides. ``stability``
     False: tau is not computed (None) and the warm answer is kept on the distance test
     alone (a guess that is itself an equilibrium of the branch under this load, nearby).
@@ -203,8 +230,7 @@ class Compensation:
             free coordinates but the actuated ones [N m, N] (the actuators' springs hold
             theirs at ``commands`` by construction).
         iterations: Newton iterations.
-        system: the last Newton matrix (with its basis of the equilibrium's rows), for the
-            next point (``compensate(..., previous=)``), or None.
+        matrices: Newton matrices formed (the iterations between them chord steps).
     """
 
     q: np.ndarray
@@ -213,7 +239,7 @@ class Compensation:
     closure_residual: float
     force_residual: float
     iterations: int
-    system: tuple | None = field(default=None, repr=False)
+    matrices: int
 
 
 def compensate(
@@ -223,7 +249,6 @@ def compensate(
     q_rest: np.ndarray,
     load: Load,
     guess: np.ndarray,
-    previous: Compensation | None = None,
 ) -> Compensation:
     """The commands whose equilibrium under ``load`` meets ``task`` (module docstring).
 
@@ -234,10 +259,8 @@ def compensate(
         q_rest: (nq,) the unloaded configuration: the rest values of every spring but the
             actuators'.
         load: the wrench at the frame and the weight.
-        guess: (nq,) start of Newton (the uncompensated equilibrium, or the last point's
-            compensated one carried along the path).
-        previous: the last point's compensation, whose Newton matrix starts this one's
-            iterations (chord steps, replaced by a new one where they do not converge).
+        guess: (nq,) start of Newton (the uncompensated equilibrium, or the last points'
+            compensated ones extrapolated along the path, :func:`extrapolated`).
 
     Raises:
         EquilibriumError: Newton does not converge in :data:`MAX_ITER` iterations (the
@@ -252,8 +275,8 @@ def compensate(
     task_scale = np.where(task.linear, clm.length, 1.0)
     row_tol = units.rows * CLOSURE_TOL
     q, fid = np.array(guess, dtype=float), clm.frame_id(frame)
-    # the Newton matrix (with its basis), the last residual
-    system, last = (None if previous is None else previous.system), math.inf
+    # the Newton matrix (with its basis), the last iterate's residual, the matrices formed
+    system, last, matrices = None, math.inf, 0
     for it in range(MAX_ITER + 1):
         st = eqs.evaluate(q, load)  # the kinematics of q in held.data
         M = held.data.oMf[fid]
@@ -271,16 +294,12 @@ def compensate(
                 st["force"],
                 1.0,
             )
-        fresh = system is None
-        if fresh:
+        rhs = None if system is None else _rhs(eqs, st, system, t)
+        if rhs is None or not float(np.max(np.abs(rhs))) <= CHORD_RATE * last:
+            # the first iterate, or a chord that stalls: a fresh tangent
             system = _matrix(held, eqs, q, load, st, task, M, unknown, cols, task_scale)
-        rhs = _rhs(eqs, st, system, t)
-        size = float(np.max(np.abs(rhs)))
-        if not fresh and not size <= CHORD_RATE * last:  # the chord no longer contracts
-            system = _matrix(held, eqs, q, load, st, task, M, unknown, cols, task_scale)
-            rhs = _rhs(eqs, st, system, t)
-            size = math.inf  # a new matrix: no contraction asked of its first step
-        last = size
+            rhs, matrices = _rhs(eqs, st, system, t), matrices + 1
+        last = float(np.max(np.abs(rhs)))
         step = np.zeros(clm.model.nv)
         step[unknown] = cols * min_norm_solve(system[0], -rhs)
         ratio = float(np.max(np.abs(step[unknown]) / (MAX_STEP * cols), initial=0.0))
@@ -303,7 +322,7 @@ def compensate(
         closure_residual=st["closure"],
         force_residual=st["force"],
         iterations=it,
-        system=system,
+        matrices=matrices,
     )
 
 

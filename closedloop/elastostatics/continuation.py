@@ -14,7 +14,7 @@ from closedloop.elastostatics.newton import CAPPED, CONVERGING, STALLED, WANDERE
 from closedloop.exceptions import EquilibriumError
 
 #: Error of tau (absolute: M is 1 unloaded; the weld curvature by central differences
-#: carries 1e-10 of it): a fall of tau^2 below TAU_NOISE (2 |tau| + TAU_NOISE) is rounding,
+#: carries 1e-10 of it): a fall of tau^2 below TAU_NOISE (2 ``|tau|`` + TAU_NOISE) is rounding,
 #: not a trend to extrapolate.
 TAU_NOISE = 1e-9
 
@@ -80,7 +80,7 @@ def fold_distance(history) -> float:
     """Load fraction still to go to where tau (:meth:`EquilibriumEquations.stability`)
     vanishes: a Newton step on tau^2, its slope at the last equilibrium that of the parabola
     through the last three (t, tau) pairs of ``history`` (the chord through two if only
-    two); inf when |tau| does not fall (beyond its rounding, TAU_NOISE) or has changed
+    two); inf when ``|tau|`` does not fall (beyond its rounding, TAU_NOISE) or has changed
     sign."""
     if len(history) < 2:
         return np.inf
@@ -130,10 +130,12 @@ def failure(
     """EquilibriumError after a failed continuation, limit load or not (its ``limit_load``).
 
     (q, t): the last equilibrium and its load fraction; ``s_fail`` the load fraction that
-    failed; ``state``: the :meth:`evaluate` state whose residuals the error reports;
-    ``history``: (t, tau) of the last three equilibria; ``how``: how the last failed
-    increment failed (:func:`advice`). A limit load when tau extrapolates to zero within
-    the failed increment: the fold is bracketed by [t, s_fail].
+    failed; ``state``: the
+    :meth:`~closedloop.elastostatics.equations.EquilibriumEquations.evaluate` state whose
+    residuals the error reports; ``history``: (t, tau) of the last three equilibria;
+    ``how``: how the last failed increment failed (:func:`advice`). A limit load when tau
+    extrapolates to zero within the failed increment: the fold is bracketed by
+    [t, s_fail].
     """
     margin, tau = eqs.stability(q, t * w)
     fold = fold_distance(history)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from closedloop.common.arrays import frozen
 from closedloop.common.conditioning import RANK_RTOL, rule_rank
 from closedloop.elastostatics.springs import spring_split
 from closedloop.elastostatics.tangent import (
@@ -43,6 +44,8 @@ class SolverUnits:
 
     @classmethod
     def of(cls, clm: ClosedLoopModel) -> SolverUnits:
+        """The scales of ``clm``, from its length and which of its coordinates are
+        translations."""
         L, model = clm.length, clm.model
         coords = np.where(clm.linear_coordinates, L, 1.0)
         q = np.ones(model.nq)
@@ -60,28 +63,49 @@ class SolverUnits:
         return self.coords * default if value is None else np.full(self.coords.size, value)
 
 
+def _free_coordinates(clm: ClosedLoopModel) -> tuple:
+    """What the equations of a model read of its free coordinates (once per model): their
+    indices, the :class:`SolverUnits`, their scales [m or rad per unit] (dq_free =
+    free_scales * y), the indices into them of the sprung ones (k > 0), and the square
+    root of their springs on y (sqrt(k) per coordinate, or the columns of the root factor
+    K_q = R^T R of the spring blocks)."""
+    free = np.flatnonzero(np.isfinite(clm.stiffness))
+    u = SolverUnits.of(clm)
+    units = SolverUnits(frozen(u.rows), frozen(u.coords), frozen(u.q))
+    scales = units.coords[free]
+    sprung = np.flatnonzero(clm.stiffness[free] > 0.0)
+    coords = free[sprung]
+    root = (
+        clm.spring_root[:, coords] * scales[sprung]
+        if clm.spring_blocks
+        else np.sqrt(clm.stiffness[coords]) * scales[sprung]
+    )
+    return frozen(free), units, frozen(scales), frozen(sprung), frozen(root)
+
+
+def solver_units(clm: ClosedLoopModel) -> SolverUnits:
+    """The :class:`SolverUnits` of ``clm`` (once per model, read-only)."""
+    return clm.memo("equilibrium_equations", _free_coordinates, clm)[1]
+
+
 class EquilibriumEquations:
     """The equilibrium equations F = 0, c = 0 of one model, loaded frame and rest q.
 
     Works on the free coordinates (finite stiffness); locked ones keep their rest values.
     Used by :func:`closedloop.elastostatics.statics.solve_equilibrium`.
+
+    Attributes:
+        free: (n_free,) the free coordinates' indices; units: the :class:`SolverUnits`;
+        free_scales: (n_free,) scale of each free coordinate [m or rad per unit]:
+        dq_free = free_scales * y; sprung: the free coordinates with a spring (k > 0),
+        indices into the free ones; root: the square root of their springs on y. Read-only,
+        shared by the equations of one model.
     """
 
     def __init__(self, clm: ClosedLoopModel, q_rest: np.ndarray, frame: str):
         self.clm, self.q_rest, self.frame = clm, q_rest, frame
-        self.free = np.flatnonzero(np.isfinite(clm.stiffness))
-        self.units = SolverUnits.of(clm)
-        #: (n_free,) scale of each free coordinate [m or rad per unit]: dq_free = free_scales * y
-        self.free_scales = self.units.coords[self.free]
-        #: the free coordinates with a spring (k > 0), indices into the free ones
-        self.sprung = np.flatnonzero(clm.stiffness[self.free] > 0.0)
-        # square root of their springs on y: sqrt(k) per coordinate, or the columns of the
-        # root factor K_q = R^T R of the spring blocks
-        coords, scales = self.free[self.sprung], self.free_scales[self.sprung]
-        self.root = (
-            clm.spring_root[:, coords] * scales
-            if clm.spring_blocks
-            else np.sqrt(clm.stiffness[coords]) * scales
+        self.free, self.units, self.free_scales, self.sprung, self.root = clm.memo(
+            "equilibrium_equations", _free_coordinates, clm
         )
 
     def evaluate(self, q: np.ndarray, w: Load | np.ndarray) -> dict:
@@ -218,8 +242,8 @@ class EquilibriumEquations:
         smallest eigenvalue of the symmetric part of N^T K_t N on the motions with a restoring
         spring, scaled by their spring stiffness; 1 unloaded, 0 where K_t turns singular,
         < 0 if unstable. Spring-free motions the load does not act on (a rod spinning about
-        its axis) are left out; the sprung ones are those that move a sprung coordinate
-        (:meth:`_sprung_motions`). The spring-free ones that the load acts on (a link
+        its axis) are left out; the sprung ones are those that move a sprung coordinate.
+        The spring-free ones that the load acts on (a link
         hanging on a passive joint) settle with them (:func:`settled_tangent`,
         :func:`stability_margin`).
         """

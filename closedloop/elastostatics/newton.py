@@ -9,9 +9,10 @@ import pinocchio as pin
 
 from closedloop.elastostatics.equations import EquilibriumEquations
 
-#: Relative tolerance on the unbalanced generalised force (see :func:`solve_equilibrium`).
+#: Relative tolerance on the unbalanced generalised force
+#: (see :func:`~closedloop.solve_equilibrium`).
 FORCE_RTOL = 1e-11
-#: Newton step [rad, and lengths in units of L], relative to max(1, |q|) (q in the same
+#: Newton step [rad, and lengths in units of L], relative to max(1, ``|q|``) (q in the same
 #: units), after which q counts as converged.
 STEP_TOL = 1e-12
 

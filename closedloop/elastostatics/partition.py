@@ -147,14 +147,15 @@ def model_scaling(clm: ClosedLoopModel, L: float) -> _Scaling:
 #: to rounding (1e-12 and better on every test mechanism). Below it the null-space path
 #: decides, with the rank rule.
 PARTITION_RCOND = 1e-6
-#: Largest residual |J_s + J_p X|_F of the partitioned closure equations, relative to
-#: max |J_s|, for the springs to move freely (else some spring coordinates are tied by
+#: Largest residual ``|J_s + J_p X|_F`` of the partitioned closure equations, relative to
+#: max ``|J_s|``, for the springs to move freely (else some spring coordinates are tied by
 #: the loops).
 PARTITION_RTOL = 1e-9
 
 
 #: From this many passive coordinates on, the passive motion is solved loop by loop
-#: (:func:`_loop_blocks`): the cost then grows with the number of loops, not its cube.
+#: (on the independent blocks of the closure Jacobian: loops that share no passive
+#: coordinate are solved apart): the cost then grows with the number of loops, not its cube.
 BLOCK_PASSIVE = 48
 
 
@@ -164,8 +165,8 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
 
     One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
     -J_p = Q1 R11, X = R11^-1 R12 (dtrtri: unlike dgels' triangular solve, it does not
-    wake a multi-threaded BLAS on a small matrix), cond_1(R11) = |R11|_1 |R11^-1|_1 (dlantr)
-    and |R22|_F = |J_s + J_p X|_F. With many passive coordinates, one such QR per
+    wake a multi-threaded BLAS on a small matrix), cond_1(R11) = ``|R11|_1`` ``|R11^-1|_1`` (dlantr)
+    and ``|R22|_F`` = ``|J_s + J_p X|_F``. With many passive coordinates, one such QR per
     independent block of loops.
     """
     p = sc.passive.size

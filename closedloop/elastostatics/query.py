@@ -245,7 +245,7 @@ class _Plan:
         (serial), else :func:`closedloop.elastostatics.partition.kinematic_factor` (the
         singular values of J T V differ from those by up to cond(T), which would move the
         rank decision of a pose near the threshold; the spread of the full-rank test widens
-        by cond(T) <= sqrt(1 + |X|_F^2) for the same reason).
+        by cond(T) <= sqrt(1 + ``|X|_F^2``) for the same reason).
         """
         sc = self._scaling
         if sc.P_diagonal is not None:  # every coordinate sprung, diagonal P: by columns
@@ -289,7 +289,7 @@ ROTATION_JOINTS = ("JointModelR", "JointModelSpherical", "JointModelUniversal")
 
 def _transposed_product(B: np.ndarray, P_rows: np.ndarray) -> np.ndarray:
     """(nv, 6) read-only G = P B^T of the serial path with diagonal P, from B (6, nv) and
-    P's diagonal in every row, P_rows (6, nv): |G_kj| = |B_jk| |P_k|."""
+    P's diagonal in every row, P_rows (6, nv): ``|G_kj| = |B_jk| |P_k|``."""
     G = B * P_rows
     G.setflags(False)  # write=False; its transpose, a view, is then read-only too
     return G.T
@@ -298,10 +298,10 @@ def _transposed_product(B: np.ndarray, P_rows: np.ndarray) -> np.ndarray:
 def _bounded(model: ClosedLoopModel, fid: int, sc, L: float) -> bool:
     """True when the serial path with a spring on every coordinate cannot overflow at any
     configuration: every joint rotates about its origin (:data:`ROTATION_JOINTS`), so
-    every entry of the frame Jacobian is at most j = max(1, 2 R + |frame offset|) (R: the
+    every entry of the frame Jacobian is at most j = max(1, 2 R + ``|frame offset|``) (R: the
     reach of the joint origins, :func:`closedloop.kinematics.configuration.joint_reach`,
-    the same at every q), and with P the largest of P_diagonal |B| <= j P, |G| <= j P^2,
-    |C| <= s (j P)^2, |D B diag(sigma)| <= j P max(1, 1/L) max(sigma), all below
+    the same at every q), and with P the largest of P_diagonal ``|B|`` <= j P, ``|G|`` <= j P^2,
+    ``|C|`` <= s (j P)^2, ``|D B diag(sigma)|`` <= j P max(1, 1/L) max(sigma), all below
     :data:`FINITE_BOUND` (the spring factor's own K is guarded where it is made,
     :func:`closedloop.elastostatics.unloaded.fast_result`)."""
     pm = model.model

@@ -108,7 +108,7 @@ def check_spread(clm: ClosedLoopModel, L: float, what: str = "the general path")
     )
 
 
-#: Values of the ``path`` argument of :func:`compliance`.
+#: Values of the ``path`` argument of :func:`~closedloop.compliance`.
 PATHS = ("auto", "null-space")
 
 

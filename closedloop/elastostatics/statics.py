@@ -37,7 +37,7 @@ singular value of the spring-scaled tangent stiffness, watched at each equilibri
 extrapolated, makes the increments approach a singularity by halves; there the solver
 steps across (a bifurcation) or stops at a limit load (a fold) bracketed to
 :data:`FOLD_RTOL` of its load. An answer is an equilibrium of the branch from rest, or
-an :class:`EquilibriumError` that says which: a limit load, or a failure of the
+an :class:`~closedloop.EquilibriumError` that says which: a limit load, or a failure of the
 iterations.
 
 Joint limits (``model.lowerPositionLimit`` / ``upperPositionLimit`` of revolute and prismatic
@@ -202,8 +202,9 @@ def solve_equilibrium(
         MechanismError: a spring-free motion moves the frame (no equilibrium).
         SingularConfigurationError: a mechanism with closures whose springs are further
             apart than :data:`closedloop.elastostatics.springs.SPREAD_RESOLVED` (1e20, scaled), the
-            message naming the stiffest and the softest (:func:`_check_spread`); so is one
-            with a passive joint (k = 0), whose spring-free motions
+            message naming the stiffest and the softest
+            (:func:`closedloop.elastostatics.springs.check_spread`); so is one with a
+            passive joint (k = 0), whose spring-free motions
             :func:`closedloop.elastostatics.springs.spring_factor` checks. Without either, any
             spread.
         EquilibriumError: no equilibrium of the branch from rest found. Its ``limit_load``
@@ -213,11 +214,12 @@ def solve_equilibrium(
             ``max_halvings`` ran out first); False when Newton failed to converge (or
             only converged on another branch) with the tangent stiffness regular:
             ``stability_margin`` holds the margin at the last equilibrium. Its advice
-            names what the failure calls for (:data:`closedloop.elastostatics.continuation
-            .ADVICE`): more ``max_iter`` when Newton was still converging, a smaller
-            ``max_increment`` or more ``max_halvings`` when it went off, a larger
-            ``max_step`` when its steps were cut, none when it stalls at the rounding of
-            the equations; followed, it may reach further, never another branch.
+            names what the failure calls for
+            (:data:`closedloop.elastostatics.continuation.ADVICE`): more ``max_iter`` when
+            Newton was still converging, a smaller ``max_increment`` or more
+            ``max_halvings`` when it went off, a larger ``max_step`` when its steps were
+            cut, none when it stalls at the rounding of the equations; followed, it may
+            reach further, never another branch.
             :class:`JointLimitError` (a subclass) with ``enforce_limits``.
     """
     _check_options(tol, max_iter, max_halvings, max_step, max_increment)

@@ -48,6 +48,7 @@ from closedloop.common.derivatives import (
     central_differences,
     pinocchio_second_order_exact,
 )
+from closedloop.elastostatics.point_closures import point_anchors, point_curvature, point_gap
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.constraints import (
     closure_jacobian,
@@ -95,50 +96,6 @@ def _hessian(raw: np.ndarray, nv: int) -> np.ndarray:
     return np.asarray(raw).ravel().reshape((6, nv, nv), order="F")
 
 
-def _weighted_hessian(raw, weights: np.ndarray, nv: int) -> np.ndarray:
-    """(nv, nv) sum_r weights_r H[r] of a Pinocchio kinematic Hessian H (:func:`_hessian`)
-    with the weights (6,), read from its memory as :func:`_hessian` reads it, without
-    forming the tensor: H[r, i, k] is element r + 6 (i + nv k) of the buffer."""
-    return (np.asarray(raw).reshape(-1, 6) @ weights).reshape(nv, nv).T
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _anchor_point(clm: ClosedLoopModel, joint: int, placement: pin.SE3, weights=None):
-    """Position p (3,) [m], point Jacobian J_p (3, nv) and, with ``weights`` lambda (3,),
-    the weighted derivative sum_r lambda_r H_p[r] (nv, nv) (H_p[:, a, b] = dJ_p[:, a]/dq_b)
-    of an anchor point fixed on ``joint``.
-
-    World axes (Pinocchio's LOCAL_WORLD_ALIGNED for a point). From the spatial (WORLD)
-    Jacobian [v0; w] of the joint, the point moves at v0 + w x p, so J_p = J_v - [p]x J_w
-    and dJ_p[:, a]/dq_b = H_v - [p]x H_w - [J_p b]x J_w a; weighted by lambda, with
-    lambda . (J_p b x J_w a) = (J_w a) . (lambda x J_p b), it is
-    lambda . H_v - ([p]x^T lambda) . H_w - J_w^T [lambda]x J_p, formed without the
-    (3, nv, nv) tensor. Expects the joint Jacobians (and, with ``weights``,
-    ``pin.computeJointKinematicHessians``) of the current q.
-    """
-    model, data = clm.model, clm.data
-    p = data.oMi[joint].act(placement.translation)
-    JW = np.asarray(pin.getJointJacobian(model, data, joint, pin.WORLD)).reshape(6, model.nv)
-    Jp = JW[:3] - _skew(p) @ JW[3:]
-    if weights is None:
-        return p, Jp, None
-    raw = pin.getJointKinematicHessian(model, data, joint, pin.WORLD)
-    H = _weighted_hessian(raw, np.concatenate([weights, -_skew(p).T @ weights]), model.nv)
-    H -= JW[3:].T @ (_skew(weights) @ Jp)
-    return p, Jp, H
-
-
-def _rows(clm: ClosedLoopModel):
-    """(closure, row slice) of every closure in the stacked residual."""
-    row = 0
-    for c in clm.closures:
-        yield c, slice(row, row + c.size)
-        row += c.size
-
-
 def closure_gap(
     clm: ClosedLoopModel, q: np.ndarray, *, update: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -162,12 +119,9 @@ def closure_gap(
     c, A = np.zeros(m), np.zeros((m, nv))
     if any(cl.kind != "3d" for cl in clm.closures):
         c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
-    for cl, rows in _rows(clm):
-        if cl.kind == "3d":
-            k = cl.constraint
-            p1, J1, _ = _anchor_point(clm, k.joint1_id, k.joint1_placement)
-            p2, J2, _ = _anchor_point(clm, k.joint2_id, k.joint2_placement)
-            c[rows], A[rows] = p2 - p1, J2 - J1
+    rows = point_anchors(clm).rows
+    if rows.size:
+        c[rows], A[rows] = point_gap(clm)
     return c, A
 
 
@@ -240,16 +194,11 @@ def closure_curvature(
     if update:
         update_kinematics(clm, q)
     out = np.zeros((model.nv, model.nv))
-    pin.computeJointKinematicHessians(model, clm.data)
-    lam_w = np.zeros_like(lam)
-    for cl, rows in _rows(clm):
-        if cl.kind != "3d":
-            lam_w[rows] = lam[rows]
-        elif np.any(lam[rows]):
-            k = cl.constraint
-            _, _, H1 = _anchor_point(clm, k.joint1_id, k.joint1_placement, lam[rows])
-            _, _, H2 = _anchor_point(clm, k.joint2_id, k.joint2_placement, lam[rows])
-            out += H2 - H1
+    rows = point_anchors(clm).rows
+    if np.any(lam[rows]):
+        out += point_curvature(clm, lam[rows])
+    lam_w = lam.copy()
+    lam_w[rows] = 0.0
     if np.any(lam_w):
         out += central_differences(model, q, lambda x: closure_jacobian(clm, x).T @ lam_w)
         update_kinematics(clm, q)
@@ -272,7 +221,7 @@ def spring_hessian(clm: ClosedLoopModel, q: np.ndarray, q_rest: np.ndarray) -> n
     (revolute, prismatic) and the other vector-space joints Je is constant and the second
     term vanishes; for a sprung joint on a Lie group (free flyer, spherical, planar:
     nq != nv) it is the derivative of Je^T f_e at fixed f_e, by central differences with
-    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of |f_e|), zero at zero deflection.
+    step :data:`WELD_CURVATURE_STEP` (error ~1e-10 of ``|f_e|``), zero at zero deflection.
     Locked coordinates (k = inf) get 0. Units: N m/rad or N/m on the diagonal.
     """
     model = clm.model
@@ -355,10 +304,10 @@ def scaled_tangent(
             (:func:`closedloop.elastostatics.compliance.spring_subspace`).
 
     Returns:
-        M: (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I), dimensionless:
-            the identity without preload, singular at a critical load.
-        P: (d, d) preload part N^T (K_t - K_q) N of the restricted tangent stiffness.
-        T: (d, s) the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
+        (M, P, T): M (s, s) ``I + T^T P T`` with T = V / sqrt(ls) (T^T N^T K_q N T = I),
+        dimensionless: the identity without preload, singular at a critical load; P (d, d)
+        the preload part N^T (K_t - K_q) N of the restricted tangent stiffness; T (d, s)
+        the scaling V / sqrt(ls) [sqrt(rad / (N m)), per the joint units].
     """
     P = N.T @ (Kt - clm.spring_matrix) @ N
     T = V / np.sqrt(ls)

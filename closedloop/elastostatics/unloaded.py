@@ -14,7 +14,7 @@ and a wrench w at the frame does the work w^T J N y, so at equilibrium
 
 Passive joints and redundant closure rows need no special case: they only shape N.
 A null direction z of K_r is a motion without any restoring spring. If it moves the
-frame (J N z != 0) there is no equilibrium (:class:`MechanismError`); if not, it is an
+frame (J N z != 0) there is no equilibrium (:class:`~closedloop.MechanismError`); if not, it is an
 internal mobility (e.g. a link spinning about its own axis) and is left out.
 
 Numerics (:mod:`closedloop.common.conditioning`). Everything is computed in unit-free
@@ -270,16 +270,17 @@ def fast_result(
 
     ``spectrum``: the rank, rigid directions, condition number, U, beta, top and bottom of
     :func:`closedloop.common.conditioning.factor_rank` on the scaled factor B_s = D B.
-    ``g_scale`` bounds |G_kj| / |B_jk|, G being then a tuple (function, arguments...)
-    whose call computes G; None: G is given.
+    ``g_scale`` bounds ``|G_kj|`` / ``|B_jk|``, G being then a tuple (function,
+    arguments...) whose call computes G; None: G is given.
 
     C, G and K are finite when bounds of their entries are: ``top`` and ``bottom``, the
-    largest and smallest kept singular values of B_s, bound |B_jk| <= max(1, L) top,
-    |C_ij| <= |B|^2 and |K_ij| <= (max(1, 1/L) / bottom)^2; G's entries are bounded by
-    ``g_scale`` or summed. Rounding adds less than a factor 1 + 1e-12 to any of these;
-    beyond :data:`FINITE_BOUND`, or NaN, every entry is computed and looked at. Within
-    it, K (from U and beta, :func:`closedloop.common.conditioning.stiffness_from_factor`)
-    and a G given as a call are computed on their first read, by the same arithmetic
+    largest and smallest kept singular values of B_s, bound ``|B_jk|`` <= max(1, L) top,
+    ``|C_ij|`` <= ``|B|^2`` and ``|K_ij|`` <= (max(1, 1/L) / bottom)^2; G's entries are
+    bounded by ``g_scale`` or summed. Rounding adds less than a factor 1 + 1e-12 to any of
+    these; beyond :data:`FINITE_BOUND`, or NaN, every entry is computed and looked at.
+    Within it, K (from U and beta,
+    :func:`closedloop.common.conditioning.stiffness_from_factor`) and a G given as a call
+    are computed on their first read, by the same arithmetic
     (:class:`closedloop.common.arrays.OnFirstRead`).
 
     Raises:

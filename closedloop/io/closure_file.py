@@ -55,15 +55,25 @@ from closedloop.model.spring_spec import check_locked_springs
 
 CLOSURE_KEYS = ("closed_loop", "type", "closure_springs", "name_mot", "springs", "locked",
                 "beams", "balls", "start")  # fmt: skip
+#: Keys of the side file of an MJCF or SDF model (no closures: the model file has them).
 SIDE_FILE_KEYS = ("name_mot", "springs", "locked", "beams", "start")
 Stiffness = float | list[float]
 
 
 @dataclass(frozen=True)
 class ClosureSpec:
-    """Contents of a closure file (see the module docstring).
+    """Contents of a closure file (see the module docstring), by key.
 
-    ``actuated`` is ``None`` when the file has no ``name_mot`` key.
+    Attributes:
+        pairs: the frame pairs of ``closed_loop``, (frame A, frame B) each.
+        types: the ``type`` of each pair.
+        actuated: the joints of ``name_mot``; None when the file has no such key.
+        springs: joint -> stiffness [N m/rad or N/m] (a list: one per coordinate).
+        locked: the joints of ``locked``.
+        beams: link -> its beam (:mod:`closedloop.model.beams`).
+        balls: URDF joints read as ball joints (:mod:`closedloop.model.balls`).
+        closure_springs: pair index -> its spring (6 values or a 6x6).
+        start: joint -> its values of ``start:`` (nq of the joint) [rad, m].
     """
 
     pairs: tuple[tuple[str, str], ...] = ()
@@ -357,7 +367,7 @@ def check_spec_names(model: pin.Model, spec: ClosureSpec, where: str) -> None:
 
 def apply_start(model: pin.Model, spec: ClosureSpec, where: str) -> None:
     """The file's ``start:`` (its names checked) written into
-    ``model.referenceConfigurations`` (:data:`closedloop.model.closed_loop.START`), if any."""
+    ``model.referenceConfigurations`` (:data:`closedloop.model.reference.START`), if any."""
     if spec.start:
         model.referenceConfigurations[START] = start_configuration(model, spec.start, where)
 

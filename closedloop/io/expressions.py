@@ -4,7 +4,7 @@ A parametric model takes its numbers from named arguments (``load_model(path, cl
 args={"d": 0.02})``, ``--arg d=0.02``): a xacro file's ``<xacro:arg>`` values
 (:mod:`closedloop.io.xacro_files`) and a closure file's ``${expr}`` placeholders, evaluated
 here with the same names (:func:`substitute`). An expression is parsed by Python's
-:mod:`ast` and checked against a whitelist before any value is computed
+``ast`` and checked against a whitelist before any value is computed
 (:func:`checked`), then computed by walking the checked tree in floating point
 (:func:`value`); Python's ``eval`` never sees the text. The whitelist:
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 from closedloop.exceptions import ExpressionError, InvalidInputError
 
-#: Functions an expression may call, by name (those of :mod:`math` that xacro also offers).
+#: Functions an expression may call, by name (those of ``math`` that xacro also offers).
 FUNCTIONS = {
     "abs": abs, "min": min, "max": max, "sqrt": math.sqrt, "exp": math.exp, "log": math.log,
     "log10": math.log10, "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,

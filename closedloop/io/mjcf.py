@@ -123,8 +123,9 @@ def read_mjcf_extras(path: Path) -> MjcfExtras:
             true/false, a repeated joint, body or equality name, an unknown joint type, a hinge or
             slide whose axis is the zero vector, a range or axis that is not numbers, a range whose
             lower bound is above its upper one, a joint with a nonzero stiffness but no name, a
-            malformed position or orientation (:data:`NUMERIC_ATTRIBUTES`), a connect without
-            anchor, a class that no ``<default>`` defines, a ``limited`` other than true/false/auto,
+            malformed position or orientation
+            (:data:`~closedloop.io.mjcf_xml.NUMERIC_ATTRIBUTES`), a connect without anchor, a
+            class that no ``<default>`` defines, a ``limited`` other than true/false/auto,
             ``euler`` angles with an upper-case (extrinsic) ``eulerseq``, a spring on a joint that
             Pinocchio merges into a composite joint (several joints in one body), a joint
             ``springdamper`` (MuJoCo derives its stiffness from the mass), a tendon with a stiffness

@@ -20,6 +20,7 @@ MJCF_EQUALITIES = {"connect": "3d", "weld": "6d"}
 
 #: Numeric attributes of a fixed count, on any element: Pinocchio 4.1 reads a malformed
 #: one (a word, NaN, too few numbers) as zeros, the largest double or uninitialised memory.
+#: Attributes of a position or an orientation and their number of values.
 NUMERIC_ATTRIBUTES = {"pos": 3, "quat": 4, "euler": 3, "axisangle": 4, "xyaxes": 6, "zaxis": 3,
                       "anchor": 3, "relpose": 7, "fromto": 6}  # fmt: skip
 #: Of those, the ones whose leading values may not all be zero (a rotation needs them).
@@ -124,6 +125,7 @@ def joints_with_defaults(root: ET.Element) -> list[tuple[ET.Element, dict[str, s
 
 
 def element_name(element: ET.Element) -> str:
+    """The quoted ``name`` attribute of ``element`` for a message, or ``(unnamed)``."""
     return repr(element.get("name")) if element.get("name") else "(unnamed)"
 
 
@@ -180,8 +182,9 @@ def write_classes(root: ET.Element) -> None:
 
 
 def active_equalities(root: ET.Element, where: str) -> list[tuple[str, ET.Element]]:
-    """(closure name, element) of the active equalities, in :attr:`MjcfExtras.closures`
-    order, from every ``<equality>`` section; classes resolved for ``active``."""
+    """(closure name, element) of the active equalities, in
+    :attr:`closedloop.io.mjcf.MjcfExtras.closures` order, from every ``<equality>``
+    section; classes resolved for ``active``."""
     found = [e for eq in root.findall("equality") for e in eq]
     other = sorted({e.tag for e in found} - set(MJCF_EQUALITIES))
     if other:

@@ -7,7 +7,8 @@ continuous, prismatic, ball, universal, fixed; ``<include>`` and nested models r
 ``degrees="true"``) relative to ``relative_to`` (SDF >= 1.7) or ``frame`` (1.5/1.6), by
 default a link's to the model, a joint's to its child link, a frame's to ``attached_to``;
 ``<axis><xyz>`` in the joint frame, or the model frame (``use_parent_model_frame``, SDF
-<= 1.6; by default in SDF <= 1.4), or ``expressed_in`` a frame; ``<limit>`` (|value| >= 1e16: none);
+<= 1.6; by default in SDF <= 1.4), or ``expressed_in`` a frame; ``<limit>``
+(``|value|`` >= 1e16: none);
 ``<dynamics><spring_stiffness>`` and ``<spring_reference>``; ``<inertial>``; ``<visual>``
 mesh / box / cylinder / sphere, ``model://NAME/...`` found under the file's ancestors,
 ``$GZ_SIM_RESOURCE_PATH``, ``$SDF_PATH``, ``$GAZEBO_MODEL_PATH`` or example-robot-data.

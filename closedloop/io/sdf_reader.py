@@ -56,9 +56,13 @@ class SdfReader:
         self.poses: dict[str, pin.SE3] = {MODEL: pin.SE3.Identity()}
 
     def fail(self, message: str):
+        """Raise a :class:`ModelFileError` of ``message``, naming the file."""
         raise ModelFileError(f"{self.where}: {message}")
 
     def named(self, parent: ET.Element, tag: str) -> dict[str, ET.Element]:
+        """The ``<tag>`` children of ``parent`` by their names; each must have a name, used
+        once (a link's unique among links, another element's among them and the links, a
+        frame's also among the joints)."""
         out: dict[str, ET.Element] = {}
         for e in parent.findall(tag):
             name = e.get("name")
@@ -74,6 +78,8 @@ class SdfReader:
         return out
 
     def floats(self, elem: ET.Element | None, what: str, n: tuple[int, ...]) -> np.ndarray:
+        """The finite numbers of ``elem``'s text (a missing element has none), as many as
+        one of the counts ``n``; ``what`` names the element in the error."""
         text = (elem.text or "") if elem is not None else ""
         try:
             v = decimals(text)
@@ -90,6 +96,7 @@ class SdfReader:
         return v
 
     def number(self, elem: ET.Element, tag: str, default: float, what: str) -> float:
+        """The one finite number of ``elem``'s child ``<tag>``, or ``default`` without it."""
         child = elem.find(tag)
         return default if child is None else float(self.floats(child, f"{what} <{tag}>", (1,))[0])
 
@@ -162,6 +169,7 @@ class SdfReader:
         return value in ("true", "1")
 
     def text(self, elem: ET.Element, tag: str, what: str) -> str:
+        """The text of ``elem``'s child ``<tag>``, stripped; an error if it has none."""
         child = elem.find(tag)
         if child is None or not (child.text or "").strip():
             self.fail(f"{what} has no <{tag}>")
@@ -189,6 +197,8 @@ class SdfReader:
         return a / np.linalg.norm(a), elem
 
     def limits(self, elem: ET.Element, what: str) -> tuple[float, float]:
+        """(lower, upper) of an ``<axis>``'s ``<limit>`` [rad or m]: infinite where it has
+        none or writes :data:`NO_LIMIT`; lower above upper is an error."""
         lim = elem.find("limit")
         if lim is None:
             return -math.inf, math.inf
@@ -210,6 +220,9 @@ class SdfReader:
         return k, self.number(dyn, "spring_reference", 0.0, what)
 
     def inertia(self, link: str) -> pin.Inertia:
+        """The spatial inertia of ``link`` in its own frame (SI), from its ``<inertial>``
+        (mass, pose, inertia tensor; SDF's defaults where one is missing: 1 kg at the
+        origin, the identity tensor); an error if it is not positive definite."""
         elem = self.links[link].find("inertial")
         if elem is None:
             return pin.Inertia(1.0, np.zeros(3), np.eye(3))  # SDF defaults

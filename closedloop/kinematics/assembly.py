@@ -20,7 +20,7 @@ from closedloop.model.closed_loop import ClosedLoopModel
 #: Default closure tolerance: infinity norm of the residual with its rows in metres divided
 #: by the model's characteristic length L (radians as they are), unit-free like
 #: :data:`closedloop.kinematics.configuration.CLOSURE_TOL`: 1e-12 L for a point closure, whatever
-# the  size of the mechanism (an absolute 1e-12 m is 3e-3 of the size of a nanometre one).
+#: the size of the mechanism (an absolute 1e-12 m is 3e-3 of the size of a nanometre one).
 ASSEMBLY_TOL = 1e-12
 #: Step of a sweep: the largest change of an actuated value per step of
 #: :func:`closedloop.kinematics.driving.assemble_connected` [rad, and lengths in units of the
@@ -37,7 +37,8 @@ POLISH_FACTOR = 100.0
 #: about a factor 2 each: from 1e-6 to the rounding, 1e-8, in about 10).
 POLISH_ITER = 40
 #: Step [rad, or lengths per L] of the central second difference along a passive
-#: direction that the closure rows do not see to first order (:func:`_check_regular`).
+#: direction that the closure rows do not see to first order (the check that a closed
+#: configuration is not a singular one, :func:`close_loops`).
 CURVATURE_STEP = 1e-4
 #: Scaled curvature of the closures along such a direction, outside the range of the
 #: passive Jacobian, relative to its largest singular value, above which the direction is
@@ -103,8 +104,7 @@ def _residual(clm: ClosedLoopModel, data, datas, q: np.ndarray, tols) -> tuple:
 
 def within(r: np.ndarray, tols) -> tuple[float, bool]:
     """(squared 2-norm of the residual r (m,), whether each row is within its tolerance)
-    (``tols``: (tolerance of each row or one for all, the smallest, the largest), as
-    :func:`_row_tolerances` gives them)."""
+    (``tols``: (tolerance of each row or one for all, the smallest, the largest))."""
     size2 = float(r.dot(r))
     rows, low, high = tols
     # |r|_inf <= |r|_2 <= sqrt(m) |r|_inf: the rows one by one only when these leave it open
@@ -275,8 +275,8 @@ def close_loops(
     may land on another branch (the parallelogram four-bar 0.1 rad from its change point,
     the crank moved 0.05 rad towards it). With an ``origin`` at most 2 :data:`INPUT_STEP`
     away, the first step is instead the first-order continuation of the origin's branch
-    (:func:`_continued`; an origin where branches meet picks none). A closed
-    configuration is then checked not to be a singular one (:func:`_check_regular`: at
+    (an origin where branches meet picks none). A closed configuration is then checked
+    not to be a singular one (at
     the change point the tolerance admitted poses up to 2.6e-6 rad from it, each with its
     own compliance; it is a SingularConfigurationError instead).
 

@@ -14,6 +14,8 @@ from closedloop.model.closed_loop import ClosedLoopModel
 #: direction counts as rank deficient: the project's one rule (:mod:`.conditioning`).
 RANK_RTOL = _RANK_RTOL
 
+#: Pinocchio's reference frame of each ``axes`` value: world axes at the frame's origin, or
+#: the frame's own axes.
 REFERENCE_FRAMES = {"world": pin.LOCAL_WORLD_ALIGNED, "local": pin.LOCAL}
 
 
@@ -220,7 +222,7 @@ def orthogonal_split(A: np.ndarray, rtol: float = RANK_RTOL) -> tuple[np.ndarray
     """Orthonormal bases of the row space and of the null space of A (m, n), and its rank.
 
     Rank-revealing QR of A^T with column pivoting (LAPACK ``dgeqp3``): A^T P = Q R with
-    |R_ii| non-increasing; the rank counts the |R_ii| above ``rtol`` times the largest.
+    ``|R_ii|`` non-increasing; the rank counts the ``|R_ii|`` above ``rtol`` times the largest.
     On matrices this small it is several times faster than an SVD, and the rank decision
     agrees with the singular values except within a small factor of the threshold.
 

@@ -17,7 +17,7 @@ Sections: ``circle`` (d), ``tube`` (d outer diameter, t wall), Iy = Iz = I, J = 
 J from Roark's approximation a c^3 (1/3 - 0.21 (c/a) (1 - c^4/(12 a^4))), a >= c the
 sides (within 0.5% of the exact series); or explicit {A, Iy, Iz, J} [m^2, m^4]. The
 section's y axis is ``y_axis`` (a vector in the link frame) made orthogonal to the beam.
-Default: the link frame axis most orthogonal to the beam (the smallest |component| of the
+Default: the link frame axis most orthogonal to the beam (the smallest ``|component|`` of the
 beam's unit vector), made orthogonal to it; when the two smallest components are within
 ``ALIGN_TOLERANCE`` of each other (a beam along a link axis, such as the z of a cylinder)
 that choice is a tie that rounding would decide, so the default is refused with a

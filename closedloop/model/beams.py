@@ -35,8 +35,9 @@ Elements and mass: ``elements: N`` (default 1) splits the beam into N equal elem
 ``<link>_beam`` at the tip, all in the end joint's axes, each with the clamped stiffness of
 length L / N (:func:`closedloop.model.beam_joints.inserted_beams` lists the elements, each
 from its start node).
-``density`` [kg/m^3] gives the beam a mass of its own (:class:`BeamMass`, the consistent
-mass of :mod:`closedloop.analysis.vibration`), with a section only.
+``density`` [kg/m^3] gives the beam a mass of its own
+(:class:`~closedloop.model.beam_theory.BeamMass`, the consistent mass of
+:mod:`closedloop.analysis.vibration`), with a section only.
 
 Preload: the beam's energy is that of beam theory on the tip's displacement and rotation
 in its rest axes, with the shortening of the bent beam in its axial elongation
@@ -214,6 +215,7 @@ def map_configuration(old: pin.Model, new: pin.Model, q: np.ndarray) -> np.ndarr
     return out
 
 
+#: A closure anchor within this fraction of a beam's length from its tip moves with the tip.
 TIP_RTOL = 1e-9
 
 
@@ -239,7 +241,7 @@ def apply_beams(model: pin.Model, geometries, beams: Mapping[str, Mapping], urdf
         (model, geometries, springs, anchors, masses): the new model, its geometry models,
         the block springs {virtual joint name: (6, 6) K [N/m, N/rad, N m/rad]}, the
         anchors on the new model and the sections of the beams that have one {virtual
-        joint name: :class:`BeamMass`}.
+        joint name: :class:`~closedloop.model.beam_theory.BeamMass`}.
 
     Raises:
         BeamError: a bad specification (the message names the beam and the value).

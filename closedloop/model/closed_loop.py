@@ -104,7 +104,7 @@ class ClosedLoopModel:
         locked: names of joints held rigid.
         visual_model, collision_model: optional geometry for viewers.
         name: display name.
-        beam_masses: virtual beam joint name -> :class:`closedloop.model.beams.BeamMass`, the
+        beam_masses: virtual beam joint name -> :class:`closedloop.model.beam_theory.BeamMass`, the
             sections (and densities) of the beams for their own mass
             (:mod:`closedloop.analysis.vibration`); filled by the loaders.
         unweighed_bodies: body (link) name -> why the model's inertia of that body is not

@@ -33,6 +33,7 @@ import pinocchio as pin
 
 from closedloop.exceptions import InvalidInputError, NameNotFoundError, did_you_mean
 
+#: Pinocchio's constraint of a closure: a point (``3d``) or a frame (the other types).
 AnchorConstraint = pin.PointAnchorConstraintModel | pin.FrameAnchorConstraintModel
 
 #: Closure types of the closure-file convention and their Pinocchio constraint (the

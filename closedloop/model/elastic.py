@@ -6,7 +6,7 @@ the 6-dof virtual joint of a beam (:mod:`closedloop.model.beams`). Its deflectio
 beam theory, in the beam's clamped (rest) axes at the tip: the tip's displacement t [m]
 (the translation of the relative placement M_rest^-1 M, not log6's, which differs from it
 at second order) and its rotation vector r = log3(R) [rad], with the shortening s of the
-bent beam added to the axial elongation (Euler-Bernoulli, von Karman):
+bent beam added to the axial elongation (Euler-Bernoulli, von Karman)::
 
     e = (t + s a, r),   energy 1/2 e^T K_b e,
     s = 1/2 (t, r)^T H_s (t, r) = (36 |t_p|^2 + 6 L t . (a x r) + 4 L^2 |r_p|^2) / (60 L),

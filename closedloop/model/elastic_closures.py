@@ -30,7 +30,7 @@ lock):
   (A and B coincide at rest), else on B's body at B's origin welded to A (its tangent,
   linear then angular, is A's motion relative to B in A's axes at A's origin). A
   singular 6x6 (positive semi-definite) is followed by one passive screw joint per free
-  direction, ``"<closure>_free1"``, ... (:func:`_bushing`).
+  direction, ``"<closure>_free1"``, ....
 * a ``universal`` pair (6 values only): its directions are those of its own frame U at
   A's origin, whose axes turn with the pair's free rotations: x along B's z axis, y along
   z_A x z_B (the cross axis), z along A's z axis (U is A where B's z is along A's x). The
@@ -100,9 +100,11 @@ _Z_ONTO_X = pin.SE3(pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0), np.zeros(3))
 
 #: Relative asymmetry max|K - K^T| / max|K| above which a 6x6 closure spring is refused.
 SYMMETRY_RTOL = 1e-9
-#: Eigenvalues of a 6x6 closure spring (unit-balanced, :func:`_balance`) below this times
-#: its largest are its free directions: its entries are known to about its symmetry's
-#: precision (:data:`SYMMETRY_RTOL`), which moves its eigenvalues by as much.
+#: Eigenvalues of a 6x6 closure spring (unit-balanced: its translations scaled by the
+#: spring's own length, the square root of its mean rotational over its mean translational
+#: diagonal stiffness) below this times its largest are its free directions: its entries
+#: are known to about its symmetry's precision (:data:`SYMMETRY_RTOL`), which moves its
+#: eigenvalues by as much.
 NULL_RTOL = 1e-9
 #: Eigenvalues below this times the largest are the rounding of a zero (a symmetric
 #: eigensolver's error on a 6x6 is a few eps times its largest, 2.2e-16 each; a margin of
@@ -404,7 +406,8 @@ def _ends(c: Closure) -> tuple[tuple, tuple]:
 def chain_values(model: pin.Model, q: np.ndarray, cuts) -> list[np.ndarray]:
     """The configuration values of each cut's joints (in order) at the configuration
     ``q`` (nq,) of the tree ``model`` without them: those of the pair met as its type says
-    there, the springs at rest (:func:`_free_part` of B's placement relative to A)."""
+    there, the springs at rest (B's placement relative to A reduced to what the pair leaves
+    free)."""
     data = model.createData()
     pin.forwardKinematics(model, data, q)
     out = []

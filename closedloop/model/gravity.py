@@ -168,7 +168,7 @@ class GravityLoad:
 
 
 def _checked_reach(model: pin.Model) -> float:
-    """Largest |coordinate| [m] of the moving bodies' centres of mass in their joint frames
+    """Largest ``|coordinate|`` [m] of the moving bodies' centres of mass in their joint frames
     (the lever of their weight), once each body is checked: InvalidInputError for a mass
     that is not finite or is negative, or a centre of mass that is not finite (a model
     file's ``<inertial>``; the payloads are checked as they are made)."""

@@ -3,12 +3,12 @@
 With C_tt, C_rr the (3, 3) translational and rotational diagonal blocks of the compliance
 C (world axes, at the frame origin), eigenvalues lambda_i and unit eigenvectors v_i:
 
-* translation: semi-axes ``s F lambda_i`` [m] along v_i, F = |f| [N] (|n| / L when f = 0):
-  the set {s C_tt u : |u| = F}, the amplified displacements of the frame origin under all
+* translation: semi-axes ``s F lambda_i`` [m] along v_i, F = ``|f|`` [N] (``|n|`` / L when f = 0):
+  the set {s C_tt u : ``|u|`` = F}, the amplified displacements of the frame origin under all
   forces of the applied magnitude. Under a pure force the amplified first-order
   displacement ``s C_tt f`` of the frame origin lies on its surface.
-* rotation (on request): semi-axes ``rho s N mu_i`` [m] along v_i, N = |n| [N m]
-  (|f| rho when n = 0), mu_i the eigenvalues of C_rr [rad/(N m)], rho = ``LEVER_FRACTION``
+* rotation (on request): semi-axes ``rho s N mu_i`` [m] along v_i, N = ``|n|`` [N m]
+  (``|f|`` rho when n = 0), mu_i the eigenvalues of C_rr [rad/(N m)], rho = ``LEVER_FRACTION``
   L (the length of the drawn arrows): the amplified rotations under all moments of the
   applied magnitude, drawn as the arc length [m] they give at radius rho.
 
@@ -74,7 +74,7 @@ def unit_vector(v: np.ndarray) -> np.ndarray:
 def compliance_ellipsoid(
     block: np.ndarray, magnitude: float, length: float, centre: np.ndarray, kind: str
 ) -> Ellipsoid:
-    """Ellipsoid {length * magnitude * block u : |u| = 1} of a symmetric (3, 3) block.
+    """Ellipsoid {length * magnitude * block u : ``|u|`` = 1} of a symmetric (3, 3) block.
 
     Args:
         block: (3, 3) symmetric positive semi-definite compliance block [SI].

@@ -20,9 +20,9 @@ Amplifying the joint deflection instead, integrate(q, a dq), turns a small rotat
 the root into a large one, which swings every link beyond it; here each link turns by a
 times its own rotation, which the cap below keeps readable.
 
-Amplification (``scale=None``): the largest of the first-order displacements |J_p dq| of
+Amplification (``scale=None``): the largest of the first-order displacements ``|J_p dq|`` of
 the joint origins and the loaded frame's origin, d_max [m], drawn at most
-``AUTO_FRACTION`` of the model size L [m], and the largest link rotation |w_i|, w_max
+``AUTO_FRACTION`` of the model size L [m], and the largest link rotation ``|w_i|``, w_max
 [rad], drawn at most ``ROTATION_CAP``:
 
     a = min(AUTO_FRACTION L / d_max, ROTATION_CAP / w_max)   (a = 1 when nothing deflects)
@@ -126,7 +126,7 @@ def largest_displacement(clm: ClosedLoopModel, q: np.ndarray, frame: str, dq: np
 
 
 def largest_rotation(twists: np.ndarray) -> float:
-    """w_max [rad]: largest link rotation |w_i| of ``twists`` (njoints, 6)."""
+    """w_max [rad]: largest link rotation ``|w_i|`` of ``twists`` (njoints, 6)."""
     return float(np.max(row_norms(np.asarray(twists)[:, 3:])))
 
 

@@ -157,7 +157,8 @@ def _hex_swatch(colour: int, alpha: float = 1.0) -> str:
 
 
 def legend_rows(info: dict) -> list[str]:
-    """The legend's text lines (HTML-escaped) from :func:`legend_info` (for tests and page)."""
+    """The legend's text lines (HTML-escaped) from
+    :func:`~closedloop.viewer.draw.legend_info` (for tests and page)."""
     w = np.asarray(info["wrench"], dtype=float)
     frame = info["frame"]
     rows = [f"pose: {info['pose']}"]

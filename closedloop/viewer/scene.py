@@ -82,7 +82,7 @@ class DeflectionScene:
         size: model size L [m] (:func:`model_size`).
         max_displacement: d_max [m], largest first-order point displacement under dq
             (origins of the joints and of the loaded frame), not amplified.
-        max_rotation: w_max [rad], largest link rotation |w_i| of :attr:`twists`, not
+        max_rotation: w_max [rad], largest link rotation ``|w_i|`` of :attr:`twists`, not
             amplified.
         poses: (njoints, 4, 4) nominal joint placements oMi(q), world frame (0: the world).
         twists: (njoints, 6) twist xi_i of each joint body (v [m] of its point at the world
@@ -245,7 +245,7 @@ def deflection_scene(
     """Poses, amplification, ellipsoids and load ramp for a wrench at ``frame``.
 
     Args:
-        clm: model with closures and springs (or a :class:`Configuration`, then no q).
+        clm: model with closures and springs (or a :class:`~closedloop.Configuration`, then no q).
         q: (nq,) assembled configuration (the unloaded pose, rest of the springs).
         frame: name of the loaded frame.
         wrench: (6,) (fx, fy, fz [N], nx, ny, nz [N m]), world axes, at the frame origin.

@@ -1,8 +1,8 @@
 """A meshcat server that listens on 127.0.0.1 only and serves the viewer page with an overlay.
 
-meshcat's own server (:mod:`meshcat.servers.zmqserver`) binds its ZeroMQ socket to
+meshcat's own server (``meshcat.servers.zmqserver``) binds its ZeroMQ socket to
 127.0.0.1 but its web server to every interface (0.0.0.0 and [::]), and it outlives a
-parent killed by a signal. This module runs the same bridge (:class:`ZMQWebSocketBridge`,
+parent killed by a signal. This module runs the same bridge (its ``ZMQWebSocketBridge``,
 the real meshcat server) with these changes:
 
 * the web server listens on 127.0.0.1 only;

@@ -439,7 +439,7 @@ def run_view(
 
     Args:
         clm, q, frame, wrench, scale, nonlinear, close_loops, rotational: as in
-            :func:`closedloop.viewer.scene.deflection_scene` (a :class:`Configuration`
+            :func:`closedloop.viewer.scene.deflection_scene` (a :class:`~closedloop.Configuration`
             may stand for clm and q).
         html: file for the self-contained page; None serves the live page (127.0.0.1)
             until Ctrl-C or for ``duration`` [s].

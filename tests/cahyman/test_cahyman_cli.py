@@ -327,7 +327,7 @@ def parameter_rows(markdown: str) -> dict[str, tuple[str, str]]:
     return {c[0]: (c[1], c[-1]) for c in cells}
 
 
-def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
+def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path, default_report):
     from cahyman_pin.params import DEFAULT_PARAMS
 
     # 1.6e-1: a YAML string; a: the default value, given: not "assumed"
@@ -336,6 +336,7 @@ def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
     status, stdout, err = run(capsys, "report", "--params", str(tmp_path / "p.yaml"),
                               "--out", str(out))  # fmt: skip
     assert (status, err.count("error")) == (0, 0) and "report written" in stdout
+    assert (out / "report.html").is_file()
     text = (out / "report.md").read_text()
     rows = parameter_rows(text)
     assert rows["b"] == ("0.09", "given") and rows["L"] == ("0.16", "given")
@@ -345,9 +346,7 @@ def test_report_reads_a_parameter_file_and_states_the_sources(capsys, tmp_path):
     assert rows["K_T"] == ("4672", "paper")
     assert "ASSUMED" not in text.split("| a |")[1].split("\n")[0]
     assert f"the parameter file {str(tmp_path / 'p.yaml')!r}" in text
-    default = tmp_path / "default"
-    assert run(capsys, "report", "--out", str(default))[0] == 0
-    text = (default / "report.md").read_text()
+    text = (default_report[0] / "report.md").read_text()  # no --params
     rows = parameter_rows(text)
     assert rows["K_s"][0] == "697000"
     assert rows["K_s"][1].startswith("assumed: 0.697e6 N/m, the printed 0.697 N/m times 1e6")

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from cahyman_pin.api import stiffness
-from cahyman_pin.cli import main
 from cahyman_pin.paper import data as paper_data
 from cahyman_pin.paper import report
 from cahyman_pin.paper import tables as tables_module
@@ -30,9 +29,8 @@ TERMS = {"eq. (": "*eq. (n)* is", "damaged place": "A *damaged place* is",
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("report")
-    return out, report.build_report(out)
+def built(default_report):
+    return default_report
 
 
 def _linearity_table():
@@ -131,12 +129,6 @@ def test_linearity_is_computed_from_the_published_values(monkeypatch, tmp_path):
     monkeypatch.setattr(tables_module, "TABLES", changed)
     table = _linearity_table()
     assert float(table.rows[0][2]) == pytest.approx(1.0)
-
-
-def test_cli_report(tmp_path, capsys):
-    assert main(["report", "--out", str(tmp_path / "r")]) == 0
-    assert (tmp_path / "r" / "report.html").is_file()
-    assert "report written" in capsys.readouterr().out
 
 
 def _text(doc):

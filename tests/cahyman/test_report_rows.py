@@ -21,7 +21,6 @@ from scipy.spatial.transform import Rotation
 
 from cahyman_pin.api import stiffness
 from cahyman_pin.backends.published import published_stiffness
-from cahyman_pin.paper import report
 from cahyman_pin.paper.compare import table_values
 from cahyman_pin.paper.data import LOAD_LABELS, LOADS, TABLE_POSES, TABLES
 from cahyman_pin.params import DEFAULT_PARAMS
@@ -133,10 +132,8 @@ def markdown_tables(text: str) -> dict[str, tuple[list[str], list[list[str]]]]:
 
 
 @pytest.fixture(scope="module")
-def markdown(tmp_path_factory):
-    out = tmp_path_factory.mktemp("report_rows")
-    report.build_report(out)
-    return markdown_tables((out / "report.md").read_text())
+def markdown(default_report):
+    return markdown_tables((default_report[0] / "report.md").read_text())
 
 
 def assert_rows(actual, desired, err_msg=""):

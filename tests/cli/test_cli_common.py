@@ -299,3 +299,32 @@ def test_warnings_of_one_place_are_counted_beyond_three(capsys):
     assert lines == [*(f"prog: warning: step {s} is outside the limits" for s in range(3)),
                      "prog: warning: the same message",
                      "prog: warning: 3 more warnings like those above"]  # fmt: skip
+
+
+@pytest.mark.parametrize("prog", MAINS)
+def test_the_reference_parser_builds_every_subcommand_in_full(prog):
+    """The command-line reference's parser holds each subcommand with its options, where
+    the command's own parser holds the others' help lines only."""
+    from cahyman_pin.cli import build_parser as cahyman_parser
+    from cahyman_pin.cli import reference_parser as cahyman_reference
+    from closedloop.cli.app import build_parser as closedloop_parser
+    from closedloop.cli.app import reference_parser as closedloop_reference
+
+    build, reference = {
+        "closedloop": (closedloop_parser, closedloop_reference),
+        "cahyman": (cahyman_parser, cahyman_reference),
+    }[prog]
+    full, lazy = subcommands(reference()), subcommands(build(None))
+    assert full.keys() == lazy.keys()
+    placeholders = [n for n, p in lazy.items() if "-h" not in p._option_string_actions]
+    assert "map" in placeholders  # a subcommand of a module of its own: its help line only
+    for name, parser in full.items():
+        assert "-h" in parser._option_string_actions, name  # built, not a placeholder
+    options = {"closedloop": ("stiffness", "--frame"), "cahyman": ("map", "--param")}[prog]
+    assert options[1] in full[options[0]]._option_string_actions
+
+
+def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """Name -> parser of each subcommand of ``parser``."""
+    (action,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)

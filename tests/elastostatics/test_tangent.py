@@ -224,6 +224,25 @@ def test_point_curvature_is_the_difference_of_the_anchor_hessians(fourbar):
     assert_close_in_norm(closure_curvature(clm, q, lam), expected, 1e-13)
 
 
+def test_many_point_closures_at_once(cahyman):
+    """CaHyMan: six point closures, three of their anchors on one body, away from closure
+    (nv = 27): the gap and its Jacobian against frames placed at the anchors, the curvature
+    against central differences of the gap Jacobian."""
+    clm = cahyman.clm
+    rng = np.random.default_rng(5)
+    q0 = cahyman.assemble(np.radians([60.0, 60.0, 60.0]), np.radians(45.0), 0.025)
+    q = pin.integrate(clm.model, q0, rng.normal(scale=0.05, size=clm.model.nv))
+    joints = [c.constraint.joint2_id for c in clm.closures]
+    assert max(joints.count(j) for j in joints) >= 3  # anchors that share a body
+    c, A = closure_gap(clm, q)
+    assert np.abs(c).max() > 1e-3
+    np.testing.assert_allclose(c, world_gap(clm, q), rtol=0, atol=ATOL_ROUNDING)
+    assert_close_in_norm(A, world_gap_jacobian(clm, q), 1e-14)
+    lam = rng.normal(size=clm.n_constraints) * 50.0
+    H_fd = _differences(clm.model, lambda x: closure_gap(clm, x)[1].T @ lam, q)
+    assert_close_in_norm(closure_curvature(clm, q, lam), H_fd, RTOL_HESSIAN_FD)
+
+
 def test_self_stress_does_not_enter_the_restricted_curvature():
     """mu in the left null space of J_c (redundant rows): N^T Hess(mu . c) N = 0."""
     clm, q0 = spherical_fourbar()
