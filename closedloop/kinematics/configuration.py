@@ -187,11 +187,12 @@ class Configuration:
         pin.computeJointJacobians(pm, data, q)
         pin.updateFramePlacements(pm, data)
         self.length = model.length if length is None else check_length(length)
-        if model.closures:  # a serial robot closes no loop: the class's residual, none
+        if model.closures:
             self._closure_residual()
+        else:  # a serial robot closes no loop: no residual, no rounding of it
+            self.residual, self.residual_norm, self.closure_error = _NO_RESIDUAL, 0.0, 0.0
+            self._rounding = 0.0
 
-    #: Without closures: no residual (the class's values; a model with closures sets its own).
-    residual, residual_norm, closure_error, _rounding = _NO_RESIDUAL, 0.0, 0.0, 0.0
     _closure_jacobian: np.ndarray | None = None  # computed on first use (per configuration)
     _frame_jacobians: dict | None = None
 
