@@ -94,6 +94,7 @@ NOT_FOR_A_URDF_QUERY = {
     "closedloop.io.mjcf_xml",
     "closedloop.io.sdf",
     "closedloop.io.sdf_reader",
+    "closedloop.model.beam_section",
     "closedloop.model.beam_theory",
     "closedloop.model.beams",
     "closedloop.model.balls",
