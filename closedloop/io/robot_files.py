@@ -1,8 +1,10 @@
 """Robot files read by format: a URDF (or expanded xacro) with its closure file, an MJCF
-with its side file, an SDF with its side file, each into a :class:`RobotTree`, the
-kinematic tree with the loops, actuated joints, springs and locked joints the files give,
-before the keyword overrides of :func:`closedloop.io.loader.load_model` (whose docstring
-lists the sources, and the serial robot's defaults).
+or an SDF with its side file, each into the kinematic tree with the loops, actuated
+joints, springs and locked joints the files give, before the keyword overrides of
+:func:`closedloop.io.loader.load_model` (whose docstring lists the sources, and the
+serial robot's defaults).
+
+Each reader returns a :class:`RobotTree`.
 
 Pinocchio's parsers run through :func:`run_parser`, which turns a failure, or an element
 dropped, into a one-line :class:`~closedloop.exceptions.ModelFileError`. The readers of
