@@ -13,22 +13,15 @@ from typing import TYPE_CHECKING
 
 #: Public name -> the module that defines it.
 _EXPORTS = {
-    **dict.fromkeys(
-        ("CaHyManStiffness", "Deflection", "backend_names", "register_backend", "stiffness"),
-        "cahyman_pin.api",
-    ),
+    **dict.fromkeys(("CaHyManStiffness", "Deflection", "stiffness"), "cahyman_pin.api"),
+    **dict.fromkeys(("backend_names", "register_backend"), "cahyman_pin.backends.registry"),
     **dict.fromkeys(("CaHyManModel", "CaHyManPose", "cahyman_model"), "cahyman_pin.model"),
     **dict.fromkeys(("DEFAULT_PARAMS", "CaHyManParams"), "cahyman_pin.params"),
 }
 
 if TYPE_CHECKING:  # the names as static analysis sees them
-    from cahyman_pin.api import (
-        CaHyManStiffness,
-        Deflection,
-        backend_names,
-        register_backend,
-        stiffness,
-    )
+    from cahyman_pin.api import CaHyManStiffness, Deflection, stiffness
+    from cahyman_pin.backends.registry import backend_names, register_backend
     from cahyman_pin.model import CaHyManModel, CaHyManPose, cahyman_model
     from cahyman_pin.params import DEFAULT_PARAMS, CaHyManParams
 

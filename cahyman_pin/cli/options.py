@@ -11,7 +11,8 @@ import warnings
 
 import numpy as np
 
-from cahyman_pin.api import CaHyManStiffness, backend_names, stiffness
+from cahyman_pin.api import CaHyManStiffness, stiffness
+from cahyman_pin.backends.registry import backend_names
 from cahyman_pin.params import DEFAULT_PARAMS, K_S_ASSUMED, K_S_PRINTED, LEG_MASSES
 from closedloop.cli.parser import UsageError, finite_float, needs_gravity
 

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cahyman_pin.api import check_closed_form, get_backend
+from cahyman_pin.backends.registry import check_closed_form, get_backend
 from cahyman_pin.model import CaHyManModel
 from cahyman_pin.params import WEIGHT_FIELDS, CaHyManParams
 from cahyman_pin.sweep.execution import STARTS, Chunk, run_chunk
@@ -347,7 +347,7 @@ def sweep(
         points: from :func:`grid` or :func:`pose_list`.
         backend: ``"generic"`` (Pinocchio, warm-started along the path), ``"consistent"``
             (closed form, vectorised over each chunk), ``"published"`` or any registered
-            backend (see :func:`cahyman_pin.api.backend_names`).
+            backend (see :func:`cahyman_pin.backends.registry.backend_names`).
         wrench: (6,) wrench at M (fx, fy, fz [N], nx, ny, nz [N m]), world axes, for the
             ``deflection`` indices; None for none.
         start: generic backend only: where each assembly starts, ``"closed_form"``
@@ -374,7 +374,7 @@ def sweep(
 
     Raises:
         InvalidInputError: unknown backend or start, bad wrench or executor, links as
-            beams with a closed-form backend (:func:`cahyman_pin.api.check_closed_form`),
+            beams with a closed-form backend (:func:`check_closed_form`),
             ``modes`` with another backend than ``"generic"``.
         ModesError: ``modes`` and no mass at any point.
             A point that cannot be computed does not raise: it is marked in ``status`` and

@@ -8,7 +8,7 @@ model, rebuilt once per run and cached per thread):
 
 * ``"generic"``: per point, :meth:`CaHyManModel.assemble` then
   :func:`closedloop.elastostatics.compliance.compliance` at M, world axes (the code path of
-  :func:`cahyman_pin.api.generic_backend`), by
+  :func:`cahyman_pin.backends.registry.generic_backend`), by
   :func:`closedloop.analysis.map_engine.assemble_points`. The assembly starts (``start``) from
   CaHyMan's closed-form geometry, computed for the whole run at once (``"closed_form"``: exact, so
   the Gauss-Newton loop only checks it), or from the previous point's configuration

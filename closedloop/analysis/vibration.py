@@ -63,7 +63,7 @@ from closedloop.exceptions import ClosedLoopError, InvalidInputError, ModesError
 from closedloop.kinematics.configuration import Configuration, as_configuration
 from closedloop.kinematics.constraints import nullspace
 from closedloop.model.beam_joints import inserted_beams
-from closedloop.model.beam_theory import beam_axes
+from closedloop.model.beam_section import beam_axes
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import check_name
 from closedloop.model.gravity import GravityLoad, Payload

@@ -48,8 +48,8 @@ from closedloop.common.arrays import decimal, overflowing, real_number
 from closedloop.common.input_files import read_text
 from closedloop.exceptions import InvalidInputError, ModelFileError, NameNotFoundError
 from closedloop.io.expressions import Arguments, substitute
-from closedloop.model.closed_loop import UNIT_NORM_TOL
 from closedloop.model.closures import CLOSURE_TYPES, joint_id, unknown_type
+from closedloop.model.coordinates import UNIT_NORM_TOL
 from closedloop.model.reference import START, reference_of
 from closedloop.model.spring_spec import check_locked_springs
 
@@ -270,13 +270,13 @@ def _start(start, where: str) -> dict[str, tuple[float, ...]]:
 def start_configuration(model: pin.Model, start: dict, where: str) -> np.ndarray:
     """(nq,) the start configuration of ``start`` (:attr:`ClosureSpec.start`, its names
     checked by :func:`check_spec_names`): ``model``'s reference configuration
-    (:func:`closedloop.model.closed_loop.reference_of`) with the named joints at their
+    (:func:`closedloop.model.reference.reference_of`) with the named joints at their
     values.
 
     Raises:
         ModelFileError: a joint given a wrong number of values, or a quaternion or unit
             complex number not of norm 1 (to
-            :data:`closedloop.model.closed_loop.UNIT_NORM_TOL`).
+            :data:`closedloop.model.coordinates.UNIT_NORM_TOL`).
     """
     q = reference_of(model)
     for name, values in start.items():

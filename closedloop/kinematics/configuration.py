@@ -142,7 +142,7 @@ class Configuration:
     Args:
         model: the model with closures and springs.
         q: (nq,) configuration [rad, m; quaternions for spherical and free-flyer joints,
-            of norm 1 to ``closedloop.model.closed_loop.UNIT_NORM_TOL`` (1e-6; InvalidInputError
+            of norm 1 to ``closedloop.model.coordinates.UNIT_NORM_TOL`` (1e-6; InvalidInputError
             beyond)].
         length: characteristic length L [m] (default: ``model.length``, the diameter of
             the joint origins and frames at the neutral configuration).

@@ -21,8 +21,8 @@ virtual joint ``<link>_beam_<end>`` placed after its start beam's (or on the lin
 straight from its start to its end; its tip carries its end and the ends of the beams that
 start from it, the link's inertia and other child joints staying at the origin.
 
-The tip stiffness from beam theory, the sections and ``section: geometry``:
-:mod:`closedloop.model.beam_theory`.
+The tip stiffness from beam theory: :mod:`closedloop.model.beam_theory`; the sections and
+``section: geometry``: :mod:`closedloop.model.beam_section`.
 
 Inertia: the link's own inertia stays at the beam's start (on the link's parent joint);
 bodies beyond a ``fixed`` end (merged by Pinocchio's URDF parser into the link's joint)
@@ -56,14 +56,13 @@ import pinocchio as pin
 
 from closedloop.exceptions import BeamError, InvalidInputError
 from closedloop.model.beam_joints import beam_link, inserted_beams, virtual_frames
+from closedloop.model.beam_section import GEOMETRY, urdf_shapes
 from closedloop.model.beam_theory import (
     ANCHOR_END,
-    GEOMETRY,
     BeamSite,
     beam_site,
     beam_stiffness,
     element_count,
-    urdf_shapes,
 )
 
 

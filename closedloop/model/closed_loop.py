@@ -24,7 +24,6 @@ without a spring is a rigid actuator (locked).
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from types import MappingProxyType
@@ -32,8 +31,7 @@ from types import MappingProxyType
 import numpy as np
 import pinocchio as pin
 
-from closedloop.common.arrays import frozen, real_array
-from closedloop.common.conditioning import characteristic_length
+from closedloop.common.arrays import frozen
 from closedloop.exceptions import InvalidInputError
 from closedloop.model.closures import (
     AnchorConstraint,
@@ -43,51 +41,20 @@ from closedloop.model.closures import (
     joint_id,
     joint_names,
 )
+from closedloop.model.coordinates import checked_configuration, neutral_facts
 from closedloop.model.reference import reference_of
-from closedloop.model.spring_spec import joint_stiffness
+from closedloop.model.spring_spec import (
+    joint_stiffness,
+    spring_matrix,
+    spring_root,
+    spring_spectra,
+)
 
 #: Workspaces (Data) kept per model for reuse: one per thread that queries at once.
 POOL_SIZE = 4
 #: Entries of :meth:`ClosedLoopModel.memo` past which those whose key carries a
 #: parameter are dropped (a few tens of kB each on CaHyMan: the scaling at a length L).
 MEMO_SIZE = 64
-#: The dtype of a configuration that needs no conversion (numpy's native float64).
-_FLOAT64 = np.dtype(np.float64)
-#: Largest change of a coordinate when the quaternions and unit complex numbers of q are
-#: normalised: a q further from the configuration manifold is refused, a nearer one
-#: normalised (7 typed digits are within it).
-UNIT_NORM_TOL = 1e-6
-
-
-def _neutral_facts(model: pin.Model) -> tuple[np.ndarray, float]:
-    """What a model's neutral configuration tells, from one forward kinematics:
-
-    * (nv,) read-only mask of the translational velocity coordinates (prismatic, the
-      linear part of a free flyer...), read off the joint motion subspaces: a coordinate
-      is linear when it moves its joint without rotating it;
-    * the characteristic length [m]: the diameter of the mechanism at the neutral
-      configuration, the largest distance between two of its joint origins and frames
-      (links, tools), not the world origin (the universe frame), so that moving the
-      mechanism in the world leaves it unchanged
-      (:func:`closedloop.common.conditioning.characteristic_length`).
-    """
-    data = model.createData()
-    pin.forwardKinematics(model, data, pin.neutral(model))
-    pin.updateFramePlacements(model, data)
-    mask = np.zeros(model.nv, dtype=bool)
-    for j in range(1, model.njoints):
-        jm = model.joints[j]
-        if jm.nv:
-            S = np.asarray(data.joints[j].S).reshape(6, jm.nv)
-            if not np.all(np.any(S != 0.0, axis=0)):
-                raise InvalidInputError(
-                    f"joint {model.names[j]!r} ({jm.shortname()}) has a coordinate that moves "
-                    "nothing (a zero axis in the robot file?); expected an axis of non-zero length"
-                )
-            mask[jm.idx_v : jm.idx_v + jm.nv] = ~np.any(S[3:] != 0.0, axis=0)
-    points = [data.oMi[j].translation for j in range(1, model.njoints)]
-    points += [data.oMf[i].translation for i in range(1, model.nframes)]  # 0: the universe
-    return frozen(mask), characteristic_length(points)
 
 
 class ClosedLoopModel:
@@ -167,7 +134,7 @@ class ClosedLoopModel:
         self._spec = (dict(springs or {}), locked)
         self.stiffness, blocks = joint_stiffness(model, springs or {}, locked, self.actuated_ids)
         self.spring_blocks: Mapping[str, np.ndarray] = MappingProxyType(blocks)
-        self.linear_coordinates, self._length = _neutral or _neutral_facts(model)
+        self.linear_coordinates, self._length = _neutral or neutral_facts(model)
         rows = [r for c in self.closures for r in c.linear_rows]
         self.linear_rows = frozen(np.array(rows, dtype=bool))
 
@@ -277,30 +244,18 @@ class ClosedLoopModel:
     def spring_matrix(self) -> np.ndarray:
         """(nv, nv) read-only joint stiffness K_q of the finite springs: the blocks and
         diag(k) elsewhere, 0 on passive and locked coordinates [N m/rad, N/m, N]."""
-        return self.memo("spring_matrix", self._spring_matrix)
-
-    def _spring_matrix(self) -> np.ndarray:
-        k = self.stiffness
-        K = np.diag(np.where(np.isinf(k), 0.0, k))
-        for name, block in self.spring_blocks.items():
-            v = self.joint_v_slice(name)
-            K[v, v] = block
-        return frozen(K)
+        return self.memo(
+            "spring_matrix", spring_matrix, self.stiffness, self.spring_blocks, self.joint_v_slice
+        )
 
     @property
     def spring_root(self) -> np.ndarray:
         """(nv, nv) read-only square root R of :attr:`spring_matrix`, K_q = R^T R: sqrt(k)
         on the diagonal, the transposed Cholesky factor (upper triangular) of each block
         [sqrt(N m), per the joint units]."""
-        return self.memo("spring_root", self._spring_root)
-
-    def _spring_root(self) -> np.ndarray:
-        k = self.stiffness
-        R = np.diag(np.sqrt(np.where(np.isinf(k), 0.0, k)))
-        for name, block in self.spring_blocks.items():
-            v = self.joint_v_slice(name)
-            R[v, v] = np.linalg.cholesky(block).T
-        return frozen(R)
+        return self.memo(
+            "spring_root", spring_root, self.stiffness, self.spring_blocks, self.joint_v_slice
+        )
 
     def spring_forces(self, dq: np.ndarray) -> np.ndarray:
         """(nv,) generalised spring forces K_q dq [N m, N] of a deflection dq (nv,)
@@ -316,17 +271,12 @@ class ClosedLoopModel:
         """
         k = self.stiffness
         f = np.where(np.isinf(k), 0.0, k) * dq
-        for v, lam, V in self.memo("spring_spectra", self._spring_spectra):
+        spectra = self.memo(
+            "spring_spectra", spring_spectra, self.spring_blocks, self.joint_v_slice
+        )
+        for v, lam, V in spectra:
             f[v] = V @ (lam * (V.T @ dq[v]))
         return f
-
-    def _spring_spectra(self) -> tuple:
-        """(velocity slice, eigenvalues, eigenvectors) of each spring block."""
-        out = []
-        for name, block in self.spring_blocks.items():
-            lam, V = np.linalg.eigh(block)
-            out.append((self.joint_v_slice(name), frozen(lam), frozen(V)))
-        return tuple(out)
 
     # ------------------------------------------------------------------ naming helpers
     def frame_id(self, name: str) -> int:
@@ -485,43 +435,9 @@ class ClosedLoopModel:
         )
 
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
-        """Validated copy of a configuration vector q (nq,)."""
-        if type(q) is np.ndarray and q.dtype is _FLOAT64 and q.ndim == 1:
-            q = q.copy()  # the common case, without the conversions of real_array
-        else:
-            q = real_array(q, "q")
-            if q.ndim > 1:  # a (1, nq) row or a stack of configurations is not one q
-                raise InvalidInputError(
-                    f"q must be one configuration, shape (nq,) = ({self.model.nq},), got shape "
-                    f"{q.shape} (many configurations: closedloop.compliances)"
-                )
-            q = q.reshape(-1)
-        if len(q) != self._nq:  # q is one-dimensional here
-            raise InvalidInputError(f"q has {q.size} values; expected nq={self._nq}")
-        # a sum of floats is finite when every one is (it may overflow: then look at each)
-        if not math.isfinite(sum(q.tolist())) and not np.isfinite(q).all():
-            raise InvalidInputError(f"q contains non-finite values: {q.tolist()}")
-        if self._unit_coordinates:  # quaternions or unit complex numbers
-            q = self._unit_norms(q)
-        return q
-
-    def _unit_norms(self, q: np.ndarray) -> np.ndarray:
-        """q with its quaternions and unit complex numbers (free-flyer, spherical, planar,
-        unbounded revolute joints) normalised, or :class:`InvalidInputError` naming the
-        joint of one whose norm is off 1 by more than :data:`UNIT_NORM_TOL`."""
-        model = self.model
-        if not pin.isNormalized(model, q, UNIT_NORM_TOL):
-            for j, jm in enumerate(model.joints):  # the first joint whose part is off
-                part = slice(jm.idx_q, jm.idx_q + jm.nq)
-                alone = pin.neutral(model)
-                alone[part] = q[part]
-                if jm.nq != jm.nv and not pin.isNormalized(model, alone, UNIT_NORM_TOL):
-                    raise InvalidInputError(
-                        f"q of joint {model.names[j]!r} ({jm.shortname()}) is "
-                        f"{q[part].tolist()}: its quaternion or unit complex number is not of "
-                        f"norm 1 (to {UNIT_NORM_TOL:g}); normalise it (pinocchio.normalize)"
-                    )
-        return pin.normalize(model, q)
+        """Validated copy of a configuration vector q (nq,)
+        (:func:`closedloop.model.coordinates.checked_configuration`)."""
+        return checked_configuration(self.model, q, self._nq, self._unit_coordinates)
 
     def reference_configuration(self) -> np.ndarray:
         """(nq,) new array: the model's reference configuration, the start of an assembly

@@ -1,11 +1,12 @@
 """The spring specification of a model as stiffnesses: one per velocity coordinate (``0``
 passive, ``k > 0`` a spring, ``inf`` locked) and the symmetric positive definite blocks
-that couple the coordinates of one joint (:mod:`closedloop.model.closed_loop`).
+that couple the coordinates of one joint (:mod:`closedloop.model.closed_loop`); the joint
+stiffness matrix K_q they make, its square root and the blocks' spectra.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
 import pinocchio as pin
@@ -121,3 +122,45 @@ def joint_stiffness(
             )
         k[jm.idx_v : jm.idx_v + jm.nv] = values
     return frozen(k), blocks
+
+
+def spring_matrix(
+    k: np.ndarray, blocks: Mapping[str, np.ndarray], v_slice: Callable[[str], slice]
+) -> np.ndarray:
+    """(nv, nv) read-only joint stiffness K_q of the finite springs: the blocks and diag(k)
+    elsewhere, 0 on passive and locked coordinates [N m/rad, N/m, N].
+
+    Args:
+        k: (nv,) stiffness of every velocity coordinate (0, > 0 or inf), as of
+            :func:`joint_stiffness`.
+        blocks: joint name -> its (nv_j, nv_j) symmetric positive definite block.
+        v_slice: joint name -> its slice of the velocity (tangent) vector.
+    """
+    K = np.diag(np.where(np.isinf(k), 0.0, k))
+    for name, block in blocks.items():
+        v = v_slice(name)
+        K[v, v] = block
+    return frozen(K)
+
+
+def spring_root(
+    k: np.ndarray, blocks: Mapping[str, np.ndarray], v_slice: Callable[[str], slice]
+) -> np.ndarray:
+    """(nv, nv) read-only square root R of :func:`spring_matrix`, K_q = R^T R: sqrt(k) on
+    the diagonal, the transposed Cholesky factor (upper triangular) of each block
+    [sqrt(N m), per the joint units] (arguments: those of :func:`spring_matrix`)."""
+    R = np.diag(np.sqrt(np.where(np.isinf(k), 0.0, k)))
+    for name, block in blocks.items():
+        v = v_slice(name)
+        R[v, v] = np.linalg.cholesky(block).T
+    return frozen(R)
+
+
+def spring_spectra(blocks: Mapping[str, np.ndarray], v_slice: Callable[[str], slice]) -> tuple:
+    """(velocity slice, (nv_j,) read-only eigenvalues, (nv_j, nv_j) read-only eigenvectors)
+    of each spring block (arguments: those of :func:`spring_matrix`)."""
+    out = []
+    for name, block in blocks.items():
+        lam, V = np.linalg.eigh(block)
+        out.append((v_slice(name), frozen(lam), frozen(V)))
+    return tuple(out)

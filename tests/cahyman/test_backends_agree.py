@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from helpers import assert_close_in_norm
 
-from cahyman_pin.api import backend_names, stiffness
+from cahyman_pin.api import stiffness
 from cahyman_pin.backends.consistent import consistent_compliance
+from cahyman_pin.backends.registry import backend_names
 from cahyman_pin.params import DEFAULT_PARAMS
 from closedloop.exceptions import InvalidInputError
 

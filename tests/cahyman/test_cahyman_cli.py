@@ -12,6 +12,7 @@ import pytest
 from helpers import REPO, closed_pipe_run
 
 from cahyman_pin import api
+from cahyman_pin.backends import registry
 from cahyman_pin.cli import main
 
 #: Same computation through the CLI and the API: only the deg/mm -> SI conversion
@@ -276,9 +277,9 @@ def test_rank_deficient_compliance_exits_1(capsys, monkeypatch):
 
     def rigid(params, alpha, alpha4, s4):
         pose = closed_form_pose(alpha, alpha4, s4, params)
-        return api.BackendResult(C=planar.C, pose=pose, details={"compliance": planar})
+        return registry.BackendResult(C=planar.C, pose=pose, details={"compliance": planar})
 
-    monkeypatch.setitem(api._BACKENDS, "rigid", rigid)
+    monkeypatch.setitem(registry._BACKENDS, "rigid", rigid)
     status, out, err = run(capsys, "stiffness", "--backend", "rigid")
     assert (status, err) == (1, "")
     assert "K does not exist: compliance rank 3 < 6" in out

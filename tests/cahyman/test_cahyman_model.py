@@ -11,6 +11,7 @@ import pytest
 from helpers import REPO
 
 from cahyman_pin import api
+from cahyman_pin.backends import registry
 from cahyman_pin.model import CaHyManModel, cahyman_model
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.urdf_builder import build_closure_yaml, build_urdf
@@ -322,9 +323,9 @@ def test_a_registered_backend_is_used(monkeypatch):
     def diagonal(params, alpha, alpha4, s4):
         from cahyman_pin.model import closed_form_pose
 
-        return api.BackendResult(C=C, pose=closed_form_pose(alpha, alpha4, s4, params))
+        return registry.BackendResult(C=C, pose=closed_form_pose(alpha, alpha4, s4, params))
 
-    monkeypatch.setitem(api._BACKENDS, "diagonal", diagonal)
+    monkeypatch.setitem(registry._BACKENDS, "diagonal", diagonal)
     r = api.stiffness(*TABLES["table3"], backend="diagonal")
     np.testing.assert_array_equal(r.C, C)
     assert r.backend == "diagonal"

@@ -7,6 +7,7 @@ import pytest
 from helpers import assert_close_in_norm
 
 from cahyman_pin import api
+from cahyman_pin.backends import registry
 from cahyman_pin.params import DEFAULT_PARAMS
 from cahyman_pin.sweep import SweepResult, grid, pose_list, sweep
 from cahyman_pin.sweep import execution as sweep_exec
@@ -290,9 +291,9 @@ def test_invalid_design_values_are_marked():
 
 def test_rank_deficient_closed_form_is_a_singular_pose_as_in_the_api(monkeypatch):
     def rigid_about_z(params, alpha, alpha4, s4):  # no rotation about z
-        return api.BackendResult(C=np.diag([1e-6, 2e-6, 3e-6, 1e-3, 2e-3, 0.0]), pose=None)
+        return registry.BackendResult(C=np.diag([1e-6, 2e-6, 3e-6, 1e-3, 2e-3, 0.0]), pose=None)
 
-    monkeypatch.setitem(api._BACKENDS, "rigid_about_z", rigid_about_z)
+    monkeypatch.setitem(registry._BACKENDS, "rigid_about_z", rigid_about_z)
     res = sweep(small_grid(), backend="rigid_about_z", executor="serial")
     assert np.all(res.status == "singular") and np.all(res.rank == 5)
     assert "numerical rank 5 < 6" in res.reasons[0]

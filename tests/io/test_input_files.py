@@ -137,7 +137,7 @@ def test_urdf_readers_of_balls_and_beam_sections_refuse_entities(tmp_path, fourb
     closures.write_text("closed_loop: []\ntype: []\nballs: [coupler]\n")
     with pytest.raises(ModelFileError, match="declares the XML entity"):
         cl.load_model(path, closures, geometry=False)
-    from closedloop.model.beam_theory import urdf_shapes
+    from closedloop.model.beam_section import urdf_shapes
 
     with pytest.raises(ModelFileError, match="declares the XML entity"):
         urdf_shapes(path)

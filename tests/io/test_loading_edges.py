@@ -20,6 +20,7 @@ from closedloop.exceptions import (
     NameNotFoundError,
 )
 from closedloop.io import loader as io
+from closedloop.io import robot_files
 from closedloop.kinematics.assembly import assemble
 
 # The MJCF and URDF four-bars are one mechanism read by two parsers: their compliances
@@ -53,11 +54,11 @@ def test_parses_in_two_threads_leave_stderr_where_it_was(tmp_path):
         first_out.wait(WAIT)
 
     def run_first():
-        io._parse(first, tmp_path, "robot file")
+        robot_files.run_parser(first, tmp_path, "robot file")
         first_out.set()
 
     one = threading.Thread(target=run_first)
-    two = threading.Thread(target=lambda: io._parse(second, tmp_path, "robot file"))
+    two = threading.Thread(target=lambda: robot_files.run_parser(second, tmp_path, "robot file"))
     try:
         one.start()
         first_in.wait()

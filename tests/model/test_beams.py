@@ -22,7 +22,7 @@ from closedloop.elastostatics.compliance import energy_shares
 from closedloop.elastostatics.statics import solve_equilibrium
 from closedloop.exceptions import ModelFileError
 from closedloop.io.loader import load_model, robot_data_dir
-from closedloop.model.beam_theory import Shape, geometry_section
+from closedloop.model.beam_section import Shape, geometry_section
 from closedloop.model.beams import BeamError, map_configuration
 
 # Library vs closed form / FEM: the same beam theory through different algebra (6x6
