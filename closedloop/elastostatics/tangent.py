@@ -121,7 +121,7 @@ def closure_gap(
         c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
     rows = point_anchors(clm).rows
     if rows.size:
-        c[rows], A[rows] = point_gap(clm)
+        c[rows], A[rows] = point_gap(clm, q)
     return c, A
 
 
@@ -196,7 +196,7 @@ def closure_curvature(
     out = np.zeros((model.nv, model.nv))
     rows = point_anchors(clm).rows
     if np.any(lam[rows]):
-        out += point_curvature(clm, lam[rows])
+        out += point_curvature(clm, q, lam[rows])
     lam_w = lam.copy()
     lam_w[rows] = 0.0
     if np.any(lam_w):
