@@ -130,7 +130,8 @@ def anchor_kinematics(clm: ClosedLoopModel, q: np.ndarray):
     last = _last
     if last.data is data and last.anchors is anchors and last.bits == bits:
         return last.value
-    H = np.array([data.oMi[int(j)].homogeneous for j in anchors.joints]).reshape(-1, 4, 4)
+    oMi = data.oMi  # one proxy for the anchors' joints
+    H = np.array([oMi[j].homogeneous for j in anchors.joints.tolist()]).reshape(-1, 4, 4)
     p = (H[:, :3, :3] @ anchors.offsets[:, :, None])[:, :, 0] + H[:, :3, 3]
     JW = np.asarray(data.J)[None] * anchors.support[:, None, :]
     Jp = JW[:, :3] - _skews(p) @ JW[:, 3:]
