@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from closedloop.common.arrays import frozen
-
 from closedloop.model.closed_loop import ClosedLoopModel
 
 
