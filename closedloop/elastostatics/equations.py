@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from closedloop.common.arrays import frozen
-from closedloop.common.conditioning import RANK_RTOL, rule_rank
+from closedloop.common.conditioning import RANK_RTOL, rule_rank, svd
 from closedloop.elastostatics.springs import spring_split
 from closedloop.elastostatics.tangent import (
     closure_gap,
@@ -134,7 +134,7 @@ class EquilibriumEquations:
         F = (g - load)[free]
         rows, cols = self.units.rows, self.free_scales
         if A.size:  # unit-free: A_s = diag(1 / rows) A diag(cols), F_y = diag(cols) F
-            U, s, Vt = np.linalg.svd(A / rows[:, None] * cols, full_matrices=True)
+            U, s, Vt = svd(A / rows[:, None] * cols)  # LAPACK's, without numpy's call cost
             r = rule_rank(s)
         else:
             U, s, Vt, r = np.zeros((A.shape[0], 0)), np.zeros(0), np.eye(free.size), 0

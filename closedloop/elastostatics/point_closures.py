@@ -19,14 +19,20 @@ an anchor weighted by a force lambda (3,) [N], entry [a, b] = lambda . dJ_p[:, a
 
 with X = V^T [lambda]x W and Y = W^T [p x lambda]x W. Every anchor is handled in one pass:
 positions and Jacobians as stacked arrays, each sum over the anchors one matrix product.
+
+The anchors' kinematics at q are kept for the next call at the same q in the same thread
+(:func:`anchor_kinematics`): the statics evaluate the gap and then the curvature at each
+iterate, and their equations' residual and tangent read them once.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 
+from closedloop.common.arrays import frozen
 from closedloop.model.closed_loop import ClosedLoopModel
 
 
@@ -100,41 +106,60 @@ def _skews(u: np.ndarray) -> np.ndarray:
     return (u @ _LEVI_CIVITA).reshape(-1, 3, 3)
 
 
-def _kinematics(clm: ClosedLoopModel, anchors: PointAnchors):
+class _Last(threading.local):
+    """This thread's last anchor kinematics: the workspace and anchors they were computed
+    for (held, so that no other object takes their identity), the bits of q, the arrays."""
+
+    data = anchors = bits = value = None
+
+
+_last = _Last()
+
+
+def anchor_kinematics(clm: ClosedLoopModel, q: np.ndarray):
     """(p, JW, Jp): the anchors' world positions (2k, 3) [m], their joints' spatial
-    Jacobians (2k, 6, nv) and their point Jacobians (2k, 3, nv), world axes. Expects the
-    joint Jacobians of the current q in ``clm.data``."""
-    data = clm.data
-    H = np.array([data.oMi[int(j)].homogeneous for j in anchors.joints]).reshape(-1, 4, 4)
+    Jacobians (2k, 6, nv) and their point Jacobians (2k, 3, nv), world axes; read-only.
+
+    Expects the joint Jacobians of q (nq,) in ``clm.data`` (this thread's workspace).
+    Kept for the next call in this thread with the same workspace (so the same model) and
+    a q of the same bits, which gets the same arrays without reading ``clm.data``.
+    """
+    data, anchors = clm.data, point_anchors(clm)
+    bits = np.asarray(q, dtype=float).tobytes()
+    last = _last
+    if last.data is data and last.anchors is anchors and last.bits == bits:
+        return last.value
+    oMi = data.oMi  # one proxy for the anchors' joints
+    H = np.array([oMi[j].homogeneous for j in anchors.joints.tolist()]).reshape(-1, 4, 4)
     p = (H[:, :3, :3] @ anchors.offsets[:, :, None])[:, :, 0] + H[:, :3, 3]
     JW = np.asarray(data.J)[None] * anchors.support[:, None, :]
     Jp = JW[:, :3] - _skews(p) @ JW[:, 3:]
-    return p, JW, Jp
+    value = frozen(p), frozen(JW), frozen(Jp)
+    last.data, last.anchors, last.bits, last.value = data, anchors, bits, value
+    return value
 
 
-def point_gap(clm: ClosedLoopModel) -> tuple[np.ndarray, np.ndarray]:
+def point_gap(clm: ClosedLoopModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(c, A): the world gaps p2 - p1 (3k,) [m] of the point closures, stacked in closure
-    order, and their Jacobian (3k, nv) [m/rad or m/m]. Expects the joint Jacobians of the
-    current q in ``clm.data``."""
-    anchors = point_anchors(clm)
-    p, _, Jp = _kinematics(clm, anchors)
+    order, and their Jacobian (3k, nv) [m/rad or m/m]. Expects the joint Jacobians of q
+    (nq,) in ``clm.data``."""
+    p, _, Jp = anchor_kinematics(clm, q)
     k = p.shape[0] // 2
     return (p[k:] - p[:k]).reshape(-1), (Jp[k:] - Jp[:k]).reshape(-1, clm.model.nv)
 
 
-def point_curvature(clm: ClosedLoopModel, lam: np.ndarray) -> np.ndarray:
+def point_curvature(clm: ClosedLoopModel, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """(nv, nv) sum_r lam_r Hess c_r over the rows of the point closures (module
     docstring); entry [a, b] = d(A^T lam)_a / dq_b. Exact for joints whose motion subspace
     is constant in their frame (:func:`closedloop.common.derivatives.pinocchio_second_order_exact`).
 
     Args:
         clm: the model.
+        q: (nq,) the configuration whose joint Jacobians are in ``clm.data``.
         lam: (3k,) the multipliers of the point closures' rows, world axes [N].
-
-    Expects the joint Jacobians of the current q in ``clm.data``.
     """
     nv, anchors = clm.model.nv, point_anchors(clm)
-    p, S, Jp = _kinematics(clm, anchors)
+    p, S, Jp = anchor_kinematics(clm, q)
     k = p.shape[0] // 2
     forces = np.concatenate([-lam.reshape(k, 3), lam.reshape(k, 3)])  # on side 1, side 2
     turn = _skews(forces)  # [lambda]x

@@ -121,7 +121,7 @@ def closure_gap(
         c[:], A[:] = closure_residual(clm, q, update=False), closure_jacobian(clm, q, update=False)
     rows = point_anchors(clm).rows
     if rows.size:
-        c[rows], A[rows] = point_gap(clm)
+        c[rows], A[rows] = point_gap(clm, q)
     return c, A
 
 
@@ -193,15 +193,15 @@ def closure_curvature(
         return out
     if update:
         update_kinematics(clm, q)
-    out = np.zeros((model.nv, model.nv))
     rows = point_anchors(clm).rows
-    if np.any(lam[rows]):
-        out += point_curvature(clm, lam[rows])
-    lam_w = lam.copy()
-    lam_w[rows] = 0.0
-    if np.any(lam_w):
-        out += central_differences(model, q, lambda x: closure_jacobian(clm, x).T @ lam_w)
-        update_kinematics(clm, q)
+    lam_p = lam[rows]
+    out = point_curvature(clm, q, lam_p) if np.any(lam_p) else np.zeros((model.nv, model.nv))
+    if rows.size < lam.size:  # rows of other closures
+        lam_w = lam.copy()
+        lam_w[rows] = 0.0
+        if np.any(lam_w):
+            out += central_differences(model, q, lambda x: closure_jacobian(clm, x).T @ lam_w)
+            update_kinematics(clm, q)
     return out
 
 
