@@ -45,7 +45,8 @@ class _Scaling(NamedTuple):
     # Jc[:, order] * scale_order to the last bit (one product a column, the rest zeros), in
     # one matrix product, in Fortran order
     gather: np.ndarray | None
-    upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
+    upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below; Fortran order, as
+    # the QR that it masks (a product of two arrays of one order is a plain loop)
     d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
     dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
     d_rows: np.ndarray  # (6, s) d in every column: D B = B * d_rows (no broadcasting)
@@ -114,7 +115,7 @@ class _Scaling(NamedTuple):
             s_q[passive, None],
             scale_order,
             gather,
-            np.triu(np.ones((row_scale.size, order.size))),
+            np.asfortranarray(np.triu(np.ones((row_scale.size, order.size)))),
             frozen(d),
             dd,
             frozen(np.repeat(d[:, None], sprung.size, axis=1)),
