@@ -414,7 +414,7 @@ def _upper(rows: int, columns: int) -> np.ndarray:
 def _passive_motions(Jc: np.ndarray, sc) -> tuple[np.ndarray, np.ndarray]:
     """X (n, p, s) = -J_p^+ J_s of each closure Jacobian of Jc (n, m, nv), and where it
     holds with the margin: J_p well conditioned, J_s + J_p X = 0 (the tests of
-    :func:`closedloop.elastostatics.springs._passive_motion`)."""
+    :func:`closedloop.elastostatics.partition.passive_motion`)."""
     p = sc.passive.size
     A = np.take(Jc, sc.order, axis=2)
     A *= sc.scale_order

@@ -45,7 +45,8 @@ class _Scaling(NamedTuple):
     # Jc[:, order] * scale_order to the last bit (one product a column, the rest zeros), in
     # one matrix product, in Fortran order
     gather: np.ndarray | None
-    upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below
+    upper: np.ndarray  # (m, p + s) 1 on and above the diagonal, 0 below; Fortran order, as
+    # the QR that it masks (a product of two arrays of one order is a plain loop)
     d: np.ndarray  # (6,) twist scaling D = diag(1/L, 1/L, 1/L, 1, 1, 1)
     dd: np.ndarray  # (6, 6) outer(d, d): K = D K_s D entrywise
     d_rows: np.ndarray  # (6, s) d in every column: D B = B * d_rows (no broadcasting)
@@ -114,7 +115,7 @@ class _Scaling(NamedTuple):
             s_q[passive, None],
             scale_order,
             gather,
-            np.triu(np.ones((row_scale.size, order.size))),
+            np.asfortranarray(np.triu(np.ones((row_scale.size, order.size)))),
             frozen(d),
             dd,
             frozen(np.repeat(d[:, None], sprung.size, axis=1)),
@@ -159,8 +160,9 @@ PARTITION_RTOL = 1e-9
 BLOCK_PASSIVE = 48
 
 
-def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
-    """X (p, s) = -J_p^+ J_s from the closure Jacobian Jc (m, nv), m >= p, or None when
+def passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
+    """X (p, s) = -J_p^+ J_s from the closure Jacobian Jc (m, nv), m >= p > 0 and s > 0
+    (:func:`partition` calls it so: LAPACK called without the size checks), or None when
     J_p is ill conditioned or J_s + J_p X does not vanish (module constants).
 
     One QR of the scaled [-J_p, J_s] (LAPACK dgeqrf) = Q [[R11, R12], [0, R22]]:
@@ -176,26 +178,27 @@ def _passive_motion(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
         A = sc.gather.dot(Jc.T).T
     else:
         A = np.multiply(Jc[:, sc.order], sc.scale_order, order="F")
-    scale = PARTITION_RTOL * abs(A[:, p:]).max()
-    qr, _, _, info = lapack.dgeqrf(A, overwrite_a=1)
+    scale = PARTITION_RTOL * np.maximum.reduce(abs(A[:, p:]), None)  # max |J_s|, scaled
+    qr, _, _, info = lapack.unchecked.dgeqrf(A, overwrite_a=1)  # (sizes: partition's)
     R = qr * sc.upper  # the triangle (Householder vectors below it)
     residual = R[p:, p:]
     if info != 0 or np.vdot(residual, residual) > scale * scale:
         return None
     R11 = R[:p, :p]
-    R_inv, info = lapack.dtrtri(R11)  # a zero pivot: info > 0; near one, a large inverse
-    cond = lapack.dlantr(b"1", R11) * lapack.dlantr(b"1", R_inv) if info == 0 else math.inf
+    R_inv, info = lapack.unchecked.dtrtri(R11)  # a zero pivot: info > 0; near one, large
+    norm_1 = lapack.unchecked.dlantr
+    cond = norm_1(b"1", R11) * norm_1(b"1", R_inv) if info == 0 else math.inf
     if not cond * PARTITION_RCOND < 1.0:  # (an inverse with inf or NaN fails it too)
         return None
     return R_inv @ R[:p, p:]
 
 
 def _passive_motion_by_blocks(Jc: np.ndarray, sc: _Scaling) -> np.ndarray | None:
-    """:func:`_passive_motion` on the blocks of :func:`_loop_blocks`, those of one shape
+    """:func:`passive_motion` on the blocks of :func:`_loop_blocks`, those of one shape
     at once, each gathered from the closure Jacobian Jc (m, nv) on its own rows and
     columns (scaled, the common ancestors' columns, rounding of a zero, set to 0). The
     QR of a block diagonal -J_p is block diagonal, and so are R and R^-1, whose 1-norms
-    are the largest of the blocks' (the 1-norm condition of :func:`_passive_motion`);
+    are the largest of the blocks' (the 1-norm condition of :func:`passive_motion`);
     the residual J_s + J_p X is checked on the blocks' spring columns, the others being
     zero."""
     X = np.zeros((sc.passive.size, sc.sprung.size))
@@ -293,7 +296,7 @@ def partition(state: Configuration, sc: _Scaling) -> tuple[str, np.ndarray | Non
     if p:
         if m < p:
             return None
-        X = _passive_motion(state.closure_jacobian(), sc)
+        X = passive_motion(state.closure_jacobian(), sc)
         if X is None:
             return None
     elif m:

@@ -37,7 +37,12 @@ from closedloop.common.conditioning import (
     factor_rank,
     spectrum_from_factor,
 )
-from closedloop.elastostatics.partition import kinematic_factor, model_scaling, partition
+from closedloop.elastostatics.partition import (
+    kinematic_factor,
+    model_scaling,
+    partition,
+    passive_motion,
+)
 from closedloop.elastostatics.springs import check_path, spring_factor
 from closedloop.elastostatics.unloaded import (
     ComplianceResult,
@@ -47,11 +52,13 @@ from closedloop.elastostatics.unloaded import (
 )
 from closedloop.exceptions import InvalidInputError
 from closedloop.kinematics.configuration import (
+    CLOSURE_TOL,
     Configuration,
     checked_configuration,
+    closure_state,
     joint_reach,
 )
-from closedloop.kinematics.constraints import reference_frame
+from closedloop.kinematics.constraints import jacobian_rows, reference_frame
 from closedloop.model.closed_loop import ClosedLoopModel
 from closedloop.model.closures import check_name
 
@@ -152,8 +159,8 @@ class _Plan:
     to the model (a model keeps its plans)."""
 
     __slots__ = (
-        "_bounded", "_fid", "_fields", "_reference", "_scaling", "_serial", "axes", "frame",
-        "length", "path",
+        "_bounded", "_fid", "_fields", "_partitioned", "_reference", "_scaling", "_serial",
+        "axes", "frame", "length", "path",
     )  # fmt: skip
 
     def __init__(self, model: ClosedLoopModel, frame: str, axes: str, path: str, length):
@@ -173,6 +180,10 @@ class _Plan:
         self._serial = path == "auto" and not model.closures and not sc.passive.size
         self._serial = self._serial and sc.sprung.size > 0
         self._bounded = self._serial and _bounded(model, self._fid, sc, self.length)
+        # closures with as many rows as passive coordinates or more, and springs: the
+        # partitioned path is tried first (partition)
+        m = sum(c.size for c in model.closures)
+        self._partitioned = path == "auto" and m >= sc.passive.size > 0 and sc.sprung.size > 0
         # what the fast paths' results take from the plan
         self._fields = {
             taken: FastFields(frame, axes, self.length, taken, sc.sigma.size, self._fid,
@@ -182,23 +193,62 @@ class _Plan:
 
     def query(self, model: ClosedLoopModel, q, check_limits: bool) -> ComplianceResult:
         """The compliance at q (nq,) of ``model`` (the plan's), q checked here, once
-        (:class:`ComplianceQuery`): a configuration of a model with loops or passive
-        joints is made a :class:`Configuration` and must close the loops; a serial robot's
-        is checked (:func:`closedloop.kinematics.configuration.checked_configuration`)
-        and its kinematics computed in a workspace of the model's pool
+        (:class:`ComplianceQuery`).
+
+        A serial robot's q is checked
+        (:func:`closedloop.kinematics.configuration.checked_configuration`) and its
+        kinematics computed in a workspace of the model's pool
         (:meth:`ClosedLoopModel.acquire_workspace`), without the closure residual, frame
         placements and Jacobians that a configuration keeps and the serial path does not
-        read."""
-        if not self._serial:
-            state = Configuration(model, q, length=self.length, check_limits=check_limits)
-            return self.at(state.require_closed())
-        q = checked_configuration(model, q, check_limits)
-        workspace = model.acquire_workspace()
+        read; so is a mechanism's on the partitioned path (:meth:`_partitioned_at`), with
+        its closure residual judged as a configuration's. Otherwise (other models, loops
+        that do not close, a partition that does not hold) q is made a
+        :class:`Configuration`, which must close the loops.
+        """
+        if self._serial:
+            q = checked_configuration(model, q, check_limits)
+            workspace = model.acquire_workspace()
+            try:
+                pin.computeJointJacobians(model.model, workspace[0], q)
+                return self._serial_at(model, workspace[0], q)
+            finally:
+                model.release_workspace(workspace)
+        if self._partitioned:
+            result = self._partitioned_at(model, checked_configuration(model, q, check_limits))
+            if result is not None:
+                return result
+        state = Configuration(model, q, length=self.length, check_limits=check_limits)
+        return self.at(state.require_closed())
+
+    @np.errstate(over="ignore", invalid="ignore")  # overflows: the result's typed error
+    def _partitioned_at(self, model: ClosedLoopModel, q: np.ndarray) -> ComplianceResult | None:
+        """The partitioned path at q (nq,), checked, in a workspace of the model's pool:
+        the kinematics, the closure residual and its rounding judged as a
+        :class:`Configuration` judges them
+        (:func:`closedloop.kinematics.configuration.closure_state`), the closure Jacobian
+        and :func:`closedloop.elastostatics.partition.passive_motion`, the operations of
+        :meth:`at` on the configuration. None when the loops do not close or the partition
+        does not hold (the configuration then raises its error, or the null-space path
+        decides)."""
+        data, datas = workspace = model.acquire_workspace()
         try:
-            pin.computeJointJacobians(model.model, workspace[0], q)
-            return self._serial_at(model, workspace[0], q)
+            pin.computeJointJacobians(model.model, data, q)
+            _, norm, error, rounding = closure_state(model, data, datas, q, self.length)
+            if not (error <= CLOSURE_TOL and rounding <= CLOSURE_TOL):
+                return None
+            X = passive_motion(jacobian_rows(model, data, datas, calc=False), self._scaling)
+            if X is None:
+                return None
+            J = self._jacobian(model, data)
+            return self._fast(model, data, q, norm, J, "partitioned", X)
         finally:
             model.release_workspace(workspace)
+
+    def _jacobian(self, model: ClosedLoopModel, data: pin.Data) -> np.ndarray:
+        """(6, nv) Jacobian of the frame, in the plan's axes, from the joint Jacobians in
+        ``data``."""
+        J = pin.getFrameJacobian(model.model, data, self._fid, self._reference)
+        return J.reshape(6, 1) if J.ndim == 1 else J  # a one-dof model gives a (6,) vector
 
     def at(self, state: Configuration) -> ComplianceResult:
         """The compliance at a closed configuration of the model at the plan's length (not
@@ -206,17 +256,12 @@ class _Plan:
         check it)."""
         if self._serial:
             return self._serial_at(state.model, state.data, state.q)
-        J = pin.getFrameJacobian(state.model.model, state.data, self._fid, self._reference)
-        if J.ndim == 1:  # a one-dof model gives a (6,) vector
-            J = J.reshape(6, 1)
-        return self._guarded(state, J)
+        return self._guarded(state, self._jacobian(state.model, state.data))
 
     def _serial_at(self, model: ClosedLoopModel, data: pin.Data, q: np.ndarray):
         """The serial path at q (checked), whose joint Jacobians and placements are in
         ``data``."""
-        J = pin.getFrameJacobian(model.model, data, self._fid, self._reference)
-        if J.ndim == 1:  # a one-dof model gives a (6,) vector
-            J = J.reshape(6, 1)
+        J = self._jacobian(model, data)
         if self._bounded:  # nothing overflows: numpy's error state as it is
             return self._fast(model, data, q, 0.0, J, "serial", None)
         with np.errstate(over="ignore", invalid="ignore"):  # overflows: the typed error

@@ -136,6 +136,36 @@ def _rounding_factor(model: pin.Model) -> float:
     return model.njoints * float(np.finfo(float).eps)
 
 
+def closure_state(
+    model: ClosedLoopModel, data: pin.Data, constraint_datas, q: np.ndarray, length: float
+) -> tuple[np.ndarray, float, float, float]:
+    """The closure residual of a model with closures at q (nq,), checked, whose joint
+    placements are in ``data`` (``constraint_datas``: its workspace's), at length L [m]:
+    the (m,) read-only residual [m; m, rad], its infinity norm [m, rad], the scaled one
+    (metres / L, radians: :attr:`Configuration.closure_error`) and the bound of its
+    rounding (:func:`residual_rounding`). The loops are closed when both of the last two
+    are within :data:`CLOSURE_TOL` (module docstring)."""
+    r = frozen(residual_rows(model, data, constraint_datas))
+    rounding = residual_rounding(model, q, length)
+    values = r.tolist()  # a few rows: Python floats cost less than numpy's calls
+    if math.isfinite(sum(values)):  # (a NaN would pass Python's max unseen)
+        norm = max(map(abs, values))
+    else:
+        norm = float(abs(r).max())
+    if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
+        error = norm / length
+    else:
+        error = float((abs(r) * _row_scale(model, length)).max())
+    return r, norm, error, rounding
+
+
+def _row_scale(model: ClosedLoopModel, length: float) -> np.ndarray:
+    """(m,) scale of the residual rows at length L [m]: 1 / L for metres, 1 for radians
+    (once per model and L)."""
+    rows = model.linear_rows
+    return model.memo(("row_scale", length), lambda: np.where(rows, 1.0 / length, 1.0))
+
+
 class Configuration:
     """Configuration q of a :class:`ClosedLoopModel`, kinematics computed once.
 
@@ -183,34 +213,19 @@ class Configuration:
         self.model = model
         self.q = q = checked_configuration(model, q, check_limits)
         pm = model.model
-        self.data, self._constraint_datas = data, _ = model.acquire_workspace()
+        self.data, self._constraint_datas = data, datas = model.acquire_workspace()
         pin.computeJointJacobians(pm, data, q)
         pin.updateFramePlacements(pm, data)
         self.length = model.length if length is None else check_length(length)
-        if model.closures:
-            self._closure_residual()
+        if model.closures:  # the residual, its norms and the bound of its rounding
+            closure = closure_state(model, data, datas, q, self.length)
+            self.residual, self.residual_norm, self.closure_error, self._rounding = closure
         else:  # a serial robot closes no loop: no residual, no rounding of it
             self.residual, self.residual_norm, self.closure_error = _NO_RESIDUAL, 0.0, 0.0
             self._rounding = 0.0
 
     _closure_jacobian: np.ndarray | None = None  # computed on first use (per configuration)
     _frame_jacobians: dict | None = None
-
-    def _closure_residual(self) -> None:
-        """The closure residual at q, its norms and the bound of its rounding (module
-        docstring)."""
-        model = self.model
-        self.residual = r = frozen(residual_rows(model, self.data, self._constraint_datas))
-        self._rounding = residual_rounding(model, self.q, self.length)
-        values = r.tolist()  # a few rows: Python floats cost less than numpy's calls
-        if math.isfinite(sum(values)):  # (a NaN would pass Python's max unseen)
-            self.residual_norm = max(map(abs, values))
-        else:
-            self.residual_norm = float(abs(r).max())
-        if model.memo("metre_rows", model.linear_rows.all):  # a factor keeps the maximum
-            self.closure_error = self.residual_norm / self.length
-        else:
-            self.closure_error = float((abs(r) * self._row_scale()).max())
 
     def __copy__(self) -> Configuration:
         """A new configuration of the same model and q, with a workspace of its own (two
@@ -263,8 +278,7 @@ class Configuration:
 
     def _row_scale(self) -> np.ndarray:
         """(m,) scale of the residual rows: 1 / L for metres, 1 for radians."""
-        rows, L = self.model.linear_rows, self.length
-        return self.model.memo(("row_scale", L), lambda: np.where(rows, 1.0 / L, 1.0))
+        return _row_scale(self.model, self.length)
 
     def _scaled_residual(self) -> np.ndarray:
         """(m,) residual with its metres divided by the length L (radians as they are)."""

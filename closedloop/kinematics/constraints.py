@@ -42,15 +42,15 @@ def update_kinematics(clm: ClosedLoopModel, q: np.ndarray) -> None:
 
 def _closures(clm: ClosedLoopModel) -> tuple[tuple, tuple[str, ...], bool]:
     """(the constraints of the closures, their types, whether all are point closures of a
-    model with more than one coordinate: Jacobians stacked as Pinocchio gives them), once
-    per model."""
+    model with more than one coordinate: residuals and Jacobians stacked as Pinocchio gives
+    them), once per model."""
+    return clm.memo("closures", _closure_kinds, clm)
+
+
+def _closure_kinds(clm: ClosedLoopModel) -> tuple[tuple, tuple[str, ...], bool]:
     closures = clm.closures
-
-    def build():
-        points = clm.model.nv > 1 and all(c.kind == "3d" for c in closures)
-        return tuple(c.constraint for c in closures), tuple(c.kind for c in closures), points
-
-    return clm.memo("closures", build)
+    points = clm.model.nv > 1 and all(c.kind == "3d" for c in closures)
+    return tuple(c.constraint for c in closures), tuple(c.kind for c in closures), points
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -114,15 +114,19 @@ def residual_rows(clm: ClosedLoopModel, data: pin.Data, constraint_datas) -> np.
     Pinocchio's for points (R_A^T (p_B - p_A)) and welds (log6 of B in A), those of
     :func:`typed_residual` for the joint types."""
     model = clm.model
-    constraints, kinds, _ = _closures(clm)
+    constraints, kinds, points = _closures(clm)
+    if not constraints:
+        return np.empty(0)
+    if points:  # Pinocchio's residuals as they are
+        for c, cd in zip(constraints, constraint_datas, strict=True):
+            c.calc(model, data, cd)
+        return np.concatenate([cd.constraint_position_error for cd in constraint_datas])
     parts = []
     for c, cd, kind in zip(constraints, constraint_datas, kinds, strict=True):
         c.calc(model, data, cd)
         parts.append(
             cd.constraint_position_error if kind in ("3d", "6d") else typed_residual(kind, cd.c1Mc2)
         )
-    if not parts:
-        return np.empty(0)
     return np.concatenate(parts)
 
 

@@ -105,6 +105,24 @@ def test_a_configuration_gives_the_query_of_its_q():
     assert_same_result(cl.ComplianceQuery(clm, frame)(q), cl.compliance(state, frame))
 
 
+def test_the_partitioned_query_in_turn_at_poses_gives_the_plain_query_at_each():
+    """The prepared partitioned query computes in a pooled workspace that the last call,
+    at another pose, left behind (joint, frame and closure data): each result is the plain
+    query's (a Configuration of its own) at its pose, in both axes."""
+    from cahyman_pin.model import cahyman_model
+
+    machine = cahyman_model()
+    rng = np.random.default_rng(7)
+    Q = [machine.assemble(np.deg2rad(rng.uniform(45, 75, 3)), rng.uniform(0.2, 1.2),
+                          rng.uniform(0.0, 0.04)) for _ in range(4)]  # fmt: skip
+    for axes in ("world", "local"):
+        query = cl.ComplianceQuery(machine.clm, "M", axes)
+        for q in Q + Q[::-1]:
+            result = query(q)
+            assert result.path == "partitioned"
+            assert_same_result(result, cl.compliance(machine.clm, q, "M", axes))
+
+
 def test_threads_sharing_one_query_and_one_model_give_the_serial_results():
     """8 threads, one query of one model each (their Pinocchio workspaces their own)."""
     poses = []
