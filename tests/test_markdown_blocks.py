@@ -39,7 +39,7 @@ NOT_RUN_HERE = {
     "python3 -m venv .venv && . .venv/bin/activate && pip install .": (
         "creates a virtual environment and installs from the network; .ci/run installs"
     ),
-    'pip install ".[docs]" && python -m sphinx -W --keep-going -b html docs docs/_build/html': (
+    'pip install ".[docs]" && python -m sphinx -n -W --keep-going -b html docs docs/_build/html': (
         "installs from the network and builds the site (minutes); .ci/run builds it"
     ),
     "cahyman report --out my-report": (
