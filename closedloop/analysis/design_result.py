@@ -19,8 +19,7 @@ from closedloop.analysis.design_evaluation import DesignEvaluation, design_map
 from closedloop.analysis.design_problem import DESIGN_INDICES, DesignProblem
 from closedloop.analysis.maps import StiffnessMap, column_name
 from closedloop.analysis.nsga2 import nondominated_fronts
-from closedloop.common.files import save_figure, write_atomically
-from closedloop.exceptions import InvalidInputError
+from closedloop.common.files import output_folder, save_figure, write_atomically
 
 
 def pareto_set(
@@ -145,11 +144,7 @@ class DesignResult:
         Raises:
             InvalidInputError: ``out`` is not a folder that can be written.
         """
-        out = Path(out)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
+        out = output_folder(out)
         text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
         paths = [write_atomically(out / "design.json", lambda f: f.write(text), text=True)]
         paths.append(write_atomically(out / "evaluations.csv", self._write_csv, text=True,

@@ -30,7 +30,7 @@ from closedloop.analysis.model_source import ModelSource, model_of
 from closedloop.analysis.tasks import CHUNK, gather, run_tasks_by_point
 from closedloop.common.arrays import ReadOnlyArrays
 from closedloop.common.figures import tidy_layout
-from closedloop.common.files import save_figure, write_atomically
+from closedloop.common.files import output_folder, save_figure, write_atomically
 from closedloop.elastostatics.compliance import UNITS
 from closedloop.exceptions import InvalidInputError
 from closedloop.model.closed_loop import ClosedLoopModel
@@ -121,11 +121,7 @@ class StiffnessMap(ReadOnlyArrays):
         """
         if index not in self.indices:
             raise InvalidInputError(f"index {index!r}; expected one of {sorted(self.indices)}")
-        out = Path(out)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
+        out = output_folder(out)
         joint_units = dict(zip(self.joints, self.units, strict=True))
         units = {**joint_units, **{k: ALL_INDICES[k] for k in self.indices}, "C": UNITS["C"],
                  "inputs": list(self.units)}  # fmt: skip

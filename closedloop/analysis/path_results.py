@@ -13,8 +13,7 @@ import pinocchio as pin
 
 from closedloop.analysis.stiffest import StiffestChoice
 from closedloop.common.arrays import ReadOnlyArrays
-from closedloop.common.files import write_atomically
-from closedloop.exceptions import InvalidInputError
+from closedloop.common.files import output_folder, write_atomically
 from closedloop.model.gravity import GravityLoad
 
 #: Labels of a pose error's components (translation [m], rotation vector [rad]).
@@ -203,11 +202,7 @@ class PathResult(ReadOnlyArrays):
         """
         from closedloop.analysis.path_figures import plot_errors, plot_path
 
-        out = Path(out)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
+        out = output_folder(out)
         arrays = self.arrays()
         meta = {
             "joints": np.asarray(self.joints),

@@ -11,6 +11,23 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from closedloop.exceptions import InvalidInputError
+
+
+def output_folder(out: str | Path) -> Path:
+    """The folder ``out``, made with its parents if missing.
+
+    Raises:
+        InvalidInputError: ``out`` cannot be made or is not a folder (the message names it
+            and the system's reason).
+    """
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InvalidInputError(f"cannot write to {str(out)!r}: {e.strerror}") from None
+    return out
+
 
 def write_atomically(
     path: str | Path, write: Callable[[IO[Any]], object], *, text: bool = False,
