@@ -276,23 +276,10 @@ def spectrum_from_factor(
         scales: (d (6,), outer(d, d) (6, 6)) of :func:`twist_scaling` at ``length``, when
             the caller has them.
     """
-    return factor_spectrum(B_s, length, range_factor, spread, scales)[0]
-
-
-def factor_spectrum(
-    B_s: np.ndarray,
-    length: float,
-    range_factor: np.ndarray | Callable[[], np.ndarray] | None = None,
-    spread: float = 1.0,
-    scales: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[Spectrum, float, float]:
-    """:func:`spectrum_from_factor` (same arguments), and the largest and the smallest kept
-    singular values of B_s (0.0 and 1.0 without any) [rad/sqrt(N m)]: bounds of C's and
-    K's entries (C_s = B_s B_s^T, K_s = U diag(beta^-2) U^T)."""
     d, dd = scales if scales is not None else (twist_scaling(length), None)
     if not (isinstance(B_s, np.ndarray) and B_s.ndim == 2):
         B_s = np.asarray(B_s, dtype=float).reshape(6, -1)
-    rank, rigid, cond, U, beta, top, bottom = factor_rank(B_s, range_factor, spread, d)
+    rank, rigid, cond, U, beta, _, bottom = factor_rank(B_s, range_factor, spread, d)
     K = None
     if rank == 6:
         entry = max(1.0, 1.0 / length) / bottom  # |K_ij| <= entry^2
@@ -301,7 +288,7 @@ def factor_spectrum(
         else:
             with np.errstate(over="ignore", invalid="ignore"):  # an overflow: the caller's error
                 K = stiffness_from_factor(U, beta, d, dd)
-    return _spectrum(rank, rigid, cond, float(length), K), top, bottom
+    return _spectrum(rank, rigid, cond, float(length), K)
 
 
 def factor_rank(
@@ -310,7 +297,7 @@ def factor_rank(
     spread: float,
     d: np.ndarray,
 ) -> tuple:
-    """The rule of :func:`factor_spectrum` on B_s (6, r) without K (``d``: the twist
+    """The rule of :func:`spectrum_from_factor` on B_s (6, r) without K (``d``: the twist
     scaling at the length, :func:`twist_scaling`).
 
     Returns:
